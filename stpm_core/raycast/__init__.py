@@ -1,0 +1,59 @@
+"""Time-aware ray casting: every ray carries its own shutter time.
+
+Public API (implemented by the backends in this package; one interface):
+
+    caster = make_caster(scene, backend="auto")   # 'embree' | 'numpy' | 'auto'
+    hits = caster.intersect(origins, dirs, times, tmax=None)
+    blocked = caster.occluded(origins, dirs, times, tmax)
+
+Arrays
+------
+origins : (n, 3) float64 world-space ray origins.
+dirs    : (n, 3) float64 world-space directions (need not be unit length;
+          ``t`` is measured in units of ``|dir|``).
+times   : (n,) float64 normalised shutter times in [0, 1].
+tmax    : (n,) float64 or None (= inf): hits at t >= tmax are ignored.
+
+A ray never reports a hit with t <= ``TMIN_REL * scale`` (self-intersection
+guard; callers also offset origins along the normal).
+
+:class:`Hits` fields (n rows; misses have ``t = inf`` and ``instance = -1``):
+t (n,) float64; instance (n,) int32 index into ``scene.instances``;
+prim (n,) int32 triangle index within that instance's mesh; u, v (n,)
+float64 barycentrics (point = (1-u-v) * v0 + u * v1 + v * v2);
+position (n, 3) world hit point; ng (n, 3) unit geometric normal in world
+space (orientation from the triangle winding); ns (n, 3) unit shading
+normal (smooth normals interpolated, else ng); material (n,) int32 index
+into ``scene.materials`` (-1 for misses).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Hits", "make_caster"]
+
+
+@dataclass
+class Hits:
+    t: np.ndarray
+    instance: np.ndarray
+    prim: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    position: np.ndarray
+    ng: np.ndarray
+    ns: np.ndarray
+    material: np.ndarray
+
+    @property
+    def hit(self) -> np.ndarray:
+        """(n,) bool: did the ray hit anything?"""
+        return np.isfinite(self.t)
+
+
+def make_caster(scene, backend: str = "auto"):
+    """Build a ray caster for ``scene`` ('auto' = embree when importable, else numpy)."""
+    from .build import make_caster as _make
+    return _make(scene, backend=backend)

@@ -1,0 +1,373 @@
+"""The STPM scene model: plain dataclasses and numpy arrays, no bpy.
+
+Conventions (the whole core follows them):
+
+* World space is Blender's: right-handed, +Z up, metres ("scene units").
+* Time is **normalised shutter time** ``u`` in [0, 1] (see :mod:`stpm_core.shutter`).
+* Anything that can move carries a :class:`~stpm_core.motion.MotionTransform`
+  (one sample = static).  Deforming meshes carry vertex positions per time step.
+* Colours are linear RGB float (3,).  Radiometric units match Cycles
+  (``shared/design.md``): point/spot of power P watts has intensity
+  ``color * P / (4 pi)`` W/sr; an area light of power P is a one-sided
+  Lambertian emitter of on-axis intensity ``color * P / pi``; a sun of strength S
+  gives irradiance ``color * S`` W/m^2 on a facing surface; surface emission and
+  the world colour are radiance in W/(m^2 sr).
+* Cameras and lights look down their local -Z axis with +Y up (Blender's).
+
+Validation lives in :func:`validate_scene`; the scene file loader calls it and
+so does the renderer, so a half-built scene never renders.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from .errors import SceneError
+from .motion import MotionTransform
+from .shutter import Shutter
+
+__all__ = [
+    "Mesh", "Instance", "Camera", "Light", "Material", "World", "Scene",
+    "validate_scene", "SCENE_FORMAT_VERSION",
+]
+
+SCENE_FORMAT_VERSION = 1
+
+
+@dataclass
+class Mesh:
+    """A triangle mesh in object space.
+
+    Attributes
+    ----------
+    vertices : (V, 3) float32 positions, or (K, V, 3) float32 for a deforming
+        mesh whose shape is sampled at ``vertex_times``.
+    triangles : (F, 3) int32 vertex indices.
+    material_ids : (F,) int32 indices into ``Scene.materials``.
+    vertex_times : (K,) float64 increasing normalised times, for deforming
+        meshes only (``None`` for a rigid mesh).  Positions are linear between
+        steps and clamped outside.
+    normals : (F, 3, 3) float32 per-corner shading normals (object space) or
+        ``None`` for flat shading.  Deforming meshes shade flat.
+    name : str, for messages.
+    """
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    material_ids: np.ndarray
+    vertex_times: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    name: str = "mesh"
+
+    @property
+    def is_deforming(self) -> bool:
+        return self.vertex_times is not None and np.asarray(self.vertices).ndim == 3 and len(self.vertex_times) > 1
+
+    def vertices_at(self, t: float) -> np.ndarray:
+        """Object-space vertex positions (V, 3) at normalised time t (scalar)."""
+        if not self.is_deforming:
+            v = np.asarray(self.vertices)
+            return v[0] if v.ndim == 3 else v
+        times = np.asarray(self.vertex_times)
+        i = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2))
+        a = float(np.clip((t - times[i]) / (times[i + 1] - times[i]), 0.0, 1.0))
+        return (1 - a) * self.vertices[i] + a * self.vertices[i + 1]
+
+
+@dataclass
+class Instance:
+    """A placement of a mesh: ``mesh`` index into ``Scene.meshes`` and its motion."""
+
+    mesh: int
+    transform: MotionTransform = field(default_factory=MotionTransform.static)
+    name: str = "object"
+
+
+@dataclass
+class Camera:
+    """A Blender camera (looks down local -Z, +Y up), possibly moving.
+
+    Attributes
+    ----------
+    type : 'PERSP' or 'ORTHO'.
+    transform : camera-to-world motion (scale is ignored).
+    lens : focal length in mm (perspective).
+    sensor_width, sensor_height : mm.
+    sensor_fit : 'AUTO', 'HORIZONTAL' or 'VERTICAL' (Blender semantics).
+    ortho_scale : width of the view in scene units along the fitted axis (ortho).
+    shift_x, shift_y : lens shift in units of the fitted sensor size.
+    clip_start, clip_end : scene units along the view axis.
+    """
+
+    type: Literal["PERSP", "ORTHO"] = "PERSP"
+    transform: MotionTransform = field(default_factory=MotionTransform.static)
+    lens: float = 50.0
+    sensor_width: float = 36.0
+    sensor_height: float = 24.0
+    sensor_fit: Literal["AUTO", "HORIZONTAL", "VERTICAL"] = "AUTO"
+    ortho_scale: float = 6.0
+    shift_x: float = 0.0
+    shift_y: float = 0.0
+    clip_start: float = 0.1
+    clip_end: float = 1000.0
+
+
+@dataclass
+class Light:
+    """A Blender light, possibly moving (looks down local -Z).
+
+    Attributes
+    ----------
+    type : 'POINT', 'SPOT', 'AREA' or 'SUN'.
+    color : (3,) linear RGB multiplier.
+    power : watts for POINT / SPOT / AREA; for SUN, strength in W/m^2.
+    transform : light-to-world motion.
+    radius : POINT / SPOT sphere radius in scene units (0 = a true point).
+    use_soft_falloff : POINT / SPOT: Blender's soft falloff near the sphere.
+    spot_size : SPOT full cone angle in radians.
+    spot_blend : SPOT edge softness in [0, 1].
+    shape : AREA 'SQUARE', 'RECTANGLE', 'DISK' or 'ELLIPSE'.
+    size, size_y : AREA extent in scene units (size_y for RECTANGLE / ELLIPSE).
+    angle : SUN angular diameter in radians.
+    """
+
+    type: Literal["POINT", "SPOT", "AREA", "SUN"] = "POINT"
+    color: np.ndarray = field(default_factory=lambda: np.ones(3))
+    power: float = 1000.0
+    transform: MotionTransform = field(default_factory=MotionTransform.static)
+    radius: float = 0.0
+    use_soft_falloff: bool = True
+    spot_size: float = np.pi / 4
+    spot_blend: float = 0.15
+    shape: Literal["SQUARE", "RECTANGLE", "DISK", "ELLIPSE"] = "SQUARE"
+    size: float = 1.0
+    size_y: float = 1.0
+    angle: float = 0.0
+    name: str = "light"
+
+
+@dataclass
+class Material:
+    """A layered surface in the spirit of the Principled BSDF.
+
+    Lobe weights (they sum to 1 before emission):
+
+    * metal    = ``metallic``                                   (conductor, tinted by base_color)
+    * glass    = ``(1 - metallic) * transmission``              (dielectric with Fresnel, ``ior``)
+    * dielectric base = ``(1 - metallic) * (1 - transmission)``: Lambertian
+      ``base_color`` under a specular dielectric coat whose Fresnel reflectance
+      uses ``ior`` scaled by ``specular`` (0 = no coat: a pure Diffuse BSDF).
+
+    ``roughness`` 0 means perfectly specular (mirror / clear glass); above 0 a
+    GGX lobe with alpha = roughness^2.  ``emission`` is radiance W/(m^2 sr),
+    emitted from both sides of the surface (Cycles does the same).
+
+    Attributes
+    ----------
+    base_color : (3,) linear albedo in [0, 1].
+    metallic, transmission, roughness, specular : float in [0, 1].
+    ior : float >= 1 (1 = index-matched: light passes straight through).
+    emission : (3,) radiance.
+    name : str.
+    """
+
+    base_color: np.ndarray = field(default_factory=lambda: np.full(3, 0.8))
+    metallic: float = 0.0
+    transmission: float = 0.0
+    roughness: float = 0.5
+    specular: float = 0.0
+    ior: float = 1.5
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    name: str = "material"
+
+    @classmethod
+    def diffuse(cls, color=(0.8, 0.8, 0.8), name: str = "diffuse") -> "Material":
+        return cls(base_color=np.asarray(color, float), name=name)
+
+    @classmethod
+    def mirror(cls, color=(1.0, 1.0, 1.0), roughness: float = 0.0, name: str = "mirror") -> "Material":
+        return cls(base_color=np.asarray(color, float), metallic=1.0, roughness=roughness, name=name)
+
+    @classmethod
+    def glass(cls, ior: float = 1.5, color=(1.0, 1.0, 1.0), roughness: float = 0.0, name: str = "glass") -> "Material":
+        return cls(base_color=np.asarray(color, float), transmission=1.0, ior=ior, roughness=roughness, name=name)
+
+    @classmethod
+    def emitter(cls, radiance=(1.0, 1.0, 1.0), name: str = "emission") -> "Material":
+        return cls(base_color=np.zeros(3), emission=np.asarray(radiance, float), name=name)
+
+    @property
+    def is_specular(self) -> bool:
+        """True when some lobe is a delta or glossy lobe (metal, glass, coat)."""
+        return self.metallic > 0 or self.transmission > 0 or self.specular > 0
+
+    @property
+    def diffuse_weight(self) -> float:
+        return (1.0 - self.metallic) * (1.0 - self.transmission)
+
+
+@dataclass
+class World:
+    """Background radiance seen by rays that leave the scene: ``color * strength``."""
+
+    color: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    strength: float = 1.0
+
+    @property
+    def radiance(self) -> np.ndarray:
+        return np.asarray(self.color, float) * float(self.strength)
+
+
+@dataclass
+class Scene:
+    """Everything a render needs, for one frame.
+
+    Attributes
+    ----------
+    meshes, instances, lights, materials : lists of the dataclasses above.
+    camera : Camera.
+    world : World.
+    shutter : Shutter (frames and curve).
+    resolution : (width, height) pixels.
+    frame : the frame being rendered (informational).
+    metadata : free-form strings (exporter version, warnings, source file).
+    """
+
+    meshes: list[Mesh] = field(default_factory=list)
+    instances: list[Instance] = field(default_factory=list)
+    camera: Camera = field(default_factory=Camera)
+    lights: list[Light] = field(default_factory=list)
+    materials: list[Material] = field(default_factory=list)
+    world: World = field(default_factory=World)
+    shutter: Shutter = field(default_factory=Shutter)
+    resolution: tuple[int, int] = (320, 240)
+    frame: float = 1.0
+    metadata: dict = field(default_factory=dict)
+
+    @property
+    def has_motion(self) -> bool:
+        """Does anything move within the shutter (objects, deformation, camera, lights)?"""
+        if self.shutter.is_instant:
+            return False
+        return (any(not i.transform.is_static for i in self.instances)
+                or any(m.is_deforming for m in self.meshes)
+                or not self.camera.transform.is_static
+                or any(not l.transform.is_static for l in self.lights))
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """World-space bounds (3,), (3,) of all geometry over the whole shutter."""
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for inst in self.instances:
+            v = np.asarray(self.meshes[inst.mesh].vertices).reshape(-1, 3)
+            if v.shape[0] == 0:
+                continue
+            a, b = inst.transform.bounds_of(v.min(0), v.max(0))
+            lo, hi = np.minimum(lo, a), np.maximum(hi, b)
+        if not np.all(np.isfinite(lo)):
+            return np.zeros(3), np.zeros(3)
+        return lo, hi
+
+
+def _check_finite(name: str, a) -> np.ndarray:
+    a = np.asarray(a)
+    if a.dtype.kind in "fc" and not np.all(np.isfinite(a)):
+        raise SceneError(f"{name} contains NaN or inf")
+    return a
+
+
+def _check_vec3(name: str, a, *, nonneg: bool = False) -> None:
+    a = _check_finite(name, a)
+    if a.shape != (3,):
+        raise SceneError(f"{name} must have shape (3,), got {a.shape}")
+    if nonneg and np.any(a < 0):
+        raise SceneError(f"{name} must be non-negative, got {a.tolist()}")
+
+
+def _check_range(name: str, v, lo: float, hi: float = np.inf) -> None:
+    if not np.isfinite(v) or v < lo or v > hi:
+        raise SceneError(f"{name} must be in [{lo}, {hi}], got {v}")
+
+
+def validate_scene(scene: Scene) -> None:
+    """Check every field; raise :class:`SceneError` naming the first bad one.
+
+    Checks shapes, dtypes, NaN/inf, index ranges, enum values and physical
+    ranges (negative power, albedo > 1, IOR < 1 ...).
+    """
+    for mi, m in enumerate(scene.meshes):
+        p = f"meshes[{mi}] ({m.name!r})"
+        v = _check_finite(f"{p}.vertices", m.vertices)
+        if not (v.ndim in (2, 3) and v.shape[-1] == 3):
+            raise SceneError(f"{p}.vertices must have shape (V, 3) or (K, V, 3), got {v.shape}")
+        tri = np.asarray(m.triangles)
+        if tri.ndim != 2 or tri.shape[1] != 3 or tri.dtype.kind not in "iu":
+            raise SceneError(f"{p}.triangles must be an integer array of shape (F, 3), got {tri.dtype} {tri.shape}")
+        nv = v.shape[-2]
+        if tri.size and (tri.min() < 0 or tri.max() >= nv):
+            raise SceneError(f"{p}.triangles index out of range [0, {nv})")
+        mid = np.asarray(m.material_ids)
+        if mid.shape != (tri.shape[0],) or (mid.size and mid.dtype.kind not in "iu"):
+            raise SceneError(f"{p}.material_ids must be an integer array of shape ({tri.shape[0]},), got {mid.shape}")
+        if mid.size and (mid.min() < 0 or mid.max() >= len(scene.materials)):
+            raise SceneError(f"{p}.material_ids index out of range [0, {len(scene.materials)})")
+        if v.ndim == 3:
+            if m.vertex_times is None:
+                raise SceneError(f"{p}.vertex_times is required when vertices has shape (K, V, 3)")
+            vt = _check_finite(f"{p}.vertex_times", m.vertex_times)
+            if vt.shape != (v.shape[0],):
+                raise SceneError(f"{p}.vertex_times must have shape ({v.shape[0]},), got {vt.shape}")
+            if vt.size > 1 and np.any(np.diff(vt) <= 0):
+                raise SceneError(f"{p}.vertex_times must be strictly increasing")
+        if m.normals is not None:
+            n = _check_finite(f"{p}.normals", m.normals)
+            if n.shape != (tri.shape[0], 3, 3):
+                raise SceneError(f"{p}.normals must have shape ({tri.shape[0]}, 3, 3), got {n.shape}")
+    for ii, inst in enumerate(scene.instances):
+        if not (0 <= inst.mesh < len(scene.meshes)):
+            raise SceneError(f"instances[{ii}] ({inst.name!r}).mesh index {inst.mesh} out of range [0, {len(scene.meshes)})")
+        if not isinstance(inst.transform, MotionTransform):
+            raise SceneError(f"instances[{ii}].transform must be a MotionTransform")
+    c = scene.camera
+    if c.type not in ("PERSP", "ORTHO"):
+        raise SceneError(f"camera.type must be 'PERSP' or 'ORTHO', got {c.type!r}")
+    if c.sensor_fit not in ("AUTO", "HORIZONTAL", "VERTICAL"):
+        raise SceneError(f"camera.sensor_fit must be AUTO, HORIZONTAL or VERTICAL, got {c.sensor_fit!r}")
+    for name in ("lens", "sensor_width", "sensor_height", "ortho_scale", "clip_start"):
+        val = getattr(c, name)
+        if not np.isfinite(val) or val <= 0:
+            raise SceneError(f"camera.{name} must be positive and finite, got {val}")
+    for name in ("shift_x", "shift_y"):
+        _check_range(f"camera.{name}", getattr(c, name), -1e6, 1e6)
+    if not np.isfinite(c.clip_end) or c.clip_end <= c.clip_start:
+        raise SceneError(f"camera.clip_end must be finite and > clip_start, got {c.clip_end}")
+    for li, l in enumerate(scene.lights):
+        p = f"lights[{li}] ({l.name!r})"
+        if l.type not in ("POINT", "SPOT", "AREA", "SUN"):
+            raise SceneError(f"{p}.type must be POINT, SPOT, AREA or SUN, got {l.type!r}")
+        _check_vec3(f"{p}.color", l.color, nonneg=True)
+        _check_range(f"{p}.power", l.power, 0.0)
+        _check_range(f"{p}.radius", l.radius, 0.0)
+        _check_range(f"{p}.spot_size", l.spot_size, 0.0, np.pi)
+        _check_range(f"{p}.spot_blend", l.spot_blend, 0.0, 1.0)
+        _check_range(f"{p}.angle", l.angle, 0.0, np.pi)
+        if l.type == "AREA":
+            if l.shape not in ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE"):
+                raise SceneError(f"{p}.shape must be SQUARE, RECTANGLE, DISK or ELLIPSE, got {l.shape!r}")
+            _check_range(f"{p}.size", l.size, 0.0)
+            _check_range(f"{p}.size_y", l.size_y, 0.0)
+    for mi, m in enumerate(scene.materials):
+        p = f"materials[{mi}] ({m.name!r})"
+        _check_vec3(f"{p}.base_color", m.base_color, nonneg=True)
+        if np.any(np.asarray(m.base_color) > 1.0):
+            raise SceneError(f"{p}.base_color must be <= 1 (energy conserving), got {np.asarray(m.base_color).tolist()}")
+        _check_vec3(f"{p}.emission", m.emission, nonneg=True)
+        for name in ("metallic", "transmission", "roughness", "specular"):
+            _check_range(f"{p}.{name}", getattr(m, name), 0.0, 1.0)
+        _check_range(f"{p}.ior", m.ior, 1.0, 10.0)
+    _check_vec3("world.color", scene.world.color, nonneg=True)
+    _check_range("world.strength", scene.world.strength, 0.0)
+    w, h = scene.resolution
+    if int(w) != w or int(h) != h or not (1 <= w <= 65536 and 1 <= h <= 65536):
+        raise SceneError(f"resolution must be two integers in [1, 65536], got {scene.resolution}")

@@ -1,0 +1,123 @@
+"""Render settings: the same names as Blender's ``scene.stpm`` and ``stpm render``.
+
+See ``shared/interface.md``; names here are fixed (add, never rename).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+
+from .errors import SettingsError
+
+__all__ = ["RenderSettings", "METHODS", "ESTIMATORS", "EFFECTS", "KERNELS"]
+
+METHODS = ("PHOTON", "ACCUMULATION")
+ESTIMATORS = ("STANDARD", "TEMPORAL", "KD4D")
+EFFECTS = ("AUTO", "MANUAL")
+KERNELS = ("BOX", "CONE")
+
+
+@dataclass
+class RenderSettings:
+    """Everything that controls a render besides the scene.
+
+    Attributes
+    ----------
+    method : 'PHOTON' (time-stamped photon maps) or 'ACCUMULATION' (average of
+        ``accumulation_steps`` complete stills, the baseline).
+    estimator : 'STANDARD' | 'TEMPORAL' | 'KD4D' radiance estimate.
+    accumulation_steps : instants averaged by ACCUMULATION (>= 1).
+    samples : camera samples per pixel, each at its own shutter time.
+    photons_global : photons emitted for the global (indirect) map.
+    photons_caustic : photons emitted toward specular objects for the caustic map.
+    k_nearest : photons per radiance estimate.
+    temporal_alpha : TEMPORAL candidates as a multiple of k; 0 = automatic and consistent.
+    time_scale : KD4D's s in scene units per shutter; 0 = automatic.
+    seed : all randomness derives from it.
+    effects : 'AUTO' (simulate only what the scene calls for) or 'MANUAL'.
+    caustics, indirect : with effects='MANUAL', whether to build each map.
+    kernel : 'BOX' or 'CONE' density-estimation kernel.
+    max_depth : longest specular chain followed from the camera / photon bounces.
+    filter_width : Blackman-Harris pixel filter width in pixels (Blender default 1.5).
+    threads : worker threads for ray casting / look-ups (0 = all cores).
+    """
+
+    method: str = "PHOTON"
+    estimator: str = "TEMPORAL"
+    accumulation_steps: int = 8
+    samples: int = 16
+    photons_global: int = 200_000
+    photons_caustic: int = 200_000
+    k_nearest: int = 50
+    temporal_alpha: float = 0.0
+    time_scale: float = 0.0
+    seed: int = 0
+    effects: str = "AUTO"
+    caustics: bool = True
+    indirect: bool = True
+    kernel: str = "BOX"
+    max_depth: int = 8
+    filter_width: float = 1.5
+    threads: int = 0
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> "RenderSettings":
+        """Raise :class:`SettingsError` naming the first impossible value."""
+        def enum(name, allowed):
+            v = getattr(self, name)
+            if isinstance(v, str):
+                v = v.upper()
+                setattr(self, name, v)
+            if v not in allowed:
+                raise SettingsError(f"{name} must be one of {', '.join(allowed)}, got {v!r}")
+
+        def integer(name, lo, hi=2**62):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not (lo <= v <= hi):
+                raise SettingsError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
+
+        def real(name, lo, hi=float("inf")):
+            v = getattr(self, name)
+            try:
+                v = float(v)
+            except (TypeError, ValueError):
+                raise SettingsError(f"{name} must be a number, got {v!r}") from None
+            if not (lo <= v <= hi):
+                raise SettingsError(f"{name} must be in [{lo}, {hi}], got {v}")
+            setattr(self, name, v)
+
+        enum("method", METHODS)
+        enum("estimator", ESTIMATORS)
+        enum("effects", EFFECTS)
+        enum("kernel", KERNELS)
+        integer("accumulation_steps", 1, 4096)
+        integer("samples", 1, 1 << 16)
+        integer("photons_global", 0, 1 << 31)
+        integer("photons_caustic", 0, 1 << 31)
+        integer("k_nearest", 1, 100_000)
+        integer("seed", 0, 2**63 - 1)
+        integer("max_depth", 1, 1024)
+        integer("threads", 0, 1024)
+        real("temporal_alpha", 0.0, 1e6)
+        if 0.0 < self.temporal_alpha < 1.0:
+            raise SettingsError(f"temporal_alpha must be 0 (automatic) or >= 1, got {self.temporal_alpha}")
+        real("time_scale", 0.0, 1e30)
+        real("filter_width", 0.0, 64.0)
+        return self
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "RenderSettings":
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise SettingsError(f"unknown setting {unknown[0]!r}")
+        return cls(**d)
+
+    def replace(self, **changes) -> "RenderSettings":
+        d = self.to_dict()
+        d.update(changes)
+        return RenderSettings.from_dict(d)
