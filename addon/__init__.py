@@ -1,0 +1,39 @@
+"""STPM Photon Mapper: a Blender render engine (thin registration only).
+
+Works both as a Blender 4.2+ extension (``bl_ext.<repo>.stpm``) and from a
+source checkout (``import addon; addon.register()`` with the repository root on
+``sys.path``).  Everything else lives in the sibling modules:
+
+* ``properties.py`` -- ``scene.stpm`` settings
+* ``engine.py``     -- the RenderEngine (export -> stpm_core.render -> passes)
+* ``ui.py``         -- Render-properties panels and presets
+* ``export/``       -- one converter per kind of Blender data
+* ``batch.py``      -- .blend loading and frame rendering without the UI
+"""
+from __future__ import annotations
+
+_registered = False
+
+
+def register() -> None:
+    """Register properties, engine and panels (idempotent)."""
+    global _registered
+    if _registered:
+        return
+    from . import engine, properties, ui
+    properties.register()
+    engine.register()
+    ui.register()
+    _registered = True
+
+
+def unregister() -> None:
+    """Undo :func:`register` (idempotent)."""
+    global _registered
+    if not _registered:
+        return
+    from . import engine, properties, ui
+    ui.unregister()
+    engine.unregister()
+    properties.unregister()
+    _registered = False

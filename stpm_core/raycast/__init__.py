@@ -14,8 +14,9 @@ dirs    : (n, 3) float64 world-space directions (need not be unit length;
 times   : (n,) float64 normalised shutter times in [0, 1].
 tmax    : (n,) float64 or None (= inf): hits at t >= tmax are ignored.
 
-A ray never reports a hit with t <= ``TMIN_REL * scale`` (self-intersection
-guard; callers also offset origins along the normal).
+A ray never reports a hit with ``t * |dir| <= TMIN_REL * scale`` (a distance;
+``scale`` = diagonal of the scene bounds over the shutter; self-intersection
+guard, callers also offset origins along the normal).  See docs/raycast.md.
 
 :class:`Hits` fields (n rows; misses have ``t = inf`` and ``instance = -1``):
 t (n,) float64; instance (n,) int32 index into ``scene.instances``;
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Hits", "make_caster"]
+__all__ = ["Hits", "make_caster", "TMIN_REL"]
 
 
 @dataclass
@@ -51,6 +52,9 @@ class Hits:
     def hit(self) -> np.ndarray:
         """(n,) bool: did the ray hit anything?"""
         return np.isfinite(self.t)
+
+
+from .geometry import TMIN_REL  # noqa: E402  (self-intersection guard, see above)
 
 
 def make_caster(scene, backend: str = "auto"):

@@ -1,0 +1,50 @@
+"""Locate ``stpm_core``: bundled inside the extension zip, or top-level in a checkout.
+
+The built extension ships ``stpm_core`` as a sub-package of the add-on; a
+checkout has it next to ``addon/``.  Either way the rest of the add-on reaches
+the core only through this module, so one copy of each core module (and of its
+exception classes) is used.
+"""
+from __future__ import annotations
+
+import importlib
+
+try:  # the extension zip: <extension>/stpm_core
+    from . import stpm_core as core  # type: ignore[attr-defined]
+except ImportError:  # a source checkout: stpm_core is top-level
+    import stpm_core as core
+
+
+def sub(name: str):
+    """Import the core sub-module ``name`` (e.g. ``'scene'``) from whichever copy is in use."""
+    return importlib.import_module(f"{core.__name__}.{name}")
+
+
+errors = sub("errors")
+StpmError = errors.StpmError
+RenderCancelled = errors.RenderCancelled
+RenderSettings = sub("settings").RenderSettings
+scene_model = sub("scene")
+MotionTransform = sub("motion").MotionTransform
+Shutter = sub("shutter").Shutter
+
+
+def passes_table() -> tuple:
+    """The one table of render passes ``(name, channels, channel_ids)``.
+
+    ``stpm_core.render.PASSES`` per the contract; ``stpm_core.film.PASSES`` is
+    the same tuple (the film owns it) and is used while render.py is absent.
+    """
+    try:
+        return tuple(sub("render").PASSES)
+    except (ImportError, AttributeError):
+        return tuple(sub("film").PASSES)
+
+
+def render_function():
+    """``stpm_core.render.render`` (imported lazily: it pulls in scipy / embreex)."""
+    return sub("render").render
+
+
+__all__ = ["core", "sub", "StpmError", "RenderCancelled", "RenderSettings", "scene_model",
+           "MotionTransform", "Shutter", "passes_table", "render_function"]

@@ -1,0 +1,237 @@
+"""Blender depsgraph -> :class:`stpm_core.scene.Scene`, one converter per kind of thing.
+
+:func:`export_scene` is the only entry point.  It needs a way to move the
+depsgraph in time: inside a RenderEngine that is ``engine.frame_set(frame,
+subframe=...)`` (the render depsgraph follows); the batch path without an
+engine passes ``scene.frame_set`` and the view-layer depsgraph.
+
+Steps
+1. At the current frame: every instance of ``depsgraph.object_instances``
+   (modifiers, geometry-node instances, particles) -> meshes, instances,
+   lights; the scene camera; materials; world.
+2. If the shutter is open for a while: step through K shutter times, record
+   each instance's matrix (and, for meshes that deform, vertex positions).
+3. Assemble MotionTransforms (static when nothing moved) and deformation.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .._core import StpmError, scene_model
+from . import camera as camera_export
+from . import lights as light_export
+from . import materials as material_export
+from . import mesh as mesh_export
+from . import motion
+from . import world as world_export
+
+__all__ = ["export_scene"]
+
+
+def _instance_key(inst) -> tuple:
+    """A key that names the same instance at every motion step."""
+    parent = inst.parent.original.name_full if inst.parent is not None else ""
+    pid = tuple(inst.persistent_id) if inst.is_instance else ()
+    return (parent, inst.object.original.name_full, pid)
+
+
+def _warn_once(warnings: list, text: str) -> None:
+    if text not in warnings:
+        warnings.append(text)
+
+
+def _hidden_instancer_child(inst) -> bool:
+    """A child that its parent instances on vertices/faces renders only as instances.
+
+    The render depsgraph already hides it; the view-layer depsgraph of the
+    batch path does not, so apply the render rule here.
+    """
+    if inst.is_instance:
+        return False
+    parent = inst.object.parent
+    return parent is not None and parent.instance_type in ("VERTS", "FACES")
+
+
+class _Record:
+    """What step 1 learnt about one instance (before motion is known)."""
+
+    __slots__ = ("kind", "name", "obj_name", "matrix", "mesh", "use_motion", "use_deform", "is_instance")
+
+    def __init__(self, kind, name, obj_name, matrix, *, mesh=-1, use_motion=True, use_deform=True,
+                 is_instance=False):
+        self.kind, self.name, self.obj_name, self.matrix = kind, name, obj_name, matrix
+        self.mesh, self.use_motion, self.use_deform, self.is_instance = mesh, use_motion, use_deform, is_instance
+
+
+def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
+    """Export the depsgraph's scene at its current frame.
+
+    Parameters
+    ----------
+    depsgraph : the evaluated depsgraph (render depsgraph inside an engine).
+    frame_set : callable(frame: int, subframe: float) moving the depsgraph in time.
+    motion_steps : K, shutter times sampled for moving things (objects' own
+        Cycles motion steps raise it).
+
+    Returns (Scene, warnings: list[str]).  Raises StpmError when there is no camera.
+    """
+    scene = depsgraph.scene
+    render = scene.render
+    warnings: list[str] = []
+    frame_now, sub_now = scene.frame_current, float(scene.frame_subframe)
+    frame = frame_now + sub_now
+    shutter = motion.shutter_from_render(render, frame)
+    cam_obj = scene.camera
+    if cam_obj is None:
+        raise StpmError(f"scene {scene.name!r} has no active camera")
+    cam_name = cam_obj.name_full
+
+    # 1. Everything at the current frame
+    mats = material_export.MaterialExporter(warnings)
+    meshes: list = []
+    mesh_cache: dict = {}
+    records: dict = {}
+    steps = motion_steps
+    cam_matrix = None
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        key = _instance_key(inst)
+        M = np.array(inst.matrix_world, dtype=np.float64)
+        use_mb, use_deform, obj_steps = motion.object_motion_settings(obj.original if not inst.is_instance else obj)
+        if use_mb:
+            steps = max(steps, obj_steps if render.use_motion_blur else 0)
+        if obj.type == "CAMERA":
+            if obj.original.name_full == cam_name and not inst.is_instance:
+                cam_matrix = M
+                records[key] = _Record("CAMERA", cam_name, cam_name, M, use_motion=use_mb)
+            continue
+        if obj.type == "LIGHT":
+            if not inst.is_instance:  # light data is read again after the motion steps
+                records[key] = _Record("LIGHT", obj.name, obj.original.name_full, M, use_motion=use_mb)
+            else:
+                _warn_once(warnings, f"light {obj.name!r}: instanced lights are not supported, skipped")
+            continue
+        if obj.type not in mesh_export.GEOMETRY_TYPES or _hidden_instancer_child(inst):
+            continue
+        if not inst.is_instance and not inst.show_self:  # e.g. a particle emitter set not to render
+            continue
+        if not mesh_export.has_mesh(obj):
+            if obj.type not in mesh_export.MESHED_ELSEWHERE:
+                _warn_once(warnings, f"object {obj.name!r}: {obj.type} geometry is not supported, skipped")
+            continue
+        # Geometry: one Mesh per distinct evaluated data + material mapping
+        slot_mats = [s.material for s in obj.material_slots] if len(obj.material_slots) else \
+            list(getattr(obj.data, "materials", []) or [])
+        mat_ids = np.array([mats.index_of(m) for m in slot_mats] or [mats.index_of(None)], dtype=np.int32)
+        data_key = (obj.data.as_pointer() if inst.is_instance and obj.data is not None else obj.name_full,
+                    tuple(mat_ids.tolist()))
+        if data_key not in mesh_cache:
+            me, cleanup = mesh_export.evaluated_mesh(obj)
+            if me is None:
+                continue
+            arr = mesh_export.mesh_arrays(me)
+            cleanup()
+            if arr["triangles"].shape[0] == 0:
+                mesh_cache[data_key] = -1
+            else:
+                slot = np.clip(arr["slots"], 0, len(mat_ids) - 1)
+                meshes.append(scene_model.Mesh(vertices=arr["vertices"], triangles=arr["triangles"],
+                                               material_ids=mat_ids[slot], normals=arr["normals"],
+                                               name=obj.name))
+                mesh_cache[data_key] = len(meshes) - 1
+        if mesh_cache[data_key] < 0:
+            continue
+        records[key] = _Record("MESH", obj.name if not inst.is_instance else f"{obj.name}@{inst.parent.name}",
+                               obj.original.name_full, M, mesh=mesh_cache[data_key], use_motion=use_mb,
+                               use_deform=use_deform and not inst.is_instance and obj.type == "MESH",
+                               is_instance=inst.is_instance)
+    if cam_matrix is None:  # a camera hidden from render still defines the view
+        cam_eval = cam_obj.evaluated_get(depsgraph)
+        cam_matrix = np.array(cam_eval.matrix_world, dtype=np.float64)
+        records[("", cam_name, ())] = _Record("CAMERA", cam_name, cam_name, cam_matrix)
+    light_data = {r.obj_name: None for r in records.values() if r.kind == "LIGHT"}
+
+    # 2. Motion steps across the shutter
+    times = np.array([0.5])
+    samples = {k: [r.matrix] for k, r in records.items()}
+    shapes: dict = {}
+    if not shutter.is_instant:
+        times = motion.step_times(steps)
+        samples = {k: [] for k in records}
+        shapes = {k: [] for k, r in records.items() if r.kind == "MESH" and r.use_deform}
+        try:
+            for u in times:
+                frame_set(*motion.split_frame(float(shutter.to_frame(u))))
+                seen = set()
+                for inst in depsgraph.object_instances:
+                    key = _instance_key(inst)
+                    if key not in samples or key in seen:
+                        continue
+                    seen.add(key)
+                    samples[key].append(np.array(inst.matrix_world, dtype=np.float64))
+                    if key in shapes:
+                        shapes[key].append(mesh_export.vertex_positions(inst.object.data))
+                if ("", cam_name, ()) in samples and ("", cam_name, ()) not in seen:
+                    cam_eval = scene.camera.evaluated_get(depsgraph)
+                    samples[("", cam_name, ())].append(np.array(cam_eval.matrix_world, dtype=np.float64))
+        finally:
+            frame_set(frame_now, sub_now)
+        for key, r in records.items():
+            if len(samples[key]) != len(times):
+                warnings.append(f"object {r.name!r} is not present during the whole shutter; rendered without motion")
+                samples[key] = [r.matrix]
+            elif not r.use_motion:
+                samples[key] = [r.matrix]
+    # Light data is read at the current frame (after restoring it)
+    for inst in depsgraph.object_instances:
+        if inst.object.type == "LIGHT" and inst.object.original.name_full in light_data and not inst.is_instance:
+            light_data[inst.object.original.name_full] = inst.object
+
+    # 3. Assemble instances, deformation, lights and camera
+    instances, lights = [], []
+    light_seen: list[bool] = []  # Object > Visibility > Camera of each light (Blender's default: off)
+    cam = None
+    for key, r in records.items():
+        K = len(samples[key])
+        t = times if K == len(times) else np.array([0.5])
+        if r.kind == "MESH":
+            if r.use_motion and key in shapes and len(shapes[key]) == len(times):
+                _attach_deformation(meshes[r.mesh], shapes[key], times, r.name, warnings)
+            instances.append(scene_model.Instance(mesh=r.mesh, transform=motion.transform_from_samples(t, samples[key]),
+                                                  name=r.name))
+        elif r.kind == "LIGHT":
+            obj = light_data.get(r.obj_name)
+            if obj is not None:
+                lights.append(light_export.export_light(obj, t, samples[key], warnings))
+                light_seen.append(bool(getattr(obj, "visible_camera", True)))
+        elif r.kind == "CAMERA" and cam is None:
+            cam = camera_export.export_camera(cam_obj.evaluated_get(depsgraph), t, samples[key], warnings)
+
+    if abs(render.pixel_aspect_x - render.pixel_aspect_y) > 1e-6:
+        warnings.append("non-square pixel aspect is ignored")
+    out = scene_model.Scene(
+        meshes=meshes, instances=instances, camera=cam, lights=lights, materials=mats.materials,
+        world=world_export.export_world(scene.world, warnings), shutter=shutter,
+        resolution=camera_export.render_resolution(render), frame=float(frame),
+        metadata={"exporter": "stpm-blender", "blender_scene": scene.name, "motion_steps": int(len(times)),
+                  "warnings": list(warnings),
+                  # Render flags the scene dataclasses have no field for (read by the integrator)
+                  "film_transparent": bool(render.film_transparent),
+                  "light_visible_camera": light_seen})
+    return out, warnings
+
+
+def _attach_deformation(mesh, shapes: list, times: np.ndarray, name: str, warnings: list) -> None:
+    """Turn a rigid mesh into a deforming one when its vertices move across the steps."""
+    V = mesh.vertices.shape[0]
+    if any(s.shape[0] != V for s in shapes):
+        warnings.append(f"object {name!r}: vertex count changes during the shutter; "
+                        f"deformation blur skipped, the frame's shape is used")
+        return
+    stack = np.stack(shapes).astype(np.float32)
+    tol = 1e-6 * (1.0 + float(np.abs(stack).max(initial=0.0)))
+    if np.abs(stack - stack[:1]).max(initial=0.0) <= tol:
+        return  # rigid: nothing deforms
+    mesh.vertices = stack
+    mesh.vertex_times = np.asarray(times, dtype=np.float64)
+    mesh.normals = None  # deforming meshes shade flat (scene model)

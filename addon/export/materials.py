@@ -1,0 +1,209 @@
+"""Blender node materials -> :class:`stpm_core.scene.Material`.
+
+Walks from the active Material Output's Surface link.  Understood nodes:
+
+=================  ==============================================================
+Principled BSDF    Base Color, Metallic, Roughness, Transmission Weight, IOR,
+                   Specular IOR Level (0.5 = Blender's default -> specular 1),
+                   Emission Color * Emission Strength
+Diffuse BSDF       Color (Lambertian, no coat)
+Glossy BSDF        Color, Roughness (metallic 1)
+Glass BSDF         Color, Roughness, IOR (transmission 1)
+Emission           Color * Strength (radiance, W m^-2 sr^-1, as in Cycles)
+Mix Shader         every parameter blended by Fac (approximate: warned)
+Image Texture      on a colour input: the image's mean linear colour (warned)
+=================  ==============================================================
+
+Anything else becomes the grey diffuse default and a warning; nothing raises.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .._core import scene_model
+
+FIELDS = ("base_color", "metallic", "transmission", "roughness", "specular", "ior", "emission")
+
+
+def _uses_nodes(idblock) -> bool:
+    """Blender < 5 has a use_nodes switch; 5.0 always uses the node tree (and deprecates the flag)."""
+    import bpy
+    if bpy.app.version >= (5, 0, 0):
+        return idblock.node_tree is not None
+    return bool(idblock.use_nodes)
+
+
+def default_material(name: str = "STPM default") -> "scene_model.Material":
+    """Blender's default grey diffuse."""
+    return scene_model.Material.diffuse((0.8, 0.8, 0.8), name=name)
+
+
+def _params(**kw) -> dict:
+    """A full parameter dict (base_color (3,), emission (3,) float64, scalars float)."""
+    p = {"base_color": np.full(3, 0.8), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
+         "specular": 0.0, "ior": 1.5, "emission": np.zeros(3)}
+    p.update(kw)
+    return p
+
+
+class MaterialExporter:
+    """Converts and caches materials; ``warnings`` collects what was approximated."""
+
+    def __init__(self, warnings: list):
+        self.warnings = warnings
+        self.materials: list = []
+        self._index: dict = {}
+        self._image_means: dict = {}
+
+    # Public entry
+    def index_of(self, mat) -> int:
+        """Index into ``self.materials`` of a Blender material (None -> the grey default)."""
+        key = mat.name_full if mat is not None else None
+        if key not in self._index:
+            self._index[key] = len(self.materials)
+            self.materials.append(self.convert(mat) if mat is not None else default_material())
+        return self._index[key]
+
+    def convert(self, mat) -> "scene_model.Material":
+        """One Blender material -> Material (never raises for unsupported setups)."""
+        self._where = f"material {mat.name!r}"
+        tree = mat.node_tree if _uses_nodes(mat) else None
+        if tree is None:
+            p = _params(base_color=np.array(mat.diffuse_color[:3], dtype=np.float64),
+                        metallic=float(mat.metallic), roughness=float(mat.roughness))
+        else:
+            out = self._output_node(tree)
+            sock = out.inputs.get("Surface") if out is not None else None
+            if sock is None or not sock.is_linked:
+                self._warn("no surface shader connected, using grey diffuse")
+                p = _params()
+            else:
+                p = self._shader(self._follow(sock.links[0]), depth=0)
+        return self._material(p, mat.name)
+
+    # Helpers
+    def _warn(self, msg: str) -> None:
+        text = f"{self._where}: {msg}"
+        if text not in self.warnings:
+            self.warnings.append(text)
+
+    @staticmethod
+    def _output_node(tree):
+        outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
+                and getattr(n, "target", "ALL") in ("ALL", "CYCLES")]
+        active = [n for n in outs if getattr(n, "is_active_output", False)]
+        return (active or outs or [None])[0]
+
+    @staticmethod
+    def _follow(link):
+        """The node feeding a link, skipping reroutes."""
+        node = link.from_node
+        while node.bl_idname == "NodeReroute" and node.inputs[0].is_linked:
+            node = node.inputs[0].links[0].from_node
+        return node
+
+    def _material(self, p: dict, name: str) -> "scene_model.Material":
+        base = np.asarray(p["base_color"], dtype=np.float64)
+        if np.any(base > 1.0):
+            self._warn("base colour above 1 clipped (energy conservation)")
+        return scene_model.Material(
+            base_color=np.clip(base, 0.0, 1.0),
+            metallic=float(np.clip(p["metallic"], 0, 1)), transmission=float(np.clip(p["transmission"], 0, 1)),
+            roughness=float(np.clip(p["roughness"], 0, 1)), specular=float(np.clip(p["specular"], 0, 1)),
+            ior=float(np.clip(p["ior"], 1.0, 10.0)), emission=np.maximum(np.asarray(p["emission"], float), 0.0),
+            name=name)
+
+    def _value(self, node, name: str, default: float) -> float:
+        """A scalar input's value (linked inputs: their default, with a warning)."""
+        sock = node.inputs.get(name)
+        if sock is None:
+            return default
+        if sock.is_linked:
+            src = self._follow(sock.links[0])
+            if src.bl_idname == "ShaderNodeValue":
+                return float(src.outputs[0].default_value)
+            self._warn(f"{node.name}.{name} driven by {src.bl_idname} is not supported, using its value")
+        return float(sock.default_value)
+
+    def _color(self, node, name: str, default=(0.8, 0.8, 0.8)) -> np.ndarray:
+        """A colour input (3,) linear RGB; image textures give their mean colour."""
+        sock = node.inputs.get(name)
+        if sock is None:
+            return np.asarray(default, dtype=np.float64)
+        if sock.is_linked:
+            src = self._follow(sock.links[0])
+            if src.bl_idname == "ShaderNodeTexImage":
+                mean = self._image_mean(src.image)
+                if mean is not None:
+                    self._warn(f"image texture {src.image.name!r} approximated by its mean colour")
+                    return mean
+            elif src.bl_idname == "ShaderNodeRGB":
+                return np.array(src.outputs[0].default_value[:3], dtype=np.float64)
+            else:
+                self._warn(f"{node.name}.{name} driven by {src.bl_idname} is not supported, using its colour")
+        return np.array(sock.default_value[:3], dtype=np.float64)
+
+    def _image_mean(self, image) -> np.ndarray | None:
+        """Mean linear RGB (3,) of an image, or None (missing / empty image: warned)."""
+        if image is None:
+            self._warn("image texture without an image, using its colour")
+            return None
+        if image.name_full in self._image_means:
+            return self._image_means[image.name_full]
+        w, h = image.size[:]
+        c = image.channels
+        if w * h == 0 or c < 3:
+            self._warn(f"image {image.name!r} has no pixels, using its colour")
+            return None
+        px = np.empty(w * h * c, dtype=np.float32)
+        image.pixels.foreach_get(px)
+        rgb = px.reshape(-1, c)[:, :3].astype(np.float64)
+        if not image.is_float and image.colorspace_settings.name == "sRGB":
+            rgb = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)  # sRGB -> linear
+        mean = rgb.mean(axis=0)
+        self._image_means[image.name_full] = mean
+        return mean
+
+    # The shader tree walk
+    def _shader(self, node, depth: int) -> dict:
+        """Parameters of the closure produced by ``node`` (recursive through Mix Shader)."""
+        kind = node.bl_idname
+        if depth > 16:
+            self._warn("shader tree too deep, using grey diffuse")
+            return _params()
+        if kind == "ShaderNodeBsdfPrincipled":
+            for name in ("Coat Weight", "Sheen Weight", "Subsurface Weight"):
+                if self._value(node, name, 0.0) > 0:
+                    self._warn(f"Principled {name} is ignored")
+            if self._value(node, "Alpha", 1.0) < 1.0:
+                self._warn("Principled Alpha is ignored (opaque)")
+            emission = self._color(node, "Emission Color", (0, 0, 0)) * self._value(node, "Emission Strength", 0.0)
+            return _params(base_color=self._color(node, "Base Color"),
+                           metallic=self._value(node, "Metallic", 0.0),
+                           roughness=self._value(node, "Roughness", 0.5),
+                           transmission=self._value(node, "Transmission Weight", 0.0),
+                           ior=self._value(node, "IOR", 1.5),
+                           specular=min(1.0, 2.0 * self._value(node, "Specular IOR Level", 0.5)),
+                           emission=emission)
+        if kind == "ShaderNodeBsdfDiffuse":
+            return _params(base_color=self._color(node, "Color"), roughness=1.0, specular=0.0)
+        if kind in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
+            return _params(base_color=self._color(node, "Color"), metallic=1.0,
+                           roughness=self._value(node, "Roughness", 0.5))
+        if kind == "ShaderNodeBsdfGlass":
+            return _params(base_color=self._color(node, "Color", (1, 1, 1)), transmission=1.0,
+                           roughness=self._value(node, "Roughness", 0.0), ior=self._value(node, "IOR", 1.5))
+        if kind == "ShaderNodeEmission":
+            return _params(base_color=np.zeros(3), roughness=1.0,
+                           emission=self._color(node, "Color", (1, 1, 1)) * self._value(node, "Strength", 1.0))
+        if kind == "ShaderNodeMixShader":
+            fac = float(np.clip(self._value(node, "Fac", 0.5), 0.0, 1.0))
+            self._warn("Mix Shader approximated by blending the two shaders' parameters")
+            sides = []
+            for sock in (node.inputs[1], node.inputs[2]):
+                sides.append(self._shader(self._follow(sock.links[0]), depth + 1) if sock.is_linked
+                             else _params(base_color=np.zeros(3)))
+            return {k: (1 - fac) * np.asarray(sides[0][k], float) + fac * np.asarray(sides[1][k], float)
+                    for k in FIELDS}
+        self._warn(f"shader node {node.bl_idname} ({node.name!r}) is not supported, using grey diffuse")
+        return _params()

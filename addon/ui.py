@@ -1,0 +1,159 @@
+"""Render-properties panels (``STPM_RENDER_PT_*``) and the preset operator/menu."""
+from __future__ import annotations
+
+import bpy
+from bpy.props import EnumProperty
+
+from .presets import PRESET_ITEMS, apply_preset
+
+
+class STPM_OT_apply_preset(bpy.types.Operator):
+    """Set the STPM render settings from a preset"""
+
+    bl_idname = "stpm.apply_preset"
+    bl_label = "Apply STPM Preset"
+    bl_options = {"REGISTER", "UNDO"}
+
+    preset: EnumProperty(name="Preset", items=PRESET_ITEMS, default="PREVIEW")
+
+    def execute(self, context):
+        apply_preset(context.scene.stpm, self.preset)
+        return {"FINISHED"}
+
+
+class STPM_MT_presets(bpy.types.Menu):
+    bl_idname = "STPM_MT_presets"
+    bl_label = "STPM Presets"
+
+    def draw(self, context):
+        for ident, label, _desc in PRESET_ITEMS:
+            self.layout.operator(STPM_OT_apply_preset.bl_idname, text=label).preset = ident
+
+
+class _STPMPanel:
+    """Mixin: Render properties, shown only while STPM is the engine."""
+
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "render"
+    COMPAT_ENGINES = {"STPM"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+
+class STPM_RENDER_PT_sampling(_STPMPanel, bpy.types.Panel):
+    bl_label = "Sampling"
+
+    def draw_header_preset(self, context):
+        self.layout.menu(STPM_MT_presets.bl_idname, text="", icon="PRESET")
+
+    def draw(self, context):
+        props = context.scene.stpm
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column()
+        col.prop(props, "samples")
+        col.prop(props, "seed")
+        col.prop(props, "max_depth")
+        col.prop(props, "filter_width")
+        col.prop(props, "threads")
+
+
+class STPM_RENDER_PT_photons(_STPMPanel, bpy.types.Panel):
+    bl_label = "Photons"
+
+    def draw(self, context):
+        props = context.scene.stpm
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column()
+        col.prop(props, "photons_global")
+        col.prop(props, "photons_caustic")
+        col.prop(props, "k_nearest")
+        col.prop(props, "kernel")
+
+
+class STPM_RENDER_PT_method(_STPMPanel, bpy.types.Panel):
+    bl_label = "Estimator & Method"
+
+    def draw(self, context):
+        props = context.scene.stpm
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column()
+        col.prop(props, "method")
+        if props.method == "ACCUMULATION":
+            col.prop(props, "accumulation_steps")
+        col.prop(props, "estimator")
+        sub = col.column()
+        sub.active = props.estimator == "TEMPORAL"
+        sub.prop(props, "temporal_alpha")
+        sub = col.column()
+        sub.active = props.estimator == "KD4D"
+        sub.prop(props, "time_scale")
+
+
+class STPM_RENDER_PT_motion_blur(_STPMPanel, bpy.types.Panel):
+    """Blender's own shutter settings: STPM follows them."""
+
+    bl_label = "Motion Blur"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.render, "use_motion_blur", text="")
+
+    def draw(self, context):
+        rd = context.scene.render
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.active = rd.use_motion_blur
+        col = layout.column()
+        col.prop(rd, "motion_blur_position", text="Position")
+        col.prop(rd, "motion_blur_shutter")
+        col.prop(context.scene.stpm, "motion_steps")
+        col.separator()
+        col.label(text="Shutter Curve")
+        col.template_curve_mapping(rd, "motion_blur_shutter_curve")
+
+
+class STPM_RENDER_PT_effects(_STPMPanel, bpy.types.Panel):
+    bl_label = "Effects"
+
+    def draw(self, context):
+        props = context.scene.stpm
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column()
+        col.prop(props, "effects")
+        sub = col.column()
+        sub.active = props.effects == "MANUAL"
+        sub.prop(props, "caustics")
+        sub.prop(props, "indirect")
+
+
+classes = (
+    STPM_OT_apply_preset,
+    STPM_MT_presets,
+    STPM_RENDER_PT_sampling,
+    STPM_RENDER_PT_photons,
+    STPM_RENDER_PT_method,
+    STPM_RENDER_PT_motion_blur,
+    STPM_RENDER_PT_effects,
+)
+
+
+def register() -> None:
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

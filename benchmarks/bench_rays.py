@@ -1,0 +1,235 @@
+"""Ray-casting throughput: the time-aware caster next to raw embreex ``run()``.
+
+Scene (built in numpy, about 100k triangles): an icosphere (82k triangles)
+resting on a 100 x 100 grid floor (20k), plus four small icospheres (1.3k
+each).  Two variants with the same geometry:
+
+* ``static``: everything static;
+* ``motion``: the four small spheres translate and rotate across the shutter;
+* ``motion_big``: the big sphere moves and turns as well (worst case: most
+  rays meet a moving instance).
+
+Ray batches, each ray with a random shutter time:
+
+* ``camera``: coherent rays from a pinhole looking at the scene;
+* ``shadow``: from points on the floor toward a point light, tmax at the light
+  (``occluded``).
+
+Reported: Mrays/s of the caster (embree and, on a small subset, numpy), of raw
+embreex ``run()`` on the same rays against one float32 world-space scene at
+time 0 (no refinement, no shading), and the ratios motion/static cost and
+caster/raw speed.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from stpm_core.motion import MotionTransform
+from stpm_core.raycast import make_caster
+from stpm_core.raycast.build import embree_available
+from stpm_core.scene import Instance, Material, Mesh, Scene
+
+__all__ = ["run", "icosphere", "grid", "bench_scene"]
+
+
+def icosphere(level: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit icosphere: vertices (V, 3) float64, triangles (20 * 4**level, 3) int32."""
+    p = (1 + 5 ** 0.5) / 2
+    V = np.array([[-1, p, 0], [1, p, 0], [-1, -p, 0], [1, -p, 0], [0, -1, p], [0, 1, p],
+                  [0, -1, -p], [0, 1, -p], [p, 0, -1], [p, 0, 1], [-p, 0, -1], [-p, 0, 1]], float)
+    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+                  [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    for _ in range(level):
+        # Split each edge once (edges keyed by sorted vertex pair), four children per face
+        e = np.sort(np.stack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], 1).reshape(-1, 2), axis=1)
+        uniq, inv = np.unique(e, axis=0, return_inverse=True)
+        mid = len(V) + inv.reshape(-1, 3)
+        V = np.vstack([V, 0.5 * (V[uniq[:, 0]] + V[uniq[:, 1]])])
+        a, b, c = F[:, 0], F[:, 1], F[:, 2]
+        ab, bc, ca = mid[:, 0], mid[:, 1], mid[:, 2]
+        F = np.concatenate([np.stack([a, ab, ca], 1), np.stack([b, bc, ab], 1),
+                            np.stack([c, ca, bc], 1), np.stack([ab, bc, ca], 1)])
+    V = V / np.linalg.norm(V, axis=1, keepdims=True)
+    return V, F.astype(np.int32)
+
+
+def grid(n: int, size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Flat n x n quad grid in z = 0, side ``size``, centred: (V, 3), (2 n^2, 3)."""
+    x = np.linspace(-size / 2, size / 2, n + 1)
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    V = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], 1)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    k = (i * (n + 1) + j).ravel()
+    F = np.concatenate([np.stack([k, k + n + 1, k + n + 2], 1), np.stack([k, k + n + 2, k + 1], 1)])
+    return V, F.astype(np.int32)
+
+
+def _mesh(V, F, smooth=False) -> Mesh:
+    normals = V[F].astype(np.float32) if smooth else None
+    return Mesh(vertices=V.astype(np.float32), triangles=F, material_ids=np.zeros(len(F), np.int32),
+                normals=normals)
+
+
+def _trs(t, angle=0.0, s=1.0) -> np.ndarray:
+    M = np.eye(4)
+    c, si = np.cos(angle), np.sin(angle)
+    M[:3, :3] = np.array([[c, -si, 0], [si, c, 0], [0, 0, 1]]) * s
+    M[:3, 3] = t
+    return M
+
+
+def bench_scene(moving: bool, big_moves: bool = False) -> Scene:
+    """~107k triangles; the four small spheres move when ``moving``, the big one too
+    when ``big_moves`` (then 80 % of the triangles are in moving instances)."""
+    big = _mesh(*icosphere(6), smooth=True)
+    small = _mesh(*icosphere(3), smooth=True)
+    floor = _mesh(*grid(100, 10.0))
+    if big_moves:
+        big_tr = MotionTransform(np.array([0.0, 1.0]), np.stack([_trs([-0.2, 0, 1]), _trs([0.2, 0.1, 1], 0.5)]))
+    else:
+        big_tr = MotionTransform.static(_trs([0, 0, 1]))
+    inst = [Instance(0, big_tr), Instance(2)]
+    for k in range(4):
+        a = k * np.pi / 2
+        p0 = np.array([2.5 * np.cos(a), 2.5 * np.sin(a), 0.5])
+        if moving:
+            tr = MotionTransform(np.array([0.0, 0.5, 1.0]),
+                                 np.stack([_trs(p0, 0.0, 0.4), _trs(p0 + [0.3, 0.2, 0.1], 0.8, 0.4),
+                                           _trs(p0 + [0.6, 0.0, 0.0], 1.6, 0.4)]))
+        else:
+            tr = MotionTransform.static(_trs(p0, 0.0, 0.4))
+        inst.append(Instance(1, tr))
+    return Scene(meshes=[big, small, floor], instances=inst, materials=[Material()])
+
+
+def camera_rays(n: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Pinhole rays from (0, -7, 4) looking at the origin over a 60-degree view, row order."""
+    w = int(np.sqrt(n))
+    h = n // w
+    eye = np.array([0.0, -7.0, 4.0])
+    fwd = -eye / np.linalg.norm(eye)
+    right = np.cross(fwd, [0, 0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    px, py = np.meshgrid((np.arange(w) + 0.5) / w * 2 - 1, (np.arange(h) + 0.5) / h * 2 - 1)
+    d = fwd + np.tan(np.pi / 6) * (px.ravel()[:, None] * right + py.ravel()[:, None] * up)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return np.broadcast_to(eye, d.shape).copy(), d
+
+
+def shadow_rays(n: int, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Floor points -> light at (2, -2, 6): origins, unit dirs, tmax = distance."""
+    p = np.column_stack([rng.uniform(-5, 5, (n, 2)), np.full(n, 1e-4)])
+    L = np.array([2.0, -2.0, 6.0]) - p
+    dist = np.linalg.norm(L, axis=1)
+    return p, L / dist[:, None], dist
+
+
+def _best_of(f, repeats: int) -> float:
+    """Smallest wall time of ``repeats`` calls of f (seconds)."""
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        f()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def _raw_embree(scene: Scene):
+    """One float32 world-space embreex scene of all geometry at time 0 (the baseline)."""
+    from embreex import rtcore_scene as rtcs
+    from embreex.mesh_construction import TriangleMesh
+    Vs, Fs, nv = [], [], 0
+    for inst in scene.instances:
+        m = scene.meshes[inst.mesh]
+        M = inst.transform.at(0.0)
+        V = np.asarray(m.vertices, float) @ M[:3, :3].T + M[:3, 3]
+        Vs.append(V)
+        Fs.append(np.asarray(m.triangles) + nv)
+        nv += len(V)
+    es = rtcs.EmbreeScene()
+    TriangleMesh(es, np.vstack(Vs).astype(np.float32), np.vstack(Fs).astype(np.int32))
+    return es
+
+
+def _raw_run(es, o, d, tmax=None, query="INTERSECT", batch=8192):
+    """Raw run() over the rays in batches (float32 conversion included)."""
+    o32, d32 = o.astype(np.float32), d.astype(np.float32)
+    far = None if tmax is None else tmax.astype(np.float32)
+    for a in range(0, len(o32), batch):
+        sl = slice(a, a + batch)
+        if query == "INTERSECT":
+            es.run(o32[sl], d32[sl], output=1)
+        else:
+            es.run(o32[sl], d32[sl], dists=far[sl], query="OCCLUDED")
+
+
+def run(n_rays: int = 131072, repeats: int = 7, seed: int = 0) -> dict:
+    """Measure and return {name: value}; speeds in Mrays/s, ratios unitless.
+
+    Caster and raw embree calls are interleaved and each keeps its best of
+    ``repeats`` (the machine is shared: best-of is the least noisy statistic).
+    """
+    rng = np.random.default_rng(seed)
+    out: dict = {}
+    scenes = {"static": bench_scene(False), "motion": bench_scene(True), "motion_big": bench_scene(True, True)}
+    ntri = sum(len(scenes["static"].meshes[i.mesh].triangles) for i in scenes["static"].instances)
+    out["triangles"] = int(ntri)
+    out["rays_per_batch"] = int(n_rays)
+    co, cd = camera_rays(n_rays, rng)
+    so, sd, sdist = shadow_rays(n_rays, rng)
+    times = rng.uniform(0, 1, co.shape[0])
+    stimes = rng.uniform(0, 1, so.shape[0])
+    n_cam, n_sh = co.shape[0], so.shape[0]
+    if embree_available():
+        # Every job of every variant in each round, so load changes hit them all alike
+        jobs = {}
+        for variant, sc in scenes.items():
+            t0 = time.perf_counter()
+            caster = make_caster(sc, "embree")
+            out[f"embree_{variant}_build_s"] = time.perf_counter() - t0
+            es = _raw_embree(sc)
+            jobs.update({
+                f"embree_{variant}_camera": (n_cam, lambda c=caster: c.intersect(co, cd, times)),
+                f"raw_{variant}_camera": (n_cam, lambda e=es: _raw_run(e, co, cd)),
+                f"embree_{variant}_shadow": (n_sh, lambda c=caster: c.occluded(so, sd, stimes, sdist)),
+                f"raw_{variant}_shadow": (n_sh, lambda e=es: _raw_run(e, so, sd, sdist, "OCCLUDED")),
+                f"embree_{variant}_shadow_intersect": (n_sh, lambda c=caster: c.intersect(so, sd, stimes, sdist)),
+            })
+        best = {k: np.inf for k in jobs}
+        for _ in range(repeats):
+            for k, (_, f) in jobs.items():
+                best[k] = min(best[k], _best_of(f, 1))
+        for k, (n, _) in sorted(jobs.items()):
+            out[f"{k}_Mrays_s"] = n / best[k] / 1e6
+    # numpy fallback (PairBVH) on a subset of the camera rays
+    m = 2048
+    sub = np.linspace(0, n_cam - 1, m).astype(int)
+    for variant in ("static", "motion"):
+        caster = make_caster(scenes[variant], "numpy")
+        s = _best_of(lambda: caster.intersect(co[sub], cd[sub], times[sub]), 1)
+        out[f"numpy_{variant}_camera_Mrays_s"] = m / s / 1e6
+    # numpy fallback on a small scene (1.5k triangles: icosphere + floor, moving sphere)
+    small = Scene(meshes=[_mesh(*icosphere(3), smooth=True), _mesh(*grid(10, 10.0))],
+                  instances=[Instance(0, MotionTransform(np.array([0.0, 1.0]),
+                                                         np.stack([_trs([0, 0, 1]), _trs([0.5, 0, 1], 0.5)]))),
+                             Instance(1)], materials=[Material()])
+    m = 16384
+    out["small_scene_triangles"] = 1280 + 200
+    for backend in (["embree"] if embree_available() else []) + ["numpy"]:
+        caster = make_caster(small, backend)
+        s = _best_of(lambda: caster.intersect(co[:m], cd[:m], times[:m]), 3)
+        out[f"{backend}_small_camera_Mrays_s"] = m / s / 1e6
+    # Ratios (targets: motion cost <= 1.5 x static; caster >= 50 % of raw)
+    if embree_available():
+        for kind in ("camera", "shadow"):
+            for variant in ("motion", "motion_big"):
+                out[f"{variant}_over_static_cost_{kind}"] = (out[f"embree_static_{kind}_Mrays_s"]
+                                                             / out[f"embree_{variant}_{kind}_Mrays_s"])
+            for variant in scenes:
+                out[f"caster_over_raw_{variant}_{kind}"] = (out[f"embree_{variant}_{kind}_Mrays_s"]
+                                                            / out[f"raw_{variant}_{kind}_Mrays_s"])
+    return out

@@ -1,0 +1,106 @@
+"""Blender's camera model: primary rays for continuous pixel coordinates at
+each ray's own shutter time.
+
+Conventions (docs/camera.md has the derivation and a picture):
+
+* Pixel coordinates: ``px`` in [0, W) left -> right, ``py`` in [0, H) top ->
+  bottom; pixel i's centre is i + 0.5.  Row 0 is the TOP row.
+* The camera looks down its local -Z axis, +X right, +Y up.  Its pose at time
+  t is ``camera.transform.at(t)``; scale is ignored (rotation columns are
+  normalised), so a scaled camera object renders like Blender's.
+* Sensor fit decides which image axis the sensor size (or ortho_scale) spans:
+  AUTO -> the longer image axis spans ``sensor_width``; HORIZONTAL -> the image
+  width spans ``sensor_width``; VERTICAL -> the image height spans
+  ``sensor_height``.  Call the spanned length (in mm at focal distance ``lens``
+  for perspective, in scene units for ortho) the *fitted size* F and the number
+  of pixels along the fitted axis N_fit.  One pixel is F / N_fit wide on the
+  image plane (square pixels).
+* Shift: ``shift_x`` / ``shift_y`` move the frame by that fraction of the
+  fitted size F (Blender: shift 1.0 moves by one full fitted width).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["generate_rays", "view_axis", "camera_to_world", "image_plane"]
+
+
+def camera_to_world(camera, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation (n, 3, 3) with unit columns (X right, Y up, Z back) and position (n, 3) at times (n,)."""
+    M = camera.transform.at(np.atleast_1d(np.asarray(times, dtype=np.float64)))
+    R = M[:, :3, :3]
+    # Ignore scale: normalise each rotation column
+    R = R / np.maximum(np.linalg.norm(R, axis=1, keepdims=True), 1e-300)
+    return R, M[:, :3, 3]
+
+
+def image_plane(camera, resolution) -> tuple[float, float, float, float]:
+    """Image-plane extent of the frame: (half_w, half_h, centre_x, centre_y).
+
+    Units: for PERSP, tangent of the view angle (the plane at distance 1); for
+    ORTHO, scene units.  The frame spans x in [cx - half_w, cx + half_w] (left
+    -> right) and y in [cy - half_h, cy + half_h] (bottom -> top).
+    """
+    W, H = (int(resolution[0]), int(resolution[1]))
+    # Fitted axis and fitted size F
+    fit = camera.sensor_fit
+    if fit == "AUTO":
+        fit = "HORIZONTAL" if W >= H else "VERTICAL"
+        sensor = camera.sensor_width
+    elif fit == "HORIZONTAL":
+        sensor = camera.sensor_width
+    else:
+        sensor = camera.sensor_height
+    if camera.type == "ORTHO":
+        F = float(camera.ortho_scale)
+    else:
+        F = float(sensor) / float(camera.lens)
+    # Square pixels: pixel size = F / N_fit
+    n_fit = W if fit == "HORIZONTAL" else H
+    pixel = F / n_fit
+    half_w, half_h = 0.5 * W * pixel, 0.5 * H * pixel
+    return half_w, half_h, camera.shift_x * F, camera.shift_y * F
+
+
+def generate_rays(camera, resolution, px: np.ndarray, py: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Primary rays through continuous pixel positions at their own times.
+
+    Parameters
+    ----------
+    camera : scene.Camera.
+    resolution : (W, H) pixels.
+    px, py : (n,) float pixel coordinates (px left -> right, py top -> bottom).
+    times : (n,) normalised shutter times.
+
+    Returns
+    -------
+    origins : (n, 3) world positions (PERSP: the camera position; ORTHO: on the
+        plane at ``clip_start`` in front of the camera).
+    dirs : (n, 3) unit world directions.
+    """
+    px = np.asarray(px, dtype=np.float64)
+    py = np.asarray(py, dtype=np.float64)
+    W, H = int(resolution[0]), int(resolution[1])
+    half_w, half_h, cx, cy = image_plane(camera, resolution)
+    # Image-plane point: x right, y up (row 0 = top)
+    x = cx + (2.0 * px / W - 1.0) * half_w
+    y = cy + (1.0 - 2.0 * py / H) * half_h
+    R, pos = camera_to_world(camera, times)
+    if camera.type == "ORTHO":
+        # Parallel rays down -Z from the plane at clip_start
+        local_o = np.stack([x, y, np.full_like(x, -float(camera.clip_start))], axis=-1)
+        origins = np.einsum("nij,nj->ni", R, local_o) + pos
+        dirs = -R[:, :, 2]
+    else:
+        # Pinhole: the ray through (x, y, -1) on the plane at unit distance
+        local_d = np.stack([x, y, -np.ones_like(x)], axis=-1)
+        dirs = np.einsum("nij,nj->ni", R, local_d)
+        dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+        origins = pos.copy()
+    return origins, np.ascontiguousarray(dirs)
+
+
+def view_axis(camera, times: np.ndarray) -> np.ndarray:
+    """Unit forward direction (camera -Z in world) (n, 3) at times (n,), for the Depth pass."""
+    R, _ = camera_to_world(camera, times)
+    return -R[:, :, 2].copy()

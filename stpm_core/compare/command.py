@@ -1,0 +1,164 @@
+"""``stpm compare SCENE`` on the command line (``stpm_core.cli`` hands it the arguments after ``compare``).
+
+    stpm compare SCENE [--frame F] [--output REPORT_DIR] [--reference REF.exr]
+                 [--time-budget SECONDS] [--photon-budgets 1,4,16]
+                 [--accumulation-steps 1,2,4,8,16,32] [--estimators standard,temporal,kd4d]
+                 [--resolution WxH] [--samples S] [--reference-photons F] [--reference-samples F]
+                 [--cache-dir DIR] [--no-cache] [--quiet]
+
+Writes REPORT_DIR/report.html and REPORT_DIR/report.json (default REPORT_DIR:
+``<scene stem>_compare`` next to the scene) and prints where, with the headline
+speed-up, on stdout.  A progress bar goes to stderr.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+from ..errors import StpmError
+from .reference import REFERENCE_PHOTON_FACTOR, REFERENCE_SAMPLE_FACTOR
+from .run import run_compare
+from .sweep import DEFAULT_ACCUMULATION_STEPS, DEFAULT_PHOTON_BUDGETS, PHOTON_ESTIMATORS
+
+__all__ = ["main", "build_parser"]
+
+
+class _UsageError(StpmError):
+    """Bad syntax; replaced by stpm_core.cli.UsageError (exit status 2) when the CLI is importable."""
+
+
+def _usage_error_class():
+    try:
+        from ..cli import UsageError
+        return UsageError
+    except ImportError:
+        return _UsageError
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise _usage_error_class()(message)
+
+
+def _number_list(kind):
+    def conv(text: str):
+        try:
+            vals = [kind(v) for v in text.replace(" ", "").split(",") if v]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list of numbers, got {text!r}") from None
+        if not vals or any(v <= 0 for v in vals):
+            raise argparse.ArgumentTypeError(f"expected positive numbers, got {text!r}")
+        return vals
+    return conv
+
+
+def _estimators(text: str):
+    vals = [v.upper() for v in text.replace(" ", "").split(",") if v]
+    bad = [v for v in vals if v not in PHOTON_ESTIMATORS]
+    if not vals or bad:
+        raise argparse.ArgumentTypeError(f"estimators are standard, temporal, kd4d; got {text!r}")
+    return vals
+
+
+def _resolution(text: str):
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 320x240, got {text!r}") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"resolution must be positive, got {text!r}")
+    return w, h
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="stpm compare",
+                description="Compare STANDARD, TEMPORAL and KD4D photon estimates with the accumulation "
+                            "buffer: wall time and error against a reference; writes report.html and "
+                            "report.json.")
+    p.add_argument("scene", help="scene file: .stpm / .npz (core) or .blend")
+    p.add_argument("--frame", type=int, help="frame (default: the file's)")
+    p.add_argument("--output", "-o", metavar="REPORT_DIR",
+                   help="report directory (default: <scene stem>_compare next to the scene)")
+    p.add_argument("--reference", metavar="REF.exr",
+                   help="reference image (its Combined pass); default: computed and cached")
+    p.add_argument("--time-budget", type=float, dest="time_budget", metavar="SECONDS",
+                   help="stop starting runs once the sweep has taken this long (the report notes what was skipped)")
+    p.add_argument("--photon-budgets", type=_number_list(float), dest="photon_budgets", metavar="B,B,...",
+                   default=list(DEFAULT_PHOTON_BUDGETS), help="photon counts as multiples of the file's "
+                   f"(default {','.join(map(str, DEFAULT_PHOTON_BUDGETS))})")
+    p.add_argument("--accumulation-steps", type=_number_list(int), dest="accumulation_steps", metavar="N,N,...",
+                   default=list(DEFAULT_ACCUMULATION_STEPS),
+                   help=f"accumulation-buffer instants (default {','.join(map(str, DEFAULT_ACCUMULATION_STEPS))})")
+    p.add_argument("--estimators", type=_estimators, default=list(PHOTON_ESTIMATORS),
+                   metavar="standard,temporal,kd4d", help="photon estimators to sweep (default all three)")
+    p.add_argument("--resolution", type=_resolution, metavar="WxH", help="override the scene's resolution")
+    p.add_argument("--samples", type=int, metavar="S", help="override the file's samples per pixel")
+    p.add_argument("--reference-photons", type=float, dest="reference_photons", metavar="F",
+                   default=REFERENCE_PHOTON_FACTOR,
+                   help=f"computed reference: photons x F (default {REFERENCE_PHOTON_FACTOR})")
+    p.add_argument("--reference-samples", type=float, dest="reference_samples", metavar="F",
+                   default=REFERENCE_SAMPLE_FACTOR,
+                   help=f"computed reference: samples x F (default {REFERENCE_SAMPLE_FACTOR})")
+    p.add_argument("--cache-dir", dest="cache_dir", metavar="DIR",
+                   help="where computed references are cached (default ~/.cache/stpm/references)")
+    p.add_argument("--no-cache", action="store_true", dest="no_cache", help="always recompute the reference")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    return p
+
+
+def _headline(report: dict) -> list[str]:
+    lines = []
+    cost = report["cost"]
+    tgt = cost.get("target")
+    for m, name in (("rmse", "RMSE"), ("flip", "FLIP")):
+        b = cost["best_time_dependent"].get(m) if tgt else None
+        if b:
+            le = "<= " if b["bound"] == "at most" else ""
+            lines.append(f"{name}: {b['estimator']} reaches {tgt['label']}'s error in {le}{b['time_s']:.2f} s "
+                         f"vs {tgt['wall_s']:.2f} s: {b['speedup']:.2f}x")
+        elif tgt:
+            lines.append(f"{name}: no time-dependent estimator reached {tgt['label']}'s error within the sweep")
+    if report["sweep"]["skipped"]:
+        lines.append(f"skipped (time budget): {', '.join(report['sweep']['skipped'])}")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``stpm compare``; returns the exit status (errors are raised as StpmError for the CLI to print)."""
+    from ..cli import load_any_scene
+    from ..progress import ProgressBar
+
+    args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    if args.time_budget is not None and args.time_budget < 0:
+        raise StpmError("--time-budget must be >= 0 seconds")
+    if args.reference_photons < 1 or args.reference_samples < 1:
+        raise StpmError("--reference-photons and --reference-samples must be >= 1")
+    scene_path = Path(args.scene)
+    scene, settings, _export_s = load_any_scene(scene_path, args.frame)
+    if args.resolution is not None:
+        scene = dataclasses.replace(scene, resolution=tuple(args.resolution))
+    if args.samples is not None:
+        if args.samples < 1:
+            raise StpmError("--samples must be >= 1")
+        settings = settings.replace(samples=args.samples)
+    out_dir = Path(args.output) if args.output else scene_path.with_name(scene_path.stem + "_compare")
+    if args.reference is not None and not Path(args.reference).is_file():
+        raise StpmError(f"reference image not found: {args.reference}")
+
+    bar = ProgressBar(quiet=args.quiet)
+    try:
+        report = run_compare(scene, settings, out_dir, reference=args.reference, time_budget=args.time_budget,
+                             photon_budgets=args.photon_budgets, accumulation_steps=args.accumulation_steps,
+                             estimators=args.estimators, progress=bar, cache_dir=args.cache_dir,
+                             use_cache=not args.no_cache, reference_photon_factor=args.reference_photons,
+                             reference_sample_factor=args.reference_samples, scene_name=scene_path.name,
+                             scene_path=scene_path)
+    finally:
+        bar.close()
+    print(f"report: {report['files']['html']}")
+    print(f"numbers: {report['files']['json']}")
+    for line in _headline(report):
+        print(line)
+    return 0

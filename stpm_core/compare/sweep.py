@@ -1,0 +1,217 @@
+"""The sweep of ``stpm compare``: which runs, in which order, their time and error.
+
+Runs (:func:`plan_runs`):
+
+* each photon estimator (STANDARD, TEMPORAL, KD4D) at each photon budget b:
+  ``photons_caustic`` and ``photons_global`` = b x the file's, everything
+  else (k, samples, seed) the file's;
+* ACCUMULATION with N instants for each N: N complete stills with the file's
+  settings, averaged (``stpm_core.render``).
+
+Runs go cheapest first (estimated cost in stills: a photon run at budget b is
+about (1 + b) / 2 stills, ACCUMULATION N about N), so a time budget that
+runs out leaves every method with its cheap points and skips the dear ones.
+Once the sweep's elapsed time reaches the budget no further run starts; the
+rest are marked ``skipped``.
+
+Each run records ``wall_s`` (from ``result.stats``), the per-phase seconds
+and RMSE / relative MSE / FLIP of its Combined RGB against the reference.
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import RenderCancelled, StpmError
+from .metrics import combined_rgb, image_errors
+
+__all__ = ["Run", "plan_runs", "run_sweep", "is_consistent", "PHOTON_ESTIMATORS", "METHOD_ORDER",
+           "DEFAULT_PHOTON_BUDGETS", "DEFAULT_ACCUMULATION_STEPS"]
+
+PHOTON_ESTIMATORS = ("STANDARD", "TEMPORAL", "KD4D")
+METHOD_ORDER = ("ACCUMULATION", "STANDARD", "TEMPORAL", "KD4D")
+DEFAULT_PHOTON_BUDGETS = (1, 4, 16)
+DEFAULT_ACCUMULATION_STEPS = (1, 2, 4, 8, 16, 32)
+_PHASES = ("photon_trace_s", "photon_map_build_s", "photon_lookup_s", "render_s")
+
+
+@dataclass
+class Run:
+    """One render of the sweep.
+
+    Attributes
+    ----------
+    label : 'TEMPORAL x4', 'ACCUMULATION N=16', ...
+    method : 'STANDARD' | 'TEMPORAL' | 'KD4D' | 'ACCUMULATION' (the curve it belongs to).
+    settings : the RenderSettings it renders with.
+    photon_factor : photons as a multiple of the file's (1 for ACCUMULATION: per still).
+    accumulation_steps : N for ACCUMULATION, else None.
+    cost : estimated cost in stills (orders the sweep).
+    status : 'pending' | 'done' | 'skipped' | 'failed'; note: why (skipped / failed).
+    wall_s, phases : seconds from the render's stats.
+    errors : {'rmse', 'relmse', 'flip'} against the reference (None where not computed).
+    rgb : (H, W, 3) float32 Combined RGB (done runs), flip_map : (H, W, 3) magma map or None.
+    """
+
+    label: str
+    method: str
+    settings: object
+    photon_factor: float = 1.0
+    accumulation_steps: int | None = None
+    cost: float = 1.0
+    status: str = "pending"
+    note: str = ""
+    wall_s: float | None = None
+    phases: dict = field(default_factory=dict)
+    photons: dict = field(default_factory=dict)
+    errors: dict = field(default_factory=lambda: {"rmse": None, "relmse": None, "flip": None})
+    rgb: np.ndarray | None = None
+    flip_map: np.ndarray | None = None
+
+    def to_json(self) -> dict:
+        """JSON-ready record (no images)."""
+        s = self.settings
+        return {
+            "label": self.label, "method": self.method,
+            "estimator": "STANDARD" if self.method == "ACCUMULATION" else self.method,
+            "photon_factor": self.photon_factor, "accumulation_steps": self.accumulation_steps,
+            "photons_caustic": int(s.photons_caustic), "photons_global": int(s.photons_global),
+            "samples": int(s.samples), "k_nearest": int(s.k_nearest),
+            "status": self.status, "note": self.note or None,
+            "wall_s": self.wall_s, "phases": dict(self.phases) if self.status == "done" else None,
+            "photons_stored": dict(self.photons) if self.status == "done" else None,
+            "rmse": self.errors.get("rmse"), "relmse": self.errors.get("relmse"), "flip": self.errors.get("flip"),
+        }
+
+
+# ----------------------------------------------------------------------------
+# Consistency (the seed's "consistent?" column)
+# ----------------------------------------------------------------------------
+def is_consistent(method: str, settings, scene) -> tuple[bool, str]:
+    """(consistent?, why) for a method on this scene: does its error vanish as its budget grows?"""
+    if method == "STANDARD":
+        if not scene.has_motion:
+            return True, "nothing moves: time plays no role"
+        return False, "time ignored: photons on a moving surface at other times are lost"
+    if method == "TEMPORAL":
+        if float(settings.temporal_alpha) == 0.0:
+            return True, "automatic window shrinks as photons grow"
+        return False, f"fixed alpha = {settings.temporal_alpha:g}: the time window does not shrink"
+    if method == "KD4D":
+        return True, "4D ball shrinks as photons grow"
+    if method == "ACCUMULATION":
+        return True, "as N and the photons per still grow"
+    raise StpmError(f"unknown method {method!r}")
+
+
+# ----------------------------------------------------------------------------
+# Plan
+# ----------------------------------------------------------------------------
+def _factor_label(b: float) -> str:
+    return f"x{b:g}"
+
+
+def plan_runs(settings, *, photon_budgets=DEFAULT_PHOTON_BUDGETS,
+              accumulation_steps=DEFAULT_ACCUMULATION_STEPS, estimators=PHOTON_ESTIMATORS) -> list[Run]:
+    """The sweep's runs, cheapest first (ties: ACCUMULATION, then STANDARD, TEMPORAL, KD4D)."""
+    budgets = sorted({float(b) for b in photon_budgets})
+    steps = sorted({int(n) for n in accumulation_steps})
+    if any(b <= 0 for b in budgets):
+        raise StpmError("photon budgets must be > 0")
+    if any(n < 1 for n in steps):
+        raise StpmError("accumulation steps must be >= 1")
+    for e in estimators:
+        if e not in PHOTON_ESTIMATORS:
+            raise StpmError(f"unknown estimator {e!r} (choose from {', '.join(PHOTON_ESTIMATORS)})")
+    runs = []
+    # -- Photon estimators at each budget -------------------------------------------
+    for b in budgets:
+        for est in estimators:
+            st = settings.replace(method="PHOTON", estimator=est,
+                                  photons_caustic=int(round(settings.photons_caustic * b)),
+                                  photons_global=int(round(settings.photons_global * b)))
+            runs.append(Run(label=f"{est} {_factor_label(b)}", method=est, settings=st,
+                            photon_factor=b, cost=0.5 * (1.0 + b)))
+    # -- Accumulation buffer with N stills ----------------------------------------------
+    for n in steps:
+        st = settings.replace(method="ACCUMULATION", accumulation_steps=n)
+        runs.append(Run(label=f"ACCUMULATION N={n}", method="ACCUMULATION", settings=st,
+                        accumulation_steps=n, cost=float(n)))
+    order = {m: i for i, m in enumerate(METHOD_ORDER)}
+    runs.sort(key=lambda r: (r.cost, order[r.method]))
+    return runs
+
+
+# ----------------------------------------------------------------------------
+# Sweep
+# ----------------------------------------------------------------------------
+def run_sweep(scene, runs: list[Run], reference_rgb: np.ndarray, *, time_budget: float | None = None,
+              progress=None, cancel=None, with_flip: bool = True) -> dict:
+    """Render every run (until the time budget is spent) and measure it against the reference.
+
+    reference_rgb : (H, W, 3) linear RGB.  progress(fraction, message) spans
+    the whole sweep, weighted by each run's estimated cost.
+    Returns {'sweep_wall_s', 'time_budget_s', 'skipped': [labels], 'budget_exhausted': bool}.
+    """
+    from ..render import render
+
+    total_cost = sum(r.cost for r in runs) or 1.0
+    done_cost = 0.0
+    t_start = _time.perf_counter()
+    exhausted = False
+    for i, run in enumerate(runs):
+        # -- Time budget: start no run once it is spent ------------------------------
+        elapsed = _time.perf_counter() - t_start
+        if time_budget is not None and elapsed >= time_budget:
+            exhausted = True
+            run.status, run.note = "skipped", f"time budget of {time_budget:g} s spent"
+            continue
+        if cancel is not None and cancel():
+            raise RenderCancelled("compare cancelled")
+
+        # -- Render ----------------------------------------------------------------
+        def sub(f, msg, _a=done_cost, _c=run.cost, _label=run.label, _i=i):
+            if progress is not None:
+                progress((_a + _c * float(f)) / total_cost, f"[{_i + 1}/{len(runs)}] {_label}: {msg}")
+
+        try:
+            result = render(scene, run.settings, progress=sub, cancel=cancel)
+        except RenderCancelled:
+            raise
+        except StpmError as e:
+            run.status, run.note = "failed", str(e).splitlines()[0] if str(e) else type(e).__name__
+            done_cost += run.cost
+            continue
+        stats = result.stats
+        run.wall_s = float(stats.get("wall_s", 0.0))
+        run.phases = {k: float(stats.get(k, 0.0) or 0.0) for k in _PHASES}
+        run.photons = {"caustic": int(stats.get("photons_caustic", 0) or 0),
+                       "global": int(stats.get("photons_global", 0) or 0)}
+        run.rgb = combined_rgb(result.passes).astype(np.float32)
+
+        # -- Error against the reference ----------------------------------------------
+        errs = image_errors(run.rgb.astype(np.float64), reference_rgb, with_flip=with_flip)
+        run.flip_map = errs.pop("_flip_map")
+        run.errors = errs
+        run.status = "done"
+        done_cost += run.cost
+        if progress is not None:
+            progress(done_cost / total_cost, f"[{i + 1}/{len(runs)}] {run.label}: done in {run.wall_s:.1f} s")
+    return {"sweep_wall_s": _time.perf_counter() - t_start,
+            "time_budget_s": None if time_budget is None else float(time_budget),
+            "skipped": [r.label for r in runs if r.status == "skipped"],
+            "budget_exhausted": exhausted}
+
+
+def finite_or_none(x):
+    """x as a float if finite, else None (JSON has no NaN)."""
+    if x is None:
+        return None
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None

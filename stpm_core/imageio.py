@@ -1,0 +1,211 @@
+"""Image output: multilayer OpenEXR with Blender's channel names, and an sRGB PNG preview.
+
+Channel names follow Blender's multilayer EXR: ``<view layer>.<pass>.<channel>``,
+e.g. ``ViewLayer.Combined.R``, ``ViewLayer.Depth.Z``, ``ViewLayer.Normal.X``.
+The passes and their channel letters come from the one table
+:data:`stpm_core.film.PASSES` (re-exported by :mod:`stpm_core.render`), so the
+film, this writer and the Blender add-on cannot disagree.
+
+Images are row 0 = top (the contract in docs/internal-api.md), which is also
+the EXR / PNG scanline order: no flip here.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .errors import StpmError
+
+__all__ = ["write_exr", "read_exr", "write_png", "read_png", "linear_to_srgb",
+           "channel_names", "VIEW_LAYER"]
+
+VIEW_LAYER = "ViewLayer"
+
+
+def _passes_table():
+    """The (name, channels, channel_ids) table: render.PASSES when present, else film.PASSES."""
+    try:
+        from .render import PASSES  # the public home named by the contract
+    except ImportError:
+        from .film import PASSES
+    return PASSES
+
+
+def channel_names(passes: dict, view_layer: str = VIEW_LAYER) -> list[tuple[str, str, int]]:
+    """(pass name, full channel name, channel index) for every channel written, in table order.
+
+    Passes in ``passes`` but not in the table (extra passes) follow, with
+    channel letters RGBA / XYZ picked by their channel count.
+    """
+    out = []
+    known = set()
+    for name, count, ids in _passes_table():
+        known.add(name)
+        if name in passes:
+            for c in range(count):
+                out.append((name, f"{view_layer}.{name}.{ids[c]}", c))
+    for name in sorted(set(passes) - known):
+        count = np.asarray(passes[name]).reshape(*np.shape(passes[name])[:2], -1).shape[2]
+        ids = "Z" if count == 1 else ("RGB" if count == 3 else "RGBA"[:count] if count <= 4 else None)
+        for c in range(count):
+            out.append((name, f"{view_layer}.{name}.{ids[c] if ids else c}", c))
+    return out
+
+
+def write_exr(path, result, metadata: dict | None = None, *, half: bool = False,
+              view_layer: str = VIEW_LAYER) -> Path:
+    """Write a multilayer OpenEXR (ZIP compression) with Blender's channel names.
+
+    Parameters
+    ----------
+    path : output file name.
+    result : a ``RenderResult`` (``.passes``, optional ``.stats``) or a dict
+        pass name -> (H, W, C) float array (row 0 = top).
+    metadata : extra string attributes (values that are not strings are written
+        as JSON).  ``result.stats`` is added as ``stpm:stats`` (JSON).
+    half : write 16-bit half floats instead of 32-bit floats (Depth stays 32-bit).
+    """
+    import OpenImageIO as oiio
+
+    passes = result if isinstance(result, dict) else result.passes
+    if not passes:
+        raise StpmError("write_exr: no passes to write")
+    shapes = {n: np.asarray(a).shape for n, a in passes.items()}
+    H, W = next(iter(shapes.values()))[:2]
+
+    # Gather every channel, in table order, into one (H, W, C) float32 block
+    cols, names = [], []
+    for name, full, c in channel_names(passes, view_layer):
+        a = np.asarray(passes[name], dtype=np.float32)
+        if a.ndim == 2:
+            a = a[:, :, None]
+        if a.shape[:2] != (H, W):
+            raise StpmError(f"write_exr: pass {name} has shape {a.shape}, expected ({H}, {W}, C)")
+        cols.append(a[:, :, c])
+        names.append(full)
+    pixels = np.ascontiguousarray(np.stack(cols, axis=-1))
+
+    # Header: channels, compression, metadata
+    fmt = oiio.HALF if half else oiio.FLOAT
+    spec = oiio.ImageSpec(int(W), int(H), len(names), fmt)
+    spec.channelnames = tuple(names)
+    if half:
+        # Depth stays 32-bit float as in Blender's half EXRs (1e10 background overflows half)
+        spec.channelformats = tuple(oiio.TypeDesc(oiio.FLOAT) if n.endswith(".Depth.Z") else oiio.TypeDesc(oiio.HALF)
+                                    for n in names)
+    spec.attribute("compression", "zip")
+    # Tell readers the alpha channel of Combined is alpha (Blender does the same).
+    if f"{view_layer}.Combined.A" in names:
+        spec.alpha_channel = names.index(f"{view_layer}.Combined.A")
+    meta = dict(metadata or {})
+    stats = getattr(result, "stats", None)
+    if stats and "stpm:stats" not in meta:
+        meta["stpm:stats"] = stats
+    for key, value in meta.items():
+        text = value if isinstance(value, str) else json.dumps(value, default=_json_default)
+        spec.attribute(key if ":" in key else f"stpm:{key}", text)
+
+    path = Path(path)
+    out = oiio.ImageOutput.create(str(path))
+    if out is None or not out.open(str(path), spec):
+        raise StpmError(f"cannot write EXR {path}: {oiio.geterror() or 'open failed'}")
+    ok = out.write_image(pixels)
+    err = out.geterror()
+    out.close()
+    if not ok:
+        raise StpmError(f"cannot write EXR {path}: {err}")
+    return path
+
+
+def _json_default(o):
+    """JSON for numpy scalars and arrays inside stats / settings."""
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    return str(o)
+
+
+def read_exr(path, view_layer: str = VIEW_LAYER) -> dict:
+    """Read a multilayer EXR written by :func:`write_exr` (or Blender).
+
+    Returns a dict pass name -> (H, W, C) float32, plus ``"_channels"``: the
+    channel names in file order and ``"_metadata"``: string attributes.
+    """
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise StpmError(f"cannot read EXR {path}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+        names = list(spec.channelnames)
+        meta = {a.name: a.value for a in spec.extra_attribs}
+    finally:
+        inp.close()
+    pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    groups: dict[str, list[int]] = {}
+    for i, n in enumerate(names):
+        parts = n.split(".")
+        key = parts[1] if len(parts) == 3 and parts[0] == view_layer else ".".join(parts[:-1]) or n
+        groups.setdefault(key, []).append(i)
+    out = {k: pixels[:, :, idx].copy() for k, idx in groups.items()}
+    out["_channels"] = names
+    out["_metadata"] = meta
+    return out
+
+
+def linear_to_srgb(x: np.ndarray) -> np.ndarray:
+    """The sRGB transfer curve (IEC 61966-2-1) on linear values clipped to [0, 1].
+
+    ``12.92 x`` for ``x <= 0.0031308``, else ``1.055 x^(1/2.4) - 0.055``.
+    NaN and -inf map to 0, +inf to 1 (a bad pixel never spreads or crashes).
+    """
+    x = np.nan_to_num(np.asarray(x, dtype=np.float64), nan=0.0, posinf=1.0, neginf=0.0)
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def write_png(path, rgb: np.ndarray) -> Path:
+    """Write an 8-bit sRGB preview of linear RGB(A) ``rgb`` (H, W, 3|4), row 0 = top.
+
+    Colour channels are clipped to [0, 1] and sRGB-encoded; alpha (if given)
+    is dropped: the preview is opaque, as the world colour is rendered.
+    """
+    import OpenImageIO as oiio
+
+    rgb = np.asarray(rgb)
+    if rgb.ndim != 3 or rgb.shape[2] < 3:
+        raise StpmError(f"write_png: expected (H, W, 3) RGB, got {rgb.shape}")
+    v = np.round(linear_to_srgb(rgb[:, :, :3]) * 255.0).astype(np.uint8)
+    H, W = v.shape[:2]
+    spec = oiio.ImageSpec(W, H, 3, oiio.UINT8)
+    spec.attribute("oiio:ColorSpace", "sRGB")
+    path = Path(path)
+    out = oiio.ImageOutput.create(str(path))
+    if out is None or not out.open(str(path), spec):
+        raise StpmError(f"cannot write PNG {path}: {oiio.geterror() or 'open failed'}")
+    ok = out.write_image(np.ascontiguousarray(v))
+    err = out.geterror()
+    out.close()
+    if not ok:
+        raise StpmError(f"cannot write PNG {path}: {err}")
+    return path
+
+
+def read_png(path) -> np.ndarray:
+    """Read an 8-bit image -> (H, W, C) uint8 (for tests)."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise StpmError(f"cannot read {path}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        px = inp.read_image(0, 0, 0, spec.nchannels, oiio.UINT8)
+    finally:
+        inp.close()
+    return np.asarray(px, dtype=np.uint8).reshape(spec.height, spec.width, spec.nchannels)

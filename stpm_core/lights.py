@@ -1,0 +1,524 @@
+"""Blender lights in Cycles units: direct-light sampling and photon emission.
+
+Units (``shared/design.md``, "Units: match Cycles"; every formula with its
+code name is in docs/lights-and-materials.md):
+
+* POINT / SPOT of power P W: radiant intensity ``I = color * P / (4 pi)`` W/sr
+  (the spot cone masks it, never rescales it).  Radius r > 0 makes a soft
+  light of the same far-field intensity, emitting radiance
+  ``L = I / (pi r^2)``; ``use_soft_falloff`` picks Cycles' two shapes:
+  on = a disk of radius r facing the shading point, off = a sphere.
+* AREA of power P W: one-sided Lambertian emitter facing local -Z with
+  radiance ``L = color * P / (pi A)`` (A in world units, object scale
+  included, as Cycles does).
+* SUN of strength S: irradiance ``color * S`` W/m^2 on a facing surface;
+  ``angle`` > 0 spreads it uniformly over a cone of that angular diameter.
+
+Queries (all vectorised, each sample at its own shutter time; a light's pose
+is ``light.transform.at(times)``):
+
+* :meth:`LightSet.sample_direct` -- next-event estimation (incident-radiance estimator);
+* :meth:`LightSet.emit`, :meth:`LightSet.emit_toward` -- photons, whole or aimed;
+* :meth:`LightSet.intersect`, :meth:`LightSet.sky_radiance` -- lights seen along
+  camera rays and specular chains.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .sampling import (concentric_disk, cosine_hemisphere, orthonormal_basis, uniform_cone,
+                       uniform_sphere)
+
+__all__ = ["LightSet", "spot_attenuation"]
+
+INV_4PI = 1.0 / (4.0 * np.pi)
+
+
+# ---------------------------------------------------------------------------
+# Small geometric helpers
+# ---------------------------------------------------------------------------
+
+def _one_minus_cos_from_sin2(sin2: np.ndarray) -> np.ndarray:
+    """1 - sqrt(1 - sin^2) without cancellation for small angles."""
+    sin2 = np.clip(sin2, 0.0, 1.0)
+    return sin2 / (1.0 + np.sqrt(1.0 - sin2))
+
+
+def _local_to_world(local: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Rotate (n, 3) local directions (z = axis) into the frame about unit axis (n, 3)."""
+    t, b = orthonormal_basis(axis)
+    return local[:, 0:1] * t + local[:, 1:2] * b + local[:, 2:3] * axis
+
+
+def _normalize(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vectors (n, 3) and lengths (n,)."""
+    length = np.linalg.norm(v, axis=-1)
+    return v / np.maximum(length, 1e-300)[:, None], length
+
+
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def spot_attenuation(light, cos_axis: np.ndarray) -> np.ndarray:
+    """Spot mask in [0, 1] for directions at cos_axis (n,) from the spot axis.
+
+    Zero outside the cone of half-angle ``spot_size / 2``; inside, Cycles'
+    smoothstep from the edge inward over ``(1 - cos_half) * spot_blend`` in
+    cosine space; 1 in the core.  The mask never rescales the intensity.
+    """
+    cos_half = np.cos(0.5 * light.spot_size)
+    smooth = (1.0 - cos_half) * light.spot_blend
+    x = cos_axis - cos_half
+    if smooth <= 0.0:
+        return (x > 0.0).astype(np.float64)
+    return np.where(x > 0.0, _smoothstep(x / smooth), 0.0)
+
+
+def _spot_solid_angle(light) -> float:
+    """Integral of :func:`spot_attenuation` over the sphere (sr): 2 pi (1 - cos_half)(1 - blend / 2).
+
+    The smoothstep over a band of width w = (1 - cos_half) * blend averages 1/2,
+    so the blended cone loses w / 2 of its 2 pi (1 - cos_half) extent.
+    """
+    one_minus = 1.0 - np.cos(0.5 * light.spot_size)
+    return 2.0 * np.pi * one_minus * (1.0 - 0.5 * light.spot_blend)
+
+
+def _ray_sphere_far(o: np.ndarray, d: np.ndarray, c: np.ndarray, r: float, inside: np.ndarray) -> np.ndarray:
+    """Distance along unit d (n, 3) from o to a sphere (c, r): near hit from outside, far hit from inside."""
+    oc = o - c
+    b = np.sum(oc * d, axis=-1)
+    disc = np.maximum(b * b - (np.sum(oc * oc, axis=-1) - r * r), 0.0)
+    s = np.sqrt(disc)
+    return np.where(inside, -b + s, np.maximum(-b - s, 0.0))
+
+
+class LightSet:
+    """The scene's lights, ready for direct sampling and photon emission.
+
+    Attributes
+    ----------
+    lights : list[scene.Light].
+    power : (L,) float64 total emitted flux per light in W (mean over RGB), for
+        splitting photons in proportion to power.
+    scene_bounds : ((3,), (3,)) world bounds over the shutter (suns aim their
+        photons at the sphere around it).
+    """
+
+    def __init__(self, scene):
+        self.lights = list(scene.lights)
+        lo, hi = scene.bounds()
+        self.scene_bounds = (np.asarray(lo, float), np.asarray(hi, float))
+        # Bounding sphere of the scene (suns emit from a disc covering it)
+        self._scene_center = 0.5 * (self.scene_bounds[0] + self.scene_bounds[1])
+        self._scene_radius = max(0.5 * float(np.linalg.norm(self.scene_bounds[1] - self.scene_bounds[0])), 1e-3)
+        self.power = np.array([float(np.mean(self.flux(i))) for i in range(len(self.lights))])
+
+    def __len__(self) -> int:
+        return len(self.lights)
+
+    # -----------------------------------------------------------------------
+    # Per-light constants
+    # -----------------------------------------------------------------------
+
+    def intensity(self, li: int) -> np.ndarray:
+        """POINT / SPOT radiant intensity I = color * P / (4 pi) (3,) W/sr."""
+        l = self.lights[li]
+        return np.asarray(l.color, float) * float(l.power) * INV_4PI
+
+    def _sun_disc_radius(self, li: int) -> float:
+        """Radius of the sun's emission disc: scene sphere grown by the cone's drift across it."""
+        l = self.lights[li]
+        R = self._scene_radius
+        return R * (1.0 + 3.0 * np.tan(0.5 * min(l.angle, 3.0)))
+
+    def flux(self, li: int) -> np.ndarray:
+        """Total emitted flux (3,) W of light li (what :meth:`emit` photons sum to)."""
+        l = self.lights[li]
+        color = np.asarray(l.color, float)
+        if l.type == "POINT":
+            return color * float(l.power)
+        if l.type == "SPOT":
+            return self.intensity(li) * _spot_solid_angle(l)
+        if l.type == "AREA":
+            return color * float(l.power)
+        # SUN: irradiance S through the disc (mean cos over the cone for angle > 0)
+        R = self._sun_disc_radius(li)
+        return color * float(l.power) * np.pi * R * R * self._sun_mean_cos(li)
+
+    def _sun_mean_cos(self, li: int) -> float:
+        """Mean cosine to the axis over the sun's cone: (1 + cos_half) / 2."""
+        return 0.5 * (1.0 + np.cos(0.5 * self.lights[li].angle))
+
+    def _frame(self, li: int, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Light pose at times (n,): position (n, 3), unit X, Y, Z axes (n, 3) each (scale removed)."""
+        M = self.lights[li].transform.at(np.atleast_1d(np.asarray(times, float)))
+        R = M[:, :3, :3]
+        X, _ = _normalize(R[:, :, 0])
+        Y, _ = _normalize(R[:, :, 1])
+        Z, _ = _normalize(R[:, :, 2])
+        return M[:, :3, 3], X, Y, Z
+
+    def _area_shape(self, li: int, times: np.ndarray):
+        """AREA light at times: centre (n, 3), half-extent vectors ex, ey (n, 3), area A (n,), emitting normal (n, 3)."""
+        l = self.lights[li]
+        M = l.transform.at(np.atleast_1d(np.asarray(times, float)))
+        sx = float(l.size)
+        sy = float(l.size_y) if l.shape in ("RECTANGLE", "ELLIPSE") else sx
+        ex = 0.5 * sx * M[:, :3, 0]
+        ey = 0.5 * sy * M[:, :3, 1]
+        cross = np.cross(ex, ey)
+        A4 = np.linalg.norm(cross, axis=-1)           # |ex x ey| = A_rect / 4
+        if l.shape in ("DISK", "ELLIPSE"):
+            A = np.pi * A4
+        else:
+            A = 4.0 * A4
+        n_emit = -cross / np.maximum(A4, 1e-300)[:, None]  # faces local -Z
+        return M[:, :3, 3], ex, ey, A, n_emit
+
+    def _area_points(self, li: int, ex, ey, c, u: np.ndarray) -> np.ndarray:
+        """Uniform points (n, 3) on the area light's shape from u (n, 2)."""
+        l = self.lights[li]
+        if l.shape in ("DISK", "ELLIPSE"):
+            d = concentric_disk(u)
+        else:
+            d = 2.0 * u - 1.0
+        return c + d[:, 0:1] * ex + d[:, 1:2] * ey
+
+    # -----------------------------------------------------------------------
+    # Direct lighting
+    # -----------------------------------------------------------------------
+
+    def sample_direct(self, li: int, p: np.ndarray, times: np.ndarray, u: np.ndarray):
+        """Sample light li as seen from points p at their times.
+
+        Parameters
+        ----------
+        li : light index.
+        p : (n, 3) world shading points.
+        times : (n,) normalised shutter times.
+        u : (n, 2) uniform samples in [0, 1).
+
+        Returns
+        -------
+        wi : (n, 3) unit direction from p toward the light sample.
+        dist : (n,) distance to the light sample (inf for SUN); shadow rays
+            test [eps, dist).
+        weight : (n, 3) W/(m^2 sr) incident-radiance estimator L_e * G / pdf,
+            so reflected radiance = f * |cos(ns, wi)| * weight * visible; 0
+            where the light gives nothing (behind an area light, outside a spot).
+        """
+        l = self.lights[li]
+        p = np.asarray(p, float)
+        times = np.atleast_1d(np.asarray(times, float))
+        u = np.asarray(u, float)
+        if l.type in ("POINT", "SPOT"):
+            return self._sample_point(li, p, times, u)
+        if l.type == "AREA":
+            return self._sample_area(li, p, times, u)
+        return self._sample_sun(li, p, times, u)
+
+    def _sample_point(self, li, p, times, u):
+        """POINT / SPOT: true point (r = 0), disk facing p (soft falloff) or sphere."""
+        l = self.lights[li]
+        c, _, _, Z = self._frame(li, times)
+        I = self.intensity(li)
+        r = float(l.radius)
+        to_p, d = _normalize(p - c)              # light -> p, unit
+        n = p.shape[0]
+        if r <= 0.0:
+            # Point: E-estimator I / d^2 along the exact direction
+            wi, dist = -to_p, d
+            g = np.where(d > 0.0, 1.0 / np.maximum(d * d, 1e-300), 0.0)   # nothing at the light itself
+        elif l.use_soft_falloff:
+            # Disk of radius r centred on the light, facing p (Cycles' soft falloff).
+            # Radiance L = I / (pi r^2); pdf_A = 1 / (pi r^2) -> weight = I cos_q / t^2
+            q = c + r * _local_to_world(np.concatenate([concentric_disk(u), np.zeros((n, 1))], axis=1), to_p)
+            wi, dist = _normalize(q - p)
+            cos_q = np.maximum(-np.sum(wi * to_p, axis=-1), 0.0)
+            g = cos_q / np.maximum(dist * dist, 1e-300)
+        else:
+            # Sphere of radius r: uniform in the cone it subtends (or the whole
+            # sphere from inside).  Radiance L = I / (pi r^2); weight = L / pdf.
+            inside = d <= r
+            one_minus_cos = np.where(inside, 2.0, _one_minus_cos_from_sin2((r * r) / np.maximum(d * d, 1e-300)))
+            local = np.where(inside[:, None], uniform_sphere(u), uniform_cone(u, 1.0 - one_minus_cos))
+            wi = _local_to_world(local, -to_p)
+            dist = _ray_sphere_far(p, wi, c, r, inside)
+            omega = 2.0 * np.pi * one_minus_cos
+            g = omega / (np.pi * r * r)
+        weight = I[None, :] * g[:, None]
+        if l.type == "SPOT":
+            # Spot mask on the direction the light leaves along (toward p)
+            weight = weight * spot_attenuation(l, np.sum(-wi * -Z, axis=-1))[:, None]
+        return wi, dist, weight
+
+    def _sample_area(self, li, p, times, u):
+        """AREA: uniform by area, weight = L cos_l A / t^2 (one-sided, faces local -Z)."""
+        l = self.lights[li]
+        c, ex, ey, A, n_emit = self._area_shape(li, times)
+        q = self._area_points(li, ex, ey, c, u)
+        wi, dist = _normalize(q - p)
+        cos_l = np.maximum(-np.sum(wi * n_emit, axis=-1), 0.0)
+        L = np.asarray(l.color, float)[None, :] * (float(l.power) / (np.pi * np.maximum(A, 1e-300)))[:, None]
+        g = cos_l * A / np.maximum(dist * dist, 1e-300)
+        return wi, dist, L * g[:, None]
+
+    def _sample_sun(self, li, p, times, u):
+        """SUN: direction +Z of the light (toward the sun); cone of angular diameter ``angle``.
+
+        Radiance S / Omega uniform in the cone, pdf 1 / Omega -> weight = color * S.
+        """
+        l = self.lights[li]
+        _, _, _, Z = self._frame(li, times)
+        n = p.shape[0]
+        if l.angle > 0.0:
+            wi = _local_to_world(uniform_cone(u, np.cos(0.5 * l.angle)), Z)
+        else:
+            wi = Z.copy()
+        weight = np.broadcast_to(np.asarray(l.color, float) * float(l.power), (n, 3)).copy()
+        return wi, np.full(n, np.inf), weight
+
+    # -----------------------------------------------------------------------
+    # Lights seen along rays (camera rays and specular chains)
+    # -----------------------------------------------------------------------
+
+    def intersect(self, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax: np.ndarray | None = None):
+        """Nearest light surface along rays and the radiance it sends back along them.
+
+        Lights are not scene geometry; a path that can only reach them by
+        chance (a camera ray, a chain of delta bounces) asks here.  AREA lights
+        (one-sided), and POINT / SPOT lights with radius > 0 (the sphere, or with
+        ``use_soft_falloff`` the disc of radius r facing the ray origin, as in
+        :meth:`sample_direct`) are visible; true points and suns are not (see
+        :meth:`sky_radiance` for suns with an angle).
+
+        Parameters
+        ----------
+        o, d : (n, 3) ray origins and unit directions; times : (n,).
+        tmax : (n,) or None: only hits closer than tmax count (e.g. the geometry hit).
+
+        Returns
+        -------
+        t : (n,) distance to the nearest light hit (inf: none).
+        L : (n, 3) radiance W/(m^2 sr) arriving at o along -d from that light.
+        """
+        o = np.asarray(o, float)
+        d = np.asarray(d, float)
+        n = o.shape[0]
+        times = np.broadcast_to(np.atleast_1d(np.asarray(times, float)), (n,))
+        t_best = np.full(n, np.inf) if tmax is None else np.asarray(tmax, float).copy()
+        L = np.zeros((n, 3))
+        found = np.zeros(n, bool)
+        for li, l in enumerate(self.lights):
+            if l.type == "SUN" or (l.type in ("POINT", "SPOT") and l.radius <= 0.0):
+                continue
+            t, Le = self._hit_one(li, o, d, times)
+            closer = (t > 0) & (t < t_best)
+            t_best = np.where(closer, t, t_best)
+            L[closer] = Le[closer]
+            found |= closer
+        return np.where(found, t_best, np.inf), L
+
+    def _hit_one(self, li, o, d, times):
+        """Hit distance (n,) (inf: miss) and radiance (n, 3) of light li along rays."""
+        l = self.lights[li]
+        n = o.shape[0]
+        if l.type == "AREA":
+            # Plane of the light, inside the shape, seen from its emitting side
+            c, ex, ey, A, n_emit = self._area_shape(li, times)
+            dn = np.sum(d * n_emit, axis=-1)
+            t = np.sum((c - o) * n_emit, axis=-1) / np.where(dn == 0, np.inf, dn)
+            q = o + t[:, None] * d - c
+            a = np.sum(q * ex, axis=-1) / np.maximum(np.sum(ex * ex, axis=-1), 1e-300)
+            b = np.sum(q * ey, axis=-1) / np.maximum(np.sum(ey * ey, axis=-1), 1e-300)
+            if l.shape in ("DISK", "ELLIPSE"):
+                inside = a * a + b * b <= 1.0
+            else:
+                inside = (np.abs(a) <= 1.0) & (np.abs(b) <= 1.0)
+            ok = inside & (dn < 0) & (t > 0)
+            Le = np.asarray(l.color, float)[None, :] * (float(l.power) / (np.pi * np.maximum(A, 1e-300)))[:, None]
+            return np.where(ok, t, np.inf), np.where(ok[:, None], Le, 0.0)
+        # POINT / SPOT with radius: sphere, or the disc facing the ray origin
+        c, _, _, Z = self._frame(li, times)
+        r = float(l.radius)
+        oc = o - c
+        if l.use_soft_falloff:
+            nd, dist_c = _normalize(oc)
+            dn = np.sum(d * nd, axis=-1)
+            t = -np.sum(oc * nd, axis=-1) / np.where(dn == 0, np.inf, dn)
+            q = o + t[:, None] * d - c
+            ok = (np.sum(q * q, axis=-1) <= r * r) & (t > 0) & (dist_c > 0)
+        else:
+            b = np.sum(oc * d, axis=-1)
+            disc = b * b - (np.sum(oc * oc, axis=-1) - r * r)
+            s = np.sqrt(np.maximum(disc, 0.0))
+            t0, t1 = -b - s, -b + s
+            t = np.where(t0 > 0, t0, t1)
+            ok = (disc >= 0) & (t > 0)
+        Le = np.broadcast_to(self.intensity(li) / (np.pi * r * r), (n, 3))
+        if l.type == "SPOT":
+            Le = Le * spot_attenuation(l, np.sum(-d * -Z, axis=-1))[:, None]
+        return np.where(ok, t, np.inf), np.where(ok[:, None], Le, 0.0)
+
+    def sky_radiance(self, d: np.ndarray, times: np.ndarray) -> np.ndarray:
+        """Radiance (n, 3) of suns with angle > 0 seen along escaping rays d (n, 3): color S / Omega inside their cone."""
+        d = np.asarray(d, float)
+        n = d.shape[0]
+        times = np.broadcast_to(np.atleast_1d(np.asarray(times, float)), (n,))
+        L = np.zeros((n, 3))
+        for li, l in enumerate(self.lights):
+            if l.type != "SUN" or l.angle <= 0.0:
+                continue
+            _, _, _, Z = self._frame(li, times)
+            cos_half = np.cos(0.5 * l.angle)
+            omega = 2.0 * np.pi * (1.0 - cos_half)
+            inside = np.sum(d * Z, axis=-1) >= cos_half
+            L += inside[:, None] * (np.asarray(l.color, float) * float(l.power) / omega)[None, :]
+        return L
+
+    # -----------------------------------------------------------------------
+    # Photon emission
+    # -----------------------------------------------------------------------
+
+    def emit(self, li: int, n: int, times: np.ndarray, rng: np.random.Generator):
+        """Emit n photons from light li over its whole emission.
+
+        Returns origins (n, 3), unit dirs (n, 3), power (n, 3) W per photon;
+        E[sum of power] = :meth:`flux` (exactly, for POINT and AREA).
+        Points and spots with a radius emit from their sphere / disc
+        (:meth:`_point_origins`), so caustics get the same soft edges as shadows.
+        """
+        l = self.lights[li]
+        times = np.atleast_1d(np.asarray(times, float))
+        u = rng.random((n, 2))
+        if l.type == "POINT":
+            c, _, _, _ = self._frame(li, times)
+            dirs = uniform_sphere(u)
+            power = np.broadcast_to(self.flux(li) / n, (n, 3)).copy()
+            return self._point_origins(li, c, dirs, rng), dirs, power
+        if l.type == "SPOT":
+            # Uniform in the spot cone (solid angle Omega_c), power I * att * Omega_c / n
+            c, _, _, Z = self._frame(li, times)
+            cos_half = np.cos(0.5 * l.spot_size)
+            dirs = _local_to_world(uniform_cone(u, cos_half), -Z)
+            att = spot_attenuation(l, np.sum(dirs * -Z, axis=-1))
+            omega_c = 2.0 * np.pi * (1.0 - cos_half)
+            power = self.intensity(li)[None, :] * (att * omega_c / n)[:, None]
+            return self._point_origins(li, c, dirs, rng), dirs, power
+        if l.type == "AREA":
+            # Uniform point, cosine-weighted direction: power = L pi A / n = color P / n
+            c, ex, ey, A, n_emit = self._area_shape(li, times)
+            q = self._area_points(li, ex, ey, c, rng.random((n, 2)))
+            dirs = _local_to_world(cosine_hemisphere(u), n_emit)
+            power = np.broadcast_to(self.flux(li) / n, (n, 3)).copy()
+            return q, dirs, power
+        # SUN: a disc perpendicular to the sun covering the scene's bounding sphere
+        _, _, _, Z = self._frame(li, times)
+        R = self._sun_disc_radius(li)
+        return self._sun_photons(li, n, Z, np.broadcast_to(self._scene_center, (n, 3)),
+                                 R, 2.0 * self._scene_radius, u, rng)
+
+    def _point_origins(self, li, c, dirs, rng) -> np.ndarray:
+        """Where photons leaving along dirs (n, 3) start on a POINT / SPOT light of radius r.
+
+        A Lambertian sphere of radiance L seen from direction w is a uniformly
+        bright disc of radius r perpendicular to w, so photons along w start at a
+        uniform point of that disc: on the sphere's front (``use_soft_falloff``
+        off) or in the disc through the centre (on: Cycles' disc facing the
+        receiver).  Direction and power are those of the point light.  r = 0:
+        the centre.
+        """
+        l = self.lights[li]
+        r = float(l.radius)
+        if r <= 0.0:
+            return c
+        n = dirs.shape[0]
+        d = concentric_disk(rng.random((n, 2))) * r
+        t, b = orthonormal_basis(dirs)
+        origins = c + d[:, 0:1] * t + d[:, 1:2] * b
+        if not l.use_soft_falloff:
+            origins = origins + dirs * np.sqrt(np.maximum(r * r - np.sum(d * d, axis=1), 0.0))[:, None]
+        return origins
+
+    def _sun_photons(self, li, n, Z, center, R, back, u, rng):
+        """Sun photons through a disc of radius R (scalar or (n,)) perpendicular to Z, ``back`` upstream of center.
+
+        The sun's radiance is S / Omega in its cone, so the flux through the
+        disc is dPhi = (S / Omega) cos(theta) dA dw.  Points uniform on the disc
+        (pdf 1 / (pi R^2)) and directions uniform in the cone (pdf 1 / Omega)
+        give power = color * S * pi R^2 * cos(theta) / n per photon.
+        """
+        l = self.lights[li]
+        R = np.broadcast_to(np.asarray(R, float), (n,))
+        disc = concentric_disk(rng.random((n, 2))) * R[:, None]
+        origins = center + back * Z + _local_to_world(np.concatenate([disc, np.zeros((n, 1))], axis=1), Z)
+        if l.angle > 0.0:
+            local = uniform_cone(u, np.cos(0.5 * l.angle))
+            dirs = _local_to_world(local, -Z)
+            cos_t = local[:, 2]
+        else:
+            dirs = -Z.copy()
+            cos_t = np.ones(n)
+        power = (np.asarray(l.color, float) * float(l.power))[None, :] * (np.pi * R * R * cos_t / n)[:, None]
+        return origins, dirs, power
+
+    def emit_toward(self, li: int, n: int, times: np.ndarray, rng: np.random.Generator,
+                    centers: np.ndarray, radius: float):
+        """Emit n photons aimed at a sphere (centers (n, 3) or (3,), radius) only.
+
+        Directions are uniform in the cone the sphere subtends from each
+        emission point, and power = emitted intensity toward the direction *
+        cone solid angle / n, so the expected power reaching anything inside the
+        sphere equals that of :meth:`emit` with the same n (no photons wasted
+        elsewhere).  Emission points inside the sphere fall back to
+        :meth:`emit`'s distribution.
+
+        Returns origins (n, 3), unit dirs (n, 3), power (n, 3).
+        """
+        l = self.lights[li]
+        times = np.atleast_1d(np.asarray(times, float))
+        centers = np.broadcast_to(np.asarray(centers, float), (n, 3))
+        radius = float(radius)
+        u = rng.random((n, 2))
+        if l.type == "SUN":
+            # Disc perpendicular to the sun covering the target sphere, upstream of the
+            # whole scene so that occluders anywhere are still traced.
+            _, _, _, Z = self._frame(li, times)
+            back = (np.linalg.norm(centers - self._scene_center, axis=-1) + self._scene_radius + radius)
+            R = radius + (back + radius) * np.tan(0.5 * min(l.angle, 3.0))
+            return self._sun_photons(li, n, Z, centers, R, back[:, None], u, rng)
+        # Emission point (and, for area lights, its emitting normal and radiance).
+        # A point / spot of radius r aims from its centre at the sphere grown by r,
+        # then starts each photon on its disc (every ray from the light that can
+        # reach the target lies in that wider cone).
+        reach = radius
+        if l.type == "AREA":
+            c, ex, ey, A, n_emit = self._area_shape(li, times)
+            origins = self._area_points(li, ex, ey, c, rng.random((n, 2)))
+        else:
+            origins, _, _, Z = self._frame(li, times)
+            reach = radius + float(l.radius)
+        # Cone toward the sphere: cos_max from sin = reach / d
+        axis, d = _normalize(centers - origins)
+        inside = d <= reach
+        one_minus_cos = np.where(inside, 2.0, _one_minus_cos_from_sin2((reach * reach) / np.maximum(d * d, 1e-300)))
+        local = np.where(inside[:, None], uniform_sphere(u), uniform_cone(u, 1.0 - one_minus_cos))
+        dirs = _local_to_world(local, axis)
+        if l.type != "AREA":
+            origins = self._point_origins(li, origins, dirs, rng)
+        omega = 2.0 * np.pi * one_minus_cos           # cone solid angle (4 pi inside)
+        if l.type == "AREA":
+            # dPhi = L cos_l dA dw; point pdf 1 / A, direction pdf 1 / omega
+            L = np.asarray(l.color, float)[None, :] * (float(l.power) / (np.pi * np.maximum(A, 1e-300)))[:, None]
+            cos_l = np.maximum(np.sum(dirs * n_emit, axis=-1), 0.0)
+            power = L * (cos_l * A * omega / n)[:, None]
+        else:
+            I = self.intensity(li)
+            att = np.ones(n)
+            if l.type == "SPOT":
+                att = spot_attenuation(l, np.sum(dirs * -Z, axis=-1))
+            power = I[None, :] * (att * omega / n)[:, None]
+        return origins, dirs, power

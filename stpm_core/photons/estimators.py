@@ -1,0 +1,323 @@
+"""Irradiance estimates from a time-stamped photon map: STANDARD, TEMPORAL, KD4D.
+
+All three return irradiance ``E`` (n, 3) in W/m^2 at query points ``p`` (n, 3)
+and shutter times ``t`` (n,), counting only photons that arrived on the side
+of the shading normal ``ns`` (``dot(ns, wi) > 0``).  The derivations, with the
+units of every name used here, are in docs/photon-mapping.md.
+
+Photon power is a *per-shutter* quantity: ``Phi`` (W) is the photon's share of
+the flux integrated over the normalised shutter, and photon times are drawn
+from the shutter density g(t).  So the photons around (x, t) have density
+``E(x, t) g(t)`` in (area x time) and a region of area A and shutter mass W
+(``W = integral of g over its time span``) holds expected power E * A * W.
+
+k-nearest correction: the k-th neighbour only fixes the radius; the k - 1
+photons inside are, given that radius, independent samples of the density
+restricted to the neighbourhood, and E[(k-1) / V_k] equals the density
+exactly for a Poisson process.  So every estimate sums the k - 1 *inner*
+photons over the volume reaching the k-th (the textbook k / V_k overestimates
+by k / (k-1)).
+
+Estimators (``k`` = ``settings.k_nearest``):
+
+* STANDARD: k nearest in space; ``E = sum Phi / (pi r_k^2)`` -- the
+  shutter-averaged irradiance (time ignored).
+* TEMPORAL: m spatial candidates (the m-th fixes the disc radius r_m), the k
+  nearest in time among the m - 1 inner ones (the k-th fixes the window
+  half-width tau); ``E = sum Phi / (pi r_m^2 * W)`` with ``W`` the shutter
+  mass of [t - tau, t + tau] clipped to [0, 1].  m = ceil(alpha k) with
+  ``temporal_alpha``; 0 = automatic alpha growing as (N / k)^(1/3).
+* KD4D: k nearest in (x, y, z, s t); ``E = sum Phi / (V / s)`` with V the
+  3-ball of radius R_k in (surface x scaled time), clipped to the shutter slab
+  and weighted by g: ``V/s = integral over the clipped window of
+  pi (R^2 - s^2 (tau - t)^2) g(tau) dtau``.
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .record import oct_decode
+
+__all__ = [
+    "PhotonMap", "ESTIMATOR_NAMES", "CONE_K", "auto_temporal_alpha", "temporal_candidates",
+    "shutter_mass", "slab_ball_volume",
+]
+
+ESTIMATOR_NAMES = ("STANDARD", "TEMPORAL", "KD4D")
+CONE_K = 1.1                 # cone kernel: w(d) = 1 - d / (CONE_K * r)
+TEMPORAL_ALPHA_FIXED = 1.5   # the paper's fixed candidate multiple
+TEMPORAL_ALPHA_C = 0.25      # automatic alpha = max(1.5, C * (N / k)^(1/3))
+_QUERY_BATCH_ELEMS = 1 << 21 # neighbours gathered per batch (bounds memory)
+_GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(8)
+
+
+# ---------------------------------------------------------------------------
+# Memory order
+# ---------------------------------------------------------------------------
+
+def morton_codes(position: np.ndarray, bits: int = 10) -> np.ndarray:
+    """3D Morton (Z-order) codes (N,) uint64 of positions (N, 3) quantised to 2^bits per axis."""
+    pos = np.asarray(position, dtype=np.float64)
+    lo, hi = pos.min(0), pos.max(0)
+    q = ((pos - lo) / np.maximum(hi - lo, 1e-30) * ((1 << bits) - 1)).astype(np.uint64)
+    code = np.zeros(pos.shape[0], dtype=np.uint64)
+    for b in range(bits):
+        for a in range(3):
+            code |= ((q[:, a] >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b + a)
+    return code
+
+
+# ---------------------------------------------------------------------------
+# Shutter mass helpers
+# ---------------------------------------------------------------------------
+
+def _shutter_cdf(shutter, u: np.ndarray) -> np.ndarray:
+    """Exact CDF of the shutter density at u (n,) in [0, 1] (piecewise quadratic for a curve)."""
+    u = np.clip(np.asarray(u, dtype=np.float64), 0.0, 1.0)
+    if shutter.curve is None:
+        return u
+    uu, c, cdf = shutter._cdf_u, shutter.curve, shutter._cdf
+    i = np.clip(np.searchsorted(uu, u, side="right") - 1, 0, len(uu) - 2)
+    h = uu[i + 1] - uu[i]
+    x = u - uu[i]
+    slope = (c[i + 1] - c[i]) / h
+    total = 0.5 * (c[1:] + c[:-1]) @ np.diff(uu)
+    return cdf[i] + (c[i] * x + 0.5 * slope * x * x) / total
+
+
+def shutter_mass(shutter, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Probability mass (n,) of shutter times in [a, b] clipped to [0, 1] (dimensionless)."""
+    return np.maximum(_shutter_cdf(shutter, b) - _shutter_cdf(shutter, a), 0.0)
+
+
+def slab_ball_volume(shutter, R: np.ndarray, t: np.ndarray, s: float) -> np.ndarray:
+    """Area x shutter-mass measure (m^2) of a 3-ball in (u, v, s*t) clipped to t in [0, 1].
+
+    ``V/s = integral_{[t - R/s, t + R/s] cut to [0, 1]} pi (R^2 - s^2 (tau - t)^2) g(tau) dtau``:
+    the disc the ball cuts at time tau, weighted by the shutter density g.
+    Exact (8-point Gauss-Legendre on a quadratic) for a box shutter.
+    Unclipped and g = 1 it is (4/3) pi R^3 / s.
+    """
+    R = np.asarray(R, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    a = np.clip(t - R / s, 0.0, 1.0)
+    b = np.clip(t + R / s, 0.0, 1.0)
+    half = 0.5 * (b - a)
+    mid = 0.5 * (b + a)
+    tau = mid[:, None] + half[:, None] * _GAUSS_X[None, :]                 # (n, 8)
+    disc = np.pi * np.maximum(R[:, None] ** 2 - (s * (tau - t[:, None])) ** 2, 0.0)
+    g = shutter.density(tau) if shutter.curve is not None else 1.0
+    return (disc * g) @ _GAUSS_W * half
+
+
+# ---------------------------------------------------------------------------
+# TEMPORAL candidate count
+# ---------------------------------------------------------------------------
+
+def auto_temporal_alpha(n_photons: int, k: int) -> float:
+    """Consistent TEMPORAL candidate multiple: alpha = max(1.5, C (N/k)^(1/3)).
+
+    The time window holds about k/m of the photons a point receives, so it
+    shrinks like 1/alpha; the candidate disc holds m = alpha k of N photons,
+    so it shrinks like (alpha k / N)^(1/2).  alpha ~ (N/k)^(1/3) sends both to
+    zero and balances a moving edge's spatial bias (~ r) against the temporal
+    one (~ window) -- see docs/photon-mapping.md.
+    """
+    return max(TEMPORAL_ALPHA_FIXED, TEMPORAL_ALPHA_C * (max(n_photons, 1) / max(k, 1)) ** (1.0 / 3.0))
+
+
+def temporal_candidates(n_photons: int, k: int, temporal_alpha: float) -> int:
+    """Spatial candidates m for TEMPORAL (m - 1 >= k inner candidates when possible)."""
+    alpha = temporal_alpha if temporal_alpha >= 1.0 else auto_temporal_alpha(n_photons, k)
+    return max(int(math.ceil(alpha * k)), k + 1)
+
+
+# ---------------------------------------------------------------------------
+# The photon map
+# ---------------------------------------------------------------------------
+
+class PhotonMap:
+    """One photon map: records, decoded working arrays and lazily built kd-trees.
+
+    Parameters
+    ----------
+    records : (N,) PHOTON_DTYPE array.
+    shutter : stpm_core.shutter.Shutter (its density weights time windows).
+    time_scale : KD4D's s (scene units per shutter), > 0.
+    workers : scipy cKDTree workers (-1 = all cores).
+
+    Attributes
+    ----------
+    position : (N, 3) float64, time : (N,) float64, power : (N, 3) float32,
+    wi : (N, 3) float32 unit incoming directions.
+    timeless : True when all photons share one time (instant shutter or an
+        accumulation-buffer still): TEMPORAL and KD4D then equal STANDARD.
+    stats : dict of tree build seconds, look-up seconds and counts.
+    """
+
+    def __init__(self, records: np.ndarray, shutter, *, time_scale: float, workers: int = -1):
+        self.shutter = shutter
+        self.time_scale = float(time_scale)
+        self.workers = workers
+        self.n = int(records.shape[0])
+        # Store photons in Morton (Z-curve) order: spatial neighbours sit close in memory,
+        # so the neighbour gathers of every look-up hit the cache
+        if self.n:
+            records = records[np.argsort(morton_codes(records["position"]), kind="stable")]
+        self.records = records
+        self.position = np.ascontiguousarray(records["position"], dtype=np.float64)
+        self.time = np.ascontiguousarray(records["time"], dtype=np.float64)
+        # One 32-byte row per photon for the look-ups: (wi_x, wi_y, wi_z, 0, Phi_r, Phi_g, Phi_b, 0)
+        self._packed = np.zeros((self.n, 8), dtype=np.float32)
+        if self.n:
+            self._packed[:, :3] = oct_decode(records["wi_oct"])
+            self._packed[:, 4:7] = records["power"]
+        self.wi = self._packed[:, :3]
+        self.power = self._packed[:, 4:7]
+        self.timeless = bool(shutter.is_instant or self.n == 0 or np.ptp(self.time) == 0.0)
+        self._tree3 = None
+        self._tree4 = None
+        self.stats = {"tree_build_s": 0.0, "lookup_s": 0.0, "lookup_count": 0, "temporal_candidates": 0}
+
+    # -- kd-trees -----------------------------------------------------------
+    def tree3(self) -> cKDTree:
+        """3D kd-tree over photon positions (built on first use)."""
+        if self._tree3 is None:
+            t0 = _time.perf_counter()
+            self._tree3 = cKDTree(self.position, leafsize=16, balanced_tree=False, compact_nodes=False)
+            self.stats["tree_build_s"] += _time.perf_counter() - t0
+        return self._tree3
+
+    def tree4(self) -> cKDTree:
+        """4D kd-tree over (x, y, z, s t) (built on first use)."""
+        if self._tree4 is None:
+            t0 = _time.perf_counter()
+            xyzt = np.empty((self.n, 4))
+            xyzt[:, :3] = self.position
+            xyzt[:, 3] = self.time_scale * self.time
+            self._tree4 = cKDTree(xyzt, leafsize=16, balanced_tree=False, compact_nodes=False)
+            self.stats["tree_build_s"] += _time.perf_counter() - t0
+        return self._tree4
+
+    def build(self, estimator: str) -> None:
+        """Build the tree ``estimator`` needs now (so build time is not charged to look-ups)."""
+        if self.n == 0:
+            return
+        if estimator == "KD4D" and not self.timeless:
+            self.tree4()
+        else:
+            self.tree3()
+
+    # -- the estimate ---------------------------------------------------------
+    def estimate(self, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str = "TEMPORAL",
+                 k: int = 50, kernel: str = "BOX", temporal_alpha: float = 0.0) -> np.ndarray:
+        """Irradiance E (n, 3) W/m^2 at points p (n, 3), normals ns (n, 3), times t (n,)."""
+        p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
+        n = p.shape[0]
+        E = np.zeros((n, 3), dtype=np.float64)
+        if self.n < 2 or n == 0:
+            return E
+        ns = np.asarray(ns, dtype=np.float32).reshape(-1, 3)
+        t = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
+        estimator = estimator.upper()
+        if estimator not in ESTIMATOR_NAMES:
+            raise ValueError(f"unknown estimator {estimator!r}")
+        if self.timeless:
+            estimator = "STANDARD"  # time adds nothing: every photon has the same time
+        # k >= 2 so there is at least one inner photon; never more than the map holds
+        k = int(min(max(k, 2), self.n))
+        if estimator == "TEMPORAL":
+            m = min(temporal_candidates(self.n, k, temporal_alpha), self.n)
+            k = min(k, m - 1)
+            if k < 2:
+                estimator = "STANDARD"
+                k = int(min(self.n, 2))
+            self.stats["temporal_candidates"] = m
+        per_query = m if estimator == "TEMPORAL" else k
+        batch = max(256, _QUERY_BATCH_ELEMS // per_query)
+        t0 = _time.perf_counter()
+        for lo in range(0, n, batch):
+            sl = slice(lo, min(n, lo + batch))
+            if estimator == "STANDARD":
+                E[sl] = self._standard(p[sl], ns[sl], k, kernel)
+            elif estimator == "TEMPORAL":
+                E[sl] = self._temporal(p[sl], ns[sl], t[sl], k, m, kernel)
+            else:
+                E[sl] = self._kd4d(p[sl], ns[sl], t[sl], k, kernel)
+        self.stats["lookup_s"] += _time.perf_counter() - t0
+        self.stats["lookup_count"] += n
+        return E
+
+    # -- shared: sum the inner photons' power on the ns side --------------------
+    def _weighted_sum(self, idx: np.ndarray, ns: np.ndarray, w: np.ndarray | None) -> np.ndarray:
+        """sum_j [dot(ns, wi_j) > 0] w_j Phi_j over idx (n, j) -> (n, 3) W."""
+        G = np.take(self._packed, idx, axis=0)                     # (n, j, 8): one gather per photon
+        side = (G[..., 0] * ns[:, None, 0] + G[..., 1] * ns[:, None, 1] + G[..., 2] * ns[:, None, 2]) > 0.0
+        weight = side.astype(np.float32) if w is None else side * w.astype(np.float32)
+        return np.einsum("nk,nkc->nc", weight, G[..., 4:7]).astype(np.float64)
+
+    @staticmethod
+    def _cone(d: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """Cone kernel weights 1 - d / (CONE_K r) (n, j)."""
+        return 1.0 - d / (CONE_K * np.maximum(r, 1e-300)[:, None])
+
+    # -- STANDARD ---------------------------------------------------------------
+    def _standard(self, p, ns, k, kernel):
+        """E = sum_{k-1 inner} Phi w / (c_kernel pi r_k^2): shutter-averaged irradiance."""
+        d, idx = self.tree3().query(p, k, workers=self.workers)
+        r = d[:, -1]                                   # radius reaching the k-th photon (m)
+        inner, d_in = idx[:, :-1], d[:, :-1]
+        if kernel == "CONE":
+            Phi = self._weighted_sum(inner, ns, self._cone(d_in, r))
+            norm = 1.0 - 2.0 / (3.0 * CONE_K)          # mean cone weight over a uniform disc
+        else:
+            Phi = self._weighted_sum(inner, ns, None)
+            norm = 1.0
+        area = norm * np.pi * np.maximum(r, 1e-12) ** 2  # m^2
+        return Phi / area[:, None]
+
+    # -- TEMPORAL -------------------------------------------------------------------
+    def _temporal(self, p, ns, t, k, m, kernel):
+        """E = sum_{k-1 nearest in time} Phi w / (c_kernel pi r_m^2 W(tau_k))."""
+        d, idx = self.tree3().query(p, m, workers=self.workers)
+        r = d[:, -1]                                   # candidate disc radius: the m-th photon (m)
+        cand, d_c = idx[:, :-1], d[:, :-1]             # m - 1 inner candidates
+        dt = np.abs(self.time[cand] - t[:, None])      # time distances (shutter units)
+        # Quickselect the k nearest in time; position k-1 holds the k-th (fixes the window)
+        part = np.argpartition(dt, k - 1, axis=1)
+        rows = np.arange(cand.shape[0])[:, None]
+        tau = dt[rows[:, 0], part[:, k - 1]]           # window half-width (shutter units)
+        sel = part[:, : k - 1]                         # k - 1 photons strictly inside the window
+        inner = cand[rows, sel]
+        W = shutter_mass(self.shutter, t - tau, t + tau)  # shutter mass of the clipped window
+        if kernel == "CONE":
+            Phi = self._weighted_sum(inner, ns, self._cone(d_c[rows, sel], r))
+            norm = 1.0 - 2.0 / (3.0 * CONE_K)
+        else:
+            Phi = self._weighted_sum(inner, ns, None)
+            norm = 1.0
+        measure = norm * np.pi * np.maximum(r, 1e-12) ** 2 * np.maximum(W, 1e-12)  # m^2 (x mass)
+        return Phi / measure[:, None]
+
+    # -- KD4D -----------------------------------------------------------------------
+    def _kd4d(self, p, ns, t, k, kernel):
+        """E = sum_{k-1 inner} Phi w / (c_kernel V_clip(R_k) / s) in a 4D tree over (x, s t)."""
+        s = self.time_scale
+        q = np.empty((p.shape[0], 4))
+        q[:, :3] = p
+        q[:, 3] = s * t
+        d, idx = self.tree4().query(q, k, workers=self.workers)
+        R = d[:, -1]                                   # 4D radius reaching the k-th photon (m)
+        inner, d_in = idx[:, :-1], d[:, :-1]
+        if kernel == "CONE":
+            Phi = self._weighted_sum(inner, ns, self._cone(d_in, R))
+            norm = 1.0 - 3.0 / (4.0 * CONE_K)          # mean cone weight over a uniform 3-ball
+        else:
+            Phi = self._weighted_sum(inner, ns, None)
+            norm = 1.0
+        measure = norm * slab_ball_volume(self.shutter, np.maximum(R, 1e-12), t, s)  # m^2 (x mass)
+        return Phi / np.maximum(measure, 1e-300)[:, None]

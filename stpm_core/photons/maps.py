@@ -1,0 +1,144 @@
+"""Build the caustic and global photon maps and answer irradiance look-ups.
+
+    maps = build_photon_maps(scene, settings, caster, lights)
+    E = maps.estimate('caustic', p, ns, t)      # (n, 3) W/m^2; times albedo / pi = radiance
+
+The estimator (settings.estimator), k (settings.k_nearest), kernel,
+temporal_alpha and time_scale come from the settings; ``estimate`` also takes
+them as keyword overrides so one map can be read by all three estimators.
+"""
+from __future__ import annotations
+
+import time as _time
+
+import numpy as np
+
+from ..bsdf import MaterialTable
+from .estimators import PhotonMap, auto_temporal_alpha
+from .record import BYTES_PER_PHOTON
+from .timescale import auto_time_scale
+from .trace import trace_caustic_map, trace_global_map
+
+__all__ = ["PhotonMaps", "build_photon_maps", "KINDS"]
+
+KINDS = ("caustic", "global")
+
+
+class PhotonMaps:
+    """The caustic and global maps of one render (or of one accumulation still).
+
+    Attributes
+    ----------
+    maps : {'caustic': PhotonMap, 'global': PhotonMap}.
+    estimator, k, kernel, temporal_alpha : defaults for :meth:`estimate`.
+    time_scale : KD4D's s in scene units per shutter (resolved: never 0).
+    """
+
+    def __init__(self, maps: dict, *, estimator: str, k: int, kernel: str, temporal_alpha: float,
+                 time_scale: float, info: dict | None = None):
+        self.maps = maps
+        self.estimator = estimator
+        self.k = int(k)
+        self.kernel = kernel
+        self.temporal_alpha = float(temporal_alpha)
+        self.time_scale = float(time_scale)
+        self._info = dict(info or {})
+
+    def has(self, kind: str) -> bool:
+        """Does the ``kind`` map hold any photon?"""
+        return self.maps[kind].n > 0
+
+    def estimate(self, kind: str, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str | None = None,
+                 k: int | None = None, kernel: str | None = None, temporal_alpha: float | None = None) -> np.ndarray:
+        """Irradiance E (n, 3) W/m^2 at p (n, 3) on the ns (n, 3) side at shutter times t (n,).
+
+        Zeros where the map is empty.  Keyword overrides default to the settings.
+        """
+        if kind not in self.maps:
+            raise ValueError(f"unknown photon map {kind!r} (expected one of {KINDS})")
+        return self.maps[kind].estimate(
+            p, ns, t,
+            estimator=estimator or self.estimator,
+            k=self.k if k is None else int(k),
+            kernel=(kernel or self.kernel).upper(),
+            temporal_alpha=self.temporal_alpha if temporal_alpha is None else float(temporal_alpha))
+
+    @property
+    def stats(self) -> dict:
+        """Photons stored per map, bytes per photon, tree build and look-up seconds, trace seconds."""
+        st = dict(self._info)
+        build = lookup = 0.0
+        count = 0
+        for kind, m in self.maps.items():
+            st[f"photons_{kind}"] = m.n
+            st[f"{kind}_tree_build_s"] = m.stats["tree_build_s"]
+            st[f"{kind}_lookup_s"] = m.stats["lookup_s"]
+            st[f"{kind}_lookup_count"] = m.stats["lookup_count"]
+            build += m.stats["tree_build_s"]
+            lookup += m.stats["lookup_s"]
+            count += m.stats["lookup_count"]
+        n_total = sum(m.n for m in self.maps.values())
+        st.update({
+            "bytes_per_photon": BYTES_PER_PHOTON,
+            "photon_record_bytes": BYTES_PER_PHOTON * n_total,
+            "photon_map_build_s": build,
+            "tree_build_s": build,
+            "lookup_s": lookup,
+            "lookup_count": count,
+            "lookups_per_s": count / lookup if lookup > 0 else 0.0,
+            "estimator": self.estimator,
+            "k_nearest": self.k,
+            "kernel": self.kernel,
+            "time_scale": self.time_scale,
+            "temporal_alpha": self.temporal_alpha if self.temporal_alpha >= 1.0
+            else auto_temporal_alpha(max((m.n for m in self.maps.values()), default=0), self.k),
+        })
+        return st
+
+
+def build_photon_maps(scene, settings, caster, lights, *, time_override=None, progress=None,
+                      cancel=None) -> PhotonMaps:
+    """Trace ``settings.photons_caustic`` + ``settings.photons_global`` photons and build the maps.
+
+    Parameters
+    ----------
+    scene : Scene; settings : RenderSettings; caster : from make_caster(scene);
+    lights : LightSet(scene).
+    time_override : float or None -- every photon path at this one shutter time
+        (an accumulation-buffer still); estimates then reduce to STANDARD.
+    progress : progress(fraction, message) or None; cancel : () -> bool or None
+        (raises RenderCancelled between batches).
+    """
+    table = MaterialTable(scene.materials)
+    s = float(settings.time_scale) if settings.time_scale > 0 else auto_time_scale(scene)
+    workers = -1 if int(getattr(settings, "threads", 0)) == 0 else int(settings.threads)
+    info: dict = {}
+
+    def span(a, b):
+        return None if progress is None else (lambda f, msg: progress(a + (b - a) * f, msg))
+
+    # -- Trace both maps ---------------------------------------------------------------
+    t0 = _time.perf_counter()
+    n_c, n_g = int(settings.photons_caustic), int(settings.photons_global)
+    split = n_c / max(n_c + n_g, 1)
+    rec_c, ic = trace_caustic_map(scene, settings, caster, lights, table, time_override=time_override,
+                                  progress=span(0.0, 0.9 * split), cancel=cancel)
+    rec_g, ig = trace_global_map(scene, settings, caster, lights, table, time_override=time_override,
+                                 progress=span(0.9 * split, 0.9), cancel=cancel)
+    info.update(ic)
+    info.update(ig)
+    info["photon_trace_s"] = _time.perf_counter() - t0
+    info["photons_emitted"] = ic["photons_emitted_caustic"] + ig["photons_emitted_global"]
+    info["photons_per_s"] = info["photons_emitted"] / info["photon_trace_s"] if info["photon_trace_s"] > 0 else 0.0
+
+    # -- Build the search structure the chosen estimator needs ----------------------------
+    maps = {
+        "caustic": PhotonMap(rec_c, scene.shutter, time_scale=s, workers=workers),
+        "global": PhotonMap(rec_g, scene.shutter, time_scale=s, workers=workers),
+    }
+    for m in maps.values():
+        m.build(settings.estimator)
+    if progress is not None:
+        progress(1.0, "photon maps built")
+    return PhotonMaps(maps, estimator=settings.estimator, k=settings.k_nearest, kernel=settings.kernel,
+                      temporal_alpha=settings.temporal_alpha, time_scale=s, info=info)

@@ -1,0 +1,246 @@
+"""Photon tracing with one shutter time per path.
+
+Every photon path draws ONE normalised shutter time t from the shutter
+distribution (stratified over the photons of a batch), or takes the fixed
+``time_override`` of an accumulation-buffer still; every intersection along
+that path is cast at t, so the path sees the scene exactly as it was at t.
+
+Two maps (docs/photon-mapping.md, "Tracing"):
+
+* caustic map -- paths L S+ D.  Photons are emitted only toward the bounding
+  spheres of the instances that have a delta lobe (their bounds swept over
+  the whole shutter), with :meth:`LightSet.emit_toward`.  A photon aimed at
+  target j must hit instance j first (so overlapping cones never count a path
+  twice), continues only through delta lobes, and is stored at every
+  non-delta surface reached after >= 1 delta bounce.
+* global map -- photons from :meth:`LightSet.emit` over the whole emission,
+  stored at non-delta surfaces after >= 1 non-delta bounce.  Direct light is
+  next-event estimation's job and L S+ D belongs to the caustic map, so the
+  camera reads the global map directly at its first diffuse vertex.
+
+Russian roulette by albedo: after a bounce with throughput ``weight`` =
+f |cos| / pdf (n, 3), a photon survives with q = min(1, max_c weight_c) and
+its power becomes Phi * weight / q, so surviving photons keep about the same
+power (stored powers stay even, which keeps the density estimate's variance low).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..bsdf import bsdf_sample, has_nondelta
+from ..errors import RenderCancelled
+from ..sampling import rng_for, stratified_1d
+from .record import make_records, PHOTON_DTYPE
+
+__all__ = ["specular_targets", "split_counts", "trace_photon_paths", "trace_caustic_map", "trace_global_map"]
+
+STREAM_CAUSTIC = 0xCA05       # rng stream ids (independent of the camera's streams)
+STREAM_GLOBAL = 0x610B
+BATCH = 1 << 16               # photon paths traced together
+
+
+def has_delta(table, mat) -> np.ndarray:
+    """(n,) bool: the material has a delta lobe (clear glass, mirror metal, smooth coat)."""
+    mat = np.asarray(mat, dtype=np.int64)
+    m = np.where(mat < 0, table.size, mat)
+    smooth = table.roughness[m] == 0.0
+    return (table.w_glass[m] > 0) | (smooth & ((table.w_metal[m] > 0)
+                                               | ((table.w_base[m] > 0) & (table.specular[m] > 0))))
+
+
+def specular_targets(scene, table) -> list[tuple[int, np.ndarray, float]]:
+    """Instances with a delta lobe and the sphere bounding them over the whole shutter.
+
+    Returns a list of (instance index, centre (3,), radius) in scene units.
+    """
+    out = []
+    for ii, inst in enumerate(scene.instances):
+        mesh = scene.meshes[inst.mesh]
+        mats = np.unique(np.asarray(mesh.material_ids))
+        if mats.size == 0 or not np.any(has_delta(table, mats)):
+            continue
+        v = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+        if v.shape[0] == 0:
+            continue
+        lo, hi = inst.transform.bounds_of(v.min(0), v.max(0))
+        out.append((ii, 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6)))
+    return out
+
+
+def split_counts(total: int, weights: np.ndarray) -> np.ndarray:
+    """Split ``total`` photons in proportion to ``weights`` (largest remainder) -> (L,) int64."""
+    w = np.maximum(np.asarray(weights, dtype=np.float64), 0.0)
+    if total <= 0 or w.size == 0 or w.sum() <= 0:
+        return np.zeros(w.size, dtype=np.int64)
+    exact = total * w / w.sum()
+    n = np.floor(exact).astype(np.int64)
+    rest = total - int(n.sum())
+    if rest > 0:
+        n[np.argsort(-(exact - n), kind="stable")[:rest]] += 1
+    return n
+
+
+def _times(scene, n: int, rng, time_override) -> np.ndarray:
+    """One shutter time per photon path (n,): stratified shutter samples or the fixed still time."""
+    if time_override is not None:
+        return np.full(n, float(time_override))
+    return scene.shutter.sample(stratified_1d(n, rng))
+
+
+def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, eps: float,
+                       target_instance: int | None = None, min_nondelta: int = 1) -> np.ndarray:
+    """Trace photon paths and return the stored records.
+
+    Parameters
+    ----------
+    caster : ray caster (``intersect(o, d, times)``).
+    table : bsdf.MaterialTable.
+    o, d : (n, 3) origins and unit directions; Phi : (n, 3) W; t : (n,) path times.
+    mode : 'caustic' (store after >= 1 delta bounce, continue only through
+        delta lobes, first hit must be ``target_instance``) or 'global' (store
+        after >= ``min_nondelta`` non-delta bounces; 0 also stores first hits,
+        which only tests use).
+    max_depth : bounces followed.
+    eps : ray-origin offset along the geometric normal (scene units).
+
+    Returns
+    -------
+    (m,) PHOTON_DTYPE records.
+    """
+    o = np.asarray(o, dtype=np.float64)
+    d = np.asarray(d, dtype=np.float64)
+    Phi = np.asarray(Phi, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    # Photons with no power carry nothing
+    live = np.any(Phi > 0.0, axis=1)
+    o, d, Phi, t = o[live], d[live], Phi[live], t[live]
+    n_delta = np.zeros(o.shape[0], dtype=np.int32)      # delta bounces so far
+    n_nondelta = np.zeros(o.shape[0], dtype=np.int32)   # non-delta bounces so far
+    stored = []
+    for depth in range(max_depth + 1):
+        if o.shape[0] == 0:
+            break
+        # -- Intersect every path at its own time -------------------------------------
+        hits = caster.intersect(o, d, t, None)
+        keep = hits.hit
+        if mode == "caustic" and depth == 0 and target_instance is not None:
+            keep &= hits.instance == target_instance     # this target's cone owns only its own first hits
+        idx = np.nonzero(keep)[0]
+        if idx.size == 0:
+            break
+        d, Phi, t = d[idx], Phi[idx], t[idx]
+        n_delta, n_nondelta = n_delta[idx], n_nondelta[idx]
+        p, ng, ns, mat = hits.position[idx], hits.ng[idx], hits.ns[idx], hits.material[idx]
+        wo = -d                                          # toward where the photon came from
+        nondelta = has_nondelta(table, mat)
+        # -- Store the photon ---------------------------------------------------------------
+        if mode == "caustic":
+            store = nondelta & (n_delta >= 1)
+        else:
+            store = nondelta & (n_nondelta >= min_nondelta)
+        if np.any(store):
+            stored.append(make_records(p[store], wo[store], Phi[store], t[store]))
+        if depth == max_depth:
+            break
+        # -- Sample the next direction from the BSDF --------------------------------------
+        wi, weight, is_delta = bsdf_sample(table, mat, wo, ns, ng, rng.random((idx.size, 3)))
+        # -- Possibly terminate the path with Russian roulette (by albedo) -------------------
+        q = np.clip(weight.max(axis=1), 0.0, 1.0)
+        alive = rng.random(idx.size) < q
+        if mode == "caustic":
+            alive &= is_delta                            # L S+ D: only specular chains go on
+        Phi = Phi * weight / np.where(q > 0, q, 1.0)[:, None]
+        n_delta = n_delta + is_delta
+        n_nondelta = n_nondelta + ~is_delta
+        # -- Spawn the continuation rays, offset off the surface ------------------------------
+        side = np.where(np.sum(wi * ng, axis=1) >= 0.0, 1.0, -1.0)
+        o = p + (eps * side)[:, None] * ng
+        sel = np.nonzero(alive)[0]
+        o, d, Phi, t = o[sel], wi[sel], Phi[sel], t[sel]
+        n_delta, n_nondelta = n_delta[sel], n_nondelta[sel]
+    if not stored:
+        return np.empty(0, dtype=PHOTON_DTYPE)
+    return np.concatenate(stored)
+
+
+def _check_cancel(cancel) -> None:
+    if cancel is not None and cancel():
+        raise RenderCancelled("render cancelled")
+
+
+def _scene_eps(scene) -> tuple[float, float]:
+    """(ray offset eps, scene bounding radius) in scene units."""
+    lo, hi = scene.bounds()
+    radius = 0.5 * float(np.linalg.norm(hi - lo))
+    return max(1e-5 * max(radius, 1e-3), 1e-7), max(radius, 1e-3)
+
+
+def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=None,
+                      progress=None, cancel=None) -> tuple[np.ndarray, dict]:
+    """Caustic map records and counts: ``settings.photons_caustic`` photons aimed at specular instances.
+
+    Photons are split over (light, target) pairs by power x solid angle of the
+    target's bounding sphere (suns: power x (r_target / r_scene)^2); the split
+    only moves variance around, the power weighting of ``emit_toward`` keeps
+    every pair unbiased.
+    """
+    targets = specular_targets(scene, table)
+    eps, r_scene = _scene_eps(scene)
+    pairs, weights = [], []
+    for li, light in enumerate(lights.lights):
+        P = float(lights.power[li])
+        if P <= 0.0:
+            continue
+        pos = light.transform.at(0.5)[:3, 3]
+        for (ii, c, r) in targets:
+            if light.type == "SUN":
+                frac = min(1.0, (r / r_scene) ** 2)
+            else:
+                dist = float(np.linalg.norm(c - pos))
+                frac = 1.0 if dist <= r else 0.5 * (1.0 - np.sqrt(max(0.0, 1.0 - (r / dist) ** 2)))
+            pairs.append((li, ii, c, r))
+            weights.append(P * frac)
+    counts = split_counts(int(settings.photons_caustic), np.asarray(weights))
+    out, emitted = [], 0
+    total = max(int(counts.sum()), 1)
+    for pi, ((li, ii, c, r), n_pair) in enumerate(zip(pairs, counts)):
+        for b0 in range(0, int(n_pair), BATCH):
+            _check_cancel(cancel)
+            n = min(BATCH, int(n_pair) - b0)
+            rng = rng_for(settings.seed, STREAM_CAUSTIC, pi, b0 // BATCH)
+            t = _times(scene, n, rng, time_override)
+            o, d, Phi = lights.emit_toward(li, n, t, rng, c, r)
+            Phi = Phi * (n / float(n_pair))              # this batch's share of the pair's photons
+            out.append(trace_photon_paths(caster, table, o, d, Phi, t, rng, mode="caustic",
+                                          max_depth=settings.max_depth, eps=eps, target_instance=ii))
+            emitted += n
+            if progress is not None:
+                progress(emitted / total, "tracing caustic photons")
+    recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
+    return recs, {"photons_emitted_caustic": emitted, "caustic_targets": len(targets)}
+
+
+def trace_global_map(scene, settings, caster, lights, table, *, time_override=None,
+                     progress=None, cancel=None, min_nondelta: int = 1) -> tuple[np.ndarray, dict]:
+    """Global map records and counts: ``settings.photons_global`` photons split over lights by power."""
+    eps, _ = _scene_eps(scene)
+    counts = split_counts(int(settings.photons_global), np.asarray(lights.power, dtype=np.float64))
+    out, emitted = [], 0
+    total = max(int(counts.sum()), 1)
+    for li, n_light in enumerate(counts):
+        for b0 in range(0, int(n_light), BATCH):
+            _check_cancel(cancel)
+            n = min(BATCH, int(n_light) - b0)
+            rng = rng_for(settings.seed, STREAM_GLOBAL, li, b0 // BATCH)
+            t = _times(scene, n, rng, time_override)
+            # Each light's emit() spreads its flux over the photons it is given: scale
+            # to this batch's share of the light's photons.
+            o, d, Phi = lights.emit(li, n, t, rng)
+            Phi = Phi * (n / float(n_light))
+            out.append(trace_photon_paths(caster, table, o, d, Phi, t, rng, mode="global",
+                                          max_depth=settings.max_depth, eps=eps, min_nondelta=min_nondelta))
+            emitted += n
+            if progress is not None:
+                progress(emitted / total, "tracing global photons")
+    recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
+    return recs, {"photons_emitted_global": emitted}

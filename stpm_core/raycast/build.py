@@ -1,0 +1,292 @@
+"""The caster both backends share: batching, nearest-over-parts, shading.
+
+A scene is split into *parts*, each able to answer "nearest hit in (t0, t1)"
+for a batch of rays at their own times:
+
+* the static part: every instance whose transform is static and whose mesh
+  is rigid, baked into one world-space structure (pays no motion cost);
+* one part per moving instance (rigid motion): rays go to object space with
+  the instance's inverse transform at each ray's time;
+* one part per instance of a deforming mesh.
+
+:class:`Caster` walks the parts in that order, skipping rays whose current
+segment misses a part's swept world bounds, keeps the nearest exact (float64)
+hit, then asks the winning part of each ray for normals and material.
+Backends (:mod:`.embree_backend`, :mod:`.numpy_backend`) only provide parts.
+"""
+from __future__ import annotations
+
+import time as _time
+
+import numpy as np
+
+from . import Hits
+from .geometry import scene_scale, tmin_of
+from .pair_bvh import PairBVH, segments_meet_boxes
+
+__all__ = ["make_caster", "Caster", "BACKENDS"]
+
+BACKENDS = ("auto", "embree", "numpy")
+
+# Rays per batch: embree's run() is fastest at 4k-16k rays (design.md), and the
+# numpy work around it stays in cache.
+CHUNK = 8192
+
+# Above this many bounded parts, rays find theirs through a BVH of the part boxes;
+# below it one slab test per part is cheaper (measured: the BVH's gathers cost
+# about as much as 20-25 slab tests).
+PART_BVH_MIN = 24
+
+
+def embree_available() -> bool:
+    """Can the embreex backend be imported on this platform?"""
+    try:
+        import embreex.rtcore_scene  # noqa: F401
+        import embreex.mesh_construction  # noqa: F401
+    except Exception:
+        return False
+    return True
+
+
+def make_caster(scene, backend: str = "auto") -> "Caster":
+    """Build a time-aware ray caster for ``scene``.
+
+    backend : 'embree' (embreex, float32 BVH + float64 refinement), 'numpy'
+        (brute force, exact; the test oracle and the fallback where embreex has
+        no wheel) or 'auto' (embree when importable, else numpy).
+    """
+    from ..errors import SettingsError
+    if backend not in BACKENDS:
+        raise SettingsError(f"ray-casting backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    if backend == "auto":
+        backend = "embree" if embree_available() else "numpy"
+    if backend == "embree":
+        if not embree_available():
+            raise SettingsError("ray-casting backend 'embree' needs the embreex package, which is not installed")
+        from .embree_backend import build_parts
+    else:
+        from .numpy_backend import build_parts
+    scale = scene_scale(scene)
+    return Caster(scene, build_parts(scene, scale), scale, backend)
+
+
+def _as_rays(origins, dirs, times, tmax):
+    """Validate and broadcast ray arrays -> float64 (n,3), (n,3), (n,), (n,)."""
+    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+    n = o.shape[0]
+    if d.shape[0] != n:
+        raise ValueError(f"origins has {n} rays but dirs has {d.shape[0]}")
+    t = np.broadcast_to(np.asarray(times, dtype=np.float64), (n,))
+    tm = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, dtype=np.float64), (n,))
+    return o, d, t, tm
+
+
+class Caster:
+    """Time-aware caster over a list of parts (see module docstring).
+
+    ``stats``: rays intersected / occlusion-tested and seconds spent.
+    """
+
+    def __init__(self, scene, parts, scale: float, backend: str):
+        self.scene = scene
+        self.parts = parts
+        self.scale = scale
+        self.backend = backend
+        self.stats = {"backend": backend, "rays_intersect": 0, "rays_occluded": 0,
+                      "seconds_intersect": 0.0, "seconds_occluded": 0.0}
+        # Parts with swept bounds (moving, deforming; every numpy part), under a small BVH
+        # so a ray pays for the boxes near it, not for every moving instance
+        self.bounded = [k for k, p in enumerate(parts) if p.bounds is not None]
+        self._part_lo = np.array([parts[k].bounds[0] for k in self.bounded]).reshape(-1, 3)
+        self._part_hi = np.array([parts[k].bounds[1] for k in self.bounded]).reshape(-1, 3)
+        many = len(self.bounded) > PART_BVH_MIN
+        self._part_bvh = PairBVH(self._part_lo, self._part_hi, leaf=2) if many else None
+
+    def _bounded_rays(self, o, d, t0, t1, subset=None) -> dict:
+        """{part index k: ray indices (ascending) whose segment [t0, t1] meets part k's bounds}.
+
+        ``subset`` (m,) restricts the rays considered (indices into o, d, t0, t1).
+        """
+        out = {}
+        if not self.bounded:
+            return out
+        rays = np.arange(o.shape[0]) if subset is None else subset
+        if self._part_bvh is None:
+            if subset is None:
+                slabs, t0s, t1s = _RaySlabs(o, d), t0, t1
+            else:
+                slabs, t0s, t1s = _RaySlabs(o[rays], d[rays]), t0[rays], t1[rays]
+            meet = slabs.meets_each(self._part_lo, self._part_hi, t0s, t1s)
+            for j, k in enumerate(self.bounded):
+                out[k] = rays[meet[j]]
+            return out
+        # Part BVH in ray blocks: (ray, part) pairs, then each pair against the part's own box
+        R, J = [], []
+        for a in range(0, rays.size, CHUNK):
+            r = rays[a:a + CHUNK]
+            oo, dd = o[r], d[r]
+            ray, j = self._part_bvh.candidates(oo, dd, t0[r], t1[r])
+            with np.errstate(divide="ignore"):
+                inv = 1.0 / dd[ray]
+            keep = segments_meet_boxes(oo[ray], inv, self._part_lo[j], self._part_hi[j],
+                                       t0[r][ray], t1[r][ray])
+            R.append(r[ray[keep]])
+            J.append(j[keep])
+        R, J = np.concatenate(R), np.concatenate(J)
+        order = np.lexsort((R, J))
+        R, J = R[order], J[order]
+        cuts = np.searchsorted(J, np.arange(len(self.bounded) + 1))
+        for j, k in enumerate(self.bounded):
+            out[k] = R[cuts[j]:cuts[j + 1]]
+        return out
+
+    # ------------------------------------------------------------------ intersect
+    def intersect(self, origins, dirs, times, tmax=None) -> Hits:
+        """Nearest hit of each ray at its own time -> :class:`Hits` (see package docstring)."""
+        start = _time.perf_counter()
+        o, d, times, tmax = _as_rays(origins, dirs, times, tmax)
+        n = o.shape[0]
+        tmin = tmin_of(d, self.scale)
+        out = Hits(t=tmax.copy(), instance=np.full(n, -1, np.int32), prim=np.full(n, -1, np.int32),
+                   u=np.zeros(n), v=np.zeros(n), position=np.full((n, 3), np.nan),
+                   ng=np.zeros((n, 3)), ns=np.zeros((n, 3)), material=np.full(n, -1, np.int32))
+        best_t = out.t                       # nearest exact hit so far (starts at tmax)
+        best_part = np.full(n, -1, np.int32)
+        prim = np.full(n, -1, np.int64)      # part-local primitive of the nearest hit
+        rays = None
+        for k, part in enumerate(self.parts):
+            if part.bounds is None:
+                # Parts without bounds (the baked static scene) see every ray and shade
+                # their hits at once, in contiguous blocks (a later part may overwrite)
+                for a in range(0, n, CHUNK):
+                    sl = slice(a, min(n, a + CHUNK))
+                    t_k, p_k, u_k, v_k = part.cast(o[sl], d[sl], times[sl], tmin[sl], best_t[sl])
+                    won = t_k < best_t[sl]
+                    inst, p, ng, ns, mat = part.shade(times[sl], np.where(won, p_k, 0), u_k, v_k)
+                    wc = won[:, None]
+                    for dst, src, mask in ((best_t, t_k, won), (best_part, k, won), (prim, p_k, won),
+                                           (out.u, u_k, won), (out.v, v_k, won), (out.instance, inst, won),
+                                           (out.prim, p, won), (out.material, mat, won),
+                                           (out.ng, ng, wc), (out.ns, ns, wc)):
+                        np.copyto(dst[sl], src, where=mask)
+                continue
+            # Other parts: only rays whose segment (tmin, best_t) meets their swept bounds
+            if rays is None:
+                rays = self._bounded_rays(o, d, tmin, best_t)
+            cand = rays[k]
+            for a in range(0, cand.size, CHUNK):
+                idx = cand[a:a + CHUNK]
+                t_k, p_k, u_k, v_k = part.cast(o[idx], d[idx], times[idx], tmin[idx], best_t[idx])
+                won = t_k < best_t[idx]
+                w = idx[won]
+                best_t[w], best_part[w], prim[w], out.u[w], out.v[w] = t_k[won], k, p_k[won], u_k[won], v_k[won]
+
+        # Shading data from the bounded part each ray hit
+        for k, part in enumerate(self.parts):
+            if part.bounds is None:
+                continue
+            won = np.flatnonzero(best_part == k)
+            for a in range(0, won.size, CHUNK):
+                w = won[a:a + CHUNK]
+                inst, p, ng, ns, mat = part.shade(times[w], prim[w], out.u[w], out.v[w])
+                out.instance[w], out.prim[w], out.ng[w], out.ns[w], out.material[w] = inst, p, ng, ns, mat
+        # Misses: t = inf; hits: the point on the ray
+        hit = best_part >= 0
+        best_t[~hit] = np.inf
+        with np.errstate(invalid="ignore"):
+            np.copyto(out.position, o + best_t[:, None] * d, where=hit[:, None])
+        self.stats["rays_intersect"] += n
+        self.stats["seconds_intersect"] += _time.perf_counter() - start
+        return out
+
+    # ------------------------------------------------------------------ occluded
+    def occluded(self, origins, dirs, times, tmax) -> np.ndarray:
+        """(n,) bool: is anything hit at tmin < t < tmax at the ray's time?"""
+        start = _time.perf_counter()
+        o, d, times, tmax = _as_rays(origins, dirs, times, tmax)
+        n = o.shape[0]
+        rays = _RaySlabs(o, d)
+        tmin = tmin_of(d, self.scale)
+        blocked = np.zeros(n, bool)
+        near = None
+        for k, part in enumerate(self.parts):
+            if part.bounds is None and not blocked.any():
+                # First unbounded part: every ray, contiguous blocks
+                for a in range(0, n, CHUNK):
+                    sl = slice(a, min(n, a + CHUNK))
+                    blocked[sl] = part.occluded(o[sl], d[sl], times[sl], tmin[sl], tmax[sl])
+                continue
+            if part.bounds is None:
+                live = np.flatnonzero(~blocked)
+            else:
+                # Rays near the part's swept bounds, computed once for all bounded parts
+                if near is None:
+                    # All rays (contiguous columns beat gathering the unblocked ones)
+                    near = self._bounded_rays(o, d, tmin, tmax)
+                live = near[k][~blocked[near[k]]]
+            for a in range(0, live.size, CHUNK):
+                idx = live[a:a + CHUNK]
+                blocked[idx[part.occluded(o[idx], d[idx], times[idx], tmin[idx], tmax[idx])]] = True
+        self.stats["rays_occluded"] += n
+        self.stats["seconds_occluded"] += _time.perf_counter() - start
+        return blocked
+
+
+class _RaySlabs:
+    """Rays prepared for box tests: contiguous origin and inverse-direction columns."""
+
+    def __init__(self, o: np.ndarray, d: np.ndarray):
+        self.o = [np.ascontiguousarray(o[:, c]) for c in range(3)]
+        with np.errstate(divide="ignore"):
+            self.inv = [1.0 / d[:, c] for c in range(3)]
+
+    def candidates(self, bounds, t0, t1) -> np.ndarray:
+        """Indices (m,) of the rays whose segment [t0, t1] meets the box."""
+        return np.flatnonzero(self.meets(bounds, t0, t1))
+
+    def meets(self, bounds, t0, t1) -> np.ndarray:
+        """(n,) bool: does each ray's segment [t0 (n,), t1 (n,)] meet the box (lo, hi)?
+
+        Conservative: a NaN slab (origin on a slab plane, zero direction
+        component) does not reject.
+        """
+        lo, hi = bounds
+        n = t0.shape[0]
+        out = np.empty(n, bool)
+        # Cache-sized blocks: about 4x faster than whole-array passes
+        with np.errstate(invalid="ignore"):
+            for a in range(0, n, CHUNK):
+                sl = slice(a, min(n, a + CHUNK))
+                near, far = t0[sl], t1[sl]
+                for c in range(3):
+                    oc, ic = self.o[c][sl], self.inv[c][sl]
+                    ta = (lo[c] - oc) * ic
+                    tb = (hi[c] - oc) * ic
+                    near = np.fmax(near, np.fmin(ta, tb))
+                    far = np.fmin(far, np.fmax(ta, tb))
+                out[sl] = near <= far
+        return out
+
+    def meets_each(self, lo: np.ndarray, hi: np.ndarray, t0, t1) -> np.ndarray:
+        """(P, n) bool: :meth:`meets` for P boxes lo, hi (P, 3) at once.
+
+        Ray blocks outside, boxes inside: a block's columns stay in cache for
+        all the boxes.
+        """
+        P, n = lo.shape[0], t0.shape[0]
+        out = np.empty((P, n), bool)
+        with np.errstate(invalid="ignore"):
+            for a in range(0, n, CHUNK):
+                sl = slice(a, min(n, a + CHUNK))
+                oc = [self.o[c][sl] for c in range(3)]
+                ic = [self.inv[c][sl] for c in range(3)]
+                for j in range(P):
+                    near, far = t0[sl], t1[sl]
+                    for c in range(3):
+                        ta = (lo[j, c] - oc[c]) * ic[c]
+                        tb = (hi[j, c] - oc[c]) * ic[c]
+                        near = np.fmax(near, np.fmin(ta, tb))
+                        far = np.fmin(far, np.fmax(ta, tb))
+                    out[j, sl] = near <= far
+        return out

@@ -1,0 +1,401 @@
+"""embreex backend: float32 embree BVHs, hits refined in float64.
+
+Precision strategy
+------------------
+* Every embree scene is built from vertices re-centred on their own bounds
+  centre (world bounds for the baked static scene, object bounds for a moving
+  mesh), and rays are shifted by the same centre in float64 before the cast to
+  float32.  A scene 1e5 units from the origin therefore keeps float32's
+  relative precision of its own size, not of its distance from the origin.
+* embree only picks the triangle.  ``t`` and the barycentrics are recomputed
+  by an exact float64 Moeller-Trumbore test on that triangle (at the ray's
+  time for deforming meshes); barycentrics are clamped into the triangle since
+  embree's float32 inside test may be off by an ulp at an edge.
+* Self-intersection guard: a ray starts at ``tmin = TMIN_REL * scale / |d|``
+  (origin shifted along the ray before the float32 cast).  If the refined
+  float64 ``t`` of the hit is still <= tmin (float32 noise at grazing angles)
+  the ray is re-cast from just past that hit, up to 3 times.
+
+Motion
+------
+Static instances are baked into one world-space scene.  A moving rigid
+instance has its mesh's own object-space scene (shared between instances of
+that mesh); each ray is mapped to object space with the inverse transform at
+its own time, directions not renormalised, so t is the same in both spaces and
+the result is exact for every time.  Deforming meshes: see :class:`DeformingPart`.
+"""
+from __future__ import annotations
+
+import numpy as np
+from embreex import rtcore_scene as rtcs
+from embreex.mesh_construction import TriangleMesh
+
+from .geometry import (InstanceShading, apply_affine, apply_linear, cross, ray_triangle,
+                       swept_bounds, triangles_at, world_to_object)
+
+__all__ = ["build_parts", "EmbreeMesh", "StaticPart", "RigidPart", "DeformingPart",
+           "DEFORM_BUCKETS_MAX"]
+
+_FAR32 = np.float32(1e37)      # embree's "no tfar" value
+_RECASTS = 3                   # re-casts of rays whose refined hit fell inside the guard
+_SLACK = 4.0                   # deforming buckets: search margin in units of the shape tolerance
+
+# Deforming meshes: at most this many embree scenes (time buckets) per mesh.
+DEFORM_BUCKETS_MAX = 16
+
+
+class EmbreeMesh:
+    """One re-centred float32 embree scene of a triangle mesh.
+
+    Parameters
+    ----------
+    V : (V, 3) float64 vertex positions (world or object space).
+    F : (F, 3) int triangle indices.
+    """
+
+    def __init__(self, V: np.ndarray, F: np.ndarray, planes: bool = True):
+        V = np.asarray(V, dtype=np.float64)
+        F = np.ascontiguousarray(F, dtype=np.int32)
+        self.empty = F.shape[0] == 0
+        self.centre = 0.5 * (V.min(0) + V.max(0)) if V.shape[0] else np.zeros(3)
+        self.scene = rtcs.EmbreeScene()
+        if not self.empty:
+            TriangleMesh(self.scene, np.ascontiguousarray(V - self.centre, dtype=np.float32), F)
+        # Float64 planes n . x = w of rigid triangles (n unnormalised), for the refinement
+        self.plane_n = self.plane_w = None
+        if planes and not self.empty:
+            P = V[F]
+            self.plane_n = cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+            self.plane_w = np.einsum("ij,ij->i", self.plane_n, P[:, 0])
+
+    def _rays32(self, o, d, start, t1):
+        """Shift rays to the centre and to their start point; float32 arrays for run()."""
+        x = start[:, None] * d
+        x += o
+        x -= self.centre
+        o32 = x.astype(np.float32)
+        d32 = d.astype(np.float32)
+        far = np.maximum(t1 - start, 0.0)
+        far32 = np.minimum(far, _FAR32).astype(np.float32)      # inf -> embree's "no limit"
+        return o32, d32, far32
+
+    def occluded(self, o, d, t0, t1) -> np.ndarray:
+        """(n,) bool: any hit in (t0, t1) (float32 test)."""
+        if self.empty or o.shape[0] == 0:
+            return np.zeros(o.shape[0], bool)
+        o32, d32, far32 = self._rays32(o, d, t0, t1)
+        return self.scene.run(o32, d32, dists=far32, query="OCCLUDED") != -1
+
+    def cast(self, o, d, t0, t1, corners=None, slack=None):
+        """Nearest hit in (t0, t1) with float64 t.
+
+        Parameters
+        ----------
+        o, d : (n, 3) float64 rays in this mesh's space.
+        t0, t1 : (n,) search interval (t0 = self-intersection guard).
+        corners : None for a rigid mesh (t from the triangle's float64 plane,
+            u, v from embree), or callable(prim (m,), rays (m,)) -> (m, 3, 3)
+            float64 corners of the hit triangles at those rays' times (t, u, v
+            from an exact Moeller-Trumbore test).
+        slack : (n,) or None: embree searches (t0 - slack, t1 + slack) when its
+            float32 shape only approximates the exact one (deforming buckets);
+            the exact t must still lie in (t0, t1).
+
+        Returns
+        -------
+        t (n,) float64 (inf = miss), prim (n,) int, u, v (n,) float64; prim, u, v
+        are meaningless where t is inf.
+        """
+        n = o.shape[0]
+        if self.empty or n == 0:
+            return np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n)
+        # First pass over every ray, masks rather than compressed copies
+        s0, s1 = (t0, t1) if slack is None else (t0 - slack, t1 + slack)
+        o32, d32, far32 = self._rays32(o, d, s0, s1)
+        r = self.scene.run(o32, d32, dists=far32, output=1)
+        p = r["primID"]
+        hit = p >= 0
+        tt, u, v = self._refine(o, d, np.where(hit, p, 0), s0, r["tfar"], r["u"], r["v"], corners, None)
+        ok = hit & (tt > t0) & (tt < t1)
+        t = np.where(ok, tt, np.inf)
+        prim = p.astype(np.int64)
+        # Hits that the exact test puts inside the guard: cast again from past them
+        live = np.flatnonzero(hit & (tt <= t0))
+        if live.size == 0:
+            return t, prim, u, v
+        te = s0[live] + r["tfar"][live]                 # embree's t of the rejected hit
+        for _ in range(_RECASTS - 1):
+            start = te + t0[live]
+            o32, d32, far32 = self._rays32(o[live], d[live], start, s1[live])
+            r = self.scene.run(o32, d32, dists=far32, output=1)
+            h = np.flatnonzero(r["primID"] >= 0)
+            rays = live[h]
+            p = r["primID"][h].astype(np.int64)
+            tt, uu, vv = self._refine(o[rays], d[rays], p, start[h], r["tfar"][h], r["u"][h], r["v"][h],
+                                      corners, rays)
+            t0r = t0[rays]
+            ok = (tt > t0r) & (tt < t1[rays])
+            k = rays[ok]
+            t[k], prim[k], u[k], v[k] = tt[ok], p[ok], uu[ok], vv[ok]
+            again = ~ok & (tt <= t0r)
+            live = rays[again]
+            if live.size == 0:
+                break
+            te = start[h][again] + r["tfar"][h][again]
+        return t, prim, u, v
+
+    def _refine(self, o, d, p, start, tfar, u32, v32, corners, rays):
+        """Float64 t, u, v of rays o, d (m, 3) on triangles p (m,).
+
+        ``start + tfar`` is embree's own t (used where the float64 plane test
+        is undefined: a ray parallel to the triangle's plane).
+        """
+        if corners is None:
+            # t on the triangle's float64 plane; embree's u, v are fine for shading
+            nrm = self.plane_n[p]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                tt = (self.plane_w[p] - np.einsum("ij,ij->i", nrm, o)) / np.einsum("ij,ij->i", nrm, d)
+            uu, vv = u32.astype(np.float64), v32.astype(np.float64)
+        else:
+            # Exact float64 test on the triangle at the ray's time
+            C = corners(p, np.arange(o.shape[0]) if rays is None else rays)
+            tt, uu, vv = ray_triangle(o, d, C[:, 0], C[:, 1], C[:, 2])
+            uu = np.clip(uu, 0.0, 1.0)
+            vv = np.clip(vv, 0.0, 1.0 - uu)
+        bad = ~np.isfinite(tt)
+        if bad.any():
+            tt[bad] = start[bad] + tfar[bad]
+        return tt, uu, vv
+
+
+class StaticPart:
+    """All static rigid instances baked into one world-space embree scene.
+
+    Per baked triangle it keeps its float64 plane (in :class:`EmbreeMesh`), the owning instance
+    and mesh-local index, world geometric normal and world per-corner shading
+    normals, so shading a hit is a gather.
+    """
+
+    bounds = None
+
+    def __init__(self, scene, instances: list[int]):
+        Vs, Fs, inst, prim, ng, nsc, mat = [], [], [], [], [], [], []
+        nv = 0
+        self.smooth = any(scene.meshes[scene.instances[i].mesh].normals is not None for i in instances)
+        for i in instances:
+            mesh = scene.meshes[scene.instances[i].mesh]
+            M = scene.instances[i].transform.matrices[0]
+            Vo = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+            F = np.asarray(mesh.triangles, dtype=np.int64)
+            Vw = Vo @ M[:3, :3].T + M[:3, 3]
+            Vs.append(Vw)
+            Fs.append(F + nv)
+            nv += Vw.shape[0]
+            inst.append(np.full(F.shape[0], i, np.int32))
+            prim.append(np.arange(F.shape[0], dtype=np.int32))
+            # World normals by the inverse transpose (object winding decides the side)
+            AT = np.linalg.inv(M[:3, :3]).T
+            Po = Vo[F]
+            n_w = cross(Po[:, 1] - Po[:, 0], Po[:, 2] - Po[:, 0]) @ AT.T
+            L = np.linalg.norm(n_w, axis=1, keepdims=True)
+            n_w = n_w / np.where(L > 0, L, 1.0)
+            ng.append(n_w)
+            if mesh.normals is not None:
+                nsc.append(np.asarray(mesh.normals, dtype=np.float64) @ AT.T)
+            else:
+                nsc.append(np.repeat(n_w[:, None, :], 3, axis=1))
+            mat.append(np.asarray(mesh.material_ids, dtype=np.int32))
+        cat = (lambda a, shape: np.concatenate(a) if a else np.zeros(shape))
+        # Instance, mesh-local triangle and material of each baked triangle, one gather
+        self.ids = np.stack([cat(inst, (0,)), cat(prim, (0,)), cat(mat, (0,))], axis=1).astype(np.int32)
+        self.ng = cat(ng, (0, 3))
+        self.ns_corners = cat(nsc, (0, 3, 3)).astype(np.float32)
+        self.mesh = EmbreeMesh(cat(Vs, (0, 3)), cat(Fs, (0, 3)))
+
+    def cast(self, o, d, times, t0, t1):
+        return self.mesh.cast(o, d, t0, t1)
+
+    def occluded(self, o, d, times, t0, t1):
+        return self.mesh.occluded(o, d, t0, t1)
+
+    def shade(self, times, p, u, v):
+        ids = self.ids[p]
+        ng = self.ng[p]
+        if not self.smooth:
+            return ids[:, 0], ids[:, 1], ng, ng.copy(), ids[:, 2]
+        # Shading normal: barycentric blend of the corner normals (float32 is plenty)
+        w = np.stack([1 - u - v, u, v], axis=1).astype(np.float32)
+        ns = np.einsum("nk,nkj->nj", w, self.ns_corners[p]).astype(np.float64)
+        L = np.sqrt(np.einsum("ij,ij->i", ns, ns))
+        zero = L == 0
+        ns /= np.where(zero, 1.0, L)[:, None]
+        if zero.any():
+            ns[zero] = ng[zero]
+        return ids[:, 0], ids[:, 1], ng, ns, ids[:, 2]
+
+
+class RigidPart:
+    """One moving rigid instance: object-space embree scene, rays mapped per time."""
+
+    def __init__(self, scene, i: int, emesh: EmbreeMesh):
+        inst = scene.instances[i]
+        self.index = i
+        self.mesh = scene.meshes[inst.mesh]
+        self.transform = inst.transform
+        self.emesh = emesh
+        self.bounds = swept_bounds(self.mesh, self.transform)
+        self.shading = InstanceShading(self.mesh, self.transform)
+
+    def _to_object(self, o, d, times):
+        A, b = world_to_object(self.transform, times)
+        return apply_affine(A, b, o), apply_linear(A, d)
+
+    def cast(self, o, d, times, t0, t1):
+        oo, dd = self._to_object(o, d, times)
+        return self.emesh.cast(oo, dd, t0, t1)
+
+    def occluded(self, o, d, times, t0, t1):
+        oo, dd = self._to_object(o, d, times)
+        return self.emesh.occluded(oo, dd, t0, t1)
+
+    def shade(self, times, p, u, v):
+        ng, ns, mat = self.shading.shade(p, u, v, times)
+        return np.full(p.shape[0], self.index, np.int32), p.astype(np.int32), ng, ns, mat
+
+
+class DeformingPart:
+    """One instance of a deforming mesh: time buckets of embree scenes + exact refinement.
+
+    Each vertex-time segment is split into buckets (more where vertices move
+    more, at most :data:`DEFORM_BUCKETS_MAX` in all); a bucket's embree scene
+    holds the mesh at the bucket's mid time.  A ray is cast, in object space,
+    into the bucket containing its time; the triangle found is then intersected
+    exactly (float64) at the ray's own time.  Hits away from triangle edges are
+    exact; within the distance the vertices move in half a bucket of an edge or
+    silhouette, the triangle (or hit / miss) may be the neighbour's, with the
+    hit point on that triangle's plane at the right time.
+    """
+
+    def __init__(self, scene, i: int):
+        inst = scene.instances[i]
+        self.index = i
+        self.mesh = mesh = scene.meshes[inst.mesh]
+        self.transform = inst.transform
+        self.bounds = swept_bounds(mesh, self.transform)
+        self.shading = InstanceShading(mesh, self.transform)
+        V = np.asarray(mesh.vertices, dtype=np.float64)
+        tk = np.asarray(mesh.vertex_times, dtype=np.float64)
+        F = np.asarray(mesh.triangles)
+        # Buckets per segment, in proportion to the largest vertex displacement
+        disp = np.linalg.norm(np.diff(V, axis=0), axis=2).max(axis=1)            # (K-1,)
+        nseg = disp.shape[0]
+        budget = max(DEFORM_BUCKETS_MAX, nseg)
+        share = disp / disp.sum() if disp.sum() > 0 else np.full(nseg, 1.0 / nseg)
+        per_seg = np.maximum(1, np.floor(share * budget)).astype(int)
+        edges = [tk[0]]
+        for s in range(nseg):
+            edges.extend(np.linspace(tk[s], tk[s + 1], per_seg[s] + 1)[1:])
+        self.edges = np.asarray(edges)
+        mids = 0.5 * (self.edges[:-1] + self.edges[1:])
+        self.buckets = [EmbreeMesh(mesh.vertices_at(m), F, planes=False) for m in mids]
+        self.tk = tk
+        # Largest corner motion within half a bucket: the accuracy bound (object units)
+        half = [disp[s] / (2 * per_seg[s]) for s in range(nseg)]
+        self.tolerance = float(max(half)) if half else 0.0
+        # Vertex -> incident triangles (CSR) for the 1-ring search
+        self.F = F = np.asarray(F, dtype=np.int64)
+        corner_vertex = F.ravel()
+        order = np.argsort(corner_vertex, kind="stable")
+        self.inc_tri = order // 3
+        self.valence = np.bincount(corner_vertex, minlength=V.shape[1])
+        self.inc_start = np.concatenate([[0], np.cumsum(self.valence)[:-1]])
+
+    def _to_object(self, o, d, times):
+        A, b = world_to_object(self.transform, times)
+        return apply_affine(A, b, o), apply_linear(A, d)
+
+    def cast(self, o, d, times, t0, t1):
+        oo, dd = self._to_object(o, d, times)
+        n = o.shape[0]
+        t, prim, u, v = np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n)
+        bucket = np.clip(np.searchsorted(self.edges, times, side="right") - 1, 0, len(self.buckets) - 1)
+        # Search margin along the ray: the bucket's shape is off by up to `tolerance`
+        slack = _SLACK * self.tolerance / np.maximum(np.linalg.norm(dd, axis=1), 1e-300)
+        for k, em in enumerate(self.buckets):
+            r = np.flatnonzero(bucket == k)
+            if r.size == 0:
+                continue
+            tr = times[r]
+            corners = lambda p, rays, tr=tr: triangles_at(self.mesh, p, tr[rays])
+            t[r], prim[r], u[r], v[r] = em.cast(oo[r], dd[r], t0[r], t1[r], corners, slack[r])
+        # Hit outside its triangle at the ray's time: take the nearest of the 1-ring
+        h = np.flatnonzero(np.isfinite(t))
+        C = triangles_at(self.mesh, prim[h], times[h])
+        _, uu, vv = ray_triangle(oo[h], dd[h], C[:, 0], C[:, 1], C[:, 2])
+        eps = 1e-9
+        off = h[(uu < -eps) | (vv < -eps) | (uu + vv > 1 + eps)]
+        if off.size:
+            t[off], prim[off], u[off], v[off] = self._ring_search(oo[off], dd[off], times[off], t0[off],
+                                                                  t1[off], prim[off])
+        return t, prim, u, v
+
+    def _ring_search(self, o, d, times, t0, t1, p):
+        """Nearest exact hit among the triangles sharing a vertex with triangles p (m,)."""
+        m = p.shape[0]
+        vs = self.F[p].ravel()                                  # (3m,) corner vertices
+        counts = self.valence[vs]
+        ray = np.repeat(np.arange(3 * m) // 3, counts)
+        first = np.repeat(self.inc_start[vs] - np.cumsum(counts) + counts, counts)
+        tri = self.inc_tri[first + np.arange(ray.size)]
+        C = triangles_at(self.mesh, tri, times[ray])
+        tt, uu, vv = ray_triangle(o[ray], d[ray], C[:, 0], C[:, 1], C[:, 2])
+        ok = (uu >= 0) & (vv >= 0) & (uu + vv <= 1) & (tt > t0[ray]) & (tt < t1[ray])
+        tt = np.where(ok, tt, np.inf)
+        # Per ray minimum over its variable-length candidate list
+        order = np.lexsort((tt, ray))
+        ray_s, t_s = ray[order], tt[order]
+        lead = np.flatnonzero(np.r_[True, ray_s[1:] != ray_s[:-1]])
+        best = order[lead]
+        t = np.full(m, np.inf)
+        prim = np.full(m, -1, np.int64)
+        u, v = np.zeros(m), np.zeros(m)
+        r = ray_s[lead]
+        hit = np.isfinite(t_s[lead])
+        t[r[hit]], prim[r[hit]] = t_s[lead][hit], tri[best][hit]
+        u[r[hit]], v[r[hit]] = uu[best][hit], vv[best][hit]
+        return t, prim, u, v
+
+    def occluded(self, o, d, times, t0, t1):
+        # Exact (refined) rather than the bucket's float32 shape
+        return np.isfinite(self.cast(o, d, times, t0, t1)[0])
+
+    def shade(self, times, p, u, v):
+        ng, ns, mat = self.shading.shade(p, u, v, times)
+        return np.full(p.shape[0], self.index, np.int32), p.astype(np.int32), ng, ns, mat
+
+
+def build_parts(scene, scale: float) -> list:
+    """Static part first (cheapest, shrinks t1 for the rest), then moving, then deforming."""
+    static, rigid, deforming = [], [], []
+    for i, inst in enumerate(scene.instances):
+        mesh = scene.meshes[inst.mesh]
+        if np.asarray(mesh.triangles).shape[0] == 0:
+            continue
+        if mesh.is_deforming:
+            deforming.append(i)
+        elif inst.transform.is_static:
+            static.append(i)
+        else:
+            rigid.append(i)
+    parts = []
+    if static:
+        parts.append(StaticPart(scene, static))
+    emeshes: dict[int, EmbreeMesh] = {}
+    for i in rigid:
+        m = scene.instances[i].mesh
+        if m not in emeshes:
+            V = np.asarray(scene.meshes[m].vertices, dtype=np.float64).reshape(-1, 3)
+            emeshes[m] = EmbreeMesh(V, scene.meshes[m].triangles)
+        parts.append(RigidPart(scene, i, emeshes[m]))
+    parts.extend(DeformingPart(scene, i) for i in deforming)
+    return parts

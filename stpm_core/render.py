@@ -1,0 +1,272 @@
+"""Top-level render: scene + settings -> named passes, statistics, warnings.
+
+Pipeline (``render``)::
+
+    validate_scene -> make_caster -> LightSet -> effects plan
+      -> photon maps (method PHOTON)       build_photon_maps(...)
+      -> distribution ray tracing          integrator.trace_image(...)
+      -> RenderResult(passes, stats, warnings, plan)
+
+Method ``'ACCUMULATION'`` is the baseline the project compares against: the
+average of ``accumulation_steps`` complete stills at instants
+``t_i = shutter.sample((i + 0.5) / N)``, each with its own photon maps traced at
+that instant (``time_override``), every camera sample at that instant, and the
+STANDARD estimate (time plays no role inside one still).
+"""
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .bsdf import MaterialTable
+from .errors import RenderCancelled
+from .film import PASSES, PASS_NAMES
+from .integrator import trace_image
+from .lights import LightSet
+from .photons import build_photon_maps
+from .raycast import make_caster
+from .sampling import rng_for
+from .scene import validate_scene
+
+__all__ = ["render", "RenderResult", "PASSES", "PASS_NAMES", "plan_effects"]
+
+# Random stream separating the accumulation stills' seeds.
+STREAM_ACCUMULATION = 0xACC
+
+
+@dataclass
+class RenderResult:
+    """What a render returns.
+
+    Attributes
+    ----------
+    passes : name -> (H, W, C) float32, names and channels from :data:`PASSES`
+        (row 0 = top).
+    stats : timings (s), counts and the settings that matter (see ``render``).
+    warnings : human-readable lines for the user.
+    plan : the effects plan (see :func:`plan_effects`).
+    """
+
+    passes: dict
+    stats: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+    plan: dict = field(default_factory=dict)
+
+
+# ----------------------------------------------------------------------------
+# Effects plan: what the scene calls for
+# ----------------------------------------------------------------------------
+def _used_materials(scene) -> set[int]:
+    used = set()
+    for inst in scene.instances:
+        used.update(np.unique(np.asarray(scene.meshes[inst.mesh].material_ids)).tolist())
+    return used
+
+
+def plan_effects(scene, settings=None) -> dict:
+    """Which effects the scene calls for, and why.
+
+    Returns a dict with bool keys ``motion_blur``, ``caustics``, ``indirect``,
+    ``time_dependent`` and ``reasons`` (list of str).
+
+    * motion_blur: the shutter is open and something moves in it.
+    * caustics: some used material has a specular (delta or glossy) lobe and
+      something emits light (a light, an emissive surface).
+    * indirect: some used material reflects diffusely and light is present.
+    * time_dependent: motion blur together with photon-mapped light: the
+      photons must carry time.
+    """
+    reasons = []
+    used = _used_materials(scene)
+    mats = [scene.materials[i] for i in sorted(used) if 0 <= i < len(scene.materials)]
+    has_light = (any(l.power > 0 and np.any(np.asarray(l.color) > 0) for l in scene.lights)
+                 or any(np.any(np.asarray(m.emission) > 0) for m in mats))
+    # Motion blur
+    motion = bool(scene.has_motion)
+    if scene.shutter.is_instant:
+        reasons.append("motion_blur: off (the shutter has zero length)")
+    elif motion:
+        reasons.append("motion_blur: something moves while the shutter is open")
+    else:
+        reasons.append("motion_blur: off (nothing moves during the shutter)")
+    # Caustics
+    specular = [m.name for m in mats if m.is_specular]
+    caustics = bool(specular) and has_light
+    if caustics:
+        reasons.append(f"caustics: specular materials {specular[:3]} and a light source")
+    else:
+        reasons.append("caustics: off (" + ("no specular material" if not specular else "no light source") + ")")
+    # Indirect
+    diffuse = [m.name for m in mats if m.diffuse_weight > 0 and np.any(np.asarray(m.base_color) > 0)]
+    indirect = bool(diffuse) and has_light
+    if indirect:
+        reasons.append(f"indirect: diffuse materials {diffuse[:3]} receive light")
+    else:
+        reasons.append("indirect: off (" + ("no diffuse material" if not diffuse else "no light source") + ")")
+    time_dependent = motion and (caustics or indirect)
+    reasons.append("time_dependent: " + ("photons carry time (motion blur with photon-mapped light)"
+                                         if time_dependent else "off"))
+    return {"motion_blur": motion, "caustics": caustics, "indirect": indirect,
+            "time_dependent": time_dependent, "reasons": reasons}
+
+
+def _photon_settings(settings, plan: dict):
+    """Settings handed to the photon tracer: maps the plan (or MANUAL choice) rules out get 0 photons."""
+    if settings.effects == "MANUAL":
+        want_caustic, want_global = settings.caustics, settings.indirect
+    else:
+        want_caustic, want_global = plan["caustics"], plan["indirect"]
+    return settings.replace(photons_caustic=settings.photons_caustic if want_caustic else 0,
+                            photons_global=settings.photons_global if want_global else 0)
+
+
+def _build_maps(scene, settings, caster, lights, *, time_override=None, progress=None, cancel=None):
+    """build_photon_maps(...) or None when no photons are asked for."""
+    if settings.photons_caustic <= 0 and settings.photons_global <= 0:
+        return None
+    return build_photon_maps(scene, settings, caster, lights, time_override=time_override,
+                             progress=progress, cancel=cancel)
+
+
+def _span(progress, a: float, b: float):
+    """A progress callback mapping [0, 1] onto [a, b] of the caller's progress."""
+    if progress is None:
+        return None
+    return lambda f, msg: progress(a + (b - a) * float(f), msg)
+
+
+def _plain(v):
+    """numpy scalars / arrays inside stats -> plain Python (so the stats dict is JSON-ready)."""
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def _map_stats(maps) -> dict:
+    return _plain(dict(getattr(maps, "stats", {}) or {})) if maps is not None else {}
+
+
+# ----------------------------------------------------------------------------
+# render
+# ----------------------------------------------------------------------------
+def render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
+    """Render ``scene`` with ``settings`` (RenderSettings).
+
+    progress(fraction in [0, 1], message) is called at least once per tile;
+    cancel() -> bool is polled as often and raises :class:`RenderCancelled`.
+
+    stats keys: wall_s, export_s (0 here; the add-on fills it), photon_trace_s,
+    photon_map_build_s, photon_lookup_s, render_s, rays_cast, camera_rays, shadow_rays,
+    bounce_rays, rays_per_s, photon_lookups, photons_caustic, photons_global
+    (stored), photon_stats (the maps' own dict; a list for ACCUMULATION),
+    estimator, method, samples, resolution, seed, accumulation_steps.
+    """
+    t_wall = _time.perf_counter()
+    settings.validate()
+    validate_scene(scene)
+    warnings: list[str] = []
+    if cancel is not None and cancel():
+        raise RenderCancelled("render cancelled")
+
+    # -- Scene acceleration, lights, materials, plan --------------------------------
+    caster = make_caster(scene)
+    lights = LightSet(scene)
+    table = MaterialTable(scene.materials)
+    plan = plan_effects(scene, settings)
+    psettings = _photon_settings(settings, plan)
+    if not scene.lights and not any(np.any(np.asarray(m.emission) > 0) for m in scene.materials) \
+            and not np.any(np.asarray(scene.world.radiance) > 0):
+        warnings.append("the scene has no lights, emissive surfaces or world light: the image is black")
+    if plan["caustics"] and psettings.photons_caustic == 0 and settings.effects == "AUTO":
+        warnings.append("the scene calls for caustics but photons_caustic is 0: the Caustic pass stays empty")
+    if plan["indirect"] and psettings.photons_global == 0 and settings.effects == "AUTO":
+        warnings.append("the scene calls for indirect light but photons_global is 0: the Indirect pass stays empty")
+    if settings.method == "PHOTON" and settings.estimator == "STANDARD" and plan["time_dependent"]:
+        warnings.append("estimator STANDARD ignores photon times: photon-lit surfaces that move come out too dark")
+
+    photon_s = 0.0
+    map_stats: list[dict] = []
+    trace_stats = []
+    if settings.method == "PHOTON":
+        # -- Photon maps over the whole shutter ----------------------------------------
+        t0 = _time.perf_counter()
+        maps = _build_maps(scene, psettings, caster, lights, progress=_span(progress, 0.0, 0.3), cancel=cancel)
+        photon_s += _time.perf_counter() - t0
+        # -- Distribution ray tracing ---------------------------------------------------
+        passes, ts = trace_image(scene, settings, caster, lights, maps, table=table,
+                                 progress=progress, cancel=cancel,
+                                 progress_span=(0.3 if maps is not None else 0.0, 1.0))
+        trace_stats.append(ts)
+        map_stats.append(_map_stats(maps))      # after tracing: includes look-up counts and time
+    else:
+        # -- Accumulation buffer: N stills at stratified instants --------------------------
+        N = int(settings.accumulation_steps)
+        acc = None
+        still_settings = psettings.replace(estimator="STANDARD")
+        for i in range(N):
+            t_i = float(scene.shutter.sample(np.array([(i + 0.5) / N]))[0])
+            seed_i = int(rng_for(settings.seed, STREAM_ACCUMULATION, i).integers(0, 2**62))
+            a, b = i / N, (i + 1) / N
+            t0 = _time.perf_counter()
+            maps = _build_maps(scene, still_settings.replace(seed=seed_i), caster, lights, time_override=t_i,
+                               progress=_span(progress, a, a + 0.3 * (b - a)), cancel=cancel)
+            photon_s += _time.perf_counter() - t0
+            passes_i, ts = trace_image(scene, still_settings, caster, lights, maps, table=table,
+                                       time_override=t_i, stream=i + 1, progress=progress, cancel=cancel,
+                                       progress_span=(a + (0.3 * (b - a) if maps is not None else 0.0), b))
+            trace_stats.append(ts)
+            map_stats.append(_map_stats(maps))
+            if acc is None:
+                acc = {k: v.astype(np.float64) for k, v in passes_i.items()}
+            else:
+                for k in acc:
+                    acc[k] += passes_i[k]
+        passes = {k: (v / N).astype(np.float32) for k, v in acc.items()}
+
+    # -- Statistics -------------------------------------------------------------------
+    def total(key):
+        return float(sum(float(s.get(key, 0.0) or 0.0) for s in map_stats))
+
+    render_s = sum(ts.seconds for ts in trace_stats)
+    rays = sum(ts.rays for ts in trace_stats)
+    trace_s = total("trace_s") or total("photon_trace_s")
+    build_s = total("build_s") or total("photon_map_build_s")
+    if trace_s == 0.0 and build_s == 0.0:
+        trace_s = photon_s
+    stats = {
+        "wall_s": _time.perf_counter() - t_wall,
+        "export_s": 0.0,
+        "photon_trace_s": trace_s,
+        "photon_map_build_s": build_s,
+        "photon_s": photon_s,
+        "photon_lookup_s": total("lookup_s"),
+        "render_s": render_s,
+        "rays_cast": int(rays),
+        "camera_rays": int(sum(ts.camera_rays for ts in trace_stats)),
+        "bounce_rays": int(sum(ts.bounce_rays for ts in trace_stats)),
+        "shadow_rays": int(sum(ts.shadow_rays for ts in trace_stats)),
+        "rays_per_s": float(rays / render_s) if render_s > 0 else 0.0,
+        "photon_lookups": int(sum(ts.photon_lookups for ts in trace_stats)),
+        "photons_caustic": int(total("caustic_photons") or total("photons_caustic")),
+        "photons_global": int(total("global_photons") or total("photons_global")),
+        "photon_stats": map_stats[0] if len(map_stats) == 1 else map_stats,
+        "estimator": "STANDARD" if settings.method == "ACCUMULATION" else settings.estimator,
+        "method": settings.method,
+        "samples": int(settings.samples),
+        "accumulation_steps": int(settings.accumulation_steps) if settings.method == "ACCUMULATION" else 1,
+        "resolution": [int(scene.resolution[0]), int(scene.resolution[1])],
+        "seed": int(settings.seed),
+        "caster": dict(getattr(caster, "stats", {}) or {}),
+    }
+    stats = _plain(stats)
+    if progress is not None:
+        progress(1.0, "done")
+    return RenderResult(passes=passes, stats=stats, warnings=warnings, plan=plan)

@@ -1,0 +1,50 @@
+"""Registration, ``scene.stpm`` defaults, presets and panels."""
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from test_addon_scenes import fresh  # noqa: E402
+
+import addon  # noqa: E402
+from addon.presets import PRESETS  # noqa: E402
+from addon.properties import SETTING_NAMES, settings_from_scene  # noqa: E402
+from stpm_core.settings import RenderSettings  # noqa: E402
+
+
+def test_scene_settings_default_to_the_core_defaults():
+    scene = fresh()
+    core_defaults = RenderSettings()
+    assert set(SETTING_NAMES) == {f.name for f in dataclasses.fields(RenderSettings)}
+    for name in SETTING_NAMES:
+        assert getattr(scene.stpm, name) == pytest.approx(getattr(core_defaults, name)), name
+    assert settings_from_scene(scene) == core_defaults
+
+
+def test_presets_apply_and_make_valid_settings():
+    scene = fresh()
+    for name, values in PRESETS.items():
+        assert bpy.ops.stpm.apply_preset(preset=name) == {"FINISHED"}
+        for key, value in values.items():
+            assert getattr(scene.stpm, key) == value
+        settings_from_scene(scene)  # raises on an impossible value
+    assert PRESETS["FINAL"]["samples"] > PRESETS["PREVIEW"]["samples"]
+
+
+def test_engine_and_panels_register_and_unregister():
+    fresh()
+    panels = ["STPM_RENDER_PT_sampling", "STPM_RENDER_PT_photons", "STPM_RENDER_PT_method",
+              "STPM_RENDER_PT_motion_blur", "STPM_RENDER_PT_effects"]
+    for name in panels:
+        panel = getattr(bpy.types, name)
+        assert panel.bl_context == "render" and "STPM" in panel.COMPAT_ENGINES
+    engine = bpy.types.RenderEngine.bl_rna_get_subclass_py("STPM")
+    assert engine.bl_label == "STPM Photon Mapper" and engine.bl_use_postprocess
+    addon.unregister()
+    assert not hasattr(bpy.types.Scene, "stpm") and not hasattr(bpy.types, "STPM_RENDER_PT_sampling")
+    addon.register()
+    bpy.context.scene.render.engine = "STPM"
+    assert bpy.context.scene.stpm.estimator == "TEMPORAL"

@@ -1,0 +1,450 @@
+"""Time-aware ray casting: embree backend against the exact numpy oracle and
+against analytic answers (rigid motion, slerp, far-from-origin scenes)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from stpm_core.errors import StpmError
+from stpm_core.motion import MotionTransform
+from stpm_core.raycast import TMIN_REL, make_caster
+from stpm_core.raycast.build import embree_available
+from stpm_core.scene import Instance, Material, Mesh, Scene
+
+needs_embree = pytest.mark.skipif(not embree_available(), reason="embreex not installed")
+
+
+# ---------------------------------------------------------------- scene helpers
+def rot_z(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+
+
+def trs(t=(0, 0, 0), angle=0.0, scale=(1, 1, 1)) -> np.ndarray:
+    """4x4 object-to-world: translate @ rotate-about-z @ scale."""
+    M = np.eye(4)
+    M[:3, :3] = rot_z(angle) @ np.diag(scale)
+    M[:3, 3] = t
+    return M
+
+
+def soup(rng, F: int, spread=1.0, size=0.35) -> Mesh:
+    """Random triangle soup (disconnected triangles) around the origin."""
+    c = rng.uniform(-spread, spread, (F, 1, 3))
+    V = (c + rng.normal(0, size, (F, 3, 3))).reshape(-1, 3)
+    return Mesh(vertices=V.astype(np.float32), triangles=np.arange(3 * F, dtype=np.int32).reshape(-1, 3),
+                material_ids=rng.integers(0, 2, F).astype(np.int32))
+
+
+def heightfield(n: int, times, height) -> Mesh:
+    """Connected n x n grid over [-1, 1]^2 with z = height(x, y, t) at each time step."""
+    x = np.linspace(-1, 1, n + 1)
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    V = np.stack([np.stack([X.ravel(), Y.ravel(), height(X.ravel(), Y.ravel(), t)], 1) for t in times])
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    k = (i * (n + 1) + j).ravel()
+    F = np.concatenate([np.stack([k, k + n + 1, k + n + 2], 1), np.stack([k, k + n + 2, k + 1], 1)])
+    return Mesh(vertices=V.astype(np.float32), triangles=F.astype(np.int32),
+                material_ids=np.zeros(len(F), np.int32), vertex_times=np.asarray(times, float))
+
+
+def random_scene(rng, offset=np.zeros(3), deform_amp=0.01) -> Scene:
+    """Static soup + two rigidly moving soups (one rotating) + a slowly deforming soup."""
+    static = soup(rng, 120)
+    moving = soup(rng, 40, spread=0.5)
+    base = soup(rng, 40, spread=0.5)
+    K = 3
+    Vd = np.stack([np.asarray(base.vertices) + deform_amp * rng.normal(size=np.shape(base.vertices))
+                   for _ in range(K)])
+    deforming = Mesh(vertices=Vd.astype(np.float32), triangles=base.triangles,
+                     material_ids=base.material_ids, vertex_times=np.linspace(0, 1, K))
+    o = np.asarray(offset, float)
+    inst = [
+        Instance(0, MotionTransform.static(trs(o))),
+        Instance(1, MotionTransform(np.array([0.0, 1.0]),
+                                    np.stack([trs(o + [1, 0, 0]), trs(o + [1.5, 0.5, 0.2], 0.0, (1.2, 1, 1))]))),
+        Instance(1, MotionTransform(np.array([0.0, 0.4, 1.0]),
+                                    np.stack([trs(o + [-1, 0, 0], 0.0), trs(o + [-1, 0.3, 0], 1.2),
+                                              trs(o + [-1, 0.3, 0.3], 2.5)]))),
+        Instance(2, MotionTransform.static(trs(o + [0, 0.8, 0.3], 0.4))),
+    ]
+    return Scene(meshes=[static, moving, deforming], instances=inst,
+                 materials=[Material(), Material.mirror()])
+
+
+def random_rays(rng, n: int, offset=np.zeros(3)):
+    o = rng.uniform(-3, 3, (n, 3)) + offset
+    target = rng.uniform(-1.5, 1.5, (n, 3)) + offset
+    d = (target - o) * rng.uniform(0.2, 3.0, (n, 1))          # non-unit directions on purpose
+    return o, d, rng.uniform(0, 1, n)
+
+
+def distance_to_edges(P: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Distance (m,) from points x (m,3) in the planes of triangles P (m,3,3) to their boundary."""
+    out = np.full(len(x), np.inf)
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        e = P[:, b] - P[:, a]
+        s = np.clip(np.einsum("ij,ij->i", x - P[:, a], e) / np.einsum("ij,ij->i", e, e), 0, 1)
+        out = np.minimum(out, np.linalg.norm(x - (P[:, a] + s[:, None] * e), axis=1))
+    return out
+
+
+# ---------------------------------------------------------------- oracle agreement
+@needs_embree
+def test_embree_matches_numpy_on_random_scene():
+    rng = np.random.default_rng(7)
+    scene = random_scene(rng)
+    emb, ref = make_caster(scene, "embree"), make_caster(scene, "numpy")
+    o, d, t = random_rays(rng, 3000)
+    he, hn = emb.intersect(o, d, t), ref.intersect(o, d, t)
+    assert hn.hit.mean() > 0.3                                  # the test means something
+
+    # Rays where the two disagree must be near-ties: edge / silhouette of the deforming mesh
+    # within its documented tolerance, or two hits at (almost) the same t
+    same = (he.hit == hn.hit) & (~hn.hit | ((he.instance == hn.instance) & (he.prim == hn.prim)))
+    with np.errstate(invalid="ignore"):
+        tie = he.hit & hn.hit & (np.abs(he.t - hn.t) <= 1e-6 * np.abs(hn.t))
+    bad = ~same & ~tie
+    deform_part = [p for p in emb.parts if hasattr(p, "tolerance")][0]
+    tol = 4 * deform_part.tolerance + 1e-9
+    from stpm_core.raycast.geometry import triangles_at
+    M = scene.instances[3].transform.matrices[0]
+    explained = np.zeros(len(o), bool)
+    for side in (he, hn):
+        r = np.flatnonzero(bad & (side.instance == 3))
+        P = triangles_at(scene.meshes[2], side.prim[r].astype(np.int64), t[r])
+        x = (side.position[r] - M[:3, 3]) @ M[:3, :3]             # back to object space (rotation)
+        near_edge = distance_to_edges(P, x) <= tol
+        near_origin = side.t[r] * np.linalg.norm(d[r], axis=1) <= tol
+        explained[r[near_edge | near_origin]] = True
+    assert np.all(explained[bad]), "only the deforming mesh may disagree, within its tolerance"
+    assert bad.mean() < 0.01
+
+    # Where they agree on the hit, everything agrees
+    both = same & he.hit
+    assert both.sum() > 500
+    np.testing.assert_allclose(he.t[both], hn.t[both], rtol=1e-6)
+    np.testing.assert_allclose(he.position[both], hn.position[both], atol=1e-6)
+    np.testing.assert_allclose(he.ng[both], hn.ng[both], atol=1e-6)
+    np.testing.assert_allclose(he.ns[both], hn.ns[both], atol=1e-5)
+    np.testing.assert_array_equal(he.material[both], hn.material[both])
+    np.testing.assert_allclose(he.u[both], hn.u[both], atol=1e-4)
+    # Misses are clean
+    for h in (he, hn):
+        assert np.all(h.instance[~h.hit] == -1) and np.all(h.material[~h.hit] == -1)
+        assert np.all(np.isinf(h.t[~h.hit]))
+
+
+@needs_embree
+def test_many_moving_instances_agree():
+    """40 moving instances (culled through the part BVH) against the oracle."""
+    rng = np.random.default_rng(17)
+    mesh = soup(rng, 6, spread=0.2, size=0.15)
+    inst = []
+    for k in range(40):
+        p0, p1 = rng.uniform(-2, 2, 3), rng.uniform(-2, 2, 3)
+        a0 = rng.uniform(0, 6)
+        a1 = a0 if k % 2 else rng.uniform(0, 6)            # every other one: translation only
+        inst.append(Instance(0, MotionTransform(np.array([0.0, 1.0]), np.stack([trs(p0, a0), trs(p1, a1)]))))
+    scene = Scene(meshes=[mesh], instances=inst, materials=[Material(), Material()])
+    o, d, t = random_rays(rng, 3000)
+    he = make_caster(scene, "embree").intersect(o, d, t)
+    hn = make_caster(scene, "numpy").intersect(o, d, t)
+    assert hn.hit.sum() > 200
+    np.testing.assert_array_equal(he.hit, hn.hit)
+    np.testing.assert_allclose(he.t[he.hit], hn.t[he.hit], rtol=1e-9)
+    np.testing.assert_array_equal(he.instance, hn.instance)
+    tmax = rng.uniform(0, 1.5, len(o))
+    clear = np.abs(hn.t - tmax) > 1e-6 * tmax
+    blocked = make_caster(scene, "embree").occluded(o, d, t, tmax)
+    np.testing.assert_array_equal(blocked[clear], (hn.t < tmax)[clear])
+
+
+def test_numpy_bvh_matches_brute_force(monkeypatch):
+    """The numpy backend's BVH (swept boxes) returns exactly the brute-force hits."""
+    from stpm_core.raycast import numpy_backend
+    rng = np.random.default_rng(21)
+    scene = random_scene(rng, deform_amp=0.2)              # large deformation: swept boxes matter
+    times = np.linspace(0, 1, 3)
+    scene.meshes.append(heightfield(12, times, lambda x, y, t: 0.4 * np.sin(3 * x + 5 * t) * y))
+    scene.instances.append(Instance(3, MotionTransform(np.array([0.0, 1.0]),
+                                                       np.stack([trs((0, 0, -1)), trs((0.3, 0, -1), 0.7)]))))
+    o, d, t = random_rays(rng, 2000)
+    fast = make_caster(scene, "numpy")
+    assert all(p.bvh is not None for p in fast.parts if len(p.mesh.triangles) > numpy_backend.BRUTE_MAX)
+    monkeypatch.setattr(numpy_backend, "BRUTE_MAX", 10 ** 9)
+    brute = make_caster(scene, "numpy")
+    assert all(p.bvh is None for p in brute.parts)
+    hf, hb = fast.intersect(o, d, t), brute.intersect(o, d, t)
+    assert hb.hit.sum() > 500
+    np.testing.assert_array_equal(hf.hit, hb.hit)
+    np.testing.assert_array_equal(hf.t, hb.t)
+    same = hf.prim == hb.prim                               # ties at shared edges may pick either
+    assert same.mean() > 0.995
+    np.testing.assert_array_equal(hf.instance, hb.instance)
+
+
+@needs_embree
+def test_deforming_heightfield_is_exact_away_from_the_border():
+    """A connected, waving surface: the bucket + 1-ring refinement gives the exact hit."""
+    times = np.linspace(0, 1, 4)
+    mesh = heightfield(24, times, lambda x, y, t: 0.3 * np.sin(3 * x + 4 * t) * np.cos(2 * y - 3 * t))
+    scene = Scene(meshes=[mesh], instances=[Instance(0)], materials=[Material()])
+    rng = np.random.default_rng(3)
+    n = 2000
+    xy = rng.uniform(-0.9, 0.9, (n, 2))
+    o = np.column_stack([xy + rng.uniform(-0.05, 0.05, (n, 2)), np.full(n, 2.0)])
+    d = np.column_stack([xy - o[:, :2], np.full(n, -3.0)])
+    t = rng.uniform(0, 1, n)
+    he = make_caster(scene, "embree").intersect(o, d, t)
+    hn = make_caster(scene, "numpy").intersect(o, d, t)
+    assert he.hit.all() and hn.hit.all()
+    np.testing.assert_allclose(he.t, hn.t, rtol=1e-9)
+    agree = he.prim == hn.prim
+    assert agree.mean() > 0.995                # the rest: rays through a shared edge (a tie)
+    # The hit point lies on the surface at the ray's time (vertices linear between steps)
+    from stpm_core.raycast.geometry import triangles_at
+    P = triangles_at(mesh, he.prim.astype(np.int64), t)
+    n_tri = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    np.testing.assert_allclose(np.einsum("ij,ij->i", he.position - P[:, 0], n_tri), 0, atol=1e-9)
+
+
+# ---------------------------------------------------------------- analytic motion
+@pytest.mark.parametrize("backend", ["embree", "numpy"])
+def test_rotating_instance_hit_where_slerp_says(backend):
+    if backend == "embree" and not embree_available():
+        pytest.skip("embreex not installed")
+    # A small horizontal square at radius 2 in object space, rotating 0 -> 150 degrees about z
+    q = 0.05
+    V = np.array([[2 - q, -q, 0], [2 + q, -q, 0], [2 + q, q, 0], [2 - q, q, 0]], np.float32)
+    mesh = Mesh(vertices=V, triangles=np.array([[0, 1, 2], [0, 2, 3]], np.int32),
+                material_ids=np.zeros(2, np.int32))
+    angle = np.radians(150)
+    tr = MotionTransform(np.array([0.0, 1.0]), np.stack([trs((0, 0, 1)), trs((0, 0, 1), angle)]))
+    scene = Scene(meshes=[mesh], instances=[Instance(0, tr)], materials=[Material()])
+    caster = make_caster(scene, backend)
+    t = np.linspace(0, 1, 41)
+    # Slerp about a fixed axis = constant angular speed
+    centre = np.column_stack([2 * np.cos(angle * t), 2 * np.sin(angle * t), np.ones_like(t)])
+    o = centre + [0, 0, 5]
+    d = np.tile([0, 0, -2.0], (len(t), 1))
+    h = caster.intersect(o, d, t)
+    assert h.hit.all()
+    np.testing.assert_allclose(h.t, 2.5, rtol=1e-12)
+    np.testing.assert_allclose(h.position, centre, atol=1e-12)
+    np.testing.assert_allclose(h.ng, np.tile([0, 0, 1.0], (len(t), 1)), atol=1e-12)
+    # The same rays half a shutter later find the square gone
+    assert not caster.intersect(o, d, (t + 0.5) % 1.0).hit.any()
+    assert not caster.occluded(o, d, (t + 0.5) % 1.0, np.full(len(t), 10.0)).any()
+    assert caster.occluded(o, d, t, np.full(len(t), 10.0)).all()
+
+
+@pytest.mark.parametrize("backend", ["embree", "numpy"])
+def test_translating_instance_hit_where_lerp_says(backend):
+    if backend == "embree" and not embree_available():
+        pytest.skip("embreex not installed")
+    q = 0.05
+    V = np.array([[-q, -q, 0], [q, -q, 0], [q, q, 0], [-q, q, 0]], np.float32)
+    mesh = Mesh(vertices=V, triangles=np.array([[0, 1, 2], [0, 2, 3]], np.int32),
+                material_ids=np.zeros(2, np.int32))
+    # Translation only, three keys: (0,0,0) -> (4,0,0) at t=0.5 -> (4,2,0) at t=1
+    tr = MotionTransform(np.array([0.0, 0.5, 1.0]),
+                         np.stack([trs((0, 0, 0), 0.3), trs((4, 0, 0), 0.3), trs((4, 2, 0), 0.3)]))
+    scene = Scene(meshes=[mesh], instances=[Instance(0, tr)], materials=[Material()])
+    caster = make_caster(scene, backend)
+    t = np.linspace(0, 1, 37)
+    centre = np.column_stack([np.minimum(8 * t, 4), np.maximum(4 * t - 2, 0), np.zeros_like(t)])
+    o = centre + [0, 0, 3]
+    h = caster.intersect(o, np.tile([0, 0, -1.0], (len(t), 1)), t)
+    assert h.hit.all()
+    np.testing.assert_allclose(h.position, centre, atol=1e-12)
+    np.testing.assert_allclose(h.t, 3.0, rtol=1e-12)
+    assert not caster.intersect(o + [0.2, 0.2, 0], np.tile([0, 0, -1.0], (len(t), 1)), t).hit.any()
+
+
+@pytest.mark.parametrize("moving", [True, False])
+@pytest.mark.parametrize("backend", ["embree", "numpy"])
+def test_translating_sphere_normals_at_ray_time(backend, moving):
+    if backend == "embree" and not embree_available():
+        pytest.skip("embreex not installed")
+    from benchmarks.bench_rays import icosphere
+    V, F = icosphere(3)
+    mesh = Mesh(vertices=V.astype(np.float32), triangles=F, material_ids=np.zeros(len(F), np.int32),
+                normals=V[F].astype(np.float32))
+    # Translate by (3, 0, 0) and stretch x by 2 over the shutter
+    # (static: already stretched and moved, baked into the world-space scene)
+    if moving:
+        tr = MotionTransform(np.array([0.0, 1.0]), np.stack([trs((0, 0, 0)), trs((3, 0, 0), 0.0, (2, 1, 1))]))
+    else:
+        tr = MotionTransform.static(trs((3, 0, 0), 0.0, (2, 1, 1)))
+    scene = Scene(meshes=[mesh], instances=[Instance(0, tr)], materials=[Material()])
+    caster = make_caster(scene, backend)
+    rng = np.random.default_rng(1)
+    n = 200
+    t = rng.uniform(0, 1, n)
+    cx, sx = (3 * t, 1 + t) if moving else (np.full(n, 3.0), np.full(n, 2.0))   # centre, x semi-axis
+    o = np.column_stack([cx + rng.uniform(-0.3, 0.3, n), rng.uniform(-0.3, 0.3, n), np.full(n, 4.0)])
+    d = np.tile([0, 0, -1.0], (n, 1))
+    h = caster.intersect(o, d, t)
+    assert h.hit.all()
+    # Hit lies on the ellipsoid ((x-cx)/sx)^2 + y^2 + z^2 ~ 1 (faceted: within the tessellation error)
+    p = h.position
+    r2 = ((p[:, 0] - cx) / sx) ** 2 + p[:, 1] ** 2 + p[:, 2] ** 2
+    assert np.all(np.abs(r2 - 1) < 0.02)
+    # Shading normal = inverse-transpose of the object normal: parallel to the ellipsoid gradient
+    grad = np.column_stack([(p[:, 0] - cx) / sx ** 2, p[:, 1], p[:, 2]])
+    grad /= np.linalg.norm(grad, axis=1, keepdims=True)
+    assert np.all(np.einsum("ij,ij->i", h.ns, grad) > 0.99)
+    # Unit normals; ng is perpendicular to the world-space triangle at the ray's time
+    np.testing.assert_allclose(np.linalg.norm(h.ng, axis=1), 1, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(h.ns, axis=1), 1, atol=1e-6)
+    M = tr.at(t)
+    V32 = np.asarray(mesh.vertices, np.float64)             # the mesh stores float32 positions
+    Pw = np.einsum("nij,nkj->nki", M[:, :3, :3], V32[F[h.prim]]) + M[:, None, :3, 3]
+    for a, b in ((0, 1), (1, 2)):
+        np.testing.assert_allclose(np.einsum("ij,ij->i", h.ng, Pw[:, b] - Pw[:, a]), 0, atol=1e-12)
+
+
+@needs_embree
+def test_translated_1e5_scene_gives_the_same_hits():
+    rng = np.random.default_rng(11)
+    offset = np.array([1e5, -1e5, 1e5])
+    scene_a = random_scene(np.random.default_rng(5))
+    scene_b = random_scene(np.random.default_rng(5), offset=offset)
+    o, d, t = random_rays(rng, 3000)
+    ha = make_caster(scene_a, "embree").intersect(o, d, t)
+    hb = make_caster(scene_b, "embree").intersect(o + offset, d, t)
+    assert ha.hit.sum() > 1000
+    np.testing.assert_array_equal(ha.hit, hb.hit)
+    same = ha.hit & (ha.prim == hb.prim) & (ha.instance == hb.instance)
+    assert same.sum() >= ha.hit.sum() - 3                     # only near-ties may swap
+    np.testing.assert_allclose(ha.t[ha.hit], hb.t[ha.hit], rtol=1e-6)
+    np.testing.assert_allclose(hb.position[same] - offset, ha.position[same], atol=1e-8)
+    np.testing.assert_allclose(hb.ng[same], ha.ng[same], atol=1e-8)
+
+
+# ---------------------------------------------------------------- tmax, occlusion, guard
+@pytest.mark.parametrize("backend", ["embree", "numpy"])
+def test_tmax_and_occluded_agree_with_intersect(backend):
+    if backend == "embree" and not embree_available():
+        pytest.skip("embreex not installed")
+    rng = np.random.default_rng(2)
+    scene = random_scene(rng)
+    caster = make_caster(scene, backend)
+    o, d, t = random_rays(rng, 1500)
+    full = caster.intersect(o, d, t)
+    # tmax just past / just before the nearest hit
+    h = full.hit
+    past = caster.intersect(o[h], d[h], t[h], full.t[h] * (1 + 1e-5))
+    before = caster.intersect(o[h], d[h], t[h], full.t[h] * (1 - 1e-5))
+    assert past.hit.all()
+    np.testing.assert_allclose(past.t, full.t[h], rtol=1e-12)
+    assert not before.hit.any()
+    # Random tmax: hits respect it, and occluded == (nearest hit < tmax) away from ties
+    tmax = rng.uniform(0.0, 2.0, len(o))
+    ht = caster.intersect(o, d, t, tmax)
+    assert np.all(ht.t[ht.hit] < tmax[ht.hit])
+    np.testing.assert_array_equal(ht.hit, full.t < tmax)
+    blocked = caster.occluded(o, d, t, tmax)
+    clear_of_tie = np.abs(full.t - tmax) > 1e-5 * tmax
+    np.testing.assert_array_equal(blocked[clear_of_tie], ht.hit[clear_of_tie])
+    assert blocked.sum() > 100 and (~blocked).sum() > 100
+
+
+@pytest.mark.parametrize("backend", ["embree", "numpy"])
+def test_self_intersection_guard(backend):
+    if backend == "embree" and not embree_available():
+        pytest.skip("embreex not installed")
+    rng = np.random.default_rng(4)
+    scene = random_scene(rng)
+    caster = make_caster(scene, backend)
+    o, d, t = random_rays(rng, 1500)
+    h = caster.intersect(o, d, t)
+    # Continue each ray from its own hit point (no normal offset): it must not re-hit at ~0
+    k = h.hit
+    again = caster.intersect(h.position[k], d[k], t[k])
+    dist = again.t * np.linalg.norm(d[k], axis=1)
+    assert np.all(dist[again.hit] > TMIN_REL * caster.scale)
+    same_tri = again.hit & (again.instance == h.instance[k]) & (again.prim == h.prim[k])
+    assert not same_tri.any()
+
+
+@pytest.mark.parametrize("backend", ["embree", "numpy"])
+def test_degenerate_triangles_do_not_crash_or_nan(backend):
+    if backend == "embree" and not embree_available():
+        pytest.skip("embreex not installed")
+    V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0],           # collinear
+                  [0, 1, 0], [0, 1, 0],                       # repeated vertex
+                  [-1, -1, 0.5], [1, -1, 0.5], [0, 1, 0.5]], np.float32)
+    F = np.array([[0, 1, 2], [3, 4, 0], [3, 3, 3], [5, 6, 7]], np.int32)
+    normals = np.zeros((4, 3, 3), np.float32)                 # zero shading normals too
+    mesh = Mesh(vertices=V, triangles=F, material_ids=np.zeros(4, np.int32), normals=normals)
+    scene = Scene(meshes=[mesh], instances=[Instance(0)], materials=[Material()])
+    caster = make_caster(scene, backend)
+    rng = np.random.default_rng(0)
+    o = np.column_stack([rng.uniform(-1, 2, 500), rng.uniform(-1, 1, 500), np.full(500, 2.0)])
+    o[:50, :2] = V[[0, 1, 2, 3, 4]][np.arange(50) % 5, :2]    # aimed exactly at degenerate vertices
+    d = np.tile([0, 0, -1.0], (500, 1))
+    h = caster.intersect(o, d, np.full(500, 0.5))
+    for f in (h.t[h.hit], h.position[h.hit], h.ng[h.hit], h.ns[h.hit], h.u, h.v):
+        assert np.all(np.isfinite(f))
+    assert np.all(h.prim[h.hit] == 3)                          # only the real triangle is hit
+    np.testing.assert_allclose(h.t[h.hit], 1.5)
+    np.testing.assert_allclose(h.ns[h.hit], h.ng[h.hit])       # zero shading normal -> ng
+
+
+# ---------------------------------------------------------------- API edges
+def test_empty_scene_and_bad_backend():
+    scene = Scene(materials=[Material()])
+    caster = make_caster(scene, "numpy")
+    h = caster.intersect(np.zeros((3, 3)), np.tile([0, 0, 1.0], (3, 1)), np.zeros(3))
+    assert not h.hit.any() and np.all(h.instance == -1)
+    assert not caster.occluded(np.zeros((3, 3)), np.tile([0, 0, 1.0], (3, 1)), np.zeros(3), 1.0).any()
+    with pytest.raises(StpmError):
+        make_caster(scene, "optix")
+
+
+def test_auto_falls_back_to_numpy(monkeypatch):
+    from stpm_core.raycast import build
+    monkeypatch.setattr(build, "embree_available", lambda: False)
+    scene = Scene(meshes=[soup(np.random.default_rng(0), 5)], instances=[Instance(0)],
+                  materials=[Material(), Material()])
+    assert make_caster(scene, "auto").backend == "numpy"
+    with pytest.raises(StpmError):
+        make_caster(scene, "embree")
+
+
+def test_stats_count_rays():
+    scene = Scene(meshes=[soup(np.random.default_rng(0), 5)], instances=[Instance(0)],
+                  materials=[Material(), Material()])
+    caster = make_caster(scene)
+    caster.intersect(np.zeros((7, 3)), np.tile([0, 0, 1.0], (7, 1)), np.zeros(7))
+    caster.occluded(np.zeros((4, 3)), np.tile([0, 0, 1.0], (4, 1)), np.zeros(4), 1.0)
+    assert caster.stats["rays_intersect"] == 7 and caster.stats["rays_occluded"] == 4
+    assert caster.stats["seconds_intersect"] >= 0
+
+
+@pytest.mark.parametrize("kind", ["translation", "rotation", "affine"])
+def test_world_to_object_matches_inverse_at(kind):
+    """The per-entry inverse used by both backends equals MotionTransform.inverse_at."""
+    from stpm_core.raycast.geometry import world_to_object
+    rng = np.random.default_rng(5)
+    Ms = []
+    for k in range(4):
+        if kind == "translation":
+            M = trs(rng.normal(size=3) * 5, 0.3, (1, 2, 1))
+        elif kind == "rotation":
+            M = trs(rng.normal(size=3) * 5, rng.uniform(0, 6))
+        else:
+            M = np.eye(4)
+            M[:3, :3] = rng.normal(size=(3, 3))
+            M[:3, :3] *= np.sign(np.linalg.det(M[:3, :3]))
+            M[:3, 3] = rng.normal(size=3) * 5
+        Ms.append(M)
+    tr = MotionTransform(np.array([0.0, 0.2, 0.7, 1.0]), np.stack(Ms))
+    t = np.concatenate([rng.uniform(-0.2, 1.2, 500), tr.times])
+    A, b = world_to_object(tr, t)
+    Minv = tr.inverse_at(t)
+    np.testing.assert_allclose(np.broadcast_to(A, Minv[:, :3, :3].shape), Minv[:, :3, :3], atol=1e-12)
+    np.testing.assert_allclose(b, Minv[:, :3, 3], atol=1e-11)
+
