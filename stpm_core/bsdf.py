@@ -73,6 +73,11 @@ class MaterialTable:
         self.w_base = (1.0 - self.metallic) * (1.0 - self.transmission)
         self.w_base[M] = 0.0
         self.size = M
+        # Per-material flags, so per-hit tests are one gather
+        self.rough_lobe = (self.roughness > 0) & ((self.w_metal > 0) | (self.w_glass > 0)
+                                                  | ((self.w_base > 0) & (self.specular > 0)))
+        self.nondelta = ((self.w_base > 0) & (self.base_color.max(axis=1) > 0)) | self.rough_lobe
+        self.coat = (self.w_base > 0) & (self.specular > 0)
 
     def __len__(self) -> int:
         return self.size
@@ -344,8 +349,31 @@ def _eval_pdf(h: _Hit, wi: np.ndarray):
 
 def bsdf_eval(table: MaterialTable, mat, wo, wi, ns, ng) -> np.ndarray:
     """f(wo, wi) (n, 3) in 1/sr for the non-delta lobes (diffuse, rough coat / metal / glass reflection)."""
-    h = _Hit(table, mat, wo, ns, ng)
-    f, _ = _eval_pdf(h, np.asarray(wi, float))
+    mat = np.asarray(mat, dtype=np.int64)
+    m = np.where(mat < 0, table.size, mat)
+    wo = np.asarray(wo, float)
+    wi = np.asarray(wi, float)
+    rough = table.rough_lobe[m]
+    if rough.all():
+        h = _Hit(table, mat, wo, ns, ng)
+        f, _ = _eval_pdf(h, wi)
+        return f
+    # Rows without a rough lobe: the diffuse lobe under a smooth coat's Fresnel
+    ns_f, ng_f, _ = _oriented(wo, ns, ng)
+    cos_i = _dot(wi, ns_f)
+    above = (cos_i > 0) & (_dot(wi, ng_f) > 0)
+    scale = np.where(above, table.w_base[m], 0.0)
+    c = np.nonzero(table.coat[m] & above)[0]
+    if c.size:
+        mc = m[c]
+        cos_o = np.clip(_dot(wo[c], ns_f[c]), 0.0, 1.0)
+        scale[c] *= 1.0 - table.specular[mc] * fresnel_dielectric(cos_o, table.ior[mc])
+    f = scale[:, None] * table.base_color[m] * (1.0 / np.pi)
+    # Rows with a rough lobe: the full evaluation
+    r = np.nonzero(rough)[0]
+    if r.size:
+        h = _Hit(table, mat[r], wo[r], np.asarray(ns, float)[r], np.asarray(ng, float)[r])
+        f[r], _ = _eval_pdf(h, wi[r])
     return f
 
 
@@ -457,11 +485,7 @@ def diffuse_albedo(table: MaterialTable, mat, wo, ns) -> np.ndarray:
 def has_nondelta(table: MaterialTable, mat) -> np.ndarray:
     """(n,) bool: the material has a lobe that is not a delta (diffuse or rough), i.e. shade / store photons here."""
     mat = np.asarray(mat, dtype=np.int64)
-    m = np.where(mat < 0, table.size, mat)
-    diffuse = (table.w_base[m] > 0) & (table.base_color[m].max(axis=1) > 0)
-    rough = (table.roughness[m] > 0) & ((table.w_metal[m] > 0) | (table.w_glass[m] > 0)
-                                        | ((table.w_base[m] > 0) & (table.specular[m] > 0)))
-    return diffuse | rough
+    return table.nondelta[np.where(mat < 0, table.size, mat)]
 
 
 def emission(table: MaterialTable, mat) -> np.ndarray:

@@ -26,8 +26,19 @@ __all__ = ["generate_rays", "view_axis", "camera_to_world", "image_plane"]
 
 
 def camera_to_world(camera, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation (n, 3, 3) with unit columns (X right, Y up, Z back) and position (n, 3) at times (n,)."""
-    M = camera.transform.at(np.atleast_1d(np.asarray(times, dtype=np.float64)))
+    """Rotation (n, 3, 3) with unit columns (X right, Y up, Z back) and position (n, 3) at times (n,).
+
+    A static camera returns read-only broadcast views of its single pose.
+    """
+    times = np.atleast_1d(np.asarray(times, dtype=np.float64))
+    if camera.transform.is_static:
+        # One pose for every time: normalise once, broadcast (read-only views)
+        M0 = camera.transform.matrices[0]
+        R0 = M0[:3, :3] / np.maximum(np.linalg.norm(M0[:3, :3], axis=0, keepdims=True), 1e-300)
+        n = times.shape[0]
+        pos0 = M0[:3, 3]
+        return np.broadcast_to(R0, (n, 3, 3)), np.broadcast_to(pos0, (n, 3))
+    M = camera.transform.at(times)
     R = M[:, :3, :3]
     # Ignore scale: normalise each rotation column
     R = R / np.maximum(np.linalg.norm(R, axis=1, keepdims=True), 1e-300)
@@ -86,17 +97,19 @@ def generate_rays(camera, resolution, px: np.ndarray, py: np.ndarray, times: np.
     x = cx + (2.0 * px / W - 1.0) * half_w
     y = cy + (1.0 - 2.0 * py / H) * half_h
     R, pos = camera_to_world(camera, times)
+    if camera.transform.is_static:
+        R, pos = R[:1], pos[:1]                  # one pose: matrix products, not per-ray einsum
     if camera.type == "ORTHO":
         # Parallel rays down -Z from the plane at clip_start
         local_o = np.stack([x, y, np.full_like(x, -float(camera.clip_start))], axis=-1)
-        origins = np.einsum("nij,nj->ni", R, local_o) + pos
-        dirs = -R[:, :, 2]
+        origins = (local_o @ R[0].T + pos[0]) if R.shape[0] == 1 else np.einsum("nij,nj->ni", R, local_o) + pos
+        dirs = np.broadcast_to(-R[:, :, 2], (x.shape[0], 3))
     else:
         # Pinhole: the ray through (x, y, -1) on the plane at unit distance
         local_d = np.stack([x, y, -np.ones_like(x)], axis=-1)
-        dirs = np.einsum("nij,nj->ni", R, local_d)
-        dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-        origins = pos.copy()
+        dirs = (local_d @ R[0].T) if R.shape[0] == 1 else np.einsum("nij,nj->ni", R, local_d)
+        dirs /= np.sqrt(np.einsum("ij,ij->i", dirs, dirs))[:, None]
+        origins = np.broadcast_to(pos, (x.shape[0], 3)).copy()
     return origins, np.ascontiguousarray(dirs)
 
 

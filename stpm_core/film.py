@@ -57,6 +57,21 @@ def blackman_harris(x: np.ndarray, radius: float) -> np.ndarray:
     return np.where(np.abs(x) < radius, w, 0.0)
 
 
+def _blackman_harris32(x: np.ndarray, radius: float) -> np.ndarray:
+    """:func:`blackman_harris` in float32 (x float32, any shape): the film's hot path.
+
+    Float32 cosines are vectorised by numpy (several times faster than
+    float64); the weights are stored in float32 anyway.  Written as a cubic in
+    c = cos(pi x / r): (a0 - a2) + (a1 - 3 a3) c + 2 a2 c^2 + 4 a3 c^3.
+    """
+    c = np.cos(x * np.float32(np.pi / radius))
+    c2 = c * c
+    w = (np.float32(0.35875 - 0.14128) + np.float32(2 * 0.14128) * c2
+         + c * (np.float32(0.48829 - 3 * 0.01168) + np.float32(4 * 0.01168) * c2))
+    w[np.abs(x) >= np.float32(radius)] = 0.0
+    return w
+
+
 class Film:
     """Accumulates filter-weighted samples into the named passes.
 
@@ -134,6 +149,70 @@ class Film:
         S[y0:y1, x0:x1] += vsum.reshape(bh, bw, C)
         Wt = self._wsum.reshape(self.height, self.width)
         Wt[y0:y1, x0:x1] += wsum.reshape(bh, bw)
+
+    def _offsets(self) -> range:
+        """Pixel offsets o (relative to a sample's own pixel) that its filter can reach."""
+        r = self.radius
+        return range(int(np.floor(-0.5 - r)) + 1, int(np.ceil(0.5 + r))) if r > 0 else range(0, 1)
+
+    def add_tile(self, x0: int, y0: int, tw: int, th: int, px: np.ndarray, py: np.ndarray,
+                 values: dict[str, np.ndarray]) -> None:
+        """Splat the samples of one tile (same result as :meth:`add_samples`, faster).
+
+        The samples must be laid out as :func:`stpm_core.integrator.camera_samples`
+        makes them: the tile's pixels [x0, x0 + tw) x [y0, y0 + th) in row-major
+        order, each pixel's S = n / (tw th) samples consecutive and inside that
+        pixel.  Then every filter offset (ox, oy) sends pixel j's samples to one
+        pixel, and the splat is one batched product per tile::
+
+            sums[j, k, c] = sum_s w_k(x_js) V[j, s, c]     (k = filter offset)
+
+        followed by K shifted block additions.  Float32 throughout (each tile
+        sums at most K * S products per pixel before it reaches the float32
+        accumulators).
+        """
+        n = px.shape[0]
+        P = tw * th
+        if n == 0 or P == 0:
+            return
+        S = n // P
+        C = self.n_channels
+        # Sample values (n, C + 1) float32; the last column counts the weight sum
+        V = np.empty((n, C + 1), np.float32)
+        c0 = 0
+        for name, c, _ in PASSES:
+            V[:, c0:c0 + c] = np.asarray(values[name]).reshape(n, c)
+            c0 += c
+        V[:, C] = 1.0
+        # Separable filter weights per offset: (n, k) along x and y
+        offsets = self._offsets()
+        r = self.radius
+        if r > 0:
+            px = np.asarray(px, np.float64)
+            py = np.asarray(py, np.float64)
+            o = np.asarray(offsets, np.float32) + np.float32(0.5)
+            wx = _blackman_harris32((np.floor(px) - px).astype(np.float32)[:, None] + o[None, :], r)
+            wy = _blackman_harris32((np.floor(py) - py).astype(np.float32)[:, None] + o[None, :], r)
+        else:
+            wx = wy = np.ones((n, 1), np.float32)
+        k1 = len(offsets)
+        Wk = (wy[:, :, None] * wx[:, None, :]).reshape(P, S, k1 * k1)   # offset k = (iy, ix)
+        sums = np.matmul(Wk.transpose(0, 2, 1), V.reshape(P, S, C + 1))  # (P, K, C + 1)
+        sums = sums.reshape(th, tw, k1 * k1, C + 1)
+        # Shifted block additions, clipped to the image
+        Simg = self._sum.reshape(self.height, self.width, C)
+        Wimg = self._wsum.reshape(self.height, self.width)
+        for iy, oy in enumerate(offsets):
+            ya, yb = max(y0 + oy, 0), min(y0 + oy + th, self.height)
+            if ya >= yb:
+                continue
+            for ix, ox in enumerate(offsets):
+                xa, xb = max(x0 + ox, 0), min(x0 + ox + tw, self.width)
+                if xa >= xb:
+                    continue
+                blk = sums[ya - y0 - oy:yb - y0 - oy, xa - x0 - ox:xb - x0 - ox, iy * k1 + ix]
+                Simg[ya:yb, xa:xb] += blk[..., :C]
+                Wimg[ya:yb, xa:xb] += blk[..., C]
 
     def resolve(self) -> dict[str, np.ndarray]:
         """The passes as name -> (H, W, C) float32: weighted sums over weight sums.

@@ -45,8 +45,9 @@ __all__ = ["TraceStats", "trace_image", "camera_samples", "shade_paths"]
 
 # Random streams (second entry of rng_for(seed, ...)): one per purpose.
 STREAM_CAMERA = 0x5A3
-# Samples traced together in one wavefront batch (tile pixels x spp).
-BATCH_SAMPLES = 16384
+# Samples traced together in one wavefront batch (tile pixels x spp): large
+# batches amortise Python overhead; the caster cuts them into embree-sized chunks.
+BATCH_SAMPLES = 65536
 # Bounces after which Russian roulette may end a specular chain.
 RR_START = 3
 
@@ -289,7 +290,8 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         wo = -d[hit]                          # directions are unit (camera, bsdf_sample)
 
         # -- Emission of surfaces seen along the chain ---------------------------------------
-        L_emit[idx] += beta * emission(ctx.table, mat)
+        if ctx.any_emission:
+            L_emit[idx] += beta * emission(ctx.table, mat)
 
         # -- Shade non-delta vertices: Direct, Caustic, Indirect -----------------------------
         sh = np.nonzero(has_nondelta(ctx.table, mat))[0]
@@ -348,6 +350,7 @@ class _Context:
     film_transparent: bool
     has_delta: np.ndarray = None             # (M + 1,) bool per material; last row = miss
     visible_lights: bool = False             # some light has a shape a ray can hit
+    any_emission: bool = True                # some material emits
     light_visible_camera: list = None        # per light: seen by camera rays (Blender's visible_camera)
 
 
@@ -416,6 +419,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                    world_radiance=np.asarray(scene.world.radiance, float),
                    film_transparent=bool(scene.metadata.get("film_transparent", False)))
     ctx.has_delta = _has_delta_lobe(scene.materials)
+    ctx.any_emission = any(np.any(np.asarray(m.emission) > 0) for m in scene.materials)
     ctx.light_visible_camera = [bool(v) for v in (scene.metadata.get("light_visible_camera") or [])]
     ctx.visible_lights = any(l.type == "AREA" or (l.type in ("POINT", "SPOT") and l.radius > 0)
                              for l in lights.lights)
@@ -446,7 +450,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
         else:
             tmax0 = cam.clip_end / np.maximum(np.sum(d * axis, axis=1), 1e-12)
         values = shade_paths(ctx, o, d, times, tmax0, rng, tstats, pos, axis)
-        return px, py, values, tstats
+        return (x0, y0, gx.shape[1], gx.shape[0]), px, py, values, tstats
 
     # Trace tiles on worker threads (embree and most numpy kernels release the GIL);
     # the film takes them in tile order, so the result does not depend on the threads.
@@ -466,8 +470,8 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                     if tj not in pending:
                         pending[tj] = pool.submit(trace_tile, tj)
                 result = pending.pop(ti).result()
-            px, py, values, tstats = result
-            film.add_samples(px, py, values)
+            (x0, y0, tw, th), px, py, values, tstats = result
+            film.add_tile(x0, y0, tw, th, px, py, values)
             stats.merge(tstats)
             if progress is not None:
                 progress(f0 + (f1 - f0) * (ti + 1) / len(tiles), f"tracing tile {ti + 1}/{len(tiles)}")

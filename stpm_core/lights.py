@@ -52,7 +52,7 @@ def _local_to_world(local: np.ndarray, axis: np.ndarray) -> np.ndarray:
 
 def _normalize(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors (n, 3) and lengths (n,)."""
-    length = np.linalg.norm(v, axis=-1)
+    length = np.sqrt(np.einsum("ij,ij->i", v, v))
     return v / np.maximum(length, 1e-300)[:, None], length
 
 
@@ -153,8 +153,15 @@ class LightSet:
         return 0.5 * (1.0 + np.cos(0.5 * self.lights[li].angle))
 
     def _frame(self, li: int, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Light pose at times (n,): position (n, 3), unit X, Y, Z axes (n, 3) each (scale removed)."""
-        M = self.lights[li].transform.at(np.atleast_1d(np.asarray(times, float)))
+        """Light pose at times (n,): position (n, 3), unit X, Y, Z axes (n, 3) each (scale removed).
+
+        A static light computes its pose once and returns read-only broadcast views.
+        """
+        times = np.atleast_1d(np.asarray(times, float))
+        if self.lights[li].transform.is_static and times.shape[0] > 1:
+            n = times.shape[0]
+            return tuple(np.broadcast_to(a, (n, 3)) for a in self._frame(li, times[:1]))
+        M = self.lights[li].transform.at(times)
         R = M[:, :3, :3]
         X, _ = _normalize(R[:, :, 0])
         Y, _ = _normalize(R[:, :, 1])
@@ -164,7 +171,14 @@ class LightSet:
     def _area_shape(self, li: int, times: np.ndarray):
         """AREA light at times: centre (n, 3), half-extent vectors ex, ey (n, 3), area A (n,), emitting normal (n, 3)."""
         l = self.lights[li]
-        M = l.transform.at(np.atleast_1d(np.asarray(times, float)))
+        times = np.atleast_1d(np.asarray(times, float))
+        if l.transform.is_static and times.shape[0] > 1:
+            # One pose: compute once, broadcast (read-only views)
+            n = times.shape[0]
+            c, ex, ey, A, n_emit = self._area_shape(li, times[:1])
+            return (np.broadcast_to(c, (n, 3)), np.broadcast_to(ex, (n, 3)), np.broadcast_to(ey, (n, 3)),
+                    np.broadcast_to(A, (n,)), np.broadcast_to(n_emit, (n, 3)))
+        M = l.transform.at(times)
         sx = float(l.size)
         sy = float(l.size_y) if l.shape in ("RECTANGLE", "ELLIPSE") else sx
         ex = 0.5 * sx * M[:, :3, 0]
@@ -434,7 +448,7 @@ class LightSet:
         l = self.lights[li]
         r = float(l.radius)
         if r <= 0.0:
-            return c
+            return np.array(c)                   # a writable copy (c may be a broadcast view)
         n = dirs.shape[0]
         d = concentric_disk(rng.random((n, 2))) * r
         t, b = orthonormal_basis(dirs)

@@ -73,10 +73,15 @@ def emitter_scene(resolution=(24, 16)):
 def sweep(tmp_path_factory):
     """One full sweep on the moving-receiver scene: the report and its directory."""
     out = tmp_path_factory.mktemp("compare")
-    report = run_compare(moving_receiver_scene(), caustic_settings(), out / "report",
+    scene, st = moving_receiver_scene(), caustic_settings()
+    # an estimator-neutral second reference: accumulation buffer, 16 instants x 16x photons
+    check = get_reference(scene, st, cache_dir=out / "cache", photon_factor=16, sample_factor=1,
+                          overrides={"method": "ACCUMULATION", "accumulation_steps": 16})
+    report = run_compare(scene, st, out / "report",
                          photon_budgets=(1, 4, 16), accumulation_steps=(1, 4, 16), cache_dir=out / "cache",
                          reference_photon_factor=64, reference_sample_factor=1,
-                         reference_overrides={"seed": 1}, scene_name="moving receiver")
+                         reference_overrides={"seed": 1}, scene_name="moving receiver",
+                         extra_references={"accumulation-16": check})
     return report, out / "report"
 
 
@@ -222,6 +227,21 @@ def test_time_budget_skips_runs_and_still_writes_the_report(tmp_path):
         assert f'<section id="{s}">' in html
 
 
+def test_cancelled_sweep_still_writes_a_partial_report(tmp_path):
+    from stpm_core.errors import RenderCancelled
+
+    finished = []
+    progress = lambda f, msg: finished.append(msg) if "done in" in msg else None   # noqa: E731
+    with pytest.raises(RenderCancelled, match="partial report"):
+        run_compare(emitter_scene(), RenderSettings(samples=2), tmp_path, reference=np.full((16, 24, 3), 0.3),
+                    photon_budgets=(1,), accumulation_steps=(1, 2), progress=progress,
+                    cancel=lambda: bool(finished))
+    data = json.loads((tmp_path / "report.json").read_text())
+    assert [r["status"] for r in data["runs"]] == ["done"] + ["skipped"] * 4
+    assert data["sweep"]["cancelled"] and all(r["note"] == "cancelled" for r in data["runs"][1:])
+    assert "cancelled" in (tmp_path / "report.html").read_text()
+
+
 # ----------------------------------------------------------------------------
 # The report on a small moving scene
 # ----------------------------------------------------------------------------
@@ -260,6 +280,19 @@ def test_report_has_every_section_finite_numbers_and_valid_json(sweep):
     assert len(re.findall(r'<img src="data:image/png;base64,', html)) == 13
     assert html.count("<svg") == 3 and html.count('class="curve"') == 3 * 4
     assert (out / "reference.exr").is_file()
+
+
+def test_two_independent_references_agree_better_than_standard(sweep):
+    """TEMPORAL reference vs accumulation-buffer reference: no shared estimator, yet close."""
+    report, _ = sweep
+    cx = report["cross_references"]["accumulation-16"]
+    assert cx["reference"]["kind"] == "accumulation"
+    apart = cx["main_reference_error"]["rmse"]
+    assert apart < 0.5 * _run(report, "STANDARD x16")["rmse"]
+    assert apart < 0.5 * cx["runs"]["STANDARD x16"]["rmse"]
+    # against either reference STANDARD's error stalls and TEMPORAL's falls
+    assert cx["runs"]["TEMPORAL x16"]["rmse"] < 0.7 * cx["runs"]["TEMPORAL x1"]["rmse"]
+    assert cx["runs"]["STANDARD x16"]["rmse"] > 0.7 * cx["runs"]["STANDARD x1"]["rmse"]
 
 
 def test_accumulation_error_falls_as_instants_grow(sweep):
@@ -332,24 +365,37 @@ def test_report_opens_in_headless_chromium_with_images_loaded(sweep, tmp_path):
 # ----------------------------------------------------------------------------
 # Command line
 # ----------------------------------------------------------------------------
-def test_stpm_compare_command_line(tmp_path, capsys):
-    from stpm_core.cli import main
+def test_stpm_compare_command_line(tmp_path, capsys, monkeypatch):
+    from stpm_core import cli
+    from stpm_core.compare import main
     from stpm_core.scenefile import save_scene
 
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))        # the default reference cache
     path = save_scene(emitter_scene((16, 8)), tmp_path / "slab.stpm",
                       RenderSettings(samples=2, photons_caustic=0, photons_global=0, seed=2))
+    # -- stpm_core.compare.main: every sweep option -------------------------------------
     out = tmp_path / "rep"
-    code = main(["compare", str(path), "--output", str(out), "--photon-budgets", "1",
+    code = main([str(path), "--output", str(out), "--photon-budgets", "1,2:2",
                  "--accumulation-steps", "1,2", "--estimators", "temporal", "--reference-samples", "4",
                  "--cache-dir", str(tmp_path / "cache"), "--quiet"])
     assert code == 0
     printed = capsys.readouterr().out
     assert str(out / "report.html") in printed
     data = json.loads((out / "report.json").read_text())
-    assert [r["label"] for r in data["runs"]] == ["ACCUMULATION N=1", "TEMPORAL x1", "ACCUMULATION N=2"]
+    assert [r["label"] for r in data["runs"]] == ["ACCUMULATION N=1", "TEMPORAL x1", "ACCUMULATION N=2",
+                                                  "TEMPORAL x2 s2"]
+    assert _run(data, "TEMPORAL x2 s2")["samples"] == 4
     assert data["reference"]["kind"] == "ray-traced" and data["reference"]["settings"]["samples"] == 8
     assert data["cost"]["target"]["label"] == "ACCUMULATION N=2"          # N=16 not run: the largest below
-    # bad input: one clear line, non-zero exit
-    assert main(["compare", str(tmp_path / "missing.stpm")]) == 1
-    assert "not found" in capsys.readouterr().err
-    assert main(["compare", str(path), "--photon-budgets", "x"]) == 2
+    # -- `stpm compare` through the console script's main, default sweep ---------------------
+    out2 = tmp_path / "rep2"
+    assert cli.main(["compare", str(path), "--output", str(out2), "--quiet"]) == 0
+    data2 = json.loads((out2 / "report.json").read_text())
+    assert len(data2["runs"]) == 3 * 5 + 6 and all(r["status"] == "done" for r in data2["runs"])
+    assert list((tmp_path / "xdg" / "stpm" / "references").glob("*.npz"))
+    # -- bad input: one clear line, non-zero exit ---------------------------------------------
+    with pytest.raises(StpmError, match="not found"):
+        main([str(tmp_path / "missing.stpm")])
+    with pytest.raises(StpmError, match="PHOTONS:SAMPLES"):
+        main([str(path), "--photon-budgets", "1,2:x"])
+    assert cli.main(["compare", str(tmp_path / "missing.stpm")]) == 1

@@ -130,7 +130,7 @@ def test_moving_mirror_caustic_matches_virtual_source(estimator):
 BOX_H, BOX_HALF = 0.3, 0.5
 
 
-def _box_top_points(rng, n, margin=0.06):
+def _box_top_points(rng, n, margin=0.1):
     """Points on the moving box top (n, 3) at times (n,), lit at their time, away from edges."""
     out = []
     half_caustic = 0.5 * (Z_VIRTUAL - BOX_H) / (Z_VIRTUAL - Z_MIRROR)  # caustic half-width on the top plane
@@ -147,7 +147,7 @@ def _box_top_points(rng, n, margin=0.06):
 def test_moving_receiver_time_dependent_estimates_are_right_standard_is_dark():
     box = (box_mesh(lo=(-BOX_HALF, -BOX_HALF, 0.0), hi=(BOX_HALF, BOX_HALF, BOX_H), material=0, name="box"),
            moving((-1.0, 0, 0), (1.0, 0, 0)))
-    maps = trace(mirror_scene(box=box), photons_caustic=250_000, photons_global=0)
+    maps = trace(mirror_scene(box=box), photons_caustic=300_000, photons_global=0)
     rng = np.random.default_rng(3)
     p, t = _box_top_points(rng, 6000)
     ns = np.tile(UP, (len(p), 1))

@@ -221,7 +221,10 @@ def test_rotating_instance_hit_where_slerp_says(backend):
                 material_ids=np.zeros(2, np.int32))
     angle = np.radians(150)
     tr = MotionTransform(np.array([0.0, 1.0]), np.stack([trs((0, 0, 1)), trs((0, 0, 1), angle)]))
-    scene = Scene(meshes=[mesh], instances=[Instance(0, tr)], materials=[Material()])
+    # A static floor under everything: every ray hits it first (a fully-hit static block)
+    floor = Mesh(vertices=np.array([[-9, -9, 0], [9, -9, 0], [9, 9, 0], [-9, 9, 0]], np.float32),
+                 triangles=np.array([[0, 1, 2], [0, 2, 3]], np.int32), material_ids=np.zeros(2, np.int32))
+    scene = Scene(meshes=[mesh, floor], instances=[Instance(0, tr), Instance(1)], materials=[Material()])
     caster = make_caster(scene, backend)
     t = np.linspace(0, 1, 41)
     # Slerp about a fixed axis = constant angular speed
@@ -233,10 +236,13 @@ def test_rotating_instance_hit_where_slerp_says(backend):
     np.testing.assert_allclose(h.t, 2.5, rtol=1e-12)
     np.testing.assert_allclose(h.position, centre, atol=1e-12)
     np.testing.assert_allclose(h.ng, np.tile([0, 0, 1.0], (len(t), 1)), atol=1e-12)
-    # The same rays half a shutter later find the square gone
-    assert not caster.intersect(o, d, (t + 0.5) % 1.0).hit.any()
-    assert not caster.occluded(o, d, (t + 0.5) % 1.0, np.full(len(t), 10.0)).any()
-    assert caster.occluded(o, d, t, np.full(len(t), 10.0)).all()
+    assert np.all(h.instance == 0)
+    # The same rays half a shutter later find the square gone: they reach the floor
+    later = caster.intersect(o, d, (t + 0.5) % 1.0)
+    assert np.all(later.instance == 1)
+    np.testing.assert_allclose(later.position, centre - [0, 0, 1], atol=1e-12)
+    assert not caster.occluded(o, d, (t + 0.5) % 1.0, np.full(len(t), 2.9)).any()
+    assert caster.occluded(o, d, t, np.full(len(t), 2.9)).all()
 
 
 @pytest.mark.parametrize("backend", ["embree", "numpy"])
@@ -448,3 +454,36 @@ def test_world_to_object_matches_inverse_at(kind):
     np.testing.assert_allclose(np.broadcast_to(A, Minv[:, :3, :3].shape), Minv[:, :3, :3], atol=1e-12)
     np.testing.assert_allclose(b, Minv[:, :3, 3], atol=1e-11)
 
+
+
+@pytest.mark.parametrize("backend", ["embree", "numpy"])
+def test_zero_scale_instances(backend):
+    """A static object flattened by a zero scale still renders (normal from the cofactor
+    matrix); one shrinking to nothing over the shutter produces no NaN and no crash."""
+    if backend == "embree" and not embree_available():
+        pytest.skip("embreex not installed")
+    q = 0.5
+    V = np.array([[-q, -q, -q], [q, -q, q], [q, q, q], [-q, q, -q]], np.float32)
+    mesh = Mesh(vertices=V, triangles=np.array([[0, 1, 2], [0, 2, 3]], np.int32),
+                material_ids=np.zeros(2, np.int32), normals=np.tile([[0.0, 0.0, 1.0]], (2, 3, 1)).astype(np.float32))
+    flat = MotionTransform.static(trs((0, 0, 0), 0.0, (1, 1, 0)))          # squashed into z = 0
+    vanishing = MotionTransform(np.array([0.0, 1.0]), np.stack([trs((3, 0, 0)), trs((3, 0, 0), 0.0, (0, 0, 0))]))
+    scene = Scene(meshes=[mesh], instances=[Instance(0, flat), Instance(0, vanishing)], materials=[Material()])
+    caster = make_caster(scene, backend)
+    n = 64
+    xy = np.column_stack([np.linspace(-0.4, 0.4, n), np.linspace(0.3, -0.3, n)])
+    o = np.column_stack([xy, np.full(n, 2.0)])
+    d = np.tile([0, 0, -1.0], (n, 1))
+    h = caster.intersect(o, d, np.linspace(0, 1, n))
+    assert h.hit.all() and np.all(h.instance == 0)
+    np.testing.assert_allclose(h.t, 2.0, atol=1e-12)
+    np.testing.assert_allclose(np.abs(h.ng[:, 2]), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.abs(h.ns[:, 2]), 1.0, atol=1e-6)
+    # The vanishing one: hit early in the shutter, never at its very end, never NaN
+    o2 = o + [3, 0, 0]
+    t2 = np.linspace(0, 1, n)
+    h2 = caster.intersect(o2, d, t2)
+    assert h2.hit[:5].all() and not h2.hit[-1]
+    for f in (h2.t[h2.hit], h2.position[h2.hit], h2.ng[h2.hit], h2.ns[h2.hit]):
+        assert np.all(np.isfinite(f))
+    assert caster.occluded(o2, d, t2, 10.0)[:5].all()

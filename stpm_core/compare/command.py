@@ -1,7 +1,7 @@
 """``stpm compare SCENE`` on the command line (``stpm_core.cli`` hands it the arguments after ``compare``).
 
     stpm compare SCENE [--frame F] [--output REPORT_DIR] [--reference REF.exr]
-                 [--time-budget SECONDS] [--photon-budgets 1,4,16]
+                 [--time-budget SECONDS] [--photon-budgets 1,4,16,4:4,16:4]
                  [--accumulation-steps 1,2,4,8,16,32] [--estimators standard,temporal,kd4d]
                  [--resolution WxH] [--samples S] [--reference-photons F] [--reference-samples F]
                  [--cache-dir DIR] [--no-cache] [--quiet]
@@ -20,7 +20,7 @@ from pathlib import Path
 from ..errors import StpmError
 from .reference import REFERENCE_PHOTON_FACTOR, REFERENCE_SAMPLE_FACTOR
 from .run import run_compare
-from .sweep import DEFAULT_ACCUMULATION_STEPS, DEFAULT_PHOTON_BUDGETS, PHOTON_ESTIMATORS
+from .sweep import DEFAULT_ACCUMULATION_STEPS, DEFAULT_PHOTON_BUDGETS, PHOTON_ESTIMATORS, parse_budget
 
 __all__ = ["main", "build_parser"]
 
@@ -54,6 +54,13 @@ def _number_list(kind):
     return conv
 
 
+def _budgets(text: str):
+    try:
+        return [parse_budget(v) for v in text.replace(" ", "").split(",") if v] or parse_budget("")
+    except StpmError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
 def _estimators(text: str):
     vals = [v.upper() for v in text.replace(" ", "").split(",") if v]
     bad = [v for v in vals if v not in PHOTON_ESTIMATORS]
@@ -85,9 +92,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="reference image (its Combined pass); default: computed and cached")
     p.add_argument("--time-budget", type=float, dest="time_budget", metavar="SECONDS",
                    help="stop starting runs once the sweep has taken this long (the report notes what was skipped)")
-    p.add_argument("--photon-budgets", type=_number_list(float), dest="photon_budgets", metavar="B,B,...",
-                   default=list(DEFAULT_PHOTON_BUDGETS), help="photon counts as multiples of the file's "
-                   f"(default {','.join(map(str, DEFAULT_PHOTON_BUDGETS))})")
+    p.add_argument("--photon-budgets", type=_budgets, dest="photon_budgets", metavar="B[:S],...",
+                   default=list(DEFAULT_PHOTON_BUDGETS),
+                   help="budgets of the photon-estimator runs: photons x B (and samples x S) of the file's "
+                        f"(default {','.join(f'{b:g}:{s:g}' if s != 1 else f'{b:g}' for b, s in DEFAULT_PHOTON_BUDGETS)})")
     p.add_argument("--accumulation-steps", type=_number_list(int), dest="accumulation_steps", metavar="N,N,...",
                    default=list(DEFAULT_ACCUMULATION_STEPS),
                    help=f"accumulation-buffer instants (default {','.join(map(str, DEFAULT_ACCUMULATION_STEPS))})")

@@ -2,10 +2,11 @@
 
 For a metric (RMSE, relative MSE or FLIP) the **target** is the error of
 ACCUMULATION with N = ``target_steps`` instants (16 by default; the largest N
-run at or below it if that run was skipped).  Each photon estimator's runs,
-ordered by wall time, form an error-vs-time curve; the time it needs to reach
-the target is where that curve first crosses it, interpolated linearly in
-log(time) - log(error) between the two runs either side.  Cases:
+run at or below it if that run was skipped).  Each photon estimator's runs
+form an error-vs-time curve: their Pareto front (by wall time, each run kept
+only if it beats every cheaper run).  The time it needs to reach the target is
+where that front first crosses it, interpolated linearly in log(time) -
+log(error) between the two runs either side.  Cases:
 
 * its cheapest run is already at or below the target: time = that run's time,
   marked ``bound = 'at most'``;
@@ -17,10 +18,19 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["time_to_reach", "cost_of_accuracy", "METRICS", "TIME_DEPENDENT"]
+__all__ = ["pareto_front", "time_to_reach", "cost_of_accuracy", "METRICS", "TIME_DEPENDENT"]
 
 METRICS = ("rmse", "relmse", "flip")
 TIME_DEPENDENT = ("TEMPORAL", "KD4D")
+
+
+def pareto_front(points):
+    """The runs worth their time: sorted by time, each kept only if its error is below every cheaper run's."""
+    front = []
+    for t, e, *rest in sorted(points, key=lambda p: (p[0], p[1])):
+        if not front or e < front[-1][1]:
+            front.append((t, e, *rest))
+    return front
 
 
 def time_to_reach(points, target: float) -> tuple[float | None, str]:
@@ -28,7 +38,7 @@ def time_to_reach(points, target: float) -> tuple[float | None, str]:
 
     bound: 'interpolated' | 'at most' | 'not reached'.
     """
-    pts = sorted((t, e) for t, e in points if t is not None and e is not None and t > 0)
+    pts = pareto_front([(t, e) for t, e in points if t is not None and e is not None and t > 0])
     for i, (t, e) in enumerate(pts):
         if e <= target:
             if i == 0:

@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from html import escape
 
+from .costs import pareto_front
+
 __all__ = ["error_vs_time_svg", "METHOD_COLORS", "log_ticks"]
 
 METHOD_COLORS = {"ACCUMULATION": "#333333", "STANDARD": "#d62728", "TEMPORAL": "#1f77b4", "KD4D": "#2ca02c"}
@@ -109,7 +111,7 @@ def error_vs_time_svg(series: dict, *, ylabel: str = "RMSE", xlabel: str = "rend
     # -- Curves and legend -------------------------------------------------------------------
     for i, (name, pts) in enumerate(curves.items()):
         color = METHOD_COLORS.get(name, _FALLBACK_COLORS[i % len(_FALLBACK_COLORS)])
-        path = " ".join(f"{X(t):.1f},{Y(e):.1f}" for t, e, _ in pts)
+        path = " ".join(f"{X(t):.1f},{Y(e):.1f}" for t, e, _ in pareto_front(pts))
         out.append(f'<g class="curve" data-method="{escape(name)}">')
         out.append(f'<polyline points="{path}" fill="none" stroke="{color}" stroke-width="2"/>')
         for t, e, lbl in pts:

@@ -7,9 +7,11 @@ R, G, B channels) or **computed** and cached:
   the TEMPORAL estimator with the automatic, consistent time window
   (``temporal_alpha = 0``), ``photon_factor`` x the file's photons,
   ``sample_factor`` x its samples and k x photon_factor^(1/3).  Its bias
-  vanishes as photons grow: the disc radius shrinks as (k / N)^(1/2) and the
-  time window as (N / k)^(-1/3) (docs/photon-mapping.md), so the estimate
-  tends to the irradiance at the query point and time; see docs/compare.md.
+  vanishes as photons grow: with alpha = max(1.5, 0.25 (N / k)^(1/3)) the
+  candidate disc radius ~ sqrt(alpha k / N) and the time window ~ 1 / alpha
+  both shrink as (k / N)^(1/3) (docs/photon-mapping.md), while k grows, so
+  bias and noise both vanish and the estimate tends to the irradiance at the
+  query point and time; see docs/compare.md.
 * a scene without photon-mapped light: the same distribution ray tracer with
   ``sample_factor`` x the samples, i.e. a plain motion-blurred ray tracer
   (direct light by shadow rays, specular chains, emission, each camera sample
@@ -57,7 +59,7 @@ class Reference:
     ----------
     rgb : (H, W, 3) float64 linear RGB (row 0 = top).
     info : JSON-ready dict: source ('supplied' | 'computed' | 'cached'), kind
-        ('photon' | 'ray-traced' | 'supplied'), path, settings, wall_s,
+        ('photon' | 'ray-traced' | 'accumulation' | 'supplied'), path, settings, wall_s,
         cache_key, why (one sentence on why it converges).
     """
 
@@ -84,8 +86,9 @@ def reference_settings(scene, settings, *, photon_factor: float = REFERENCE_PHOT
                        sample_factor: float = REFERENCE_SAMPLE_FACTOR, overrides: dict | None = None):
     """(RenderSettings, kind) of the computed reference for ``scene`` rendered with ``settings``.
 
-    kind is 'photon' (TEMPORAL, consistent window, more photons and samples)
-    or 'ray-traced' (no photon map in play: only more samples).
+    kind is 'photon' (TEMPORAL, consistent window, more photons and samples),
+    'ray-traced' (no photon map in play: only more samples) or 'accumulation'
+    (``overrides`` asked for method ACCUMULATION: an estimator-neutral cross-check).
     """
     from ..sampling import rng_for
 
@@ -101,7 +104,10 @@ def reference_settings(scene, settings, *, photon_factor: float = REFERENCE_PHOT
                        photons_global=int(round(settings.photons_global * photon_factor)),
                        k_nearest=int(round(settings.k_nearest * photon_factor ** (1.0 / 3.0))))
     changes.update(overrides or {})
-    return settings.replace(**changes), kind
+    ref = settings.replace(**changes)
+    if ref.method == "ACCUMULATION":
+        kind = "accumulation"
+    return ref, kind
 
 
 _WHY = {
@@ -113,6 +119,11 @@ _WHY = {
                    "specular chains, emission, each camera sample at its own shutter time) is an "
                    "unbiased Monte Carlo estimate of the shutter-averaged pixel, converging as "
                    "samples grow."),
+    "accumulation": ("accumulation buffer with many instants, each a still with many photons: each still's "
+                     "STANDARD estimate is consistent (nothing moves within a still) and the average over "
+                     "stratified instants converges to the shutter integral, so it tends to the right "
+                     "answer as instants and photons per still grow; it shares no estimator with TEMPORAL "
+                     "or KD4D."),
     "supplied": "supplied by the user.",
 }
 

@@ -95,6 +95,16 @@ code { background: #f5f5f5; padding: 0 .2em; }
 # ----------------------------------------------------------------------------
 # Sections
 # ----------------------------------------------------------------------------
+def _recipe(rs: dict) -> str:
+    """One line describing a computed reference's settings."""
+    acc = rs.get("method") == "ACCUMULATION"
+    per = " per instant" if acc else ""
+    head = (f'accumulation buffer, {rs.get("accumulation_steps")} instants, ' if acc else
+            f'{escape(str(rs.get("estimator")))} estimator (temporal_alpha {rs.get("temporal_alpha")}), ')
+    return (head + f'{rs.get("photons_caustic")} caustic + {rs.get("photons_global")} global photons{per}, '
+            f'{rs.get("samples")} samples/pixel{per}, k = {rs.get("k_nearest")}')
+
+
 def _section_scene(rep: dict) -> str:
     sc, st, ref, sw = rep["scene"], rep["settings"], rep["reference"], rep["sweep"]
     rows = [("scene", escape(str(sc.get("name")))), ("resolution", f'{sc["resolution"][0]} x {sc["resolution"][1]}'),
@@ -104,7 +114,8 @@ def _section_scene(rep: dict) -> str:
             ("something moves", "yes" if sc.get("has_motion") else "no"),
             ("effects plan", escape(", ".join(k for k in ("motion_blur", "caustics", "indirect", "time_dependent")
                                               if sc.get("plan", {}).get(k)) or "none"))]
-    rows.append(("photon budgets", ", ".join(f"x{b:g}" for b in sw["photon_budgets"])))
+    rows.append(("photon budgets", ", ".join(f"x{b:g}" + ("" if s == 1 else f" s{s:g}")
+                                             for b, s in sw["photon_budgets"])))
     rows.append(("accumulation N", ", ".join(str(n) for n in sw["accumulation_steps"])))
     rows.append(("time budget", "none" if sw["time_budget_s"] is None else f'{sw["time_budget_s"]:g} s'))
     keys = ("samples", "photons_caustic", "photons_global", "k_nearest", "temporal_alpha", "time_scale",
@@ -116,10 +127,8 @@ def _section_scene(rep: dict) -> str:
     if ref["kind"] == "supplied":
         ref_line = f'supplied: <code>{escape(str(ref.get("path") or "(array)"))}</code>'
     else:
-        ref_line = (f'{escape(ref["source"])} ({escape(ref["kind"])}): TEMPORAL estimator, '
-                    f'{rs.get("photons_caustic")} caustic + {rs.get("photons_global")} global photons, '
-                    f'{rs.get("samples")} samples/pixel, k = {rs.get("k_nearest")}, automatic time window'
-                    + (f'; rendered in {_secs(ref.get("wall_s"))}' if ref.get("wall_s") is not None else ""))
+        ref_line = f'{escape(ref["source"])} ({escape(ref["kind"])}): ' + _recipe(rs) + \
+            (f'; rendered in {_secs(ref.get("wall_s"))}' if ref.get("wall_s") is not None else "")
     return (f'<section id="scene"><h2>Scene and settings</h2>'
             f'<div class="row"><table>{body}</table><table>{sbody}</table></div>'
             f'<p><b>Reference</b>: {ref_line}.<br><span class="note">Why it converges: {escape(ref["why"])}</span></p>'
@@ -240,6 +249,21 @@ def _section_cost(rep: dict) -> str:
             head.append(f'<li>{METRIC_NAMES[m]}: no time-dependent estimator reached {escape(tgt["label"])}\'s error '
                         f'({_num(tgt.get(m))}) within the sweep.</li>')
     note = f'<p class="note">{escape(cost["note"])}</p>' if cost.get("note") else ""
+    for name, cx in (rep.get("cross_references") or {}).items():
+        agree = cx["main_reference_error"]
+        items = []
+        for m in METRICS:
+            b = cx["cost"]["best_time_dependent"].get(m)
+            t = cx["cost"].get("target") or {}
+            items.append(f'{METRIC_NAMES[m]}: ' + (
+                f'{escape(b["estimator"])} {("&le; " if b["bound"] == "at most" else "")}{_secs(b["time_s"])}, '
+                f'{_num(b["speedup"], "{:.2f}x")}' if b else f'not reached (target {_num(t.get(m))})'))
+        rs = cx["reference"].get("settings") or {}
+        note += (f'<p><b>Cross-check against a second reference, {escape(name)}</b> '
+                 f'({escape(str(cx["reference"].get("kind")))}{(": " + _recipe(rs)) if rs else ""}). '
+                 f'The main reference is off it by RMSE {_num(agree["rmse"])}, relMSE {_num(agree["relmse"])}, '
+                 f'FLIP {_num(agree["flip"], "{:.4f}")}. Measured against it, the best time-dependent '
+                 f'estimator reaches the target in: {"; ".join(items)}.</p>')
     return ('<section id="cost"><h2>What accuracy costs in time</h2>'
             f'<p>Target: <b>{escape(tgt["label"])}</b>, {_secs(tgt["wall_s"])}.</p><ul>{"".join(head)}</ul>{note}'
             '<p class="note">Time to reach the target: where the estimator\'s error-vs-time curve first crosses '
@@ -255,19 +279,26 @@ def _section_runs(rep: dict) -> str:
         cls = "" if r["status"] == "done" else ' class="skipped"'
         ph = r.get("phases") or {}
         photons = f'{r["photons_caustic"]} / {r["photons_global"]}'
+        samples = r["samples"] * (r["accumulation_steps"] or 1)
         rows.append(f'<tr{cls}><td>{escape(r["label"])}</td><td>{escape(r["status"])}'
-                    f'{(": " + escape(r["note"])) if r.get("note") else ""}</td><td>{photons}</td>'
+                    f'{(": " + escape(r["note"])) if r.get("note") else ""}</td><td>{photons}</td><td>{samples}</td>'
                     f'<td>{_secs(r["wall_s"])}</td><td>{_secs(ph.get("photon_trace_s"))}</td>'
                     f'<td>{_secs(ph.get("photon_lookup_s"))}</td><td>{_secs(ph.get("render_s"))}</td>'
                     f'<td>{_num(r["rmse"])}</td><td>{_num(r["relmse"])}</td><td>{_num(r["flip"], "{:.4f}")}</td></tr>')
     sw = rep["sweep"]
     skipped = sw["skipped"]
-    note = (f'<p><b>Skipped</b> ({len(skipped)}): the time budget of {sw["time_budget_s"]:g} s was spent before '
-            f'{escape(", ".join(skipped))} could start.</p>' if skipped else "<p>Every planned run finished.</p>")
+    if not skipped:
+        note = "<p>Every planned run finished.</p>"
+    elif sw.get("cancelled"):
+        note = f'<p><b>Skipped</b> ({len(skipped)}): the sweep was cancelled before {escape(", ".join(skipped))}.</p>'
+    else:
+        note = (f'<p><b>Skipped</b> ({len(skipped)}): the time budget of {sw["time_budget_s"]:g} s was spent '
+                f'before {escape(", ".join(skipped))} could start.</p>')
     return ('<section id="runs"><h2>All runs</h2>' + note
             + f'<p class="note">Sweep time {_secs(sw["sweep_wall_s"])} (reference not included). '
-              'Photons: emitted per still, caustic / global. Look-up time is part of render time.</p>'
-            '<table><tr><th>Run</th><th>Status</th><th>Photons</th><th>Wall time</th><th>Photon tracing</th>'
+              'Photons: emitted per still, caustic / global. Samples / pixel: in total (ACCUMULATION: N x per still). '
+              'Look-up time is part of ray-tracing time.</p>'
+            '<table><tr><th>Run</th><th>Status</th><th>Photons</th><th>Samples / pixel</th><th>Wall time</th><th>Photon tracing</th>'
             '<th>Photon look-ups</th><th>Ray tracing</th><th>RMSE</th><th>relMSE</th><th>FLIP</th></tr>'
             f'{"".join(rows)}</table></section>')
 

@@ -9,6 +9,7 @@ The returned dict is exactly what ``report.json`` holds (finite numbers,
 """
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import json
 import math
@@ -16,13 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import StpmError
+from ..errors import RenderCancelled, StpmError
 from .costs import cost_of_accuracy
-from .metrics import RELMSE_EPS, display_scale
-from .reference import REFERENCE_PHOTON_FACTOR, REFERENCE_SAMPLE_FACTOR, get_reference
+from .metrics import RELMSE_EPS, combined_rgb, display_scale, image_errors
+from .reference import REFERENCE_PHOTON_FACTOR, REFERENCE_SAMPLE_FACTOR, Reference, get_reference
 from .report_html import render_html
 from .sweep import (DEFAULT_ACCUMULATION_STEPS, DEFAULT_PHOTON_BUDGETS, METHOD_ORDER, PHOTON_ESTIMATORS,
-                    is_consistent, plan_runs, run_sweep)
+                    is_consistent, parse_budget, plan_runs, run_sweep)
 
 __all__ = ["run_compare", "REPORT_FORMAT", "REPORT_VERSION", "json_ready"]
 
@@ -76,6 +77,30 @@ def _write_reference_exr(path: Path, rgb: np.ndarray, info: dict) -> str | None:
     return str(path)
 
 
+def _cross_check(name: str, other, ref, runs, target_steps: int) -> dict:
+    """Every finished run's error and the cost of accuracy against a second reference ``other``.
+
+    other : a Reference or an (H, W, 3|4) array.  Also how far the main reference is from it.
+    """
+    rgb = other.rgb if isinstance(other, Reference) else combined_rgb(other)
+    info = dict(other.info) if isinstance(other, Reference) else {"source": "supplied", "kind": "supplied"}
+    if rgb.shape != ref.rgb.shape:
+        raise StpmError(f"cross-check reference {name!r} is {rgb.shape[1]}x{rgb.shape[0]}, "
+                        f"not {ref.rgb.shape[1]}x{ref.rgb.shape[0]}")
+    agreement = image_errors(ref.rgb, rgb)
+    agreement.pop("_flip_map")
+    shadow = []
+    for r in runs:
+        errs = dict(r.errors)
+        if r.status == "done":
+            errs = image_errors(r.rgb.astype(np.float64), rgb)
+            errs.pop("_flip_map")
+        shadow.append(dataclasses.replace(r, errors=errs, rgb=None, flip_map=None))
+    return {"reference": info, "main_reference_error": agreement,
+            "runs": {r.label: {m: r.errors.get(m) for m in ("rmse", "relmse", "flip")} for r in shadow},
+            "cost": cost_of_accuracy(shadow, target_steps=target_steps)}
+
+
 def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float | None = None,
                 photon_budgets=DEFAULT_PHOTON_BUDGETS, accumulation_steps=DEFAULT_ACCUMULATION_STEPS,
                 estimators=PHOTON_ESTIMATORS, target_steps: int = 16, progress=None, cancel=None,
@@ -83,7 +108,8 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
                 reference_photon_factor: float = REFERENCE_PHOTON_FACTOR,
                 reference_sample_factor: float = REFERENCE_SAMPLE_FACTOR,
                 reference_overrides: dict | None = None,
-                scene_name: str | None = None, scene_path=None, write_reference: bool = True) -> dict:
+                scene_name: str | None = None, scene_path=None, write_reference: bool = True,
+                extra_references: dict | None = None) -> dict:
     """Compare the estimators with the accumulation buffer; write report.html and report.json.
 
     Parameters
@@ -92,18 +118,25 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
     out_dir : report directory (created).
     reference : None (compute, cached), a path to an EXR (its Combined pass) or an (H, W, 3|4) array.
     time_budget : seconds for the sweep (the reference not included); no run starts once spent.
-    photon_budgets : multiples of the file's photon counts for STANDARD / TEMPORAL / KD4D.
+    photon_budgets : budgets of the STANDARD / TEMPORAL / KD4D runs: b (the file's photons x b) or
+        (b, s) / 'b:s' (photons x b and samples per pixel x s).
     accumulation_steps : the N of the ACCUMULATION runs.
     estimators : which photon estimators to sweep.
     target_steps : the accumulation N whose error the estimators must reach (16).
     progress(fraction, message), cancel() -> bool : as for render; progress spans reference + sweep.
+        Cancelling during the sweep still writes the report (unfinished runs marked skipped,
+        'cancelled'), then raises RenderCancelled.
     cache_dir, use_cache : computed-reference cache (default ``~/.cache/stpm/references``).
     reference_photon_factor, reference_sample_factor, reference_overrides : reference recipe
         (see :func:`stpm_core.compare.reference.reference_settings`).
     scene_name, scene_path : shown in the report.
     write_reference : also write ``reference.exr`` into out_dir when the reference was computed.
+    extra_references : name -> second reference (Reference or (H, W, 3|4) array): a cross-check;
+        the report adds each run's error and the cost of accuracy against it, and how far the
+        main reference is from it (``cross_references``).
 
-    Returns the report dict (what report.json holds), with ``files`` naming what was written.
+    Returns the report dict (what report.json holds), with ``files`` naming what was written
+    (keys html, json and, when written, reference_exr).
     """
     settings.validate()
     out_dir = Path(out_dir)
@@ -129,9 +162,11 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
                         photon_factor=reference_photon_factor, sample_factor=reference_sample_factor,
                         overrides=reference_overrides, progress=span(0.0, ref_weight, "reference: "),
                         cancel=cancel)
-    files = {"html": str(out_dir / "report.html"), "json": str(out_dir / "report.json"), "reference_exr": None}
+    files = {"html": str(out_dir / "report.html"), "json": str(out_dir / "report.json")}
     if write_reference and ref.info["source"] != "supplied":
-        files["reference_exr"] = _write_reference_exr(out_dir / "reference.exr", ref.rgb, ref.info)
+        exr = _write_reference_exr(out_dir / "reference.exr", ref.rgb, ref.info)
+        if exr is not None:
+            files["reference_exr"] = exr
 
     # -- Sweep --------------------------------------------------------------------------------------
     sweep = run_sweep(scene, runs, ref.rgb, time_budget=time_budget, progress=span(ref_weight, sweep_weight),
@@ -145,6 +180,8 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
         best[m] = min(done, key=lambda r: r.errors["rmse"]).label if done else None
     consistent = {m: dict(zip(("consistent", "why"), is_consistent(m, settings, scene))) for m in methods}
     cost = cost_of_accuracy(runs, target_steps=target_steps)
+    cross = {name: _cross_check(name, other, ref, runs, target_steps)
+             for name, other in (extra_references or {}).items()}
 
     report = json_ready({
         "format": REPORT_FORMAT, "version": REPORT_VERSION,
@@ -156,13 +193,14 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
                     "relmse": "mean((x - r)^2 / (r^2 + eps))", "relmse_eps": RELMSE_EPS,
                     "flip": "mean HDR-FLIP error (flip-evaluator)"},
         "display": {"exposure": display_scale(ref.rgb)},
-        "sweep": {"photon_budgets": sorted({float(b) for b in photon_budgets}),
+        "sweep": {"photon_budgets": [list(b) for b in sorted({parse_budget(b) for b in photon_budgets})],
                   "accumulation_steps": sorted({int(n) for n in accumulation_steps}),
                   "estimators": list(estimators), "target_steps": int(target_steps), **sweep},
         "consistent": consistent,
         "runs": [r.to_json() for r in runs],
         "best": best,
         "cost": cost,
+        "cross_references": cross,
         "files": files,
     })
 
@@ -172,4 +210,6 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
     Path(files["html"]).write_text(render_html(report, ref.rgb, runs), encoding="utf-8")
     if progress is not None:
         progress(1.0, f"report written to {files['html']}")
+    if sweep["cancelled"]:
+        raise RenderCancelled(f"compare cancelled; partial report written to {files['html']}")
     return report

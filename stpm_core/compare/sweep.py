@@ -2,14 +2,16 @@
 
 Runs (:func:`plan_runs`):
 
-* each photon estimator (STANDARD, TEMPORAL, KD4D) at each photon budget b:
-  ``photons_caustic`` and ``photons_global`` = b x the file's, everything
-  else (k, samples, seed) the file's;
+* each photon estimator (STANDARD, TEMPORAL, KD4D) at each budget (b, s):
+  ``photons_caustic`` and ``photons_global`` = b x the file's, samples per
+  pixel = s x the file's (s = 1 when a budget is a plain number), everything
+  else (k, seed) the file's.  More samples matter because ACCUMULATION with N
+  instants takes N x the file's camera samples per pixel;
 * ACCUMULATION with N instants for each N: N complete stills with the file's
   settings, averaged (``stpm_core.render``).
 
-Runs go cheapest first (estimated cost in stills: a photon run at budget b is
-about (1 + b) / 2 stills, ACCUMULATION N about N), so a time budget that
+Runs go cheapest first (estimated cost in stills: a photon run at budget
+(b, s) is about (b + s) / 2 stills, ACCUMULATION N about N), so a time budget that
 runs out leaves every method with its cheap points and skips the dear ones.
 Once the sweep's elapsed time reaches the budget no further run starts; the
 rest are marked ``skipped``.
@@ -28,12 +30,12 @@ import numpy as np
 from ..errors import RenderCancelled, StpmError
 from .metrics import combined_rgb, image_errors
 
-__all__ = ["Run", "plan_runs", "run_sweep", "is_consistent", "PHOTON_ESTIMATORS", "METHOD_ORDER",
+__all__ = ["Run", "plan_runs", "parse_budget", "run_sweep", "is_consistent", "PHOTON_ESTIMATORS", "METHOD_ORDER",
            "DEFAULT_PHOTON_BUDGETS", "DEFAULT_ACCUMULATION_STEPS"]
 
 PHOTON_ESTIMATORS = ("STANDARD", "TEMPORAL", "KD4D")
 METHOD_ORDER = ("ACCUMULATION", "STANDARD", "TEMPORAL", "KD4D")
-DEFAULT_PHOTON_BUDGETS = (1, 4, 16)
+DEFAULT_PHOTON_BUDGETS = ((1, 1), (4, 1), (16, 1), (4, 4), (16, 4))   # (photons x, samples x)
 DEFAULT_ACCUMULATION_STEPS = (1, 2, 4, 8, 16, 32)
 _PHASES = ("photon_trace_s", "photon_map_build_s", "photon_lookup_s", "render_s")
 
@@ -44,10 +46,11 @@ class Run:
 
     Attributes
     ----------
-    label : 'TEMPORAL x4', 'ACCUMULATION N=16', ...
+    label : 'TEMPORAL x4', 'KD4D x16 s4' (16 x photons, 4 x samples), 'ACCUMULATION N=16', ...
     method : 'STANDARD' | 'TEMPORAL' | 'KD4D' | 'ACCUMULATION' (the curve it belongs to).
     settings : the RenderSettings it renders with.
     photon_factor : photons as a multiple of the file's (1 for ACCUMULATION: per still).
+    sample_factor : samples per pixel as a multiple of the file's (1 for ACCUMULATION: per still).
     accumulation_steps : N for ACCUMULATION, else None.
     cost : estimated cost in stills (orders the sweep).
     status : 'pending' | 'done' | 'skipped' | 'failed'; note: why (skipped / failed).
@@ -60,6 +63,7 @@ class Run:
     method: str
     settings: object
     photon_factor: float = 1.0
+    sample_factor: float = 1.0
     accumulation_steps: int | None = None
     cost: float = 1.0
     status: str = "pending"
@@ -77,7 +81,8 @@ class Run:
         return {
             "label": self.label, "method": self.method,
             "estimator": "STANDARD" if self.method == "ACCUMULATION" else self.method,
-            "photon_factor": self.photon_factor, "accumulation_steps": self.accumulation_steps,
+            "photon_factor": self.photon_factor, "sample_factor": self.sample_factor,
+            "accumulation_steps": self.accumulation_steps,
             "photons_caustic": int(s.photons_caustic), "photons_global": int(s.photons_global),
             "samples": int(s.samples), "k_nearest": int(s.k_nearest),
             "status": self.status, "note": self.note or None,
@@ -110,17 +115,37 @@ def is_consistent(method: str, settings, scene) -> tuple[bool, str]:
 # ----------------------------------------------------------------------------
 # Plan
 # ----------------------------------------------------------------------------
-def _factor_label(b: float) -> str:
-    return f"x{b:g}"
+def _factor_label(b: float, s: float) -> str:
+    return f"x{b:g}" + ("" if s == 1 else f" s{s:g}")
+
+
+def parse_budget(item) -> tuple[float, float]:
+    """(photon factor, sample factor) from 4, (4, 2), [4, 2] or '4:2'."""
+    try:
+        if isinstance(item, str):
+            parts = item.split(":")
+            if len(parts) > 2:
+                raise ValueError
+            b, s = float(parts[0]), float(parts[1]) if len(parts) == 2 else 1.0
+        elif isinstance(item, (tuple, list)):
+            b, s = float(item[0]), float(item[1]) if len(item) > 1 else 1.0
+        else:
+            b, s = float(item), 1.0
+    except (TypeError, ValueError, IndexError):
+        raise StpmError(f"a budget is PHOTONS or PHOTONS:SAMPLES (multiples of the file's), got {item!r}") from None
+    if not (b > 0 and s > 0 and math.isfinite(b) and math.isfinite(s)):
+        raise StpmError(f"budget multiples must be positive, got {item!r}")
+    return b, s
 
 
 def plan_runs(settings, *, photon_budgets=DEFAULT_PHOTON_BUDGETS,
               accumulation_steps=DEFAULT_ACCUMULATION_STEPS, estimators=PHOTON_ESTIMATORS) -> list[Run]:
-    """The sweep's runs, cheapest first (ties: ACCUMULATION, then STANDARD, TEMPORAL, KD4D)."""
-    budgets = sorted({float(b) for b in photon_budgets})
+    """The sweep's runs, cheapest first (ties: ACCUMULATION, then STANDARD, TEMPORAL, KD4D).
+
+    photon_budgets : items b (photons x b) or (b, s) / 'b:s' (photons x b, samples x s).
+    """
+    budgets = sorted({parse_budget(b) for b in photon_budgets})
     steps = sorted({int(n) for n in accumulation_steps})
-    if any(b <= 0 for b in budgets):
-        raise StpmError("photon budgets must be > 0")
     if any(n < 1 for n in steps):
         raise StpmError("accumulation steps must be >= 1")
     for e in estimators:
@@ -128,13 +153,14 @@ def plan_runs(settings, *, photon_budgets=DEFAULT_PHOTON_BUDGETS,
             raise StpmError(f"unknown estimator {e!r} (choose from {', '.join(PHOTON_ESTIMATORS)})")
     runs = []
     # -- Photon estimators at each budget -------------------------------------------
-    for b in budgets:
+    for b, s in budgets:
         for est in estimators:
             st = settings.replace(method="PHOTON", estimator=est,
                                   photons_caustic=int(round(settings.photons_caustic * b)),
-                                  photons_global=int(round(settings.photons_global * b)))
-            runs.append(Run(label=f"{est} {_factor_label(b)}", method=est, settings=st,
-                            photon_factor=b, cost=0.5 * (1.0 + b)))
+                                  photons_global=int(round(settings.photons_global * b)),
+                                  samples=max(1, int(round(settings.samples * s))))
+            runs.append(Run(label=f"{est} {_factor_label(b, s)}", method=est, settings=st,
+                            photon_factor=b, sample_factor=s, cost=0.5 * (b + s)))
     # -- Accumulation buffer with N stills ----------------------------------------------
     for n in steps:
         st = settings.replace(method="ACCUMULATION", accumulation_steps=n)
@@ -154,14 +180,17 @@ def run_sweep(scene, runs: list[Run], reference_rgb: np.ndarray, *, time_budget:
 
     reference_rgb : (H, W, 3) linear RGB.  progress(fraction, message) spans
     the whole sweep, weighted by each run's estimated cost.
-    Returns {'sweep_wall_s', 'time_budget_s', 'skipped': [labels], 'budget_exhausted': bool}.
+    cancel() -> bool stops the sweep (the running render within about a second); the
+    unfinished runs are marked skipped ('cancelled') so a partial report can still be written.
+    Returns {'sweep_wall_s', 'time_budget_s', 'skipped': [labels], 'budget_exhausted': bool,
+    'cancelled': bool}.
     """
     from ..render import render
 
     total_cost = sum(r.cost for r in runs) or 1.0
     done_cost = 0.0
     t_start = _time.perf_counter()
-    exhausted = False
+    exhausted = cancelled = False
     for i, run in enumerate(runs):
         # -- Time budget: start no run once it is spent ------------------------------
         elapsed = _time.perf_counter() - t_start
@@ -169,8 +198,10 @@ def run_sweep(scene, runs: list[Run], reference_rgb: np.ndarray, *, time_budget:
             exhausted = True
             run.status, run.note = "skipped", f"time budget of {time_budget:g} s spent"
             continue
-        if cancel is not None and cancel():
-            raise RenderCancelled("compare cancelled")
+        if cancelled or (cancel is not None and cancel()):
+            cancelled = True
+            run.status, run.note = "skipped", "cancelled"
+            continue
 
         # -- Render ----------------------------------------------------------------
         def sub(f, msg, _a=done_cost, _c=run.cost, _label=run.label, _i=i):
@@ -180,7 +211,9 @@ def run_sweep(scene, runs: list[Run], reference_rgb: np.ndarray, *, time_budget:
         try:
             result = render(scene, run.settings, progress=sub, cancel=cancel)
         except RenderCancelled:
-            raise
+            cancelled = True
+            run.status, run.note = "skipped", "cancelled"
+            continue
         except StpmError as e:
             run.status, run.note = "failed", str(e).splitlines()[0] if str(e) else type(e).__name__
             done_cost += run.cost
@@ -203,7 +236,7 @@ def run_sweep(scene, runs: list[Run], reference_rgb: np.ndarray, *, time_budget:
     return {"sweep_wall_s": _time.perf_counter() - t_start,
             "time_budget_s": None if time_budget is None else float(time_budget),
             "skipped": [r.label for r in runs if r.status == "skipped"],
-            "budget_exhausted": exhausted}
+            "budget_exhausted": exhausted, "cancelled": cancelled}
 
 
 def finite_or_none(x):

@@ -152,8 +152,10 @@ class PhotonMap:
 
     Attributes
     ----------
-    position : (N, 3) float64, time : (N,) float64, power : (N, 3) float32,
-    wi : (N, 3) float32 unit incoming directions.
+    records : (N,) PHOTON_DTYPE in Morton order (the order of every array below).
+    position : (N, 3) float64, time : (N,) float64; power : (N, 3) float32 and
+    wi : (N, 3) float32 unit incoming directions, both views of one packed
+    (N, 8) float32 array (one 32-byte row gathered per neighbour).
     timeless : True when all photons share one time (instant shutter or an
         accumulation-buffer still): TEMPORAL and KD4D then equal STANDARD.
     stats : dict of tree build seconds, look-up seconds and counts.
@@ -164,6 +166,7 @@ class PhotonMap:
         self.time_scale = float(time_scale)
         self.workers = workers
         self.n = int(records.shape[0])
+        t0 = _time.perf_counter()
         # Store photons in Morton (Z-curve) order: spatial neighbours sit close in memory,
         # so the neighbour gathers of every look-up hit the cache
         if self.n:
@@ -181,7 +184,9 @@ class PhotonMap:
         self.timeless = bool(shutter.is_instant or self.n == 0 or np.ptp(self.time) == 0.0)
         self._tree3 = None
         self._tree4 = None
-        self.stats = {"tree_build_s": 0.0, "lookup_s": 0.0, "lookup_count": 0, "temporal_candidates": 0}
+        # Sorting and packing count as map building
+        self.stats = {"tree_build_s": _time.perf_counter() - t0, "lookup_s": 0.0, "lookup_count": 0,
+                      "temporal_candidates": 0}
 
     # -- kd-trees -----------------------------------------------------------
     def tree3(self) -> cKDTree:

@@ -74,6 +74,7 @@ class PhotonMaps:
             st[f"{kind}_tree_build_s"] = m.stats["tree_build_s"]
             st[f"{kind}_lookup_s"] = m.stats["lookup_s"]
             st[f"{kind}_lookup_count"] = m.stats["lookup_count"]
+            st[f"{kind}_temporal_candidates"] = m.stats["temporal_candidates"]
             build += m.stats["tree_build_s"]
             lookup += m.stats["lookup_s"]
             count += m.stats["lookup_count"]

@@ -13,6 +13,14 @@ for a batch of rays at their own times:
 segment misses a part's swept world bounds, keeps the nearest exact (float64)
 hit, then asks the winning part of each ray for normals and material.
 Backends (:mod:`.embree_backend`, :mod:`.numpy_backend`) only provide parts.
+
+A part has ``bounds`` (world (lo, hi) over the shutter, or None = every ray)
+and three methods on a batch of m rays:
+
+* ``cast(o, d, times, t0, t1) -> (t, prim, u, v)``: nearest exact hit with
+  t0 < t < t1 (t = inf for a miss; prim, u, v meaningless there);
+* ``occluded(o, d, times, t0, t1) -> (m,) bool``;
+* ``shade(times, prim, u, v) -> (instance, prim, ng, ns, material)`` for hits.
 """
 from __future__ import annotations
 
@@ -22,7 +30,7 @@ import numpy as np
 
 from . import Hits
 from .geometry import scene_scale, tmin_of
-from .pair_bvh import PairBVH, segments_meet_boxes
+from .pair_bvh import PairBVH, RaySlabs, segments_meet_boxes
 
 __all__ = ["make_caster", "Caster", "BACKENDS"]
 
@@ -52,8 +60,9 @@ def make_caster(scene, backend: str = "auto") -> "Caster":
     """Build a time-aware ray caster for ``scene``.
 
     backend : 'embree' (embreex, float32 BVH + float64 refinement), 'numpy'
-        (brute force, exact; the test oracle and the fallback where embreex has
-        no wheel) or 'auto' (embree when importable, else numpy).
+        (exact float64, brute force or a numpy BVH; the test oracle and the
+        fallback where embreex has no wheel) or 'auto' (embree when importable,
+        else numpy).  See docs/raycast.md.
     """
     from ..errors import SettingsError
     if backend not in BACKENDS:
@@ -77,8 +86,11 @@ def _as_rays(origins, dirs, times, tmax):
     n = o.shape[0]
     if d.shape[0] != n:
         raise ValueError(f"origins has {n} rays but dirs has {d.shape[0]}")
-    t = np.broadcast_to(np.asarray(times, dtype=np.float64), (n,))
-    tm = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, dtype=np.float64), (n,))
+    try:
+        t = np.broadcast_to(np.asarray(times, dtype=np.float64), (n,))
+        tm = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, dtype=np.float64), (n,))
+    except ValueError:
+        raise ValueError(f"times and tmax must be scalars or have one value per ray ({n})") from None
     return o, d, t, tm
 
 
@@ -114,9 +126,9 @@ class Caster:
         rays = np.arange(o.shape[0]) if subset is None else subset
         if self._part_bvh is None:
             if subset is None:
-                slabs, t0s, t1s = _RaySlabs(o, d), t0, t1
+                slabs, t0s, t1s = RaySlabs(o, d), t0, t1
             else:
-                slabs, t0s, t1s = _RaySlabs(o[rays], d[rays]), t0[rays], t1[rays]
+                slabs, t0s, t1s = RaySlabs(o[rays], d[rays]), t0[rays], t1[rays]
             meet = slabs.meets_each(self._part_lo, self._part_hi, t0s, t1s)
             for j, k in enumerate(self.bounded):
                 out[k] = rays[meet[j]]
@@ -163,13 +175,20 @@ class Caster:
                     sl = slice(a, min(n, a + CHUNK))
                     t_k, p_k, u_k, v_k = part.cast(o[sl], d[sl], times[sl], tmin[sl], best_t[sl])
                     won = t_k < best_t[sl]
-                    inst, p, ng, ns, mat = part.shade(times[sl], np.where(won, p_k, 0), u_k, v_k)
-                    wc = won[:, None]
-                    for dst, src, mask in ((best_t, t_k, won), (best_part, k, won), (prim, p_k, won),
-                                           (out.u, u_k, won), (out.v, v_k, won), (out.instance, inst, won),
-                                           (out.prim, p, won), (out.material, mat, won),
-                                           (out.ng, ng, wc), (out.ns, ns, wc)):
-                        np.copyto(dst[sl], src, where=mask)
+                    all_won = won.all()
+                    inst, p, ng, ns, mat = part.shade(times[sl], p_k if all_won else np.where(won, p_k, 0),
+                                                      u_k, v_k)
+                    pos = o[sl] + t_k[:, None] * d[sl] if all_won else None
+                    fields = ((best_t, t_k), (best_part, k), (prim, p_k), (out.u, u_k), (out.v, v_k),
+                              (out.instance, inst), (out.prim, p), (out.material, mat), (out.ng, ng),
+                              (out.ns, ns), (out.position, pos))
+                    if all_won:
+                        # Every ray of the block hit: plain copies (position too, cache-hot)
+                        for dst, src in fields:
+                            dst[sl] = src
+                    else:
+                        for dst, src in fields[:-1]:
+                            np.copyto(dst[sl], src, where=won if np.ndim(src) < 2 else won[:, None])
                 continue
             # Other parts: only rays whose segment (tmin, best_t) meets their swept bounds
             if rays is None:
@@ -191,11 +210,13 @@ class Caster:
                 w = won[a:a + CHUNK]
                 inst, p, ng, ns, mat = part.shade(times[w], prim[w], out.u[w], out.v[w])
                 out.instance[w], out.prim[w], out.ng[w], out.ns[w], out.material[w] = inst, p, ng, ns, mat
-        # Misses: t = inf; hits: the point on the ray
+        # Misses: t = inf; hits: the point on the ray (unless a fully-hit static block set it)
         hit = best_part >= 0
         best_t[~hit] = np.inf
-        with np.errstate(invalid="ignore"):
-            np.copyto(out.position, o + best_t[:, None] * d, where=hit[:, None])
+        bounded_won = np.isin(best_part, self.bounded) if self.bounded else np.zeros(n, bool)
+        todo = np.flatnonzero(hit & (bounded_won | np.isnan(out.position[:, 0])))
+        if todo.size:
+            out.position[todo] = o[todo] + best_t[todo, None] * d[todo]
         self.stats["rays_intersect"] += n
         self.stats["seconds_intersect"] += _time.perf_counter() - start
         return out
@@ -206,7 +227,6 @@ class Caster:
         start = _time.perf_counter()
         o, d, times, tmax = _as_rays(origins, dirs, times, tmax)
         n = o.shape[0]
-        rays = _RaySlabs(o, d)
         tmin = tmin_of(d, self.scale)
         blocked = np.zeros(n, bool)
         near = None
@@ -231,62 +251,3 @@ class Caster:
         self.stats["rays_occluded"] += n
         self.stats["seconds_occluded"] += _time.perf_counter() - start
         return blocked
-
-
-class _RaySlabs:
-    """Rays prepared for box tests: contiguous origin and inverse-direction columns."""
-
-    def __init__(self, o: np.ndarray, d: np.ndarray):
-        self.o = [np.ascontiguousarray(o[:, c]) for c in range(3)]
-        with np.errstate(divide="ignore"):
-            self.inv = [1.0 / d[:, c] for c in range(3)]
-
-    def candidates(self, bounds, t0, t1) -> np.ndarray:
-        """Indices (m,) of the rays whose segment [t0, t1] meets the box."""
-        return np.flatnonzero(self.meets(bounds, t0, t1))
-
-    def meets(self, bounds, t0, t1) -> np.ndarray:
-        """(n,) bool: does each ray's segment [t0 (n,), t1 (n,)] meet the box (lo, hi)?
-
-        Conservative: a NaN slab (origin on a slab plane, zero direction
-        component) does not reject.
-        """
-        lo, hi = bounds
-        n = t0.shape[0]
-        out = np.empty(n, bool)
-        # Cache-sized blocks: about 4x faster than whole-array passes
-        with np.errstate(invalid="ignore"):
-            for a in range(0, n, CHUNK):
-                sl = slice(a, min(n, a + CHUNK))
-                near, far = t0[sl], t1[sl]
-                for c in range(3):
-                    oc, ic = self.o[c][sl], self.inv[c][sl]
-                    ta = (lo[c] - oc) * ic
-                    tb = (hi[c] - oc) * ic
-                    near = np.fmax(near, np.fmin(ta, tb))
-                    far = np.fmin(far, np.fmax(ta, tb))
-                out[sl] = near <= far
-        return out
-
-    def meets_each(self, lo: np.ndarray, hi: np.ndarray, t0, t1) -> np.ndarray:
-        """(P, n) bool: :meth:`meets` for P boxes lo, hi (P, 3) at once.
-
-        Ray blocks outside, boxes inside: a block's columns stay in cache for
-        all the boxes.
-        """
-        P, n = lo.shape[0], t0.shape[0]
-        out = np.empty((P, n), bool)
-        with np.errstate(invalid="ignore"):
-            for a in range(0, n, CHUNK):
-                sl = slice(a, min(n, a + CHUNK))
-                oc = [self.o[c][sl] for c in range(3)]
-                ic = [self.inv[c][sl] for c in range(3)]
-                for j in range(P):
-                    near, far = t0[sl], t1[sl]
-                    for c in range(3):
-                        ta = (lo[j, c] - oc[c]) * ic[c]
-                        tb = (hi[j, c] - oc[c]) * ic[c]
-                        near = np.fmax(near, np.fmin(ta, tb))
-                        far = np.fmin(far, np.fmax(ta, tb))
-                    out[j, sl] = near <= far
-        return out

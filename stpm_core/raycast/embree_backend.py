@@ -30,8 +30,9 @@ import numpy as np
 from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
-from .geometry import (InstanceShading, apply_affine, apply_linear, cross, ray_triangle,
-                       swept_bounds, triangles_at, world_to_object)
+from .geometry import (InstanceShading, MotionKeys, apply_affine, apply_linear, cross,
+                       normal_matrix, ray_triangle, swept_bounds, triangles_at, world_to_object)
+from .pair_bvh import PairBVH, RaySlabs, segments_meet_boxes
 
 __all__ = ["build_parts", "EmbreeMesh", "StaticPart", "RigidPart", "DeformingPart",
            "DEFORM_BUCKETS_MAX"]
@@ -40,7 +41,11 @@ _FAR32 = np.float32(1e37)      # embree's "no tfar" value
 _RECASTS = 3                   # re-casts of rays whose refined hit fell inside the guard
 _SLACK = 4.0                   # deforming buckets: search margin in units of the shape tolerance
 
-# Deforming meshes: at most this many embree scenes (time buckets) per mesh.
+# Moving instances of one mesh: above this many, pairs come from a BVH of their boxes.
+_GROUP_BVH_MIN = 24
+
+# Deforming meshes: about this many embree scenes (time buckets) per mesh
+# (at least one per vertex step).
 DEFORM_BUCKETS_MAX = 16
 
 
@@ -193,8 +198,8 @@ class StaticPart:
             nv += Vw.shape[0]
             inst.append(np.full(F.shape[0], i, np.int32))
             prim.append(np.arange(F.shape[0], dtype=np.int32))
-            # World normals by the inverse transpose (object winding decides the side)
-            AT = np.linalg.inv(M[:3, :3]).T
+            # World normals: inverse transpose up to a positive factor (object winding decides the side)
+            AT = normal_matrix(M[:3, :3])
             Po = Vo[F]
             n_w = cross(Po[:, 1] - Po[:, 0], Po[:, 2] - Po[:, 0]) @ AT.T
             L = np.linalg.norm(n_w, axis=1, keepdims=True)
@@ -263,17 +268,91 @@ class RigidPart:
         return np.full(p.shape[0], self.index, np.int32), p.astype(np.int32), ng, ns, mat
 
 
+class RigidGroup:
+    """Several moving instances of one mesh: one transform pass and one embree call.
+
+    Rays are paired with the instances whose swept bounds they meet (a slab
+    test per instance, or a :class:`PairBVH` of the instance boxes when there
+    are many); every (ray, instance) pair is mapped to the shared object space
+    at the ray's time in one vectorised :class:`MotionKeys` pass and cast in one
+    embree call; each ray keeps its nearest pair.  ``prim`` returned by
+    :meth:`cast` encodes the instance: ``j * F + triangle``.
+    """
+
+    def __init__(self, scene, instances: list[int], emesh: EmbreeMesh):
+        self.instances = np.asarray(instances, dtype=np.int32)
+        self.mesh = mesh = scene.meshes[scene.instances[instances[0]].mesh]
+        transforms = [scene.instances[i].transform for i in instances]
+        self.keys = MotionKeys(transforms)
+        self.emesh = emesh
+        self.n_tri = np.asarray(mesh.triangles).shape[0]
+        boxes = [swept_bounds(mesh, tr) for tr in transforms]
+        self.lo = np.array([b[0] for b in boxes])
+        self.hi = np.array([b[1] for b in boxes])
+        self.bounds = (self.lo.min(0), self.hi.max(0))
+        self.bvh = PairBVH(self.lo, self.hi, leaf=2) if len(instances) > _GROUP_BVH_MIN else None
+        self.shading = InstanceShading(mesh, None)
+
+    def _pairs(self, o, d, t0, t1):
+        """(ray, j) pairs (k,) whose segment [t0, t1] meets instance j's swept box."""
+        if self.bvh is None:
+            meet = RaySlabs(o, d).meets_each(self.lo, self.hi, t0, t1)       # (P, m)
+            j, ray = np.nonzero(meet)
+            return ray, j
+        ray, j = self.bvh.candidates(o, d, t0, t1)
+        with np.errstate(divide="ignore"):
+            inv = 1.0 / d[ray]
+        keep = segments_meet_boxes(o[ray], inv, self.lo[j], self.hi[j], t0[ray], t1[ray])
+        return ray[keep], j[keep]
+
+    def _to_object(self, o, d, times, ray, j):
+        A, b = self.keys.world_to_object(j, times[ray])
+        return apply_affine(A, b, o[ray]), apply_linear(A, d[ray])
+
+    def cast(self, o, d, times, t0, t1):
+        m = o.shape[0]
+        t, prim, u, v = np.full(m, np.inf), np.full(m, -1, np.int64), np.zeros(m), np.zeros(m)
+        ray, j = self._pairs(o, d, t0, t1)
+        if ray.size == 0:
+            return t, prim, u, v
+        oo, dd = self._to_object(o, d, times, ray, j)
+        tp, pp, up, vp = self.emesh.cast(oo, dd, t0[ray], t1[ray])
+        # Nearest pair per ray
+        np.minimum.at(t, ray, tp)
+        w = np.flatnonzero(np.isfinite(tp) & (tp == t[ray]))
+        prim[ray[w]] = j[w] * self.n_tri + pp[w]
+        u[ray[w]], v[ray[w]] = up[w], vp[w]
+        return t, prim, u, v
+
+    def occluded(self, o, d, times, t0, t1):
+        blocked = np.zeros(o.shape[0], bool)
+        ray, j = self._pairs(o, d, t0, t1)
+        if ray.size:
+            oo, dd = self._to_object(o, d, times, ray, j)
+            blocked[ray[self.emesh.occluded(oo, dd, t0[ray], t1[ray])]] = True
+        return blocked
+
+    def shade(self, times, p, u, v):
+        j, tri = np.divmod(p, self.n_tri)
+        A, _ = self.keys.world_to_object(j, times)
+        ng, ns, mat = self.shading.shade(tri, u, v, times, A)
+        return self.instances[j], tri.astype(np.int32), ng, ns, mat
+
+
 class DeformingPart:
     """One instance of a deforming mesh: time buckets of embree scenes + exact refinement.
 
     Each vertex-time segment is split into buckets (more where vertices move
-    more, at most :data:`DEFORM_BUCKETS_MAX` in all); a bucket's embree scene
+    more, about :data:`DEFORM_BUCKETS_MAX` in all); a bucket's embree scene
     holds the mesh at the bucket's mid time.  A ray is cast, in object space,
-    into the bucket containing its time; the triangle found is then intersected
-    exactly (float64) at the ray's own time.  Hits away from triangle edges are
-    exact; within the distance the vertices move in half a bucket of an edge or
-    silhouette, the triangle (or hit / miss) may be the neighbour's, with the
-    hit point on that triangle's plane at the right time.
+    into the bucket containing its time, searching ``(t0 - s, t1 + s)`` with
+    ``s = 4 tolerance / |d|``; the triangle found is then intersected exactly
+    (float64) at the ray's own time, and if the exact hit falls outside it, the
+    triangles sharing a vertex with it (1-ring) are tested exactly instead.
+    ``tolerance`` is the largest vertex motion within half a bucket (object
+    units).  Hits farther than about 4 tolerance from a silhouette or border
+    (and from the ray origin) are exact; nearer ones may hit / miss wrongly.
+    See docs/raycast.md for measured error rates.
     """
 
     def __init__(self, scene, i: int):
@@ -283,7 +362,7 @@ class DeformingPart:
         self.transform = inst.transform
         self.bounds = swept_bounds(mesh, self.transform)
         self.shading = InstanceShading(mesh, self.transform)
-        V = np.asarray(mesh.vertices, dtype=np.float64)
+        self.V = V = np.asarray(mesh.vertices, dtype=np.float64)
         tk = np.asarray(mesh.vertex_times, dtype=np.float64)
         F = np.asarray(mesh.triangles)
         # Buckets per segment, in proportion to the largest vertex displacement
@@ -326,11 +405,11 @@ class DeformingPart:
             if r.size == 0:
                 continue
             tr = times[r]
-            corners = lambda p, rays, tr=tr: triangles_at(self.mesh, p, tr[rays])
+            corners = lambda p, rays, tr=tr: triangles_at(self.mesh, p, tr[rays], self.V)
             t[r], prim[r], u[r], v[r] = em.cast(oo[r], dd[r], t0[r], t1[r], corners, slack[r])
         # Hit outside its triangle at the ray's time: take the nearest of the 1-ring
         h = np.flatnonzero(np.isfinite(t))
-        C = triangles_at(self.mesh, prim[h], times[h])
+        C = triangles_at(self.mesh, prim[h], times[h], self.V)
         _, uu, vv = ray_triangle(oo[h], dd[h], C[:, 0], C[:, 1], C[:, 2])
         eps = 1e-9
         off = h[(uu < -eps) | (vv < -eps) | (uu + vv > 1 + eps)]
@@ -347,7 +426,7 @@ class DeformingPart:
         ray = np.repeat(np.arange(3 * m) // 3, counts)
         first = np.repeat(self.inc_start[vs] - np.cumsum(counts) + counts, counts)
         tri = self.inc_tri[first + np.arange(ray.size)]
-        C = triangles_at(self.mesh, tri, times[ray])
+        C = triangles_at(self.mesh, tri, times[ray], self.V)
         tt, uu, vv = ray_triangle(o[ray], d[ray], C[:, 0], C[:, 1], C[:, 2])
         ok = (uu >= 0) & (vv >= 0) & (uu + vv <= 1) & (tt > t0[ray]) & (tt < t1[ray])
         tt = np.where(ok, tt, np.inf)
@@ -390,12 +469,17 @@ def build_parts(scene, scale: float) -> list:
     parts = []
     if static:
         parts.append(StaticPart(scene, static))
-    emeshes: dict[int, EmbreeMesh] = {}
+    # Moving rigid instances: one object-space embree scene per mesh; several moving
+    # instances of one mesh form one group (one transform pass, one embree call)
+    by_mesh: dict[int, list[int]] = {}
     for i in rigid:
-        m = scene.instances[i].mesh
-        if m not in emeshes:
-            V = np.asarray(scene.meshes[m].vertices, dtype=np.float64).reshape(-1, 3)
-            emeshes[m] = EmbreeMesh(V, scene.meshes[m].triangles)
-        parts.append(RigidPart(scene, i, emeshes[m]))
+        by_mesh.setdefault(scene.instances[i].mesh, []).append(i)
+    for m, members in by_mesh.items():
+        V = np.asarray(scene.meshes[m].vertices, dtype=np.float64).reshape(-1, 3)
+        emesh = EmbreeMesh(V, scene.meshes[m].triangles)
+        if len(members) == 1:
+            parts.append(RigidPart(scene, members[0], emesh))
+        else:
+            parts.append(RigidGroup(scene, members, emesh))
     parts.extend(DeformingPart(scene, i) for i in deforming)
     return parts

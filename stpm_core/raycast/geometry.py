@@ -12,6 +12,7 @@ Everything here is exact double precision and vectorised over rays:
 * :class:`InstanceShading` - hit point data (geometric normal, shading normal,
   material) of one instance at the ray's time, in world space.
 * :func:`scene_scale`, :func:`tmin_of` - the self-intersection guard.
+* :func:`swept_bounds` - world box of an instance over the whole shutter.
 """
 from __future__ import annotations
 
@@ -19,8 +20,8 @@ import numpy as np
 
 __all__ = [
     "TMIN_REL", "ray_triangle", "cross", "world_to_object", "triangles_at",
-    "InstanceShading", "scene_scale", "tmin_of", "slab_test", "segment_of",
-    "swept_bounds", "apply_affine", "apply_linear",
+    "InstanceShading", "scene_scale", "tmin_of", "segment_of",
+    "swept_bounds", "apply_affine", "apply_linear", "MotionKeys", "normal_matrix",
 ]
 
 # Self-intersection guard: a ray never reports a hit closer than
@@ -90,7 +91,21 @@ def _inverse3(M: np.ndarray) -> np.ndarray:
     inv[:, 0, 0], inv[:, 1, 0], inv[:, 2, 0] = A, B, C
     inv[:, 0, 1], inv[:, 1, 1], inv[:, 2, 1] = c * h - b * i, a * i - c * g, b * g - a * h
     inv[:, 0, 2], inv[:, 1, 2], inv[:, 2, 2] = b * f - c * e, c * d - a * f, a * e - b * d
-    return inv / det[:, None, None]
+    with np.errstate(divide="ignore", invalid="ignore"):   # singular (zero scale): inf / NaN rays miss
+        return inv / det[:, None, None]
+
+
+def normal_matrix(M3: np.ndarray) -> np.ndarray:
+    """(3, 3) map of object-space normals to world-space normal directions for M3 (3, 3).
+
+    The cofactor matrix ``C = det(M) M^-T`` times sign(det): the inverse
+    transpose up to a positive factor, and still defined when a zero scale
+    makes M singular (a flattened object keeps its normal).
+    """
+    m0, m1, m2 = M3[:, 0], M3[:, 1], M3[:, 2]
+    C = np.column_stack([np.cross(m1, m2), np.cross(m2, m0), np.cross(m0, m1)])
+    det = float(np.dot(m0, C[:, 0]))
+    return C * (-1.0 if det < 0 else 1.0)
 
 
 def world_to_object(transform, times: np.ndarray):
@@ -120,12 +135,24 @@ def world_to_object(transform, times: np.ndarray):
     i, a = segment_of(transform.times, times)
     if np.all(Q_k == Q_k[:1]) and np.all(S_k == S_k[:1]):
         # Pure translation (the common case): A is constant, only b moves
-        A = np.linalg.inv(transform.matrices[0, :3, :3])[None]
+        A = _inverse3(transform.matrices[:1, :3, :3])
         T = T_k[i] + a[:, None] * (T_k[i + 1] - T_k[i])
         return A, -(T @ A[0].T)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return _inverse_from_keys(T_k, Q_k, S_k, i, a)
+
+
+def _inverse_from_keys(T_k, Q_k, S_k, i, a, i1=None):
+    """World-to-object A (n, 3, 3), b (n, 3) between keys i and i+1 (n,) at fractions a (n,).
+
+    T_k (K, 3) translations, Q_k (K, 4) unit quaternions (w, x, y, z), S_k
+    (K, 3, 3) symmetric stretches of decomposed keys ``M = T R S``; ``i1``
+    (default i + 1) the second key of each pair.
+    """
+    i1 = i + 1 if i1 is None else i1
     # Rotation: slerp along the shorter arc, component arrays (n,) throughout
     q0 = [Q_k[i, c] for c in range(4)]
-    q1 = [Q_k[i + 1, c] for c in range(4)]
+    q1 = [Q_k[i1, c] for c in range(4)]
     cos_theta = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
     sign = np.where(cos_theta < 0, -1.0, 1.0)
     theta = np.arccos(np.minimum(np.abs(cos_theta), 1.0))
@@ -142,7 +169,7 @@ def world_to_object(transform, times: np.ndarray):
           [2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)],
           [2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)]]
     # Stretch: lerp the symmetric S, invert by cofactors
-    lerp = lambda K, r, c: K[i, r, c] + a * (K[i + 1, r, c] - K[i, r, c])
+    lerp = lambda K, r, c: K[i, r, c] + a * (K[i1, r, c] - K[i, r, c])
     s00, s01, s02 = lerp(S_k, 0, 0), lerp(S_k, 0, 1), lerp(S_k, 0, 2)
     s11, s12, s22 = lerp(S_k, 1, 1), lerp(S_k, 1, 2), lerp(S_k, 2, 2)
     c00, c01, c02 = s11 * s22 - s12 * s12, s02 * s12 - s01 * s22, s01 * s12 - s02 * s11
@@ -152,13 +179,46 @@ def world_to_object(transform, times: np.ndarray):
           [c01 * inv_det, c11 * inv_det, c12 * inv_det],
           [c02 * inv_det, c12 * inv_det, c22 * inv_det]]
     # A = S^-1 R^T, b = -A T
-    A = np.empty((times.shape[0], 3, 3))
+    A = np.empty((a.shape[0], 3, 3))
     for r in range(3):
         for c in range(3):
             A[:, r, c] = Si[r][0] * RT[0][c] + Si[r][1] * RT[1][c] + Si[r][2] * RT[2][c]
-    T = [T_k[i, c] + a * (T_k[i + 1, c] - T_k[i, c]) for c in range(3)]
+    T = [T_k[i, c] + a * (T_k[i1, c] - T_k[i, c]) for c in range(3)]
     b = -np.stack([A[:, r, 0] * T[0] + A[:, r, 1] * T[1] + A[:, r, 2] * T[2] for r in range(3)], axis=1)
     return A, b
+
+
+class MotionKeys:
+    """Decomposed keys of several moving transforms, stacked, for per-(ray, instance) inverses.
+
+    ``world_to_object(j, times)`` gives the inverse of transform ``j[k]`` at
+    ``times[k]`` for every pair k in one vectorised pass (instances of one
+    mesh share a single pass and a single embree call).
+    """
+
+    def __init__(self, transforms: list):
+        self.T = np.concatenate([tr._T for tr in transforms])
+        self.Q = np.concatenate([tr._Q for tr in transforms])
+        self.S = np.concatenate([tr._S for tr in transforms])
+        self.knots = np.concatenate([tr.times for tr in transforms])
+        counts = np.array([tr.times.shape[0] for tr in transforms])
+        self.first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        self.last = self.first + counts - 1
+        owner = np.repeat(np.arange(len(transforms)), counts)
+        # Knots of transform j shifted by j * W: one searchsorted serves every transform
+        self.W = float(self.knots.max() - self.knots.min()) + 1.0
+        self.shifted = self.knots + self.W * owner
+
+    def world_to_object(self, j: np.ndarray, times: np.ndarray):
+        """A (m, 3, 3), b (m, 3) of transforms j (m,) at times (m,)."""
+        f, l = self.first[j], self.last[j]
+        tq = np.clip(times, self.knots[f], self.knots[l])
+        i = np.clip(np.searchsorted(self.shifted, tq + self.W * j, side="right") - 1, f, np.maximum(l - 1, f))
+        i1 = np.minimum(i + 1, l)
+        span = self.knots[i1] - self.knots[i]
+        a = np.clip(np.divide(times - self.knots[i], span, out=np.zeros_like(times), where=span > 0), 0.0, 1.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return _inverse_from_keys(self.T, self.Q, self.S, i, a, i1)
 
 
 def apply_affine(A: np.ndarray, b: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -175,14 +235,15 @@ def apply_linear(A: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.einsum("nij,nj->ni", A, x)
 
 
-def triangles_at(mesh, prim: np.ndarray, times: np.ndarray) -> np.ndarray:
+def triangles_at(mesh, prim: np.ndarray, times: np.ndarray, V: np.ndarray | None = None) -> np.ndarray:
     """Object-space corners (n, 3, 3) float64 of triangles ``prim`` (n,) at times (n,).
 
     Rigid meshes ignore ``times``; deforming meshes interpolate their vertex
-    steps linearly (clamped outside the first/last step).
+    steps linearly (clamped outside the first/last step).  ``V``: the mesh's
+    vertices already as float64 (saves converting them on every call).
     """
     tri = np.asarray(mesh.triangles)[prim]
-    V = np.asarray(mesh.vertices, dtype=np.float64)
+    V = np.asarray(mesh.vertices, dtype=np.float64) if V is None else V
     if not mesh.is_deforming:
         V = V[0] if V.ndim == 3 else V
         return V[tri]
@@ -210,6 +271,11 @@ class InstanceShading:
         self.mesh = mesh
         self.transform = transform
         self.material_ids = np.asarray(mesh.material_ids, dtype=np.int32)
+        self.V = np.asarray(mesh.vertices, dtype=np.float64)
+        # Static transform: one normal matrix, defined even for a zero scale
+        self.N_static = None
+        if transform is not None and transform.is_static:
+            self.N_static = normal_matrix(transform.matrices[0, :3, :3])[None]
         self.normals = None
         if mesh.normals is not None and not mesh.is_deforming:
             self.normals = np.asarray(mesh.normals, dtype=np.float64)
@@ -220,11 +286,14 @@ class InstanceShading:
         ``A`` is the world-to-object linear part at the hit times if the caller
         already has it ((n, 3, 3) or (1, 3, 3)).
         """
-        if A is None:
-            A, _ = world_to_object(self.transform, times)
-        P = triangles_at(self.mesh, prim, times)
+        if A is None and self.N_static is not None:
+            AT = self.N_static
+        else:
+            if A is None:
+                A, _ = world_to_object(self.transform, times)
+            AT = np.swapaxes(A, 1, 2)
+        P = triangles_at(self.mesh, prim, times, self.V)
         n_obj = cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
-        AT = np.swapaxes(A, 1, 2)
         ng = _normalize(apply_linear(AT, n_obj))
         if self.normals is None:
             ns = ng.copy()
@@ -248,22 +317,6 @@ def tmin_of(dirs: np.ndarray, scale: float) -> np.ndarray:
     """Per-ray guard (n,) in units of |dir|: TMIN_REL * scale / |dir|."""
     L = np.sqrt(_dot(dirs, dirs))
     return TMIN_REL * scale / np.where(L > 0, L, 1.0)
-
-
-def slab_test(o: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-              t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
-    """(n,) bool: does the ray segment [t0, t1] touch the box [lo, hi] (3,)?
-
-    Conservative: NaN slabs (origin on a slab plane with a zero direction
-    component) do not reject.
-    """
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / d
-        ta = (lo - o) * inv
-        tb = (hi - o) * inv
-    near = np.fmax(np.fmax.reduce(np.fmin(ta, tb), axis=1), t0)
-    far = np.fmin(np.fmin.reduce(np.fmax(ta, tb), axis=1), t1)
-    return near <= far
 
 
 def swept_bounds(mesh, transform):

@@ -37,6 +37,12 @@ class NumpyPart:
         self.bounds = swept_bounds(mesh, self.transform)
         F = np.asarray(mesh.triangles, dtype=np.int64)
         V = np.asarray(mesh.vertices, dtype=np.float64)
+        # Static instance: triangles baked into world space, rays untouched (works
+        # for a singular, zero-scale transform too)
+        self.baked = self.transform.is_static
+        if self.baked:
+            M = self.transform.matrices[0]
+            V = V @ M[:3, :3].T + M[:3, 3]
         if mesh.is_deforming:
             self.tk = np.asarray(mesh.vertex_times, dtype=np.float64)
             self.P = V[:, F]                       # (K, F, 3, 3) corners per step
@@ -65,8 +71,11 @@ class NumpyPart:
         return tj, np.where(hit, j, -1), np.where(hit, u[r, j], 0.0), np.where(hit, v[r, j], 0.0)
 
     def cast(self, o, d, times, t0, t1):
-        A, b = world_to_object(self.transform, times)
-        oo, dd = apply_affine(A, b, o), apply_linear(A, d)
+        if self.baked:
+            oo, dd = o, d
+        else:
+            A, b = world_to_object(self.transform, times)
+            oo, dd = apply_affine(A, b, o), apply_linear(A, d)
         n = o.shape[0]
         nF = self.P.shape[1]
         t, prim, u, v = np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n)
