@@ -7,6 +7,7 @@ Output, multilayer EXR, compositor) see every pass.
 """
 from __future__ import annotations
 
+import json
 import time
 
 import bpy
@@ -104,15 +105,24 @@ class STPMRenderEngine(bpy.types.RenderEngine):
         # Results, warnings and statistics
         for w in getattr(result, "warnings", []):
             self.report({"WARNING"}, w)
+        # The effects plan: render report, EXR metadata, and the scene (for the Effects panel)
+        plan = dict(getattr(result, "plan", {}) or {})
+        meta = {}
+        if plan:
+            summary = _core.sub("plan").plan_summary(plan)
+            self.report({"INFO"}, f"STPM plan: {summary}")
+            meta = {"STPM Plan": json.dumps(plan), "STPM Plan Summary": summary}
+            store_plan(scene, plan)
         w, h = stpm_scene.resolution
         written = write_passes(self, result.passes, w, h, depsgraph.view_layer.name)
+        add_metadata(self, meta)
         stats = dict(getattr(result, "stats", {}) or {})
         stats["export_s"] = export_s
         stats["wall_s"] = time.perf_counter() - t0
         self.stpm_warnings = list(warnings) + list(getattr(result, "warnings", []))
         self.stpm_stats = stats
         LAST_RENDER.clear()
-        LAST_RENDER.update(stats=stats, warnings=list(self.stpm_warnings), passes=written, scene=stpm_scene)
+        LAST_RENDER.update(stats=stats, warnings=list(self.stpm_warnings), passes=written, scene=stpm_scene, plan=plan)
         self.update_stats("STPM", f"Done in {stats['wall_s']:.1f} s (export {export_s:.2f} s)")
 
     def cancel_requested(self) -> bool:
@@ -124,6 +134,24 @@ class STPMRenderEngine(bpy.types.RenderEngine):
         self.update_progress(float(min(max(fraction, 0.0), 1.0)))
         if message:
             self.update_stats("STPM", message)
+
+
+def add_metadata(engine, metadata: dict) -> None:
+    """name -> str into the final render result's stamp data (Blender writes it into EXR headers)."""
+    full = engine.get_result() if metadata else None
+    if full is None or not hasattr(full, "stamp_data_add_field"):
+        return
+    for key, value in metadata.items():
+        full.stamp_data_add_field(key, value)
+
+
+def store_plan(scene, plan: dict) -> None:
+    """Keep the plan on the (original) scene as JSON in ``scene["stpm_plan"]`` for the Effects panel."""
+    target = getattr(scene, "original", scene) or scene
+    try:
+        target["stpm_plan"] = json.dumps(plan)
+    except (AttributeError, RuntimeError, TypeError):  # read-only while rendering in some contexts
+        pass
 
 
 def _compatible_panels():

@@ -1,5 +1,7 @@
-"""Render-properties panels (``STPM_RENDER_PT_*``) and the preset operator/menu."""
+"""Render-properties panels (``STPM_RENDER_PT_*``), the preset operator/menu and the effects-plan operator."""
 from __future__ import annotations
+
+import json
 
 import bpy
 from bpy.props import EnumProperty
@@ -28,6 +30,47 @@ class STPM_MT_presets(bpy.types.Menu):
     def draw(self, context):
         for ident, label, _desc in PRESET_ITEMS:
             self.layout.operator(STPM_OT_apply_preset.bl_idname, text=label).preset = ident
+
+
+def scene_plan(scene) -> dict | None:
+    """The effects plan stored on the scene (``scene["stpm_plan"]``, JSON) or None."""
+    text = scene.get("stpm_plan") if hasattr(scene, "get") else None
+    if not text:
+        return None
+    try:
+        return json.loads(text)
+    except (TypeError, ValueError):
+        return None
+
+
+class STPM_OT_compute_plan(bpy.types.Operator):
+    """Work out which effects this frame calls for (motion blur, caustics, indirect light), as STPM will render it"""
+
+    bl_idname = "stpm.compute_plan"
+    bl_label = "Compute Effects Plan"
+    bl_options = {"REGISTER"}
+
+    def execute(self, context):
+        from . import _core
+        from .engine import store_plan
+        from .export import export_scene
+        from .properties import settings_from_scene
+        scene = context.scene
+        frame, subframe = scene.frame_current, scene.frame_subframe
+        try:
+            settings = settings_from_scene(scene)
+            stpm_scene, _warnings = export_scene(
+                context.evaluated_depsgraph_get(), lambda f, sub: scene.frame_set(f, subframe=sub),
+                motion_steps=scene.stpm.motion_steps)
+            plan = _core.sub("plan").make_plan(stpm_scene, settings)
+        except _core.StpmError as exc:
+            self.report({"ERROR"}, f"STPM: {exc}")
+            return {"CANCELLED"}
+        finally:
+            scene.frame_set(frame, subframe=subframe)
+        store_plan(scene, plan)
+        self.report({"INFO"}, "STPM plan: " + _core.sub("plan").plan_summary(plan))
+        return {"FINISHED"}
 
 
 class _STPMPanel:
@@ -136,10 +179,27 @@ class STPM_RENDER_PT_effects(_STPMPanel, bpy.types.Panel):
         sub.active = props.effects == "MANUAL"
         sub.prop(props, "caustics")
         sub.prop(props, "indirect")
+        # The plan: computed on demand, or by the last render
+        layout.separator()
+        layout.operator(STPM_OT_compute_plan.bl_idname, icon="FILE_REFRESH")
+        plan = scene_plan(context.scene)
+        if plan is None:
+            layout.label(text="No plan yet: compute it or render", icon="INFO")
+            return
+        box = layout.box()
+        col = box.column(align=True)
+        for key, label in (("motion_blur", "Motion Blur"), ("caustics", "Caustics"), ("indirect", "Indirect"),
+                           ("time_dependent", "Time Dependent")):
+            col.label(text=label, icon="CHECKMARK" if plan.get(key) else "X")
+        col.label(text=f"Estimator: {plan.get('estimator', '?')}")
+        col = box.column(align=True)
+        for reason in plan.get("reasons", []):
+            col.label(text=reason)
 
 
 classes = (
     STPM_OT_apply_preset,
+    STPM_OT_compute_plan,
     STPM_MT_presets,
     STPM_RENDER_PT_sampling,
     STPM_RENDER_PT_photons,

@@ -7,9 +7,11 @@
   through the caustic);
 * look-ups per second of every estimator on one 1M-photon map at k = 50
   (synthetic moving receiver: a static caustic of 1 W/m^2 over a box top
-  sliding through it), queries in image-like coherent order, median of 3;
+  sliding through it), with the scipy and the compiled (numba) search, for
+  scattered queries and for a render's density of queries (16 samples per
+  pixel footprint); both cores; best of 3 interleaved rounds;
 * the TEMPORAL / STANDARD and KD4D / STANDARD cost ratios, per look-up and
-  per render (render_s of a small render of the traced scene);
+  per render (render_s of the traced scene, same photons and k, each backend);
 * relative error of the mean irradiance on the moving box top against the
   analytic answer, for the synthetic 1M map and the traced scene.
 
@@ -64,36 +66,88 @@ def bench_tracing(n_caustic=200_000, n_global=200_000) -> dict:
             "caster": getattr(caster, "backend", type(caster).__name__)}
 
 
+def _render_like_queries(n_pixels=12_000, spp=16, footprint=2e-3, seed=12):
+    """Box-top queries as a render makes them: per pixel (fixed x, y; footprint in m) spp samples,
+    each at its own shutter time, kept where the sliding box top covers the pixel then."""
+    from test_estimators import A, H, W, box_center
+    rng = np.random.default_rng(seed)
+    xy = np.repeat(rng.uniform(-A + 0.02, A - 0.02, (n_pixels, 2)), spp, axis=0)
+    xy += rng.uniform(-footprint / 2, footprint / 2, xy.shape)
+    t = rng.random(len(xy))
+    on = np.abs(xy[:, 0] - box_center(t)) < W / 2 - 0.02
+    return np.column_stack([xy[on], np.full(on.sum(), H)]), t[on]
+
+
+def _box_queries(n, seed=11):
+    from test_estimators import box_top_queries
+    return box_top_queries(n, margin=0.02, seed=seed)
+
+
+def _set_backend(name):
+    """Force the look-up backend of maps built from now on ('numba' or 'scipy')."""
+    from stpm_core.photons import kdtree
+    if name == "numba" and not kdtree.AVAILABLE and kdtree._IMPORT_ERROR.startswith("disabled by bench"):
+        kdtree.AVAILABLE = True
+    elif name == "scipy" and kdtree.AVAILABLE:
+        kdtree.disable("disabled by bench")
+    return kdtree.AVAILABLE == (name == "numba")
+
+
 def bench_lookups(n_photons=1_000_000, n_queries=100_000, k=50) -> dict:
-    from test_estimators import UP, box_top_queries, moving_receiver_map
-    m = moving_receiver_map(n_photons, 1)
-    t0 = time.perf_counter()
-    m.tree3()
-    build3 = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    m.tree4()
-    build4 = time.perf_counter() - t0
-    p, t = box_top_queries(n_queries, margin=0.02)
+    """Look-ups/s of every estimator, scipy and numba backends, on one 1M map, two query sets.
+
+    'scattered': n_queries random box-top points in scanline order (about one query per
+    2 mm^2, a few per photon disc); 'render': 6250 pixel footprints x 16 samples (a render's
+    density of queries).  Rates: all runs interleaved round-robin, best of 3 rounds.
+    """
+    from stpm_core.photons.estimators import PhotonMap
+    from test_estimators import UP, moving_receiver_map
+    base = moving_receiver_map(n_photons, 1)
+    maps = {"scipy": PhotonMap(base.records, base.shutter, time_scale=base.time_scale, backend="scipy")}
+    out = {"n_photons": n_photons, "k": k, "cpu_count": os.cpu_count(), "load_avg_1min": os.getloadavg()[0]}
+    from stpm_core.photons import kdtree
+    if kdtree.AVAILABLE:
+        t0 = time.perf_counter()
+        kdtree.FlatTree(base.records["position"][:1000], base.records["time"][:1000], base._packed[:1000],
+                        dims=3, s=1.0)
+        out["numba_first_use_s"] = time.perf_counter() - t0      # compile, or load from the cache
+        maps["numba"] = PhotonMap(base.records, base.shutter, time_scale=base.time_scale, backend="numba")
+    for be, m in maps.items():
+        for est in ("STANDARD", "KD4D"):
+            t0 = time.perf_counter()
+            m.build(est)
+            out[f"{be}_tree{'4' if est == 'KD4D' else '3'}_build_s"] = time.perf_counter() - t0
+    p, t = _box_queries(n_queries)
     order = np.lexsort((p[:, 0], np.floor(p[:, 1] / 0.02)))          # scanline-coherent like a tile
-    p, t = p[order], t[order]
-    ns = np.tile(UP, (len(p), 1))
-    out = {"n_photons": n_photons, "n_queries": len(p), "k": k, "tree3_build_s": build3, "tree4_build_s": build4,
-           "cpu_count": os.cpu_count()}
-    for name, kw in RUNS:
-        est = name.split("_")[0]
-        E = m.estimate(p, ns, t, estimator=est, k=k, **kw)[:, 0]
-        out[f"{name}_error"] = float(E.mean() - 1.0)
-        if est == "TEMPORAL":
-            out[f"{name}_candidates"] = m.stats["temporal_candidates"]
-    # Rates: estimators interleaved round-robin, best of 3 rounds (the machine is shared:
-    # the best round is the least disturbed one)
-    for _ in range(3):
+    qsets = {"scattered": (p[order], t[order]), "render": _render_like_queries()}
+    for qname, (p, t) in qsets.items():
+        ns = np.tile(UP, (len(p), 1))
+        out[f"{qname}_n_queries"] = len(p)
         for name, kw in RUNS:
             est = name.split("_")[0]
-            rate = _rate(lambda: m.estimate(p, ns, t, estimator=est, k=k, **kw), len(p))
-            out[f"{name}_lookups_per_s"] = max(out.get(f"{name}_lookups_per_s", 0.0), rate)
-    for name in ("TEMPORAL", "TEMPORAL_1.5", "KD4D"):
-        out[f"{name}_cost_vs_STANDARD"] = out["STANDARD_lookups_per_s"] / out[f"{name}_lookups_per_s"]
+            E = maps["scipy"].estimate(p, ns, t, estimator=est, k=k, **kw)[:, 0]
+            out[f"{qname}_{name}_error"] = float(E.mean() - 1.0)
+            if est == "TEMPORAL":
+                out[f"{name}_candidates"] = maps["scipy"].stats["temporal_candidates"]
+            if "numba" in maps:
+                E2 = maps["numba"].estimate(p, ns, t, estimator=est, k=k, **kw)[:, 0]
+                rel = np.abs(E2 - E) / np.maximum(E, 1e-30)
+                out[f"{qname}_{name}_numba_vs_scipy_max_rel_diff"] = float(rel.max())
+        for _ in range(3):
+            for be, m in maps.items():
+                for name, kw in RUNS:
+                    est = name.split("_")[0]
+                    rate = _rate(lambda: m.estimate(p, ns, t, estimator=est, k=k, **kw), len(p))
+                    key = f"{qname}_{be}_{name}_lookups_per_s"
+                    out[key] = max(out.get(key, 0.0), rate)
+        for be in maps:
+            for name in ("TEMPORAL", "TEMPORAL_1.5", "KD4D"):
+                out[f"{qname}_{be}_{name}_cost_vs_STANDARD"] = (out[f"{qname}_{be}_STANDARD_lookups_per_s"]
+                                                              / out[f"{qname}_{be}_{name}_lookups_per_s"])
+            if be == "numba":
+                for name, _ in RUNS:
+                    out[f"{qname}_{name}_speedup_numba_vs_scipy"] = (out[f"{qname}_numba_{name}_lookups_per_s"]
+                                                                   / out[f"{qname}_scipy_{name}_lookups_per_s"])
     return out
 
 
@@ -113,18 +167,25 @@ def bench_traced_errors(n_caustic=400_000, n_queries=8000) -> dict:
     return out
 
 
-def bench_render_cost(resolution=(96, 96), samples=8, n_caustic=200_000) -> dict:
+def bench_render_cost(resolution=(128, 128), samples=8, n_caustic=400_000) -> dict:
+    """render_s of the same render (same photons, k) with each estimator and backend, interleaved."""
     scene = _traced_scene()
     scene.resolution = resolution
     scene.camera.ortho_scale = 4.0
-    out = {"resolution": list(resolution), "samples": samples}
-    for est in ("STANDARD", "TEMPORAL", "KD4D"):
-        r = render(scene, RenderSettings(samples=samples, photons_caustic=n_caustic, photons_global=0,
-                                         estimator=est))
-        out[f"{est}_render_s"] = r.stats["render_s"]
-        out[f"{est}_lookup_s"] = r.stats["photon_stats"].get("lookup_s", 0.0)
-    for est in ("TEMPORAL", "KD4D"):
-        out[f"{est}_render_cost_vs_STANDARD"] = out[f"{est}_render_s"] / out["STANDARD_render_s"]
+    out = {"resolution": list(resolution), "samples": samples, "photons_caustic": n_caustic,
+           "load_avg_1min": os.getloadavg()[0]}
+    backends = ["numba", "scipy"] if _set_backend("numba") else ["scipy"]
+    for be in backends:
+        _set_backend(be)
+        for est in ("STANDARD", "TEMPORAL", "KD4D"):
+            r = render(scene, RenderSettings(samples=samples, photons_caustic=n_caustic, photons_global=0,
+                                             estimator=est))
+            out[f"{be}_{est}_render_s"] = r.stats["render_s"]
+            out[f"{be}_{est}_lookup_s"] = r.stats["photon_stats"].get("lookup_s", 0.0)
+            out[f"{be}_{est}_lookup_count"] = r.stats["photon_stats"].get("lookup_count", 0)
+        for est in ("TEMPORAL", "KD4D"):
+            out[f"{be}_{est}_render_cost_vs_STANDARD"] = out[f"{be}_{est}_render_s"] / out[f"{be}_STANDARD_render_s"]
+    _set_backend("numba")
     return out
 
 

@@ -16,19 +16,28 @@ Ray batches, each ray with a random shutter time:
   (``occluded``).
 
 Reported (per CPU second, see :func:`_best_of`): Mrays/s of the caster
-(embree and, on a subset, numpy), of raw embreex ``run()`` on the same rays
-against one float32 world-space scene at time 0 (no refinement, no shading),
-and the ratios motion/static cost and caster/raw speed.
+(embree, numba and, on a subset, numpy), of raw embreex ``run()`` on the same
+rays against one float32 world-space scene at time 0 (no refinement, no
+shading), and the ratios motion/static cost and caster/raw speed.  The numba
+backend runs on all cores, so it is also reported per wall-clock second
+(``*_wall_Mrays_s``, load-dependent), and its first-call JIT compile time with
+an empty and with a filled on-disk cache (fresh processes, see
+:func:`numba_compile_times`).
 """
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
 
 from stpm_core.motion import MotionTransform
 from stpm_core.raycast import make_caster
-from stpm_core.raycast.build import embree_available
+from stpm_core.raycast.build import embree_available, numba_available
 from stpm_core.scene import Instance, Material, Mesh, Scene
 
 __all__ = ["run", "icosphere", "grid", "bench_scene"]
@@ -144,6 +153,72 @@ def _best_of(f, repeats: int) -> float:
     return best
 
 
+def _cpu_and_wall(f) -> tuple[float, float]:
+    """CPU seconds of this process (all threads) and wall seconds of one call of f."""
+    c0, w0 = time.process_time(), time.perf_counter()
+    f()
+    return time.process_time() - c0, time.perf_counter() - w0
+
+
+# Run in a fresh interpreter: import, build a caster on a small scene, first intersect, first occluded
+_COMPILE_PROBE = """
+import time, json
+import numpy as np
+t0 = time.perf_counter()
+from benchmarks.bench_rays import icosphere, _mesh
+from stpm_core.raycast import make_caster
+from stpm_core.scene import Instance, Mesh, Scene, Material
+from stpm_core.motion import MotionTransform
+V, F = icosphere(2)
+M1 = np.eye(4); M1[:3, 3] = (0.5, 0, 0)
+sc = Scene(meshes=[_mesh(V, F)], instances=[Instance(0), Instance(0, MotionTransform(np.array([0.0, 1.0]),
+           np.stack([np.eye(4), M1])))], materials=[Material()])
+t1 = time.perf_counter()
+c = make_caster(sc, "numba")
+t2 = time.perf_counter()
+o = np.tile([0.0, -5.0, 0.0], (64, 1)); d = np.tile([0.0, 1.0, 0.0], (64, 1)); u = np.linspace(0, 1, 64)
+c.intersect(o, d, u)
+t3 = time.perf_counter()
+c.occluded(o, d, u, 10.0)
+t4 = time.perf_counter()
+print(json.dumps({"import_s": t1 - t0, "build_s": t2 - t1, "intersect_s": t3 - t2, "occluded_s": t4 - t3}))
+"""
+
+
+def _children_cpu():
+    """CPU seconds used by finished child processes (None where ``resource`` is missing: Windows)."""
+    try:
+        import resource
+    except ImportError:
+        return None
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def numba_compile_times() -> dict:
+    """First-use cost of the numba backend in fresh processes: {'cold': {...}, 'warm': {...}}.
+
+    cold = empty on-disk cache (every kernel compiles), warm = the cache the
+    cold run left (kernels load).  Each dict: import_s (numpy, stpm_core),
+    build_s (first make_caster: BVH build kernel), intersect_s, occluded_s (first
+    calls: traversal kernels), total_s (wall seconds, all load-dependent) and
+    process_cpu_s (CPU seconds of the whole child process, start-up included).
+    """
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    out = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=root)
+        for kind in ("cold", "warm"):
+            cpu0 = _children_cpu()
+            r = subprocess.run([sys.executable, "-c", _COMPILE_PROBE], env=env, cwd=root,
+                               capture_output=True, text=True, check=True)
+            out[kind] = json.loads(r.stdout.strip().splitlines()[-1])
+            out[kind]["total_s"] = sum(out[kind].values())
+            if cpu0 is not None:
+                out[kind]["process_cpu_s"] = _children_cpu() - cpu0
+    return out
+
+
 def _raw_embree(scene: Scene):
     """One float32 world-space embreex scene of all geometry at time 0 (the baseline)."""
     from embreex import rtcore_scene as rtcs
@@ -190,27 +265,47 @@ def run(n_rays: int = 131072, repeats: int = 7, seed: int = 0) -> dict:
     times = rng.uniform(0, 1, co.shape[0])
     stimes = rng.uniform(0, 1, so.shape[0])
     n_cam, n_sh = co.shape[0], so.shape[0]
-    if embree_available():
+    if numba_available():
+        # First-use JIT cost in fresh processes (empty / filled on-disk cache)
+        for kind, d in numba_compile_times().items():
+            for key, v in d.items():
+                out[f"numba_first_use_{kind}_{key}"] = v
+    backends = [b for b, ok in (("embree", embree_available()), ("numba", numba_available())) if ok]
+    if "numba" in backends:
+        # Import numba and load the compiled kernels before timing the builds
+        tiny = Scene(meshes=[_mesh(*icosphere(0))], instances=[Instance(0)], materials=[Material()])
+        make_caster(tiny, "numba").occluded(co[:64], cd[:64], times[:64], 1.0)
+    if backends:
         # Every job of every variant in each round, so load changes hit them all alike
         jobs = {}
         for variant, sc in scenes.items():
-            t0 = time.perf_counter()
-            caster = make_caster(sc, "embree")
-            out[f"embree_{variant}_build_s"] = time.perf_counter() - t0
-            es = _raw_embree(sc)
-            jobs.update({
-                f"embree_{variant}_camera": (n_cam, lambda c=caster: c.intersect(co, cd, times)),
-                f"raw_{variant}_camera": (n_cam, lambda e=es: _raw_run(e, co, cd)),
-                f"embree_{variant}_shadow": (n_sh, lambda c=caster: c.occluded(so, sd, stimes, sdist)),
-                f"raw_{variant}_shadow": (n_sh, lambda e=es: _raw_run(e, so, sd, sdist, "OCCLUDED")),
-                f"embree_{variant}_shadow_intersect": (n_sh, lambda c=caster: c.intersect(so, sd, stimes, sdist)),
-            })
+            for backend in backends:
+                t0 = time.perf_counter()
+                caster = make_caster(sc, backend)
+                out[f"{backend}_{variant}_build_s"] = time.perf_counter() - t0
+                caster.occluded(co[:64], cd[:64], times[:64], 1.0)          # load compiled kernels
+                jobs.update({
+                    f"{backend}_{variant}_camera": (n_cam, lambda c=caster: c.intersect(co, cd, times)),
+                    f"{backend}_{variant}_shadow": (n_sh, lambda c=caster: c.occluded(so, sd, stimes, sdist)),
+                    f"{backend}_{variant}_shadow_intersect": (n_sh, lambda c=caster: c.intersect(so, sd, stimes,
+                                                                                                    sdist)),
+                })
+            if "embree" in backends:
+                es = _raw_embree(sc)
+                jobs.update({
+                    f"raw_{variant}_camera": (n_cam, lambda e=es: _raw_run(e, co, cd)),
+                    f"raw_{variant}_shadow": (n_sh, lambda e=es: _raw_run(e, so, sd, sdist, "OCCLUDED")),
+                })
         best = {k: np.inf for k in jobs}
+        best_wall = {k: np.inf for k in jobs}
         for _ in range(repeats):
             for k, (_, f) in jobs.items():
-                best[k] = min(best[k], _best_of(f, 1))
+                cpu, wall = _cpu_and_wall(f)
+                best[k], best_wall[k] = min(best[k], cpu), min(best_wall[k], wall)
         for k, (n, _) in sorted(jobs.items()):
             out[f"{k}_Mrays_s"] = n / best[k] / 1e6
+            if k.startswith("numba"):
+                out[f"{k}_wall_Mrays_s"] = n / best_wall[k] / 1e6
     # numpy fallback (PairBVH) on a subset of the camera rays
     m = 2048
     sub = np.linspace(0, n_cam - 1, m).astype(int)
@@ -218,6 +313,8 @@ def run(n_rays: int = 131072, repeats: int = 7, seed: int = 0) -> dict:
         caster = make_caster(scenes[variant], "numpy")
         s = _best_of(lambda: caster.intersect(co[sub], cd[sub], times[sub]), 1)
         out[f"numpy_{variant}_camera_Mrays_s"] = m / s / 1e6
+        s = _best_of(lambda: caster.occluded(so[sub], sd[sub], stimes[sub], sdist[sub]), 1)
+        out[f"numpy_{variant}_shadow_Mrays_s"] = m / s / 1e6
     # numpy fallback on a small scene (1.5k triangles: icosphere + floor, moving sphere)
     small = Scene(meshes=[_mesh(*icosphere(3), smooth=True), _mesh(*grid(10, 10.0))],
                   instances=[Instance(0, MotionTransform(np.array([0.0, 1.0]),
@@ -225,10 +322,22 @@ def run(n_rays: int = 131072, repeats: int = 7, seed: int = 0) -> dict:
                              Instance(1)], materials=[Material()])
     m = 16384
     out["small_scene_triangles"] = 1280 + 200
-    for backend in (["embree"] if embree_available() else []) + ["numpy"]:
+    for backend in backends + ["numpy"]:
         caster = make_caster(small, backend)
+        caster.occluded(co[:64], cd[:64], times[:64], 1.0)
         s = _best_of(lambda: caster.intersect(co[:m], cd[:m], times[:m]), 3)
         out[f"{backend}_small_camera_Mrays_s"] = m / s / 1e6
+    if "numba" in backends:
+        # numba next to embree (per CPU second) and next to the numpy fallback
+        for variant in scenes:
+            for kind in ("camera", "shadow"):
+                if "embree" in backends:
+                    out[f"numba_over_embree_{variant}_{kind}"] = (out[f"numba_{variant}_{kind}_Mrays_s"]
+                                                                 / out[f"embree_{variant}_{kind}_Mrays_s"])
+        for variant in ("static", "motion"):
+            for kind in ("camera", "shadow"):
+                out[f"numba_over_numpy_{variant}_{kind}"] = (out[f"numba_{variant}_{kind}_Mrays_s"]
+                                                             / out[f"numpy_{variant}_{kind}_Mrays_s"])
     # Ratios (targets: motion cost <= 1.5 x static; caster >= 50 % of raw)
     if embree_available():
         for kind in ("camera", "shadow"):

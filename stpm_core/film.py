@@ -159,6 +159,34 @@ class Film:
                  values: dict[str, np.ndarray]) -> None:
         """Splat the samples of one tile (same result as :meth:`add_samples`, faster).
 
+        ``add_window(splat_tile(...))``: the splat itself touches no film state,
+        so worker threads can run it and leave only the addition to the caller.
+        """
+        self.add_window(self.splat_tile(x0, y0, tw, th, px, py, values))
+
+    def add_window(self, window) -> None:
+        """Add a window returned by :meth:`splat_tile` into the accumulators."""
+        if window is None:
+            return
+        (ya, yb, xa, xb), active, w = window
+        C = self.n_channels
+        k = w.shape[-1] - 1
+        dst = self._sum.reshape(self.height, self.width, C)[ya:yb, xa:xb]
+        j = 0
+        for c0, c in active:
+            dst[..., c0:c0 + c] += w[..., j:j + c]
+            j += c
+        self._wsum.reshape(self.height, self.width)[ya:yb, xa:xb] += w[..., k]
+
+    def splat_tile(self, x0: int, y0: int, tw: int, th: int, px: np.ndarray, py: np.ndarray,
+                   values: dict[str, np.ndarray]):
+        """Filter-weighted sums of one tile's samples over the pixels they reach.
+
+        Returns None (nothing to add) or ``((ya, yb, xa, xb), active, w)``: the
+        image rows / columns the window covers, the (first channel, channels)
+        of the passes it holds, and w (yb - ya, xb - xa, k + 1) float32 sums
+        (last channel: the weight sum).  Reads only the film's size and filter.
+
         The samples must be laid out as :func:`stpm_core.integrator.camera_samples`
         makes them: the tile's pixels [x0, x0 + tw) x [y0, y0 + th) in row-major
         order, each pixel's S = n / (tw th) samples consecutive and inside that
@@ -167,23 +195,32 @@ class Film:
 
             sums[j, k, c] = sum_s w_k(x_js) V[j, s, c]     (k = filter offset)
 
-        followed by K shifted block additions.  Float32 throughout (each tile
+        followed by K shifted block additions.  Passes that are all zero in the
+        tile (e.g. Caustic without photons) are skipped.  Float32 throughout (each tile
         sums at most K * S products per pixel before it reaches the float32
         accumulators).
         """
         n = px.shape[0]
         P = tw * th
         if n == 0 or P == 0:
-            return
+            return None
         S = n // P
         C = self.n_channels
-        # Sample values (n, C + 1) float32; the last column counts the weight sum
-        V = np.empty((n, C + 1), np.float32)
-        c0 = 0
+        # Sample values (n, k + 1) float32 of the passes that are not all zero in this
+        # tile (they add nothing); the last column counts the weight sum
+        active, c0 = [], 0                       # (first image channel, channels, array)
         for name, c, _ in PASSES:
-            V[:, c0:c0 + c] = np.asarray(values[name]).reshape(n, c)
+            a = np.asarray(values[name]).reshape(n, c)
+            if np.any(a):
+                active.append((c0, c, a))
             c0 += c
-        V[:, C] = 1.0
+        k = sum(c for _, c, _ in active)
+        V = np.empty((n, k + 1), np.float32)
+        j = 0
+        for _, c, a in active:
+            V[:, j:j + c] = a
+            j += c
+        V[:, k] = 1.0
         # Separable filter weights per offset: (n, k) along x and y
         offsets = self._offsets()
         r = self.radius
@@ -197,22 +234,21 @@ class Film:
             wx = wy = np.ones((n, 1), np.float32)
         k1 = len(offsets)
         Wk = (wy[:, :, None] * wx[:, None, :]).reshape(P, S, k1 * k1)   # offset k = (iy, ix)
-        sums = np.matmul(Wk.transpose(0, 2, 1), V.reshape(P, S, C + 1))  # (P, K, C + 1)
-        sums = sums.reshape(th, tw, k1 * k1, C + 1)
-        # Shifted block additions, clipped to the image
-        Simg = self._sum.reshape(self.height, self.width, C)
-        Wimg = self._wsum.reshape(self.height, self.width)
-        for iy, oy in enumerate(offsets):
-            ya, yb = max(y0 + oy, 0), min(y0 + oy + th, self.height)
-            if ya >= yb:
-                continue
-            for ix, ox in enumerate(offsets):
-                xa, xb = max(x0 + ox, 0), min(x0 + ox + tw, self.width)
-                if xa >= xb:
-                    continue
-                blk = sums[ya - y0 - oy:yb - y0 - oy, xa - x0 - ox:xb - x0 - ox, iy * k1 + ix]
-                Simg[ya:yb, xa:xb] += blk[..., :C]
-                Wimg[ya:yb, xa:xb] += blk[..., C]
+        sums = np.matmul(Wk.transpose(0, 2, 1), V.reshape(P, S, k + 1))  # (P, K, k + 1)
+        sums = sums.reshape(th, tw, k1 * k1, k + 1)
+        # Shifted block additions into a local window (the tile plus the filter margin)
+        lo, hi = offsets[0], offsets[-1]
+        win = np.zeros((th + hi - lo, tw + hi - lo, k + 1), np.float32)
+        for iy in range(k1):
+            for ix in range(k1):
+                win[iy:iy + th, ix:ix + tw] += sums[:, :, iy * k1 + ix]
+        # The window, clipped to the image, into the accumulators (active passes only)
+        ya, yb = max(y0 + lo, 0), min(y0 + hi + th, self.height)
+        xa, xb = max(x0 + lo, 0), min(x0 + hi + tw, self.width)
+        if ya >= yb or xa >= xb:
+            return None
+        w = win[ya - y0 - lo:yb - y0 - lo, xa - x0 - lo:xb - x0 - lo]
+        return (ya, yb, xa, xb), [(c0, c) for c0, c, _ in active], w
 
     def resolve(self) -> dict[str, np.ndarray]:
         """The passes as name -> (H, W, C) float32: weighted sums over weight sums.

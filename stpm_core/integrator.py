@@ -2,8 +2,9 @@
 *and* shutter time, specular chains, next-event estimation and photon look-ups.
 
 Wavefront layout: the image is cut into tiles; a tile's samples (pixels x spp,
-about 16k at once) are traced together, bounce by bounce, over a shrinking set
-of live paths.  No Python loop runs per ray.
+about 64k at once) are traced together, bounce by bounce, over a shrinking set
+of live paths.  No Python loop runs per ray.  Tiles run on a thread pool and
+reach the film in tile order (results do not depend on the thread count).
 
 Per camera sample i (docs/rendering.md has the equations):
 
@@ -14,7 +15,8 @@ Per camera sample i (docs/rendering.md has the equations):
 * the path follows delta lobes (mirror, clear glass, specular coat) from the
   camera; at every non-delta vertex ``x`` reached that way it is shaded with
 
-  - Direct   = sum_lights f(wo, wi) |cos| L_i / p      (shadow ray at t_i)
+  - Direct   = sum_lights f(wo, wi) |cos| L_i / p      (shadow ray at t_i;
+               the lights include one entry per emissive instance)
   - Caustic  = rho_d / pi * E_caustic(x, n, t_i)      (``PhotonMaps.estimate``)
   - Indirect = rho_d / pi * E_global(x, n, t_i)
   - Emit     = emission and light shapes seen along the chain + world radiance
@@ -125,32 +127,54 @@ def _face_forward(n: np.ndarray, w: np.ndarray) -> np.ndarray:
     return n * np.where(np.sum(n * w, axis=1) >= 0.0, 1.0, -1.0)[:, None]
 
 
+def _rows(a: np.ndarray, sel: np.ndarray | None) -> np.ndarray:
+    """a[sel], or a itself when sel is None (every row, in order: no copy)."""
+    return a if sel is None else a[sel]
+
+
 def _direct(ctx, p, ng, ns, wo, mat, times, rng, stats: TraceStats) -> np.ndarray:
-    """Next-event estimate (n, 3): sum over lights of f(wo, wi) |cos(ns, wi)| L_i / p * V."""
+    """Next-event estimate (n, 3): sum over lights of f(wo, wi) |cos(ns, wi)| L_i / p * V.
+
+    Lights of zero power are skipped; shadow rays are cast only for samples
+    whose unshadowed contribution is positive (light in front, BSDF > 0).
+    """
     n = p.shape[0]
     Ld = np.zeros((n, 3))
-    for li in range(len(ctx.lights.lights)):
+    lights = ctx.lights
+    for li in range(len(lights)):
+        if lights.power[li] <= 0.0:
+            continue
         # Sample a point / direction on the light at each sample's time
-        wi, dist, weight = ctx.lights.sample_direct(li, p, times, rng.random((n, 2)))
+        wi, dist, weight = lights.sample_direct(li, p, times, rng.random((n, 2)))
         f = bsdf_eval(ctx.table, mat, wo, wi, ns, ng)
-        contrib = f * np.abs(np.sum(ns * wi, axis=1))[:, None] * weight
+        contrib = f * (np.abs(np.einsum("ij,ij->i", ns, wi)))[:, None]
+        contrib *= weight
         live = np.nonzero(np.any(contrib > 0.0, axis=1))[0]
         if live.size == 0:
             continue
         # Shadow rays at the same time, stopping just short of the light
-        o = _offset(p[live], ng[live], wi[live], ctx.eps)
-        d = dist[live]
-        tmax = np.where(np.isfinite(d), d * (1.0 - 1e-6) - 2.0 * ctx.eps, np.inf)
-        blocked = ctx.caster.occluded(o, wi[live], times[live], tmax)
+        all_rows = live.size == n
+        sel = None if all_rows else live
+        wl, pl, dl = _rows(wi, sel), _rows(p, sel), _rows(dist, sel)
+        o = _offset(pl, _rows(ng, sel), wl, ctx.eps)
+        # Aim from the offset origin at the light point itself and stop a margin short of
+        # it: emissive triangles are geometry the shadow ray must not reach
+        fin = np.isfinite(dl)
+        v = np.where(fin[:, None], pl + np.where(fin, dl, 0.0)[:, None] * wl - o, wl)
+        s = np.sqrt(np.einsum("ij,ij->i", v, v))
+        dirs = v / s[:, None]
+        tmax = np.where(fin, s * (1.0 - 1e-6) - 2.0 * ctx.eps, np.inf)
+        blocked = ctx.caster.occluded(o, dirs, _rows(times, sel), tmax)
         stats.shadow_rays += live.size
-        Ld[live] += np.where(blocked[:, None], 0.0, contrib[live])
+        contrib[live[blocked]] = 0.0
+        Ld += contrib
     return Ld
 
 
-def _photon_term(ctx, kind: str, p, ns_f, wo, mat, times, stats: TraceStats) -> np.ndarray:
-    """rho_d / pi * E_kind(p, ns, t) (n, 3), zero when there is no such map."""
+def _photon_term(ctx, kind: str, p, ns_f, wo, mat, times, stats: TraceStats) -> np.ndarray | None:
+    """rho_d / pi * E_kind(p, ns, t) (n, 3), None when there is no such map."""
     if ctx.maps is None or not ctx.map_kinds.get(kind, False) or p.shape[0] == 0:
-        return np.zeros((p.shape[0], 3))
+        return None
     rho = diffuse_albedo(ctx.table, mat, wo, ns_f)
     live = np.nonzero(np.any(rho > 0.0, axis=1))[0]
     out = np.zeros((p.shape[0], 3))
@@ -179,6 +203,8 @@ def _seen_lights(lights, o: np.ndarray, d: np.ndarray, t: np.ndarray, t_scene: n
     n = o.shape[0]
     L = np.zeros((n, 3))
     for li, light in enumerate(lights.lights):
+        if light.type == "MESH":
+            continue                          # emissive triangles: the caster hits them (Emit)
         color = np.asarray(light.color, float)
         if light.power <= 0 or not np.any(color > 0):
             continue
@@ -234,11 +260,15 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
 
     Returns pass name -> (n, C) float64 (Combined alpha = 1, or coverage when
     the film is transparent; Depth along the view axis; Normal at the first hit).
+
+    Bookkeeping: ``idx = None`` stands for "every sample, in order" (the first
+    bounce, and later ones while no path has ended), so the common case pays
+    for no gathers or scatters; ``beta = None`` is a throughput of 1.
     """
     n = o.shape[0]
-    # Path state (all (live,) rows; idx maps them back to samples)
-    idx = np.arange(n)                       # sample index of each live path
-    beta = np.ones((n, 3))                   # throughput of the delta chain
+    # Path state: idx maps live rows to samples (None = all), beta their throughput (None = 1)
+    idx = None
+    beta = None
     tmax = tmax0                             # camera clipping for the first segment
     # Per-sample outputs
     L_emit = np.zeros((n, 3))
@@ -250,68 +280,99 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
     covered = np.zeros(n)
     world_L = ctx.world_radiance
 
+    def add(dst: np.ndarray, rows, value: np.ndarray, w=None) -> None:
+        """dst[idx[rows]] += w * value (rows None = all live rows; w None = beta)."""
+        w = beta if w is None else w
+        if w is not None:
+            value = (w if rows is None else w[rows]) * value
+        target = idx if rows is None else (rows if idx is None else idx[rows])
+        if target is None:
+            dst += value
+        else:
+            dst[target] += value
+
     for bounce in range(ctx.max_depth + 1):
-        if idx.size == 0:
+        m = n if idx is None else idx.size
+        if m == 0:
             break
-        t = times[idx]
+        t = times if idx is None else times[idx]
         hits = ctx.caster.intersect(o, d, t, tmax)
         if bounce == 0:
-            stats.camera_rays += idx.size
+            stats.camera_rays += m
         else:
-            stats.bounce_rays += idx.size
+            stats.bounce_rays += m
         hit = hits.hit
+        all_hit = bool(hit.all())
 
         # -- Lights seen through delta lobes (before the next surface) -------------------------
         # Cycles' defaults: lights are invisible to camera rays (visible_camera off) and
         # visible to glossy / transmission rays, i.e. in mirrors and through glass.
         if ctx.visible_lights:
-            L_emit[idx] += beta * _seen_lights(ctx.lights, o, d, t, hits.t, camera_ray=(bounce == 0),
-                                                visible_camera=ctx.light_visible_camera)
+            add(L_emit, None, _seen_lights(ctx.lights, o, d, t, hits.t, camera_ray=(bounce == 0),
+                                           visible_camera=ctx.light_visible_camera))
 
         # -- Escaped rays see the world ------------------------------------------------
-        miss = ~hit
-        if np.any(miss) and np.any(world_L > 0):
+        if not all_hit and np.any(world_L > 0):
             if not (bounce == 0 and ctx.film_transparent):
-                L_emit[idx[miss]] += beta[miss] * world_L
+                miss = np.nonzero(~hit)[0]
+                add(L_emit, miss, np.broadcast_to(world_L, (miss.size, 3)))
 
         # -- First hit: Depth, Normal, coverage -------------------------------------------
         if bounce == 0:
-            hs = idx[hit]
-            depth[hs] = np.sum((hits.position[hit] - cam_pos[hs]) * cam_axis[hs], axis=1)
-            normal[hs] = hits.ns[hit]
-            covered[hs] = 1.0
+            hs = None if all_hit else np.nonzero(hit)[0]
+            pos = hits.position if all_hit else hits.position[hs]
+            hs_all = slice(None) if all_hit else hs
+            depth[hs_all] = np.einsum("ij,ij->i", pos - _rows(cam_pos, hs), _rows(cam_axis, hs))
+            normal[hs_all] = _rows(hits.ns, hs)
+            covered[hs_all] = 1.0
 
         # -- Keep the paths that hit something ------------------------------------------
-        idx, beta, t = idx[hit], beta[hit], t[hit]
-        if idx.size == 0:
-            break
-        p, ng, ns = hits.position[hit], hits.ng[hit], hits.ns[hit]
-        mat = hits.material[hit]
-        wo = -d[hit]                          # directions are unit (camera, bsdf_sample)
+        if not all_hit:
+            keep = np.nonzero(hit)[0]
+            if keep.size == 0:
+                break
+            idx = keep if idx is None else idx[keep]
+            beta = None if beta is None else beta[keep]
+            t = t[keep]
+            p, ng, ns, mat = hits.position[keep], hits.ng[keep], hits.ns[keep], hits.material[keep]
+            wo = -d[keep]                     # directions are unit (camera, bsdf_sample)
+        else:
+            p, ng, ns, mat = hits.position, hits.ng, hits.ns, hits.material
+            wo = -d
 
         # -- Emission of surfaces seen along the chain ---------------------------------------
         if ctx.any_emission:
-            L_emit[idx] += beta * emission(ctx.table, mat)
+            e_rows = np.nonzero(ctx.emissive[mat])[0]
+            if e_rows.size:
+                add(L_emit, e_rows, emission(ctx.table, mat[e_rows]))
 
         # -- Shade non-delta vertices: Direct, Caustic, Indirect -----------------------------
-        sh = np.nonzero(has_nondelta(ctx.table, mat))[0]
-        if sh.size:
-            ns_f = _face_forward(ns[sh], wo[sh])
-            b = beta[sh]
-            L_direct[idx[sh]] += b * _direct(ctx, p[sh], ng[sh], ns[sh], wo[sh], mat[sh], t[sh], rng, stats)
-            L_caustic[idx[sh]] += b * _photon_term(ctx, "caustic", p[sh], ns_f, wo[sh], mat[sh], t[sh], stats)
-            L_indirect[idx[sh]] += b * _photon_term(ctx, "global", p[sh], ns_f, wo[sh], mat[sh], t[sh], stats)
+        nd = has_nondelta(ctx.table, mat)
+        sh = None if nd.all() else np.nonzero(nd)[0]
+        if sh is None or sh.size:
+            p_s, ng_s, ns_s, wo_s = _rows(p, sh), _rows(ng, sh), _rows(ns, sh), _rows(wo, sh)
+            mat_s, t_s = _rows(mat, sh), _rows(t, sh)
+            if len(ctx.lights):
+                add(L_direct, sh, _direct(ctx, p_s, ng_s, ns_s, wo_s, mat_s, t_s, rng, stats))
+            if ctx.maps is not None:
+                ns_f = _face_forward(ns_s, wo_s)
+                for kind, dst in (("caustic", L_caustic), ("global", L_indirect)):
+                    val = _photon_term(ctx, kind, p_s, ns_f, wo_s, mat_s, t_s, stats)
+                    if val is not None:
+                        add(dst, sh, val)
 
         if bounce == ctx.max_depth:
             break
         # -- Continue through delta lobes only (materials without one end here) -------------
-        u = rng.random((idx.size, 3))
         spec = np.nonzero(ctx.has_delta[mat])[0]
         if spec.size == 0:
             break
-        idx, beta, p, ng, ns, wo, mat, u = idx[spec], beta[spec], p[spec], ng[spec], ns[spec], wo[spec], mat[spec], u[spec]
+        u = rng.random((spec.size, 3))
+        idx = spec if idx is None else idx[spec]
+        beta = None if beta is None else beta[spec]
+        p, ng, ns, wo, mat = p[spec], ng[spec], ns[spec], wo[spec], mat[spec]
         wi, weight, is_delta = bsdf_sample(ctx.table, mat, wo, ns, ng, u)
-        beta = beta * weight
+        beta = weight if beta is None else beta * weight
         go = is_delta & np.any(beta > 0.0, axis=1)
 
         # -- Possibly terminate the chain with Russian roulette -------------------------------
@@ -351,6 +412,7 @@ class _Context:
     has_delta: np.ndarray = None             # (M + 1,) bool per material; last row = miss
     visible_lights: bool = False             # some light has a shape a ray can hit
     any_emission: bool = True                # some material emits
+    emissive: np.ndarray = None              # (M + 1,) bool per material: emits
     light_visible_camera: list = None        # per light: seen by camera rays (Blender's visible_camera)
 
 
@@ -420,6 +482,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                    film_transparent=bool(scene.metadata.get("film_transparent", False)))
     ctx.has_delta = _has_delta_lobe(scene.materials)
     ctx.any_emission = any(np.any(np.asarray(m.emission) > 0) for m in scene.materials)
+    ctx.emissive = np.any(table.emission > 0, axis=1)
     ctx.light_visible_camera = [bool(v) for v in (scene.metadata.get("light_visible_camera") or [])]
     ctx.visible_lights = any(l.type == "AREA" or (l.type in ("POINT", "SPOT") and l.radius > 0)
                              for l in lights.lights)
@@ -432,7 +495,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     static_cam = cam.transform.is_static
 
     def trace_tile(ti: int):
-        """Samples of tile ti: (px, py, pass values, TraceStats).  Pure function of (seed, stream, ti)."""
+        """Tile ti traced and splatted: (film window, TraceStats).  Pure function of (seed, stream, ti)."""
         x0, y0 = tiles[ti]
         tstats = TraceStats()
         # Pixels of the tile and their camera samples
@@ -450,7 +513,8 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
         else:
             tmax0 = cam.clip_end / np.maximum(np.sum(d * axis, axis=1), 1e-12)
         values = shade_paths(ctx, o, d, times, tmax0, rng, tstats, pos, axis)
-        return (x0, y0, gx.shape[1], gx.shape[0]), px, py, values, tstats
+        # Filter splat here (on the worker); the film only adds the window, in tile order
+        return film.splat_tile(x0, y0, gx.shape[1], gx.shape[0], px, py, values), tstats
 
     # Trace tiles on worker threads (embree and most numpy kernels release the GIL);
     # the film takes them in tile order, so the result does not depend on the threads.
@@ -470,8 +534,8 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                     if tj not in pending:
                         pending[tj] = pool.submit(trace_tile, tj)
                 result = pending.pop(ti).result()
-            (x0, y0, tw, th), px, py, values, tstats = result
-            film.add_tile(x0, y0, tw, th, px, py, values)
+            window, tstats = result
+            film.add_window(window)
             stats.merge(tstats)
             if progress is not None:
                 progress(f0 + (f1 - f0) * (ti + 1) / len(tiles), f"tracing tile {ti + 1}/{len(tiles)}")

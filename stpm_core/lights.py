@@ -13,6 +13,10 @@ code name is in docs/lights-and-materials.md):
   included, as Cycles does).
 * SUN of strength S: irradiance ``color * S`` W/m^2 on a facing surface;
   ``angle`` > 0 spreads it uniformly over a cone of that angular diameter.
+* MESH (:class:`MeshLight`, one per instance with emissive triangles, after
+  the scene's lights in :attr:`LightSet.lights`): ``Material.emission`` is
+  radiance emitted from both sides, flux ``2 pi Le A``; triangles sampled by
+  power, points uniform, at each sample's time.
 
 Queries (all vectorised, each sample at its own shutter time; a light's pose
 is ``light.transform.at(times)``):
@@ -29,7 +33,7 @@ import numpy as np
 from .sampling import (concentric_disk, cosine_hemisphere, orthonormal_basis, uniform_cone,
                        uniform_sphere)
 
-__all__ = ["LightSet", "spot_attenuation"]
+__all__ = ["LightSet", "MeshLight", "mesh_lights", "spot_attenuation"]
 
 INV_4PI = 1.0 / (4.0 * np.pi)
 
@@ -89,10 +93,181 @@ def _spot_solid_angle(light) -> float:
 def _ray_sphere_far(o: np.ndarray, d: np.ndarray, c: np.ndarray, r: float, inside: np.ndarray) -> np.ndarray:
     """Distance along unit d (n, 3) from o to a sphere (c, r): near hit from outside, far hit from inside."""
     oc = o - c
-    b = np.sum(oc * d, axis=-1)
-    disc = np.maximum(b * b - (np.sum(oc * oc, axis=-1) - r * r), 0.0)
+    b = np.einsum("ij,ij->i", oc, d)
+    disc = np.maximum(b * b - (np.einsum("ij,ij->i", oc, oc) - r * r), 0.0)
     s = np.sqrt(disc)
     return np.where(inside, -b + s, np.maximum(-b - s, 0.0))
+
+
+# ---------------------------------------------------------------------------
+# Emissive meshes as lights
+# ---------------------------------------------------------------------------
+
+class _CentroidMotion:
+    """Pose of a mesh light for code that treats lights as posed objects.
+
+    ``at(t)`` gives identity rotation and, as translation, the area-weighted
+    centroid of the emitting triangles at time t (what a caller asking "where
+    is this light" wants, e.g. to aim caustic photons).
+    """
+
+    def __init__(self, mesh_light: "MeshLight"):
+        self._ml = mesh_light
+        self.is_static = mesh_light.is_static
+
+    def at(self, t):
+        scalar = np.ndim(t) == 0
+        t = np.atleast_1d(np.asarray(t, float))
+        out = np.broadcast_to(np.eye(4), (t.shape[0], 4, 4)).copy()
+        out[:, :3, 3] = self._ml.centroid(t)
+        return out[0] if scalar else out
+
+
+class MeshLight:
+    """The emitting triangles of one scene instance, as one light entry.
+
+    Surface emission is radiance ``Le`` W/(m^2 sr) (``Material.emission``),
+    emitted from both sides of every triangle, as Cycles' Emission shader on a
+    mesh.  A triangle of world area A (at the time asked for) emits
+    ``Phi = 2 pi Le A`` W.
+
+    Sampling: triangle j with the fixed probability ``q_j`` proportional to
+    ``Le_j A_j`` (mean RGB radiance times the area averaged over shutter times
+    0, 1/2, 1), then a uniform point of that triangle at the sample's own time
+    (pdf ``q_j / A_j(t)`` per unit area).  Any q_j > 0 keeps the estimators
+    unbiased; proportional to power keeps their variance low.
+
+    Attributes (besides the ones every light entry has: ``type = 'MESH'``,
+    ``color``, ``power`` (W, mean RGB flux at mid-shutter), ``transform``
+    (:class:`_CentroidMotion`), ``radius = 0``, ``name``):
+    instance : index into ``scene.instances``.
+    prims : (F_e,) triangle indices (within the mesh) that emit.
+    Le : (F_e, 3) radiance of each.
+    """
+
+    type = "MESH"
+    radius = 0.0
+    use_soft_falloff = False
+
+    def __init__(self, scene, instance: int, prims: np.ndarray, Le: np.ndarray):
+        inst = scene.instances[instance]
+        mesh = scene.meshes[inst.mesh]
+        self.instance = int(instance)
+        self.name = f"{inst.name} (emission)"
+        self.prims = np.asarray(prims, np.int64)
+        self.Le = np.asarray(Le, float)
+        self.color = np.ones(3)
+        self._inst_transform = inst.transform
+        tri = np.asarray(mesh.triangles, np.int64)[self.prims]
+        V = np.asarray(mesh.vertices, np.float64)
+        if mesh.is_deforming:
+            # (K, F_e, 3, 3) object-space corners at each vertex step
+            self._steps = np.asarray(mesh.vertex_times, float)
+            self._corners = V[:, tri]
+        else:
+            self._steps = None
+            self._corners = (V[0] if V.ndim == 3 else V)[tri]
+        self.is_static = inst.transform.is_static and self._steps is None
+        self._world_static = None
+        if self.is_static:
+            M = inst.transform.matrices[0]
+            self._world_static = self._corners @ M[:3, :3].T + M[:3, 3]
+        # Triangle choice: q_j ~ mean(Le_j) * area averaged over three shutter times
+        A = np.mean([self._areas_at(t) for t in (0.0, 0.5, 1.0)], axis=0)
+        w = np.mean(self.Le, axis=1) * A
+        if not np.any(w > 0):
+            w = np.ones_like(w)
+        w = np.maximum(w, 1e-12 * w.max())      # every triangle keeps a chance
+        self.q = w / w.sum()
+        self.cdf = np.cumsum(self.q)
+        self.cdf[-1] = 1.0
+        self.transform = _CentroidMotion(self)
+        self.power = float(np.mean(self.flux_at(0.5)))
+
+    # -- geometry at times ------------------------------------------------------------
+    def corners(self, j: np.ndarray, times: np.ndarray) -> np.ndarray:
+        """World corners (n, 3, 3) of emitting triangles j (n,) at times (n,)."""
+        if self._world_static is not None:
+            return self._world_static[j]
+        if self._steps is None:
+            C = self._corners[j]
+        else:
+            K = self._steps.shape[0]
+            i = np.clip(np.searchsorted(self._steps, times, side="right") - 1, 0, K - 2)
+            a = np.clip((times - self._steps[i]) / (self._steps[i + 1] - self._steps[i]), 0.0, 1.0)
+            C = (1.0 - a)[:, None, None] * self._corners[i, j] + a[:, None, None] * self._corners[i + 1, j]
+        M = self._inst_transform.at(times)
+        return np.einsum("nij,nkj->nki", M[:, :3, :3], C) + M[:, None, :3, 3]
+
+    def _all_corners_at(self, t: float) -> np.ndarray:
+        """World corners (F_e, 3, 3) of every emitting triangle at one time t (one matrix)."""
+        if self._world_static is not None:
+            return self._world_static
+        if self._steps is None:
+            C = self._corners
+        else:
+            K = self._steps.shape[0]
+            i = int(np.clip(np.searchsorted(self._steps, t, side="right") - 1, 0, K - 2))
+            a = float(np.clip((t - self._steps[i]) / (self._steps[i + 1] - self._steps[i]), 0.0, 1.0))
+            C = (1.0 - a) * self._corners[i] + a * self._corners[i + 1]
+        M = self._inst_transform.at(float(t))
+        return C @ M[:3, :3].T + M[:3, 3]
+
+    def _areas_at(self, t: float) -> np.ndarray:
+        C = self._all_corners_at(t)
+        return 0.5 * np.linalg.norm(np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0]), axis=-1)
+
+    def flux_at(self, t: float) -> np.ndarray:
+        """Total emitted flux (3,) W at time t: 2 pi sum_j Le_j A_j(t) (both sides)."""
+        return 2.0 * np.pi * np.sum(self.Le * self._areas_at(t)[:, None], axis=0)
+
+    def centroid(self, times: np.ndarray) -> np.ndarray:
+        """Area-weighted centroid (n, 3) of the emitting triangles at times (n,)."""
+        out = np.empty((times.shape[0], 3))
+        for k, t in enumerate(times):
+            C = self._all_corners_at(t)
+            A = 0.5 * np.linalg.norm(np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0]), axis=-1)
+            out[k] = np.sum(C.mean(axis=1) * A[:, None], axis=0) / max(A.sum(), 1e-300)
+        return out
+
+    def sample_points(self, times: np.ndarray, u: np.ndarray):
+        """Points on the emitter at times (n,) from u (n, 2).
+
+        u[:, 0] picks the triangle (by the CDF of q) and is then rescaled to
+        [0, 1) inside the chosen interval, so two numbers give both the
+        triangle and the point.
+
+        Returns q (n, 3) points, nrm (n, 3) unit geometric normals, A (n,)
+        world areas of their triangles, Le (n, 3) radiance, pq (n,) = q_j.
+        """
+        j = np.minimum(np.searchsorted(self.cdf, u[:, 0], side="right"), self.q.shape[0] - 1)
+        lo = self.cdf[j] - self.q[j]
+        u0 = np.clip((u[:, 0] - lo) / self.q[j], 0.0, 1.0 - 1e-12)
+        C = self.corners(j, times)
+        e1, e2 = C[:, 1] - C[:, 0], C[:, 2] - C[:, 0]
+        cr = np.cross(e1, e2)
+        two_A = np.sqrt(np.einsum("ij,ij->i", cr, cr))
+        nrm = cr / np.maximum(two_A, 1e-300)[:, None]
+        # Uniform point: barycentrics (1 - s, s (1 - v), s v) with s = sqrt(u0)
+        s = np.sqrt(u0)
+        b1, b2 = s * (1.0 - u[:, 1]), s * u[:, 1]
+        q = C[:, 0] + b1[:, None] * e1 + b2[:, None] * e2
+        return q, nrm, 0.5 * two_A, self.Le[j], self.q[j]
+
+
+def mesh_lights(scene) -> list[MeshLight]:
+    """One :class:`MeshLight` per instance with emissive triangles (instance order)."""
+    E = np.array([np.asarray(m.emission, float) for m in scene.materials]).reshape(-1, 3)
+    out = []
+    for i, inst in enumerate(scene.instances):
+        mid = np.asarray(scene.meshes[inst.mesh].material_ids, np.int64)
+        if mid.size == 0 or E.shape[0] == 0:
+            continue
+        Le = E[np.clip(mid, 0, E.shape[0] - 1)]
+        prims = np.nonzero(np.any(Le > 0, axis=1))[0]
+        if prims.size:
+            out.append(MeshLight(scene, i, prims, Le[prims]))
+    return out
 
 
 class LightSet:
@@ -100,7 +275,11 @@ class LightSet:
 
     Attributes
     ----------
-    lights : list[scene.Light].
+    lights : list: the scene's lights (``scene.Light``, same indices as
+        ``scene.lights``) followed by one :class:`MeshLight` (``type == 'MESH'``)
+        per instance with emissive triangles.  Every query below takes an index
+        into this list and treats both kinds alike.
+    n_scene_lights : how many of them are ``scene.lights``.
     power : (L,) float64 total emitted flux per light in W (mean over RGB), for
         splitting photons in proportion to power.
     scene_bounds : ((3,), (3,)) world bounds over the shutter (suns aim their
@@ -108,7 +287,8 @@ class LightSet:
     """
 
     def __init__(self, scene):
-        self.lights = list(scene.lights)
+        self.lights = list(scene.lights) + mesh_lights(scene)
+        self.n_scene_lights = len(scene.lights)
         lo, hi = scene.bounds()
         self.scene_bounds = (np.asarray(lo, float), np.asarray(hi, float))
         # Bounding sphere of the scene (suns emit from a disc covering it)
@@ -137,6 +317,8 @@ class LightSet:
     def flux(self, li: int) -> np.ndarray:
         """Total emitted flux (3,) W of light li (what :meth:`emit` photons sum to)."""
         l = self.lights[li]
+        if l.type == "MESH":
+            return l.flux_at(0.5)
         color = np.asarray(l.color, float)
         if l.type == "POINT":
             return color * float(l.power)
@@ -232,7 +414,17 @@ class LightSet:
             return self._sample_point(li, p, times, u)
         if l.type == "AREA":
             return self._sample_area(li, p, times, u)
+        if l.type == "MESH":
+            return self._sample_mesh(li, p, times, u)
         return self._sample_sun(li, p, times, u)
+
+    def _sample_mesh(self, li, p, times, u):
+        """MESH: triangle by power, uniform point; weight = Le |cos_l| A / (q_j t^2) (two-sided)."""
+        q, nrm, A, Le, pq = self.lights[li].sample_points(np.broadcast_to(times, (p.shape[0],)), u)
+        wi, dist = _normalize(q - p)
+        cos_l = np.abs(np.einsum("ij,ij->i", wi, nrm))
+        g = cos_l * A / (pq * np.maximum(dist * dist, 1e-300))
+        return wi, dist, Le * g[:, None]
 
     def _sample_point(self, li, p, times, u):
         """POINT / SPOT: true point (r = 0), disk facing p (soft falloff) or sphere."""
@@ -258,7 +450,9 @@ class LightSet:
             # sphere from inside).  Radiance L = I / (pi r^2); weight = L / pdf.
             inside = d <= r
             one_minus_cos = np.where(inside, 2.0, _one_minus_cos_from_sin2((r * r) / np.maximum(d * d, 1e-300)))
-            local = np.where(inside[:, None], uniform_sphere(u), uniform_cone(u, 1.0 - one_minus_cos))
+            local = uniform_cone(u, 1.0 - one_minus_cos)
+            if inside.any():
+                local[inside] = uniform_sphere(u[inside])
             wi = _local_to_world(local, -to_p)
             dist = _ray_sphere_far(p, wi, c, r, inside)
             omega = 2.0 * np.pi * one_minus_cos
@@ -327,8 +521,8 @@ class LightSet:
         L = np.zeros((n, 3))
         found = np.zeros(n, bool)
         for li, l in enumerate(self.lights):
-            if l.type == "SUN" or (l.type in ("POINT", "SPOT") and l.radius <= 0.0):
-                continue
+            if l.type in ("SUN", "MESH") or (l.type in ("POINT", "SPOT") and l.radius <= 0.0):
+                continue          # MESH: the caster hits the triangles themselves
             t, Le = self._hit_one(li, o, d, times)
             closer = (t > 0) & (t < t_best)
             t_best = np.where(closer, t, t_best)
@@ -422,6 +616,14 @@ class LightSet:
             omega_c = 2.0 * np.pi * (1.0 - cos_half)
             power = self.intensity(li)[None, :] * (att * omega_c / n)[:, None]
             return self._point_origins(li, c, dirs, rng), dirs, power
+        if l.type == "MESH":
+            # Triangle by q_j, uniform point, random side, cosine direction:
+            # power = Le cos / (q_j / A * 1/2 * cos / pi) / n = 2 pi Le A / (q_j n)
+            q, nrm, A, Le, pq = l.sample_points(times if times.shape[0] == n else np.broadcast_to(times, (n,)), u)
+            side = np.where(rng.random(n) < 0.5, 1.0, -1.0)[:, None]
+            dirs = _local_to_world(cosine_hemisphere(rng.random((n, 2))), side * nrm)
+            power = Le * (2.0 * np.pi * A / (pq * n))[:, None]
+            return q, dirs, power
         if l.type == "AREA":
             # Uniform point, cosine-weighted direction: power = L pi A / n = color P / n
             c, ex, ey, A, n_emit = self._area_shape(li, times)
@@ -512,6 +714,9 @@ class LightSet:
         if l.type == "AREA":
             c, ex, ey, A, n_emit = self._area_shape(li, times)
             origins = self._area_points(li, ex, ey, c, rng.random((n, 2)))
+        elif l.type == "MESH":
+            origins, n_emit, A, Le_m, pq = l.sample_points(
+                times if times.shape[0] == n else np.broadcast_to(times, (n,)), rng.random((n, 2)))
         else:
             origins, _, _, Z = self._frame(li, times)
             reach = radius + float(l.radius)
@@ -521,10 +726,14 @@ class LightSet:
         one_minus_cos = np.where(inside, 2.0, _one_minus_cos_from_sin2((reach * reach) / np.maximum(d * d, 1e-300)))
         local = np.where(inside[:, None], uniform_sphere(u), uniform_cone(u, 1.0 - one_minus_cos))
         dirs = _local_to_world(local, axis)
-        if l.type != "AREA":
+        if l.type not in ("AREA", "MESH"):
             origins = self._point_origins(li, origins, dirs, rng)
         omega = 2.0 * np.pi * one_minus_cos           # cone solid angle (4 pi inside)
-        if l.type == "AREA":
+        if l.type == "MESH":
+            # dPhi = Le |cos_l| dA dw (both sides); point pdf q_j / A, direction pdf 1 / omega
+            cos_l = np.abs(np.einsum("ij,ij->i", dirs, n_emit))
+            power = Le_m * (cos_l * A / pq * omega / n)[:, None]
+        elif l.type == "AREA":
             # dPhi = L cos_l dA dw; point pdf 1 / A, direction pdf 1 / omega
             L = np.asarray(l.color, float)[None, :] * (float(l.power) / (np.pi * np.maximum(A, 1e-300)))[:, None]
             cos_l = np.maximum(np.sum(dirs * n_emit, axis=-1), 0.0)

@@ -39,6 +39,10 @@ import json
 
 import numpy as np
 
+from .bsdf import MaterialTable
+from .photons.trace import trace_photon_paths
+from .sampling import rng_for, stratified_1d
+
 __all__ = ["make_plan", "apply_plan", "format_plan", "plan_summary", "EFFECT_KEYS",
            "PROBE_PHOTONS_AIMED", "PROBE_PHOTONS_LIGHT"]
 
@@ -173,10 +177,6 @@ def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[i
     Returns {'reach_specular': {li: set(instance)}, 'lit_diffuse': set(instance),
     'caustic_stored': int, 'aimed': int, 'emitted': int}.
     """
-    from .bsdf import MaterialTable
-    from .photons.trace import trace_photon_paths
-    from .sampling import rng_for, stratified_1d
-
     seed = int(getattr(settings, "seed", 0)) if settings is not None else 0
     max_depth = int(getattr(settings, "max_depth", 8)) if settings is not None else 8
     table = MaterialTable(scene.materials)
@@ -188,8 +188,7 @@ def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[i
     for rnd, n in enumerate((PROBE_PHOTONS_AIMED, PROBE_PHOTONS_AIMED_RETRY)):
         if rnd == 1 and (out["caustic_stored"] > 0 or not out["reach_specular"]):
             break
-        _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, eps,
-                     trace_photon_paths, rng_for, stratified_1d)
+        _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, eps)
     # -- Photons over each light's whole emission: which diffuse objects are lit directly
     for li in emitting:
         n = PROBE_PHOTONS_LIGHT
@@ -208,8 +207,7 @@ def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[i
     return out
 
 
-def _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, eps,
-                 trace_photon_paths, rng_for, stratified_1d) -> None:
+def _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, eps) -> None:
     """n photons per (light, specular object) pair: first hits on the object, caustic photons stored."""
     for li in emitting:
         for pi, (ii, (c, r)) in enumerate(spec_targets.items()):

@@ -62,6 +62,89 @@ def caustic_settings(**kw):
     return RenderSettings(**d)
 
 
+def moving_caustic_scene(resolution=(96, 64)):
+    """The benchmark's moving caustic: a point light at z = 1 under a 0.6 x 0.6 mirror (z = 2, facing
+    down) sliding x = -0.25 -> 0.25 over the shutter, so the 1.8 m wide caustic moves 3x that on the
+    floor; a black shade under the light (the view gets caustic light only); a diffuse box sliding
+    x = 0.8 -> -0.8 through it.  Ortho view from z = 1.8, x in [-1.2, 1.2] (W:H must be 3:2)."""
+    mats = [Material.diffuse((0.8, 0.8, 0.8), name="floor"), Material.mirror(name="mirror"),
+            Material.diffuse((0.0, 0.0, 0.0), name="shade")]
+    objs = [plane_mesh(10.0, z=0.0, material=0, name="floor"),
+            (plane_mesh(0.6, z=0.0, material=1, flip=True, name="mirror"), moving((-0.25, 0, 2.0), (0.25, 0, 2.0))),
+            (plane_mesh(0.3, z=0.0, material=2, flip=True, name="shade"), translate(0, 0, 0.9)),
+            (box_mesh((-0.3, -0.3, 0.0), (0.3, 0.3, 0.3), material=0, name="box"), moving((0.8, 0, 0), (-0.8, 0, 0)))]
+    return make_scene(objs, mats, ortho_camera_down(height=1.8, ortho_scale=2.4),
+                      [point_light((0, 0, 1.0), 100.0)], resolution=resolution, shutter=Shutter(1.0, 2.0),
+                      metadata={"name": "moving caustic"})
+
+
+def analytic_moving_caustic(resolution=(96, 64), filter_width: float = 1.5, sub: int = 8,
+                            n_t: int = 256) -> np.ndarray:
+    """The exact pixel values (H, W, 3) of :func:`moving_caustic_scene`, by quadrature (no photons).
+
+    Seen from the ortho camera (x in [-1.2, 1.2], y in [-0.8, 0.8], row 0 = top)
+    each point is the black shade (|x|, |y| < 0.15), the box top (z = 0.3,
+    |x - b(t)| < 0.3, |y| < 0.3, b(t) = 0.8 - 1.6 t) or the floor (z = 0), all
+    diffuse rho = 0.8, radiance rho / pi * E.  Irradiance E at p = (x, y, z):
+
+    * caustic: the light's mirror image V = (0, 0, 3) seen through the mirror
+      aperture (|x s - c(t)| < 0.3, |y s| < 0.3 at s = 1 / (3 - z),
+      c(t) = -0.25 + 0.5 t), E = I (3 - z) / |p - V|^3, I = P / (4 pi);
+      blocked by the shade (|x|, |y| s' < 0.15 at s' = 2.1 / (3 - z)) and,
+      for the floor, by the box (the path from (x, y, 0) to (0.9 x, 0.9 y, 0.3)
+      crossing its footprint);
+    * direct: I (1 - z) / |p - L|^3 from L = (0, 0, 1) unless the shade is in the
+      way (|x|, |y| 0.1 / (1 - z) < 0.15).
+
+    Time: ``n_t`` midpoints over the shutter; space: ``sub`` x ``sub`` points per
+    pixel, then the film's separable Blackman-Harris filter (radius
+    ``filter_width`` pixels, normalised over the points inside the image).
+    """
+    from stpm_core.film import blackman_harris
+
+    W, H = resolution
+    pix = 2.4 / W
+    I = 100.0 / (4 * np.pi)                               # point-light intensity (W/sr)
+    rho_pi = 0.8 / np.pi
+    # -- Fine grid: sub x sub points per pixel -------------------------------------------
+    u = (np.arange(W * sub) + 0.5) / sub                  # continuous pixel coordinates
+    v = (np.arange(H * sub) + 0.5) / sub
+    x, y = np.meshgrid(-1.2 + u * pix, 0.8 - v * pix)
+    shade = (np.abs(x) < 0.15) & (np.abs(y) < 0.15)
+    F = np.zeros_like(x)
+    for t in (np.arange(n_t) + 0.5) / n_t:
+        c, b = -0.25 + 0.5 * t, 0.8 - 1.6 * t             # mirror and box centres (x)
+        on_box = (np.abs(x - b) < 0.3) & (np.abs(y) < 0.3) & ~shade
+        z = np.where(on_box, 0.3, 0.0)
+        # -- Caustic: virtual source through the moving aperture ----------------------------
+        h = 3.0 - z
+        E_c = I * h / (x * x + y * y + h * h) ** 1.5
+        aperture = (np.abs(x / h - c) < 0.3) & (np.abs(y / h) < 0.3)
+        shaded = (np.abs(2.1 * x / h) < 0.15) & (np.abs(2.1 * y / h) < 0.15)
+        # floor point behind the box: f = 1 - 0.1 u in [0.9, 1] with f |y| < 0.3 and |f x - b| < 0.3
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f_hi = np.minimum(1.0, np.where(y != 0, 0.3 / np.abs(y), np.inf))
+            a1, a2 = (b - 0.3) / x, (b + 0.3) / x
+            lo = np.maximum(0.9, np.where(x > 0, a1, np.where(x < 0, a2, -np.inf)))
+            hi = np.minimum(f_hi, np.where(x > 0, a2, np.where(x < 0, a1, np.inf)))
+        behind_box = (lo < hi) & ~on_box & ~((x == 0) & (abs(b) >= 0.3))
+        E = np.where(aperture & ~shaded & ~behind_box, E_c, 0.0)
+        # -- Direct light, unless the shade is in the way -------------------------------------
+        hl = 1.0 - z
+        lit = ~((np.abs(0.1 * x / hl) < 0.15) & (np.abs(0.1 * y / hl) < 0.15))
+        E += np.where(lit, I * hl / (x * x + y * y + hl * hl) ** 1.5, 0.0)
+        F += np.where(shade, 0.0, rho_pi * E)
+    F /= n_t
+
+    # -- Pixel filter: separable Blackman-Harris over the fine points inside the image ---------
+    def weights(n, coords):
+        w = blackman_harris(coords[None, :] - (np.arange(n) + 0.5)[:, None], filter_width)
+        return w / w.sum(1, keepdims=True)
+
+    img = weights(H, v) @ F @ weights(W, u).T
+    return np.repeat(img[:, :, None], 3, axis=2)
+
+
 def emitter_scene(resolution=(24, 16)):
     """An emissive slab moving under an ortho camera: no photon map is needed (ray-traced reference)."""
     slab = box_mesh((-0.2, -5, -0.1), (0.2, 5, 0.1))
@@ -75,11 +158,11 @@ def sweep(tmp_path_factory):
     out = tmp_path_factory.mktemp("compare")
     scene, st = moving_receiver_scene(), caustic_settings()
     # an estimator-neutral second reference: accumulation buffer, 16 instants x 16x photons
-    check = get_reference(scene, st, cache_dir=out / "cache", photon_factor=16, sample_factor=1,
-                          overrides={"method": "ACCUMULATION", "accumulation_steps": 16})
+    check = get_reference(scene, st, cache_dir=out / "cache", method="ACCUMULATION", steps=16,
+                          photon_factor=16, sample_factor=1)
     report = run_compare(scene, st, out / "report",
                          photon_budgets=(1, 4, 16), accumulation_steps=(1, 4, 16), cache_dir=out / "cache",
-                         reference_photon_factor=64, reference_sample_factor=1,
+                         reference_method="TEMPORAL", reference_photon_factor=64, reference_sample_factor=1,
                          reference_overrides={"seed": 1}, scene_name="moving receiver",
                          extra_references={"accumulation-16": check})
     return report, out / "report"
@@ -164,13 +247,23 @@ def test_svg_plot_is_well_formed_log_log():
 # ----------------------------------------------------------------------------
 # Reference
 # ----------------------------------------------------------------------------
-def test_reference_recipe_photon_or_ray_traced():
-    st = caustic_settings(temporal_alpha=1.5, estimator="STANDARD")
-    ref, kind = reference_settings(moving_receiver_scene(), st, photon_factor=16, sample_factor=4)
-    assert kind == "photon" and ref.estimator == "TEMPORAL" and ref.temporal_alpha == 0.0
+def test_reference_recipes():
+    scene, st = moving_receiver_scene(), caustic_settings(temporal_alpha=1.5, estimator="STANDARD")
+    # default: accumulation buffer, 64 instants x 4x photons x 1x samples each
+    acc, kind = reference_settings(scene, st)
+    assert kind == "accumulation" and acc.method == "ACCUMULATION" and acc.accumulation_steps == 64
+    assert (acc.photons_caustic, acc.samples, acc.k_nearest) == (16000, 4, round(30 * 4 ** (1 / 3)))
+    # one time-stamped map: consistent window whatever the file's alpha
+    ref, kind = reference_settings(scene, st, method="temporal")
+    assert kind == "temporal" and ref.estimator == "TEMPORAL" and ref.temporal_alpha == 0.0
     assert (ref.photons_caustic, ref.samples, ref.k_nearest) == (64000, 16, round(30 * 16 ** (1 / 3)))
-    ref2, kind2 = reference_settings(emitter_scene(), RenderSettings(samples=4), photon_factor=16, sample_factor=8)
-    assert kind2 == "ray-traced" and ref2.samples == 32
+    assert reference_settings(scene, st, method="KD4D")[0].estimator == "KD4D"
+    # no photon map in play: a plain motion-blurred ray tracer with more samples
+    ref2, kind2 = reference_settings(emitter_scene(), RenderSettings(samples=4), sample_factor=8)
+    assert kind2 == "ray-traced" and ref2.samples == 32 and ref2.method == "PHOTON"
+    assert reference_settings(emitter_scene(), RenderSettings(samples=4))[0].samples == 16
+    with pytest.raises(StpmError, match="reference method"):
+        reference_settings(scene, st, method="PATH")
 
 
 def test_reference_is_cached_and_supplied_exr_is_read(tmp_path):
@@ -194,6 +287,33 @@ def test_reference_is_cached_and_supplied_exr_is_read(tmp_path):
     write_exr(tmp_path / "small.exr", {"Combined": img[:4, :4]})
     with pytest.raises(StpmError, match="renders at"):
         get_reference(scene, st, reference=tmp_path / "small.exr")
+
+
+def _exact_and_settings(resolution=(24, 16)):
+    st = RenderSettings(samples=2, photons_caustic=4000, photons_global=0, k_nearest=20, seed=1,
+                        effects="MANUAL", caustics=True, indirect=False)
+    return moving_caustic_scene(resolution), st, analytic_moving_caustic(resolution, sub=8, n_t=128)
+
+
+def test_default_reference_is_closer_to_the_exact_image_than_the_runs_it_judges(tmp_path):
+    """Moving caustic with an analytic answer: the default recipe (accumulation buffer, 64 instants x 4x
+    photons) lands nearer the exact image than ACCUMULATION N=4 with the file's settings, unbiased."""
+    from stpm_core.compare.metrics import combined_rgb
+    from stpm_core.render import render
+
+    scene, st, exact = _exact_and_settings()
+    ref = get_reference(scene, st, cache_dir=tmp_path)
+    assert ref.info["kind"] == "accumulation" and ref.info["settings"]["accumulation_steps"] == 64
+    run4 = combined_rgb(render(scene, st.replace(method="ACCUMULATION", accumulation_steps=4)).passes)
+    assert rmse(ref.rgb, exact) < 0.6 * rmse(run4, exact)
+    assert abs(ref.rgb.mean() / exact.mean() - 1.0) < 0.03          # no overall bias beyond 3 %
+
+
+@pytest.mark.slow
+def test_default_reference_converges_as_photons_grow(tmp_path):
+    scene, st, exact = _exact_and_settings((48, 32))
+    errors = [rmse(get_reference(scene, st, cache_dir=tmp_path, photon_factor=f).rgb, exact) for f in (1, 4, 16)]
+    assert errors[2] < 0.8 * errors[1] < 0.8 * 0.8 * errors[0]
 
 
 # ----------------------------------------------------------------------------
@@ -270,7 +390,7 @@ def test_report_has_every_section_finite_numbers_and_valid_json(sweep):
     assert data["consistent"]["STANDARD"]["consistent"] is False
     assert data["consistent"]["TEMPORAL"]["consistent"] is True
     assert data["cost"]["target"]["label"] == "ACCUMULATION N=16"
-    assert data["reference"]["kind"] == "photon" and data["reference"]["settings"]["photons_caustic"] == 256000
+    assert data["reference"]["kind"] == "temporal" and data["reference"]["settings"]["photons_caustic"] == 256000
     html = (out / "report.html").read_text()
     for s in SECTIONS:
         assert f'<section id="{s}">' in html
@@ -288,10 +408,10 @@ def test_two_independent_references_agree_better_than_standard(sweep):
     cx = report["cross_references"]["accumulation-16"]
     assert cx["reference"]["kind"] == "accumulation"
     apart = cx["main_reference_error"]["rmse"]
-    assert apart < 0.5 * _run(report, "STANDARD x16")["rmse"]
-    assert apart < 0.5 * cx["runs"]["STANDARD x16"]["rmse"]
+    assert apart < 0.6 * _run(report, "STANDARD x16")["rmse"]
+    assert apart < 0.6 * cx["runs"]["STANDARD x16"]["rmse"]
     # against either reference STANDARD's error stalls and TEMPORAL's falls
-    assert cx["runs"]["TEMPORAL x16"]["rmse"] < 0.7 * cx["runs"]["TEMPORAL x1"]["rmse"]
+    assert cx["runs"]["TEMPORAL x16"]["rmse"] < 0.75 * cx["runs"]["TEMPORAL x1"]["rmse"]
     assert cx["runs"]["STANDARD x16"]["rmse"] > 0.7 * cx["runs"]["STANDARD x1"]["rmse"]
 
 
@@ -387,11 +507,12 @@ def test_stpm_compare_command_line(tmp_path, capsys, monkeypatch):
     assert _run(data, "TEMPORAL x2 s2")["samples"] == 4
     assert data["reference"]["kind"] == "ray-traced" and data["reference"]["settings"]["samples"] == 8
     assert data["cost"]["target"]["label"] == "ACCUMULATION N=2"          # N=16 not run: the largest below
-    # -- `stpm compare` through the console script's main, default sweep ---------------------
+    # -- `stpm compare` through the console script's main: default sweep cut by a time budget -----
     out2 = tmp_path / "rep2"
-    assert cli.main(["compare", str(path), "--output", str(out2), "--quiet"]) == 0
+    assert cli.main(["compare", str(path), "--output", str(out2), "--time-budget", "0.5", "--quiet"]) == 0
     data2 = json.loads((out2 / "report.json").read_text())
-    assert len(data2["runs"]) == 3 * 5 + 6 and all(r["status"] == "done" for r in data2["runs"])
+    status = [r["status"] for r in data2["runs"]]
+    assert len(status) == 3 * 5 + 6 and status[0] == "done" and "skipped" in status
     assert list((tmp_path / "xdg" / "stpm" / "references").glob("*.npz"))
     # -- bad input: one clear line, non-zero exit ---------------------------------------------
     with pytest.raises(StpmError, match="not found"):

@@ -192,3 +192,94 @@ def test_consistency_photons_x4_per_step():
 @pytest.mark.slow
 def test_consistency_photons_x4_per_step_large():
     _consistency([40_000, 160_000, 640_000, 2_560_000], k=100, margin=0.01)
+
+
+# ----------------------------------------------------------------------------
+# Compiled (numba) search against scipy's cKDTree: the same estimates
+# ----------------------------------------------------------------------------
+def random_scene_map(N, rng, backend, time_scale=0.7):
+    """Photons on three planes + a cloud, random times, powers and directions (both sides)."""
+    plane = rng.integers(0, 4, N)
+    pos = rng.uniform(-1, 1, (N, 3))
+    pos[plane == 0, 2] = 0.0
+    pos[plane == 1, 1] = 0.25
+    pos[plane == 2, 0] = -0.5
+    wi = rng.normal(size=(N, 3))
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    Phi = rng.exponential(1e-4, (N, 3))
+    t = rng.random(N)
+    return PhotonMap(make_records(pos, wi, Phi, t), BOX, time_scale=time_scale, backend=backend)
+
+
+def mixed_queries(rng, n):
+    """Scattered points plus dense clusters (like a pixel's samples) on and off the photon planes."""
+    scattered = rng.uniform(-1, 1, (n // 2, 3))
+    centres = rng.uniform(-0.9, 0.9, (n // 40, 3))
+    centres[: len(centres) // 2, 2] = 0.0
+    clustered = np.repeat(centres, 20, axis=0) + rng.normal(0, 2e-3, (len(centres) * 20, 3))
+    p = np.vstack([scattered, clustered])
+    ns = rng.normal(size=p.shape)
+    ns /= np.linalg.norm(ns, axis=1, keepdims=True)
+    return p, ns, rng.random(len(p))
+
+
+@pytest.mark.parametrize("estimator,kernel,alpha", [
+    ("STANDARD", "BOX", 0.0), ("STANDARD", "CONE", 0.0), ("TEMPORAL", "BOX", 0.0), ("TEMPORAL", "CONE", 0.0),
+    ("TEMPORAL", "BOX", 1.5), ("KD4D", "BOX", 0.0), ("KD4D", "CONE", 0.0)])
+def test_numba_search_gives_the_scipy_estimates(estimator, kernel, alpha):
+    pytest.importorskip("numba")
+    from stpm_core.photons import kdtree
+    if not kdtree.AVAILABLE:
+        pytest.skip("numba disabled")
+    rng = np.random.default_rng(21)
+    recs = random_scene_map(40_000, rng, "scipy").records
+    fast = PhotonMap(recs, BOX, time_scale=0.7, backend="numba")
+    ref = PhotonMap(recs, BOX, time_scale=0.7, backend="scipy")
+    p, ns, t = mixed_queries(rng, 6000)
+    for k in (2, 7, 50):
+        kw = dict(estimator=estimator, k=k, kernel=kernel, temporal_alpha=alpha)
+        E_fast, E_ref = fast.estimate(p, ns, t, **kw), ref.estimate(p, ns, t, **kw)
+        # same neighbours, same selection: equal up to float32 vs float64 summation
+        assert np.allclose(E_fast, E_ref, rtol=1e-5, atol=0.0), (k, np.abs(E_fast / E_ref - 1).max())
+        assert (E_ref > 0).mean() > 0.3      # most estimates non-trivial
+
+
+def test_candidate_cache_changes_nothing():
+    pytest.importorskip("numba")
+    from stpm_core.photons import kdtree
+    if not kdtree.AVAILABLE:
+        pytest.skip("numba disabled")
+    rng = np.random.default_rng(22)
+    m = random_scene_map(30_000, rng, "numba")
+    p, ns, t = mixed_queries(rng, 4000)
+    for dims, mode, q4, kq in ((3, kdtree.MODE_STANDARD, t, 30), (3, kdtree.MODE_TEMPORAL, t, 120),
+                               (4, kdtree.MODE_KD4D, m.time_scale * t, 30)):
+        q = np.column_stack([p, q4])
+        tree = m.flat_tree(dims)
+        with_cache = tree.lookup(mode, q, ns, kq, 20, False, 1.1, 1, cache=True)
+        without = tree.lookup(mode, q, ns, kq, 20, False, 1.1, 1, cache=False)
+        for a, b in zip(with_cache, without):
+            assert np.allclose(a, b, rtol=1e-12, atol=0.0)
+
+
+def test_scipy_fallback_when_numba_is_unavailable():
+    # A fresh interpreter with numba switched off picks scipy and answers the same
+    import json
+    import os
+    import subprocess
+    import sys
+    code = (
+        "import json, numpy as np, sys; sys.path.insert(0, 'tests');"
+        "from test_estimators import random_scene_map, mixed_queries;"
+        "rng = np.random.default_rng(23); m = random_scene_map(5000, rng, 'auto');"
+        "p, ns, t = mixed_queries(rng, 400);"
+        "print(json.dumps({'backend': m.backend, 'E': m.estimate(p, ns, t, k=20).tolist()}))")
+    env = dict(os.environ, STPM_NO_NUMBA="1")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    out = json.loads(subprocess.run([sys.executable, "-c", code], env=env, cwd=root, capture_output=True,
+                                    text=True, check=True).stdout)
+    assert out["backend"] == "scipy"
+    rng = np.random.default_rng(23)
+    m = random_scene_map(5000, rng, "auto")
+    p, ns, t = mixed_queries(rng, 400)
+    assert np.allclose(np.array(out["E"]), m.estimate(p, ns, t, k=20), rtol=1e-5, atol=0.0)

@@ -237,3 +237,21 @@ def test_probe_turns_caustics_off_when_no_specular_path_reaches_a_diffuse_surfac
     assert plan["details"]["lights_reaching_specular"] == {"light": ["plate"]}
     assert not plan["caustics"] and "none of" in plan["reasons"][1]
     assert plan["details"]["probe"]["photons_aimed"] == 512 + 4096
+
+
+def test_stpm_render_records_the_plan_in_stats_and_exr(tmp_path):
+    """`stpm render` (in-process) writes the plan it followed into --stats and the EXR header."""
+    from stpm_core.cli import main
+    from stpm_core.imageio import read_exr
+    from stpm_core.scenefile import save_scene
+    scene = _diffuse_pair(OPEN)
+    scene.resolution = (8, 6)
+    path = save_scene(scene, tmp_path / "pair.stpm") or tmp_path / "pair.stpm"
+    out, stats = tmp_path / "pair.exr", tmp_path / "pair.json"
+    assert main(["render", str(path), "--output", str(out), "--stats", str(stats), "--samples", "1",
+                 "--photons-global", "2000", "--photons-caustic", "2000", "--quiet"]) == 0
+    st = json.loads(stats.read_text())
+    expected = make_plan(scene, RenderSettings(samples=1, photons_global=2000, photons_caustic=2000))
+    assert st["plan"] == expected
+    assert st["photons_caustic"] == 0 and st["estimator"] == expected["estimator"] == "STANDARD"
+    assert json.loads(read_exr(out)["_metadata"]["stpm:plan"]) == expected

@@ -413,6 +413,8 @@ def test_empty_scene_and_bad_backend():
 def test_auto_falls_back_to_numpy(monkeypatch):
     from stpm_core.raycast import build
     monkeypatch.setattr(build, "embree_available", lambda: False)
+    monkeypatch.setattr(build, "numba_available", lambda: False)   # auto: embree, else numba, else numpy
+    monkeypatch.delenv(build.BACKEND_ENV, raising=False)
     scene = Scene(meshes=[soup(np.random.default_rng(0), 5)], instances=[Instance(0)],
                   materials=[Material(), Material()])
     assert make_caster(scene, "auto").backend == "numpy"

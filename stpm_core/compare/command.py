@@ -3,7 +3,8 @@
     stpm compare SCENE [--frame F] [--output REPORT_DIR] [--reference REF.exr]
                  [--time-budget SECONDS] [--photon-budgets 1,4,16,4:4,16:4]
                  [--accumulation-steps 1,2,4,8,16,32] [--estimators standard,temporal,kd4d]
-                 [--resolution WxH] [--samples S] [--reference-photons F] [--reference-samples F]
+                 [--resolution WxH] [--samples S] [--reference-method accumulation|temporal|kd4d]
+                 [--reference-steps N] [--reference-photons F] [--reference-samples F]
                  [--cache-dir DIR] [--no-cache] [--quiet]
 
 Writes REPORT_DIR/report.html and REPORT_DIR/report.json (default REPORT_DIR:
@@ -18,7 +19,7 @@ import sys
 from pathlib import Path
 
 from ..errors import StpmError
-from .reference import REFERENCE_PHOTON_FACTOR, REFERENCE_SAMPLE_FACTOR
+from .reference import REFERENCE_FACTORS, REFERENCE_METHOD, REFERENCE_METHODS, REFERENCE_STEPS
 from .run import run_compare
 from .sweep import DEFAULT_ACCUMULATION_STEPS, DEFAULT_PHOTON_BUDGETS, PHOTON_ESTIMATORS, parse_budget
 
@@ -103,12 +104,17 @@ def build_parser() -> argparse.ArgumentParser:
                    metavar="standard,temporal,kd4d", help="photon estimators to sweep (default all three)")
     p.add_argument("--resolution", type=_resolution, metavar="WxH", help="override the scene's resolution")
     p.add_argument("--samples", type=int, metavar="S", help="override the file's samples per pixel")
+    p.add_argument("--reference-method", type=str.upper, dest="reference_method", default=REFERENCE_METHOD,
+                   choices=REFERENCE_METHODS, metavar="{accumulation,temporal,kd4d}",
+                   help="computed reference's recipe (default accumulation: 64 instants x 4x photons)")
+    p.add_argument("--reference-steps", type=int, dest="reference_steps", metavar="N", default=REFERENCE_STEPS,
+                   help=f"instants of an accumulation reference (default {REFERENCE_STEPS})")
     p.add_argument("--reference-photons", type=float, dest="reference_photons", metavar="F",
-                   default=REFERENCE_PHOTON_FACTOR,
-                   help=f"computed reference: photons x F (default {REFERENCE_PHOTON_FACTOR})")
+                   help="computed reference: photons x F (per instant for accumulation; default "
+                        + ", ".join(f"{m.lower()} {f[0]:g}" for m, f in REFERENCE_FACTORS.items()) + ")")
     p.add_argument("--reference-samples", type=float, dest="reference_samples", metavar="F",
-                   default=REFERENCE_SAMPLE_FACTOR,
-                   help=f"computed reference: samples x F (default {REFERENCE_SAMPLE_FACTOR})")
+                   help="computed reference: samples x F (per instant for accumulation; default "
+                        + ", ".join(f"{m.lower()} {f[1]:g}" for m, f in REFERENCE_FACTORS.items()) + ")")
     p.add_argument("--cache-dir", dest="cache_dir", metavar="DIR",
                    help="where computed references are cached (default ~/.cache/stpm/references)")
     p.add_argument("--no-cache", action="store_true", dest="no_cache", help="always recompute the reference")
@@ -141,8 +147,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     if args.time_budget is not None and args.time_budget < 0:
         raise StpmError("--time-budget must be >= 0 seconds")
-    if args.reference_photons < 1 or args.reference_samples < 1:
-        raise StpmError("--reference-photons and --reference-samples must be >= 1")
+    if any(v is not None and v < 1 for v in (args.reference_photons, args.reference_samples, args.reference_steps)):
+        raise StpmError("--reference-photons, --reference-samples and --reference-steps must be >= 1")
     scene_path = Path(args.scene)
     scene, settings, _export_s = load_any_scene(scene_path, args.frame)
     if args.resolution is not None:
@@ -160,8 +166,10 @@ def main(argv: list[str] | None = None) -> int:
         report = run_compare(scene, settings, out_dir, reference=args.reference, time_budget=args.time_budget,
                              photon_budgets=args.photon_budgets, accumulation_steps=args.accumulation_steps,
                              estimators=args.estimators, progress=bar, cache_dir=args.cache_dir,
-                             use_cache=not args.no_cache, reference_photon_factor=args.reference_photons,
-                             reference_sample_factor=args.reference_samples, scene_name=scene_path.name,
+                             use_cache=not args.no_cache, reference_method=args.reference_method,
+                             reference_photon_factor=args.reference_photons,
+                             reference_sample_factor=args.reference_samples, reference_steps=args.reference_steps,
+                             scene_name=scene_path.name,
                              scene_path=scene_path)
     finally:
         bar.close()

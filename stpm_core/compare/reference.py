@@ -1,25 +1,32 @@
 """The reference image every run of ``stpm compare`` is measured against.
 
 Either **supplied** (``--reference REF.exr``: its ``Combined`` pass, or plain
-R, G, B channels) or **computed** and cached:
+R, G, B channels) or **computed** and cached.  Recipes (``method``):
 
-* a scene with photon-mapped light (caustics or indirect light in the plan):
-  the TEMPORAL estimator with the automatic, consistent time window
-  (``temporal_alpha = 0``), ``photon_factor`` x the file's photons,
-  ``sample_factor`` x its samples and k x photon_factor^(1/3).  Its bias
-  vanishes as photons grow: with alpha = max(1.5, 0.25 (N / k)^(1/3)) the
-  candidate disc radius ~ sqrt(alpha k / N) and the time window ~ 1 / alpha
-  both shrink as (k / N)^(1/3) (docs/photon-mapping.md), while k grows, so
-  bias and noise both vanish and the estimate tends to the irradiance at the
-  query point and time; see docs/compare.md.
-* a scene without photon-mapped light: the same distribution ray tracer with
-  ``sample_factor`` x the samples, i.e. a plain motion-blurred ray tracer
-  (direct light by shadow rays, specular chains, emission, each camera sample
-  at its own time): an unbiased estimate of the shutter-averaged pixel.
+* ``'ACCUMULATION'`` (default): an accumulation buffer of ``steps`` = 64
+  instants, each a still with ``photon_factor`` = 4 x the file's photons and
+  ``sample_factor`` = 1 x its samples (so 64 x the samples per pixel in all),
+  k x photon_factor^(1/3).  Within one instant nothing moves, so each still's
+  STANDARD estimate is consistent (its disc shrinks as photons grow); the mean
+  over stratified instants converges to the shutter integral.  It shares no
+  estimator with TEMPORAL or KD4D, and no instant with an ACCUMULATION run of
+  N instants unless N is a multiple of 64 ((i + 1/2) / 64 = (j + 1/2) / N needs
+  N (2i + 1) = 64 (2j + 1)), so it flatters no run of the sweep.
+* ``'TEMPORAL'`` / ``'KD4D'``: one time-stamped photon map, the automatic
+  consistent time window / time scale, 16 x the photons, 4 x the samples,
+  k x 16^(1/3).  Consistent too (docs/photon-mapping.md), and cheaper, but at
+  reachable photon counts TEMPORAL's window still leaks a moving caustic into
+  unlit moments (about +8 % at 128 x photons on the benchmark scene, against its
+  analytic answer), so it is not the default.
+* A scene with no photon-mapped light (no caustics, no indirect in the plan):
+  whatever the method, one render with ``sample_factor`` x the samples (4 when
+  not given): a plain motion-blurred distribution ray tracer (direct light by
+  shadow rays, specular chains, emission, each camera sample at its own time),
+  an unbiased estimate of the shutter-averaged pixel.
 
 The core has no unbiased path tracer for point-light caustics (a point light
-seen through a perfect mirror cannot be hit by a camera path), so the photon
-reference is the one that converges to the right answer there.
+seen through a perfect mirror cannot be hit by a camera path), so a
+consistent photon estimate is what converges to the right answer there.
 
 Cache: ``<cache_dir>/<key>.npz`` with key = SHA-256 of the scene's content
 (the exported scene arrays and header, metadata left out), its frame and
@@ -43,10 +50,15 @@ from .metrics import combined_rgb
 
 __all__ = ["Reference", "reference_settings", "scene_digest", "reference_cache_key",
            "default_cache_dir", "load_reference_exr", "get_reference",
+           "REFERENCE_METHODS", "REFERENCE_METHOD", "REFERENCE_STEPS", "REFERENCE_FACTORS",
            "REFERENCE_PHOTON_FACTOR", "REFERENCE_SAMPLE_FACTOR"]
 
-REFERENCE_PHOTON_FACTOR = 16     # reference photons = this x the file's
-REFERENCE_SAMPLE_FACTOR = 4      # reference samples per pixel = this x the file's
+REFERENCE_METHODS = ("ACCUMULATION", "TEMPORAL", "KD4D")
+REFERENCE_METHOD = "ACCUMULATION"
+REFERENCE_STEPS = 64             # instants of the accumulation-buffer reference
+# (photons x, samples x) of the file's, per recipe (per instant for ACCUMULATION)
+REFERENCE_FACTORS = {"ACCUMULATION": (4.0, 1.0), "TEMPORAL": (16.0, 4.0), "KD4D": (16.0, 4.0)}
+REFERENCE_PHOTON_FACTOR, REFERENCE_SAMPLE_FACTOR = REFERENCE_FACTORS[REFERENCE_METHOD]
 _CACHE_VERSION = 1               # bump when the reference recipe changes
 _STREAM_REFERENCE = 0x5EF        # seed stream: the reference's noise is independent of the runs'
 
@@ -59,7 +71,7 @@ class Reference:
     ----------
     rgb : (H, W, 3) float64 linear RGB (row 0 = top).
     info : JSON-ready dict: source ('supplied' | 'computed' | 'cached'), kind
-        ('photon' | 'ray-traced' | 'accumulation' | 'supplied'), path, settings, wall_s,
+        ('accumulation' | 'temporal' | 'kd4d' | 'ray-traced' | 'supplied'), path, settings, wall_s,
         cache_key, why (one sentence on why it converges).
     """
 
@@ -82,48 +94,67 @@ def _uses_photons(scene, settings) -> bool:
     return bool((caustic and settings.photons_caustic > 0) or (indirect and settings.photons_global > 0))
 
 
-def reference_settings(scene, settings, *, photon_factor: float = REFERENCE_PHOTON_FACTOR,
-                       sample_factor: float = REFERENCE_SAMPLE_FACTOR, overrides: dict | None = None):
+def reference_settings(scene, settings, *, method: str = REFERENCE_METHOD, photon_factor: float | None = None,
+                       sample_factor: float | None = None, steps: int = REFERENCE_STEPS,
+                       overrides: dict | None = None):
     """(RenderSettings, kind) of the computed reference for ``scene`` rendered with ``settings``.
 
-    kind is 'photon' (TEMPORAL, consistent window, more photons and samples),
-    'ray-traced' (no photon map in play: only more samples) or 'accumulation'
-    (``overrides`` asked for method ACCUMULATION: an estimator-neutral cross-check).
+    method : 'ACCUMULATION' | 'TEMPORAL' | 'KD4D' (see the module docstring).
+    photon_factor, sample_factor : None = the method's defaults (:data:`REFERENCE_FACTORS`).
+    steps : instants of an ACCUMULATION reference.
+    overrides : settings applied last (tests, cross-checks).
+    kind : 'accumulation' | 'temporal' | 'kd4d', or 'ray-traced' when no photon map is in play.
     """
     from ..sampling import rng_for
 
-    if photon_factor < 1 or sample_factor < 1:
-        raise StpmError("reference photon and sample factors must be >= 1")
+    method = str(method).upper()
+    if method not in REFERENCE_METHODS:
+        raise StpmError(f"reference method must be one of {', '.join(REFERENCE_METHODS).lower()}, got {method!r}")
+    pf, sf = REFERENCE_FACTORS[method]
+    pf = pf if photon_factor is None else float(photon_factor)
+    sf = sf if sample_factor is None else float(sample_factor)
+    if pf < 1 or sf < 1 or int(steps) < 1:
+        raise StpmError("reference photon and sample factors and steps must be >= 1")
     seed = int(rng_for(settings.seed, _STREAM_REFERENCE).integers(0, 2**62))
-    changes = dict(method="PHOTON", estimator="TEMPORAL", temporal_alpha=0.0, seed=seed,
-                   samples=int(math.ceil(settings.samples * sample_factor)))
-    kind = "ray-traced"
-    if _uses_photons(scene, settings):
-        kind = "photon"
-        changes.update(photons_caustic=int(round(settings.photons_caustic * photon_factor)),
-                       photons_global=int(round(settings.photons_global * photon_factor)),
-                       k_nearest=int(round(settings.k_nearest * photon_factor ** (1.0 / 3.0))))
+    changes = dict(method="PHOTON", estimator="TEMPORAL", temporal_alpha=0.0, seed=seed)
+    if not _uses_photons(scene, settings):
+        # -- No photon map: a motion-blurred ray tracer with more samples ----------------------
+        kind = "ray-traced"
+        rt_sf = float(sample_factor) if sample_factor is not None else REFERENCE_FACTORS["TEMPORAL"][1]
+        changes.update(samples=int(math.ceil(settings.samples * rt_sf)))
+    else:
+        kind = method.lower()
+        changes.update(samples=int(math.ceil(settings.samples * sf)),
+                       photons_caustic=int(round(settings.photons_caustic * pf)),
+                       photons_global=int(round(settings.photons_global * pf)),
+                       k_nearest=int(round(settings.k_nearest * pf ** (1.0 / 3.0))))
+        if method == "ACCUMULATION":
+            changes.update(method="ACCUMULATION", accumulation_steps=int(steps))
+        else:
+            changes.update(estimator=method)
     changes.update(overrides or {})
     ref = settings.replace(**changes)
-    if ref.method == "ACCUMULATION":
+    if ref.method == "ACCUMULATION" and kind != "ray-traced":
         kind = "accumulation"
     return ref, kind
 
 
 _WHY = {
-    "photon": ("TEMPORAL estimator with the automatic time window: as photons grow (k fixed "
-               "relative to N) the disc radius and the time window both shrink to zero while "
-               "the photon count inside them grows, so its bias and its variance vanish: it "
-               "converges to the time-dependent irradiance at each point and instant."),
+    "accumulation": ("accumulation buffer with many instants, each a still with many photons: within one "
+                     "instant nothing moves, so each still's STANDARD estimate is consistent (its disc "
+                     "shrinks as photons grow), and the mean over stratified instants converges to the "
+                     "shutter integral. It shares no estimator with TEMPORAL or KD4D and no instant with "
+                     "the sweep's accumulation runs."),
+    "temporal": ("TEMPORAL estimator with the automatic time window: as photons grow the candidate disc "
+                 "and the time window both shrink as (k / N)^(1/3) while k grows, so its bias and "
+                 "variance vanish: it converges to the time-dependent irradiance at each point and instant "
+                 "(slowly where a caustic moves over a static receiver)."),
+    "kd4d": ("KD4D estimator with the automatic time scale: the 4D ball in (surface x scaled time) "
+             "shrinks as (k s / N)^(1/3) while k grows, so its bias and variance vanish."),
     "ray-traced": ("no photon map is needed by this scene: distribution ray tracing (shadow rays, "
                    "specular chains, emission, each camera sample at its own shutter time) is an "
                    "unbiased Monte Carlo estimate of the shutter-averaged pixel, converging as "
                    "samples grow."),
-    "accumulation": ("accumulation buffer with many instants, each a still with many photons: each still's "
-                     "STANDARD estimate is consistent (nothing moves within a still) and the average over "
-                     "stratified instants converges to the shutter integral, so it tends to the right "
-                     "answer as instants and photons per still grow; it shares no estimator with TEMPORAL "
-                     "or KD4D."),
     "supplied": "supplied by the user.",
 }
 
@@ -192,17 +223,27 @@ def load_reference_exr(path, resolution=None) -> np.ndarray:
 # Get a reference: supplied, cached or computed
 # ----------------------------------------------------------------------------
 def get_reference(scene, settings, *, reference=None, cache_dir=None, use_cache: bool = True,
-                  photon_factor: float = REFERENCE_PHOTON_FACTOR,
-                  sample_factor: float = REFERENCE_SAMPLE_FACTOR, overrides: dict | None = None,
-                  progress=None, cancel=None) -> Reference:
+                  method: str = REFERENCE_METHOD, photon_factor: float | None = None,
+                  sample_factor: float | None = None, steps: int = REFERENCE_STEPS,
+                  overrides: dict | None = None, progress=None, cancel=None) -> Reference:
     """The reference for ``scene`` rendered with ``settings``.
 
-    reference : None (compute or load from the cache), a path to an EXR, or an
-        (H, W, 3|4) linear image.
+    reference : None (compute or load from the cache), a path to an EXR, an
+        (H, W, 3|4) linear image, or a :class:`Reference` (its info describes it in the report).
+    method, photon_factor, sample_factor, steps, overrides : the recipe (:func:`reference_settings`).
     cache_dir : where computed references are kept (default :func:`default_cache_dir`).
     progress, cancel : as for :func:`stpm_core.render.render`.
     """
     # -- Supplied ------------------------------------------------------------------
+    if isinstance(reference, Reference):
+        rgb = combined_rgb(reference.rgb)
+        if (rgb.shape[1], rgb.shape[0]) != tuple(map(int, scene.resolution)):
+            raise StpmError(f"reference image is {rgb.shape[1]}x{rgb.shape[0]} but the scene renders at "
+                            f"{scene.resolution[0]}x{scene.resolution[1]}")
+        info = {"source": "supplied", "kind": "supplied", "path": None, "settings": None, "wall_s": None,
+                "cache_key": None, "why": _WHY["supplied"]}
+        info.update(reference.info or {})
+        return Reference(rgb, info)
     if reference is not None:
         if isinstance(reference, (str, os.PathLike)):
             rgb = load_reference_exr(reference, scene.resolution)
@@ -217,13 +258,12 @@ def get_reference(scene, settings, *, reference=None, cache_dir=None, use_cache:
                                "wall_s": None, "cache_key": None, "why": _WHY["supplied"]})
 
     # -- Cached --------------------------------------------------------------------
-    ref_settings, kind = reference_settings(scene, settings, photon_factor=photon_factor,
-                                            sample_factor=sample_factor, overrides=overrides)
+    ref_settings, kind = reference_settings(scene, settings, method=method, photon_factor=photon_factor,
+                                            sample_factor=sample_factor, steps=steps, overrides=overrides)
     key = reference_cache_key(scene, ref_settings)
     cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     cache_file = cache_dir / f"{key}.npz"
-    info = {"kind": kind, "settings": ref_settings.to_dict(), "cache_key": key, "why": _WHY[kind],
-            "photon_factor": float(photon_factor), "sample_factor": float(sample_factor)}
+    info = {"kind": kind, "settings": ref_settings.to_dict(), "cache_key": key, "why": _WHY[kind]}
     if use_cache and cache_file.is_file():
         try:
             with np.load(cache_file) as z:

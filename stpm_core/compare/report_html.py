@@ -30,6 +30,8 @@ from .plots import METHOD_COLORS, error_vs_time_svg
 
 __all__ = ["png_bytes", "png_data_uri", "render_html", "METRIC_NAMES"]
 
+_LUMA = np.array([0.2126, 0.7152, 0.0722])   # Rec. 709 luminance weights
+
 METRIC_NAMES = {"rmse": "RMSE", "relmse": "relMSE", "flip": "FLIP"}
 _MIN_DISPLAY_WIDTH = 240     # small renders are shown enlarged (pixelated), never below this
 
@@ -124,14 +126,15 @@ def _section_scene(rep: dict) -> str:
     body = "".join(f"<tr><th>{k}</th><td>{v}</td></tr>" for k, v in rows)
     sbody = "".join(f"<tr><th>{k}</th><td>{v}</td></tr>" for k, v in srows)
     rs = ref.get("settings") or {}
-    if ref["kind"] == "supplied":
-        ref_line = f'supplied: <code>{escape(str(ref.get("path") or "(array)"))}</code>'
+    if ref["source"] == "supplied":
+        ref_line = (f'supplied ({escape(str(ref.get("kind")))})'
+                    + (f': <code>{escape(str(ref["path"]))}</code>' if ref.get("path") else ""))
     else:
         ref_line = f'{escape(ref["source"])} ({escape(ref["kind"])}): ' + _recipe(rs) + \
             (f'; rendered in {_secs(ref.get("wall_s"))}' if ref.get("wall_s") is not None else "")
     return (f'<section id="scene"><h2>Scene and settings</h2>'
             f'<div class="row"><table>{body}</table><table>{sbody}</table></div>'
-            f'<p><b>Reference</b>: {ref_line}.<br><span class="note">Why it converges: {escape(ref["why"])}</span></p>'
+            f'<p><b>Reference</b>: {ref_line}.<br><span class="note">Why it is right: {escape(ref["why"])}</span></p>'
             f'<p class="note">Errors are measured on the linear RGB of the Combined pass. RMSE is in pixel units '
             f'(shutter-averaged radiance); relMSE = mean (x - r)&sup2; / (r&sup2; + {rep["metrics"]["relmse_eps"]:g}); '
             f'FLIP is the mean HDR-FLIP error (0 = identical, 1 = as different as can be). '
@@ -167,10 +170,12 @@ def _section_error_maps(ref_rgb, best) -> str:
             flips.append(_figure(_img(png_data_uri(run.flip_map, linear=False), W, H, f"FLIP map {run.label}"),
                                  f'FLIP: {escape(run.label)} (mean {_num(run.errors["flip"], "{:.3f}")})'))
         d = signed_relative_error(run.rgb.astype(np.float64), ref_rgb)
+        overall = float(np.mean(run.rgb @ _LUMA) / max(float(np.mean(ref_rgb @ _LUMA)), 1e-12) - 1.0)
         signed.append(_figure(_img(png_data_uri(diverging_colors(d, 0.5), linear=False), W, H,
                                    f"signed error {run.label}"),
-                              f'{escape(run.label)}: mean {100 * float(np.mean(d)):+.1f} %'))
-    legend = ('<p class="note">Signed luminance error (test - reference) / reference: '
+                              f'{escape(run.label)}: overall {100 * overall:+.1f} %'))
+    legend = ('<p class="note">Signed luminance error (test - reference) / max(reference, 5 % of its mean); '
+              'the caption gives the overall brightness error (mean luminance against the reference\'s): '
               '<span class="swatch" style="background:#2159d9"></span> -50 % or darker, white = right, '
               '<span class="swatch" style="background:#d92121"></span> +50 % or brighter. '
               'FLIP maps use the magma scale: black = no visible difference, yellow = large.</p>')
@@ -297,7 +302,8 @@ def _section_runs(rep: dict) -> str:
     return ('<section id="runs"><h2>All runs</h2>' + note
             + f'<p class="note">Sweep time {_secs(sw["sweep_wall_s"])} (reference not included). '
               'Photons: emitted per still, caustic / global. Samples / pixel: in total (ACCUMULATION: N x per still). '
-              'Look-up time is part of ray-tracing time.</p>'
+              'Photon look-ups: seconds inside look-ups summed over the worker threads (they run inside ray tracing, '
+              'so they can exceed its wall time).</p>'
             '<table><tr><th>Run</th><th>Status</th><th>Photons</th><th>Samples / pixel</th><th>Wall time</th><th>Photon tracing</th>'
             '<th>Photon look-ups</th><th>Ray tracing</th><th>RMSE</th><th>relMSE</th><th>FLIP</th></tr>'
             f'{"".join(rows)}</table></section>')

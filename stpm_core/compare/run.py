@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import RenderCancelled, StpmError
 from .costs import cost_of_accuracy
 from .metrics import RELMSE_EPS, combined_rgb, display_scale, image_errors
-from .reference import REFERENCE_PHOTON_FACTOR, REFERENCE_SAMPLE_FACTOR, Reference, get_reference
+from .reference import REFERENCE_METHOD, REFERENCE_STEPS, Reference, get_reference, reference_settings
 from .report_html import render_html
 from .sweep import (DEFAULT_ACCUMULATION_STEPS, DEFAULT_PHOTON_BUDGETS, METHOD_ORDER, PHOTON_ESTIMATORS,
                     is_consistent, parse_budget, plan_runs, run_sweep)
@@ -105,8 +105,8 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
                 photon_budgets=DEFAULT_PHOTON_BUDGETS, accumulation_steps=DEFAULT_ACCUMULATION_STEPS,
                 estimators=PHOTON_ESTIMATORS, target_steps: int = 16, progress=None, cancel=None,
                 cache_dir=None, use_cache: bool = True,
-                reference_photon_factor: float = REFERENCE_PHOTON_FACTOR,
-                reference_sample_factor: float = REFERENCE_SAMPLE_FACTOR,
+                reference_method: str = REFERENCE_METHOD, reference_photon_factor: float | None = None,
+                reference_sample_factor: float | None = None, reference_steps: int = REFERENCE_STEPS,
                 reference_overrides: dict | None = None,
                 scene_name: str | None = None, scene_path=None, write_reference: bool = True,
                 extra_references: dict | None = None) -> dict:
@@ -116,7 +116,8 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
     ----------
     scene, settings : the Scene and its RenderSettings (the file's).
     out_dir : report directory (created).
-    reference : None (compute, cached), a path to an EXR (its Combined pass) or an (H, W, 3|4) array.
+    reference : None (compute, cached), a path to an EXR (its Combined pass), an (H, W, 3|4) array or a
+        Reference (rgb + info: e.g. {'kind': 'analytic', 'why': ...}).
     time_budget : seconds for the sweep (the reference not included); no run starts once spent.
     photon_budgets : budgets of the STANDARD / TEMPORAL / KD4D runs: b (the file's photons x b) or
         (b, s) / 'b:s' (photons x b and samples per pixel x s).
@@ -127,8 +128,9 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
         Cancelling during the sweep still writes the report (unfinished runs marked skipped,
         'cancelled'), then raises RenderCancelled.
     cache_dir, use_cache : computed-reference cache (default ``~/.cache/stpm/references``).
-    reference_photon_factor, reference_sample_factor, reference_overrides : reference recipe
-        (see :func:`stpm_core.compare.reference.reference_settings`).
+    reference_method, reference_photon_factor, reference_sample_factor, reference_steps,
+    reference_overrides : the computed reference's recipe (default: accumulation buffer of 64
+        instants x 4 x photons; see :func:`stpm_core.compare.reference.reference_settings`).
     scene_name, scene_path : shown in the report.
     write_reference : also write ``reference.exr`` into out_dir when the reference was computed.
     extra_references : name -> second reference (Reference or (H, W, 3|4) array): a cross-check;
@@ -148,7 +150,15 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
                      estimators=estimators)
 
     # -- Progress: the reference weighs like the stills it costs -----------------------------
-    ref_weight = 0.0 if reference is not None else max(reference_photon_factor, reference_sample_factor) * 0.5
+    ref_weight = 0.0
+    if reference is None:
+        rs, _kind = reference_settings(scene, settings, method=reference_method, photon_factor=reference_photon_factor,
+                                       sample_factor=reference_sample_factor, steps=reference_steps,
+                                       overrides=reference_overrides)
+        photons = settings.photons_caustic + settings.photons_global
+        p = (rs.photons_caustic + rs.photons_global) / photons if photons else 1.0
+        n = rs.accumulation_steps if rs.method == "ACCUMULATION" else 1
+        ref_weight = n * 0.5 * (p + rs.samples / settings.samples)     # in stills, like the runs' costs
     sweep_weight = sum(r.cost for r in runs)
     total = (ref_weight + sweep_weight) or 1.0
 
@@ -159,7 +169,8 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
 
     # -- Reference -------------------------------------------------------------------------------
     ref = get_reference(scene, settings, reference=reference, cache_dir=cache_dir, use_cache=use_cache,
-                        photon_factor=reference_photon_factor, sample_factor=reference_sample_factor,
+                        method=reference_method, photon_factor=reference_photon_factor,
+                        sample_factor=reference_sample_factor, steps=reference_steps,
                         overrides=reference_overrides, progress=span(0.0, ref_weight, "reference: "),
                         cancel=cancel)
     files = {"html": str(out_dir / "report.html"), "json": str(out_dir / "report.json")}

@@ -237,14 +237,3 @@ def run_sweep(scene, runs: list[Run], reference_rgb: np.ndarray, *, time_budget:
             "time_budget_s": None if time_budget is None else float(time_budget),
             "skipped": [r.label for r in runs if r.status == "skipped"],
             "budget_exhausted": exhausted, "cancelled": cancelled}
-
-
-def finite_or_none(x):
-    """x as a float if finite, else None (JSON has no NaN)."""
-    if x is None:
-        return None
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        return None
-    return x if math.isfinite(x) else None

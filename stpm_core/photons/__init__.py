@@ -2,8 +2,9 @@
 
 Modules: :mod:`.record` (the 32-byte photon record), :mod:`.trace` (photon
 paths, one shutter time each), :mod:`.estimators` (the estimates and their
-normalisations), :mod:`.timescale` (KD4D's automatic s), :mod:`.maps`
-(build_photon_maps / PhotonMaps).  See docs/photon-mapping.md.
+normalisations), :mod:`.kdtree` (compiled look-ups, numba; scipy fallback),
+:mod:`.timescale` (KD4D's automatic s), :mod:`.maps` (build_photon_maps /
+PhotonMaps).  See docs/photon-mapping.md.
 """
 from .estimators import PhotonMap
 from .maps import KINDS, PhotonMaps, build_photon_maps

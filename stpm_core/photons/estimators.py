@@ -18,6 +18,12 @@ exactly for a Poisson process.  So every estimate sums the k - 1 *inner*
 photons over the volume reaching the k-th (the textbook k / V_k overestimates
 by k / (k-1)).
 
+Search engines: each estimate first gathers, per query, the summed power of
+its selected photons and the radius / window that bound them -- with the
+compiled kd-tree of :mod:`.kdtree` (numba) when available, else scipy's
+cKDTree (``PhotonMap.backend``); both give the same neighbours, and the
+normalisations below are one numpy code path (``PhotonMap._normalise``).
+
 Estimators (``k`` = ``settings.k_nearest``):
 
 * STANDARD: k nearest in space; ``E = sum Phi / (pi r_k^2)`` -- the
@@ -35,11 +41,14 @@ Estimators (``k`` = ``settings.k_nearest``):
 from __future__ import annotations
 
 import math
+import threading
 import time as _time
+import warnings
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from . import kdtree as _kdtree
 from .record import oct_decode
 
 __all__ = [
@@ -148,7 +157,9 @@ class PhotonMap:
     records : (N,) PHOTON_DTYPE array.
     shutter : stpm_core.shutter.Shutter (its density weights time windows).
     time_scale : KD4D's s (scene units per shutter), > 0.
-    workers : scipy cKDTree workers (-1 = all cores).
+    workers : look-up threads (-1 or 0 = all cores); a batch of queries is split over them.
+    backend : 'auto' (compiled numba kd-tree when numba imports, else scipy), 'numba' or
+        'scipy'.  Both give the same estimates (:mod:`.kdtree`).
 
     Attributes
     ----------
@@ -158,14 +169,21 @@ class PhotonMap:
     (N, 8) float32 array (one 32-byte row gathered per neighbour).
     timeless : True when all photons share one time (instant shutter or an
         accumulation-buffer still): TEMPORAL and KD4D then equal STANDARD.
+    backend : 'numba' or 'scipy', the search actually used.
     stats : dict of tree build seconds, look-up seconds and counts.
     """
 
-    def __init__(self, records: np.ndarray, shutter, *, time_scale: float, workers: int = -1):
+    def __init__(self, records: np.ndarray, shutter, *, time_scale: float, workers: int = -1,
+                 backend: str = "auto"):
         self.shutter = shutter
         self.time_scale = float(time_scale)
         self.workers = workers
         self.n = int(records.shape[0])
+        if backend not in ("auto", "numba", "scipy"):
+            raise ValueError(f"unknown look-up backend {backend!r}")
+        if backend == "numba" and not _kdtree.AVAILABLE:
+            raise RuntimeError(f"numba look-ups unavailable ({_kdtree._IMPORT_ERROR})")
+        self.backend = "numba" if backend != "scipy" and _kdtree.AVAILABLE else "scipy"
         t0 = _time.perf_counter()
         # Store photons in Morton (Z-curve) order: spatial neighbours sit close in memory,
         # so the neighbour gathers of every look-up hit the cache
@@ -184,38 +202,64 @@ class PhotonMap:
         self.timeless = bool(shutter.is_instant or self.n == 0 or np.ptp(self.time) == 0.0)
         self._tree3 = None
         self._tree4 = None
+        self._flat = {}                      # dims -> kdtree.FlatTree (numba backend)
+        self._lock = threading.Lock()
         # Sorting and packing count as map building
         self.stats = {"tree_build_s": _time.perf_counter() - t0, "lookup_s": 0.0, "lookup_count": 0,
                       "temporal_candidates": 0}
 
     # -- kd-trees -----------------------------------------------------------
     def tree3(self) -> cKDTree:
-        """3D kd-tree over photon positions (built on first use)."""
-        if self._tree3 is None:
-            t0 = _time.perf_counter()
-            self._tree3 = cKDTree(self.position, leafsize=16, balanced_tree=False, compact_nodes=False)
-            self.stats["tree_build_s"] += _time.perf_counter() - t0
+        """3D scipy kd-tree over photon positions (built on first use)."""
+        with self._lock:
+            if self._tree3 is None:
+                t0 = _time.perf_counter()
+                self._tree3 = cKDTree(self.position, leafsize=16, balanced_tree=False, compact_nodes=False)
+                self.stats["tree_build_s"] += _time.perf_counter() - t0
         return self._tree3
 
     def tree4(self) -> cKDTree:
-        """4D kd-tree over (x, y, z, s t) (built on first use)."""
-        if self._tree4 is None:
-            t0 = _time.perf_counter()
-            xyzt = np.empty((self.n, 4))
-            xyzt[:, :3] = self.position
-            xyzt[:, 3] = self.time_scale * self.time
-            self._tree4 = cKDTree(xyzt, leafsize=16, balanced_tree=False, compact_nodes=False)
-            self.stats["tree_build_s"] += _time.perf_counter() - t0
+        """4D scipy kd-tree over (x, y, z, s t) (built on first use)."""
+        with self._lock:
+            if self._tree4 is None:
+                t0 = _time.perf_counter()
+                xyzt = np.empty((self.n, 4))
+                xyzt[:, :3] = self.position
+                xyzt[:, 3] = self.time_scale * self.time
+                self._tree4 = cKDTree(xyzt, leafsize=16, balanced_tree=False, compact_nodes=False)
+                self.stats["tree_build_s"] += _time.perf_counter() - t0
         return self._tree4
+
+    def flat_tree(self, dims: int):
+        """Compiled kd-tree (numba backend) in 3D or 4D (x, y, z, s t), built on first use."""
+        with self._lock:
+            tree = self._flat.get(dims)
+            if tree is None:
+                t0 = _time.perf_counter()
+                tree = _kdtree.FlatTree(self.records["position"], self.records["time"], self._packed,
+                                        dims=dims, s=self.time_scale)
+                self._flat[dims] = tree
+                self.stats["tree_build_s"] += _time.perf_counter() - t0
+        return tree
 
     def build(self, estimator: str) -> None:
         """Build the tree ``estimator`` needs now (so build time is not charged to look-ups)."""
         if self.n == 0:
             return
-        if estimator == "KD4D" and not self.timeless:
-            self.tree4()
-        else:
-            self.tree3()
+        dims = 4 if estimator == "KD4D" and not self.timeless else 3
+        if self.backend == "numba":
+            try:
+                self.flat_tree(dims)
+                return
+            except Exception as exc:  # noqa: BLE001 -- a compile failure falls back to scipy
+                self._fall_back(exc)
+        self.tree4() if dims == 4 else self.tree3()
+
+    def _fall_back(self, exc: Exception) -> None:
+        """The compiled path failed (e.g. no compiler cache, broken llvmlite): use scipy from now on."""
+        _kdtree.disable(f"{type(exc).__name__}: {exc}")
+        warnings.warn(f"STPM: compiled photon look-ups failed ({exc}); using scipy", RuntimeWarning)
+        self.backend = "scipy"
 
     # -- the estimate ---------------------------------------------------------
     def estimate(self, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str = "TEMPORAL",
@@ -235,29 +279,80 @@ class PhotonMap:
             estimator = "STANDARD"  # time adds nothing: every photon has the same time
         # k >= 2 so there is at least one inner photon; never more than the map holds
         k = int(min(max(k, 2), self.n))
+        m = k
         if estimator == "TEMPORAL":
             m = min(temporal_candidates(self.n, k, temporal_alpha), self.n)
             k = min(k, m - 1)
             if k < 2:
                 estimator = "STANDARD"
-                k = int(min(self.n, 2))
+                k = m = int(min(self.n, 2))
             self.stats["temporal_candidates"] = m
-        per_query = m if estimator == "TEMPORAL" else k
-        batch = max(256, _QUERY_BATCH_ELEMS // per_query)
         t0 = _time.perf_counter()
-        for lo in range(0, n, batch):
-            sl = slice(lo, min(n, lo + batch))
-            if estimator == "STANDARD":
-                E[sl] = self._standard(p[sl], ns[sl], k, kernel)
-            elif estimator == "TEMPORAL":
-                E[sl] = self._temporal(p[sl], ns[sl], t[sl], k, m, kernel)
-            else:
-                E[sl] = self._kd4d(p[sl], ns[sl], t[sl], k, kernel)
+        # -- search: Phi summed over the inner / selected photons, radius, time window ----------
+        if self.backend == "numba":
+            try:
+                Phi, r, tau = self._search_numba(estimator, p, ns, t, k, m, kernel)
+            except Exception as exc:  # noqa: BLE001 -- fall back to scipy, same answer
+                self._fall_back(exc)
+        if self.backend == "scipy":
+            Phi, r, tau = self._search_scipy(estimator, p, ns, t, k, m, kernel)
+        # -- normalise: the same numpy code for both searches ------------------------------------
+        E[:] = self._normalise(estimator, Phi, r, tau, t, kernel)
         self.stats["lookup_s"] += _time.perf_counter() - t0
         self.stats["lookup_count"] += n
         return E
 
-    # -- shared: sum the inner photons' power on the ns side --------------------
+    # -- normalisations (docs/photon-mapping.md, section 5) -------------------------------------------
+    def _normalise(self, estimator, Phi, r, tau, t, kernel):
+        """E (n, 3) W/m^2 from summed power Phi (n, 3) W, the k-th / m-th radius r (n,) and tau (n,).
+
+        STANDARD: pi r_k^2; TEMPORAL: pi r_m^2 W(t - tau, t + tau); KD4D: the clipped ball V(R)/s;
+        each times the kernel's mean weight over its neighbourhood.
+        """
+        cone = kernel == "CONE"
+        if estimator == "KD4D":
+            norm = 1.0 - 3.0 / (4.0 * CONE_K) if cone else 1.0   # mean cone weight over a 3-ball
+            measure = norm * slab_ball_volume(self.shutter, np.maximum(r, 1e-12), t, self.time_scale)
+            return Phi / np.maximum(measure, 1e-300)[:, None]
+        norm = 1.0 - 2.0 / (3.0 * CONE_K) if cone else 1.0       # mean cone weight over a disc
+        area = norm * np.pi * np.maximum(r, 1e-12) ** 2          # m^2
+        if estimator == "TEMPORAL":
+            W = shutter_mass(self.shutter, t - tau, t + tau)      # shutter mass of the clipped window
+            area = area * np.maximum(W, 1e-12)                    # m^2 (x mass)
+        return Phi / area[:, None]
+
+    # -- compiled search ------------------------------------------------------------------------
+    def _search_numba(self, estimator, p, ns, t, k, m, kernel):
+        """(Phi (n, 3) W, r (n,) m, tau (n,)) from the fused numba kernel (see kdtree.py)."""
+        q = np.empty((p.shape[0], 4))
+        q[:, :3] = p
+        if estimator == "KD4D":
+            q[:, 3] = self.time_scale * t
+            tree, mode = self.flat_tree(4), _kdtree.MODE_KD4D
+        else:
+            q[:, 3] = t
+            tree = self.flat_tree(3)
+            mode = _kdtree.MODE_TEMPORAL if estimator == "TEMPORAL" else _kdtree.MODE_STANDARD
+        kq = m if estimator == "TEMPORAL" else k
+        return tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers)
+
+    # -- scipy search -----------------------------------------------------------------------------
+    def _search_scipy(self, estimator, p, ns, t, k, m, kernel):
+        """(Phi (n, 3) W, r (n,) m, tau (n,)) with scipy's cKDTree, in memory-bounded batches."""
+        n = p.shape[0]
+        Phi, r, tau = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
+        per_query = m if estimator == "TEMPORAL" else k
+        batch = max(256, _QUERY_BATCH_ELEMS // per_query)
+        for lo in range(0, n, batch):
+            sl = slice(lo, min(n, lo + batch))
+            if estimator == "STANDARD":
+                Phi[sl], r[sl] = self._standard(p[sl], ns[sl], k, kernel)
+            elif estimator == "TEMPORAL":
+                Phi[sl], r[sl], tau[sl] = self._temporal(p[sl], ns[sl], t[sl], k, m, kernel)
+            else:
+                Phi[sl], r[sl] = self._kd4d(p[sl], ns[sl], t[sl], k, kernel)
+        return Phi, r, tau
+
     def _weighted_sum(self, idx: np.ndarray, ns: np.ndarray, w: np.ndarray | None) -> np.ndarray:
         """sum_j [dot(ns, wi_j) > 0] w_j Phi_j over idx (n, j) -> (n, 3) W."""
         G = np.take(self._packed, idx, axis=0)                     # (n, j, 8): one gather per photon
@@ -270,24 +365,15 @@ class PhotonMap:
         """Cone kernel weights 1 - d / (CONE_K r) (n, j)."""
         return 1.0 - d / (CONE_K * np.maximum(r, 1e-300)[:, None])
 
-    # -- STANDARD ---------------------------------------------------------------
     def _standard(self, p, ns, k, kernel):
-        """E = sum_{k-1 inner} Phi w / (c_kernel pi r_k^2): shutter-averaged irradiance."""
+        """STANDARD: Phi over the k - 1 inner photons, r_k."""
         d, idx = self.tree3().query(p, k, workers=self.workers)
         r = d[:, -1]                                   # radius reaching the k-th photon (m)
-        inner, d_in = idx[:, :-1], d[:, :-1]
-        if kernel == "CONE":
-            Phi = self._weighted_sum(inner, ns, self._cone(d_in, r))
-            norm = 1.0 - 2.0 / (3.0 * CONE_K)          # mean cone weight over a uniform disc
-        else:
-            Phi = self._weighted_sum(inner, ns, None)
-            norm = 1.0
-        area = norm * np.pi * np.maximum(r, 1e-12) ** 2  # m^2
-        return Phi / area[:, None]
+        w = self._cone(d[:, :-1], r) if kernel == "CONE" else None
+        return self._weighted_sum(idx[:, :-1], ns, w), r
 
-    # -- TEMPORAL -------------------------------------------------------------------
     def _temporal(self, p, ns, t, k, m, kernel):
-        """E = sum_{k-1 nearest in time} Phi w / (c_kernel pi r_m^2 W(tau_k))."""
+        """TEMPORAL: Phi over the k - 1 nearest in time among m - 1 inner candidates, r_m, tau_k."""
         d, idx = self.tree3().query(p, m, workers=self.workers)
         r = d[:, -1]                                   # candidate disc radius: the m-th photon (m)
         cand, d_c = idx[:, :-1], d[:, :-1]             # m - 1 inner candidates
@@ -297,32 +383,15 @@ class PhotonMap:
         rows = np.arange(cand.shape[0])[:, None]
         tau = dt[rows[:, 0], part[:, k - 1]]           # window half-width (shutter units)
         sel = part[:, : k - 1]                         # k - 1 photons strictly inside the window
-        inner = cand[rows, sel]
-        W = shutter_mass(self.shutter, t - tau, t + tau)  # shutter mass of the clipped window
-        if kernel == "CONE":
-            Phi = self._weighted_sum(inner, ns, self._cone(d_c[rows, sel], r))
-            norm = 1.0 - 2.0 / (3.0 * CONE_K)
-        else:
-            Phi = self._weighted_sum(inner, ns, None)
-            norm = 1.0
-        measure = norm * np.pi * np.maximum(r, 1e-12) ** 2 * np.maximum(W, 1e-12)  # m^2 (x mass)
-        return Phi / measure[:, None]
+        w = self._cone(d_c[rows, sel], r) if kernel == "CONE" else None
+        return self._weighted_sum(cand[rows, sel], ns, w), r, tau
 
-    # -- KD4D -----------------------------------------------------------------------
     def _kd4d(self, p, ns, t, k, kernel):
-        """E = sum_{k-1 inner} Phi w / (c_kernel V_clip(R_k) / s) in a 4D tree over (x, s t)."""
-        s = self.time_scale
+        """KD4D: Phi over the k - 1 inner photons in (x, y, z, s t), R_k."""
         q = np.empty((p.shape[0], 4))
         q[:, :3] = p
-        q[:, 3] = s * t
+        q[:, 3] = self.time_scale * t
         d, idx = self.tree4().query(q, k, workers=self.workers)
         R = d[:, -1]                                   # 4D radius reaching the k-th photon (m)
-        inner, d_in = idx[:, :-1], d[:, :-1]
-        if kernel == "CONE":
-            Phi = self._weighted_sum(inner, ns, self._cone(d_in, R))
-            norm = 1.0 - 3.0 / (4.0 * CONE_K)          # mean cone weight over a uniform 3-ball
-        else:
-            Phi = self._weighted_sum(inner, ns, None)
-            norm = 1.0
-        measure = norm * slab_ball_volume(self.shutter, np.maximum(R, 1e-12), t, s)  # m^2 (x mass)
-        return Phi / np.maximum(measure, 1e-300)[:, None]
+        w = self._cone(d[:, :-1], R) if kernel == "CONE" else None
+        return self._weighted_sum(idx[:, :-1], ns, w), R

@@ -87,6 +87,7 @@ class PhotonMaps:
             "lookup_s": lookup,
             "lookup_count": count,
             "lookups_per_s": count / lookup if lookup > 0 else 0.0,
+            "lookup_backend": next((m.backend for m in self.maps.values() if m.n), "scipy"),
             "estimator": self.estimator,
             "k_nearest": self.k,
             "kernel": self.kernel,

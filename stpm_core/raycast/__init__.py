@@ -2,7 +2,7 @@
 
 Public API (implemented by the backends in this package; one interface):
 
-    caster = make_caster(scene, backend="auto")   # 'embree' | 'numpy' | 'auto'
+    caster = make_caster(scene, backend="auto")   # 'embree' | 'numba' | 'numpy' | 'auto'
     hits = caster.intersect(origins, dirs, times, tmax=None)
     blocked = caster.occluded(origins, dirs, times, tmax)
 
@@ -58,6 +58,6 @@ from .geometry import TMIN_REL  # noqa: E402  (self-intersection guard, see abov
 
 
 def make_caster(scene, backend: str = "auto"):
-    """Build a ray caster for ``scene`` ('auto' = embree when importable, else numpy)."""
+    """Build a ray caster for ``scene`` ('auto': $STPM_RAYCAST_BACKEND, else embree, numba or numpy)."""
     from .build import make_caster as _make
     return _make(scene, backend=backend)

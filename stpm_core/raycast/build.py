@@ -12,7 +12,8 @@ for a batch of rays at their own times:
 :class:`Caster` walks the parts in that order, skipping rays whose current
 segment misses a part's swept world bounds, keeps the nearest exact (float64)
 hit, then asks the winning part of each ray for normals and material.
-Backends (:mod:`.embree_backend`, :mod:`.numpy_backend`) only provide parts.
+Backends (:mod:`.embree_backend`, :mod:`.numba_backend`, :mod:`.numpy_backend`)
+only provide parts.
 
 A part has ``bounds`` (world (lo, hi) over the shutter, or None = every ray)
 and three methods on a batch of m rays:
@@ -24,6 +25,7 @@ and three methods on a batch of m rays:
 """
 from __future__ import annotations
 
+import os
 import time as _time
 
 import numpy as np
@@ -34,7 +36,11 @@ from .pair_bvh import PairBVH, RaySlabs, segments_meet_boxes
 
 __all__ = ["make_caster", "Caster", "BACKENDS"]
 
-BACKENDS = ("auto", "embree", "numpy")
+BACKENDS = ("auto", "embree", "numba", "numpy")
+
+# Environment override of backend='auto' (render() and the photon tracer build
+# their casters with 'auto'): one of BACKENDS, e.g. STPM_RAYCAST_BACKEND=numba
+BACKEND_ENV = "STPM_RAYCAST_BACKEND"
 
 # Rays per batch: embree's run() is fastest at 4k-16k rays (design.md), and the
 # numpy work around it stays in cache.
@@ -56,23 +62,42 @@ def embree_available() -> bool:
     return True
 
 
+def numba_available() -> bool:
+    """Can the numba backend be imported (numba installed and working)?"""
+    try:
+        import numba  # noqa: F401
+    except Exception:
+        return False
+    return True
+
+
 def make_caster(scene, backend: str = "auto") -> "Caster":
     """Build a time-aware ray caster for ``scene``.
 
-    backend : 'embree' (embreex, float32 BVH + float64 refinement), 'numpy'
+    backend : 'embree' (embreex, float32 BVH + float64 refinement), 'numba'
+        (compiled float64 BVH, exact; for platforms without embreex), 'numpy'
         (exact float64, brute force or a numpy BVH; the test oracle and the
-        fallback where embreex has no wheel) or 'auto' (embree when importable,
-        else numpy).  See docs/raycast.md.
+        last fallback) or 'auto': the environment variable
+        ``STPM_RAYCAST_BACKEND`` if set, else embree when importable, else
+        numba when importable, else numpy.  See docs/raycast.md.
     """
     from ..errors import SettingsError
+    if backend == "auto" and os.environ.get(BACKEND_ENV, "").strip():
+        backend = os.environ[BACKEND_ENV].strip().lower()
+        if backend not in BACKENDS:
+            raise SettingsError(f"{BACKEND_ENV} must be one of {', '.join(BACKENDS)}, got {backend!r}")
     if backend not in BACKENDS:
         raise SettingsError(f"ray-casting backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     if backend == "auto":
-        backend = "embree" if embree_available() else "numpy"
+        backend = "embree" if embree_available() else "numba" if numba_available() else "numpy"
     if backend == "embree":
         if not embree_available():
             raise SettingsError("ray-casting backend 'embree' needs the embreex package, which is not installed")
         from .embree_backend import build_parts
+    elif backend == "numba":
+        if not numba_available():
+            raise SettingsError("ray-casting backend 'numba' needs the numba package, which is not installed")
+        from .numba_backend import build_parts
     else:
         from .numpy_backend import build_parts
     scale = scene_scale(scene)

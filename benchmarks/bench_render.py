@@ -1,0 +1,194 @@
+"""Full-tracer throughput: camera + shadow rays per second through
+``integrator.trace_image`` next to raw embreex ``run()`` on the very same rays.
+
+Scene: :func:`benchmarks.bench_rays.bench_scene` (about 107k triangles: an
+82k-triangle icosphere on a 20k-triangle floor grid, four small icospheres),
+one diffuse material, a point light, a pinhole camera; 320 x 240 pixels at
+16 samples per pixel, no photons (Combined = Direct + world).  Two variants:
+
+* ``static``: nothing moves;
+* ``motion``: the four small spheres translate and turn across an open
+  shutter (every camera sample has its own time).
+
+Per variant:
+
+1. the tracer renders once with a caster wrapper that records every ray it is
+   asked to cast (origins, directions, tmax, kind), not timed;
+2. the tracer renders again (deterministic: the same rays), timed with
+   ``threads=1`` (CPU seconds of the tracing thread: the machine is shared) and with
+   ``threads=0`` (wall seconds, all cores);
+3. the recorded rays go straight through raw embreex ``run()`` (float32,
+   batches of 8192, INTERSECT for camera rays, OCCLUDED with tmax for shadow
+   rays) against one world-space scene at time 0: the ceiling a pure-embree
+   tracer could reach on this machine.
+
+Reported: Mrays/s of the tracer (camera + shadow rays / CPU s), of raw embree
+on the same rays, ``tracer_over_raw`` and ``motion_over_static_cost`` (cost
+per ray, moving over static), plus the tracer's split between ray casting
+(CPU seconds inside the caster's calls) and everything else (sampling,
+shading, film).
+Targets (issue 2): tracer_over_raw >= 0.5, motion_over_static_cost <= 1.5.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from stpm_core.motion import MotionTransform
+from stpm_core.raycast.build import embree_available
+from stpm_core.scene import Camera, Light, Material, World
+from stpm_core.settings import RenderSettings
+from stpm_core.shutter import Shutter
+
+from .bench_rays import bench_scene
+
+__all__ = ["run", "render_scene", "RecordingCaster"]
+
+WIDTH, HEIGHT, SPP = 320, 240, 16
+
+
+def _look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Camera-to-world matrix looking from eye to target (local -Z forward)."""
+    eye, target, up = (np.asarray(a, float) for a in (eye, target, up))
+    f = (target - eye) / np.linalg.norm(target - eye)
+    x = np.cross(f, up)
+    x /= np.linalg.norm(x)
+    M = np.eye(4)
+    M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = x, np.cross(x, f), -f, eye
+    return M
+
+
+def render_scene(moving: bool):
+    """The ~107k-triangle benchmark scene with camera, light, material and shutter."""
+    sc = bench_scene(moving)
+    sc.materials = [Material.diffuse((0.7, 0.7, 0.7))]
+    sc.camera = Camera(type="PERSP", transform=MotionTransform.static(_look_at((0, -7, 4), (0, 0, 0.5))),
+                       lens=35.0)
+    M = np.eye(4)
+    M[:3, 3] = (2.0, -2.0, 6.0)
+    sc.lights = [Light(type="POINT", power=2000.0, transform=MotionTransform.static(M))]
+    sc.world = World(color=np.full(3, 0.05), strength=1.0)
+    sc.resolution = (WIDTH, HEIGHT)
+    sc.shutter = Shutter(1.0, 1.5) if moving else Shutter(1.0, 1.0)
+    return sc
+
+
+class RecordingCaster:
+    """Wraps a caster and keeps a copy of every ray batch it casts."""
+
+    def __init__(self, caster):
+        self.caster = caster
+        self.stats = caster.stats
+        self.batches: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def intersect(self, o, d, t, tmax=None):
+        n = np.asarray(o).shape[0]
+        tm = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, float), (n,))
+        self.batches.append(("intersect", np.array(o, float), np.array(d, float), np.array(tm)))
+        return self.caster.intersect(o, d, t, tmax)
+
+    def occluded(self, o, d, t, tmax):
+        self.batches.append(("occluded", np.array(o, float), np.array(d, float),
+                             np.array(np.broadcast_to(np.asarray(tmax, float), (np.asarray(o).shape[0],)))))
+        return self.caster.occluded(o, d, t, tmax)
+
+
+class TimingCaster:
+    """Wraps a caster and adds up the calling thread's CPU seconds spent in it."""
+
+    def __init__(self, caster):
+        self.caster = caster
+        self.stats = caster.stats
+        self.seconds = 0.0
+
+    def intersect(self, *a, **k):
+        t0 = time.thread_time()
+        try:
+            return self.caster.intersect(*a, **k)
+        finally:
+            self.seconds += time.thread_time() - t0
+
+    def occluded(self, *a, **k):
+        t0 = time.thread_time()
+        try:
+            return self.caster.occluded(*a, **k)
+        finally:
+            self.seconds += time.thread_time() - t0
+
+
+def _trace(scene, caster, threads: int):
+    from stpm_core.integrator import trace_image
+    from stpm_core.lights import LightSet
+    st = RenderSettings(samples=SPP, photons_caustic=0, photons_global=0, seed=0, threads=threads)
+    return trace_image(scene, st, caster, LightSet(scene), None)
+
+
+def _raw_times(es, batches, chunk: int = 8192) -> float:
+    """CPU seconds for raw run() over the recorded rays (float32 conversion included)."""
+    t0 = time.process_time()
+    for kind, o, d, tmax in batches:
+        o32, d32 = o.astype(np.float32), d.astype(np.float32)
+        far = np.minimum(tmax, 1e37).astype(np.float32)
+        for a in range(0, o32.shape[0], chunk):
+            sl = slice(a, a + chunk)
+            if kind == "intersect":
+                es.run(o32[sl], d32[sl], dists=far[sl], output=1)
+            else:
+                es.run(o32[sl], d32[sl], dists=far[sl], query="OCCLUDED")
+    return time.process_time() - t0
+
+
+def run(repeats: int = 2) -> dict:
+    """Measure and return {name: value}; speeds in Mrays/s, times in s, ratios unitless."""
+    from stpm_core.raycast import make_caster
+    from .bench_rays import _raw_embree
+
+    out: dict = {"resolution": f"{WIDTH}x{HEIGHT}", "spp": SPP}
+    if not embree_available():
+        out["skipped"] = "embreex not importable"
+        return out
+    for variant, moving in (("static", False), ("motion", True)):
+        sc = render_scene(moving)
+        out["triangles"] = int(sum(len(sc.meshes[i.mesh].triangles) for i in sc.instances))
+        caster = make_caster(sc, "embree")
+        # 1. Record the rays (not timed)
+        rec = RecordingCaster(caster)
+        _, stats = _trace(sc, rec, threads=1)
+        n_cam = sum(o.shape[0] for k, o, _, _ in rec.batches if k == "intersect")
+        n_sh = sum(o.shape[0] for k, o, _, _ in rec.batches if k == "occluded")
+        n = n_cam + n_sh
+        out[f"{variant}_camera_rays"] = int(stats.camera_rays)
+        out[f"{variant}_bounce_rays"] = int(stats.bounce_rays)
+        out[f"{variant}_shadow_rays"] = int(stats.shadow_rays)
+        # 2. The tracer, best of `repeats`: CPU seconds on one thread; wall seconds on all cores
+        cpu, wall, cast = np.inf, np.inf, np.inf
+        for _ in range(repeats):
+            timed = TimingCaster(caster)
+            t0 = time.thread_time()
+            _trace(sc, timed, threads=1)          # threads=1 traces on this thread
+            c = time.thread_time() - t0
+            if c < cpu:
+                cpu, cast = c, timed.seconds
+            w0 = time.perf_counter()
+            _trace(sc, caster, threads=0)
+            wall = min(wall, time.perf_counter() - w0)
+        # 3. Raw embree on the same rays, best of `repeats`
+        es = _raw_embree(sc)
+        raw = min(_raw_times(es, rec.batches) for _ in range(repeats))
+        out[f"{variant}_tracer_cpu_s"] = cpu
+        out[f"{variant}_tracer_wall_s_all_threads"] = wall
+        out[f"{variant}_tracer_casting_s"] = cast
+        out[f"{variant}_tracer_shading_s"] = cpu - cast
+        out[f"{variant}_tracer_Mrays_s"] = n / cpu / 1e6
+        out[f"{variant}_tracer_wall_Mrays_s_all_threads"] = n / wall / 1e6
+        out[f"{variant}_raw_cpu_s"] = raw
+        out[f"{variant}_raw_Mrays_s"] = n / raw / 1e6
+        out[f"{variant}_tracer_over_raw"] = out[f"{variant}_tracer_Mrays_s"] / out[f"{variant}_raw_Mrays_s"]
+    out["motion_over_static_cost"] = out["static_tracer_Mrays_s"] / out["motion_tracer_Mrays_s"]
+    return out
+
+
+if __name__ == "__main__":
+    for k, v in run().items():
+        print(f"{k:40s} {v}")

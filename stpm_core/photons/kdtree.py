@@ -1,0 +1,626 @@
+"""Compiled kd-tree look-ups (numba) for the three estimators, with scipy as the fallback.
+
+The estimators in :mod:`.estimators` need, per query, a k-nearest search and
+then a reduction over the neighbours (side test, optional cone weight, sum
+of power; for TEMPORAL first the k nearest in time among m spatial
+candidates).  With scipy, the search returns (n, k) index and distance
+arrays that numpy then gathers and reduces: about 80 % of a look-up is
+``cKDTree.query`` and the rest is array traffic.  Here one compiled function
+does search and reduction per query, so no (n, k) array is ever built.
+
+The results are *the same estimates* as the scipy path:
+
+* distances are computed in float64 from the float32 record positions (the
+  float64 copy scipy searches holds exactly those values), as the same sum
+  of squared coordinate differences in the same order; KD4D's fourth
+  coordinate is the same float64 product ``s * t``.  So every neighbour set
+  is the one scipy returns, except for exact distance ties at the k-th
+  neighbour, where either answer is a valid k-nearest set (both searches
+  then pick arbitrarily);
+* TEMPORAL's selection takes the k - 1 smallest time distances among the
+  m - 1 inner candidates and the k-th as the window half-width, like
+  ``np.argpartition`` (again arbitrary only among exact ties);
+* power is summed in float64 (the numpy path sums float32), so estimates
+  agree to float32 rounding (about 1e-6 relative; tested).
+
+The normalisations (disc area, window mass, clipped ball volume) are not
+here: :class:`PhotonMap` applies the same numpy code to the radii and window
+widths this module returns.
+
+Tree: a balanced kd-tree built here (numba), median split on the widest
+axis of each node's tight bounding box, 2^L leaves of at most ``LEAF_SIZE``
+photons; leaf l is the rows [l N / L, (l + 1) N / L) of one (N, 12) float32
+array in tree order, a 48-byte row per photon ``(x, y, z, t, wi, 0, Phi,
+0)``: the search reads the first 16 bytes of a leaf's contiguous rows, and
+the power of the photons it keeps is then already in cache.  Node boxes are
+float32 rounded outward (exact for x, y, z; a hair larger for s t, which only
+makes pruning more conservative), a node's two children in one 64-byte line.
+
+Search (:func:`_knn`): best-first (nodes in increasing box distance, the
+nearer child followed at once, the farther queued), so only leaves that
+reach the final kq-th ball are scanned.  Nearer photons are appended to a
+buffer of 2 kq and cut back to the kq nearest by quickselect when it fills
+(O(1) per photon where a heap costs O(log kq): TEMPORAL keeps m = 340).
+
+Candidate cache (:func:`_lookup`): queries are processed in Morton order,
+and after a full search at c with kq-th distance r_c every photon within
+r_c + 2 rho of c (rho = beta r_c) is copied to a small block; every later
+query within rho of c has all its kq nearest in that block (proof in
+:func:`_lookup`), so it is answered by one pass over the block.  It pays
+when queries are dense relative to the photon radius (several samples per
+pixel footprint that is small against r_k); otherwise it is rarely entered.
+
+Threads: the compiled functions release the GIL (``nogil``) and run one
+query range each; :func:`run_chunks` splits a batch of queries over a small
+thread pool.  No numba threading layer is used, so calling from several
+render threads at once is safe.
+
+Fallback: if numba cannot be imported (or compiling fails), ``AVAILABLE`` is
+False and :class:`PhotonMap` uses scipy's cKDTree; set ``STPM_NO_NUMBA=1`` to
+force that path.
+"""
+from __future__ import annotations
+
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+__all__ = ["AVAILABLE", "LEAF_SIZE", "MODE_STANDARD", "MODE_TEMPORAL", "MODE_KD4D", "FlatTree", "run_chunks",
+           "disable"]
+
+LEAF_SIZE = 16           # at most this many photons per leaf (2^L leaves of 8..16; 12..32 measured within 10 %)
+MODE_STANDARD, MODE_TEMPORAL, MODE_KD4D = 0, 1, 2
+CACHE_BETA_3D = 0.5      # candidate cache radius rho = beta r_c (3D: photons on surfaces, ~(1+2 beta)^2 kq cached)
+CACHE_BETA_LARGE_K = 0.25  # 3D with kq > 64 (TEMPORAL's m): a smaller block, ~2.25 kq photons
+CACHE_BETA_4D = 0.3      # 4D: photons fill surface x time, ~(1+2 beta)^3 kq cached
+CACHE_CAP_FACTOR = 12    # at most this many x kq cached photons (else no cache for that query)
+_CHUNK_MIN = 2048        # fewer queries than this per thread are not split
+
+AVAILABLE = False
+_IMPORT_ERROR = ""
+if os.environ.get("STPM_NO_NUMBA", "") not in ("", "0"):
+    _IMPORT_ERROR = "disabled by STPM_NO_NUMBA"
+else:
+    try:
+        import numba as _nb
+        AVAILABLE = True
+    except Exception as exc:  # noqa: BLE001 -- any import failure means: use scipy
+        _IMPORT_ERROR = f"{type(exc).__name__}: {exc}"
+
+
+def disable(reason: str) -> None:
+    """Switch the compiled path off for this process (after a compile or run failure)."""
+    global AVAILABLE, _IMPORT_ERROR
+    AVAILABLE = False
+    _IMPORT_ERROR = reason
+
+
+# ---------------------------------------------------------------------------
+# Thread pool shared by every map
+# ---------------------------------------------------------------------------
+_POOL: ThreadPoolExecutor | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL._max_workers < workers:
+            _POOL = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="stpm-lookup")
+        return _POOL
+
+
+def run_chunks(fn, n: int, workers: int) -> None:
+    """Call fn(lo, hi) over [0, n) split into about ``workers`` ranges, in parallel (fn releases the GIL)."""
+    workers = max(1, (os.cpu_count() or 1) if workers is None or workers <= 0 else int(workers))
+    parts = min(workers, max(1, n // _CHUNK_MIN))
+    if parts <= 1:
+        fn(0, n)
+        return
+    edges = np.linspace(0, n, parts + 1).astype(np.int64)
+    futures = [_pool(workers).submit(fn, int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+    for f in futures:
+        f.result()
+
+
+# ---------------------------------------------------------------------------
+# Compiled kernels
+# ---------------------------------------------------------------------------
+if AVAILABLE:
+    _jit = _nb.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
+
+    @_jit
+    def _coord(P, j, d, s):
+        """Coordinate d of row j of P (N, 4) float32 (x, y, z, t): x, y, z or s * t, in float64."""
+        if d == 3:
+            return s * np.float64(P[j, 3])
+        return np.float64(P[j, d])
+
+    @_jit
+    def _split_rows(P, perm, lo, hi, nth, dim, s):
+        """Quickselect rows lo..hi-1 of P (and perm) so row nth holds the nth smallest coordinate dim.
+
+        Rows are swapped in place, so the tree is built on contiguous memory.
+        """
+        while hi - lo > 1:
+            # median of three as pivot (deterministic)
+            a = _coord(P, lo, dim, s)
+            b = _coord(P, (lo + hi) // 2, dim, s)
+            c = _coord(P, hi - 1, dim, s)
+            if a > b:
+                a, b = b, a
+            if b > c:
+                b = c
+                if a > b:
+                    b = a
+            pivot = b
+            i, j = lo, hi - 1
+            while i <= j:
+                while _coord(P, i, dim, s) < pivot:
+                    i += 1
+                while _coord(P, j, dim, s) > pivot:
+                    j -= 1
+                if i <= j:
+                    for d in range(4):
+                        tmp = P[i, d]
+                        P[i, d] = P[j, d]
+                        P[j, d] = tmp
+                    ti = perm[i]
+                    perm[i] = perm[j]
+                    perm[j] = ti
+                    i += 1
+                    j -= 1
+            if nth <= j:
+                hi = j + 1
+            elif nth >= i:
+                lo = i
+            else:
+                return
+
+    @_jit
+    def _build(P, D, s, n_leaves):
+        """Balanced kd-tree over the rows of P (N, 4) float32 (x, y, z, t), in D = 3 or 4 dims (4th = s t).
+
+        P is reordered in place to tree order.  Returns perm (N,) int64 (tree row -> input row)
+        and box (2 L, 8) float32: row i + 1 holds node i's tight bounding box (min in columns
+        0..D-1, max in 4..4+D-1) rounded outward to float32.  Implicit layout: the children of
+        node i are 2i+1 and 2i+2 (rows 2i+2, 2i+3: one 64-byte line); leaves are nodes
+        L-1 .. 2L-2, and leaf l holds rows [l N // L, (l + 1) N // L).
+        """
+        N = P.shape[0]
+        n_nodes = 2 * n_leaves - 1
+        perm = np.arange(N)
+        node_lo = np.zeros(n_nodes, np.int64)
+        node_hi = np.zeros(n_nodes, np.int64)
+        bmin = np.empty((n_nodes, D))
+        bmax = np.empty((n_nodes, D))
+        node_hi[0] = N
+        # middle leaf of every inner node: node i at depth d, position p in its level covers
+        # leaves [p, p + 1) * L / 2^d
+        leaf_mid = np.zeros(n_leaves, np.int64)
+        for i in range(n_leaves - 1):
+            d = 0
+            while (2 << d) <= i + 1:
+                d += 1
+            width = n_leaves >> d
+            leaf_mid[i] = (i + 1 - (1 << d)) * width + width // 2
+        for i in range(n_nodes):
+            lo, hi = node_lo[i], node_hi[i]
+            # tight bounding box of the node's rows
+            for d in range(D):
+                bmin[i, d] = np.inf
+                bmax[i, d] = -np.inf
+            for j in range(lo, hi):
+                for d in range(D):
+                    v = _coord(P, j, d, s)
+                    if v < bmin[i, d]:
+                        bmin[i, d] = v
+                    if v > bmax[i, d]:
+                        bmax[i, d] = v
+            if i >= n_leaves - 1:
+                continue
+            # split the widest axis at the median
+            dim, width = 0, -1.0
+            for d in range(D):
+                w = bmax[i, d] - bmin[i, d]
+                if w > width:
+                    dim, width = d, w
+            # split rows so that leaf l ends up holding rows [l N // L, (l + 1) N // L)
+            mid = (leaf_mid[i] * N) // n_leaves
+            if hi - lo > 1 and lo < mid < hi:
+                _split_rows(P, perm, lo, hi, mid, dim, s)
+            node_lo[2 * i + 1], node_hi[2 * i + 1] = lo, mid
+            node_lo[2 * i + 2], node_hi[2 * i + 2] = mid, hi
+        box = np.zeros((n_nodes + 1, 8), np.float32)
+        for i in range(n_nodes):
+            for d in range(D):
+                lo32 = np.float32(bmin[i, d])
+                if np.float64(lo32) > bmin[i, d]:
+                    lo32 = np.nextafter(lo32, np.float32(-np.inf))
+                hi32 = np.float32(bmax[i, d])
+                if np.float64(hi32) < bmax[i, d]:
+                    hi32 = np.nextafter(hi32, np.float32(np.inf))
+                box[i + 1, d] = lo32
+                box[i + 1, 4 + d] = hi32
+        return perm, box
+
+    @_jit
+    def _box_dist2(box, row, q0, q1, q2, q3, D):
+        """Squared distance (float64) from the query to the bounding box in row ``row`` of box."""
+        acc = 0.0
+        for d in range(D):
+            v = q0 if d == 0 else (q1 if d == 1 else (q2 if d == 2 else q3))
+            lo = np.float64(box[row, d])
+            hi = np.float64(box[row, 4 + d])
+            if v < lo:
+                acc += (lo - v) * (lo - v)
+            elif v > hi:
+                acc += (v - hi) * (v - hi)
+        return acc
+
+    @_jit
+    def _select(key, aux, idx, lo, hi, nth):
+        """Quickselect key[lo:hi] (carrying aux, idx): key[nth] is the nth smallest, no larger key left of it."""
+        while hi - lo > 1:
+            a, b, c = key[lo], key[(lo + hi) // 2], key[hi - 1]
+            if a > b:
+                a, b = b, a
+            if b > c:
+                b = c
+                if a > b:
+                    b = a
+            pivot = b
+            i, j = lo, hi - 1
+            while i <= j:
+                while key[i] < pivot:
+                    i += 1
+                while key[j] > pivot:
+                    j -= 1
+                if i <= j:
+                    key[i], key[j] = key[j], key[i]
+                    aux[i], aux[j] = aux[j], aux[i]
+                    idx[i], idx[j] = idx[j], idx[i]
+                    i += 1
+                    j -= 1
+            if nth <= j:
+                hi = j + 1
+            elif nth >= i:
+                lo = i
+            else:
+                return
+
+    @_jit
+    def _knn(P, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist):
+        """Best-first kq-nearest search.  On return bd[:kq] / bi[:kq] hold the squared distances and
+        rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther, in any order).
+
+        Nodes are visited in increasing bounding-box distance (min-heap qnode / qdist, scratch of at
+        least the node count + 1), so the search stops at the first node beyond the current kq-th
+        distance: it scans only the leaves that reach the final ball.  Photons nearer than the
+        current bound are appended to the buffer bd / bi (capacity 2 kq); a full buffer is cut back
+        to its kq nearest by quickselect, which also tightens the bound (O(1) per photon, where a
+        kq-heap costs O(log kq)).  bx is scratch carried along.
+        """
+        cap = bd.shape[0]
+        N = P.shape[0]
+        cnt = 0
+        bound = np.inf
+        first_leaf = n_leaves - 1
+        q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
+        qnode[0] = 0
+        qdist[0] = 0.0
+        nq = 1
+        while nq > 0:
+            node, dist = qnode[0], qdist[0]
+            if dist >= bound:
+                # the buffer's bound may be loose: cut it to the exact kq-th first
+                if cnt > kq:
+                    _select(bd, bx, bi, 0, cnt, kq - 1)
+                    cnt = kq
+                    bound = bd[kq - 1]
+                if dist >= bound:
+                    break
+            # pop the nearest queued node
+            nq -= 1
+            if nq > 0:
+                last_n, last_d = qnode[nq], qdist[nq]
+                pos = 0
+                while True:
+                    c = 2 * pos + 1
+                    if c >= nq:
+                        break
+                    if c + 1 < nq and qdist[c + 1] < qdist[c]:
+                        c += 1
+                    if qdist[c] >= last_d:
+                        break
+                    qnode[pos] = qnode[c]
+                    qdist[pos] = qdist[c]
+                    pos = c
+                qnode[pos] = last_n
+                qdist[pos] = last_d
+            # descend to a leaf through the nearer children, queueing the farther ones
+            while node < first_leaf and dist < bound:
+                cl = 2 * node + 1
+                dl = _box_dist2(box, cl + 1, q0, q1, q2, q3, D)
+                dr = _box_dist2(box, cl + 2, q0, q1, q2, q3, D)
+                if dl <= dr:
+                    node, dist, far, dfar = cl, dl, cl + 1, dr
+                else:
+                    node, dist, far, dfar = cl + 1, dr, cl, dl
+                if dfar < bound:
+                    pos = nq
+                    nq += 1
+                    while pos > 0:
+                        parent = (pos - 1) // 2
+                        if qdist[parent] <= dfar:
+                            break
+                        qnode[pos] = qnode[parent]
+                        qdist[pos] = qdist[parent]
+                        pos = parent
+                    qnode[pos] = far
+                    qdist[pos] = dfar
+            if node < first_leaf or dist >= bound:
+                continue
+            # scan the leaf's contiguous rows
+            leaf = node - first_leaf
+            for j in range((leaf * N) // n_leaves, ((leaf + 1) * N) // n_leaves):
+                e0 = np.float64(P[j, 0]) - q0
+                e1 = np.float64(P[j, 1]) - q1
+                e2 = np.float64(P[j, 2]) - q2
+                d2 = e0 * e0 + e1 * e1 + e2 * e2
+                if D == 4:
+                    e3 = s * np.float64(P[j, 3]) - q3
+                    d2 += e3 * e3
+                if d2 < bound:
+                    bd[cnt] = d2
+                    bi[cnt] = j
+                    cnt += 1
+                    if cnt == cap:
+                        _select(bd, bx, bi, 0, cnt, kq - 1)
+                        cnt = kq
+                        bound = bd[kq - 1]
+            if bound == np.inf and cnt >= kq:
+                _select(bd, bx, bi, 0, cnt, kq - 1)
+                cnt = kq
+                bound = bd[kq - 1]
+        if cnt > kq:
+            _select(bd, bx, bi, 0, cnt, kq - 1)
+
+    @_jit
+    def _range(P, box, n_leaves, q0, q1, q2, q3, D, s, R2, cx, ci, stack):
+        """All photons with squared distance <= R2 from the query: coordinates into cx (cap, 4)
+        float64 (x, y, z and t or s t, exactly as the search computes them) and rows into ci.
+        Returns their count, or -1 when more than the capacity cx.shape[0]."""
+        cap = cx.shape[0]
+        N = P.shape[0]
+        first_leaf = n_leaves - 1
+        n = 0
+        top = 1
+        stack[0] = 0
+        while top > 0:
+            top -= 1
+            node = stack[top]
+            if _box_dist2(box, node + 1, q0, q1, q2, q3, D) > R2:
+                continue
+            if node < first_leaf:
+                stack[top] = 2 * node + 1
+                stack[top + 1] = 2 * node + 2
+                top += 2
+                continue
+            leaf = node - first_leaf
+            for j in range((leaf * N) // n_leaves, ((leaf + 1) * N) // n_leaves):
+                x0 = np.float64(P[j, 0])
+                x1 = np.float64(P[j, 1])
+                x2 = np.float64(P[j, 2])
+                x3 = s * np.float64(P[j, 3]) if D == 4 else np.float64(P[j, 3])
+                e0 = x0 - q0
+                e1 = x1 - q1
+                e2 = x2 - q2
+                d2 = e0 * e0 + e1 * e1 + e2 * e2
+                if D == 4:
+                    e3 = x3 - q3
+                    d2 += e3 * e3
+                if d2 <= R2:
+                    if n == cap:
+                        return -1
+                    cx[n, 0] = x0
+                    cx[n, 1] = x1
+                    cx[n, 2] = x2
+                    cx[n, 3] = x3
+                    ci[n] = j
+                    n += 1
+        return n
+
+    @_jit
+    def _scan_cache(cx, ci, n_c, q0, q1, q2, q3, D, kq, bd, bi, bx):
+        """The kq nearest among the cached candidates (same arithmetic and buffer as _knn)."""
+        cap = bd.shape[0]
+        cnt = 0
+        bound = np.inf
+        for a in range(n_c):
+            e0 = cx[a, 0] - q0
+            e1 = cx[a, 1] - q1
+            e2 = cx[a, 2] - q2
+            d2 = e0 * e0 + e1 * e1 + e2 * e2
+            if D == 4:
+                e3 = cx[a, 3] - q3
+                d2 += e3 * e3
+            if d2 < bound:
+                bd[cnt] = d2
+                bi[cnt] = ci[a]
+                cnt += 1
+                if cnt == cap:
+                    _select(bd, bx, bi, 0, cnt, kq - 1)
+                    cnt = kq
+                    bound = bd[kq - 1]
+        _select(bd, bx, bi, 0, cnt, kq - 1)
+
+    @_jit
+    def _lookup(P, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, beta, cache_cap,
+                out_phi, out_r, out_tau):
+        """Fused search + reduction for queries q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32.
+
+        mode STANDARD / KD4D: kq = k nearest (3D / 4D); TEMPORAL: kq = m candidates, then the k
+        nearest in time among the m - 1 inner ones.  Writes out_phi (n, 3) W (sum of w Phi over
+        the k - 1 inner / selected photons on the ns side), out_r (n,) distance of the kq-th
+        photon (m) and out_tau (n,) TEMPORAL's window half-width (shutter units).
+
+        Candidate cache (queries in spatially coherent order): after a full search at c with
+        kq-th distance r_c, if the next query lies within rho = beta r_c, every photon within
+        r_c + 2 rho of c is cached.  For any query q with |q - c| <= rho the ball of radius
+        r_c + |q - c| around q contains the ball of radius r_c around c, hence >= kq photons,
+        so q's kq nearest lie within r_c + rho of q, i.e. within r_c + 2 rho of c: all cached.
+        The kq nearest among the cache are then exactly q's kq nearest (same distances, same
+        selection), found by one pass over a small block in cache instead of a tree search.
+        """
+        D = 4 if mode == MODE_KD4D else 3
+        bd = np.empty(2 * kq)
+        bi = np.empty(2 * kq, np.int64)
+        bx = np.empty(2 * kq)
+        qq = np.empty(4)
+        qnode = np.empty(box.shape[0], np.int64)
+        qdist = np.empty(box.shape[0])
+        cx = np.empty((cache_cap, 4))
+        ci = np.empty(cache_cap, np.int64)
+        stack = np.empty(256, np.int64)
+        have, n_c = False, 0
+        c0 = c1 = c2 = c3 = 0.0
+        rho2 = -1.0
+        n = q.shape[0]
+        for i in range(n):
+            q0, q1, q2, q3 = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+            # -- the kq nearest: from the candidate cache when it covers q, else a tree search
+            e0, e1, e2, e3 = q0 - c0, q1 - c1, q2 - c2, q3 - c3
+            dc2 = e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0)
+            if have and dc2 <= rho2:
+                _scan_cache(cx, ci, n_c, q0, q1, q2, q3, D, kq, bd, bi, bx)
+            else:
+                qq[0], qq[1], qq[2], qq[3] = q0, q1, q2, q3
+                _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist)
+                have = False
+                if beta > 0.0 and i + 1 < n:
+                    rc = np.sqrt(bd[kq - 1])
+                    rho = beta * rc
+                    e0, e1, e2, e3 = q[i + 1, 0] - q0, q[i + 1, 1] - q1, q[i + 1, 2] - q2, q[i + 1, 3] - q3
+                    dn2 = e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0)
+                    if dn2 < rho * rho:
+                        R = rc + 2.0 * rho
+                        n_c = _range(P, box, n_leaves, q0, q1, q2, q3, D, s, R * R * (1.0 + 1e-9), cx, ci, stack)
+                        if n_c >= kq:
+                            have = True
+                            c0, c1, c2, c3 = q0, q1, q2, q3
+                            rho2 = rho * rho * (1.0 - 1e-9)
+            # slot kq - 1 = the kq-th neighbour (fixes the radius); slots 0 .. kq - 2 are inner
+            r = np.sqrt(bd[kq - 1])
+            out_r[i] = r
+            n_sel = kq - 1
+            if mode == MODE_TEMPORAL:
+                # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau
+                for a in range(kq - 1):
+                    bx[a] = abs(np.float64(P[bi[a], 3]) - q3)
+                _select(bx, bd, bi, 0, kq - 1, k - 1)
+                out_tau[i] = bx[k - 1]
+                n_sel = k - 1
+            inv_r = 1.0 / (cone_k * max(r, 1e-300))
+            n0, n1, n2 = ns[i, 0], ns[i, 1], ns[i, 2]
+            p0 = 0.0
+            p1 = 0.0
+            p2 = 0.0
+            for a in range(n_sel):
+                j = bi[a]
+                if P[j, 4] * n0 + P[j, 5] * n1 + P[j, 6] * n2 > 0.0:
+                    w = 1.0
+                    if cone:
+                        w = 1.0 - np.sqrt(bd[a]) * inv_r
+                    p0 += w * P[j, 8]
+                    p1 += w * P[j, 9]
+                    p2 += w * P[j, 10]
+            out_phi[i, 0] = p0
+            out_phi[i, 1] = p1
+            out_phi[i, 2] = p2
+
+    @_jit
+    def _morton(q, lo, scale, D):
+        """Morton codes (n,) int64 of the first D columns of q quantised to 2^10 cells per axis."""
+        n = q.shape[0]
+        code = np.zeros(n, np.int64)
+        for i in range(n):
+            c = 0
+            for a in range(D):
+                v = int((q[i, a] - lo[a]) * scale[a])
+                v = min(max(v, 0), 1023)
+                for b in range(10):
+                    c |= ((v >> b) & 1) << (D * b + a)
+            code[i] = c
+        return code
+
+
+class FlatTree:
+    """A compiled kd-tree over one map's photons, in 3D (x, y, z) or 4D (x, y, z, s t).
+
+    Parameters
+    ----------
+    position : (N, 3) float32 positions (m); time : (N,) float32 shutter times;
+    packed : (N, 8) float32 rows (wi, 0, Phi, 0); dims : 3 or 4; s : KD4D's time scale (m per shutter).
+    """
+
+    def __init__(self, position: np.ndarray, time: np.ndarray, packed: np.ndarray, *, dims: int, s: float):
+        N = int(position.shape[0])
+        # One 48-byte row per photon: (x, y, z, t, wi, 0, Phi, 0): the search reads the first
+        # 16 bytes, and the photons it keeps are then already in cache for the sums
+        xyzt = np.empty((N, 4), dtype=np.float32)
+        xyzt[:, :3] = position
+        xyzt[:, 3] = time
+        n_leaves = 1
+        while n_leaves * LEAF_SIZE < N:
+            n_leaves *= 2
+        self.dims, self.s, self.n_leaves = int(dims), float(s), n_leaves
+        # xyzt is reordered in place to tree order: every leaf is one contiguous block
+        perm, box = _build(xyzt, self.dims, self.s, n_leaves)
+        # 64-byte aligned copy, so a node's two children share one cache line
+        raw = np.empty(box.size * 4 + 64, np.uint8)
+        off = (-raw.ctypes.data) % 64
+        self.box = raw[off:off + box.size * 4].view(np.float32).reshape(box.shape)
+        self.box[:] = box
+        self.perm = perm
+        self.pts = np.empty((N, 12), dtype=np.float32)
+        self.pts[:, :4] = xyzt
+        self.pts[:, 4:12] = packed[perm]
+
+    def lookup(self, mode: int, q: np.ndarray, ns: np.ndarray, kq: int, k: int, cone: bool, cone_k: float,
+               workers: int, cache: bool = True):
+        """Sums Phi (n, 3) W, radius r (n,) m of the kq-th neighbour and TEMPORAL's tau (n,) for queries q (n, 4).
+
+        Queries are processed in Morton order (of x, y, z, plus s t for KD4D; results come back in the
+        input order), so consecutive queries are neighbours: the tree nodes they read stay in
+        cache and the candidate cache (``cache``) serves most of them.
+        """
+        n = q.shape[0]
+        q = np.ascontiguousarray(q, dtype=np.float64)
+        ns = np.ascontiguousarray(ns, dtype=np.float32)
+        D = 4 if mode == MODE_KD4D else 3
+        lo = q.min(axis=0)
+        scale = 1024.0 / np.maximum(q.max(axis=0) - lo, 1e-30)
+        order = np.argsort(_morton(q, lo, scale, D), kind="stable")
+        qs, nss = q[order], ns[order]
+        phi = np.zeros((n, 3))
+        r = np.zeros(n)
+        tau = np.zeros(n)
+        if not cache:
+            beta = 0.0
+        elif mode == MODE_KD4D:
+            beta = CACHE_BETA_4D
+        else:
+            beta = CACHE_BETA_3D if kq <= 64 else CACHE_BETA_LARGE_K
+        cap = CACHE_CAP_FACTOR * kq
+
+        def part(a, b):
+            _lookup(self.pts, self.box, self.n_leaves, qs[a:b], nss[a:b], mode, kq, k, self.s, cone, cone_k,
+                    beta, cap, phi[a:b], r[a:b], tau[a:b])
+
+        run_chunks(part, n, workers)
+        out_phi, out_r, out_tau = np.empty_like(phi), np.empty_like(r), np.empty_like(tau)
+        out_phi[order], out_r[order], out_tau[order] = phi, r, tau
+        return out_phi, out_r, out_tau
