@@ -9,6 +9,7 @@ source checkout (``import addon; addon.register()`` with the repository root on
 * ``ui.py``         -- Render-properties panels and presets
 * ``export/``       -- one converter per kind of Blender data
 * ``batch.py``      -- .blend loading and frame rendering without the UI
+* ``compare_op.py`` -- "Compare with Accumulation Buffer" (the stpm compare report)
 """
 from __future__ import annotations
 
@@ -20,9 +21,10 @@ def register() -> None:
     global _registered
     if _registered:
         return
-    from . import engine, properties, ui
+    from . import compare_op, engine, properties, ui
     properties.register()
     engine.register()
+    compare_op.register()
     ui.register()
     _registered = True
 
@@ -32,8 +34,9 @@ def unregister() -> None:
     global _registered
     if not _registered:
         return
-    from . import engine, properties, ui
+    from . import compare_op, engine, properties, ui
     ui.unregister()
+    compare_op.unregister()
     engine.unregister()
     properties.unregister()
     _registered = False

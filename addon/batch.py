@@ -100,17 +100,32 @@ def load_blend(path, frame=None) -> tuple:
     The Scene's ``metadata['warnings']`` lists what the export approximated.
     """
     scene = _open(path)
+    stpm_scene, settings = export_current(scene, frame)
+    stpm_scene.metadata["source"] = str(path)
+    return stpm_scene, settings
+
+
+def export_current(scene, frame=None) -> tuple:
+    """Export the open Blender ``scene`` at ``frame`` (None = its current frame).
+
+    Outside a RenderEngine, time moves with ``scene.frame_set``; the current
+    frame is restored afterwards.  Returns (Scene, settings dict) as
+    :func:`load_blend` does.
+    """
+    frame_before, subframe_before = scene.frame_current, scene.frame_subframe
     f = float(scene.frame_current if frame is None else frame)
     fi = int(f // 1)
     scene.frame_set(fi, subframe=f - fi)
-    depsgraph = bpy.context.evaluated_depsgraph_get()
+    try:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
 
-    def frame_set(frame_int: int, subframe: float) -> None:
-        scene.frame_set(frame_int, subframe=subframe)
+        def frame_set(frame_int: int, subframe: float) -> None:
+            scene.frame_set(frame_int, subframe=subframe)
 
-    stpm_scene, warnings = export_scene(depsgraph, frame_set, motion_steps=scene.stpm.motion_steps)
+        stpm_scene, warnings = export_scene(depsgraph, frame_set, motion_steps=scene.stpm.motion_steps)
+    finally:
+        scene.frame_set(frame_before, subframe=subframe_before)
     stpm_scene.metadata["warnings"] = list(warnings)
-    stpm_scene.metadata["source"] = str(path)
     return stpm_scene, settings_dict(scene.stpm)
 
 

@@ -6,12 +6,12 @@ Blender's "Install from Disk" expects)::
     blender_manifest.toml   # + platforms = [...] and wheels = [...]
     __init__.py, engine.py, ... , export/   # the add-on
     stpm_core/                              # the core, imported as a sub-package
-    wheels/*.whl                            # scipy, OpenImageIO, embreex (where it exists)
+    wheels/*.whl                            # scipy, OpenImageIO, numba, ... embreex (where it exists)
 
 numpy is left out: Blender ships it (1.26 in Blender 4.2 to 5.0).  Wheels are
 fetched with ``pip download`` for CPython 3.11 and the target platform tags.
 embreex (Embree 4) exists for Linux x86_64 and Windows x64 only; elsewhere
-``stpm_core.raycast`` falls back to its numpy backend (see docs/blender.md).
+``stpm_core.raycast`` uses its numba backend (see docs/raycast.md).
 
 Options:  --all-platforms   linux-x64, macos-arm64, macos-x64, windows-x64
           --platform NAME   one of those (default: this machine)
@@ -42,9 +42,26 @@ PLATFORM_TAGS: dict[str, list[str]] = {
     "macos-x64": ["macosx_10_9_x86_64", "macosx_10_14_x86_64", "macosx_10_15_x86_64", "macosx_14_0_x86_64"],
     "windows-x64": ["win_amd64"],
 }
-# Bundled Python dependencies (numpy excluded: Blender has it).  Versions follow pyproject.toml.
-WHEELS_ALL = ["scipy==1.16.3", "OpenImageIO==3.0.21.0"]
-WHEELS_EMBREE = {"linux-x64": "embreex==4.4.0.post1", "windows-x64": "embreex==4.4.0.post1"}
+
+
+def _pinned_dependencies() -> dict[str, str]:
+    """name -> 'name==version' for the core's dependencies in pyproject.toml (one source of truth)."""
+    deps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
+    pins = {}
+    for dep in deps:
+        req = dep.split(";")[0].strip()
+        pins[re.split(r"[=<>!~ ]", req, maxsplit=1)[0].lower()] = req
+    return pins
+
+
+_PINS = _pinned_dependencies()
+# numba's compiler backend: a dependency of numba pip would resolve; wheels are fetched --no-deps.
+LLVMLITE = "llvmlite==0.44.0"
+# Bundled Python dependencies (numpy excluded: Blender has it; embreex only where it has wheels).
+WHEELS_ALL = [req for name, req in _PINS.items() if name not in ("numpy", "embreex")] + [LLVMLITE]
+WHEELS_EMBREE = {"linux-x64": _PINS["embreex"], "windows-x64": _PINS["embreex"]}
+# Wheels some platforms lack (flip-evaluator: none for macOS x86_64); bundled where they exist.
+OPTIONAL_WHEELS = (_PINS["flip-evaluator"],)
 # Files of addon/ that are developer tools, not part of the extension
 EXCLUDE = {"build_zip.py", "blender_manifest.toml"}
 
@@ -136,7 +153,11 @@ def download_wheels(platform_name: str) -> list[Path]:
            "--abi", "none", "-d", str(dest)]
     for tag in PLATFORM_TAGS[platform_name]:
         cmd += ["--platform", tag]
-    subprocess.check_call(cmd + reqs)
+    subprocess.check_call(cmd + [r for r in reqs if r not in OPTIONAL_WHEELS])
+    for req in OPTIONAL_WHEELS:  # no wheel for some platforms: the feature degrades, the build goes on
+        if req in reqs and subprocess.call(cmd + [req], stderr=subprocess.DEVNULL) != 0:
+            print(f"build.py addon: no {req} wheel for {platform_name}; "
+                  f"stpm compare reports no FLIP there", file=sys.stderr)
     wanted = {re.split(r"[=<>]", r)[0].lower().replace("-", "_") for r in reqs}
     found = [p for p in sorted(dest.glob("*.whl")) if p.name.split("-")[0].lower() in wanted]
     return found
@@ -188,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     targets = list(PLATFORM_TAGS) if args.all_platforms else [args.platform or this_platform()]
     for name in targets:
         path = build(name, wheels=not args.no_wheels, out_dir=args.out)
-        note = "" if name in WHEELS_EMBREE or args.no_wheels else "  (no embreex wheel: numpy ray casting)"
+        note = "" if name in WHEELS_EMBREE or args.no_wheels else "  (no embreex wheel: numba ray casting)"
         print(f"{path}{note}")
     return 0
 

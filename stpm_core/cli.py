@@ -102,34 +102,37 @@ def _build_parser() -> _Parser:
     pl.add_argument("--frame", help="frame F (default: the file's frame)")
     pl.add_argument("--json", action="store_true", help="print the plan as JSON")
 
-    c = sub.add_parser("compare", help="compare the estimators and the accumulation buffer "
-                       "(REPORT_DIR/report.html + report.json)")
-    c.add_argument("scene")
-    c.add_argument("--frame", help="frame F (default: the file's frame)")
-    c.add_argument("--output", "-o", metavar="REPORT_DIR", help="report folder (default: SCENE stem + '_compare')")
-    c.add_argument("--reference", metavar="REF.exr", help="reference image (its Combined pass); "
-                   "default: computed with many more samples and photons (cached)")
-    c.add_argument("--time-budget", type=float, dest="time_budget", metavar="SECONDS",
-                   help="stop starting new sweep runs after this many seconds")
-    _add_setting_options(c)
-    c.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    # `compare` has many options of its own: its parser lives with it (stpm_core.compare.command).
+    c = sub.add_parser("compare", add_help=False,
+                       help="compare the estimators and the accumulation buffer (REPORT_DIR/report.html + "
+                            "report.json); see stpm compare --help")
+    c.add_argument("rest", nargs=argparse.REMAINDER)
     return p
 
 
-def _add_setting_options(parser) -> None:
-    """The RenderSettings options shared by ``render`` and ``compare`` (names fixed by interface.md)."""
-    parser.add_argument("--method", type=_lower_choice("photon", "accumulation"), metavar="{photon,accumulation}")
-    parser.add_argument("--estimator", type=_lower_choice("standard", "temporal", "kd4d"),
+def _add_setting_options(parser, skip: tuple[str, ...] = ()) -> None:
+    """The RenderSettings options shared by ``render`` and ``compare`` (names fixed by interface.md).
+
+    ``skip``: option destinations the caller defines differently (``compare`` sweeps
+    accumulation steps and has its own --samples / --resolution).
+    """
+    add = parser.add_argument
+
+    def opt(*names, **kw):
+        if kw.get("dest", names[0].lstrip("-")) not in skip:
+            add(*names, **kw)
+    opt("--method", dest="method", type=_lower_choice("photon", "accumulation"), metavar="{photon,accumulation}")
+    opt("--estimator", dest="estimator", type=_lower_choice("standard", "temporal", "kd4d"),
                         metavar="{standard,temporal,kd4d}")
-    parser.add_argument("--accumulation-steps", type=int, dest="accumulation_steps", metavar="N")
-    parser.add_argument("--samples", type=int, metavar="S")
-    parser.add_argument("--photons-global", type=int, dest="photons_global", metavar="N")
-    parser.add_argument("--photons-caustic", type=int, dest="photons_caustic", metavar="N")
-    parser.add_argument("--k", type=int, dest="k_nearest", metavar="K")
-    parser.add_argument("--temporal-alpha", type=float, dest="temporal_alpha", metavar="A")
-    parser.add_argument("--time-scale", type=float, dest="time_scale", metavar="S")
-    parser.add_argument("--seed", type=int, metavar="S")
-    parser.add_argument("--resolution", type=_resolution, metavar="WxH")
+    opt("--accumulation-steps", type=int, dest="accumulation_steps", metavar="N")
+    opt("--samples", type=int, dest="samples", metavar="S")
+    opt("--photons-global", type=int, dest="photons_global", metavar="N")
+    opt("--photons-caustic", type=int, dest="photons_caustic", metavar="N")
+    opt("--k", type=int, dest="k_nearest", metavar="K")
+    opt("--temporal-alpha", type=float, dest="temporal_alpha", metavar="A")
+    opt("--time-scale", type=float, dest="time_scale", metavar="S")
+    opt("--seed", type=int, dest="seed", metavar="S")
+    opt("--resolution", type=_resolution, dest="resolution", metavar="WxH")
 
 
 # Command-line option -> RenderSettings field (only the ones the user gave override).
@@ -241,10 +244,11 @@ def _frame_path(template: str, frame: int | None, many: bool) -> Path:
     return p
 
 
-def _checked_overrides(args) -> dict:
+def _checked_overrides(args, skip: tuple[str, ...] = ()) -> dict:
     """The settings options the user gave, checked before any (possibly slow, .blend) loading."""
     from .settings import RenderSettings
-    overrides = {k: getattr(args, k) for k in _SETTING_OPTIONS if getattr(args, k) is not None}
+    overrides = {k: getattr(args, k) for k in _SETTING_OPTIONS
+                 if k not in skip and getattr(args, k, None) is not None}
     try:
         RenderSettings().replace(**overrides)
     except SettingsError as e:
@@ -396,45 +400,12 @@ def _cmd_plan(args) -> int:
 
 
 def _cmd_compare(args) -> int:
-    """Dispatch to ``stpm_core.compare.run_compare`` (report.html + report.json)."""
+    """``stpm compare``: hand the arguments to stpm_core.compare.command (report.html + report.json)."""
     try:
-        from .compare import run_compare
+        from .compare.command import main as compare_main
     except ImportError:
-        try:
-            from .compare.run import run_compare
-        except ImportError:
-            raise StpmError("stpm compare is not available in this installation (stpm_core.compare is missing)") \
-                from None
-    from .progress import ProgressBar
-
-    overrides = _checked_overrides(args)
-    frames = parse_frames(args.frame) if args.frame is not None else [None]
-    if len(frames) > 1:
-        raise UsageError("stpm compare takes one frame, not a range")
-    scene_path = Path(args.scene)
-    if args.reference is not None and not Path(args.reference).is_file():
-        raise StpmError(f"reference image not found: {args.reference}")
-    if args.time_budget is not None and not args.time_budget > 0:
-        raise UsageError(f"--time-budget must be positive, got {args.time_budget}")
-    out_dir = Path(args.output) if args.output else scene_path.with_name(scene_path.stem + "_compare")
-
-    scene, settings, _ = load_any_scene(scene_path, frames[0])
-    settings = settings.replace(**overrides)
-    if args.resolution is not None:
-        scene.resolution = args.resolution
-    bar = ProgressBar(quiet=args.quiet)
-    with _CancelFlag() as cancel:
-        try:
-            report = run_compare(scene, settings, out_dir, reference=args.reference, time_budget=args.time_budget,
-                                 progress=bar, cancel=cancel, scene_name=scene_path.name, scene_path=str(scene_path))
-        finally:
-            bar.close()
-    files = report.get("files") if isinstance(report, dict) else None
-    written = (list(files.values()) if isinstance(files, dict) else list(files or [])) or \
-        [out_dir / "report.html", out_dir / "report.json"]
-    for f in written:
-        print(f"wrote {f}")
-    return EXIT_OK
+        raise StpmError("stpm compare is not available in this installation (stpm_core.compare is missing)") from None
+    return compare_main(args.rest)
 
 
 # ----------------------------------------------------------------------------
@@ -450,6 +421,10 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         parser = _build_parser()
+        if argv[:1] == ["compare"]:
+            # Everything after `compare` belongs to its own parser (argparse's REMAINDER
+            # would not take a leading option such as --help).
+            return _cmd_compare(argparse.Namespace(rest=argv[1:]))
         args = parser.parse_args(argv)
         if args.command is None:
             parser.print_help()

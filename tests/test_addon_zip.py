@@ -97,7 +97,7 @@ def _install_and_render(zip_path: Path, tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_all_platform_zips_bundle_the_wheels_that_exist(tmp_path):
-    # Downloads scipy, OpenImageIO and embreex wheels for four platforms (hundreds of MB)
+    # Downloads scipy, OpenImageIO, numba, flip-evaluator and embreex wheels for four platforms (hundreds of MB)
     for name in build_zip.PLATFORM_TAGS:
         zip_path = build_zip.build(name, wheels=True, out_dir=tmp_path)
         with zipfile.ZipFile(zip_path) as zf:
@@ -105,5 +105,8 @@ def test_all_platform_zips_bundle_the_wheels_that_exist(tmp_path):
         wheels = " ".join(data["wheels"]).lower()
         assert "scipy-" in wheels and "openimageio-" in wheels and "numpy" not in wheels
         assert ("embreex-" in wheels) == (name in ("linux-x64", "windows-x64")), name
+        # the ray-casting backend where embreex is missing, and its compiler
+        assert "numba-" in wheels and "llvmlite-" in wheels, name
+        assert ("flip_evaluator-" in wheels) == (name != "macos-x64"), name  # no macOS x86_64 wheel exists
         if name == build_zip.this_platform() and importlib.util.find_spec("bpy"):
             _install_and_render(zip_path, tmp_path / name)  # Blender installs the wheels itself

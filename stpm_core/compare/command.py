@@ -119,7 +119,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where computed references are cached (default ~/.cache/stpm/references)")
     p.add_argument("--no-cache", action="store_true", dest="no_cache", help="always recompute the reference")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    # The render settings every run starts from (same names as `stpm render`).
+    from ..cli import _add_setting_options
+    _add_setting_options(p, skip=_OWN_OPTIONS)
     return p
+
+
+# Options this parser defines itself (the sweep's list of N, and scene overrides).
+_OWN_OPTIONS = ("accumulation_steps", "samples", "resolution")
 
 
 def _headline(report: dict) -> list[str]:
@@ -141,7 +148,7 @@ def _headline(report: dict) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``stpm compare``; returns the exit status (errors are raised as StpmError for the CLI to print)."""
-    from ..cli import load_any_scene
+    from ..cli import _CancelFlag, _checked_overrides, load_any_scene
     from ..progress import ProgressBar
 
     args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
@@ -149,8 +156,10 @@ def main(argv: list[str] | None = None) -> int:
         raise StpmError("--time-budget must be >= 0 seconds")
     if any(v is not None and v < 1 for v in (args.reference_photons, args.reference_samples, args.reference_steps)):
         raise StpmError("--reference-photons, --reference-samples and --reference-steps must be >= 1")
+    overrides = _checked_overrides(args, skip=_OWN_OPTIONS)
     scene_path = Path(args.scene)
     scene, settings, _export_s = load_any_scene(scene_path, args.frame)
+    settings = settings.replace(**overrides)
     if args.resolution is not None:
         scene = dataclasses.replace(scene, resolution=tuple(args.resolution))
     if args.samples is not None:
@@ -162,17 +171,18 @@ def main(argv: list[str] | None = None) -> int:
         raise StpmError(f"reference image not found: {args.reference}")
 
     bar = ProgressBar(quiet=args.quiet)
-    try:
-        report = run_compare(scene, settings, out_dir, reference=args.reference, time_budget=args.time_budget,
-                             photon_budgets=args.photon_budgets, accumulation_steps=args.accumulation_steps,
-                             estimators=args.estimators, progress=bar, cache_dir=args.cache_dir,
-                             use_cache=not args.no_cache, reference_method=args.reference_method,
-                             reference_photon_factor=args.reference_photons,
-                             reference_sample_factor=args.reference_samples, reference_steps=args.reference_steps,
-                             scene_name=scene_path.name,
-                             scene_path=scene_path)
-    finally:
-        bar.close()
+    with _CancelFlag() as cancel:
+        try:
+            report = run_compare(scene, settings, out_dir, reference=args.reference, time_budget=args.time_budget,
+                                 photon_budgets=args.photon_budgets, accumulation_steps=args.accumulation_steps,
+                                 estimators=args.estimators, progress=bar, cancel=cancel, cache_dir=args.cache_dir,
+                                 use_cache=not args.no_cache, reference_method=args.reference_method,
+                                 reference_photon_factor=args.reference_photons,
+                                 reference_sample_factor=args.reference_samples,
+                                 reference_steps=args.reference_steps,
+                                 scene_name=scene_path.name, scene_path=scene_path)
+        finally:
+            bar.close()
     print(f"report: {report['files']['html']}")
     print(f"numbers: {report['files']['json']}")
     for line in _headline(report):

@@ -192,9 +192,10 @@ def run_sweep(scene, runs: list[Run], reference_rgb: np.ndarray, *, time_budget:
     t_start = _time.perf_counter()
     exhausted = cancelled = False
     for i, run in enumerate(runs):
-        # -- Time budget: start no run once it is spent ------------------------------
+        # -- Time budget: start no run once it is spent.  A positive budget always lets
+        #    the first run start (a report with no run says nothing); 0 skips them all --
         elapsed = _time.perf_counter() - t_start
-        if time_budget is not None and elapsed >= time_budget:
+        if time_budget is not None and elapsed >= time_budget and (i > 0 or time_budget <= 0):
             exhausted = True
             run.status, run.note = "skipped", f"time budget of {time_budget:g} s spent"
             continue

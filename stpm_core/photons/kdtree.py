@@ -28,7 +28,7 @@ here: :class:`PhotonMap` applies the same numpy code to the radii and window
 widths this module returns.
 
 Tree: a balanced kd-tree built here (numba), median split on the widest
-axis of each node's tight bounding box, 2^L leaves of at most ``LEAF_SIZE``
+axis of each node (measured on up to 512 strided rows), 2^L leaves of at most ``LEAF_SIZE``
 photons; leaf l is the rows [l N / L, (l + 1) N / L) of one (N, 12) float32
 array in tree order, a 48-byte row per photon ``(x, y, z, t, wi, 0, Phi,
 0)``: the search reads the first 16 bytes of a leaf's contiguous rows, and
@@ -206,33 +206,41 @@ if AVAILABLE:
                 d += 1
             width = n_leaves >> d
             leaf_mid[i] = (i + 1 - (1 << d)) * width + width // 2
-        for i in range(n_nodes):
+        for i in range(n_leaves - 1):
             lo, hi = node_lo[i], node_hi[i]
-            # tight bounding box of the node's rows
-            for d in range(D):
-                bmin[i, d] = np.inf
-                bmax[i, d] = -np.inf
-            for j in range(lo, hi):
-                for d in range(D):
-                    v = _coord(P, j, d, s)
-                    if v < bmin[i, d]:
-                        bmin[i, d] = v
-                    if v > bmax[i, d]:
-                        bmax[i, d] = v
-            if i >= n_leaves - 1:
-                continue
-            # split the widest axis at the median
+            # split axis: the widest of the node's extent, measured on <= 512 strided rows
+            # (any split gives a valid tree; this only keeps the cells compact)
+            step = max(1, (hi - lo) // 512)
             dim, width = 0, -1.0
             for d in range(D):
-                w = bmax[i, d] - bmin[i, d]
-                if w > width:
-                    dim, width = d, w
+                vmin, vmax = np.inf, -np.inf
+                for j in range(lo, hi, step):
+                    v = _coord(P, j, d, s)
+                    vmin = min(vmin, v)
+                    vmax = max(vmax, v)
+                if vmax - vmin > width:
+                    dim, width = d, vmax - vmin
             # split rows so that leaf l ends up holding rows [l N // L, (l + 1) N // L)
             mid = (leaf_mid[i] * N) // n_leaves
             if hi - lo > 1 and lo < mid < hi:
                 _split_rows(P, perm, lo, hi, mid, dim, s)
             node_lo[2 * i + 1], node_hi[2 * i + 1] = lo, mid
             node_lo[2 * i + 2], node_hi[2 * i + 2] = mid, hi
+        # tight boxes: leaves from their rows, inner nodes as the union of their children
+        for i in range(n_nodes - 1, -1, -1):
+            for d in range(D):
+                bmin[i, d] = np.inf
+                bmax[i, d] = -np.inf
+            if i >= n_leaves - 1:
+                for j in range(node_lo[i], node_hi[i]):
+                    for d in range(D):
+                        v = _coord(P, j, d, s)
+                        bmin[i, d] = min(bmin[i, d], v)
+                        bmax[i, d] = max(bmax[i, d], v)
+            else:
+                for d in range(D):
+                    bmin[i, d] = min(bmin[2 * i + 1, d], bmin[2 * i + 2, d])
+                    bmax[i, d] = max(bmax[2 * i + 1, d], bmax[2 * i + 2, d])
         box = np.zeros((n_nodes + 1, 8), np.float32)
         for i in range(n_nodes):
             for d in range(D):
