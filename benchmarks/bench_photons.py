@@ -167,22 +167,30 @@ def bench_traced_errors(n_caustic=400_000, n_queries=8000) -> dict:
     return out
 
 
-def bench_render_cost(resolution=(128, 128), samples=8, n_caustic=400_000) -> dict:
-    """render_s of the same render (same photons, k) with each estimator and backend, interleaved."""
+def bench_render_cost(resolution=(128, 128), samples=8, n_caustic=400_000, rounds=3) -> dict:
+    """render_s of the same render (same photons, k) per estimator and backend.
+
+    Renders interleaved round-robin over (backend, estimator), ``rounds`` times; the
+    best round of each counts (the least disturbed one on a shared machine).
+    """
     scene = _traced_scene()
     scene.resolution = resolution
     scene.camera.ortho_scale = 4.0
-    out = {"resolution": list(resolution), "samples": samples, "photons_caustic": n_caustic,
+    out = {"resolution": list(resolution), "samples": samples, "photons_caustic": n_caustic, "rounds": rounds,
            "load_avg_1min": os.getloadavg()[0]}
     backends = ["numba", "scipy"] if _set_backend("numba") else ["scipy"]
+    for _ in range(rounds):
+        for be in backends:
+            _set_backend(be)
+            for est in ("STANDARD", "TEMPORAL", "KD4D"):
+                r = render(scene, RenderSettings(samples=samples, photons_caustic=n_caustic, photons_global=0,
+                                                 estimator=est))
+                key = f"{be}_{est}_render_s"
+                if r.stats["render_s"] < out.get(key, np.inf):
+                    out[key] = r.stats["render_s"]
+                    out[f"{be}_{est}_lookup_s"] = r.stats["photon_stats"].get("lookup_s", 0.0)
+                    out[f"{be}_{est}_lookup_count"] = r.stats["photon_stats"].get("lookup_count", 0)
     for be in backends:
-        _set_backend(be)
-        for est in ("STANDARD", "TEMPORAL", "KD4D"):
-            r = render(scene, RenderSettings(samples=samples, photons_caustic=n_caustic, photons_global=0,
-                                             estimator=est))
-            out[f"{be}_{est}_render_s"] = r.stats["render_s"]
-            out[f"{be}_{est}_lookup_s"] = r.stats["photon_stats"].get("lookup_s", 0.0)
-            out[f"{be}_{est}_lookup_count"] = r.stats["photon_stats"].get("lookup_count", 0)
         for est in ("TEMPORAL", "KD4D"):
             out[f"{be}_{est}_render_cost_vs_STANDARD"] = out[f"{be}_{est}_render_s"] / out[f"{be}_STANDARD_render_s"]
     _set_backend("numba")

@@ -16,7 +16,9 @@ Ray batches, each ray with a random shutter time:
   (``occluded``).
 
 Reported (per CPU second, see :func:`_best_of`): Mrays/s of the caster
-(embree, numba and, on a subset, numpy), of raw embreex ``run()`` on the same
+(embree, numba and, on a subset, numpy; ``embree_*`` uses the fused numba
+kernels around embree's ``run()``, ``embree_numpy_*`` the same caster with
+its numpy path, ``make_caster(..., fused=False)``: before / after in one run), of raw embreex ``run()`` on the same
 rays against one float32 world-space scene at time 0 (no refinement, no
 shading), and the ratios motion/static cost and caster/raw speed.  The numba
 backend runs on all cores, so it is also reported per wall-clock second
@@ -37,7 +39,7 @@ import numpy as np
 
 from stpm_core.motion import MotionTransform
 from stpm_core.raycast import make_caster
-from stpm_core.raycast.build import embree_available, numba_available
+from stpm_core.raycast.build import embree_available, make_caster as _make_caster, numba_available
 from stpm_core.scene import Instance, Material, Mesh, Scene
 
 __all__ = ["run", "icosphere", "grid", "bench_scene"]
@@ -278,10 +280,13 @@ def run(n_rays: int = 131072, repeats: int = 7, seed: int = 0) -> dict:
     if backends:
         # Every job of every variant in each round, so load changes hit them all alike
         jobs = {}
+        # embree with its numpy path (no fused kernels) next to the default fused one
+        variants_of = list(backends) + (["embree_numpy"] if "embree" in backends else [])
         for variant, sc in scenes.items():
-            for backend in backends:
+            for backend in variants_of:
                 t0 = time.perf_counter()
-                caster = make_caster(sc, backend)
+                caster = (_make_caster(sc, "embree", fused=False) if backend == "embree_numpy"
+                          else make_caster(sc, backend))
                 out[f"{backend}_{variant}_build_s"] = time.perf_counter() - t0
                 caster.occluded(co[:64], cd[:64], times[:64], 1.0)          # load compiled kernels
                 jobs.update({
@@ -339,12 +344,19 @@ def run(n_rays: int = 131072, repeats: int = 7, seed: int = 0) -> dict:
                 out[f"numba_over_numpy_{variant}_{kind}"] = (out[f"numba_{variant}_{kind}_Mrays_s"]
                                                              / out[f"numpy_{variant}_{kind}_Mrays_s"])
     # Ratios (targets: motion cost <= 1.5 x static; caster >= 50 % of raw)
+    # (``numpy_path_*``: the same ratios for the embree caster's numpy path, i.e. before fusing)
     if embree_available():
-        for kind in ("camera", "shadow"):
-            for variant in ("motion", "motion_big"):
-                out[f"{variant}_over_static_cost_{kind}"] = (out[f"embree_static_{kind}_Mrays_s"]
-                                                             / out[f"embree_{variant}_{kind}_Mrays_s"])
-            for variant in scenes:
-                out[f"caster_over_raw_{variant}_{kind}"] = (out[f"embree_{variant}_{kind}_Mrays_s"]
-                                                            / out[f"raw_{variant}_{kind}_Mrays_s"])
+        for tag, name in (("", "embree"), ("numpy_path_", "embree_numpy")):
+            for kind in ("camera", "shadow", "shadow_intersect"):
+                for variant in ("motion", "motion_big"):
+                    out[f"{tag}{variant}_over_static_cost_{kind}"] = (out[f"{name}_static_{kind}_Mrays_s"]
+                                                                      / out[f"{name}_{variant}_{kind}_Mrays_s"])
+                for variant in scenes:
+                    raw = out[f"raw_{variant}_{kind if kind != 'shadow_intersect' else 'shadow'}_Mrays_s"]
+                    if kind != "shadow_intersect":
+                        out[f"{tag}caster_over_raw_{variant}_{kind}"] = out[f"{name}_{variant}_{kind}_Mrays_s"] / raw
+        for variant in scenes:
+            for kind in ("camera", "shadow", "shadow_intersect"):
+                out[f"fused_speedup_{variant}_{kind}"] = (out[f"embree_{variant}_{kind}_Mrays_s"]
+                                                          / out[f"embree_numpy_{variant}_{kind}_Mrays_s"])
     return out

@@ -283,3 +283,27 @@ def test_scipy_fallback_when_numba_is_unavailable():
     m = random_scene_map(5000, rng, "auto")
     p, ns, t = mixed_queries(rng, 400)
     assert np.allclose(np.array(out["E"]), m.estimate(p, ns, t, k=20), rtol=1e-5, atol=0.0)
+
+
+def test_numba_radii_and_windows_equal_scipy_exactly():
+    # Same float64 distance arithmetic: the k-th radius and TEMPORAL's window are bit-identical
+    pytest.importorskip("numba")
+    from stpm_core.photons import kdtree
+    if not kdtree.AVAILABLE:
+        pytest.skip("numba disabled")
+    rng = np.random.default_rng(24)
+    m = random_scene_map(30_000, rng, "numba")
+    p, ns, t = mixed_queries(rng, 4000)
+    for k in (2, 3, 16, 50):
+        d3, _ = m.tree3().query(p, k)
+        _, r, _ = m.flat_tree(3).lookup(kdtree.MODE_STANDARD, np.column_stack([p, t]), ns, k, k, False, 1.1, 2)
+        assert np.array_equal(r, d3[:, -1]), k
+        q4 = np.column_stack([p, m.time_scale * t])
+        d4, _ = m.tree4().query(q4, k)
+        _, R, _ = m.flat_tree(4).lookup(kdtree.MODE_KD4D, q4, ns, k, k, False, 1.1, 2)
+        assert np.array_equal(R, d4[:, -1]), k
+    mm, k = 120, 20
+    d, idx = m.tree3().query(p, mm)
+    tau_ref = np.sort(np.abs(m.time[idx[:, :-1]] - t[:, None]), axis=1)[:, k - 1]
+    _, r, tau = m.flat_tree(3).lookup(kdtree.MODE_TEMPORAL, np.column_stack([p, t]), ns, mm, k, False, 1.1, 2)
+    assert np.array_equal(r, d[:, -1]) and np.array_equal(tau, tau_ref)

@@ -41,6 +41,8 @@ nearer child followed at once, the farther queued), so only leaves that
 reach the final kq-th ball are scanned.  Nearer photons are appended to a
 buffer of 2 kq and cut back to the kq nearest by quickselect when it fills
 (O(1) per photon where a heap costs O(log kq): TEMPORAL keeps m = 340).
+Warm start: the previous query's kq nearest lie within r_prev + |q - q_prev|
+of q, so that radius already bounds the search from its first node.
 
 Candidate cache (:func:`_lookup`): queries are processed in Morton order,
 and after a full search at c with kq-th distance r_c every photon within
@@ -300,7 +302,7 @@ if AVAILABLE:
                 return
 
     @_jit
-    def _knn(P, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist):
+    def _knn(P, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist, bound0):
         """Best-first kq-nearest search.  On return bd[:kq] / bi[:kq] hold the squared distances and
         rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther, in any order).
 
@@ -310,11 +312,15 @@ if AVAILABLE:
         current bound are appended to the buffer bd / bi (capacity 2 kq); a full buffer is cut back
         to its kq nearest by quickselect, which also tightens the bound (O(1) per photon, where a
         kq-heap costs O(log kq)).  bx is scratch carried along.
+
+        bound0: a squared distance known to hold at least kq photons strictly inside (inf if
+        none is known); the search then prunes from its first node.  Returns False if fewer
+        than kq photons were found below bound0 (the caller then searches again with inf).
         """
         cap = bd.shape[0]
         N = P.shape[0]
         cnt = 0
-        bound = np.inf
+        bound = bound0
         first_leaf = n_leaves - 1
         q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
         qnode[0] = 0
@@ -393,8 +399,12 @@ if AVAILABLE:
                 _select(bd, bx, bi, 0, cnt, kq - 1)
                 cnt = kq
                 bound = bd[kq - 1]
-        if cnt > kq:
-            _select(bd, bx, bi, 0, cnt, kq - 1)
+        if cnt < kq:
+            return False
+        # the kq nearest to the front, the kq-th at kq - 1 (also when exactly kq were kept
+        # below a warm-start bound and never cut)
+        _select(bd, bx, bi, 0, cnt, kq - 1)
+        return True
 
     @_jit
     def _range(P, box, n_leaves, q0, q1, q2, q3, D, s, R2, cx, ci, stack):
@@ -496,6 +506,7 @@ if AVAILABLE:
         have, n_c = False, 0
         c0 = c1 = c2 = c3 = 0.0
         rho2 = -1.0
+        r_prev = np.inf
         n = q.shape[0]
         for i in range(n):
             q0, q1, q2, q3 = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
@@ -506,7 +517,14 @@ if AVAILABLE:
                 _scan_cache(cx, ci, n_c, q0, q1, q2, q3, D, kq, bd, bi, bx)
             else:
                 qq[0], qq[1], qq[2], qq[3] = q0, q1, q2, q3
-                _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist)
+                # warm start: the previous query's kq nearest lie within r_prev + |q - q_prev|
+                bound0 = np.inf
+                if i > 0:
+                    e0, e1, e2, e3 = q0 - q[i - 1, 0], q1 - q[i - 1, 1], q2 - q[i - 1, 2], q3 - q[i - 1, 3]
+                    dp = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0))
+                    bound0 = ((r_prev + dp) * (1.0 + 1e-9)) ** 2
+                if not _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0):
+                    _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, np.inf)
                 have = False
                 if beta > 0.0 and i + 1 < n:
                     rc = np.sqrt(bd[kq - 1])
@@ -523,6 +541,7 @@ if AVAILABLE:
             # slot kq - 1 = the kq-th neighbour (fixes the radius); slots 0 .. kq - 2 are inner
             r = np.sqrt(bd[kq - 1])
             out_r[i] = r
+            r_prev = r
             n_sel = kq - 1
             if mode == MODE_TEMPORAL:
                 # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau

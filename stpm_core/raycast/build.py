@@ -71,7 +71,7 @@ def numba_available() -> bool:
     return True
 
 
-def make_caster(scene, backend: str = "auto") -> "Caster":
+def make_caster(scene, backend: str = "auto", fused: bool | None = None) -> "Caster":
     """Build a time-aware ray caster for ``scene``.
 
     backend : 'embree' (embreex, float32 BVH + float64 refinement), 'numba'
@@ -80,6 +80,9 @@ def make_caster(scene, backend: str = "auto") -> "Caster":
         last fallback) or 'auto': the environment variable
         ``STPM_RAYCAST_BACKEND`` if set, else embree when importable, else
         numba when importable, else numpy.  See docs/raycast.md.
+    fused : embree backend only: None (default) = numba kernels around
+        embree's ``run()`` whenever numba imports (:mod:`.embree_kernels`);
+        False = the numpy path (same results to rounding; tests, benchmarks).
     """
     from ..errors import SettingsError
     if backend == "auto" and os.environ.get(BACKEND_ENV, "").strip():
@@ -93,7 +96,8 @@ def make_caster(scene, backend: str = "auto") -> "Caster":
     if backend == "embree":
         if not embree_available():
             raise SettingsError("ray-casting backend 'embree' needs the embreex package, which is not installed")
-        from .embree_backend import build_parts
+        from .embree_backend import build_parts as _embree_parts
+        build_parts = (lambda sc, scale: _embree_parts(sc, scale, fused))
     elif backend == "numba":
         if not numba_available():
             raise SettingsError("ray-casting backend 'numba' needs the numba package, which is not installed")
@@ -193,6 +197,15 @@ class Caster:
         prim = np.full(n, -1, np.int64)      # part-local primitive of the nearest hit
         rays = None
         for k, part in enumerate(self.parts):
+            if part.bounds is None and getattr(part, "intersect_into", None) is not None:
+                # Fused static part: cast, refine and write every field in one kernel per block
+                for a in range(0, n, CHUNK):
+                    sl = slice(a, min(n, a + CHUNK))
+                    part.intersect_into(o[sl], d[sl], times[sl], tmin[sl], k,
+                                        (best_t[sl], best_part[sl], prim[sl], out.u[sl], out.v[sl],
+                                         out.instance[sl], out.prim[sl], out.material[sl], out.ng[sl],
+                                         out.ns[sl], out.position[sl]))
+                continue
             if part.bounds is None:
                 # Parts without bounds (the baked static scene) see every ray and shade
                 # their hits at once, in contiguous blocks (a later part may overwrite)
@@ -214,6 +227,17 @@ class Caster:
                     else:
                         for dst, src in fields[:-1]:
                             np.copyto(dst[sl], src, where=won if np.ndim(src) < 2 else won[:, None])
+                continue
+            if self._part_bvh is None and getattr(part, "cast_all", None) is not None:
+                # Fused part: its kernel does the box tests, every ray in contiguous blocks
+                for a in range(0, n, CHUNK):
+                    sl = slice(a, min(n, a + CHUNK))
+                    t_k, p_k, u_k, v_k = part.cast_all(o[sl], d[sl], times[sl], tmin[sl], best_t[sl])
+                    won = t_k < best_t[sl]
+                    if won.any():
+                        w = a + np.flatnonzero(won)
+                        best_t[w], best_part[w], prim[w] = t_k[won], k, p_k[won]
+                        out.u[w], out.v[w] = u_k[won], v_k[won]
                 continue
             # Other parts: only rays whose segment (tmin, best_t) meets their swept bounds
             if rays is None:
@@ -261,6 +285,13 @@ class Caster:
                 for a in range(0, n, CHUNK):
                     sl = slice(a, min(n, a + CHUNK))
                     blocked[sl] = part.occluded(o[sl], d[sl], times[sl], tmin[sl], tmax[sl])
+                continue
+            if part.bounds is not None and self._part_bvh is None \
+                    and getattr(part, "occluded_all", None) is not None:
+                # Fused part: box tests and transforms in its kernel, unblocked rays of each block
+                for a in range(0, n, CHUNK):
+                    sl = slice(a, min(n, a + CHUNK))
+                    blocked[sl] |= part.occluded_all(o[sl], d[sl], times[sl], tmin[sl], tmax[sl], blocked[sl])
                 continue
             if part.bounds is None:
                 live = np.flatnonzero(~blocked)

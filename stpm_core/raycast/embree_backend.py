@@ -34,8 +34,17 @@ from .geometry import (InstanceShading, MotionKeys, apply_affine, apply_linear, 
                        normal_matrix, ray_triangle, swept_bounds, triangles_at, world_to_object)
 from .pair_bvh import PairBVH, RaySlabs, segments_meet_boxes
 
-__all__ = ["build_parts", "EmbreeMesh", "StaticPart", "RigidPart", "DeformingPart",
-           "DEFORM_BUCKETS_MAX"]
+# Fused numba kernels for the work around run() (None: numba missing, numpy path only)
+try:
+    from . import embree_kernels as _K
+except Exception:          # pragma: no cover - depends on the platform
+    _K = None
+
+__all__ = ["build_parts", "EmbreeMesh", "StaticPart", "RigidPart", "RigidGroup", "DeformingPart",
+           "DEFORM_BUCKETS_MAX", "FUSED_AVAILABLE"]
+
+# Can the parts use the fused numba kernels (embree_kernels)?
+FUSED_AVAILABLE = _K is not None
 
 _FAR32 = np.float32(1e37)      # embree's "no tfar" value
 _RECASTS = 3                   # re-casts of rays whose refined hit fell inside the guard
@@ -58,8 +67,9 @@ class EmbreeMesh:
     F : (F, 3) int triangle indices.
     """
 
-    def __init__(self, V: np.ndarray, F: np.ndarray, planes: bool = True):
+    def __init__(self, V: np.ndarray, F: np.ndarray, planes: bool = True, fused: bool = False):
         V = np.asarray(V, dtype=np.float64)
+        self.fused = fused and FUSED_AVAILABLE
         F = np.ascontiguousarray(F, dtype=np.int32)
         self.empty = F.shape[0] == 0
         self.centre = 0.5 * (V.min(0) + V.max(0)) if V.shape[0] else np.zeros(3)
@@ -75,6 +85,12 @@ class EmbreeMesh:
 
     def _rays32(self, o, d, start, t1):
         """Shift rays to the centre and to their start point; float32 arrays for run()."""
+        if self.fused:
+            n = o.shape[0]
+            o32, d32, far32 = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.float32)
+            _K.rays32(np.ascontiguousarray(o), np.ascontiguousarray(d), np.ascontiguousarray(start),
+                      np.ascontiguousarray(t1), self.centre, o32, d32, far32)
+            return o32, d32, far32
         x = start[:, None] * d
         x += o
         x -= self.centre
@@ -91,7 +107,7 @@ class EmbreeMesh:
         o32, d32, far32 = self._rays32(o, d, t0, t1)
         return self.scene.run(o32, d32, dists=far32, query="OCCLUDED") != -1
 
-    def cast(self, o, d, t0, t1, corners=None, slack=None):
+    def cast(self, o, d, t0, t1, corners=None, slack=None, rays32=None):
         """Nearest hit in (t0, t1) with float64 t.
 
         Parameters
@@ -105,6 +121,8 @@ class EmbreeMesh:
         slack : (n,) or None: embree searches (t0 - slack, t1 + slack) when its
             float32 shape only approximates the exact one (deforming buckets);
             the exact t must still lie in (t0, t1).
+        rays32 : (o32, d32, far32) already made by :func:`.embree_kernels.rigid_pairs`
+            (rays starting at t0, no slack) or None.
 
         Returns
         -------
@@ -116,7 +134,7 @@ class EmbreeMesh:
             return np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros(n), np.zeros(n)
         # First pass over every ray, masks rather than compressed copies
         s0, s1 = (t0, t1) if slack is None else (t0 - slack, t1 + slack)
-        o32, d32, far32 = self._rays32(o, d, s0, s1)
+        o32, d32, far32 = self._rays32(o, d, s0, s1) if rays32 is None else rays32
         r = self.scene.run(o32, d32, dists=far32, output=1)
         p = r["primID"]
         hit = p >= 0
@@ -155,6 +173,13 @@ class EmbreeMesh:
         ``start + tfar`` is embree's own t (used where the float64 plane test
         is undefined: a ray parallel to the triangle's plane).
         """
+        if corners is None and self.fused:
+            # Same plane test, one kernel pass
+            tt = np.zeros(o.shape[0])
+            _K.refine_plane(np.ascontiguousarray(o), np.ascontiguousarray(d), np.ascontiguousarray(p),
+                            np.ascontiguousarray(start), np.ascontiguousarray(tfar), self.plane_n,
+                            self.plane_w, tt)
+            return tt, u32.astype(np.float64), v32.astype(np.float64)
         if corners is None:
             # t on the triangle's float64 plane; embree's u, v are fine for shading
             nrm = self.plane_n[p]
@@ -183,7 +208,8 @@ class StaticPart:
 
     bounds = None
 
-    def __init__(self, scene, instances: list[int]):
+    def __init__(self, scene, instances: list[int], fused: bool = False):
+        self.fused = fused and FUSED_AVAILABLE
         Vs, Fs, inst, prim, ng, nsc, mat = [], [], [], [], [], [], []
         nv = 0
         self.smooth = any(scene.meshes[scene.instances[i].mesh].normals is not None for i in instances)
@@ -215,10 +241,46 @@ class StaticPart:
         self.ids = np.stack([cat(inst, (0,)), cat(prim, (0,)), cat(mat, (0,))], axis=1).astype(np.int32)
         self.ng = cat(ng, (0, 3))
         self.ns_corners = cat(nsc, (0, 3, 3)).astype(np.float32)
-        self.mesh = EmbreeMesh(cat(Vs, (0, 3)), cat(Fs, (0, 3)))
+        self.mesh = EmbreeMesh(cat(Vs, (0, 3)), cat(Fs, (0, 3)), fused=self.fused)
 
     def cast(self, o, d, times, t0, t1):
         return self.mesh.cast(o, d, t0, t1)
+
+    def intersect_into(self, o, d, times, t0, k, fields) -> None:
+        """Cast m rays and write the hits nearer than the current best straight into the results.
+
+        o, d (m, 3), times, t0 (m,); ``fields`` = views (m rows) of the
+        caster's arrays: best_t (read as t1, then updated), best_part (set to
+        ``k``), part prim, u, v, instance, prim, material, ng, ns, position.
+        One embree call, then :func:`.embree_kernels.static_finish`; rays whose
+        refined hit fell inside the guard go through :meth:`EmbreeMesh.cast`'s
+        re-cast and numpy :meth:`shade` (rare).
+        """
+        best_t, best_part, prim, u, v, inst, p_out, mat, ng, ns, pos = fields
+        m = o.shape[0]
+        em = self.mesh
+        if em.empty or m == 0:
+            return
+        o, d = np.ascontiguousarray(o), np.ascontiguousarray(d)
+        o32, d32, far32 = em._rays32(o, d, t0, best_t)
+        r = em.scene.run(o32, d32, dists=far32, output=1)
+        again = np.empty(m, np.int64)
+        n_again = _K.static_finish(o, d, t0, r["tfar"], r["primID"], r["u"], r["v"], t0, em.plane_n, em.plane_w,
+                                   self.ids, self.ng, self.ns_corners, self.smooth, k, best_t, best_part, prim,
+                                   u, v, inst, p_out, mat, ng, ns, pos, again)
+        if n_again == 0:
+            return
+        # Guard re-casts: the numpy path for those rays
+        a = again[:n_again]
+        t_a, p_a, u_a, v_a = em.cast(o[a], d[a], t0[a], best_t[a])
+        won = np.flatnonzero(t_a < best_t[a])
+        if won.size == 0:
+            return
+        w = a[won]
+        i_w, p_w, ng_w, ns_w, mat_w = self.shade(times[w], p_a[won], u_a[won], v_a[won])
+        best_t[w], best_part[w], prim[w], u[w], v[w] = t_a[won], k, p_a[won], u_a[won], v_a[won]
+        inst[w], p_out[w], mat[w], ng[w], ns[w] = i_w, p_w, mat_w, ng_w, ns_w
+        pos[w] = o[w] + t_a[won, None] * d[w]
 
     def occluded(self, o, d, times, t0, t1):
         return self.mesh.occluded(o, d, t0, t1)
@@ -279,7 +341,7 @@ class RigidGroup:
     :meth:`cast` encodes the instance: ``j * F + triangle``.
     """
 
-    def __init__(self, scene, instances: list[int], emesh: EmbreeMesh):
+    def __init__(self, scene, instances: list[int], emesh: EmbreeMesh, fused: bool = False):
         self.instances = np.asarray(instances, dtype=np.int32)
         self.mesh = mesh = scene.meshes[scene.instances[instances[0]].mesh]
         transforms = [scene.instances[i].transform for i in instances]
@@ -292,6 +354,22 @@ class RigidGroup:
         self.bounds = (self.lo.min(0), self.hi.max(0))
         self.bvh = PairBVH(self.lo, self.hi, leaf=2) if len(instances) > _GROUP_BVH_MIN else None
         self.shading = InstanceShading(mesh, None)
+        # Fused kernels (box tests + per-ray transforms in one pass) below the BVH threshold
+        self.fused = fused and FUSED_AVAILABLE and self.bvh is None
+        if self.fused:
+            k = self.keys
+            c = np.ascontiguousarray
+            Q, first, last = c(k.Q, np.float64), c(k.first, np.int64), c(k.last, np.int64)
+            arc = np.zeros((Q.shape[0], 3))
+            _K.slerp_table(Q, first, last, arc)
+            self._keys = (c(k.T, np.float64), Q, c(k.S, np.float64), arc, c(k.knots, np.float64), first, last)
+            V = np.asarray(mesh.vertices, dtype=np.float64)
+            self._V = c(V[0] if V.ndim == 3 else V)
+            self._F = c(np.asarray(mesh.triangles), np.int64)
+            N = self.shading.normals
+            self._N = c(N if N is not None else np.zeros((0, 3, 3)), np.float64)
+            self._box = (c(self.bounds[0], np.float64), c(self.bounds[1], np.float64))
+            self.cast_all, self.occluded_all = self._cast_all, self._occluded_all
 
     def _pairs(self, o, d, t0, t1):
         """(ray, j) pairs (k,) whose segment [t0, t1] meets instance j's swept box."""
@@ -332,8 +410,53 @@ class RigidGroup:
             blocked[ray[self.emesh.occluded(oo, dd, t0[ray], t1[ray])]] = True
         return blocked
 
+    # ------------------------------------------------ fused (numba) path
+    def _fused_pairs(self, o, d, times, t0, t1, skip, full: bool):
+        """Kernel :func:`.embree_kernels.rigid_pairs` over m rays -> ray, j, o64, d64, (o32, d32, far32)."""
+        m = o.shape[0]
+        cap = m * self.lo.shape[0]
+        ray, j = np.empty(cap, np.int64), np.empty(cap, np.int64)
+        o64 = np.empty((cap if full else 0, 3))
+        d64 = np.empty((cap if full else 0, 3))
+        o32, d32, far32 = np.empty((cap, 3), np.float32), np.empty((cap, 3), np.float32), np.empty(cap, np.float32)
+        c = np.ascontiguousarray
+        n = _K.rigid_pairs(c(o), c(d), c(times), c(t0), c(t1), skip, *self._box, self.lo, self.hi, *self._keys,
+                           self.emesh.centre, ray, j, o64, d64, o32, d32, far32)
+        return ray[:n], j[:n], o64[:n], d64[:n], (o32[:n], d32[:n], far32[:n])
+
+    def _cast_all(self, o, d, times, t0, t1):
+        """:meth:`cast` over every ray (m,), box tests included (the caster skips its own)."""
+        m = o.shape[0]
+        t, prim, u, v = np.full(m, np.inf), np.full(m, -1, np.int64), np.zeros(m), np.zeros(m)
+        ray, j, oo, dd, r32 = self._fused_pairs(o, d, times, t0, t1, np.zeros(m, np.bool_), True)
+        if ray.size == 0:
+            return t, prim, u, v
+        tp, pp, up, vp = self.emesh.cast(oo, dd, t0[ray], t1[ray], rays32=r32)
+        # Nearest pair per ray
+        np.minimum.at(t, ray, tp)
+        w = np.flatnonzero(np.isfinite(tp) & (tp == t[ray]))
+        prim[ray[w]] = j[w] * self.n_tri + pp[w]
+        u[ray[w]], v[ray[w]] = up[w], vp[w]
+        return t, prim, u, v
+
+    def _occluded_all(self, o, d, times, t0, t1, skip):
+        """(m,) bool over every ray, rays with ``skip`` (m,) bool ignored (left False)."""
+        blocked = np.zeros(o.shape[0], bool)
+        ray, _, _, _, (o32, d32, far32) = self._fused_pairs(o, d, times, t0, t1, np.ascontiguousarray(skip), False)
+        if ray.size:
+            blocked[ray[self.emesh.scene.run(o32, d32, dists=far32, query="OCCLUDED") != -1]] = True
+        return blocked
+
     def shade(self, times, p, u, v):
         j, tri = np.divmod(p, self.n_tri)
+        if self.fused:
+            m = p.shape[0]
+            ng, ns, mat = np.empty((m, 3)), np.empty((m, 3)), np.empty(m, np.int32)
+            c = np.ascontiguousarray
+            _K.rigid_shade(c(j, np.int64), c(tri, np.int64), c(u, np.float64), c(v, np.float64),
+                           c(times, np.float64), *self._keys, self._V, self._F, self._N,
+                           self.shading.material_ids, ng, ns, mat)
+            return self.instances[j], tri.astype(np.int32), ng, ns, mat
         A, _ = self.keys.world_to_object(j, times)
         ng, ns, mat = self.shading.shade(tri, u, v, times, A)
         return self.instances[j], tri.astype(np.int32), ng, ns, mat
@@ -453,8 +576,15 @@ class DeformingPart:
         return np.full(p.shape[0], self.index, np.int32), p.astype(np.int32), ng, ns, mat
 
 
-def build_parts(scene, scale: float) -> list:
-    """Static part first (cheapest, shrinks t1 for the rest), then moving, then deforming."""
+def build_parts(scene, scale: float, fused: bool | None = None) -> list:
+    """Static part first (cheapest, shrinks t1 for the rest), then moving, then deforming.
+
+    fused : use the numba kernels of :mod:`.embree_kernels` around embree
+        (None = whenever numba imports; False = the numpy path, same results
+        to rounding).  Fused, a single moving instance is a one-member
+        :class:`RigidGroup`.
+    """
+    fused = FUSED_AVAILABLE if fused is None else (fused and FUSED_AVAILABLE)
     static, rigid, deforming = [], [], []
     for i, inst in enumerate(scene.instances):
         mesh = scene.meshes[inst.mesh]
@@ -468,7 +598,7 @@ def build_parts(scene, scale: float) -> list:
             rigid.append(i)
     parts = []
     if static:
-        parts.append(StaticPart(scene, static))
+        parts.append(StaticPart(scene, static, fused))
     # Moving rigid instances: one object-space embree scene per mesh; several moving
     # instances of one mesh form one group (one transform pass, one embree call)
     by_mesh: dict[int, list[int]] = {}
@@ -476,10 +606,10 @@ def build_parts(scene, scale: float) -> list:
         by_mesh.setdefault(scene.instances[i].mesh, []).append(i)
     for m, members in by_mesh.items():
         V = np.asarray(scene.meshes[m].vertices, dtype=np.float64).reshape(-1, 3)
-        emesh = EmbreeMesh(V, scene.meshes[m].triangles)
-        if len(members) == 1:
+        emesh = EmbreeMesh(V, scene.meshes[m].triangles, fused=fused)
+        if len(members) == 1 and not fused:
             parts.append(RigidPart(scene, members[0], emesh))
         else:
-            parts.append(RigidGroup(scene, members, emesh))
+            parts.append(RigidGroup(scene, members, emesh, fused))
     parts.extend(DeformingPart(scene, i) for i in deforming)
     return parts

@@ -1,0 +1,330 @@
+"""numba kernels fusing the numpy work around embree's ``run()`` (embree backend).
+
+Each kernel does in one pass per ray what :mod:`.embree_backend` otherwise
+does with a dozen whole-array numpy operations (temporaries, gathers), with
+the same float64 operations in the same order, so results agree with the
+numpy path to rounding (tests/test_raycast.py compares them):
+
+* :func:`rays32` - re-centred float32 rays for ``run()``
+  (``EmbreeMesh._rays32``);
+* :func:`static_finish` - after embree's closest-hit call on the baked
+  static scene: float64 plane refinement of t, guard / tmax test, and every
+  :class:`~stpm_core.raycast.Hits` field (instance, prim, material, ng, the
+  corner-normal blend ns, position) written straight into the caster's
+  result arrays;
+* :func:`rigid_pairs` - moving rigid instances of one mesh: swept-box tests
+  of each ray against the group box and each instance box, and for every
+  (ray, instance) pair met, the inverse transform at the ray's time
+  (:class:`.geometry.MotionKeys`: lerp, slerp, stretch inverse) applied to
+  the ray, written as float64 object-space rays and float32 embree rays;
+* :func:`rigid_shade` - normals and material of moving hits at their times.
+
+Kernels are serial (``cache=True``): embree's ``run()`` is single-threaded
+and the caster works in 8192-ray chunks.  Importing this module fails where
+numba is missing; the embree backend then keeps its numpy path.
+"""
+from __future__ import annotations
+
+import os
+
+# Same policy as the numba backend: OpenMP workers (if numba ever starts them) sleep
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import numpy as np  # noqa: E402
+from numba import njit  # noqa: E402
+
+__all__ = ["rays32", "static_finish", "rigid_pairs", "rigid_shade", "refine_plane", "slerp_table"]
+
+FAR32 = float(np.float32(1e37))     # embree's "no tfar" value, as float64
+_HUGE = 1e300                       # stands in for 1/0 in the slab test (0 * _HUGE = 0, no NaN)
+
+
+# ---------------------------------------------------------------- embree input
+@njit(cache=True, error_model="numpy")
+def rays32(o, d, start, t1, centre, o32, d32, far32):
+    """Rays o, d (m, 3) float64 shifted to start (m,) and the mesh centre (3,) -> o32, d32 (m, 3), far32 (m,)."""
+    for i in range(o.shape[0]):
+        s = start[i]
+        for c in range(3):
+            o32[i, c] = np.float32((s * d[i, c] + o[i, c]) - centre[c])
+            d32[i, c] = np.float32(d[i, c])
+        far = max(t1[i] - s, 0.0)
+        far32[i] = np.float32(min(far, FAR32))
+
+
+@njit(cache=True, error_model="numpy")
+def refine_plane(o, d, p, start, tfar, plane_n, plane_w, tt):
+    """Float64 t (m,) into tt of rays o, d on the planes of triangles p (m,) (p < 0: left alone).
+
+    Where the plane test is undefined (ray parallel to the plane) embree's own
+    ``start + tfar`` stands.
+    """
+    for i in range(o.shape[0]):
+        q = p[i]
+        if q < 0:
+            continue
+        n0, n1, n2 = plane_n[q, 0], plane_n[q, 1], plane_n[q, 2]
+        t = (plane_w[q] - (n0 * o[i, 0] + n1 * o[i, 1] + n2 * o[i, 2])) / (n0 * d[i, 0] + n1 * d[i, 1]
+                                                                          + n2 * d[i, 2])
+        if not np.isfinite(t):
+            t = start[i] + np.float64(tfar[i])
+        tt[i] = t
+
+
+# ---------------------------------------------------------------- static part
+@njit(cache=True, error_model="numpy")
+def static_finish(o, d, start, tfar, primID, u32, v32, t0, plane_n, plane_w, ids, ng_tab, nsc, smooth, k,
+                  best_t, best_part, prim, u_out, v_out, inst_out, p_out, mat_out, ng_out, ns_out, pos_out,
+                  again):
+    """Refine embree's closest hits on the baked static scene and write the won ones.
+
+    Inputs per ray (m,): o, d (m, 3) world rays, start = guard t0 (the cast
+    started there), embree's tfar, primID, u32, v32.  Tables per baked
+    triangle: plane_n (F, 3), plane_w (F,), ids (F, 3) int32 (instance,
+    mesh-local prim, material), ng_tab (F, 3), nsc (F, 3, 3) float32 corner
+    normals (used when ``smooth``).  A ray whose refined t lies in
+    (t0, best_t) overwrites best_t, best_part (= k), prim, u, v, instance,
+    mesh prim, material, ng, ns, position.  Rays whose refined t is inside the
+    guard (t <= t0) are listed in ``again`` for a re-cast; returns their count.
+    """
+    n_again = 0
+    for i in range(o.shape[0]):
+        q = primID[i]
+        if q < 0:
+            continue
+        # Float64 t on the triangle's plane (embree's where undefined)
+        n0, n1, n2 = plane_n[q, 0], plane_n[q, 1], plane_n[q, 2]
+        t = (plane_w[q] - (n0 * o[i, 0] + n1 * o[i, 1] + n2 * o[i, 2])) / (n0 * d[i, 0] + n1 * d[i, 1]
+                                                                          + n2 * d[i, 2])
+        if not np.isfinite(t):
+            t = start[i] + np.float64(tfar[i])
+        if t <= t0[i]:
+            again[n_again] = i
+            n_again += 1
+            continue
+        if not t < best_t[i]:
+            continue
+        # Hit fields
+        u = np.float64(u32[i])
+        v = np.float64(v32[i])
+        best_t[i] = t
+        best_part[i] = k
+        prim[i] = q
+        u_out[i] = u
+        v_out[i] = v
+        inst_out[i] = ids[q, 0]
+        p_out[i] = ids[q, 1]
+        mat_out[i] = ids[q, 2]
+        for c in range(3):
+            ng_out[i, c] = ng_tab[q, c]
+            pos_out[i, c] = o[i, c] + t * d[i, c]
+        if not smooth:
+            for c in range(3):
+                ns_out[i, c] = ng_tab[q, c]
+            continue
+        # Shading normal: float32 barycentric blend of the corner normals, float64 normalise
+        w0, w1, w2 = np.float32(1 - u - v), np.float32(u), np.float32(v)
+        s0 = np.float64(w0 * nsc[q, 0, 0] + w1 * nsc[q, 1, 0] + w2 * nsc[q, 2, 0])
+        s1 = np.float64(w0 * nsc[q, 0, 1] + w1 * nsc[q, 1, 1] + w2 * nsc[q, 2, 1])
+        s2 = np.float64(w0 * nsc[q, 0, 2] + w1 * nsc[q, 1, 2] + w2 * nsc[q, 2, 2])
+        L = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        if L == 0:
+            for c in range(3):
+                ns_out[i, c] = ng_tab[q, c]
+        else:
+            ns_out[i, 0], ns_out[i, 1], ns_out[i, 2] = s0 / L, s1 / L, s2 / L
+    return n_again
+
+
+# ---------------------------------------------------------------- moving instances
+@njit(cache=True, error_model="numpy")
+def _inv(x):
+    return 1.0 / x if abs(x) > 1e-290 else _HUGE
+
+
+@njit(cache=True, error_model="numpy")
+def _meets(lo, hi, ox, oy, oz, ix, iy, iz, t0, t1):
+    """Does segment [t0, t1] of the ray meet box lo, hi (3,)?  Conservative (slab test)."""
+    near, far = t0, t1
+    ta, tb = (lo[0] - ox) * ix, (hi[0] - ox) * ix
+    near, far = max(near, min(ta, tb)), min(far, max(ta, tb))
+    ta, tb = (lo[1] - oy) * iy, (hi[1] - oy) * iy
+    near, far = max(near, min(ta, tb)), min(far, max(ta, tb))
+    ta, tb = (lo[2] - oz) * iz, (hi[2] - oz) * iz
+    near, far = max(near, min(ta, tb)), min(far, max(ta, tb))
+    return near <= far
+
+
+@njit(cache=True, error_model="numpy")
+def slerp_table(Q, first, last, arc):
+    """Per key i (K,): the arc to the next key of its transform -> arc (K, 3) = theta, sin theta, sign.
+
+    Q (K, 4) unit quaternions (w, x, y, z); first, last (J,) key ranges.
+    The slerp's arccos depends only on the key pair, so it is evaluated once
+    here rather than per ray.
+    """
+    for j in range(first.shape[0]):
+        for i in range(first[j], last[j] + 1):
+            i1 = min(i + 1, last[j])
+            cos_theta = Q[i, 0] * Q[i1, 0] + Q[i, 1] * Q[i1, 1] + Q[i, 2] * Q[i1, 2] + Q[i, 3] * Q[i1, 3]
+            theta = np.arccos(min(abs(cos_theta), 1.0))
+            arc[i, 0] = theta
+            arc[i, 1] = np.sin(theta)
+            arc[i, 2] = -1.0 if cos_theta < 0 else 1.0
+
+
+@njit(cache=True, error_model="numpy")
+def _world_to_object(T, Q, S, arc, knots, f, l, time, A, b):
+    """A (3, 3), b (3,) of the transform with keys f..l at ``time`` (as MotionKeys.world_to_object).
+
+    arc : (K, 3) from :func:`slerp_table`.
+    """
+    # Key pair and fraction
+    tq = min(max(time, knots[f]), knots[l])
+    i = f
+    while i + 1 <= l and knots[i + 1] <= tq:
+        i += 1
+    i = min(i, max(l - 1, f))
+    i1 = min(i + 1, l)
+    span = knots[i1] - knots[i]
+    a = (time - knots[i]) / span if span > 0 else 0.0
+    a = min(max(a, 0.0), 1.0)
+    # Rotation: slerp along the shorter arc
+    theta, sin_theta, sign = arc[i, 0], arc[i, 1], arc[i, 2]
+    if sin_theta < 1e-6:
+        w0, w1 = 1 - a, a * sign
+    else:
+        w0, w1 = np.sin((1 - a) * theta) / sin_theta, np.sin(a * theta) / sin_theta * sign
+    w = w0 * Q[i, 0] + w1 * Q[i1, 0]
+    x = w0 * Q[i, 1] + w1 * Q[i1, 1]
+    y = w0 * Q[i, 2] + w1 * Q[i1, 2]
+    z = w0 * Q[i, 3] + w1 * Q[i1, 3]
+    norm = 1.0 / np.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w * norm, x * norm, y * norm, z * norm
+    # R^T
+    r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)
+    r10, r11, r12 = 2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)
+    r20, r21, r22 = 2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)
+    # Stretch: lerp, inverse by cofactors
+    s00 = S[i, 0, 0] + a * (S[i1, 0, 0] - S[i, 0, 0])
+    s01 = S[i, 0, 1] + a * (S[i1, 0, 1] - S[i, 0, 1])
+    s02 = S[i, 0, 2] + a * (S[i1, 0, 2] - S[i, 0, 2])
+    s11 = S[i, 1, 1] + a * (S[i1, 1, 1] - S[i, 1, 1])
+    s12 = S[i, 1, 2] + a * (S[i1, 1, 2] - S[i, 1, 2])
+    s22 = S[i, 2, 2] + a * (S[i1, 2, 2] - S[i, 2, 2])
+    c00, c01, c02 = s11 * s22 - s12 * s12, s02 * s12 - s01 * s22, s01 * s12 - s02 * s11
+    c11, c12, c22 = s00 * s22 - s02 * s02, s01 * s02 - s00 * s12, s00 * s11 - s01 * s01
+    inv_det = 1.0 / (s00 * c00 + s01 * c01 + s02 * c02)
+    i00, i01, i02 = c00 * inv_det, c01 * inv_det, c02 * inv_det
+    i11, i12, i22 = c11 * inv_det, c12 * inv_det, c22 * inv_det
+    # A = S^-1 R^T, b = -A T
+    A[0, 0] = i00 * r00 + i01 * r10 + i02 * r20
+    A[0, 1] = i00 * r01 + i01 * r11 + i02 * r21
+    A[0, 2] = i00 * r02 + i01 * r12 + i02 * r22
+    A[1, 0] = i01 * r00 + i11 * r10 + i12 * r20
+    A[1, 1] = i01 * r01 + i11 * r11 + i12 * r21
+    A[1, 2] = i01 * r02 + i11 * r12 + i12 * r22
+    A[2, 0] = i02 * r00 + i12 * r10 + i22 * r20
+    A[2, 1] = i02 * r01 + i12 * r11 + i22 * r21
+    A[2, 2] = i02 * r02 + i12 * r12 + i22 * r22
+    T0 = T[i, 0] + a * (T[i1, 0] - T[i, 0])
+    T1 = T[i, 1] + a * (T[i1, 1] - T[i, 1])
+    T2 = T[i, 2] + a * (T[i1, 2] - T[i, 2])
+    for r in range(3):
+        b[r] = -(A[r, 0] * T0 + A[r, 1] * T1 + A[r, 2] * T2)
+
+
+@njit(cache=True, error_model="numpy")
+def rigid_pairs(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, T, Q, S, arc, knots, first, last, centre,
+                ray, inst, o64, d64, o32, d32, far32):
+    """(ray, instance) pairs of moving instances of one mesh, mapped to object space.
+
+    o, d (m, 3), times, t0, t1 (m,) world rays; ``skip`` (m,) bool rays to
+    ignore (already blocked); box_lo, box_hi (3,) the group's swept box; lo,
+    hi (J, 3) each instance's.  T, Q, S, knots, first, last: the stacked keys of
+    :class:`.geometry.MotionKeys`, arc their :func:`slerp_table`; centre (3,) the object-space embree
+    scene's centre.  For each pair k written: ray[k], inst[k] (index j),
+    object-space o64, d64 (k, 3) float64 (if o64 has rows) and the float32
+    embree rays o32, d32, far32 starting at t0.  Returns the pair count.
+    """
+    A = np.empty((3, 3))
+    b = np.empty(3)
+    n = 0
+    full = o64.shape[0] > 0
+    J = lo.shape[0]
+    for i in range(o.shape[0]):
+        if skip[i]:
+            continue
+        ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
+        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+        ix, iy, iz = _inv(dx), _inv(dy), _inv(dz)
+        s, e = t0[i], t1[i]
+        if not _meets(box_lo, box_hi, ox, oy, oz, ix, iy, iz, s, e):
+            continue
+        for j in range(J):
+            if not _meets(lo[j], hi[j], ox, oy, oz, ix, iy, iz, s, e):
+                continue
+            # Ray to object space at its own time (directions not renormalised)
+            _world_to_object(T, Q, S, arc, knots, first[j], last[j], times[i], A, b)
+            for r in range(3):
+                oo = A[r, 0] * ox + A[r, 1] * oy + A[r, 2] * oz + b[r]
+                dd = A[r, 0] * dx + A[r, 1] * dy + A[r, 2] * dz
+                if full:
+                    o64[n, r] = oo
+                    d64[n, r] = dd
+                o32[n, r] = np.float32((s * dd + oo) - centre[r])
+                d32[n, r] = np.float32(dd)
+            far32[n] = np.float32(min(max(e - s, 0.0), FAR32))
+            ray[n] = i
+            inst[n] = j
+            n += 1
+    return n
+
+
+@njit(cache=True, error_model="numpy")
+def rigid_shade(j, tri, u, v, times, T, Q, S, arc, knots, first, last, V, F, normals, material_ids,
+                ng, ns, mat):
+    """World normals and material of hits on moving instances (as InstanceShading.shade).
+
+    j, tri (m,) instance (index into the keys) and triangle; u, v, times (m,);
+    V (nv, 3) float64 object vertices, F (nf, 3) triangles, normals (nf, 3, 3)
+    float64 corner normals or (0, 3, 3) for flat shading.  Writes ng, ns (m, 3),
+    mat (m,).
+    """
+    A = np.empty((3, 3))
+    b = np.empty(3)
+    smooth = normals.shape[0] > 0
+    for k in range(tri.shape[0]):
+        q = tri[k]
+        jj = j[k]
+        _world_to_object(T, Q, S, arc, knots, first[jj], last[jj], times[k], A, b)
+        # Geometric normal: object cross product through A^T, normalised
+        a0, a1, a2 = F[q, 0], F[q, 1], F[q, 2]
+        e10, e11, e12 = V[a1, 0] - V[a0, 0], V[a1, 1] - V[a0, 1], V[a1, 2] - V[a0, 2]
+        e20, e21, e22 = V[a2, 0] - V[a0, 0], V[a2, 1] - V[a0, 1], V[a2, 2] - V[a0, 2]
+        n0, n1, n2 = e11 * e22 - e12 * e21, e12 * e20 - e10 * e22, e10 * e21 - e11 * e20
+        g0 = A[0, 0] * n0 + A[1, 0] * n1 + A[2, 0] * n2
+        g1 = A[0, 1] * n0 + A[1, 1] * n1 + A[2, 1] * n2
+        g2 = A[0, 2] * n0 + A[1, 2] * n1 + A[2, 2] * n2
+        L = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+        if L > 0:
+            g0, g1, g2 = g0 / L, g1 / L, g2 / L
+        ng[k, 0], ng[k, 1], ng[k, 2] = g0, g1, g2
+        mat[k] = material_ids[q]
+        if not smooth:
+            ns[k, 0], ns[k, 1], ns[k, 2] = g0, g1, g2
+            continue
+        # Shading normal: float64 blend of the corner normals, through A^T
+        w0, w1, w2 = 1 - u[k] - v[k], u[k], v[k]
+        m0 = w0 * normals[q, 0, 0] + w1 * normals[q, 1, 0] + w2 * normals[q, 2, 0]
+        m1 = w0 * normals[q, 0, 1] + w1 * normals[q, 1, 1] + w2 * normals[q, 2, 1]
+        m2 = w0 * normals[q, 0, 2] + w1 * normals[q, 1, 2] + w2 * normals[q, 2, 2]
+        s0 = A[0, 0] * m0 + A[1, 0] * m1 + A[2, 0] * m2
+        s1 = A[0, 1] * m0 + A[1, 1] * m1 + A[2, 1] * m2
+        s2 = A[0, 2] * m0 + A[1, 2] * m1 + A[2, 2] * m2
+        L = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        if L > 0:
+            s0, s1, s2 = s0 / L, s1 / L, s2 / L
+        if s0 == 0 and s1 == 0 and s2 == 0:
+            s0, s1, s2 = g0, g1, g2
+        ns[k, 0], ns[k, 1], ns[k, 2] = s0, s1, s2
