@@ -541,6 +541,7 @@ def test_fused_kernels_match_numpy_path_and_oracle():
     scene = fused_scene(rng)
     fused, plain, ref = make(scene, "embree"), make(scene, "embree", fused=False), make(scene, "numpy")
     assert isinstance(fused.parts[0], StaticPart) and fused.parts[0].fused and not plain.parts[0].fused
+    assert fused.parts[0].intersect_into is not None and plain.parts[0].intersect_into is None
     groups = [p for p in fused.parts if isinstance(p, RigidGroup)]
     assert len(groups) == 2 and all(g.fused for g in groups)             # the lone sphere: a 1-member group
     assert any(isinstance(p, RigidPart) for p in plain.parts)
@@ -670,11 +671,13 @@ def test_without_numba_the_embree_caster_keeps_its_numpy_path(monkeypatch):
     """numba missing (FUSED_AVAILABLE False): no fused part, same hits as the oracle."""
     from stpm_core.raycast import embree_backend
     monkeypatch.setattr(embree_backend, "FUSED_AVAILABLE", False)
+    monkeypatch.setattr(embree_backend, "_K", None)            # as if numba had failed to import
     rng = np.random.default_rng(33)
     scene = fused_scene(rng)
     caster = make_caster(scene, "embree")
     assert not any(getattr(p, "fused", False) for p in caster.parts)
-    assert not any(hasattr(p, "intersect_into") and p.fused for p in caster.parts)
+    assert all(getattr(p, "intersect_into", None) is None and getattr(p, "cast_all", None) is None
+               for p in caster.parts)
     o, d, t = random_rays(rng, 1500)
     he, hn = caster.intersect(o, d, t), make_caster(scene, "numpy").intersect(o, d, t)
     rigid = he.hit & hn.hit & (he.instance == hn.instance) & (he.prim == hn.prim) & (hn.instance != 3)

@@ -22,6 +22,15 @@ and three methods on a batch of m rays:
   t0 < t < t1 (t = inf for a miss; prim, u, v meaningless there);
 * ``occluded(o, d, times, t0, t1) -> (m,) bool``;
 * ``shade(times, prim, u, v) -> (instance, prim, ng, ns, material)`` for hits.
+
+Optional fused entry points (embree parts with numba, :mod:`.embree_kernels`),
+used by the caster when present and not None:
+
+* unbounded part: ``intersect_into(o, d, times, t0, k, fields)`` casts and
+  writes every result field of the rays it wins in place;
+* bounded part: ``cast_all(o, d, times, t0, t1)`` and
+  ``occluded_all(o, d, times, t0, t1, skip)`` take every ray of a block and do
+  their own swept-box tests (the caster's part-box pass is skipped for them).
 """
 from __future__ import annotations
 

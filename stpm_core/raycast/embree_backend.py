@@ -207,9 +207,12 @@ class StaticPart:
     """
 
     bounds = None
+    intersect_into = None      # the fused entry point when the kernels are on (see Caster.intersect)
 
     def __init__(self, scene, instances: list[int], fused: bool = False):
         self.fused = fused and FUSED_AVAILABLE
+        if self.fused:
+            self.intersect_into = self._intersect_into
         Vs, Fs, inst, prim, ng, nsc, mat = [], [], [], [], [], [], []
         nv = 0
         self.smooth = any(scene.meshes[scene.instances[i].mesh].normals is not None for i in instances)
@@ -246,7 +249,7 @@ class StaticPart:
     def cast(self, o, d, times, t0, t1):
         return self.mesh.cast(o, d, t0, t1)
 
-    def intersect_into(self, o, d, times, t0, k, fields) -> None:
+    def _intersect_into(self, o, d, times, t0, k, fields) -> None:
         """Cast m rays and write the hits nearer than the current best straight into the results.
 
         o, d (m, 3), times, t0 (m,); ``fields`` = views (m rows) of the
@@ -432,6 +435,10 @@ class RigidGroup:
         if ray.size == 0:
             return t, prim, u, v
         tp, pp, up, vp = self.emesh.cast(oo, dd, t0[ray], t1[ray], rays32=r32)
+        if self.lo.shape[0] == 1:
+            # One instance: at most one pair per ray, a plain scatter
+            t[ray], prim[ray], u[ray], v[ray] = tp, pp, up, vp
+            return t, prim, u, v
         # Nearest pair per ray
         np.minimum.at(t, ray, tp)
         w = np.flatnonzero(np.isfinite(tp) & (tp == t[ray]))

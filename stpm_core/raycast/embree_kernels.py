@@ -20,7 +20,8 @@ numpy path to rounding (tests/test_raycast.py compares them):
 * :func:`rigid_shade` - normals and material of moving hits at their times.
 
 Kernels are serial (``cache=True``): embree's ``run()`` is single-threaded
-and the caster works in 8192-ray chunks.  Importing this module fails where
+and the caster works in 8192-ray chunks; ``nogil=True``, so tracer threads
+casting at once run them in parallel.  Importing this module fails where
 numba is missing; the embree backend then keeps its numpy path.
 """
 from __future__ import annotations
@@ -33,14 +34,14 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
-__all__ = ["rays32", "static_finish", "rigid_pairs", "rigid_shade", "refine_plane", "slerp_table"]
+__all__ = ["rays32", "static_finish", "rigid_pairs", "rigid_shade", "refine_plane", "slerp_table", "warm_up"]
 
 FAR32 = float(np.float32(1e37))     # embree's "no tfar" value, as float64
 _HUGE = 1e300                       # stands in for 1/0 in the slab test (0 * _HUGE = 0, no NaN)
 
 
 # ---------------------------------------------------------------- embree input
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def rays32(o, d, start, t1, centre, o32, d32, far32):
     """Rays o, d (m, 3) float64 shifted to start (m,) and the mesh centre (3,) -> o32, d32 (m, 3), far32 (m,)."""
     for i in range(o.shape[0]):
@@ -52,7 +53,7 @@ def rays32(o, d, start, t1, centre, o32, d32, far32):
         far32[i] = np.float32(min(far, FAR32))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def refine_plane(o, d, p, start, tfar, plane_n, plane_w, tt):
     """Float64 t (m,) into tt of rays o, d on the planes of triangles p (m,) (p < 0: left alone).
 
@@ -72,7 +73,7 @@ def refine_plane(o, d, p, start, tfar, plane_n, plane_w, tt):
 
 
 # ---------------------------------------------------------------- static part
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def static_finish(o, d, start, tfar, primID, u32, v32, t0, plane_n, plane_w, ids, ng_tab, nsc, smooth, k,
                   best_t, best_part, prim, u_out, v_out, inst_out, p_out, mat_out, ng_out, ns_out, pos_out,
                   again):
@@ -137,12 +138,12 @@ def static_finish(o, d, start, tfar, primID, u32, v32, t0, plane_n, plane_w, ids
 
 
 # ---------------------------------------------------------------- moving instances
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _inv(x):
     return 1.0 / x if abs(x) > 1e-290 else _HUGE
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _meets(lo, hi, ox, oy, oz, ix, iy, iz, t0, t1):
     """Does segment [t0, t1] of the ray meet box lo, hi (3,)?  Conservative (slab test)."""
     near, far = t0, t1
@@ -155,7 +156,7 @@ def _meets(lo, hi, ox, oy, oz, ix, iy, iz, t0, t1):
     return near <= far
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def slerp_table(Q, first, last, arc):
     """Per key i (K,): the arc to the next key of its transform -> arc (K, 3) = theta, sin theta, sign.
 
@@ -173,7 +174,7 @@ def slerp_table(Q, first, last, arc):
             arc[i, 2] = -1.0 if cos_theta < 0 else 1.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _world_to_object(T, Q, S, arc, knots, f, l, time, A, b):
     """A (3, 3), b (3,) of the transform with keys f..l at ``time`` (as MotionKeys.world_to_object).
 
@@ -234,7 +235,7 @@ def _world_to_object(T, Q, S, arc, knots, f, l, time, A, b):
         b[r] = -(A[r, 0] * T0 + A[r, 1] * T1 + A[r, 2] * T2)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def rigid_pairs(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, T, Q, S, arc, knots, first, last, centre,
                 ray, inst, o64, d64, o32, d32, far32):
     """(ray, instance) pairs of moving instances of one mesh, mapped to object space.
@@ -281,7 +282,7 @@ def rigid_pairs(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, T, Q, S, arc,
     return n
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def rigid_shade(j, tri, u, v, times, T, Q, S, arc, knots, first, last, V, F, normals, material_ids,
                 ng, ns, mat):
     """World normals and material of hits on moving instances (as InstanceShading.shade).
@@ -328,3 +329,32 @@ def rigid_shade(j, tri, u, v, times, T, Q, S, arc, knots, first, last, V, F, nor
         if s0 == 0 and s1 == 0 and s2 == 0:
             s0, s1, s2 = g0, g1, g2
         ns[k, 0], ns[k, 1], ns[k, 2] = s0, s1, s2
+
+
+def warm_up() -> float:
+    """Compile (or load from numba's on-disk cache) every kernel above; seconds taken.
+
+    The embree backend calls them on its first rays otherwise (see
+    docs/raycast.md for the measured first-use cost).
+    """
+    import time
+    start = time.perf_counter()
+    from .build import make_caster
+    from ..motion import MotionTransform
+    from ..scene import Instance, Material, Mesh, Scene
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    mesh = Mesh(vertices=V, triangles=np.array([[0, 1, 2]], np.int32), material_ids=np.zeros(1, np.int32),
+                normals=np.tile(np.array([0, 0, 1], np.float32), (1, 3, 1)))
+    M1 = np.eye(4)
+    M1[:3, 3] = (0, 0, 1)
+    scene = Scene(meshes=[mesh], instances=[Instance(0), Instance(0, MotionTransform(np.array([0.0, 1.0]),
+                                                                                  np.stack([M1, M1 * 1.0])))],
+                  materials=[Material()])
+    try:
+        caster = make_caster(scene, "embree")
+    except Exception:          # no embreex: nothing of this module will run
+        return time.perf_counter() - start
+    o, d = np.array([[0.2, 0.2, 2.0]]), np.array([[0.0, 0.0, -1.0]])
+    caster.intersect(o, d, np.zeros(1))
+    caster.occluded(o, d, np.zeros(1), np.full(1, 10.0))
+    return time.perf_counter() - start

@@ -393,7 +393,8 @@ def build_parts(scene, scale: float) -> list:
 
 
 def warm_up() -> float:
-    """Compile (or load from the on-disk cache) every kernel of this backend; seconds taken.
+    """Compile (or load from the on-disk cache) every kernel of this backend and the embree
+    backend's fused kernels (:mod:`.embree_kernels`); seconds taken.
 
     For an installer or an add-on to call once in the background, so the first
     render does not pay the JIT compilation (about 10-15 CPU seconds, see
@@ -407,4 +408,7 @@ def warm_up() -> float:
     seg, a = _no_steps(1)
     tris.cast(o, d, np.zeros(1), np.full(1, np.inf), seg, a)
     tris.occluded(o, d, np.zeros(1), np.full(1, np.inf), seg, a)
+    # The embree backend's fused kernels too (they need numba, not this backend)
+    from .embree_kernels import warm_up as warm_embree
+    warm_embree()
     return time.perf_counter() - start
