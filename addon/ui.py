@@ -139,6 +139,8 @@ class STPM_RENDER_PT_method(_STPMPanel, bpy.types.Panel):
         sub = col.column()
         sub.active = props.estimator == "KD4D"
         sub.prop(props, "time_scale")
+        # What accuracy costs in time: the stpm compare report, written next to the .blend
+        layout.operator("stpm.compare", icon="GRAPH")
 
 
 class STPM_RENDER_PT_motion_blur(_STPMPanel, bpy.types.Panel):

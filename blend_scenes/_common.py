@@ -29,6 +29,7 @@ linear_keys = _linear_keys
 def new_scene(name: str):
     """Empty file with the STPM add-on registered; returns the scene."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.context.preferences.filepaths.save_version = 0   # no .blend1 backups next to the scenes
     import addon
     addon.register()
     scene = bpy.context.scene

@@ -26,6 +26,7 @@ from .film import PASSES, PASS_NAMES
 from .integrator import trace_image
 from .lights import LightSet
 from .photons import build_photon_maps
+from .plan import apply_plan, make_plan
 from .raycast import make_caster
 from .sampling import rng_for
 from .scene import validate_scene
@@ -58,68 +59,9 @@ class RenderResult:
 # ----------------------------------------------------------------------------
 # Effects plan: what the scene calls for
 # ----------------------------------------------------------------------------
-def _used_materials(scene) -> set[int]:
-    used = set()
-    for inst in scene.instances:
-        used.update(np.unique(np.asarray(scene.meshes[inst.mesh].material_ids)).tolist())
-    return used
-
-
 def plan_effects(scene, settings=None) -> dict:
-    """Which effects the scene calls for, and why.
-
-    Returns a dict with bool keys ``motion_blur``, ``caustics``, ``indirect``,
-    ``time_dependent`` and ``reasons`` (list of str).
-
-    * motion_blur: the shutter is open and something moves in it.
-    * caustics: some used material has a specular (delta or glossy) lobe and
-      something emits light (a light, an emissive surface).
-    * indirect: some used material reflects diffusely and light is present.
-    * time_dependent: motion blur together with photon-mapped light: the
-      photons must carry time.
-    """
-    reasons = []
-    used = _used_materials(scene)
-    mats = [scene.materials[i] for i in sorted(used) if 0 <= i < len(scene.materials)]
-    has_light = (any(l.power > 0 and np.any(np.asarray(l.color) > 0) for l in scene.lights)
-                 or any(np.any(np.asarray(m.emission) > 0) for m in mats))
-    # Motion blur
-    motion = bool(scene.has_motion)
-    if scene.shutter.is_instant:
-        reasons.append("motion_blur: off (the shutter has zero length)")
-    elif motion:
-        reasons.append("motion_blur: something moves while the shutter is open")
-    else:
-        reasons.append("motion_blur: off (nothing moves during the shutter)")
-    # Caustics
-    specular = [m.name for m in mats if m.is_specular]
-    caustics = bool(specular) and has_light
-    if caustics:
-        reasons.append(f"caustics: specular materials {specular[:3]} and a light source")
-    else:
-        reasons.append("caustics: off (" + ("no specular material" if not specular else "no light source") + ")")
-    # Indirect
-    diffuse = [m.name for m in mats if m.diffuse_weight > 0 and np.any(np.asarray(m.base_color) > 0)]
-    indirect = bool(diffuse) and has_light
-    if indirect:
-        reasons.append(f"indirect: diffuse materials {diffuse[:3]} receive light")
-    else:
-        reasons.append("indirect: off (" + ("no diffuse material" if not diffuse else "no light source") + ")")
-    time_dependent = motion and (caustics or indirect)
-    reasons.append("time_dependent: " + ("photons carry time (motion blur with photon-mapped light)"
-                                         if time_dependent else "off"))
-    return {"motion_blur": motion, "caustics": caustics, "indirect": indirect,
-            "time_dependent": time_dependent, "reasons": reasons}
-
-
-def _photon_settings(settings, plan: dict):
-    """Settings handed to the photon tracer: maps the plan (or MANUAL choice) rules out get 0 photons."""
-    if settings.effects == "MANUAL":
-        want_caustic, want_global = settings.caustics, settings.indirect
-    else:
-        want_caustic, want_global = plan["caustics"], plan["indirect"]
-    return settings.replace(photons_caustic=settings.photons_caustic if want_caustic else 0,
-                            photons_global=settings.photons_global if want_global else 0)
+    """The effects plan: :func:`stpm_core.plan.make_plan` (docs/effects.md); kept under its old name."""
+    return make_plan(scene, settings)
 
 
 def _build_maps(scene, settings, caster, lights, *, time_override=None, progress=None, cancel=None):
@@ -163,11 +105,15 @@ def render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     progress(fraction in [0, 1], message) is called at least once per tile;
     cancel() -> bool is polled as often and raises :class:`RenderCancelled`.
 
-    stats keys: wall_s, export_s (0 here; the add-on fills it), photon_trace_s,
+    The effects plan (stpm_core.plan.make_plan, docs/effects.md) decides what is
+    simulated: maps it rules out get 0 photons, and a scene whose lighting does
+    not change in the shutter is read with STANDARD (``apply_plan``).
+
+    stats keys: wall_s, export_s (0 here; the add-on fills it), plan_s, photon_trace_s,
     photon_map_build_s, photon_lookup_s, render_s, rays_cast, camera_rays, shadow_rays,
     bounce_rays, rays_per_s, photon_lookups, photons_caustic, photons_global
     (stored), photon_stats (the maps' own dict; a list for ACCUMULATION),
-    estimator, method, samples, resolution, seed, accumulation_steps.
+    estimator (the one used), method, samples, resolution, seed, accumulation_steps.
     """
     t_wall = _time.perf_counter()
     settings.validate()
@@ -180,8 +126,10 @@ def render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     caster = make_caster(scene)
     lights = LightSet(scene)
     table = MaterialTable(scene.materials)
-    plan = plan_effects(scene, settings)
-    psettings = _photon_settings(settings, plan)
+    t_plan = _time.perf_counter()
+    plan = make_plan(scene, settings, caster=caster, lights=lights)
+    psettings = apply_plan(settings, plan)      # what the plan rules out gets no photons; STANDARD when static
+    plan_s = _time.perf_counter() - t_plan
     if not scene.lights and not any(np.any(np.asarray(m.emission) > 0) for m in scene.materials) \
             and not np.any(np.asarray(scene.world.radiance) > 0):
         warnings.append("the scene has no lights, emissive surfaces or world light: the image is black")
@@ -244,6 +192,7 @@ def render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     stats = {
         "wall_s": _time.perf_counter() - t_wall,
         "export_s": 0.0,
+        "plan_s": plan_s,
         "photon_trace_s": trace_s,
         "photon_map_build_s": build_s,
         "photon_s": photon_s,
@@ -258,7 +207,7 @@ def render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
         "photons_caustic": int(total("caustic_photons") or total("photons_caustic")),
         "photons_global": int(total("global_photons") or total("photons_global")),
         "photon_stats": map_stats[0] if len(map_stats) == 1 else map_stats,
-        "estimator": "STANDARD" if settings.method == "ACCUMULATION" else settings.estimator,
+        "estimator": "STANDARD" if settings.method == "ACCUMULATION" else psettings.estimator,
         "method": settings.method,
         "samples": int(settings.samples),
         "accumulation_steps": int(settings.accumulation_steps) if settings.method == "ACCUMULATION" else 1,

@@ -88,6 +88,18 @@ def test_zero_length_shutter_renders_the_frame_instant():
                   glass_scene(translate(0, 0, 1), shutter=Shutter(1.0, 1.0)))
 
 
+def test_zero_length_shutter_aims_caustic_photons_at_the_instant():
+    """With the shutter closed, a moving glass sphere is aimed at where it is, not at its unused path."""
+    from stpm_core.bsdf import MaterialTable
+    from stpm_core.photons.trace import specular_targets
+    moving_scene = glass_scene(moving((-0.5, 0, 1), (0.5, 0, 1)), shutter=Shutter(1.0, 1.0))
+    still_scene = glass_scene(translate(0, 0, 1), shutter=Shutter(1.0, 1.0))
+    (i0, c0, r0), = specular_targets(moving_scene, MaterialTable(moving_scene.materials))
+    (i1, c1, r1), = specular_targets(still_scene, MaterialTable(still_scene.materials))
+    np.testing.assert_allclose(c0, c1, atol=1e-9)
+    assert r0 == pytest.approx(r1)
+
+
 def test_micro_shutter_equals_the_instant():
     """1e-6 frames of shutter: the sphere (1 unit per frame) travels 1e-6 units; the image is the instant's."""
     micro = glass_scene(moving((-0.5e-6, 0, 1), (0.5e-6, 0, 1)), shutter=Shutter(1.0, 1.0 + 1e-6))

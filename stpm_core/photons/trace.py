@@ -51,6 +51,8 @@ def has_delta(table, mat) -> np.ndarray:
 def specular_targets(scene, table) -> list[tuple[int, np.ndarray, float]]:
     """Instances with a delta lobe and the sphere bounding them over the whole shutter.
 
+    (At its one instant u = 0.5 when the shutter is closed: motion outside it is unused.)
+
     Returns a list of (instance index, centre (3,), radius) in scene units.
     """
     out = []
@@ -62,7 +64,13 @@ def specular_targets(scene, table) -> list[tuple[int, np.ndarray, float]]:
         v = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
         if v.shape[0] == 0:
             continue
-        lo, hi = inst.transform.bounds_of(v.min(0), v.max(0))
+        if scene.shutter.is_instant:
+            # A closed shutter: every path is at u = 0.5, so aim at the instance as it is then
+            M = inst.transform.at(0.5)
+            w = np.asarray(mesh.vertices_at(0.5), dtype=np.float64) @ M[:3, :3].T + M[:3, 3]
+            lo, hi = w.min(0), w.max(0)
+        else:
+            lo, hi = inst.transform.bounds_of(v.min(0), v.max(0))
         out.append((ii, 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6)))
     return out
 
