@@ -205,7 +205,6 @@ class Film:
         if n == 0 or P == 0:
             return None
         S = n // P
-        C = self.n_channels
         # Sample values (n, k + 1) float32 of the passes that are not all zero in this
         # tile (they add nothing); the last column counts the weight sum
         active, c0 = [], 0                       # (first image channel, channels, array)

@@ -40,7 +40,7 @@ import numpy as np
 from .bsdf import MaterialTable, bsdf_eval, bsdf_sample, diffuse_albedo, emission, has_nondelta
 from .camera import camera_to_world, generate_rays
 from .errors import RenderCancelled
-from .film import DEPTH_BACKGROUND, PASSES, Film
+from .film import DEPTH_BACKGROUND, Film
 from .sampling import rng_for
 
 __all__ = ["TraceStats", "trace_image", "camera_samples", "shade_paths"]

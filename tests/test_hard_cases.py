@@ -16,7 +16,7 @@ from stpm_core.motion import MotionTransform
 from stpm_core.photons.estimators import PhotonMap
 from stpm_core.photons.record import make_records
 from stpm_core.render import render
-from stpm_core.scene import Camera, Light, Material, Mesh, World, validate_scene
+from stpm_core.scene import Camera, Material, Mesh, World, validate_scene
 from stpm_core.settings import RenderSettings
 from stpm_core.shutter import Shutter
 

@@ -30,8 +30,8 @@ import numpy as np
 from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
-from .geometry import (InstanceShading, MotionKeys, apply_affine, apply_linear, cross,
-                       normal_matrix, ray_triangle, swept_bounds, triangles_at, world_to_object)
+from .geometry import (InstanceShading, MotionKeys, apply_affine, apply_linear, baked_normals, cross,
+                       ray_triangle, swept_bounds, triangles_at, world_to_object)
 from .pair_bvh import PairBVH, RaySlabs, segments_meet_boxes
 
 # Fused numba kernels for the work around run() (None: numba missing, numpy path only)
@@ -228,16 +228,9 @@ class StaticPart:
             inst.append(np.full(F.shape[0], i, np.int32))
             prim.append(np.arange(F.shape[0], dtype=np.int32))
             # World normals: inverse transpose up to a positive factor (object winding decides the side)
-            AT = normal_matrix(M[:3, :3])
-            Po = Vo[F]
-            n_w = cross(Po[:, 1] - Po[:, 0], Po[:, 2] - Po[:, 0]) @ AT.T
-            L = np.linalg.norm(n_w, axis=1, keepdims=True)
-            n_w = n_w / np.where(L > 0, L, 1.0)
+            n_w, ns_w = baked_normals(Vo, F, M, mesh.normals)
             ng.append(n_w)
-            if mesh.normals is not None:
-                nsc.append(np.asarray(mesh.normals, dtype=np.float64) @ AT.T)
-            else:
-                nsc.append(np.repeat(n_w[:, None, :], 3, axis=1))
+            nsc.append(ns_w)
             mat.append(np.asarray(mesh.material_ids, dtype=np.int32))
         cat = (lambda a, shape: np.concatenate(a) if a else np.zeros(shape))
         # Instance, mesh-local triangle and material of each baked triangle, one gather

@@ -108,6 +108,28 @@ def normal_matrix(M3: np.ndarray) -> np.ndarray:
     return C * (-1.0 if det < 0 else 1.0)
 
 
+def baked_normals(Vo: np.ndarray, F: np.ndarray, M: np.ndarray, corner_normals) -> tuple[np.ndarray, np.ndarray]:
+    """World-space normals of a static instance baked into world space.
+
+    Vo : (V, 3) object-space vertices; F : (F, 3) triangles; M : (4, 4) object-to-world;
+    corner_normals : (F, 3, 3) object-space shading normals or None.
+    Returns ng (F, 3) unit geometric normals (the object winding decides the side,
+    mapped by the cofactor matrix so a zero scale still gives a normal) and
+    ns_corners (F, 3, 3) world shading normals per corner (not normalised; ng where
+    the mesh has none).
+    """
+    AT = normal_matrix(M[:3, :3])
+    Po = Vo[F]
+    n_w = cross(Po[:, 1] - Po[:, 0], Po[:, 2] - Po[:, 0]) @ AT.T
+    L = np.linalg.norm(n_w, axis=1, keepdims=True)
+    n_w = n_w / np.where(L > 0, L, 1.0)
+    if corner_normals is not None:
+        ns = np.asarray(corner_normals, dtype=np.float64) @ AT.T
+    else:
+        ns = np.repeat(n_w[:, None, :], 3, axis=1)
+    return n_w, ns
+
+
 def world_to_object(transform, times: np.ndarray):
     """World-to-object affine maps of an instance at each ray's time.
 

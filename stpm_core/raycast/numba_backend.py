@@ -36,7 +36,7 @@ import numpy as np  # noqa: E402
 from numba import njit, prange  # noqa: E402
 
 from .bvh_build import build_bvh
-from .geometry import (InstanceShading, apply_affine, apply_linear, cross, normal_matrix, segment_of,
+from .geometry import (InstanceShading, apply_affine, apply_linear, baked_normals, segment_of,
                        swept_bounds, world_to_object)
 
 __all__ = ["build_parts", "StaticPart", "NumbaPart", "TriangleBVH", "warm_up"]
@@ -280,16 +280,9 @@ class StaticPart:
             ids.append(np.stack([np.full(len(F), i), np.arange(len(F)),
                                  np.asarray(mesh.material_ids)], axis=1))
             # Normals: cofactor map of the object-space winding normal / corner normals
-            AT = normal_matrix(M[:3, :3])
-            Po = Vo[F]
-            n_w = cross(Po[:, 1] - Po[:, 0], Po[:, 2] - Po[:, 0]) @ AT.T
-            L = np.linalg.norm(n_w, axis=1, keepdims=True)
-            n_w = n_w / np.where(L > 0, L, 1.0)
+            n_w, ns_w = baked_normals(Vo, F, M, mesh.normals)
             ng.append(n_w)
-            if mesh.normals is not None:
-                nsc.append(np.asarray(mesh.normals, dtype=np.float64) @ AT.T)
-            else:
-                nsc.append(np.repeat(n_w[:, None, :], 3, axis=1))
+            nsc.append(ns_w)
         self.ids = np.concatenate(ids).astype(np.int32)          # (F, 3): instance, prim, material
         self.ng = np.concatenate(ng)
         self.ns_corners = np.concatenate(nsc)
