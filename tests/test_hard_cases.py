@@ -129,29 +129,37 @@ def test_motion_of_100_times_the_object_size():
 # ----------------------------------------------------------------------------
 # Scale and position
 # ----------------------------------------------------------------------------
+# Enough caustic photons that the estimate's noise (seed to seed about +-15 % with the
+# default 4000 photons and k = 16) sits well below the 2 % tolerance: rounding at 1e5
+# from the origin changes a few random paths, so the comparison must not hinge on them.
+SCALE_SETTINGS = dict(photons_caustic=40_000, k_nearest=50)
+
+
 @pytest.fixture(scope="module")
 def reference_scale_render():
-    return check(render(glass_scene(moving((-0.3, 0, 1), (0.3, 0, 1))), _settings()))
-
-
-FLOAT32_PHOTONS = pytest.mark.xfail(
-    strict=True, reason="photon records store world positions as float32 (photons/record.py): 1e5 from the "
-                        "origin they are quantised to ~8 mm and the caustic estimate is off by ~7 %; "
-                        "fix: store positions relative to the scene centre")
+    return check(render(glass_scene(moving((-0.3, 0, 1), (0.3, 0, 1))), _settings(**SCALE_SETTINGS)))
 
 
 @pytest.mark.parametrize("scale,offset", [(1e-3, (0, 0, 0)), (1e4, (0, 0, 0)),
-                                          pytest.param(1.0, (1e5, -1e5, 1e5), marks=FLOAT32_PHOTONS)],
+                                          (1.0, (1e5, -1e5, 1e5))],
                          ids=["scale_1e-3", "scale_1e4", "translate_1e5"])
 def test_scaled_and_translated_scene_matches(reference_scale_render, scale, offset):
     """Scaling the scene (light power by scale^2) or moving it far away changes no pixel beyond noise."""
     ref = reference_scale_render
     sc = glass_scene(moving((-0.3, 0, 1), (0.3, 0, 1)), scale=scale, offset=offset)
-    out = check(render(sc, _settings()))
+    out = check(render(sc, _settings(**SCALE_SETTINGS)))
     for name in ("Direct", "Caustic", "Emit"):
         diff = np.abs(out[name] - ref[name])
-        # same seeds: the same random paths; tiny float differences may flip a few samples
-        assert diff.mean() <= 0.02 * max(ref[name].mean(), 1e-3), (name, float(diff.mean()), float(ref[name].mean()))
+        level = max(ref[name].mean(), 1e-3)
+        if offset == (0, 0, 0):
+            # same seeds, same random paths: pixels agree up to a few flipped samples
+            assert diff.mean() <= 0.02 * level, (name, float(diff.mean()), float(ref[name].mean()))
+        else:
+            # 1e5 from the origin, float rounding reroutes some random paths: no pass may be
+            # biased (float32 world photon positions made the caustic 7 % off), pixels at noise level
+            assert abs(out[name].mean() - ref[name].mean()) <= 0.02 * level, (name, float(out[name].mean()),
+                                                                               float(ref[name].mean()))
+            assert diff.mean() <= 0.10 * level, (name, float(diff.mean()), float(ref[name].mean()))
     np.testing.assert_allclose(out["Depth"][ref["Depth"] < 1e9] / scale, ref["Depth"][ref["Depth"] < 1e9], rtol=1e-3)
 
 

@@ -88,8 +88,13 @@ def _caustic_points(rng, n, lo, hi):
 
 @pytest.mark.parametrize("estimator", ["STANDARD", "TEMPORAL", "KD4D"])
 def test_static_mirror_caustic_matches_virtual_source(estimator):
-    maps = trace(mirror_scene(), photons_caustic=150_000, photons_global=0, estimator=estimator)
+    scene = mirror_scene()
+    maps = trace(scene, photons_caustic=150_000, photons_global=0, estimator=estimator)
     assert maps.stats["photons_caustic"] > 50_000 and maps.stats["photons_global"] == 0
+    # records are stored relative to the scene's centre (float32 precision far from the origin)
+    lo, hi = scene.bounds()
+    np.testing.assert_allclose(maps.maps["caustic"].origin, 0.5 * (lo + hi))
+    np.testing.assert_allclose(maps.maps["caustic"].position[:, 2] + maps.maps["caustic"].origin[2], 0.0, atol=1e-5)
     rng = np.random.default_rng(1)
     # 3 x 3 blocks of the caustic, 0.2 away from its edges at +-1.5
     edges = np.linspace(-1.3, 1.3, 4)

@@ -160,11 +160,13 @@ class PhotonMap:
     workers : look-up threads (-1 or 0 = all cores); a batch of queries is split over them.
     backend : 'auto' (compiled numba kd-tree when numba imports, else scipy), 'numba' or
         'scipy'.  Both give the same estimates (:mod:`.kdtree`).
+    origin : (3,) float64 world point the record positions are relative to
+        (:func:`.record.photon_origin`; None = the world origin).
 
     Attributes
     ----------
     records : (N,) PHOTON_DTYPE in Morton order (the order of every array below).
-    position : (N, 3) float64, time : (N,) float64; power : (N, 3) float32 and
+    position : (N, 3) float64 relative to ``origin``, time : (N,) float64; power : (N, 3) float32 and
     wi : (N, 3) float32 unit incoming directions, both views of one packed
     (N, 8) float32 array (one 32-byte row gathered per neighbour).
     timeless : True when all photons share one time (instant shutter or an
@@ -174,8 +176,10 @@ class PhotonMap:
     """
 
     def __init__(self, records: np.ndarray, shutter, *, time_scale: float, workers: int = -1,
-                 backend: str = "auto"):
+                 backend: str = "auto", origin: np.ndarray | None = None):
         self.shutter = shutter
+        # World position of the records' (0, 0, 0) (record.py); queries are shifted by it
+        self.origin = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64).reshape(3)
         self.time_scale = float(time_scale)
         self.workers = workers
         self.n = int(records.shape[0])
@@ -265,7 +269,7 @@ class PhotonMap:
     def estimate(self, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str = "TEMPORAL",
                  k: int = 50, kernel: str = "BOX", temporal_alpha: float = 0.0) -> np.ndarray:
         """Irradiance E (n, 3) W/m^2 at points p (n, 3), normals ns (n, 3), times t (n,)."""
-        p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
+        p = np.asarray(p, dtype=np.float64).reshape(-1, 3) - self.origin  # into the records' frame
         n = p.shape[0]
         E = np.zeros((n, 3), dtype=np.float64)
         if self.n < 2 or n == 0:

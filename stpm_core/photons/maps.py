@@ -15,7 +15,7 @@ import numpy as np
 
 from ..bsdf import MaterialTable
 from .estimators import PhotonMap, auto_temporal_alpha
-from .record import BYTES_PER_PHOTON
+from .record import BYTES_PER_PHOTON, photon_origin
 from .timescale import auto_time_scale
 from .trace import trace_caustic_map, trace_global_map
 
@@ -134,9 +134,10 @@ def build_photon_maps(scene, settings, caster, lights, *, time_override=None, pr
     info["photons_per_s"] = info["photons_emitted"] / info["photon_trace_s"] if info["photon_trace_s"] > 0 else 0.0
 
     # -- Build the search structure the chosen estimator needs ----------------------------
+    origin = photon_origin(scene)  # the records' positions are relative to it (record.py)
     maps = {
-        "caustic": PhotonMap(rec_c, scene.shutter, time_scale=s, workers=workers),
-        "global": PhotonMap(rec_g, scene.shutter, time_scale=s, workers=workers),
+        "caustic": PhotonMap(rec_c, scene.shutter, time_scale=s, workers=workers, origin=origin),
+        "global": PhotonMap(rec_g, scene.shutter, time_scale=s, workers=workers, origin=origin),
     }
     for m in maps.values():
         m.build(settings.estimator)

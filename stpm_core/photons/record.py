@@ -3,11 +3,16 @@
 Layout (numpy structured dtype :data:`PHOTON_DTYPE`, little-endian, packed)::
 
     offset  bytes  field      type          meaning
-    0       12     position   float32 x 3   world-space hit point (scene units, m)
+    0       12     position   float32 x 3   hit point relative to the map's origin (scene units, m)
     12       4     time       float32       normalised shutter time t in [0, 1] of the photon's path
     16      12     power      float32 x 3   RGB flux Phi carried by the photon (W)
     28       4     wi_oct     int16 x 2     incoming direction, octahedral-packed (see below)
     ----    32
+
+Positions are stored relative to the map's ``origin`` (float64, the centre of
+the scene's bounds: :func:`photon_origin`), so float32 keeps its ~1e-7
+relative precision over the scene's own extent even for a scene placed 1e5
+units from the world origin (world float32 would quantise it to ~8 mm).
 
 ``wi`` is the unit direction from the surface back toward where the photon
 came from (it points away from the surface on the side the photon arrived
@@ -24,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["PHOTON_DTYPE", "BYTES_PER_PHOTON", "make_records", "oct_encode", "oct_decode"]
+__all__ = ["PHOTON_DTYPE", "BYTES_PER_PHOTON", "make_records", "photon_origin", "oct_encode", "oct_decode"]
 
 PHOTON_DTYPE = np.dtype([
     ("position", "<f4", (3,)),
@@ -70,12 +75,20 @@ def oct_decode(code: np.ndarray) -> np.ndarray:
     return w / np.linalg.norm(w, axis=-1, keepdims=True)
 
 
-def make_records(position: np.ndarray, wi: np.ndarray, power: np.ndarray, time: np.ndarray) -> np.ndarray:
+def photon_origin(scene) -> np.ndarray:
+    """(3,) float64 origin of the scene's photon records: the centre of its bounds over the shutter."""
+    lo, hi = scene.bounds()
+    return 0.5 * (np.asarray(lo, np.float64) + np.asarray(hi, np.float64))
+
+
+def make_records(position: np.ndarray, wi: np.ndarray, power: np.ndarray, time: np.ndarray,
+                 origin: np.ndarray | None = None) -> np.ndarray:
     """Pack photons into records.
 
     Parameters
     ----------
-    position : (n, 3) world hit points (m).
+    position : (n, 3) world hit points (m), float64.
+    origin : (3,) float64 subtracted before the float32 cast (None = world origin).
     wi : (n, 3) unit incoming directions (pointing away from the surface).
     power : (n, 3) RGB flux (W).
     time : (n,) normalised shutter times.
@@ -87,7 +100,7 @@ def make_records(position: np.ndarray, wi: np.ndarray, power: np.ndarray, time: 
     n = int(np.asarray(time).shape[0])
     rec = np.empty(n, dtype=PHOTON_DTYPE)
     if n:
-        rec["position"] = position
+        rec["position"] = position if origin is None else np.asarray(position, np.float64) - origin
         rec["time"] = time
         rec["power"] = power
         rec["wi_oct"] = oct_encode(wi)

@@ -30,7 +30,7 @@ import numpy as np
 from ..bsdf import bsdf_sample, has_nondelta
 from ..errors import RenderCancelled
 from ..sampling import rng_for, stratified_1d
-from .record import make_records, PHOTON_DTYPE
+from .record import make_records, photon_origin, PHOTON_DTYPE
 
 __all__ = ["specular_targets", "split_counts", "trace_photon_paths", "trace_caustic_map", "trace_global_map"]
 
@@ -96,7 +96,8 @@ def _times(scene, n: int, rng, time_override) -> np.ndarray:
 
 
 def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, eps: float,
-                       target_instance: int | None = None, min_nondelta: int = 1) -> np.ndarray:
+                       target_instance: int | None = None, min_nondelta: int = 1,
+                       origin: np.ndarray | None = None) -> np.ndarray:
     """Trace photon paths and return the stored records.
 
     Parameters
@@ -110,6 +111,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         which only tests use).
     max_depth : bounces followed.
     eps : ray-origin offset along the geometric normal (scene units).
+    origin : (3,) world point stored positions are relative to (record.photon_origin).
 
     Returns
     -------
@@ -147,7 +149,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         else:
             store = nondelta & (n_nondelta >= min_nondelta)
         if np.any(store):
-            stored.append(make_records(p[store], wo[store], Phi[store], t[store]))
+            stored.append(make_records(p[store], wo[store], Phi[store], t[store], origin))
         if depth == max_depth:
             break
         # -- Sample the next direction from the BSDF --------------------------------------
@@ -194,6 +196,7 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
     """
     targets = specular_targets(scene, table)
     eps, r_scene = _scene_eps(scene)
+    origin = photon_origin(scene)
     pairs, weights = [], []
     for li, light in enumerate(lights.lights):
         P = float(lights.power[li])
@@ -219,7 +222,7 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
             t = _times(scene, n, rng, time_override)
             o, d, Phi = lights.emit_toward(li, n, t, rng, c, r)
             Phi = Phi * (n / float(n_pair))              # this batch's share of the pair's photons
-            out.append(trace_photon_paths(caster, table, o, d, Phi, t, rng, mode="caustic",
+            out.append(trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="caustic",
                                           max_depth=settings.max_depth, eps=eps, target_instance=ii))
             emitted += n
             if progress is not None:
@@ -232,6 +235,7 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
                      progress=None, cancel=None, min_nondelta: int = 1) -> tuple[np.ndarray, dict]:
     """Global map records and counts: ``settings.photons_global`` photons split over lights by power."""
     eps, _ = _scene_eps(scene)
+    origin = photon_origin(scene)
     counts = split_counts(int(settings.photons_global), np.asarray(lights.power, dtype=np.float64))
     out, emitted = [], 0
     total = max(int(counts.sum()), 1)
@@ -245,7 +249,7 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
             # to this batch's share of the light's photons.
             o, d, Phi = lights.emit(li, n, t, rng)
             Phi = Phi * (n / float(n_light))
-            out.append(trace_photon_paths(caster, table, o, d, Phi, t, rng, mode="global",
+            out.append(trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global",
                                           max_depth=settings.max_depth, eps=eps, min_nondelta=min_nondelta))
             emitted += n
             if progress is not None:
