@@ -220,8 +220,6 @@ def load_any_scene(path, frame: int | None):
         except ImportError as e:
             raise StpmError(f"cannot load {path.name}: .blend files need Blender's bpy module and "
                             f"addon.batch ({e}); install the 'test' extra or export a .stpm scene") from None
-        if not hasattr(batch, "load_blend"):
-            raise StpmError(f"cannot load {path.name}: addon.batch has no load_blend yet")
         with _stdout_to_stderr():  # Blender's own log lines must not pollute stdout (plan --json)
             scene, d = batch.load_blend(str(path), frame)
         settings = _settings_from_dict(d, path.name)
@@ -401,10 +399,7 @@ def _cmd_plan(args) -> int:
 
 def _cmd_compare(args) -> int:
     """``stpm compare``: hand the arguments to stpm_core.compare.command (report.html + report.json)."""
-    try:
-        from .compare.command import main as compare_main
-    except ImportError:
-        raise StpmError("stpm compare is not available in this installation (stpm_core.compare is missing)") from None
+    from .compare.command import main as compare_main
     return compare_main(args.rest)
 
 

@@ -131,9 +131,8 @@ def _blend_scene():
     if not DEMO_BLEND.exists():
         return None
     try:
-        from addon import batch
-        load_blend = batch.load_blend
-    except (ImportError, AttributeError):
+        from addon.batch import load_blend  # needs bpy
+    except ImportError:
         return None
     from .cli import _settings_from_dict, _stdout_to_stderr
     with _stdout_to_stderr():  # Blender's log lines

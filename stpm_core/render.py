@@ -31,7 +31,7 @@ from .raycast import make_caster
 from .sampling import rng_for
 from .scene import validate_scene
 
-__all__ = ["render", "RenderResult", "PASSES", "PASS_NAMES", "plan_effects"]
+__all__ = ["render", "RenderResult", "PASSES", "PASS_NAMES"]
 
 # Random stream separating the accumulation stills' seeds.
 STREAM_ACCUMULATION = 0xACC
@@ -47,21 +47,13 @@ class RenderResult:
         (row 0 = top).
     stats : timings (s), counts and the settings that matter (see ``render``).
     warnings : human-readable lines for the user.
-    plan : the effects plan (see :func:`plan_effects`).
+    plan : the effects plan (:func:`stpm_core.plan.make_plan`).
     """
 
     passes: dict
     stats: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     plan: dict = field(default_factory=dict)
-
-
-# ----------------------------------------------------------------------------
-# Effects plan: what the scene calls for
-# ----------------------------------------------------------------------------
-def plan_effects(scene, settings=None) -> dict:
-    """The effects plan: :func:`stpm_core.plan.make_plan` (docs/effects.md); kept under its old name."""
-    return make_plan(scene, settings)
 
 
 def _build_maps(scene, settings, caster, lights, *, time_override=None, progress=None, cancel=None):

@@ -84,14 +84,10 @@ class Reference:
 # ----------------------------------------------------------------------------
 def _uses_photons(scene, settings) -> bool:
     """Whether a render of ``scene`` with ``settings`` builds any photon map."""
-    from ..render import plan_effects
+    from ..plan import apply_plan, make_plan
 
-    plan = plan_effects(scene, settings)
-    if settings.effects == "MANUAL":
-        caustic, indirect = settings.caustics, settings.indirect
-    else:
-        caustic, indirect = plan["caustics"], plan["indirect"]
-    return bool((caustic and settings.photons_caustic > 0) or (indirect and settings.photons_global > 0))
+    used = apply_plan(settings, make_plan(scene, settings))   # the settings render() acts on
+    return used.photons_caustic > 0 or used.photons_global > 0
 
 
 def reference_settings(scene, settings, *, method: str = REFERENCE_METHOD, photon_factor: float | None = None,

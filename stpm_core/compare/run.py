@@ -51,9 +51,9 @@ def json_ready(obj):
 
 
 def _scene_info(scene, scene_name, scene_path) -> dict:
-    from ..render import plan_effects
+    from ..plan import make_plan
 
-    plan = plan_effects(scene)
+    plan = make_plan(scene)
     return {"name": scene_name or str(scene.metadata.get("name") or scene.metadata.get("source") or "scene"),
             "path": None if scene_path is None else str(Path(scene_path).resolve()),
             "resolution": [int(scene.resolution[0]), int(scene.resolution[1])],

@@ -30,7 +30,7 @@ import numpy as np
 from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
-from .geometry import (InstanceShading, MotionKeys, apply_affine, apply_linear, baked_normals, cross,
+from .geometry import (ExactCastPart, InstanceShading, MotionKeys, apply_affine, apply_linear, baked_normals, cross,
                        ray_triangle, swept_bounds, triangles_at, world_to_object)
 from .pair_bvh import PairBVH, RaySlabs, segments_meet_boxes
 
@@ -462,7 +462,7 @@ class RigidGroup:
         return self.instances[j], tri.astype(np.int32), ng, ns, mat
 
 
-class DeformingPart:
+class DeformingPart(ExactCastPart):
     """One instance of a deforming mesh: time buckets of embree scenes + exact refinement.
 
     Each vertex-time segment is split into buckets (more where vertices move
@@ -475,7 +475,8 @@ class DeformingPart:
     ``tolerance`` is the largest vertex motion within half a bucket (object
     units).  Hits farther than about 4 tolerance from a silhouette or border
     (and from the ray origin) are exact; nearer ones may hit / miss wrongly.
-    See docs/raycast.md for measured error rates.
+    See docs/raycast.md for measured error rates.  ``occluded`` uses the exact
+    (refined) cast, not the bucket's float32 shape (:class:`ExactCastPart`).
     """
 
     def __init__(self, scene, i: int):
@@ -566,14 +567,6 @@ class DeformingPart:
         t[r[hit]], prim[r[hit]] = t_s[lead][hit], tri[best][hit]
         u[r[hit]], v[r[hit]] = uu[best][hit], vv[best][hit]
         return t, prim, u, v
-
-    def occluded(self, o, d, times, t0, t1):
-        # Exact (refined) rather than the bucket's float32 shape
-        return np.isfinite(self.cast(o, d, times, t0, t1)[0])
-
-    def shade(self, times, p, u, v):
-        ng, ns, mat = self.shading.shade(p, u, v, times)
-        return np.full(p.shape[0], self.index, np.int32), p.astype(np.int32), ng, ns, mat
 
 
 def build_parts(scene, scale: float, fused: bool | None = None) -> list:

@@ -108,6 +108,22 @@ def normal_matrix(M3: np.ndarray) -> np.ndarray:
     return C * (-1.0 if det < 0 else 1.0)
 
 
+class ExactCastPart:
+    """``occluded`` and ``shade`` for parts whose ``cast`` is exact at each ray's time.
+
+    A part using it sets ``self.index`` (its instance) and ``self.shading``
+    (an :class:`InstanceShading`) and defines ``cast(o, d, times, t0, t1) ->
+    (t, prim, u, v)``.  Used by the numpy parts and by embree's deforming part.
+    """
+
+    def occluded(self, o, d, times, t0, t1):
+        return np.isfinite(self.cast(o, d, times, t0, t1)[0])
+
+    def shade(self, times, p, u, v):
+        ng, ns, mat = self.shading.shade(p, u, v, times)
+        return np.full(p.shape[0], self.index, np.int32), p.astype(np.int32), ng, ns, mat
+
+
 def baked_normals(Vo: np.ndarray, F: np.ndarray, M: np.ndarray, corner_normals) -> tuple[np.ndarray, np.ndarray]:
     """World-space normals of a static instance baked into world space.
 

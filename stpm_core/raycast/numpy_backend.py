@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .geometry import (InstanceShading, apply_affine, apply_linear, ray_triangle, segment_of,
+from .geometry import (ExactCastPart, InstanceShading, apply_affine, apply_linear, ray_triangle, segment_of,
                        swept_bounds, world_to_object)
 from .pair_bvh import PairBVH
 
@@ -25,7 +25,7 @@ BRUTE_MAX = 64     # meshes with more triangles go through a PairBVH
 _BVH_RAYS = 2048   # rays per BVH traversal batch
 
 
-class NumpyPart:
+class NumpyPart(ExactCastPart):
     """One instance (static, moving or deforming), brute force over its triangles."""
 
     def __init__(self, scene, i: int):
@@ -123,13 +123,6 @@ class NumpyPart:
         w = np.flatnonzero(inside & (tt == best[ray]))
         t[ray[w]], prim[ray[w]], u[ray[w]], v[ray[w]] = tt[w], tri[w], uu[w], vv[w]
         return t, prim, u, v
-
-    def occluded(self, o, d, times, t0, t1):
-        return np.isfinite(self.cast(o, d, times, t0, t1)[0])
-
-    def shade(self, times, p, u, v):
-        ng, ns, mat = self.shading.shade(p, u, v, times)
-        return np.full(p.shape[0], self.index, np.int32), p.astype(np.int32), ng, ns, mat
 
 
 def build_parts(scene, scale: float) -> list:
