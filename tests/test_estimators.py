@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stpm_core.photons.estimators import PhotonMap, shutter_mass, slab_ball_volume, temporal_candidates
+from stpm_core.photons.estimators import (PhotonMap, shutter_mass, slab_ball_volume, temporal_candidates,
+                                          temporal_slices)
 from stpm_core.photons.record import make_records
 from stpm_core.shutter import Shutter
 
@@ -117,10 +118,43 @@ def test_window_mass_and_clipped_ball_volume():
     assert np.isclose(V[2], np.pi * (25.0 - s * s / 12), rtol=1e-9)
 
 
-def test_temporal_candidates_grow_with_photons():
-    assert temporal_candidates(10**6, 50, 1.5) == 75
-    m = [temporal_candidates(n, 50, 0.0) for n in (10**4, 10**5, 10**6, 10**7)]
-    assert all(b > a for a, b in zip(m, m[1:])) and m[-1] / 50 < 10**7 / 50 ** 2
+def test_temporal_slices_grow_with_photons():
+    assert temporal_candidates(10**6, 50, 1.5) == 75 and temporal_slices(10**6, 50, 1.5) == 1
+    # default: a fixed 1.5 k candidates inside time slices that multiply as photons grow
+    B = [temporal_slices(n, 50) for n in (10**4, 10**5, 10**6, 10**7, 10**8)]
+    assert all(temporal_candidates(n, 50, 0.0) == 75 for n in (10**4, 10**8))
+    assert all(b >= a for a, b in zip(B, B[1:])) and B[-1] > 4 * B[1] >= 4
+    # ... and more slowly than photons: the photons per slice grow too (the disc shrinks)
+    per_slice = [n / b for n, b in zip((10**4, 10**5, 10**6, 10**7, 10**8), B)]
+    assert all(b > 3 * a for a, b in zip(per_slice, per_slice[1:]))      # ~ 10^(2/3) per decade
+    assert temporal_slices(600, 50) == 1           # never a slice with fewer than 4 m photons
+
+
+def test_temporal_follows_light_that_changes_during_the_shutter():
+    # Uniform in space, E(t) = 0.5 + t W/m^2 over the shutter: the window is clipped to its time
+    # slice, so estimates at every time (slice edges and shutter ends included) follow E(t);
+    # STANDARD returns the shutter average 1.0.
+    rng = np.random.default_rng(8)
+    N = 200_000
+    t_ph = (np.arange(N) + rng.random(N)) / N
+    pos = np.column_stack([rng.uniform(-0.5, 0.5, (N, 2)), np.zeros(N)])
+    Phi = np.repeat(((0.5 + t_ph) / N)[:, None], 3, axis=1)
+    m = PhotonMap(make_records(pos, np.tile(UP, (N, 1)), Phi, t_ph), BOX, time_scale=1.0)
+    assert temporal_slices(N, 50) == 4              # slice edges at t = 0.25, 0.5, 0.75
+    p, ns, _ = queries(rng, 20_000, 0.4)
+    for lo, hi in ((0.2, 0.3), (0.45, 0.55), (0.7, 0.8), (0.0, 0.05), (0.95, 1.0)):
+        t = rng.uniform(lo, hi, len(p))
+        truth = (0.5 + t).mean()
+        E = m.estimate(p, ns, t, estimator="TEMPORAL", k=50)[:, 0].mean()
+        E_std = m.estimate(p, ns, t, estimator="STANDARD", k=50)[:, 0].mean()
+        assert abs(E_std - 1.0) < 0.02
+        if 0.0 < lo and hi < 1.0:
+            # around a slice edge the one-sided windows on either side cancel to first order
+            assert abs(E / truth - 1) < 0.02, (lo, hi, E)
+        else:
+            # at a shutter end the window is one-sided (it cannot reach outside the shutter):
+            # biased toward the inside by slope x half the window, far less than STANDARD
+            assert abs(E - truth) < 0.2 * abs(E_std - truth), (lo, hi, E)
 
 
 # ----------------------------------------------------------------------------

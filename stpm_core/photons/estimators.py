@@ -31,8 +31,13 @@ Estimators (``k`` = ``settings.k_nearest``):
 * TEMPORAL: m spatial candidates (the m-th fixes the disc radius r_m), the k
   nearest in time among the m - 1 inner ones (the k-th fixes the window
   half-width tau); ``E = sum Phi / (pi r_m^2 * W)`` with ``W`` the shutter
-  mass of [t - tau, t + tau] clipped to [0, 1].  m = ceil(alpha k) with
-  ``temporal_alpha``; 0 = automatic alpha growing as (N / k)^(1/3).
+  mass of [t - tau, t + tau] clipped to the shutter.  ``temporal_alpha`` >= 1:
+  m = ceil(alpha k) over the whole shutter (1.5 = the paper).  0 (default):
+  the photons are cut into B time slices of equal shutter mass, B growing as
+  (N / k)^(1/3), each with its own 3D kd-tree; a query searches the slice
+  holding its time with m = ceil(1.5 k) and clips the window to that slice,
+  so the window shrinks as photons grow while the search stays as cheap as
+  the paper's.
 * KD4D: k nearest in (x, y, z, s t); ``E = sum Phi / (V / s)`` with V the
   3-ball of radius R_k in (surface x scaled time), clipped to the shutter slab
   and weighted by g: ``V/s = integral over the clipped window of
@@ -53,13 +58,14 @@ from .record import oct_decode
 
 __all__ = [
     "PhotonMap", "ESTIMATOR_NAMES", "CONE_K", "auto_temporal_alpha", "temporal_candidates",
-    "shutter_mass", "slab_ball_volume",
+    "temporal_slices", "shutter_mass", "slab_ball_volume",
 ]
 
 ESTIMATOR_NAMES = ("STANDARD", "TEMPORAL", "KD4D")
 CONE_K = 1.1                 # cone kernel: w(d) = 1 - d / (CONE_K * r)
-TEMPORAL_ALPHA_FIXED = 1.5   # the paper's fixed candidate multiple
-TEMPORAL_ALPHA_C = 0.25      # automatic alpha = max(1.5, C * (N / k)^(1/3))
+TEMPORAL_ALPHA_FIXED = 1.5   # the paper's fixed candidate multiple (also the multiple inside a slice)
+TEMPORAL_SLICE_C = 0.25      # automatic time slices B = max(1, round(C * (N / k)^(1/3)))
+TEMPORAL_SLICE_ALPHA = 1.5   # candidates per estimate inside a slice, as a multiple of k
 _QUERY_BATCH_ELEMS = 1 << 21 # neighbours gathered per batch (bounds memory)
 _GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(8)
 
@@ -127,21 +133,41 @@ def slab_ball_volume(shutter, R: np.ndarray, t: np.ndarray, s: float) -> np.ndar
 # TEMPORAL candidate count
 # ---------------------------------------------------------------------------
 
-def auto_temporal_alpha(n_photons: int, k: int) -> float:
-    """Consistent TEMPORAL candidate multiple: alpha = max(1.5, C (N/k)^(1/3)).
+def temporal_slices(n_photons: int, k: int, temporal_alpha: float = 0.0) -> int:
+    """Time slices B of the consistent TEMPORAL (1 for a fixed ``temporal_alpha`` >= 1).
 
-    The time window holds about k/m of the photons a point receives, so it
-    shrinks like 1/alpha; the candidate disc holds m = alpha k of N photons,
-    so it shrinks like (alpha k / N)^(1/2).  alpha ~ (N/k)^(1/3) sends both to
-    zero and balances a moving edge's spatial bias (~ r) against the temporal
-    one (~ window) -- see docs/photon-mapping.md.
+    B = max(1, round(C (N/k)^(1/3))), and never so many that a slice holds
+    fewer than 4 m photons.  Each slice covers 1/B of the shutter mass; its
+    window is at most that long, so it shrinks like B^-1, and the candidate
+    disc holds m = 1.5 k of the slice's N / B photons, so its radius shrinks
+    like (B k / N)^(1/2); B ~ (N / k)^(1/3) sends both to zero and balances a
+    moving edge's spatial bias (~ r) against the temporal one (~ window) --
+    see docs/photon-mapping.md.
     """
-    return max(TEMPORAL_ALPHA_FIXED, TEMPORAL_ALPHA_C * (max(n_photons, 1) / max(k, 1)) ** (1.0 / 3.0))
+    if temporal_alpha >= 1.0:
+        return 1
+    N, k = max(int(n_photons), 1), max(int(k), 1)
+    B = int(round(TEMPORAL_SLICE_C * (N / k) ** (1.0 / 3.0)))
+    m = int(math.ceil(TEMPORAL_SLICE_ALPHA * k))
+    return max(1, min(B, N // (4 * m)))
+
+
+def auto_temporal_alpha(n_photons: int, k: int) -> float:
+    """The effective candidate multiple of the consistent TEMPORAL, over the whole shutter.
+
+    Within one of B slices the search takes 1.5 k candidates, i.e. 1.5 B k photons'
+    worth of the whole shutter's density: alpha = 1.5 B (for reports; B from
+    :func:`temporal_slices`).
+    """
+    return TEMPORAL_SLICE_ALPHA * temporal_slices(n_photons, k, 0.0)
 
 
 def temporal_candidates(n_photons: int, k: int, temporal_alpha: float) -> int:
-    """Spatial candidates m for TEMPORAL (m - 1 >= k inner candidates when possible)."""
-    alpha = temporal_alpha if temporal_alpha >= 1.0 else auto_temporal_alpha(n_photons, k)
+    """Spatial candidates m per TEMPORAL search (m - 1 >= k inner candidates when possible).
+
+    ``temporal_alpha`` >= 1: m = ceil(alpha k) over the shutter; 0: m = ceil(1.5 k) within a slice.
+    """
+    alpha = temporal_alpha if temporal_alpha >= 1.0 else TEMPORAL_SLICE_ALPHA
     return max(int(math.ceil(alpha * k)), k + 1)
 
 
@@ -207,6 +233,7 @@ class PhotonMap:
         self._tree3 = None
         self._tree4 = None
         self._flat = {}                      # dims -> kdtree.FlatTree (numba backend)
+        self._slices = {}                    # B -> TEMPORAL's time slices (see :meth:`time_slices`)
         self._lock = threading.Lock()
         # Sorting and packing count as map building
         self.stats = {"tree_build_s": _time.perf_counter() - t0, "lookup_s": 0.0, "lookup_count": 0,
@@ -246,11 +273,56 @@ class PhotonMap:
                 self.stats["tree_build_s"] += _time.perf_counter() - t0
         return tree
 
-    def build(self, estimator: str) -> None:
-        """Build the tree ``estimator`` needs now (so build time is not charged to look-ups)."""
+    def time_slices(self, B: int) -> dict:
+        """TEMPORAL's B time slices of equal shutter mass, each with its own 3D kd-tree (built on first use).
+
+        Returns a dict: ``edges`` (B + 1,) shutter times (slice j is [edges[j], edges[j + 1]),
+        ``edges[0] = 0``, ``edges[B] = 1``, inner edges at the shutter's mass quantiles j / B);
+        ``rows`` list of B (n_j,) int64 photon rows (Morton order kept inside a slice);
+        ``trees`` list of B kd-trees over those rows (kdtree.FlatTree or scipy cKDTree).
+        """
+        with self._lock:
+            sl = self._slices.get(B)
+            if sl is not None and sl["backend"] == self.backend:
+                return sl
+            t0 = _time.perf_counter()
+            edges = np.empty(B + 1)
+            edges[0], edges[B] = 0.0, 1.0
+            edges[1:B] = self.shutter.sample(np.arange(1, B) / B)
+            which = np.clip(np.searchsorted(edges[1:B], self.time, side="right"), 0, B - 1)
+            order = np.argsort(which, kind="stable")
+            starts = np.searchsorted(which[order], np.arange(B + 1))
+            rows = [order[starts[j]:starts[j + 1]] for j in range(B)]
+            trees = []
+            for r in rows:
+                if len(r) == 0:
+                    trees.append(None)
+                elif self.backend == "numba":
+                    trees.append(_kdtree.FlatTree(self.records["position"][r], self.records["time"][r],
+                                                  self._packed[r], dims=3, s=self.time_scale))
+                else:
+                    trees.append(cKDTree(self.position[r], leafsize=16, balanced_tree=False, compact_nodes=False))
+            sl = {"edges": edges, "rows": rows, "trees": trees, "backend": self.backend}
+            self._slices[B] = sl
+            self.stats["tree_build_s"] += _time.perf_counter() - t0
+        return sl
+
+    def build(self, estimator: str, *, k: int = 50, temporal_alpha: float = 0.0) -> None:
+        """Build the tree(s) ``estimator`` needs now (so build time is not charged to look-ups)."""
         if self.n == 0:
             return
         dims = 4 if estimator == "KD4D" and not self.timeless else 3
+        B = temporal_slices(self.n, k, temporal_alpha) if estimator == "TEMPORAL" and not self.timeless else 1
+        if B > 1:
+            try:
+                self.time_slices(B)
+                return
+            except Exception as exc:  # noqa: BLE001 -- a compile failure falls back to scipy
+                if self.backend != "numba":
+                    raise
+                self._fall_back(exc)
+                self.time_slices(B)
+                return
         if self.backend == "numba":
             try:
                 self.flat_tree(dims)
@@ -284,14 +356,23 @@ class PhotonMap:
         # k >= 2 so there is at least one inner photon; never more than the map holds
         k = int(min(max(k, 2), self.n))
         m = k
+        B = 1
         if estimator == "TEMPORAL":
+            B = temporal_slices(self.n, k, temporal_alpha)
             m = min(temporal_candidates(self.n, k, temporal_alpha), self.n)
             k = min(k, m - 1)
             if k < 2:
                 estimator = "STANDARD"
                 k = m = int(min(self.n, 2))
+                B = 1
             self.stats["temporal_candidates"] = m
+            self.stats["temporal_slices"] = B
         t0 = _time.perf_counter()
+        if B > 1:
+            E[:] = self._estimate_sliced(B, p, ns, t, k, m, kernel)
+            self.stats["lookup_s"] += _time.perf_counter() - t0
+            self.stats["lookup_count"] += n
+            return E
         # -- search: Phi summed over the inner / selected photons, radius, time window ----------
         if self.backend == "numba":
             try:
@@ -305,6 +386,54 @@ class PhotonMap:
         self.stats["lookup_s"] += _time.perf_counter() - t0
         self.stats["lookup_count"] += n
         return E
+
+    # -- TEMPORAL on time slices ---------------------------------------------------------------------
+    def _estimate_sliced(self, B, p, ns, t, k, m, kernel):
+        """Consistent TEMPORAL: each query searches the slice holding its time (E (n, 3) W/m^2).
+
+        Within slice j = [a, b) the m candidates and the k nearest in time come from that slice's
+        photons only, so the window is clipped to the slice: W = mass of [t - tau, t + tau] cut to
+        [a, b] (docs/photon-mapping.md shows (k - 1) / (pi r_m^2 W) stays unbiased).
+        """
+        try:
+            sl = self.time_slices(B)
+        except Exception as exc:  # noqa: BLE001 -- numba failed: same slices with scipy trees
+            if self.backend != "numba":
+                raise
+            self._fall_back(exc)
+            sl = self.time_slices(B)
+        edges = sl["edges"]
+        which = np.clip(np.searchsorted(edges[1:B], t, side="right"), 0, B - 1)
+        order = np.argsort(which, kind="stable")
+        starts = np.searchsorted(which[order], np.arange(B + 1))
+        n = p.shape[0]
+        Phi, r, tau = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
+        lo, hi = edges[which], edges[which + 1]
+        for j in range(B):
+            q = order[starts[j]:starts[j + 1]]
+            rows, tree = sl["rows"][j], sl["trees"][j]
+            if len(q) == 0 or tree is None:
+                continue
+            mj = min(m, len(rows))
+            kj = min(k, mj - 1)
+            if kj < 2:                                  # a nearly empty slice: nothing to estimate with
+                continue
+            if sl["backend"] == "numba":
+                qq = np.empty((len(q), 4))
+                qq[:, :3] = p[q]
+                qq[:, 3] = t[q]
+                Phi[q], r[q], tau[q] = tree.lookup(_kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj, kernel == "CONE",
+                                                   CONE_K, self.workers)
+            else:
+                batch = max(256, _QUERY_BATCH_ELEMS // mj)
+                for a in range(0, len(q), batch):
+                    qb = q[a:a + batch]
+                    Phi[qb], r[qb], tau[qb] = self._temporal(p[qb], ns[qb], t[qb], kj, mj, kernel,
+                                                             tree=tree, rows=rows)
+        norm = 1.0 - 2.0 / (3.0 * CONE_K) if kernel == "CONE" else 1.0
+        area = norm * np.pi * np.maximum(r, 1e-12) ** 2                       # m^2
+        W = shutter_mass(self.shutter, np.maximum(t - tau, lo), np.minimum(t + tau, hi))
+        return Phi / (area * np.maximum(W, 1e-12))[:, None]
 
     # -- normalisations (docs/photon-mapping.md, section 5) -------------------------------------------
     def _normalise(self, estimator, Phi, r, tau, t, kernel):
@@ -376,9 +505,15 @@ class PhotonMap:
         w = self._cone(d[:, :-1], r) if kernel == "CONE" else None
         return self._weighted_sum(idx[:, :-1], ns, w), r
 
-    def _temporal(self, p, ns, t, k, m, kernel):
-        """TEMPORAL: Phi over the k - 1 nearest in time among m - 1 inner candidates, r_m, tau_k."""
-        d, idx = self.tree3().query(p, m, workers=self.workers)
+    def _temporal(self, p, ns, t, k, m, kernel, tree=None, rows=None):
+        """TEMPORAL: Phi over the k - 1 nearest in time among m - 1 inner candidates, r_m, tau_k.
+
+        ``tree`` / ``rows``: search a time slice's cKDTree whose point i is photon ``rows[i]``
+        (default: the whole map's 3D tree).
+        """
+        d, idx = (tree or self.tree3()).query(p, m, workers=self.workers)
+        if rows is not None:
+            idx = rows[idx]
         r = d[:, -1]                                   # candidate disc radius: the m-th photon (m)
         cand, d_c = idx[:, :-1], d[:, :-1]             # m - 1 inner candidates
         dt = np.abs(self.time[cand] - t[:, None])      # time distances (shutter units)

@@ -40,7 +40,7 @@ Search (:func:`_knn`): best-first (nodes in increasing box distance, the
 nearer child followed at once, the farther queued), so only leaves that
 reach the final kq-th ball are scanned.  Nearer photons are appended to a
 buffer of 2 kq and cut back to the kq nearest by quickselect when it fills
-(O(1) per photon where a heap costs O(log kq): TEMPORAL keeps m = 340).
+(O(1) per photon where a heap costs O(log kq); TEMPORAL with a large fixed alpha keeps hundreds).
 Warm start: the previous query's kq nearest lie within r_prev + |q - q_prev|
 of q, so that radius already bounds the search from its first node.
 
@@ -75,7 +75,7 @@ __all__ = ["AVAILABLE", "LEAF_SIZE", "MODE_STANDARD", "MODE_TEMPORAL", "MODE_KD4
 LEAF_SIZE = 16           # at most this many photons per leaf (2^L leaves of 8..16; 12..32 measured within 10 %)
 MODE_STANDARD, MODE_TEMPORAL, MODE_KD4D = 0, 1, 2
 CACHE_BETA_3D = 0.5      # candidate cache radius rho = beta r_c (3D: photons on surfaces, ~(1+2 beta)^2 kq cached)
-CACHE_BETA_LARGE_K = 0.25  # 3D with kq > 64 (TEMPORAL's m): a smaller block, ~2.25 kq photons
+CACHE_BETA_LARGE_K = 0.25  # 3D with kq > 64 (e.g. TEMPORAL's m): a smaller block, ~2.25 kq photons
 CACHE_BETA_4D = 0.3      # 4D: photons fill surface x time, ~(1+2 beta)^3 kq cached
 CACHE_CAP_FACTOR = 12    # at most this many x kq cached photons (else no cache for that query)
 _CHUNK_MIN = 2048        # fewer queries than this per thread are not split
@@ -302,6 +302,37 @@ if AVAILABLE:
                 return
 
     @_jit
+    def _kth(key, n, nth):
+        """The nth smallest (0-based) of key[:n] by quickselect; key is reordered in place."""
+        lo, hi = 0, n
+        while hi - lo > 1:
+            a, b, c = key[lo], key[(lo + hi) // 2], key[hi - 1]
+            if a > b:
+                a, b = b, a
+            if b > c:
+                b = c
+                if a > b:
+                    b = a
+            pivot = b
+            i, j = lo, hi - 1
+            while i <= j:
+                while key[i] < pivot:
+                    i += 1
+                while key[j] > pivot:
+                    j -= 1
+                if i <= j:
+                    key[i], key[j] = key[j], key[i]
+                    i += 1
+                    j -= 1
+            if nth <= j:
+                hi = j + 1
+            elif nth >= i:
+                lo = i
+            else:
+                break
+        return key[nth]
+
+    @_jit
     def _knn(P, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist, bound0):
         """Best-first kq-nearest search.  On return bd[:kq] / bi[:kq] hold the squared distances and
         rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther, in any order).
@@ -497,6 +528,7 @@ if AVAILABLE:
         bd = np.empty(2 * kq)
         bi = np.empty(2 * kq, np.int64)
         bx = np.empty(2 * kq)
+        tk = np.empty(2 * kq)
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
@@ -543,19 +575,36 @@ if AVAILABLE:
             out_r[i] = r
             r_prev = r
             n_sel = kq - 1
+            tau = np.inf
+            ties = 0
             if mode == MODE_TEMPORAL:
-                # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau
+                # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau.
+                # Select on a keys-only copy (cheaper swaps); the sum below then takes every
+                # candidate nearer in time than tau, plus as many at exactly tau as make k - 1.
+                n_less = 0
                 for a in range(kq - 1):
-                    bx[a] = abs(np.float64(P[bi[a], 3]) - q3)
-                _select(bx, bd, bi, 0, kq - 1, k - 1)
-                out_tau[i] = bx[k - 1]
-                n_sel = k - 1
+                    dt = abs(np.float64(P[bi[a], 3]) - q3)
+                    bx[a] = dt
+                    tk[a] = dt
+                tau = _kth(tk, kq - 1, k - 1)
+                for a in range(kq - 1):
+                    if bx[a] < tau:
+                        n_less += 1
+                ties = k - 1 - n_less
+                out_tau[i] = tau
             inv_r = 1.0 / (cone_k * max(r, 1e-300))
             n0, n1, n2 = ns[i, 0], ns[i, 1], ns[i, 2]
             p0 = 0.0
             p1 = 0.0
             p2 = 0.0
             for a in range(n_sel):
+                if mode == MODE_TEMPORAL:
+                    if bx[a] > tau:
+                        continue
+                    if bx[a] == tau:
+                        if ties <= 0:
+                            continue
+                        ties -= 1
                 j = bi[a]
                 if P[j, 4] * n0 + P[j, 5] * n1 + P[j, 6] * n2 > 0.0:
                     w = 1.0

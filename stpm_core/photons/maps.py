@@ -75,6 +75,7 @@ class PhotonMaps:
             st[f"{kind}_lookup_s"] = m.stats["lookup_s"]
             st[f"{kind}_lookup_count"] = m.stats["lookup_count"]
             st[f"{kind}_temporal_candidates"] = m.stats["temporal_candidates"]
+            st[f"{kind}_temporal_slices"] = m.stats.get("temporal_slices", 1)
             build += m.stats["tree_build_s"]
             lookup += m.stats["lookup_s"]
             count += m.stats["lookup_count"]
@@ -140,7 +141,7 @@ def build_photon_maps(scene, settings, caster, lights, *, time_override=None, pr
         "global": PhotonMap(rec_g, scene.shutter, time_scale=s, workers=workers, origin=origin),
     }
     for m in maps.values():
-        m.build(settings.estimator)
+        m.build(settings.estimator, k=settings.k_nearest, temporal_alpha=settings.temporal_alpha)
     if progress is not None:
         progress(1.0, "photon maps built")
     return PhotonMaps(maps, estimator=settings.estimator, k=settings.k_nearest, kernel=settings.kernel,
