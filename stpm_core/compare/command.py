@@ -1,7 +1,7 @@
 """``stpm compare SCENE`` on the command line (``stpm_core.cli`` hands it the arguments after ``compare``).
 
     stpm compare SCENE [--frame F] [--output REPORT_DIR] [--reference REF.exr]
-                 [--time-budget SECONDS] [--photon-budgets 1,4,16,4:4,16:4]
+                 [--time-budget SECONDS] [--photon-budgets 1,4,16,4:4,16:4] [--k-exponent E]
                  [--accumulation-steps 1,2,4,8,16,32] [--estimators standard,temporal,kd4d]
                  [--resolution WxH] [--samples S] [--reference-method accumulation|temporal|kd4d]
                  [--reference-steps N] [--reference-photons F] [--reference-samples F]
@@ -93,10 +93,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="reference image (its Combined pass); default: computed and cached")
     p.add_argument("--time-budget", type=float, dest="time_budget", metavar="SECONDS",
                    help="stop starting runs once the sweep has taken this long (the report notes what was skipped)")
-    p.add_argument("--photon-budgets", type=_budgets, dest="photon_budgets", metavar="B[:S],...",
+    p.add_argument("--photon-budgets", type=_budgets, dest="photon_budgets", metavar="B[:S[:K]],...",
                    default=list(DEFAULT_PHOTON_BUDGETS),
-                   help="budgets of the photon-estimator runs: photons x B (and samples x S) of the file's "
+                   help="budgets of the photon-estimator runs: photons x B (and samples x S, k x K) of the file's "
                         f"(default {','.join(f'{b:g}:{s:g}' if s != 1 else f'{b:g}' for b, s in DEFAULT_PHOTON_BUDGETS)})")
+    p.add_argument("--k-exponent", type=float, dest="k_exponent", default=0.0, metavar="E",
+                   help="photon runs use k x B^E (B = their photon multiple; default 0: the file's k)")
     p.add_argument("--accumulation-steps", type=_number_list(int), dest="accumulation_steps", metavar="N,N,...",
                    default=list(DEFAULT_ACCUMULATION_STEPS),
                    help=f"accumulation-buffer instants (default {','.join(map(str, DEFAULT_ACCUMULATION_STEPS))})")
@@ -152,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
     from ..progress import ProgressBar
 
     args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    if not args.k_exponent >= 0:
+        raise StpmError("--k-exponent must be >= 0")
     if args.time_budget is not None and args.time_budget < 0:
         raise StpmError("--time-budget must be >= 0 seconds")
     if any(v is not None and v < 1 for v in (args.reference_photons, args.reference_samples, args.reference_steps)):
@@ -175,7 +179,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             report = run_compare(scene, settings, out_dir, reference=args.reference, time_budget=args.time_budget,
                                  photon_budgets=args.photon_budgets, accumulation_steps=args.accumulation_steps,
-                                 estimators=args.estimators, progress=bar, cancel=cancel, cache_dir=args.cache_dir,
+                                 estimators=args.estimators, k_exponent=args.k_exponent, progress=bar,
+                                 cancel=cancel, cache_dir=args.cache_dir,
                                  use_cache=not args.no_cache, reference_method=args.reference_method,
                                  reference_photon_factor=args.reference_photons,
                                  reference_sample_factor=args.reference_samples,

@@ -116,8 +116,11 @@ def _section_scene(rep: dict) -> str:
             ("something moves", "yes" if sc.get("has_motion") else "no"),
             ("effects plan", escape(", ".join(k for k in ("motion_blur", "caustics", "indirect", "time_dependent")
                                               if sc.get("plan", {}).get(k)) or "none"))]
-    rows.append(("photon budgets", ", ".join(f"x{b:g}" + ("" if s == 1 else f" s{s:g}")
-                                             for b, s in sw["photon_budgets"])))
+    kexp = float(sw.get("k_exponent") or 0.0)
+    rows.append(("photon budgets", ", ".join(f"x{b[0]:g}" + ("" if len(b) < 2 or b[1] == 1 else f" s{b[1]:g}")
+                                             + ("" if len(b) < 3 or b[2] == 1 else f" k x{b[2]:g}")
+                                             for b in sw["photon_budgets"])
+                                   + ("" if kexp == 0 else f"; k x b^{kexp:g}")))
     rows.append(("accumulation N", ", ".join(str(n) for n in sw["accumulation_steps"])))
     rows.append(("time budget", "none" if sw["time_budget_s"] is None else f'{sw["time_budget_s"]:g} s'))
     keys = ("samples", "photons_caustic", "photons_global", "k_nearest", "temporal_alpha", "time_scale",

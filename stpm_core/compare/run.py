@@ -103,7 +103,8 @@ def _cross_check(name: str, other, ref, runs, target_steps: int) -> dict:
 
 def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float | None = None,
                 photon_budgets=DEFAULT_PHOTON_BUDGETS, accumulation_steps=DEFAULT_ACCUMULATION_STEPS,
-                estimators=PHOTON_ESTIMATORS, target_steps: int = 16, progress=None, cancel=None,
+                estimators=PHOTON_ESTIMATORS, k_exponent: float = 0.0, target_steps: int = 16,
+                progress=None, cancel=None,
                 cache_dir=None, use_cache: bool = True,
                 reference_method: str = REFERENCE_METHOD, reference_photon_factor: float | None = None,
                 reference_sample_factor: float | None = None, reference_steps: int = REFERENCE_STEPS,
@@ -119,8 +120,9 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
     reference : None (compute, cached), a path to an EXR (its Combined pass), an (H, W, 3|4) array or a
         Reference (rgb + info: e.g. {'kind': 'analytic', 'why': ...}).
     time_budget : seconds for the sweep (the reference not included); no run starts once spent.
-    photon_budgets : budgets of the STANDARD / TEMPORAL / KD4D runs: b (the file's photons x b) or
-        (b, s) / 'b:s' (photons x b and samples per pixel x s).
+    photon_budgets : budgets of the STANDARD / TEMPORAL / KD4D runs: b (the file's photons x b),
+        (b, s) / 'b:s' (photons x b and samples per pixel x s) or (b, s, f) / 'b:s:f' (and k x f).
+    k_exponent : e in the photon runs' k = round(f x k x b^e) (0: the file's k; see sweep.budget_k).
     accumulation_steps : the N of the ACCUMULATION runs.
     estimators : which photon estimators to sweep.
     target_steps : the accumulation N whose error the estimators must reach (16).
@@ -147,7 +149,7 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
     except OSError as e:
         raise StpmError(f"cannot create report directory {out_dir}: {e.strerror or e}") from None
     runs = plan_runs(settings, photon_budgets=photon_budgets, accumulation_steps=accumulation_steps,
-                     estimators=estimators)
+                     estimators=estimators, k_exponent=k_exponent)
 
     # -- Progress: the reference weighs like the stills it costs -----------------------------
     ref_weight = 0.0
@@ -205,6 +207,7 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
                     "flip": "mean HDR-FLIP error (flip-evaluator)"},
         "display": {"exposure": display_scale(ref.rgb)},
         "sweep": {"photon_budgets": [list(b) for b in sorted({parse_budget(b) for b in photon_budgets})],
+                  "k_exponent": float(k_exponent),
                   "accumulation_steps": sorted({int(n) for n in accumulation_steps}),
                   "estimators": list(estimators), "target_steps": int(target_steps), **sweep},
         "consistent": consistent,

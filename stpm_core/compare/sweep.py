@@ -2,13 +2,16 @@
 
 Runs (:func:`plan_runs`):
 
-* each photon estimator (STANDARD, TEMPORAL, KD4D) at each budget (b, s):
+* each photon estimator (STANDARD, TEMPORAL, KD4D) at each budget (b, s, f):
   ``photons_caustic`` and ``photons_global`` = b x the file's, samples per
-  pixel = s x the file's (s = 1 when a budget is a plain number), everything
-  else (k, seed) the file's.  More samples matter because ACCUMULATION with N
-  instants takes N x the file's camera samples per pixel;
+  pixel = s x the file's, ``k_nearest`` = round(f x k x b^e) with k the
+  file's and e = ``k_exponent`` (:func:`budget_k`; s = f = 1 when a budget
+  does not give them, e = 0 by default), everything else (seed, time scale)
+  the file's.  More samples matter because ACCUMULATION with N instants takes
+  N x the file's camera samples per pixel; k may grow with the photons
+  because a consistent estimate needs k -> infinity as well as k / N -> 0;
 * ACCUMULATION with N instants for each N: N complete stills with the file's
-  settings, averaged (``stpm_core.render``).
+  settings (its k too, whatever the budgets say), averaged (``stpm_core.render``).
 
 Runs go cheapest first (estimated cost in stills: a photon run at budget
 (b, s) is about (b + s) / 2 stills, ACCUMULATION N about N), so a time budget that
@@ -30,12 +33,13 @@ import numpy as np
 from ..errors import RenderCancelled, StpmError
 from .metrics import combined_rgb, image_errors
 
-__all__ = ["Run", "plan_runs", "parse_budget", "run_sweep", "is_consistent", "PHOTON_ESTIMATORS", "METHOD_ORDER",
+__all__ = ["Run", "plan_runs", "parse_budget", "budget_k", "budget_label", "run_sweep", "warm_up", "is_consistent",
+           "PHOTON_ESTIMATORS", "METHOD_ORDER",
            "DEFAULT_PHOTON_BUDGETS", "DEFAULT_ACCUMULATION_STEPS"]
 
 PHOTON_ESTIMATORS = ("STANDARD", "TEMPORAL", "KD4D")
 METHOD_ORDER = ("ACCUMULATION", "STANDARD", "TEMPORAL", "KD4D")
-DEFAULT_PHOTON_BUDGETS = ((1, 1), (4, 1), (16, 1), (4, 4), (16, 4))   # (photons x, samples x)
+DEFAULT_PHOTON_BUDGETS = ((1, 1), (4, 1), (16, 1), (4, 4), (16, 4))   # (photons x, samples x[, k x])
 DEFAULT_ACCUMULATION_STEPS = (1, 2, 4, 8, 16, 32)
 _PHASES = ("photon_trace_s", "photon_map_build_s", "photon_lookup_s", "render_s")
 
@@ -46,11 +50,13 @@ class Run:
 
     Attributes
     ----------
-    label : 'TEMPORAL x4', 'KD4D x16 s4' (16 x photons, 4 x samples), 'ACCUMULATION N=16', ...
+    label : 'TEMPORAL x4', 'KD4D x16 s4' (16 x photons, 4 x samples), 'KD4D x16 s4 k15' (k = 15, not
+        the file's), 'ACCUMULATION N=16', ...
     method : 'STANDARD' | 'TEMPORAL' | 'KD4D' | 'ACCUMULATION' (the curve it belongs to).
     settings : the RenderSettings it renders with.
     photon_factor : photons as a multiple of the file's (1 for ACCUMULATION: per still).
     sample_factor : samples per pixel as a multiple of the file's (1 for ACCUMULATION: per still).
+    k_factor : the budget's f in k = round(f x k_file x b^k_exponent) (1 for ACCUMULATION).
     accumulation_steps : N for ACCUMULATION, else None.
     cost : estimated cost in stills (orders the sweep).
     status : 'pending' | 'done' | 'skipped' | 'failed'; note: why (skipped / failed).
@@ -64,6 +70,7 @@ class Run:
     settings: object
     photon_factor: float = 1.0
     sample_factor: float = 1.0
+    k_factor: float = 1.0
     accumulation_steps: int | None = None
     cost: float = 1.0
     status: str = "pending"
@@ -81,7 +88,7 @@ class Run:
         return {
             "label": self.label, "method": self.method,
             "estimator": "STANDARD" if self.method == "ACCUMULATION" else self.method,
-            "photon_factor": self.photon_factor, "sample_factor": self.sample_factor,
+            "photon_factor": self.photon_factor, "sample_factor": self.sample_factor, "k_factor": self.k_factor,
             "accumulation_steps": self.accumulation_steps,
             "photons_caustic": int(s.photons_caustic), "photons_global": int(s.photons_global),
             "samples": int(s.samples), "k_nearest": int(s.k_nearest),
@@ -115,34 +122,60 @@ def is_consistent(method: str, settings, scene) -> tuple[bool, str]:
 # ----------------------------------------------------------------------------
 # Plan
 # ----------------------------------------------------------------------------
-def _factor_label(b: float, s: float) -> str:
-    return f"x{b:g}" + ("" if s == 1 else f" s{s:g}")
+def budget_label(b: float, s: float = 1.0, k: int | None = None) -> str:
+    """'x16', 'x16 s4', 'x16 s4 k15': photons x b, samples x s (when not 1), k (when given)."""
+    return f"x{b:g}" + ("" if s == 1 else f" s{s:g}") + ("" if k is None else f" k{int(k)}")
 
 
-def parse_budget(item) -> tuple[float, float]:
-    """(photon factor, sample factor) from 4, (4, 2), [4, 2] or '4:2'."""
+def parse_budget(item) -> tuple[float, float, float]:
+    """(photon factor b, sample factor s, k factor f) from 4, (4, 2), (4, 2, 0.5), '4:2' or '4:2:0.5'.
+
+    s and f default to 1.  All three must be positive and finite.
+    """
     try:
         if isinstance(item, str):
             parts = item.split(":")
-            if len(parts) > 2:
+            if not 1 <= len(parts) <= 3:
                 raise ValueError
-            b, s = float(parts[0]), float(parts[1]) if len(parts) == 2 else 1.0
+            vals = [float(v) for v in parts]
         elif isinstance(item, (tuple, list)):
-            b, s = float(item[0]), float(item[1]) if len(item) > 1 else 1.0
+            if not 1 <= len(item) <= 3:
+                raise ValueError
+            vals = [float(v) for v in item]
         else:
-            b, s = float(item), 1.0
+            vals = [float(item)]
     except (TypeError, ValueError, IndexError):
-        raise StpmError(f"a budget is PHOTONS or PHOTONS:SAMPLES (multiples of the file's), got {item!r}") from None
-    if not (b > 0 and s > 0 and math.isfinite(b) and math.isfinite(s)):
+        raise StpmError(f"a budget is PHOTONS, PHOTONS:SAMPLES or PHOTONS:SAMPLES:K (multiples of the "
+                        f"file's), got {item!r}") from None
+    b, s, f = (vals + [1.0, 1.0])[:3]
+    if not all(v > 0 and math.isfinite(v) for v in (b, s, f)):
         raise StpmError(f"budget multiples must be positive, got {item!r}")
-    return b, s
+    return b, s, f
+
+
+def budget_k(k_file: int, photon_factor: float, k_factor: float = 1.0, k_exponent: float = 0.0) -> int:
+    """k of a photon run: max(1, round(k_factor x k_file x photon_factor ** k_exponent)).
+
+    k_exponent = e: with N = b x the file's photons a look-up's relative variance goes as 1 / k ~ b^-e
+    and its radius as (k / N)^(1/d) ~ b^((e - 1) / d) (d = 2 for STANDARD's disc, 3 for KD4D's
+    ball in space x time), so e = 0 (the file's k throughout) shrinks only the radius, 0 < e < 1
+    shrinks both (consistent).  Which e pays depends on whether bias or variance dominates:
+    docs/compare.md, "k with the budget".
+    """
+    if not (k_exponent >= 0 and math.isfinite(k_exponent)):
+        raise StpmError(f"k exponent must be >= 0, got {k_exponent!r}")
+    return max(1, int(round(float(k_factor) * int(k_file) * float(photon_factor) ** float(k_exponent))))
 
 
 def plan_runs(settings, *, photon_budgets=DEFAULT_PHOTON_BUDGETS,
-              accumulation_steps=DEFAULT_ACCUMULATION_STEPS, estimators=PHOTON_ESTIMATORS) -> list[Run]:
+              accumulation_steps=DEFAULT_ACCUMULATION_STEPS, estimators=PHOTON_ESTIMATORS,
+              k_exponent: float = 0.0) -> list[Run]:
     """The sweep's runs, cheapest first (ties: ACCUMULATION, then STANDARD, TEMPORAL, KD4D).
 
-    photon_budgets : items b (photons x b) or (b, s) / 'b:s' (photons x b, samples x s).
+    photon_budgets : items b (photons x b), (b, s) / 'b:s' (and samples x s) or (b, s, f) / 'b:s:f'
+        (and k = f x the file's k x b^k_exponent, :func:`budget_k`).
+    k_exponent : how k grows with the photon factor b in the photon runs (0: the file's k throughout).
+        ACCUMULATION always uses the file's settings, k included.
     """
     budgets = sorted({parse_budget(b) for b in photon_budgets})
     steps = sorted({int(n) for n in accumulation_steps})
@@ -151,16 +184,22 @@ def plan_runs(settings, *, photon_budgets=DEFAULT_PHOTON_BUDGETS,
     for e in estimators:
         if e not in PHOTON_ESTIMATORS:
             raise StpmError(f"unknown estimator {e!r} (choose from {', '.join(PHOTON_ESTIMATORS)})")
-    runs = []
+    runs, seen = [], set()
     # -- Photon estimators at each budget -------------------------------------------
-    for b, s in budgets:
+    for b, s, f in budgets:
+        k = budget_k(settings.k_nearest, b, f, k_exponent)
+        samples = max(1, int(round(settings.samples * s)))
         for est in estimators:
+            label = f"{est} {budget_label(b, s, None if k == settings.k_nearest else k)}"
+            if label in seen:          # two budgets that round to the same run
+                continue
+            seen.add(label)
             st = settings.replace(method="PHOTON", estimator=est,
                                   photons_caustic=int(round(settings.photons_caustic * b)),
                                   photons_global=int(round(settings.photons_global * b)),
-                                  samples=max(1, int(round(settings.samples * s))))
-            runs.append(Run(label=f"{est} {_factor_label(b, s)}", method=est, settings=st,
-                            photon_factor=b, sample_factor=s, cost=0.5 * (b + s)))
+                                  samples=samples, k_nearest=k)
+            runs.append(Run(label=label, method=est, settings=st,
+                            photon_factor=b, sample_factor=s, k_factor=f, cost=0.5 * (b + s)))
     # -- Accumulation buffer with N stills ----------------------------------------------
     for n in steps:
         st = settings.replace(method="ACCUMULATION", accumulation_steps=n)
@@ -174,19 +213,59 @@ def plan_runs(settings, *, photon_budgets=DEFAULT_PHOTON_BUDGETS,
 # ----------------------------------------------------------------------------
 # Sweep
 # ----------------------------------------------------------------------------
+WARM_UP_RESOLUTION = (16, 16)
+WARM_UP_PHOTONS = 2000
+
+
+def warm_up(scene, runs: list[Run]) -> float:
+    """Render each distinct (method, estimator) of ``runs`` once, tiny, untimed; returns the seconds spent.
+
+    The first render in a process loads (or compiles) the numba kernels of its code path: measured
+    0.4-0.7 s with a warm on-disk cache and 2-3 s after a source change, against 0.16 s for a
+    whole 96 x 64 still, all charged to whichever run happens to go first.  A 16 x 16 render with
+    at most 2000 photons and 1 sample per pixel per code path takes that cost out of the timings.
+    """
+    import dataclasses
+
+    from ..render import render
+
+    t0 = _time.perf_counter()
+    small = dataclasses.replace(scene, resolution=WARM_UP_RESOLUTION)
+    seen = set()
+    for run in runs:
+        st = run.settings
+        key = (st.method, st.estimator)
+        if key in seen:
+            continue
+        seen.add(key)
+        st = st.replace(samples=1, accumulation_steps=1,
+                        photons_caustic=min(int(st.photons_caustic), WARM_UP_PHOTONS),
+                        photons_global=min(int(st.photons_global), WARM_UP_PHOTONS))
+        try:
+            render(small, st)
+        except StpmError:
+            pass                      # the timed run will fail again and say why
+    return _time.perf_counter() - t0
+
+
 def run_sweep(scene, runs: list[Run], reference_rgb: np.ndarray, *, time_budget: float | None = None,
-              progress=None, cancel=None, with_flip: bool = True) -> dict:
+              progress=None, cancel=None, with_flip: bool = True, warm: bool = True) -> dict:
     """Render every run (until the time budget is spent) and measure it against the reference.
+
+    warm : first render every code path once, tiny and untimed (:func:`warm_up`), so that no run's
+    wall time includes loading the compiled kernels.  Not counted against ``time_budget``.
 
     reference_rgb : (H, W, 3) linear RGB.  progress(fraction, message) spans
     the whole sweep, weighted by each run's estimated cost.
     cancel() -> bool stops the sweep (the running render within about a second); the
     unfinished runs are marked skipped ('cancelled') so a partial report can still be written.
-    Returns {'sweep_wall_s', 'time_budget_s', 'skipped': [labels], 'budget_exhausted': bool,
+    Returns {'sweep_wall_s', 'warm_up_s', 'time_budget_s', 'skipped': [labels], 'budget_exhausted': bool,
     'cancelled': bool}.
     """
     from ..render import render
 
+    skip_all = time_budget is not None and time_budget <= 0
+    warm_s = warm_up(scene, [r for r in runs if r.status == "pending"]) if warm and runs and not skip_all else 0.0
     total_cost = sum(r.cost for r in runs) or 1.0
     done_cost = 0.0
     t_start = _time.perf_counter()
@@ -234,7 +313,7 @@ def run_sweep(scene, runs: list[Run], reference_rgb: np.ndarray, *, time_budget:
         done_cost += run.cost
         if progress is not None:
             progress(done_cost / total_cost, f"[{i + 1}/{len(runs)}] {run.label}: done in {run.wall_s:.1f} s")
-    return {"sweep_wall_s": _time.perf_counter() - t_start,
+    return {"sweep_wall_s": _time.perf_counter() - t_start, "warm_up_s": warm_s,
             "time_budget_s": None if time_budget is None else float(time_budget),
             "skipped": [r.label for r in runs if r.status == "skipped"],
             "budget_exhausted": exhausted, "cancelled": cancelled}
