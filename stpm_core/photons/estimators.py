@@ -430,16 +430,14 @@ class PhotonMap:
                     qb = q[a:a + batch]
                     Phi[qb], r[qb], tau[qb] = self._temporal(p[qb], ns[qb], t[qb], kj, mj, kernel,
                                                              tree=tree, rows=rows)
-        norm = 1.0 - 2.0 / (3.0 * CONE_K) if kernel == "CONE" else 1.0
-        area = norm * np.pi * np.maximum(r, 1e-12) ** 2                       # m^2
-        W = shutter_mass(self.shutter, np.maximum(t - tau, lo), np.minimum(t + tau, hi))
-        return Phi / (area * np.maximum(W, 1e-12))[:, None]
+        return self._normalise("TEMPORAL", Phi, r, tau, t, kernel, lo=lo, hi=hi)
 
     # -- normalisations (docs/photon-mapping.md, section 5) -------------------------------------------
-    def _normalise(self, estimator, Phi, r, tau, t, kernel):
+    def _normalise(self, estimator, Phi, r, tau, t, kernel, lo=0.0, hi=1.0):
         """E (n, 3) W/m^2 from summed power Phi (n, 3) W, the k-th / m-th radius r (n,) and tau (n,).
 
-        STANDARD: pi r_k^2; TEMPORAL: pi r_m^2 W(t - tau, t + tau); KD4D: the clipped ball V(R)/s;
+        STANDARD: pi r_k^2; TEMPORAL: pi r_m^2 W, W the shutter mass of [t - tau, t + tau] cut to
+        [lo, hi] (the shutter, or a time slice: scalars or (n,)); KD4D: the clipped ball V(R)/s;
         each times the kernel's mean weight over its neighbourhood.
         """
         cone = kernel == "CONE"
@@ -450,7 +448,7 @@ class PhotonMap:
         norm = 1.0 - 2.0 / (3.0 * CONE_K) if cone else 1.0       # mean cone weight over a disc
         area = norm * np.pi * np.maximum(r, 1e-12) ** 2          # m^2
         if estimator == "TEMPORAL":
-            W = shutter_mass(self.shutter, t - tau, t + tau)      # shutter mass of the clipped window
+            W = shutter_mass(self.shutter, np.maximum(t - tau, lo), np.minimum(t + tau, hi))  # clipped window
             area = area * np.maximum(W, 1e-12)                    # m^2 (x mass)
         return Phi / area[:, None]
 
