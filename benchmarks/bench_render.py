@@ -28,6 +28,8 @@ per ray, moving over static), plus the tracer's split between ray casting
 (CPU seconds inside the caster's calls) and everything else (sampling,
 shading, film).
 Targets (issue 2): tracer_over_raw >= 0.5, motion_over_static_cost <= 1.5.
+``shading_kernels`` says whether the tracer ran its compiled kernels
+(``stpm_core.shading_kernels``; ``STPM_NO_NUMBA=1`` measures the numpy path).
 """
 from __future__ import annotations
 
@@ -144,7 +146,9 @@ def run(repeats: int = 2) -> dict:
     from stpm_core.raycast import make_caster
     from .bench_rays import _raw_embree
 
-    out: dict = {"resolution": f"{WIDTH}x{HEIGHT}", "spp": SPP}
+    from stpm_core import shading_kernels
+
+    out: dict = {"resolution": f"{WIDTH}x{HEIGHT}", "spp": SPP, "shading_kernels": shading_kernels.AVAILABLE}
     if not embree_available():
         out["skipped"] = "embreex not importable"
         return out

@@ -15,8 +15,12 @@ smooth coverage ramp across pixel boundaries.
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import scipy.sparse
+
+from . import shading_kernels as _K
 
 __all__ = ["PASSES", "PASS_NAMES", "pass_channels", "blackman_harris", "Film"]
 
@@ -70,6 +74,20 @@ def _blackman_harris32(x: np.ndarray, radius: float) -> np.ndarray:
          + c * (np.float32(0.48829 - 3 * 0.01168) + np.float32(4 * 0.01168) * c2))
     w[np.abs(x) >= np.float32(radius)] = 0.0
     return w
+
+
+_WIN = threading.local()
+
+
+def _window_buffer(shape: tuple) -> np.ndarray:
+    """A zeroed float64 array of ``shape`` in this thread's reused buffer (valid until its next call)."""
+    size = int(np.prod(shape))
+    buf = getattr(_WIN, "buf", None)
+    if buf is None or buf.size < size:
+        buf = _WIN.buf = np.empty(size)
+    out = buf[:size].reshape(shape)
+    out[:] = 0.0
+    return out
 
 
 class Film:
@@ -204,6 +222,9 @@ class Film:
         P = tw * th
         if n == 0 or P == 0:
             return None
+        if _K.AVAILABLE:
+            V = np.concatenate([np.asarray(values[name], np.float64).reshape(n, c) for name, c, _ in PASSES], axis=1)
+            return self.splat_tile_matrix(x0, y0, tw, th, px, py, V)
         S = n // P
         # Sample values (n, k + 1) float32 of the passes that are not all zero in this
         # tile (they add nothing); the last column counts the weight sum
@@ -248,6 +269,72 @@ class Film:
             return None
         w = win[ya - y0 - lo:yb - y0 - lo, xa - x0 - lo:xb - x0 - lo]
         return (ya, yb, xa, xb), [(c0, c) for c0, c, _ in active], w
+
+    def splat_tile_matrix(self, x0: int, y0: int, tw: int, th: int, px: np.ndarray, py: np.ndarray,
+                          V: np.ndarray, combined_is_sum: bool = False, alpha_one: bool = False,
+                          zero: tuple = (), scan: bool = True, channels: np.ndarray | None = None,
+                          columns: np.ndarray | None = None):
+        """:meth:`splat_tile` with the sample values as one matrix V (n, m) float64, by the
+        compiled kernel ``shading_kernels.splat_tile`` (float32 per-pixel sums as in the
+        numpy splat, float64 window).  Needs ``shading_kernels.AVAILABLE``.
+
+        channels (m,): the image channel (:data:`PASSES` order, 0 .. 19) of
+        each column of V; None = V has all 20 channels in order.  columns: the
+        columns to sum (None: all; with ``scan`` the all-zero ones are then
+        skipped, ``zero`` names passes known to be 0).  The splat is linear in
+        V, so channels that are fixed combinations of others need no sums of
+        their own: ``combined_is_sum`` (Combined RGB = Emit + Direct + Indirect
+        + Caustic for every sample, as the integrator makes it) and
+        ``alpha_one`` (Combined alpha = 1: its sum is the weight sum) take them
+        from the other sums.  Returns the :meth:`splat_tile` window format
+        with every pass.
+        """
+        n = px.shape[0]
+        P = tw * th
+        if n == 0 or P == 0:
+            return None
+        C = self.n_channels
+        V = np.ascontiguousarray(V, np.float64)
+        chan = np.arange(C) if channels is None else np.asarray(channels, np.int64)
+        if columns is None:
+            skip = np.zeros(V.shape[1], bool)
+            skip |= (chan < 3) if combined_is_sum else False
+            skip |= (chan == 3) if alpha_one else False
+            for name in zero:
+                c0 = self._first_channel(name)
+                skip |= (chan >= c0) & (chan < c0 + pass_channels(name))
+            act = _K.active_channels(V, skip) if scan else np.flatnonzero(~skip)
+        else:
+            act = np.asarray(columns, np.int64)
+        offsets = self._offsets()
+        lo, k1 = offsets[0], len(offsets)
+        win = _window_buffer((th + k1 - 1, tw + k1 - 1, act.size + 1))
+        _K.splat_tile(tw, th, n // P, np.ascontiguousarray(px, np.float64), np.ascontiguousarray(py, np.float64),
+                      V, act, self.radius, lo, k1, win)
+        ya, yb = max(y0 + lo, 0), min(y0 + lo + th + k1 - 1, self.height)
+        xa, xb = max(x0 + lo, 0), min(x0 + lo + tw + k1 - 1, self.width)
+        if ya >= yb or xa >= xb:
+            return None
+        # Image channels: the sums, Combined RGB from its parts (in Emit, Direct, Indirect,
+        # Caustic order, float64), Combined alpha from the weight sum
+        summed = chan[act]
+        comb = np.array([int(np.flatnonzero(summed == c0)[0]) for c0 in
+                         (self._first_channel(name) for name in ("Emit", "Direct", "Indirect", "Caustic"))
+                         if combined_is_sum and np.any(summed == c0)], np.int64)
+        w = np.empty((yb - ya, xb - xa, C + 1), np.float32)
+        _K.splat_finish(win, ya - y0 - lo, yb - y0 - lo, xa - x0 - lo, xb - x0 - lo, np.ascontiguousarray(summed),
+                        comb, bool(alpha_one), w)
+        return (ya, yb, xa, xb), [(0, C)], w
+
+    @staticmethod
+    def _first_channel(name: str) -> int:
+        """First image channel of pass ``name`` in :data:`PASSES` order."""
+        c0 = 0
+        for n, c, _ in PASSES:
+            if n == name:
+                return c0
+            c0 += c
+        raise KeyError(name)
 
     def resolve(self) -> dict[str, np.ndarray]:
         """The passes as name -> (H, W, C) float32: weighted sums over weight sums.

@@ -32,16 +32,18 @@ cannot be weighted by a glossy lobe without incoming directions).
 from __future__ import annotations
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import shading_kernels as _K
 from .bsdf import MaterialTable, bsdf_eval, bsdf_sample, diffuse_albedo, emission, has_nondelta
-from .camera import camera_to_world, generate_rays
+from .camera import camera_to_world, generate_rays, image_plane
 from .errors import RenderCancelled
-from .film import DEPTH_BACKGROUND, Film
-from .sampling import rng_for
+from .film import DEPTH_BACKGROUND, PASSES, Film
+from .sampling import rng_for, skip_uniforms
 
 __all__ = ["TraceStats", "trace_image", "camera_samples", "shade_paths"]
 
@@ -91,6 +93,8 @@ def camera_samples(ix: np.ndarray, iy: np.ndarray, spp: int, shutter, rng: np.ra
     cols = spp // rows), leftover samples uniform.  Time: xi = (pi_p(j) + U) / spp
     with pi_p a random permutation per pixel, mapped through ``shutter.sample``
     (the shutter curve's inverse CDF); ``time_override`` fixes every time.
+    The time numbers take their place in the random stream in every case (an
+    instant shutter sees the paths of a very short one).
     """
     P, S = ix.shape[0], int(spp)
     rows = max(1, int(np.floor(np.sqrt(S))))
@@ -103,14 +107,15 @@ def camera_samples(ix: np.ndarray, iy: np.ndarray, spp: int, shutter, rng: np.ra
     uy = np.concatenate([np.broadcast_to((cy / rows), (P, m)) + jit[:, :m, 1] / rows, jit[:, m:, 1]], axis=1)
     px = (ix[:, None] + ux).ravel()
     py = (iy[:, None] + uy).ravel()
-    # Time strata, permuted independently in each pixel
+    # Time strata, permuted independently in each pixel (when every time is the same the
+    # numbers are skipped, not made: the stream stays where drawing them would leave it)
+    if time_override is not None or shutter.is_instant:
+        skip_uniforms(rng, 2 * P * S)
+        times = np.full(P * S, float(time_override)) if time_override is not None else shutter.sample(np.zeros(P * S))
+        return px, py, times
     perm = np.argsort(rng.random((P, S)), axis=1)
     xi = ((perm + rng.random((P, S))) / S).ravel()
-    if time_override is not None:
-        times = np.full(P * S, float(time_override))
-    else:
-        times = shutter.sample(xi)
-    return px, py, times
+    return px, py, shutter.sample(xi)
 
 
 # ----------------------------------------------------------------------------
@@ -132,6 +137,31 @@ def _rows(a: np.ndarray, sel: np.ndarray | None) -> np.ndarray:
     return a if sel is None else a[sel]
 
 
+def _is_delta_light(light) -> bool:
+    """A light sampled without random numbers: POINT / SPOT of radius 0, SUN of angle 0."""
+    if light.type in ("POINT", "SPOT"):
+        return float(light.radius) <= 0.0
+    return light.type == "SUN" and float(light.angle) <= 0.0
+
+
+def _light_uniforms(light, n: int, rng: np.random.Generator, out: np.ndarray | None = None) -> np.ndarray:
+    """Uniforms (n, 2) for one light's samples, one block of the stream per light.
+
+    Delta lights ignore them: their block is skipped (``skip_uniforms``) and
+    zeros are returned, the stream ending where drawing would leave it.
+    out: an (n, 2) buffer to draw into.
+    """
+    if _is_delta_light(light):
+        skip_uniforms(rng, 2 * n)
+        return np.zeros((n, 2)) if out is None else _fill(out, 0.0)
+    return rng.random((n, 2)) if out is None else rng.random(out=out)
+
+
+def _fill(a: np.ndarray, value: float) -> np.ndarray:
+    a[...] = value
+    return a
+
+
 def _direct(ctx, p, ng, ns, wo, mat, times, rng, stats: TraceStats) -> np.ndarray:
     """Next-event estimate (n, 3): sum over lights of f(wo, wi) |cos(ns, wi)| L_i / p * V.
 
@@ -145,7 +175,7 @@ def _direct(ctx, p, ng, ns, wo, mat, times, rng, stats: TraceStats) -> np.ndarra
         if lights.power[li] <= 0.0:
             continue
         # Sample a point / direction on the light at each sample's time
-        wi, dist, weight = lights.sample_direct(li, p, times, rng.random((n, 2)))
+        wi, dist, weight = lights.sample_direct(li, p, times, _light_uniforms(lights.lights[li], n, rng))
         f = bsdf_eval(ctx.table, mat, wo, wi, ns, ng)
         contrib = f * (np.abs(np.einsum("ij,ij->i", ns, wi)))[:, None]
         contrib *= weight
@@ -264,7 +294,14 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
     Bookkeeping: ``idx = None`` stands for "every sample, in order" (the first
     bounce, and later ones while no path has ended), so the common case pays
     for no gathers or scatters; ``beta = None`` is a throughput of 1.
+
+    With the compiled kernels (``shading_kernels.AVAILABLE``) the same
+    estimator runs through :func:`_shade_paths_fast` (same random numbers,
+    same result to float rounding).
     """
+    if _K.AVAILABLE and getattr(ctx, "kernels", False):
+        V = _shade_paths_fast(ctx, o, d, times, tmax0, rng, stats, cam_pos, cam_axis)
+        return _pass_views(V)
     n = o.shape[0]
     # Path state: idx maps live rows to samples (None = all), beta their throughput (None = 1)
     idx = None
@@ -393,6 +430,220 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
 
 
 # ----------------------------------------------------------------------------
+# The same paths through the compiled kernels (shading_kernels)
+# ----------------------------------------------------------------------------
+# Column of each pass in the per-sample matrix V (n, 20): PASSES order
+_COL = {}
+_c = 0
+for _name, _nc, _ in PASSES:
+    _COL[_name] = (_c, _c + _nc)
+    _c += _nc
+N_CHANNELS = _c
+_NO_IDX = np.zeros(0, np.int64)
+_NO_ROWS3 = np.zeros((0, 3))
+
+
+def _compact_layout(ctx) -> dict[str, tuple[int, int]]:
+    """Columns of the per-sample matrix of a tile: only the passes this render can fill.
+
+    Depth, Normal, Emit, Direct always; Indirect / Caustic with their photon
+    map; ``Alpha`` (the coverage, Combined's alpha) with a transparent film.
+    Combined RGB (= Emit + Direct + Indirect + Caustic) and an alpha of 1 are
+    formed by the splat.  Narrow rows: the tile's matrix is streamed from
+    memory several times (first hit, next-event estimation, splat).
+    """
+    names = [("Depth", 1), ("Normal", 3), ("Emit", 3), ("Direct", 3)]
+    if "Indirect" not in ctx.zero_passes:
+        names.append(("Indirect", 3))
+    if "Caustic" not in ctx.zero_passes:
+        names.append(("Caustic", 3))
+    if ctx.film_transparent:
+        names.append(("Alpha", 1))
+    out, c = {}, 0
+    for name, k in names:
+        out[name] = (c, c + k)
+        c += k
+    return out
+
+
+def _pass_views(V: np.ndarray) -> dict[str, np.ndarray]:
+    """Pass name -> (n, C) view of the per-sample matrix V (n, 20)."""
+    return {name: V[:, a:b] for name, (a, b) in _COL.items()}
+
+
+def _first_pose(a: np.ndarray) -> np.ndarray:
+    """(k, 3) contiguous: one row when every row of a (n, 3) is the same view (stride 0)."""
+    a = np.asarray(a, np.float64)
+    if a.shape[0] > 0 and a.strides[0] == 0:
+        return np.ascontiguousarray(a[:1])
+    return np.ascontiguousarray(a)
+
+
+def _direct_fast(ctx, sh: np.ndarray, hits, d: np.ndarray, t_s: np.ndarray, rng, stats: TraceStats,
+                 dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool) -> bool:
+    """:func:`_direct` at the hit rows sh (k,) of ``hits`` (rays d), by the NEE kernels, added
+    straight into dst (n, 3) (the Direct pass: dst[idx[row]] += beta[row] * contribution, light by
+    light); returns whether any shadow ray was cast.
+
+    Same random numbers as :func:`_direct` (one (k, 2) block per light);
+    POINT / SPOT lights of radius 0 are sampled in the kernel, other lights by
+    ``LightSet.sample_direct``; materials with rough lobes get f from ``bsdf_eval``.
+    """
+    k = sh.size
+    cast_any = False
+    lights, table = ctx.lights, ctx.table
+    P, NG, NS, mat = hits.position, hits.ng, hits.ns, hits.material
+    gathered = None
+    so, sd = _scratch("so", (k, 3)), _scratch("sd", (k, 3))
+    stmax, live = _scratch("stmax", (k,)), _scratch("live", (k,), np.int64)
+    contrib = _scratch("contrib", (k, 3))
+    for li in range(len(lights)):
+        if lights.power[li] <= 0.0:
+            continue
+        light = lights.lights[li]
+        u = _light_uniforms(light, k, rng, out=_scratch("u_light", (k, 2)))
+        point = light.type in ("POINT", "SPOT") and float(light.radius) <= 0.0
+        if point and not ctx.rough_any:
+            C, _, _, Z = lights._frame(li, t_s[:1] if light.transform.is_static else t_s)
+            spot = light.type == "SPOT"
+            cos_half = float(np.cos(0.5 * light.spot_size)) if spot else 1.0
+            smooth = (1.0 - cos_half) * float(light.spot_blend) if spot else 0.0
+            m = _K.nee_point(sh, P, NG, NS, d, mat, _first_pose(C), lights.intensity(li), spot, cos_half, smooth,
+                             _first_pose(Z), _NO_ROWS3, False, table.w_base, table.coat, table.specular,
+                             table.ior, table.base_color, ctx.eps, contrib, so, sd, stmax, live)
+        else:
+            if gathered is None:
+                gathered = (P[sh], NG[sh], NS[sh], -d[sh], mat[sh])
+            p_s, ng_s, ns_s, wo_s, mat_s = gathered
+            wi, dist, weight = lights.sample_direct(li, p_s, t_s, u)
+            wi = np.ascontiguousarray(wi, np.float64)
+            weight = np.ascontiguousarray(np.broadcast_to(weight, (k, 3)), np.float64)
+            dist = np.ascontiguousarray(np.broadcast_to(dist, (k,)), np.float64)
+            if ctx.rough_any:
+                f, use_f = np.ascontiguousarray(bsdf_eval(table, mat_s, wo_s, wi, ns_s, ng_s)), True
+            else:
+                f, use_f = _NO_ROWS3, False
+            m = _K.nee_given(sh, P, NG, NS, d, mat, wi, dist, weight, f, use_f, table.w_base, table.coat,
+                             table.specular, table.ior, table.base_color, ctx.eps, contrib, so, sd, stmax, live)
+        if m == 0:
+            continue
+        lv = live[:m]
+        blocked = ctx.caster.occluded(so[:m], sd[:m], np.take(t_s, lv, out=_scratch("t_live", (m,))), stmax[:m])
+        stats.shadow_rays += m
+        cast_any = True
+        _K.nee_accumulate(dst, sh, idx_k, use_idx, beta_k, use_beta, contrib, lv,
+                          np.ascontiguousarray(blocked, np.bool_))
+    return cast_any
+
+
+def _shade_paths_fast(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_axis,
+                      V: np.ndarray | None = None, layout: dict | None = None,
+                      touched: set | None = None) -> np.ndarray:
+    """:func:`shade_paths` through the kernels -> V (n, 20): the passes' channels in PASSES order.
+
+    Same control flow, random numbers and estimator as the numpy loop in
+    :func:`shade_paths`; per bounce, ``classify_hits`` does the misses, the
+    emission and the first-hit passes in one pass over the hits, and the
+    shading / continuing rows index the caster's arrays directly (no gathers).
+    layout: pass name -> (first, end) column of V; None: every pass in
+    PASSES order (20 columns, Combined included).  Other layouts come from
+    :func:`_compact_layout` (no Combined: ``Film.splat_tile_matrix`` derives it).
+    V: an (n, width) float64 buffer to fill, any content (None: a new one).
+    touched: a set that receives the names of the passes among Emit, Direct,
+    Indirect and Caustic that got any value (the others are 0 everywhere).
+    """
+    n = o.shape[0]
+    full = layout is None
+    cols = _COL if full else layout
+    if V is None:
+        V = np.empty((n, max(b for _, b in cols.values())))   # classify_hits starts every row (first bounce)
+    L_emit, L_direct = V[:, slice(*cols["Emit"])], V[:, slice(*cols["Direct"])]
+    L_indirect = V[:, slice(*cols["Indirect"])] if "Indirect" in cols else None
+    L_caustic = V[:, slice(*cols["Caustic"])] if "Caustic" in cols else None
+    covered = np.empty(n) if full else _scratch("covered", (n,))
+    cam_pos, cam_axis = _first_pose(cam_pos), _first_pose(cam_axis)
+    world_L = np.asarray(ctx.world_radiance, np.float64)
+    world_on = bool(np.any(world_L > 0))
+    table = ctx.table
+    # Passes that received something (the others stay 0: the splat can skip them)
+    touched = set() if touched is None else touched
+    idx = None
+    beta = None
+    tmax = tmax0
+    for bounce in range(ctx.max_depth + 1):
+        m = n if idx is None else idx.size
+        if m == 0:
+            break
+        t = times if idx is None else times[idx]
+        hits = ctx.caster.intersect(o, d, t, tmax)
+        if bounce == 0:
+            stats.camera_rays += m
+        else:
+            stats.bounce_rays += m
+        use_idx, use_beta = idx is not None, beta is not None
+        idx_k = idx if use_idx else _NO_IDX
+        beta_k = beta if use_beta else _NO_ROWS3
+        sh, spec = _scratch("sh", (m,), np.int64), _scratch("spec", (m,), np.int64)
+        n_hit, n_sh, n_spec, n_emit = _K.classify_hits(
+            hits.t, hits.material, table.nondelta, ctx.has_delta, ctx.emissive, table.emission, world_L,
+            world_on and not (bounce == 0 and ctx.film_transparent), idx_k, use_idx, beta_k, use_beta, V,
+            cols["Emit"][0], bounce == 0, cols["Depth"][0], cols["Normal"][0], DEPTH_BACKGROUND,
+            hits.position, hits.ns, cam_pos, cam_axis, covered, sh, spec)
+        if ctx.visible_lights:
+            # After classify_hits, which starts the rows (the numpy loop adds these first: the same
+            # sum on the first bounce, where each row gets at most one other term; rounding later)
+            val = _seen_lights(ctx.lights, o, d, t, hits.t, camera_ray=(bounce == 0),
+                               visible_camera=ctx.light_visible_camera)
+            _K.scatter_add(L_emit, np.arange(m), idx_k, use_idx, beta_k, use_beta, val)
+            touched.add("Emit")
+        if n_emit:
+            touched.add("Emit")
+        if n_hit == 0:
+            break
+        sh, spec = sh[:n_sh], spec[:n_spec]
+        if n_sh:
+            t_s = np.take(t, sh, out=_scratch("t_s", (n_sh,)))
+            if len(ctx.lights) and _direct_fast(ctx, sh, hits, d, t_s, rng, stats, L_direct, idx_k, use_idx,
+                                                beta_k, use_beta):
+                touched.add("Direct")
+            if ctx.maps is not None:
+                p_s, ns_s, wo_s, mat_s = hits.position[sh], hits.ns[sh], -d[sh], hits.material[sh]
+                ns_f = _face_forward(ns_s, wo_s)
+                for kind, dst in (("caustic", L_caustic), ("global", L_indirect)):
+                    val = _photon_term(ctx, kind, p_s, ns_f, wo_s, mat_s, t_s, stats)
+                    if val is not None:
+                        _K.scatter_add(dst, sh, idx_k, use_idx, beta_k, use_beta, np.ascontiguousarray(val))
+                        touched.add("Caustic" if kind == "caustic" else "Indirect")
+        if bounce == ctx.max_depth or n_spec == 0:
+            break
+        # -- Continue through delta lobes only (as in shade_paths) ---------------------------
+        u = rng.random((n_spec, 3))
+        idx = spec if idx is None else idx[spec]
+        beta = None if beta is None else beta[spec]
+        p, ng, ns, mat = hits.position[spec], hits.ng[spec], hits.ns[spec], hits.material[spec]
+        wo = -d[spec]
+        wi, weight, is_delta = bsdf_sample(table, mat, wo, ns, ng, u)
+        beta = weight if beta is None else beta * weight
+        go = is_delta & np.any(beta > 0.0, axis=1)
+        if bounce + 1 >= RR_START:
+            q = np.clip(np.max(beta, axis=1), 0.05, 1.0)
+            go &= rng.random(idx.size) < q
+            beta = beta / q[:, None]
+        idx, beta = idx[go], np.ascontiguousarray(beta[go])
+        o = _offset(p[go], ng[go], wi[go], ctx.eps)
+        d = np.ascontiguousarray(wi[go])
+        tmax = None
+
+    if full:
+        a, b = _COL["Combined"]
+        V[:, a:a + 3] = L_emit + L_direct + L_indirect + L_caustic
+        V[:, a + 3] = covered if ctx.film_transparent else 1.0
+    elif "Alpha" in cols:
+        V[:, cols["Alpha"][0]] = covered
+    return V
+
+
+# ----------------------------------------------------------------------------
 # The image
 # ----------------------------------------------------------------------------
 @dataclass
@@ -414,6 +665,10 @@ class _Context:
     any_emission: bool = True                # some material emits
     emissive: np.ndarray = None              # (M + 1,) bool per material: emits
     light_visible_camera: list = None        # per light: seen by camera rays (Blender's visible_camera)
+    rough_any: bool = False                  # some material has a rough (GGX) lobe
+    kernels: bool = False                    # shade with the compiled kernels (shading_kernels)
+    zero_passes: tuple = ()                  # passes that stay 0 for every sample
+    layout: dict = None                      # columns of a tile's per-sample matrix (_compact_layout)
 
 
 def _has_delta_lobe(materials) -> np.ndarray:
@@ -452,6 +707,76 @@ def _map_kinds(maps) -> dict:
     return kinds
 
 
+class _ThreadScratch(threading.local):
+    """Per-thread buffers reused from tile to tile (fresh large arrays cost page faults)."""
+
+    def __init__(self):
+        self.bufs: dict = {}
+
+
+_SCRATCH = _ThreadScratch()
+
+
+def _scratch(name: str, shape: tuple, dtype=np.float64) -> np.ndarray:
+    """This thread's buffer ``name`` viewed as an uninitialised array of shape / dtype.
+
+    Valid until the same thread asks for ``name`` again (the next tile).
+    """
+    size = int(np.prod(shape))
+    buf = _SCRATCH.bufs.get(name)
+    if buf is None or buf.size < size or buf.dtype != np.dtype(dtype):
+        buf = np.empty(size, dtype)
+        _SCRATCH.bufs[name] = buf
+    return buf[:size].reshape(shape)
+
+
+def _trace_tile_fast(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, time_override, tstats):
+    """One tile through the kernels: (film window, TraceStats); same samples as the numpy tile.
+
+    Draws the camera uniforms in :func:`camera_samples`' order, makes rays with
+    ``camera_rays`` (the formulas of ``camera.generate_rays``), shades with
+    :func:`_shade_paths_fast` and splats with ``Film.splat_tile_matrix``.
+    """
+    P, S = tw * th, int(spp)
+    n = P * S
+    # The uniforms of camera_samples, in its order (drawn into reused buffers)
+    jit = rng.random(out=_scratch("jit", (P, S, 2)))
+    px, py, xi = _scratch("px", (n,)), _scratch("py", (n,)), _scratch("xi", (n,))
+    with_time = time_override is None and not shutter.is_instant
+    if with_time:
+        perm_u = rng.random(out=_scratch("perm_u", (P, S)))
+        time_u = rng.random(out=_scratch("time_u", (P, S)))
+    else:
+        skip_uniforms(rng, 2 * P * S)
+        perm_u = time_u = np.zeros((P, 0))
+    _K.camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, px, py, xi)
+    if time_override is not None:
+        times = np.full(n, float(time_override))
+    else:
+        times = shutter.sample(xi if with_time else np.zeros(n))
+    R, pos = camera_to_world(cam, times[:1] if cam.transform.is_static else times)
+    R = np.ascontiguousarray(R[:1] if cam.transform.is_static else R, np.float64)
+    pos = np.ascontiguousarray(pos[:1] if cam.transform.is_static else pos, np.float64)
+    half_w, half_h, cx, cy = image_plane(cam, resolution)
+    o, d, tmax0 = _scratch("o", (n, 3)), _scratch("d", (n, 3)), _scratch("tmax0", (n,))
+    _K.camera_rays(px, py, int(resolution[0]), int(resolution[1]), float(half_w), float(half_h), float(cx),
+                   float(cy), R, pos, cam.type == "ORTHO", float(cam.clip_start), float(cam.clip_end), o, d, tmax0)
+    axis = np.ascontiguousarray(-R[:, :, 2])
+    touched: set = set()
+    layout = ctx.layout
+    V = _shade_paths_fast(ctx, o, d, times, tmax0, rng, tstats, pos, axis,
+                          V=_scratch("V", (n, max(b for _, b in layout.values()))), layout=layout, touched=touched)
+    # Image channel of every column of V; columns of passes nothing reached are left out
+    chan, keep = [], []
+    for name, (a, b) in layout.items():
+        c0 = _COL["Combined"][0] + 3 if name == "Alpha" else _COL[name][0]
+        chan.extend(range(c0, c0 + b - a))
+        keep.extend([name not in ("Emit", "Direct", "Indirect", "Caustic") or name in touched] * (b - a))
+    return film.splat_tile_matrix(x0, y0, tw, th, px, py, V, combined_is_sum=True,
+                                  alpha_one=not ctx.film_transparent, channels=np.asarray(chan),
+                                  columns=np.flatnonzero(keep)), tstats
+
+
 def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_override: float | None = None,
                 stream: int = 0, progress=None, cancel=None, progress_span=(0.0, 1.0)) -> tuple[dict, TraceStats]:
     """Trace the whole image; returns (passes name -> (H, W, C) float32, TraceStats).
@@ -486,6 +811,12 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     ctx.light_visible_camera = [bool(v) for v in (scene.metadata.get("light_visible_camera") or [])]
     ctx.visible_lights = any(l.type == "AREA" or (l.type in ("POINT", "SPOT") and l.radius > 0)
                              for l in lights.lights)
+    ctx.rough_any = bool(np.any(table.rough_lobe))
+    ctx.kernels = _K.AVAILABLE
+    # Passes no sample can reach: photon passes without that map (the splat skips them)
+    ctx.zero_passes = tuple(name for name, kind in (("Caustic", "caustic"), ("Indirect", "global"))
+                            if maps is None or not ctx.map_kinds.get(kind, False))
+    ctx.layout = _compact_layout(ctx)
     film = Film(W, H, settings.filter_width)
     cam = scene.camera
 
@@ -501,6 +832,15 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
         # Pixels of the tile and their camera samples
         gy, gx = np.mgrid[y0:min(y0 + side, H), x0:min(x0 + side, W)]
         rng = rng_for(settings.seed, STREAM_CAMERA, stream, ti)
+        if ctx.kernels and _K.AVAILABLE:
+            try:
+                return _trace_tile_fast(ctx, film, cam, (W, H), x0, y0, gx.shape[1], gx.shape[0], spp,
+                                        scene.shutter, rng, time_override, tstats)
+            except _K.CompileError as exc:
+                # numba could not compile a kernel here: numpy from now on, this tile again
+                _K.disable(f"{type(exc).__name__}: {exc}")
+                tstats = TraceStats()
+                rng = rng_for(settings.seed, STREAM_CAMERA, stream, ti)
         px, py, times = camera_samples(gx.ravel(), gy.ravel(), spp, scene.shutter, rng, time_override)
         o, d = generate_rays(cam, (W, H), px, py, times)
         # Camera pose per sample (once for a static camera) for Depth and clipping

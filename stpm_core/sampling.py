@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
-    "rng_for", "orthonormal_basis", "to_world", "cosine_hemisphere", "uniform_sphere",
+    "rng_for", "skip_uniforms", "orthonormal_basis", "to_world", "cosine_hemisphere", "uniform_sphere",
     "uniform_cone", "uniform_cone_pdf", "concentric_disk", "stratified_1d", "stratified_2d",
 ]
 
@@ -31,6 +31,18 @@ def rng_for(seed: int, *stream: int) -> np.random.Generator:
     """
     entropy = [int(seed) & 0xFFFFFFFFFFFFFFFF] + [int(s) & 0xFFFFFFFFFFFFFFFF for s in stream]
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence(entropy)))
+
+
+def skip_uniforms(rng: np.random.Generator, n: int) -> None:
+    """Move ``rng`` past n float64 uniforms without making them.
+
+    ``rng.random`` takes one 64-bit output of the bit generator per float64,
+    so advancing the bit generator by n leaves the stream exactly where
+    ``rng.random(n)`` would (tests/test_shading_kernels.py checks it).  For
+    numbers a value ignores (times of an instant shutter, uniforms of a point
+    light): the rest of the stream, and so the image, stays the same.
+    """
+    rng.bit_generator.advance(int(n))
 
 
 def orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,197 @@
+"""The compiled tracer kernels (stpm_core.shading_kernels) against the numpy path they replace.
+
+Both paths draw the same random numbers, so a render with the kernels and one
+with ``shading_kernels.AVAILABLE = False`` (the numpy fallback, as with
+STPM_NO_NUMBA=1) must agree to float rounding, pass by pass.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from scenes import (box_mesh, look_at, make_scene, moving, ortho_camera_down, persp_camera, plane_mesh, point_light,
+                    sphere_mesh, translate)
+from stpm_core import shading_kernels as K
+from stpm_core.film import PASSES, Film, blackman_harris
+from stpm_core.integrator import camera_samples
+from stpm_core.motion import MotionTransform
+from stpm_core.render import render
+from stpm_core.scene import Light, Material
+from stpm_core.settings import RenderSettings
+from stpm_core.shutter import Shutter
+
+pytestmark = pytest.mark.skipif(not K.AVAILABLE, reason=f"numba kernels unavailable: {K.IMPORT_ERROR}")
+
+
+def _both(scene, settings, monkeypatch):
+    """(kernels, numpy) passes of the same render."""
+    a = render(scene, settings).passes
+    with monkeypatch.context() as m:
+        m.setattr(K, "AVAILABLE", False)
+        b = render(scene, settings).passes
+    return a, b
+
+
+def _assert_close(a, b):
+    for name, _, _ in PASSES:
+        x, y = a[name].astype(np.float64), b[name].astype(np.float64)
+        scale = max(np.abs(y).max(), 1e-30)
+        assert np.allclose(x, y, rtol=2e-5, atol=2e-6 * scale), (name, np.abs(x - y).max(), scale)
+
+
+def _spot(pos, target, power):
+    return Light(type="SPOT", power=power, transform=MotionTransform.static(look_at(pos, target)),
+                 radius=0.0, spot_size=0.9, spot_blend=0.3)
+
+
+def _area(pos, size, power):
+    M = translate(*pos)
+    return Light(type="AREA", power=power, transform=MotionTransform.static(M), size=size)
+
+
+def _scene(materials, lights, camera=None, shutter=None, world=(0.05, 0.06, 0.07), metadata=None):
+    objs = [plane_mesh(8.0),
+            (sphere_mesh(0.5, 8, 16, material=1), moving((-0.6, 0, 0.5), (0.4, 0.1, 0.6))),
+            (box_mesh((-0.3, -0.3, 0), (0.3, 0.3, 0.4), material=2), translate(0.9, 0.6, 0.0)),
+            (box_mesh((-0.15, -0.15, 0), (0.15, 0.15, 0.1), material=3), translate(-1.0, 1.0, 1.2))]
+    return make_scene(objs, materials, camera or persp_camera((0.5, -4, 2.5), (0, 0, 0.4)), lights,
+                      world=world, resolution=(37, 29), shutter=shutter or Shutter(1.0, 1.5), metadata=metadata)
+
+
+_SMOOTH = [Material.diffuse((0.7, 0.6, 0.5)), Material.glass(1.5),
+           Material(base_color=np.array([0.3, 0.5, 0.6]), specular=0.5, roughness=0.0),
+           Material.emitter((4.0, 3.0, 2.0))]
+_LIGHTS = [point_light((1, -1, 3), 300.0), _spot((-1.5, -1.0, 3.0), (0, 0, 0), 500.0)]
+
+
+def test_kernels_match_numpy_point_and_spot_lights(monkeypatch):
+    """Point + spot lights (sampled in the kernel), a mesh light, glass chains, motion, world: same image."""
+    st = RenderSettings(samples=5, photons_caustic=0, photons_global=0, seed=11, threads=1, max_depth=6)
+    a, b = _both(_scene(_SMOOTH, _LIGHTS), st, monkeypatch)
+    _assert_close(a, b)
+    assert a["Direct"].max() > 0 and a["Emit"].max() > 0
+
+
+def test_kernels_match_numpy_other_lights_rough_materials_transparent_film(monkeypatch):
+    """Area / soft point / sun lights (sampled by LightSet), rough lobes (f from bsdf_eval), alpha = coverage."""
+    mats = [Material(base_color=np.array([0.6, 0.6, 0.6]), specular=0.5, roughness=0.4), Material.glass(1.4),
+            Material(base_color=np.array([0.8, 0.7, 0.3]), metallic=1.0, roughness=0.3),
+            Material.emitter((2.0, 2.0, 2.0))]
+    sun = Light(type="SUN", power=2.0, transform=MotionTransform.static(look_at((1, -2, 4), (0, 0, 0))), angle=0.1)
+    lights = [_area((0.5, 0.0, 2.5), 0.8, 200.0), point_light((-1, -1, 2.5), 150.0, radius=0.2), sun]
+    st = RenderSettings(samples=4, photons_caustic=0, photons_global=0, seed=5, threads=2, filter_width=2.3)
+    a, b = _both(_scene(mats, lights, world=(0.0, 0.0, 0.0), metadata={"film_transparent": True}), st, monkeypatch)
+    _assert_close(a, b)
+    assert 0.0 < a["Combined"][..., 3].min() or a["Combined"][..., 3].max() <= 1.0
+
+
+def test_kernels_match_numpy_ortho_box_filter_with_photons(monkeypatch):
+    """Ortho camera, box filter, caustic and global photon maps (PhotonMaps.estimate on the same points)."""
+    st = RenderSettings(samples=3, photons_caustic=4000, photons_global=4000, seed=2, threads=1, filter_width=0.0)
+    sc = _scene(_SMOOTH, _LIGHTS[:1], camera=ortho_camera_down(6.0, 4.0), shutter=Shutter(1.0, 1.0))
+    a, b = _both(sc, st, monkeypatch)
+    _assert_close(a, b)
+    assert a["Indirect"].max() > 0
+
+
+def test_camera_tile_equals_camera_samples():
+    """camera_tile reproduces camera_samples bit for bit from the same uniforms (spp with leftovers too)."""
+    for spp in (1, 5, 16):
+        x0, y0, tw, th = 3, 7, 6, 4
+        gy, gx = np.mgrid[y0:y0 + th, x0:x0 + tw]
+        px, py, xi = camera_samples(gx.ravel(), gy.ravel(), spp, Shutter(1.0, 1.5), np.random.default_rng(spp))
+        rng = np.random.default_rng(spp)
+        P = tw * th
+        jit, perm_u, time_u = rng.random((P, spp, 2)), rng.random((P, spp)), rng.random((P, spp))
+        out = [np.empty(P * spp) for _ in range(3)]
+        K.camera_tile(x0, y0, tw, th, spp, jit, perm_u, time_u, True, *out)
+        for x, y in zip((px, py, xi), out):
+            assert np.array_equal(x, y)
+
+
+@pytest.mark.parametrize("radius", [0.7, 1.5, 2.3, 4.0])
+def test_filter_polynomial_matches_blackman_harris(radius):
+    x = np.linspace(-radius - 0.5, radius + 0.5, 2001)
+    got = np.array([K._bh(v, 1.0 / radius) for v in x])
+    assert np.abs(got - blackman_harris(x, radius)).max() < 1e-13
+
+
+def test_splat_matrix_with_derived_combined_equals_add_samples():
+    """Combined derived from its parts (and alpha from the weights) splats like the full matrix."""
+    rng = np.random.default_rng(4)
+    W, H, spp = 19, 13, 6
+    fa, fb = Film(W, H, 1.5), Film(W, H, 1.5)
+    gy, gx = np.mgrid[0:H, 0:W]
+    px, py, _ = camera_samples(gx.ravel(), gy.ravel(), spp, Shutter(), rng)
+    n = px.size
+    V = rng.random((n, 20))
+    V[:, 17:20] = 0.0                                      # Caustic all zero
+    V[:, 0:3] = V[:, 8:11] + V[:, 11:14] + V[:, 14:17]      # Combined = Emit + Direct + Indirect (+ Caustic)
+    V[:, 3] = 1.0
+    vals, c0 = {}, 0
+    for name, c, _ in PASSES:
+        vals[name] = V[:, c0:c0 + c]
+        c0 += c
+    fa.add_samples(px, py, vals)
+    fb.add_window(fb.splat_tile_matrix(0, 0, W, H, px, py, V, combined_is_sum=True, alpha_one=True,
+                                       zero=("Caustic",), scan=False))
+    A, B = fa.resolve(), fb.resolve()
+    for name in A:
+        assert np.allclose(A[name], B[name], rtol=2e-6, atol=1e-6), name
+
+
+def test_skip_uniforms_leaves_the_stream_where_drawing_would():
+    """skip_uniforms(rng, n) == rng.random(n) for every number that follows (the skipped blocks of
+    instant shutters and point lights keep the rest of the image's random numbers in place)."""
+    from stpm_core.sampling import rng_for, skip_uniforms
+    a, b = rng_for(9, 1, 2), rng_for(9, 1, 2)
+    a.random(3), b.random(3)
+    a.random((700, 2))
+    skip_uniforms(b, 1400)
+    assert np.array_equal(a.random(11), b.random(11))
+
+
+def test_kernels_match_numpy_moving_camera_and_lights_time_override(monkeypatch):
+    """A moving camera (one pose per sample) and moving point / spot lights; time_override too."""
+    from stpm_core.integrator import trace_image
+    from stpm_core.lights import LightSet
+    from stpm_core.raycast import make_caster
+    cam = persp_camera((0.5, -4, 2.5), (0, 0, 0.4))
+    M0 = cam.transform.matrices[0]
+    cam.transform = MotionTransform(np.array([0.0, 1.0]), np.stack([M0, translate(0.3, 0.2, 0.1) @ M0]))
+    pl = point_light((1, -1, 3), 300.0)
+    pl.transform = moving((1, -1, 3), (0.5, -0.5, 3.2))
+    sp = _spot((-1.5, -1.0, 3.0), (0, 0, 0), 500.0)
+    sp.transform = MotionTransform(np.array([0.0, 1.0]), np.stack([sp.transform.matrices[0],
+                                                                   translate(0.4, 0, 0) @ sp.transform.matrices[0]]))
+    sc = _scene(_SMOOTH, [pl, sp], camera=cam)
+    st = RenderSettings(samples=3, photons_caustic=0, photons_global=0, seed=4, threads=1)
+    caster = make_caster(sc)
+    for t in (None, 0.3):
+        a, _ = trace_image(sc, st, caster, LightSet(sc), time_override=t)
+        with monkeypatch.context() as m:
+            m.setattr(K, "AVAILABLE", False)
+            b, _ = trace_image(sc, st, caster, LightSet(sc), time_override=t)
+        _assert_close(a, b)
+        assert a["Direct"].max() > 0
+
+
+def test_a_kernel_that_fails_to_compile_falls_back_to_numpy(monkeypatch):
+    """A numba compile error in a tile switches the kernels off and that tile is traced by numpy."""
+    from stpm_core import integrator
+    st = RenderSettings(samples=2, photons_caustic=0, photons_global=0, seed=3, threads=1)
+    sc = _scene(_SMOOTH, _LIGHTS[:1])
+    with monkeypatch.context() as m:
+        m.setattr(K, "AVAILABLE", False)
+        ref = render(sc, st).passes
+
+    def broken(*a, **k):
+        raise K.CompileError("no typing for this signature")
+
+    monkeypatch.setattr(K, "AVAILABLE", True)          # restored after the test
+    monkeypatch.setattr(K, "IMPORT_ERROR", "")
+    monkeypatch.setattr(integrator, "_trace_tile_fast", broken)
+    out = render(sc, st).passes
+    assert not K.AVAILABLE and K.IMPORT_ERROR.startswith(K.CompileError.__name__)
+    for name in ref:
+        assert np.array_equal(ref[name], out[name]), name
