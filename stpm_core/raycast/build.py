@@ -26,11 +26,16 @@ and three methods on a batch of m rays:
 Optional fused entry points (embree parts with numba, :mod:`.embree_kernels`),
 used by the caster when present and not None:
 
-* unbounded part: ``intersect_into(o, d, times, t0, k, fields)`` casts and
-  writes every result field of the rays it wins in place;
+* unbounded part, first in the list (the baked static scene):
+  ``intersect_into(o, d, times, tmax, guard, k, fields, tmin, final)`` makes
+  the guard, casts and writes every result field of every ray in place
+  (misses included: the caster pre-fills nothing), and
+  ``occluded_into(o, d, tmax, guard, tmin, blocked)``;
 * bounded part: ``cast_all(o, d, times, t0, t1)`` and
   ``occluded_all(o, d, times, t0, t1, skip)`` take every ray of a block and do
-  their own swept-box tests (the caster's part-box pass is skipped for them).
+  their own swept-box tests (the caster's part-box pass is skipped for them);
+  ``shade_rows(rows, prim, times, out)`` writes the shading fields of the
+  rays it won straight into the results.
 """
 from __future__ import annotations
 
@@ -40,12 +45,14 @@ import time as _time
 import numpy as np
 
 from . import Hits
-from .geometry import scene_scale, tmin_of
+from .geometry import TMIN_REL, scene_scale, tmin_of
 from .pair_bvh import PairBVH, RaySlabs, segments_meet_boxes
 
 __all__ = ["make_caster", "Caster", "BACKENDS"]
 
 BACKENDS = ("auto", "embree", "numba", "numpy")
+
+_HIT_FIELDS = ("t", "instance", "prim", "u", "v", "position", "ng", "ns", "material")
 
 # Environment override of backend='auto' (render() and the photon tracer build
 # their casters with 'auto'): one of BACKENDS, e.g. STPM_RAYCAST_BACKEND=numba
@@ -150,6 +157,8 @@ class Caster:
         self.bounded = [k for k, p in enumerate(parts) if p.bounds is not None]
         self._part_lo = np.array([parts[k].bounds[0] for k in self.bounded]).reshape(-1, 3)
         self._part_hi = np.array([parts[k].bounds[1] for k in self.bounded]).reshape(-1, 3)
+        self._is_bounded = np.zeros(len(parts) + 1, bool)         # part k (or -1 = none) has bounds?
+        self._is_bounded[self.bounded] = True
         many = len(self.bounded) > PART_BVH_MIN
         self._part_bvh = PairBVH(self._part_lo, self._part_hi, leaf=2) if many else None
 
@@ -192,29 +201,68 @@ class Caster:
         return out
 
     # ------------------------------------------------------------------ intersect
-    def intersect(self, origins, dirs, times, tmax=None) -> Hits:
-        """Nearest hit of each ray at its own time -> :class:`Hits` (see package docstring)."""
+    def intersect(self, origins, dirs, times, tmax=None, out: Hits | None = None) -> Hits:
+        """Nearest hit of each ray at its own time -> :class:`Hits` (see package docstring).
+
+        out : optional :class:`Hits` with at least n rows (e.g. from :meth:`Hits.empty`, kept
+            between calls) whose arrays receive the results (any prior content); the
+            returned Hits holds views of their first n rows.  Saves allocating ~120 bytes
+            per ray per call (page faults where that memory would be fresh; no gain
+            measured in the tracer, where the allocator recycles it).  The caller must
+            not use the previous results held in ``out`` after the call, nor pass input
+            arrays that share memory with it.
+        """
         start = _time.perf_counter()
+        n_tmax = tmax
         o, d, times, tmax = _as_rays(origins, dirs, times, tmax)
         n = o.shape[0]
-        tmin = tmin_of(d, self.scale)
-        out = Hits(t=tmax.copy(), instance=np.full(n, -1, np.int32), prim=np.full(n, -1, np.int32),
-                   u=np.zeros(n), v=np.zeros(n), position=np.full((n, 3), np.nan),
-                   ng=np.zeros((n, 3)), ns=np.zeros((n, 3)), material=np.full(n, -1, np.int32))
-        best_t = out.t                       # nearest exact hit so far (starts at tmax)
-        best_part = np.full(n, -1, np.int32)
-        prim = np.full(n, -1, np.int64)      # part-local primitive of the nearest hit
+        first = self.parts[0] if self.parts else None
+        fast = first is not None and first.bounds is None and getattr(first, "intersect_into", None) is not None
+        if out is not None:
+            out = Hits(*(getattr(out, f)[:n] for f in _HIT_FIELDS))
+        elif fast:
+            out = Hits.empty(n)
+        if fast:
+            # Fused first (static) part: guard, cast, refine and every field in kernels per block,
+            # no pre-filled arrays; misses written by the kernel
+            only = len(self.parts) == 1
+            o, d, times = (np.ascontiguousarray(a) for a in (o, d, times))
+            tm = None if n_tmax is None else np.ascontiguousarray(tmax)
+            best_t = out.t
+            guard = TMIN_REL * self.scale
+            # Part index, part primitive and guard of every ray: needed by the parts that follow,
+            # else one block's worth (cache-resident) reused block after block
+            rows = min(n, CHUNK) if only else n
+            best_part, prim, tmin = np.empty(rows, np.int32), np.empty(rows, np.int64), np.empty(rows)
+            for a in range(0, n, CHUNK):
+                sl = slice(a, min(n, a + CHUNK))
+                bl = slice(0, sl.stop - a) if only else sl
+                first.intersect_into(o[sl], d[sl], times[sl], None if tm is None else tm[sl], guard, 0,
+                                     (best_t[sl], best_part[bl], prim[bl], out.u[sl], out.v[sl],
+                                      out.instance[sl], out.prim[sl], out.material[sl], out.ng[sl],
+                                      out.ns[sl], out.position[sl]), tmin[bl], only)
+            if only:
+                self.stats["rays_intersect"] += n
+                self.stats["seconds_intersect"] += _time.perf_counter() - start
+                return out
+            parts = list(enumerate(self.parts))[1:]
+        else:
+            tmin = tmin_of(d, self.scale)
+            if out is None:
+                out = Hits.empty(n)
+            out.t[:] = tmax
+            out.instance.fill(-1)
+            out.prim.fill(-1)
+            out.material.fill(-1)
+            for f in (out.u, out.v, out.ng, out.ns):
+                f.fill(0.0)
+            out.position.fill(np.nan)
+            best_t = out.t                       # nearest exact hit so far (starts at tmax)
+            best_part = np.full(n, -1, np.int32)
+            prim = np.full(n, -1, np.int64)      # part-local primitive of the nearest hit
+            parts = list(enumerate(self.parts))
         rays = None
-        for k, part in enumerate(self.parts):
-            if part.bounds is None and getattr(part, "intersect_into", None) is not None:
-                # Fused static part: cast, refine and write every field in one kernel per block
-                for a in range(0, n, CHUNK):
-                    sl = slice(a, min(n, a + CHUNK))
-                    part.intersect_into(o[sl], d[sl], times[sl], tmin[sl], k,
-                                        (best_t[sl], best_part[sl], prim[sl], out.u[sl], out.v[sl],
-                                         out.instance[sl], out.prim[sl], out.material[sl], out.ng[sl],
-                                         out.ns[sl], out.position[sl]))
-                continue
+        for k, part in parts:
             if part.bounds is None:
                 # Parts without bounds (the baked static scene) see every ray and shade
                 # their hits at once, in contiguous blocks (a later part may overwrite)
@@ -236,6 +284,13 @@ class Caster:
                     else:
                         for dst, src in fields[:-1]:
                             np.copyto(dst[sl], src, where=won if np.ndim(src) < 2 else won[:, None])
+                continue
+            if self._part_bvh is None and getattr(part, "cast_into", None) is not None:
+                # Fused part merging its hits itself: box tests, transforms, refinement, nearest pair
+                for a in range(0, n, CHUNK):
+                    sl = slice(a, min(n, a + CHUNK))
+                    part.cast_into(o[sl], d[sl], times[sl], tmin[sl], k, best_t[sl], best_part[sl], prim[sl],
+                                   out.u[sl], out.v[sl])
                 continue
             if self._part_bvh is None and getattr(part, "cast_all", None) is not None:
                 # Fused part: its kernel does the box tests, every ray in contiguous blocks
@@ -264,14 +319,23 @@ class Caster:
             if part.bounds is None:
                 continue
             won = np.flatnonzero(best_part == k)
+            if fast and getattr(part, "shade_rows", None) is not None:
+                part.shade_rows(won, prim, times, out)             # fused: straight into the results
+                continue
             for a in range(0, won.size, CHUNK):
                 w = won[a:a + CHUNK]
                 inst, p, ng, ns, mat = part.shade(times[w], prim[w], out.u[w], out.v[w])
                 out.instance[w], out.prim[w], out.ng[w], out.ns[w], out.material[w] = inst, p, ng, ns, mat
         # Misses: t = inf; hits: the point on the ray (unless a fully-hit static block set it)
+        if fast:
+            from .embree_kernels import finish_hits
+            finish_hits(best_part, self._is_bounded, best_t, o, d, out.position)
+            self.stats["rays_intersect"] += n
+            self.stats["seconds_intersect"] += _time.perf_counter() - start
+            return out
         hit = best_part >= 0
         best_t[~hit] = np.inf
-        bounded_won = np.isin(best_part, self.bounded) if self.bounded else np.zeros(n, bool)
+        bounded_won = self._is_bounded[best_part]             # best_part -1: the last entry, False
         todo = np.flatnonzero(hit & (bounded_won | np.isnan(out.position[:, 0])))
         if todo.size:
             out.position[todo] = o[todo] + best_t[todo, None] * d[todo]
@@ -285,10 +349,26 @@ class Caster:
         start = _time.perf_counter()
         o, d, times, tmax = _as_rays(origins, dirs, times, tmax)
         n = o.shape[0]
-        tmin = tmin_of(d, self.scale)
-        blocked = np.zeros(n, bool)
+        first = self.parts[0] if self.parts else None
         near = None
-        for k, part in enumerate(self.parts):
+        if first is not None and first.bounds is None and getattr(first, "occluded_into", None) is not None:
+            # Fused first (static) part: guard and float32 rays in one kernel per block
+            o, d = np.ascontiguousarray(o), np.ascontiguousarray(d)
+            tm = np.ascontiguousarray(tmax)
+            blocked = np.empty(n, bool)
+            only = len(self.parts) == 1
+            tmin = np.empty(min(n, CHUNK) if only else n)           # the guard: kept if parts follow
+            guard = TMIN_REL * self.scale
+            for a in range(0, n, CHUNK):
+                sl = slice(a, min(n, a + CHUNK))
+                first.occluded_into(o[sl], d[sl], tm[sl], guard, tmin[:sl.stop - a] if only else tmin[sl],
+                                    blocked[sl])
+            parts = list(enumerate(self.parts))[1:]
+        else:
+            tmin = tmin_of(d, self.scale)
+            blocked = np.zeros(n, bool)
+            parts = list(enumerate(self.parts))
+        for k, part in parts:
             if part.bounds is None and not blocked.any():
                 # First unbounded part: every ray, contiguous blocks
                 for a in range(0, n, CHUNK):

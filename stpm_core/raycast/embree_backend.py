@@ -22,9 +22,14 @@ Static instances are baked into one world-space scene.  A moving rigid
 instance has its mesh's own object-space scene (shared between instances of
 that mesh); each ray is mapped to object space with the inverse transform at
 its own time, directions not renormalised, so t is the same in both spaces and
-the result is exact for every time.  Deforming meshes: see :class:`DeformingPart`.
+the result is exact for every time.  With the fused kernels a ray is paired
+with a moving instance only if it meets the instance's box over the ray's
+time slice (:func:`slice_bounds`, 1/16 of the shutter), not just its box over
+the whole shutter.  Deforming meshes: see :class:`DeformingPart`.
 """
 from __future__ import annotations
+
+import threading
 
 import numpy as np
 from embreex import rtcore_scene as rtcs
@@ -48,6 +53,8 @@ FUSED_AVAILABLE = _K is not None
 
 _FAR32 = np.float32(1e37)      # embree's "no tfar" value
 _RECASTS = 3                   # re-casts of rays whose refined hit fell inside the guard
+_NO_T = np.zeros(1)            # stands for an absent tmax in the kernels
+_SCRATCH_ROWS = 8192           # rows of the per-thread ray buffers (the caster's block size)
 _SLACK = 4.0                   # deforming buckets: search margin in units of the shape tolerance
 
 # Moving instances of one mesh: above this many, pairs come from a BVH of their boxes.
@@ -56,6 +63,9 @@ _GROUP_BVH_MIN = 24
 # Deforming meshes: about this many embree scenes (time buckets) per mesh
 # (at least one per vertex step).
 DEFORM_BUCKETS_MAX = 16
+
+# Moving instances (fused kernels): per-time-slice boxes over the shutter, this many slices
+TIME_SLICES = 16
 
 
 class EmbreeMesh:
@@ -207,12 +217,15 @@ class StaticPart:
     """
 
     bounds = None
-    intersect_into = None      # the fused entry point when the kernels are on (see Caster.intersect)
+    # The fused entry points when the kernels are on (see Caster.intersect / occluded)
+    intersect_into = None
+    occluded_into = None
 
     def __init__(self, scene, instances: list[int], fused: bool = False):
         self.fused = fused and FUSED_AVAILABLE
+        self._local = threading.local()
         if self.fused:
-            self.intersect_into = self._intersect_into
+            self.intersect_into, self.occluded_into = self._intersect_into, self._occluded_into
         Vs, Fs, inst, prim, ng, nsc, mat = [], [], [], [], [], [], []
         nv = 0
         self.smooth = any(scene.meshes[scene.instances[i].mesh].normals is not None for i in instances)
@@ -242,34 +255,55 @@ class StaticPart:
     def cast(self, o, d, times, t0, t1):
         return self.mesh.cast(o, d, t0, t1)
 
-    def _intersect_into(self, o, d, times, t0, k, fields) -> None:
-        """Cast m rays and write the hits nearer than the current best straight into the results.
+    def _scratch(self, m: int):
+        """This thread's float32 ray buffers (o32, d32 (m, 3), far32 (m,)) and index buffer (m,), reused."""
+        buf = getattr(self._local, "buf", None)
+        if buf is None or buf[2].shape[0] < m:
+            cap = max(m, _SCRATCH_ROWS)
+            buf = (np.empty((cap, 3), np.float32), np.empty((cap, 3), np.float32), np.empty(cap, np.float32),
+                   np.empty(cap, np.int64))
+            self._local.buf = buf
+        return tuple(b[:m] for b in buf)
 
-        o, d (m, 3), times, t0 (m,); ``fields`` = views (m rows) of the
-        caster's arrays: best_t (read as t1, then updated), best_part (set to
-        ``k``), part prim, u, v, instance, prim, material, ng, ns, position.
-        One embree call, then :func:`.embree_kernels.static_finish`; rays whose
-        refined hit fell inside the guard go through :meth:`EmbreeMesh.cast`'s
-        re-cast and numpy :meth:`shade` (rare).
+    def _intersect_into(self, o, d, times, tmax, guard, k, fields, tmin, final: bool) -> None:
+        """Cast m rays as the caster's first part and write every result field in place.
+
+        o, d (m, 3), times (m,) C-contiguous; tmax (m,) or None (+inf);
+        guard = TMIN_REL * scale.  ``fields`` = views (m rows, any content) of
+        the caster's arrays: best_t, best_part (``k`` where won), part prim, u,
+        v, instance, prim, material, ng, ns, position; ``tmin`` (m,) receives
+        the guard t.  Rays that miss get the miss values (t = +inf if
+        ``final``, else tmax, for the parts that follow).  One kernel makes
+        the guard and the float32 rays, one embree call, then
+        :func:`.embree_kernels.static_finish`; rays whose refined hit fell
+        inside the guard go through :meth:`EmbreeMesh.cast`'s re-cast and
+        numpy :meth:`shade` (rare).
         """
         best_t, best_part, prim, u, v, inst, p_out, mat, ng, ns, pos = fields
         m = o.shape[0]
         em = self.mesh
-        if em.empty or m == 0:
-            return
-        o, d = np.ascontiguousarray(o), np.ascontiguousarray(d)
-        o32, d32, far32 = em._rays32(o, d, t0, best_t)
-        r = em.scene.run(o32, d32, dists=far32, output=1)
-        again = np.empty(m, np.int64)
-        n_again = _K.static_finish(o, d, t0, r["tfar"], r["primID"], r["u"], r["v"], t0, em.plane_n, em.plane_w,
-                                   self.ids, self.ng, self.ns_corners, self.smooth, k, best_t, best_part, prim,
-                                   u, v, inst, p_out, mat, ng, ns, pos, again)
+        has_tmax = tmax is not None
+        tm = tmax if has_tmax else _NO_T
+        o32, d32, far32, again = self._scratch(m)
+        _K.guard_rays32(o, d, tm, has_tmax, guard, em.centre, tmin, o32, d32, far32)
+        if em.empty:
+            primID = np.full(m, -1, np.int32)
+            r = {"tfar": far32, "primID": primID, "u": far32, "v": far32}
+        else:
+            r = em.scene.run(o32, d32, dists=far32, output=1)
+        n_again = _K.static_finish(o, d, tmin, r["tfar"], r["primID"], r["u"], r["v"], tmin, em.plane_n,
+                                   em.plane_w, self.ids, self.ng, self.ns_corners, self.smooth, k, best_t,
+                                   best_part, prim, u, v, inst, p_out, mat, ng, ns, pos, again, True, final, tm,
+                                   has_tmax)
         if n_again == 0:
             return
-        # Guard re-casts: the numpy path for those rays
-        a = again[:n_again]
-        t_a, p_a, u_a, v_a = em.cast(o[a], d[a], t0[a], best_t[a])
-        won = np.flatnonzero(t_a < best_t[a])
+        # Guard re-casts: the numpy path for those rays (best_t still holds their tmax)
+        a = again[:n_again].copy()
+        t_a, p_a, u_a, v_a = em.cast(o[a], d[a], tmin[a], best_t[a])
+        won_m = t_a < best_t[a]
+        if final:
+            best_t[a[~won_m]] = np.inf
+        won = np.flatnonzero(won_m)
         if won.size == 0:
             return
         w = a[won]
@@ -277,6 +311,20 @@ class StaticPart:
         best_t[w], best_part[w], prim[w], u[w], v[w] = t_a[won], k, p_a[won], u_a[won], v_a[won]
         inst[w], p_out[w], mat[w], ng[w], ns[w] = i_w, p_w, mat_w, ng_w, ns_w
         pos[w] = o[w] + t_a[won, None] * d[w]
+
+    def _occluded_into(self, o, d, tmax, guard, tmin, blocked) -> None:
+        """Occlusion of m rays as the caster's first part: blocked (m,) bool and the guard tmin (m,) written.
+
+        o, d (m, 3) C-contiguous, tmax (m,); float32 test as :meth:`EmbreeMesh.occluded`.
+        """
+        m = o.shape[0]
+        em = self.mesh
+        o32, d32, far32, _ = self._scratch(m)
+        _K.guard_rays32(o, d, tmax, True, guard, em.centre, tmin, o32, d32, far32)
+        if em.empty:
+            blocked[:] = False
+            return
+        _K.occluded_of(em.scene.run(o32, d32, dists=far32, query="OCCLUDED"), blocked)
 
     def occluded(self, o, d, times, t0, t1):
         return self.mesh.occluded(o, d, t0, t1)
@@ -352,6 +400,7 @@ class RigidGroup:
         self.shading = InstanceShading(mesh, None)
         # Fused kernels (box tests + per-ray transforms in one pass) below the BVH threshold
         self.fused = fused and FUSED_AVAILABLE and self.bvh is None
+        self._local = threading.local()
         if self.fused:
             k = self.keys
             c = np.ascontiguousarray
@@ -365,7 +414,9 @@ class RigidGroup:
             N = self.shading.normals
             self._N = c(N if N is not None else np.zeros((0, 3, 3)), np.float64)
             self._box = (c(self.bounds[0], np.float64), c(self.bounds[1], np.float64))
+            self._slices = slice_bounds(mesh, transforms, self.lo, self.hi)
             self.cast_all, self.occluded_all = self._cast_all, self._occluded_all
+            self.shade_rows, self.cast_into = self._shade_rows, self._cast_into
 
     def _pairs(self, o, d, t0, t1):
         """(ray, j) pairs (k,) whose segment [t0, t1] meets instance j's swept box."""
@@ -411,13 +462,18 @@ class RigidGroup:
         """Kernel :func:`.embree_kernels.rigid_pairs` over m rays -> ray, j, o64, d64, (o32, d32, far32)."""
         m = o.shape[0]
         cap = m * self.lo.shape[0]
-        ray, j = np.empty(cap, np.int64), np.empty(cap, np.int64)
-        o64 = np.empty((cap if full else 0, 3))
-        d64 = np.empty((cap if full else 0, 3))
-        o32, d32, far32 = np.empty((cap, 3), np.float32), np.empty((cap, 3), np.float32), np.empty(cap, np.float32)
+        # This thread's pair buffers, reused between calls (valid until its next call)
+        buf = getattr(self._local, "pairs", None)
+        if buf is None or buf[0].shape[0] < cap:
+            buf = (np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty((cap, 3)), np.empty((cap, 3)),
+                   np.empty((cap, 3), np.float32), np.empty((cap, 3), np.float32), np.empty(cap, np.float32))
+            self._local.pairs = buf
+        ray, j, o64, d64, o32, d32, far32 = (b[:cap] for b in buf)
+        if not full:
+            o64, d64 = o64[:0], d64[:0]
         c = np.ascontiguousarray
-        n = _K.rigid_pairs(c(o), c(d), c(times), c(t0), c(t1), skip, *self._box, self.lo, self.hi, *self._keys,
-                           self.emesh.centre, ray, j, o64, d64, o32, d32, far32)
+        n = _K.rigid_pairs_timed(c(o), c(d), c(times), c(t0), c(t1), skip, *self._box, self.lo, self.hi,
+                                 *self._slices, *self._keys, self.emesh.centre, ray, j, o64, d64, o32, d32, far32)
         return ray[:n], j[:n], o64[:n], d64[:n], (o32[:n], d32[:n], far32[:n])
 
     def _cast_all(self, o, d, times, t0, t1):
@@ -439,6 +495,41 @@ class RigidGroup:
         u[ray[w]], v[ray[w]] = up[w], vp[w]
         return t, prim, u, v
 
+    def _cast_into(self, o, d, times, t0, k, best_t, best_part, prim, u, v) -> None:
+        """:meth:`cast_all` merged straight into the caster's arrays (m rows each, contiguous).
+
+        best_t (m,) is read as t1 and lowered where a pair wins; best_part (set to ``k``), prim
+        (``j * F + triangle``), u, v written there.  One kernel pass after embree's call
+        (:func:`.embree_kernels.group_finish`); a block with a hit inside the guard goes through
+        :meth:`cast_all`'s numpy path instead (re-casts; rare).
+        """
+        m = o.shape[0]
+        ray, j, oo, dd, (o32, d32, far32) = self._fused_pairs(o, d, times, t0, best_t, np.zeros(m, np.bool_), True)
+        if ray.size == 0:
+            return
+        far_in = far32.copy()                   # run() overwrites it with tfar
+        r = self.emesh.scene.run(o32, d32, dists=far32, output=1)
+        buf = getattr(self._local, "blk", None)
+        if buf is None or buf[0].shape[0] < m:
+            buf = (np.empty(m), np.empty(m, np.int64), np.empty(m), np.empty(m))
+            self._local.blk = buf
+        em = self.emesh
+        if _K.group_finish(oo, dd, ray, j, t0, best_t, r["tfar"], r["primID"], r["u"], r["v"], em.plane_n,
+                           em.plane_w, self.n_tri, k, *(b[:m] for b in buf), best_t, best_part, prim, u, v):
+            return
+        # Guard re-casts: the numpy path on the same pairs (as cast_all, then the caster's merge)
+        t_k, p_k, u_k, v_k = np.full(m, np.inf), np.full(m, -1, np.int64), np.zeros(m), np.zeros(m)
+        tp, pp, up, vp = em.cast(oo, dd, t0[ray], best_t[ray], rays32=(o32, d32, far_in))
+        if self.lo.shape[0] == 1:
+            t_k[ray], p_k[ray], u_k[ray], v_k[ray] = tp, pp, up, vp
+        else:
+            np.minimum.at(t_k, ray, tp)
+            w = np.flatnonzero(np.isfinite(tp) & (tp == t_k[ray]))
+            p_k[ray[w]] = j[w] * self.n_tri + pp[w]
+            u_k[ray[w]], v_k[ray[w]] = up[w], vp[w]
+        won = np.flatnonzero(t_k < best_t)
+        best_t[won], best_part[won], prim[won], u[won], v[won] = t_k[won], k, p_k[won], u_k[won], v_k[won]
+
     def _occluded_all(self, o, d, times, t0, t1, skip):
         """(m,) bool over every ray, rays with ``skip`` (m,) bool ignored (left False)."""
         blocked = np.zeros(o.shape[0], bool)
@@ -446,6 +537,15 @@ class RigidGroup:
         if ray.size:
             blocked[ray[self.emesh.scene.run(o32, d32, dists=far32, query="OCCLUDED") != -1]] = True
         return blocked
+
+    def _shade_rows(self, rows, prim, times, out) -> None:
+        """:meth:`shade` of the rays ``rows`` (k,) this group won, written into ``out`` (:class:`Hits`, n rows).
+
+        prim (n,) int64 group primitives (``j * F + triangle``), times (n,); u, v read from ``out``.
+        """
+        _K.rigid_shade_rows(rows, prim, self.n_tri, out.u, out.v, times, self.instances, *self._keys, self._V,
+                            self._F, self._N, self.shading.material_ids, out.instance, out.prim, out.ng, out.ns,
+                            out.material)
 
     def shade(self, times, p, u, v):
         j, tri = np.divmod(p, self.n_tri)
@@ -567,6 +667,35 @@ class DeformingPart(ExactCastPart):
         t[r[hit]], prim[r[hit]] = t_s[lead][hit], tri[best][hit]
         u[r[hit]], v[r[hit]] = uu[best][hit], vv[best][hit]
         return t, prim, u, v
+
+
+def slice_bounds(mesh, transforms, lo, hi, slices: int = TIME_SLICES, samples: int = 9):
+    """World boxes of moving instances per shutter time slice -> slice_lo, slice_hi (J, slices, 3).
+
+    Slice l covers normalised times [l / slices, (l + 1) / slices]: the
+    object box's corners are transformed at ``samples`` times spread over it
+    (plus the transform's key times inside it) and the box of those points
+    is padded by 2 % of the instance's whole swept box diagonal (lo, hi
+    (J, 3), from :func:`.geometry.swept_bounds`), the pad that box itself got
+    from 33 samples over the whole shutter: the slice samples are 4x denser,
+    so the slice box is at least as safe.  Rays at times in [0, 1] are tested
+    against the slice box of their time (:func:`.embree_kernels.rigid_pairs_timed`).
+    """
+    V = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+    a, b = V.min(0), V.max(0)
+    corners = np.array([[x, y, z] for x in (a[0], b[0]) for y in (a[1], b[1]) for z in (a[2], b[2])])
+    J = len(transforms)
+    s_lo, s_hi = np.empty((J, slices, 3)), np.empty((J, slices, 3))
+    for j, tr in enumerate(transforms):
+        pad = 0.02 * float(np.linalg.norm(hi[j] - lo[j])) + 1e-300
+        knots = np.asarray(tr.times, dtype=np.float64)
+        for l in range(slices):
+            t_a, t_b = l / slices, (l + 1) / slices
+            ts = np.concatenate([np.linspace(t_a, t_b, samples), knots[(knots > t_a) & (knots < t_b)]])
+            M = tr.at(ts)
+            pts = (np.einsum("kij,cj->kci", M[:, :3, :3], corners) + M[:, None, :3, 3]).reshape(-1, 3)
+            s_lo[j, l], s_hi[j, l] = pts.min(0) - pad, pts.max(0) + pad
+    return s_lo, s_hi
 
 
 def build_parts(scene, scale: float, fused: bool | None = None) -> list:

@@ -6,18 +6,25 @@ the same float64 operations in the same order, so results agree with the
 numpy path to rounding (tests/test_raycast.py compares them):
 
 * :func:`rays32` - re-centred float32 rays for ``run()``
-  (``EmbreeMesh._rays32``);
+  (``EmbreeMesh._rays32``); :func:`guard_rays32` - the same with the
+  self-intersection guard (``tmin_of``) computed in the same pass (the
+  caster's first, static part);
 * :func:`static_finish` - after embree's closest-hit call on the baked
   static scene: float64 plane refinement of t, guard / tmax test, and every
   :class:`~stpm_core.raycast.Hits` field (instance, prim, material, ng, the
   corner-normal blend ns, position) written straight into the caster's
-  result arrays;
-* :func:`rigid_pairs` - moving rigid instances of one mesh: swept-box tests
-  of each ray against the group box and each instance box, and for every
-  (ray, instance) pair met, the inverse transform at the ray's time
+  result arrays - misses too (``init``), so the caster pre-fills nothing;
+* :func:`rigid_pairs_timed` - moving rigid instances of one mesh: box tests
+  of each ray against the group box and each instance's box for the ray's
+  time slice (:func:`rigid_pairs`: whole swept boxes), and for every (ray,
+  instance) pair met, the inverse transform at the ray's time
   (:class:`.geometry.MotionKeys`: lerp, slerp, stretch inverse) applied to
   the ray, written as float64 object-space rays and float32 embree rays;
-* :func:`rigid_shade` - normals and material of moving hits at their times.
+* :func:`rigid_shade` / :func:`rigid_shade_rows` - normals and material of
+  moving hits at their times (the latter straight into the result rows);
+* :func:`group_finish` - after embree's call on a group's pairs: refinement,
+  nearest pair per ray and the won fields written into the caster's arrays;
+* :func:`finish_hits` - the caster's epilogue (miss t, moving hits' positions).
 
 Kernels are serial (``cache=True``): embree's ``run()`` is single-threaded
 and the caster works in 8192-ray chunks; ``nogil=True``, so tracer threads
@@ -34,7 +41,8 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
-__all__ = ["rays32", "static_finish", "rigid_pairs", "rigid_shade", "refine_plane", "slerp_table", "warm_up"]
+__all__ = ["rays32", "guard_rays32", "occluded_of", "static_finish", "rigid_pairs", "rigid_pairs_timed",
+           "rigid_shade", "rigid_shade_rows", "group_finish", "finish_hits", "refine_plane", "slerp_table", "warm_up"]
 
 FAR32 = float(np.float32(1e37))     # embree's "no tfar" value, as float64
 _HUGE = 1e300                       # stands in for 1/0 in the slab test (0 * _HUGE = 0, no NaN)
@@ -74,9 +82,39 @@ def refine_plane(o, d, p, start, tfar, plane_n, plane_w, tt):
 
 # ---------------------------------------------------------------- static part
 @njit(cache=True, nogil=True, error_model="numpy")
+def guard_rays32(o, d, tmax, has_tmax, guard, centre, tmin, o32, d32, far32):
+    """Guard and embree rays in one pass (``tmin_of`` + :func:`rays32` from tmin).
+
+    o, d (m, 3) float64 world rays; tmax (m,) (read only if ``has_tmax``,
+    else +inf); guard = TMIN_REL * scale.  Writes tmin (m,) = guard / |d|
+    (|d| = 0 or NaN: guard), and the float32 rays o32, d32 (m, 3), far32 (m,)
+    starting at tmin, shifted to the mesh centre (3,) - the same float64
+    operations as ``tmin_of`` then ``rays32``.
+    """
+    for i in range(o.shape[0]):
+        d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
+        L = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        s = guard / (L if L > 0 else 1.0)
+        tmin[i] = s
+        for c in range(3):
+            o32[i, c] = np.float32((s * d[i, c] + o[i, c]) - centre[c])
+            d32[i, c] = np.float32(d[i, c])
+        t1 = tmax[i] if has_tmax else np.inf
+        far = max(t1 - s, 0.0)
+        far32[i] = np.float32(min(far, FAR32))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def occluded_of(geom, blocked):
+    """blocked (m,) bool = embree's OCCLUDED answer geom (m,) != -1."""
+    for i in range(geom.shape[0]):
+        blocked[i] = geom[i] != -1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def static_finish(o, d, start, tfar, primID, u32, v32, t0, plane_n, plane_w, ids, ng_tab, nsc, smooth, k,
                   best_t, best_part, prim, u_out, v_out, inst_out, p_out, mat_out, ng_out, ns_out, pos_out,
-                  again):
+                  again, init, final, tmax, has_tmax):
     """Refine embree's closest hits on the baked static scene and write the won ones.
 
     Inputs per ray (m,): o, d (m, 3) world rays, start = guard t0 (the cast
@@ -87,23 +125,52 @@ def static_finish(o, d, start, tfar, primID, u32, v32, t0, plane_n, plane_w, ids
     (t0, best_t) overwrites best_t, best_part (= k), prim, u, v, instance,
     mesh prim, material, ng, ns, position.  Rays whose refined t is inside the
     guard (t <= t0) are listed in ``again`` for a re-cast; returns their count.
+
+    init : the output arrays are uninitialised (first part of the caster):
+        best_t starts as tmax (m,) (+inf unless ``has_tmax``) and every ray
+        that does not win gets the miss values (best_part, prim, instance,
+        mesh prim, material -1; u, v, ng, ns 0; position NaN).
+    final : no part follows: rays that do not win get t = +inf at once (rays
+        listed in ``again`` keep best_t = tmax for their re-cast).
     """
     n_again = 0
     for i in range(o.shape[0]):
+        if init:
+            t1 = tmax[i] if has_tmax else np.inf
+        else:
+            t1 = best_t[i]
         q = primID[i]
-        if q < 0:
-            continue
-        # Float64 t on the triangle's plane (embree's where undefined)
-        n0, n1, n2 = plane_n[q, 0], plane_n[q, 1], plane_n[q, 2]
-        t = (plane_w[q] - (n0 * o[i, 0] + n1 * o[i, 1] + n2 * o[i, 2])) / (n0 * d[i, 0] + n1 * d[i, 1]
-                                                                          + n2 * d[i, 2])
-        if not np.isfinite(t):
-            t = start[i] + np.float64(tfar[i])
-        if t <= t0[i]:
-            again[n_again] = i
-            n_again += 1
-            continue
-        if not t < best_t[i]:
+        won = False
+        recast = False
+        t = 0.0
+        if q >= 0:
+            # Float64 t on the triangle's plane (embree's where undefined)
+            n0, n1, n2 = plane_n[q, 0], plane_n[q, 1], plane_n[q, 2]
+            t = (plane_w[q] - (n0 * o[i, 0] + n1 * o[i, 1] + n2 * o[i, 2])) / (n0 * d[i, 0] + n1 * d[i, 1]
+                                                                              + n2 * d[i, 2])
+            if not np.isfinite(t):
+                t = start[i] + np.float64(tfar[i])
+            if t <= t0[i]:
+                again[n_again] = i
+                n_again += 1
+                recast = True
+            elif t < t1:
+                won = True
+        if not won:
+            if init:
+                # Miss values (a re-cast may still overwrite them)
+                best_t[i] = np.inf if (final and not recast) else t1
+                best_part[i] = -1
+                prim[i] = -1
+                u_out[i] = 0.0
+                v_out[i] = 0.0
+                inst_out[i] = -1
+                p_out[i] = -1
+                mat_out[i] = -1
+                for c in range(3):
+                    ng_out[i, c] = 0.0
+                    ns_out[i, c] = 0.0
+                    pos_out[i, c] = np.nan
             continue
         # Hit fields
         u = np.float64(u32[i])
@@ -247,12 +314,30 @@ def rigid_pairs(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, T, Q, S, arc,
     scene's centre.  For each pair k written: ray[k], inst[k] (index j),
     object-space o64, d64 (k, 3) float64 (if o64 has rows) and the float32
     embree rays o32, d32, far32 starting at t0.  Returns the pair count.
+    (:func:`rigid_pairs_timed` without time-slice boxes.)
+    """
+    none = np.empty((lo.shape[0], 0, 3))
+    return rigid_pairs_timed(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, none, none, T, Q, S, arc, knots,
+                             first, last, centre, ray, inst, o64, d64, o32, d32, far32)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def rigid_pairs_timed(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, slice_lo, slice_hi, T, Q, S, arc, knots,
+                      first, last, centre, ray, inst, o64, d64, o32, d32, far32):
+    """:func:`rigid_pairs` with per-time-slice instance boxes.
+
+    slice_lo, slice_hi (J, L, 3): instance j's world box over shutter slice
+    [l / L, (l + 1) / L] (L = 0: none).  A ray whose time lies in [0, 1] is
+    tested against the box of its slice instead of the whole swept box lo,
+    hi (J, 3) (both conservative; the slice box is much smaller for fast
+    motion, so fewer pairs are transformed and cast).
     """
     A = np.empty((3, 3))
     b = np.empty(3)
     n = 0
     full = o64.shape[0] > 0
     J = lo.shape[0]
+    L = slice_lo.shape[1]
     for i in range(o.shape[0]):
         if skip[i]:
             continue
@@ -262,11 +347,18 @@ def rigid_pairs(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, T, Q, S, arc,
         s, e = t0[i], t1[i]
         if not _meets(box_lo, box_hi, ox, oy, oz, ix, iy, iz, s, e):
             continue
+        tr = times[i]
+        sl = -1
+        if L > 0 and tr >= 0.0 and tr <= 1.0:
+            sl = min(int(tr * L), L - 1)
         for j in range(J):
-            if not _meets(lo[j], hi[j], ox, oy, oz, ix, iy, iz, s, e):
+            if sl >= 0:
+                if not _meets(slice_lo[j, sl], slice_hi[j, sl], ox, oy, oz, ix, iy, iz, s, e):
+                    continue
+            elif not _meets(lo[j], hi[j], ox, oy, oz, ix, iy, iz, s, e):
                 continue
             # Ray to object space at its own time (directions not renormalised)
-            _world_to_object(T, Q, S, arc, knots, first[j], last[j], times[i], A, b)
+            _world_to_object(T, Q, S, arc, knots, first[j], last[j], tr, A, b)
             for r in range(3):
                 oo = A[r, 0] * ox + A[r, 1] * oy + A[r, 2] * oz + b[r]
                 dd = A[r, 0] * dx + A[r, 1] * dy + A[r, 2] * dz
@@ -280,6 +372,85 @@ def rigid_pairs(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, T, Q, S, arc,
             inst[n] = j
             n += 1
     return n
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def group_finish(o64, d64, ray, inst, t0, t1, tfar, primID, u32, v32, plane_n, plane_w, n_tri, k, t_blk, p_blk,
+                 u_blk, v_blk, best_t, best_part, prim, u_out, v_out):
+    """After embree's call on a group's (ray, instance) pairs: refine, keep each ray's nearest pair, write the won.
+
+    Per pair (P,): o64, d64 (P, 3) object-space rays, ray, inst, embree's tfar, primID, u32, v32
+    (the cast started at t0[ray]).  Per ray (m,): t0, t1 (= best_t before the call; not changed
+    until every pair is done) and scratch t_blk, p_blk, u_blk, v_blk.  t is refined on the
+    triangle's float64 plane (as :func:`refine_plane`); a pair with t0 < t < t1 is a candidate, a
+    ray keeps its nearest candidate (the last of equal ones, as ``EmbreeMesh.cast`` then the
+    group's ``np.minimum.at`` merge), and where that beats best_t, best_t, best_part (= k), prim
+    (= inst * n_tri + triangle), u, v are written.  Returns False, having written nothing, if any
+    refined t lies inside the guard (t <= t0): the caller re-casts that block on the numpy path.
+    """
+    m = t0.shape[0]
+    for i in range(m):
+        t_blk[i] = np.inf
+    for q in range(ray.shape[0]):
+        p = primID[q]
+        if p < 0:
+            continue
+        i = ray[q]
+        n0, n1, n2 = plane_n[p, 0], plane_n[p, 1], plane_n[p, 2]
+        t = (plane_w[p] - (n0 * o64[q, 0] + n1 * o64[q, 1] + n2 * o64[q, 2])) / (n0 * d64[q, 0] + n1 * d64[q, 1]
+                                                                                + n2 * d64[q, 2])
+        if not np.isfinite(t):
+            t = t0[i] + np.float64(tfar[q])
+        if t <= t0[i]:
+            return False
+        if t < t1[i] and t <= t_blk[i]:
+            t_blk[i] = t
+            p_blk[i] = inst[q] * n_tri + p
+            u_blk[i] = np.float64(u32[q])
+            v_blk[i] = np.float64(v32[q])
+    for i in range(m):
+        if t_blk[i] < best_t[i]:
+            best_t[i] = t_blk[i]
+            best_part[i] = k
+            prim[i] = p_blk[i]
+            u_out[i] = u_blk[i]
+            v_out[i] = v_blk[i]
+    return True
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _shade_one(q, jj, uk, vk, tk, T, Q, S, arc, knots, first, last, V, F, normals, smooth, A, b, ng, ns, row):
+    """ng[row], ns[row] (world, unit) of triangle q of instance jj at barycentrics uk, vk and time tk."""
+    _world_to_object(T, Q, S, arc, knots, first[jj], last[jj], tk, A, b)
+    # Geometric normal: object cross product through A^T, normalised
+    a0, a1, a2 = F[q, 0], F[q, 1], F[q, 2]
+    e10, e11, e12 = V[a1, 0] - V[a0, 0], V[a1, 1] - V[a0, 1], V[a1, 2] - V[a0, 2]
+    e20, e21, e22 = V[a2, 0] - V[a0, 0], V[a2, 1] - V[a0, 1], V[a2, 2] - V[a0, 2]
+    n0, n1, n2 = e11 * e22 - e12 * e21, e12 * e20 - e10 * e22, e10 * e21 - e11 * e20
+    g0 = A[0, 0] * n0 + A[1, 0] * n1 + A[2, 0] * n2
+    g1 = A[0, 1] * n0 + A[1, 1] * n1 + A[2, 1] * n2
+    g2 = A[0, 2] * n0 + A[1, 2] * n1 + A[2, 2] * n2
+    L = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+    if L > 0:
+        g0, g1, g2 = g0 / L, g1 / L, g2 / L
+    ng[row, 0], ng[row, 1], ng[row, 2] = g0, g1, g2
+    if not smooth:
+        ns[row, 0], ns[row, 1], ns[row, 2] = g0, g1, g2
+        return
+    # Shading normal: float64 blend of the corner normals, through A^T
+    w0, w1, w2 = 1 - uk - vk, uk, vk
+    m0 = w0 * normals[q, 0, 0] + w1 * normals[q, 1, 0] + w2 * normals[q, 2, 0]
+    m1 = w0 * normals[q, 0, 1] + w1 * normals[q, 1, 1] + w2 * normals[q, 2, 1]
+    m2 = w0 * normals[q, 0, 2] + w1 * normals[q, 1, 2] + w2 * normals[q, 2, 2]
+    s0 = A[0, 0] * m0 + A[1, 0] * m1 + A[2, 0] * m2
+    s1 = A[0, 1] * m0 + A[1, 1] * m1 + A[2, 1] * m2
+    s2 = A[0, 2] * m0 + A[1, 2] * m1 + A[2, 2] * m2
+    L = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    if L > 0:
+        s0, s1, s2 = s0 / L, s1 / L, s2 / L
+    if s0 == 0 and s1 == 0 and s2 == 0:
+        s0, s1, s2 = g0, g1, g2
+    ns[row, 0], ns[row, 1], ns[row, 2] = s0, s1, s2
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -297,38 +468,47 @@ def rigid_shade(j, tri, u, v, times, T, Q, S, arc, knots, first, last, V, F, nor
     smooth = normals.shape[0] > 0
     for k in range(tri.shape[0]):
         q = tri[k]
-        jj = j[k]
-        _world_to_object(T, Q, S, arc, knots, first[jj], last[jj], times[k], A, b)
-        # Geometric normal: object cross product through A^T, normalised
-        a0, a1, a2 = F[q, 0], F[q, 1], F[q, 2]
-        e10, e11, e12 = V[a1, 0] - V[a0, 0], V[a1, 1] - V[a0, 1], V[a1, 2] - V[a0, 2]
-        e20, e21, e22 = V[a2, 0] - V[a0, 0], V[a2, 1] - V[a0, 1], V[a2, 2] - V[a0, 2]
-        n0, n1, n2 = e11 * e22 - e12 * e21, e12 * e20 - e10 * e22, e10 * e21 - e11 * e20
-        g0 = A[0, 0] * n0 + A[1, 0] * n1 + A[2, 0] * n2
-        g1 = A[0, 1] * n0 + A[1, 1] * n1 + A[2, 1] * n2
-        g2 = A[0, 2] * n0 + A[1, 2] * n1 + A[2, 2] * n2
-        L = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
-        if L > 0:
-            g0, g1, g2 = g0 / L, g1 / L, g2 / L
-        ng[k, 0], ng[k, 1], ng[k, 2] = g0, g1, g2
+        _shade_one(q, j[k], u[k], v[k], times[k], T, Q, S, arc, knots, first, last, V, F, normals, smooth, A, b,
+                   ng, ns, k)
         mat[k] = material_ids[q]
-        if not smooth:
-            ns[k, 0], ns[k, 1], ns[k, 2] = g0, g1, g2
-            continue
-        # Shading normal: float64 blend of the corner normals, through A^T
-        w0, w1, w2 = 1 - u[k] - v[k], u[k], v[k]
-        m0 = w0 * normals[q, 0, 0] + w1 * normals[q, 1, 0] + w2 * normals[q, 2, 0]
-        m1 = w0 * normals[q, 0, 1] + w1 * normals[q, 1, 1] + w2 * normals[q, 2, 1]
-        m2 = w0 * normals[q, 0, 2] + w1 * normals[q, 1, 2] + w2 * normals[q, 2, 2]
-        s0 = A[0, 0] * m0 + A[1, 0] * m1 + A[2, 0] * m2
-        s1 = A[0, 1] * m0 + A[1, 1] * m1 + A[2, 1] * m2
-        s2 = A[0, 2] * m0 + A[1, 2] * m1 + A[2, 2] * m2
-        L = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-        if L > 0:
-            s0, s1, s2 = s0 / L, s1 / L, s2 / L
-        if s0 == 0 and s1 == 0 and s2 == 0:
-            s0, s1, s2 = g0, g1, g2
-        ns[k, 0], ns[k, 1], ns[k, 2] = s0, s1, s2
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def rigid_shade_rows(rows, prim, n_tri, u, v, times, instances, T, Q, S, arc, knots, first, last, V, F, normals,
+                     material_ids, inst_out, p_out, ng, ns, mat):
+    """:func:`rigid_shade` written straight into the caster's result rows.
+
+    rows (k,) the rays a group won; prim, u, v, times (n,) every ray's group
+    primitive (``j * n_tri + triangle``), barycentrics and time; instances
+    (J,) scene instance of each member.  Writes inst_out, p_out, mat (n,)
+    int32 and ng, ns (n, 3) at those rows.
+    """
+    A = np.empty((3, 3))
+    b = np.empty(3)
+    smooth = normals.shape[0] > 0
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        jj = prim[r] // n_tri
+        q = prim[r] - jj * n_tri
+        _shade_one(q, jj, u[r], v[r], times[r], T, Q, S, arc, knots, first, last, V, F, normals, smooth, A, b,
+                   ng, ns, r)
+        inst_out[r] = instances[jj]
+        p_out[r] = q
+        mat[r] = material_ids[q]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def finish_hits(best_part, is_bounded, best_t, o, d, pos):
+    """Caster epilogue: misses (best_part < 0) get t = +inf; rays won by a bounded part get
+    pos = o + t d (n, 3) (the unbounded static part wrote its own positions)."""
+    for i in range(best_part.shape[0]):
+        k = best_part[i]
+        if k < 0:
+            best_t[i] = np.inf
+        elif is_bounded[k]:
+            t = best_t[i]
+            for c in range(3):
+                pos[i, c] = o[i, c] + t * d[i, c]
 
 
 def warm_up() -> float:
