@@ -167,7 +167,7 @@ def bench_traced_errors(n_caustic=400_000, n_queries=8000) -> dict:
     return out
 
 
-def bench_render_cost(resolution=(128, 128), samples=8, n_caustic=400_000, rounds=3) -> dict:
+def bench_render_cost(resolution=(128, 128), samples=8, n_caustic=400_000, rounds=6) -> dict:
     """render_s of the same render (same photons, k) per estimator and backend.
 
     Renders interleaved round-robin over (backend, estimator), ``rounds`` times; the
