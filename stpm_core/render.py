@@ -91,6 +91,9 @@ def _map_stats(maps) -> dict:
 # ----------------------------------------------------------------------------
 # render
 # ----------------------------------------------------------------------------
+_FIRST_RENDER = True     # this process has not rendered yet (the compiled kernels may still need loading)
+
+
 def render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     """Render ``scene`` with ``settings`` (RenderSettings).
 
@@ -113,6 +116,12 @@ def render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     warnings: list[str] = []
     if cancel is not None and cancel():
         raise RenderCancelled("render cancelled")
+    global _FIRST_RENDER
+    if _FIRST_RENDER and progress is not None:
+        # numba compiles the ray-casting, shading and look-up kernels on a machine's first render
+        # (about 20 s, then cached on disk); say so rather than look frozen
+        progress(0.0, "loading compiled kernels (the first render on a machine compiles them: up to ~20 s)")
+    _FIRST_RENDER = False
 
     # -- Scene acceleration, lights, materials, plan --------------------------------
     caster = make_caster(scene)
