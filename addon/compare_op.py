@@ -128,11 +128,5 @@ class STPM_OT_compare(bpy.types.Operator):
 classes = (STPM_OT_compare,)
 
 
-def register() -> None:
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+# Blender's helper: register in order, unregister in reverse
+register, unregister = bpy.utils.register_classes_factory(classes)
