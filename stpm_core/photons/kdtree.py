@@ -302,37 +302,6 @@ if AVAILABLE:
                 return
 
     @_jit
-    def _kth(key, n, nth):
-        """The nth smallest (0-based) of key[:n] by quickselect; key is reordered in place."""
-        lo, hi = 0, n
-        while hi - lo > 1:
-            a, b, c = key[lo], key[(lo + hi) // 2], key[hi - 1]
-            if a > b:
-                a, b = b, a
-            if b > c:
-                b = c
-                if a > b:
-                    b = a
-            pivot = b
-            i, j = lo, hi - 1
-            while i <= j:
-                while key[i] < pivot:
-                    i += 1
-                while key[j] > pivot:
-                    j -= 1
-                if i <= j:
-                    key[i], key[j] = key[j], key[i]
-                    i += 1
-                    j -= 1
-            if nth <= j:
-                hi = j + 1
-            elif nth >= i:
-                lo = i
-            else:
-                break
-        return key[nth]
-
-    @_jit
     def _knn(P, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist, bound0):
         """Best-first kq-nearest search.  On return bd[:kq] / bi[:kq] hold the squared distances and
         rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther, in any order).
@@ -529,6 +498,8 @@ if AVAILABLE:
         bi = np.empty(2 * kq, np.int64)
         bx = np.empty(2 * kq)
         tk = np.empty(2 * kq)
+        tx = np.empty(2 * kq)
+        ti = np.empty(2 * kq, np.int64)
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
@@ -579,14 +550,15 @@ if AVAILABLE:
             ties = 0
             if mode == MODE_TEMPORAL:
                 # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau.
-                # Select on a keys-only copy (cheaper swaps); the sum below then takes every
+                # Select on a copy (bx, bd, bi keep their order); the sum below then takes every
                 # candidate nearer in time than tau, plus as many at exactly tau as make k - 1.
                 n_less = 0
                 for a in range(kq - 1):
                     dt = abs(np.float64(P[bi[a], 3]) - q3)
                     bx[a] = dt
                     tk[a] = dt
-                tau = _kth(tk, kq - 1, k - 1)
+                _select(tk, tx, ti, 0, kq - 1, k - 1)      # tx, ti: scratch carried along
+                tau = tk[k - 1]
                 for a in range(kq - 1):
                     if bx[a] < tau:
                         n_less += 1
