@@ -319,6 +319,29 @@ def test_scipy_fallback_when_numba_is_unavailable():
     assert np.allclose(np.array(out["E"]), m.estimate(p, ns, t, k=20), rtol=1e-5, atol=0.0)
 
 
+def test_sliced_temporal_falls_back_to_scipy_when_a_compiled_lookup_fails(monkeypatch):
+    pytest.importorskip("numba")
+    from stpm_core.photons import kdtree
+    if not kdtree.AVAILABLE:
+        pytest.skip("numba disabled")
+    monkeypatch.setattr(kdtree, "AVAILABLE", True)           # _fall_back switches it off: restore after
+    monkeypatch.setattr(kdtree, "_IMPORT_ERROR", "")
+    rng = np.random.default_rng(24)
+    recs = random_scene_map(20_000, rng, "scipy").records
+    fast = PhotonMap(recs, BOX, time_scale=0.7, backend="numba")
+    ref = PhotonMap(recs, BOX, time_scale=0.7, backend="scipy")
+    assert temporal_slices(fast.n, 7) > 1
+    p, ns, t = mixed_queries(rng, 600)
+
+    def broken(*a, **k):
+        raise RuntimeError("simulated compile failure")
+    monkeypatch.setattr(kdtree.FlatTree, "lookup", broken)
+    with pytest.warns(RuntimeWarning, match="using scipy"):
+        E = fast.estimate(p, ns, t, estimator="TEMPORAL", k=7)
+    assert fast.backend == "scipy"
+    assert np.allclose(E, ref.estimate(p, ns, t, estimator="TEMPORAL", k=7), rtol=1e-12, atol=0.0)
+
+
 def test_numba_radii_and_windows_equal_scipy_exactly():
     # Same float64 distance arithmetic: the k-th radius and TEMPORAL's window are bit-identical
     pytest.importorskip("numba")

@@ -130,8 +130,20 @@ def slab_ball_volume(shutter, R: np.ndarray, t: np.ndarray, s: float) -> np.ndar
 
 
 # ---------------------------------------------------------------------------
-# TEMPORAL candidate count
+# TEMPORAL candidate count and time slices
 # ---------------------------------------------------------------------------
+
+def _by_slice(edges: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Group times t (n,) by slice [edges[j], edges[j + 1]) of edges (B + 1,).
+
+    Returns which (n,) slice of each time, order (n,) indices sorted by slice (stable) and
+    starts (B + 1,): slice j's indices are ``order[starts[j]:starts[j + 1]]``.
+    """
+    B = len(edges) - 1
+    which = np.clip(np.searchsorted(edges[1:B], t, side="right"), 0, B - 1)
+    order = np.argsort(which, kind="stable")
+    return which, order, np.searchsorted(which[order], np.arange(B + 1))
+
 
 def temporal_slices(n_photons: int, k: int, temporal_alpha: float = 0.0) -> int:
     """Time slices B of the consistent TEMPORAL (1 for a fixed ``temporal_alpha`` >= 1).
@@ -289,9 +301,7 @@ class PhotonMap:
             edges = np.empty(B + 1)
             edges[0], edges[B] = 0.0, 1.0
             edges[1:B] = self.shutter.sample(np.arange(1, B) / B)
-            which = np.clip(np.searchsorted(edges[1:B], self.time, side="right"), 0, B - 1)
-            order = np.argsort(which, kind="stable")
-            starts = np.searchsorted(which[order], np.arange(B + 1))
+            _, order, starts = _by_slice(edges, self.time)
             rows = [order[starts[j]:starts[j + 1]] for j in range(B)]
             trees = []
             for r in rows:
@@ -314,15 +324,8 @@ class PhotonMap:
         dims = 4 if estimator == "KD4D" and not self.timeless else 3
         B = temporal_slices(self.n, k, temporal_alpha) if estimator == "TEMPORAL" and not self.timeless else 1
         if B > 1:
-            try:
-                self.time_slices(B)
-                return
-            except Exception as exc:  # noqa: BLE001 -- a compile failure falls back to scipy
-                if self.backend != "numba":
-                    raise
-                self._fall_back(exc)
-                self.time_slices(B)
-                return
+            self._numba_or_scipy(lambda: self.time_slices(B))
+            return
         if self.backend == "numba":
             try:
                 self.flat_tree(dims)
@@ -330,6 +333,16 @@ class PhotonMap:
             except Exception as exc:  # noqa: BLE001 -- a compile failure falls back to scipy
                 self._fall_back(exc)
         self.tree4() if dims == 4 else self.tree3()
+
+    def _numba_or_scipy(self, fn):
+        """fn() with the current engine; if the compiled one fails, switch this map to scipy and call fn() again."""
+        try:
+            return fn()
+        except Exception as exc:  # noqa: BLE001 -- a compile or run failure falls back to scipy
+            if self.backend != "numba":
+                raise
+            self._fall_back(exc)
+            return fn()
 
     def _fall_back(self, exc: Exception) -> None:
         """The compiled path failed (e.g. no compiler cache, broken llvmlite): use scipy from now on."""
@@ -394,18 +407,15 @@ class PhotonMap:
         Within slice j = [a, b) the m candidates and the k nearest in time come from that slice's
         photons only, so the window is clipped to the slice: W = mass of [t - tau, t + tau] cut to
         [a, b] (docs/photon-mapping.md shows (k - 1) / (pi r_m^2 W) stays unbiased).
+        A failure of the compiled search (build or look-up) redoes the estimate with scipy trees.
         """
-        try:
-            sl = self.time_slices(B)
-        except Exception as exc:  # noqa: BLE001 -- numba failed: same slices with scipy trees
-            if self.backend != "numba":
-                raise
-            self._fall_back(exc)
-            sl = self.time_slices(B)
+        return self._numba_or_scipy(lambda: self._search_sliced(B, p, ns, t, k, m, kernel))
+
+    def _search_sliced(self, B, p, ns, t, k, m, kernel):
+        """:meth:`_estimate_sliced` with the map's current engine."""
+        sl = self.time_slices(B)
         edges = sl["edges"]
-        which = np.clip(np.searchsorted(edges[1:B], t, side="right"), 0, B - 1)
-        order = np.argsort(which, kind="stable")
-        starts = np.searchsorted(which[order], np.arange(B + 1))
+        which, order, starts = _by_slice(edges, t)
         n = p.shape[0]
         Phi, r, tau = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
         lo, hi = edges[which], edges[which + 1]
