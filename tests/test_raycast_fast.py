@@ -1,5 +1,5 @@
 """Fast paths of the embree caster (fused first static part, time-slice boxes of moving
-instances, reusable ``out=`` hits): the same bits as the plain paths, and safe bounds."""
+instances): the same bits as the plain paths, and safe bounds."""
 from __future__ import annotations
 
 import numpy as np
@@ -73,25 +73,6 @@ def test_fused_first_part_gives_the_plain_paths_bits(which):
         assert np.all(np.isinf(hf.t[miss])) and np.all(hf.instance[miss] == -1) and np.all(hf.material[miss] == -1)
         assert np.all(np.isnan(hf.position[miss])) and np.all(hf.ng[miss] == 0)
     np.testing.assert_array_equal(fused.occluded(o, d, t, tmax), plain.occluded(o, d, t, tmax))
-
-
-@needs_fused
-def test_out_buffers_are_reused_and_give_the_same_hits():
-    """intersect(out=Hits.empty(capacity)): views of the first n rows, results as without out=,
-    whatever the buffers held before (fused and plain paths)."""
-    rng = np.random.default_rng(8)
-    scene = fused_scene(rng)
-    for fused in (None, False):
-        caster = make_caster(scene, "embree", fused=fused)
-        buf = Hits.empty(3000)
-        for f in FIELDS:
-            getattr(buf, f).fill(7)                          # stale content must not leak through
-        for n in (3000, 1234):
-            o, d, t = random_rays(rng, n)
-            ref = caster.intersect(o, d, t)
-            got = caster.intersect(o, d, t, out=buf)
-            assert got.t.shape == (n,) and np.shares_memory(got.t, buf.t) and np.shares_memory(got.ns, buf.ns)
-            assert_same_hits(got, ref)
 
 
 @needs_fused

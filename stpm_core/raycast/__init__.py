@@ -3,7 +3,7 @@
 Public API (implemented by the backends in this package; one interface):
 
     caster = make_caster(scene, backend="auto")   # 'embree' | 'numba' | 'numpy' | 'auto'
-    hits = caster.intersect(origins, dirs, times, tmax=None, out=None)
+    hits = caster.intersect(origins, dirs, times, tmax=None)
     blocked = caster.occluded(origins, dirs, times, tmax)
 
 Arrays
@@ -50,7 +50,7 @@ class Hits:
 
     @classmethod
     def empty(cls, n: int) -> "Hits":
-        """Uninitialised arrays for n rays (dtypes as above); a reusable ``out=`` for ``intersect``."""
+        """Uninitialised arrays for n rays (dtypes as above), for the caster to fill."""
         return cls(t=np.empty(n), instance=np.empty(n, np.int32), prim=np.empty(n, np.int32), u=np.empty(n),
                    v=np.empty(n), position=np.empty((n, 3)), ng=np.empty((n, 3)), ns=np.empty((n, 3)),
                    material=np.empty(n, np.int32))

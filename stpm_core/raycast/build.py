@@ -52,7 +52,6 @@ __all__ = ["make_caster", "Caster", "BACKENDS"]
 
 BACKENDS = ("auto", "embree", "numba", "numpy")
 
-_HIT_FIELDS = ("t", "instance", "prim", "u", "v", "position", "ng", "ns", "material")
 
 # Environment override of backend='auto' (render() and the photon tracer build
 # their casters with 'auto'): one of BACKENDS, e.g. STPM_RAYCAST_BACKEND=numba
@@ -201,27 +200,15 @@ class Caster:
         return out
 
     # ------------------------------------------------------------------ intersect
-    def intersect(self, origins, dirs, times, tmax=None, out: Hits | None = None) -> Hits:
-        """Nearest hit of each ray at its own time -> :class:`Hits` (see package docstring).
-
-        out : optional :class:`Hits` with at least n rows (e.g. from :meth:`Hits.empty`, kept
-            between calls) whose arrays receive the results (any prior content); the
-            returned Hits holds views of their first n rows.  Saves allocating ~120 bytes
-            per ray per call (page faults where that memory would be fresh; no gain
-            measured in the tracer, where the allocator recycles it).  The caller must
-            not use the previous results held in ``out`` after the call, nor pass input
-            arrays that share memory with it.
-        """
+    def intersect(self, origins, dirs, times, tmax=None) -> Hits:
+        """Nearest hit of each ray at its own time -> :class:`Hits` (see package docstring)."""
         start = _time.perf_counter()
         n_tmax = tmax
         o, d, times, tmax = _as_rays(origins, dirs, times, tmax)
         n = o.shape[0]
         first = self.parts[0] if self.parts else None
         fast = first is not None and first.bounds is None and getattr(first, "intersect_into", None) is not None
-        if out is not None:
-            out = Hits(*(getattr(out, f)[:n] for f in _HIT_FIELDS))
-        elif fast:
-            out = Hits.empty(n)
+        out = Hits.empty(n)
         if fast:
             # Fused first (static) part: guard, cast, refine and every field in kernels per block,
             # no pre-filled arrays; misses written by the kernel
@@ -248,8 +235,6 @@ class Caster:
             parts = list(enumerate(self.parts))[1:]
         else:
             tmin = tmin_of(d, self.scale)
-            if out is None:
-                out = Hits.empty(n)
             out.t[:] = tmax
             out.instance.fill(-1)
             out.prim.fill(-1)
