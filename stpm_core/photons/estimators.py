@@ -63,9 +63,8 @@ __all__ = [
 
 ESTIMATOR_NAMES = ("STANDARD", "TEMPORAL", "KD4D")
 CONE_K = 1.1                 # cone kernel: w(d) = 1 - d / (CONE_K * r)
-TEMPORAL_ALPHA_FIXED = 1.5   # the paper's fixed candidate multiple (also the multiple inside a slice)
 TEMPORAL_SLICE_C = 0.25      # automatic time slices B = max(1, round(C * (N / k)^(1/3)))
-TEMPORAL_SLICE_ALPHA = 1.5   # candidates per estimate inside a slice, as a multiple of k
+TEMPORAL_SLICE_ALPHA = 1.5   # candidates per estimate inside a slice, as a multiple of k (the paper's 1.5)
 _QUERY_BATCH_ELEMS = 1 << 21 # neighbours gathered per batch (bounds memory)
 _GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(8)
 
