@@ -3,26 +3,29 @@
 One source of truth for the passes: :data:`PASSES` lists ``(name, channels,
 channel_ids)`` and is used by the film, the EXR writer and the Blender add-on.
 
-Pixel estimator (see docs/rendering.md)::
+Pixel estimator (see docs/rendering.md, "The pixel estimator")::
 
-    I_j = sum_i w(x_i - c_j) L(x_i, t_i) / sum_i w(x_i - c_j)
+    I_j = (1 / S) sum_{i in pixel j} L(x_i, t_i),    x_i - c_j ~ w / (integral of w)
 
-``x_i`` is the film position of camera sample i (continuous pixel coordinates,
-pixel j has centre ``c_j = (ix + 0.5, iy + 0.5)``), ``t_i`` its shutter time and
-``w`` the separable Blackman-Harris filter.  Every sample is *splatted* to all
-pixels its filter covers, so an edge that moves during the shutter produces a
-smooth coverage ramp across pixel boundaries.
+Filter importance sampling, as Cycles and pbrt-v4 do: camera sample i of
+pixel j sits at ``x_i = c_j + filter_offsets(u_i, r)`` (``c_j = (ix + 0.5, iy +
+0.5)``, ``u_i`` the pixel's stratified uniforms), drawn from the normalised
+separable Blackman-Harris window ``w``, and counts for pixel j only, with
+weight 1.  The expected value is the filter-weighted average
+``integral w(x - c_j) L(x, t) dx / integral w``, the same as splatting each
+sample into every pixel its filter covers, but each sample is added once
+instead of (2r + 1)^2 times.  A moving edge still gives a smooth coverage
+ramp: neighbouring pixels' samples overlap on the film.
 """
 from __future__ import annotations
 
 import threading
 
 import numpy as np
-import scipy.sparse
 
 from . import shading_kernels as _K
 
-__all__ = ["PASSES", "PASS_NAMES", "pass_channels", "blackman_harris", "Film"]
+__all__ = ["PASSES", "PASS_NAMES", "pass_channels", "blackman_harris", "filter_offsets", "BH_INVERSE_CDF", "Film"]
 
 # Render passes: (name, channel count, channel ids) -- Blender's names and order.
 PASSES: tuple[tuple[str, int, str], ...] = (
@@ -38,6 +41,9 @@ PASS_NAMES: tuple[str, ...] = tuple(p[0] for p in PASSES)
 
 # Depth written where a camera ray escapes (Blender writes 1e10 for the background).
 DEPTH_BACKGROUND = 1.0e10
+
+# Blackman-Harris coefficients: w(x) = A0 + A1 cos(pi x / r) + A2 cos(2 pi x / r) + A3 cos(3 pi x / r)
+BH_A = (0.35875, 0.48829, 0.14128, 0.01168)
 
 
 def pass_channels(name: str) -> int:
@@ -61,19 +67,44 @@ def blackman_harris(x: np.ndarray, radius: float) -> np.ndarray:
     return np.where(np.abs(x) < radius, w, 0.0)
 
 
-def _blackman_harris32(x: np.ndarray, radius: float) -> np.ndarray:
-    """:func:`blackman_harris` in float32 (x float32, any shape): the film's hot path.
+def blackman_harris_cdf(v: np.ndarray) -> np.ndarray:
+    """CDF of the unit-radius window on [-1, 1]: F(v) = integral_{-1}^{v} w / integral_{-1}^{1} w.
 
-    Float32 cosines are vectorised by numpy (several times faster than
-    float64); the weights are stored in float32 anyway.  Written as a cubic in
-    c = cos(pi x / r): (a0 - a2) + (a1 - 3 a3) c + 2 a2 c^2 + 4 a3 c^3.
+    integral_{-1}^{v} w = A0 (v + 1) + sum_k A_k sin(k pi v) / (k pi)   (the sines vanish at -1),
+    and the whole integral is 2 A0.
     """
-    c = np.cos(x * np.float32(np.pi / radius))
-    c2 = c * c
-    w = (np.float32(0.35875 - 0.14128) + np.float32(2 * 0.14128) * c2
-         + c * (np.float32(0.48829 - 3 * 0.01168) + np.float32(4 * 0.01168) * c2))
-    w[np.abs(x) >= np.float32(radius)] = 0.0
-    return w
+    v = np.clip(np.asarray(v, dtype=np.float64), -1.0, 1.0)
+    a0, a1, a2, a3 = BH_A
+    s = a0 * (v + 1.0) + sum(a * np.sin(k * np.pi * v) / (k * np.pi) for k, a in ((1, a1), (2, a2), (3, a3)))
+    return s / (2.0 * a0)
+
+
+def _inverse_cdf_table(m: int = 4097, fine: int = 1 << 17) -> np.ndarray:
+    """(m,) float64: F^-1(j / (m - 1)) of the unit-radius window (-1 .. 1), by inverting F on a fine grid."""
+    v = np.linspace(-1.0, 1.0, fine + 1)
+    return np.interp(np.linspace(0.0, 1.0, m), blackman_harris_cdf(v), v)
+
+
+# Inverse CDF of the unit-radius Blackman-Harris window at m = 4097 evenly spaced
+# probabilities (linear in between: filter_offsets, shading_kernels.camera_tile).
+BH_INVERSE_CDF: np.ndarray = _inverse_cdf_table()
+
+
+def filter_offsets(u: np.ndarray, radius: float) -> np.ndarray:
+    """Film offsets (pixels, from the pixel centre) distributed as the window: u (n,) in [0, 1) -> (n,).
+
+    ``radius * F^-1(u)`` with F^-1 interpolated linearly in :data:`BH_INVERSE_CDF`
+    (the same formula as the compiled ``camera_tile``).  ``radius <= 0``: the box
+    filter, offsets ``u - 1/2`` (uniform over the pixel).
+    """
+    u = np.asarray(u, dtype=np.float64)
+    if radius <= 0:
+        return u - 0.5
+    T = BH_INVERSE_CDF
+    s = u * (T.size - 1)
+    j = np.minimum(s.astype(np.int64), T.size - 2)
+    f = s - j
+    return radius * (T[j] * (1.0 - f) + T[j + 1] * f)
 
 
 _WIN = threading.local()
@@ -91,7 +122,7 @@ def _window_buffer(shape: tuple) -> np.ndarray:
 
 
 class Film:
-    """Accumulates filter-weighted samples into the named passes.
+    """Accumulates camera samples into the named passes, each sample into its own pixel.
 
     Parameters
     ----------
@@ -99,13 +130,13 @@ class Film:
     filter_width : Blackman-Harris width in pixels (``RenderSettings.filter_width``,
         Blender's default 1.5).  As in Cycles, the Blackman-Harris support is
         twice the width (radius = ``filter_width`` pixels), because the window is
-        narrow near its ends.  ``filter_width == 0`` is a box over each pixel:
-        a sample counts only for the pixel it falls in.
+        narrow near its ends.  The filter shapes where camera samples are placed
+        (:func:`filter_offsets`); the film itself only sums.  ``filter_width == 0``
+        is a box over each pixel.
 
-    Memory: float32 accumulators (H*W, 17) and the weight sum (H*W,)
-    (72 bytes per pixel: 150 MB at 1920x1080).  Each batch is summed in
-    float64 first and a pixel receives batches from at most a few tiles, so
-    float32 storage loses nothing visible.
+    Memory: float32 accumulators (H*W, 20) and the sample count (H*W,)
+    (84 bytes per pixel: 175 MB at 1920x1080).  Each tile is summed in float64
+    and a pixel receives one tile, so float32 storage loses nothing visible.
     """
 
     def __init__(self, width: int, height: int, filter_width: float = 1.5):
@@ -115,75 +146,27 @@ class Film:
         self._sum = np.zeros((self.height * self.width, self.n_channels), np.float32)
         self._wsum = np.zeros(self.height * self.width, np.float32)
 
-    def add_samples(self, px: np.ndarray, py: np.ndarray, values: dict[str, np.ndarray]) -> None:
-        """Splat samples at film positions px, py (n,) (pixels, row 0 = top).
+    def add_samples(self, ix: np.ndarray, iy: np.ndarray, values: dict[str, np.ndarray]) -> None:
+        """Add samples to the pixels they were drawn for: ix, iy (n,) integer pixel indices (row 0 = top).
 
         values : pass name -> (n, C) float array for every name in :data:`PASSES`.
-        Work is done in the bounding box of the pixels the samples reach (a
-        tile plus the filter margin), so the cost does not grow with the image.
+        The general (slow) form of :meth:`tile_sums` + :meth:`add_window`.
         """
-        px = np.asarray(px, dtype=np.float64)
-        py = np.asarray(py, dtype=np.float64)
-        n = px.shape[0]
+        ix = np.asarray(ix, dtype=np.int64)
+        iy = np.asarray(iy, dtype=np.int64)
+        n = ix.shape[0]
         if n == 0:
             return
         V = np.concatenate([np.asarray(values[name], dtype=np.float64).reshape(n, c)
                             for name, c, _ in PASSES], axis=1)
-        fx, fy = np.floor(px).astype(np.int64), np.floor(py).astype(np.int64)
-        # Pixel offsets o (relative to the sample's own pixel) with |o + 1/2 - frac| < r
-        r = self.radius
-        offsets = range(int(np.floor(-0.5 - r)) + 1, int(np.ceil(0.5 + r))) if r > 0 else range(0, 1)
-        m = max(-offsets[0], offsets[-1])
-        # Local window: the samples' pixels plus the filter margin, clipped to the image
-        x0, x1 = max(int(fx.min()) - m, 0), min(int(fx.max()) + m + 1, self.width)
-        y0, y1 = max(int(fy.min()) - m, 0), min(int(fy.max()) + m + 1, self.height)
-        if x0 >= x1 or y0 >= y1:
-            return
-        bw, bh = x1 - x0, y1 - y0
-        # Separable weights: one window evaluation per offset and axis
-        ones = np.ones(n)
-        wxs = [ones if r <= 0 else blackman_harris(fx + o + 0.5 - px, r) for o in offsets]
-        wys = [ones if r <= 0 else blackman_harris(fy + o + 0.5 - py, r) for o in offsets]
-        C = self.n_channels
-        # Each sample's K = len(offsets)^2 (window pixel, weight) pairs; pairs outside
-        # the window keep weight 0 and point at pixel 0
-        cols, vals = [], []
-        for oy, wy in zip(offsets, wys):
-            iy = fy + oy
-            for ox, wx in zip(offsets, wxs):
-                ix = fx + ox
-                inside = (ix >= x0) & (ix < x1) & (iy >= y0) & (iy < y1)
-                cols.append(np.where(inside, (iy - y0) * bw + (ix - x0), 0))
-                vals.append(np.where(inside, wx * wy, 0.0))
-        K = len(cols)
-        # B (samples, window pixels) of filter weights, built directly in CSR form
-        # (row i holds sample i's K entries); the sums are B^T @ [V, 1]
-        B = scipy.sparse.csr_matrix((np.stack(vals, axis=1).ravel(), np.stack(cols, axis=1).ravel(),
-                                     np.arange(0, n * K + 1, K)), shape=(n, bh * bw))
-        sums = B.T @ np.concatenate([V, np.ones((n, 1))], axis=1)
-        vsum, wsum = sums[:, :C], sums[:, C]
-        # Add the window into the full-image accumulators
-        S = self._sum.reshape(self.height, self.width, C)
-        S[y0:y1, x0:x1] += vsum.reshape(bh, bw, C)
-        Wt = self._wsum.reshape(self.height, self.width)
-        Wt[y0:y1, x0:x1] += wsum.reshape(bh, bw)
-
-    def _offsets(self) -> range:
-        """Pixel offsets o (relative to a sample's own pixel) that its filter can reach."""
-        r = self.radius
-        return range(int(np.floor(-0.5 - r)) + 1, int(np.ceil(0.5 + r))) if r > 0 else range(0, 1)
-
-    def add_tile(self, x0: int, y0: int, tw: int, th: int, px: np.ndarray, py: np.ndarray,
-                 values: dict[str, np.ndarray]) -> None:
-        """Splat the samples of one tile (same result as :meth:`add_samples`, faster).
-
-        ``add_window(splat_tile(...))``: the splat itself touches no film state,
-        so worker threads can run it and leave only the addition to the caller.
-        """
-        self.add_window(self.splat_tile(x0, y0, tw, th, px, py, values))
+        j = iy * self.width + ix
+        acc = np.zeros((self.height * self.width, self.n_channels + 1))
+        np.add.at(acc, j, np.concatenate([V, np.ones((n, 1))], axis=1))
+        self._sum += acc[:, :-1].astype(np.float32)
+        self._wsum += acc[:, -1].astype(np.float32)
 
     def add_window(self, window) -> None:
-        """Add a window returned by :meth:`splat_tile` into the accumulators."""
+        """Add a window returned by :meth:`tile_sums` into the accumulators."""
         if window is None:
             return
         (ya, yb, xa, xb), active, w = window
@@ -196,100 +179,59 @@ class Film:
             j += c
         self._wsum.reshape(self.height, self.width)[ya:yb, xa:xb] += w[..., k]
 
-    def splat_tile(self, x0: int, y0: int, tw: int, th: int, px: np.ndarray, py: np.ndarray,
-                   values: dict[str, np.ndarray]):
-        """Filter-weighted sums of one tile's samples over the pixels they reach.
+    def tile_sums(self, x0: int, y0: int, tw: int, th: int, values: dict[str, np.ndarray]):
+        """Per-pixel sums of one tile's samples (touches no film state: worker threads run it).
 
         Returns None (nothing to add) or ``((ya, yb, xa, xb), active, w)``: the
-        image rows / columns the window covers, the (first channel, channels)
-        of the passes it holds, and w (yb - ya, xb - xa, k + 1) float32 sums
-        (last channel: the weight sum).  Reads only the film's size and filter.
+        image rows / columns of the tile, the (first channel, channels) of the
+        passes it holds, and w (yb - ya, xb - xa, k + 1) float32 sums (last
+        channel: the sample count), for :meth:`add_window`.
 
         The samples must be laid out as :func:`stpm_core.integrator.camera_samples`
         makes them: the tile's pixels [x0, x0 + tw) x [y0, y0 + th) in row-major
-        order, each pixel's S = n / (tw th) samples consecutive and inside that
-        pixel.  Then every filter offset (ox, oy) sends pixel j's samples to one
-        pixel, and the splat is one batched product per tile::
-
-            sums[j, k, c] = sum_s w_k(x_js) V[j, s, c]     (k = filter offset)
-
-        followed by K shifted block additions.  Passes that are all zero in the
-        tile (e.g. Caustic without photons) are skipped.  Float32 throughout (each tile
-        sums at most K * S products per pixel before it reaches the float32
-        accumulators).
+        order, each pixel's S = n / (tw th) samples consecutive, so
+        ``w[p, c] = sum_s V[p, s, c]``.  Passes that are all zero in the tile
+        (e.g. Caustic without photons) are skipped.  Sums in float64.
         """
-        n = px.shape[0]
         P = tw * th
+        n = next(iter(values.values())).shape[0] if values else 0
         if n == 0 or P == 0:
             return None
         if _K.AVAILABLE:
             V = np.concatenate([np.asarray(values[name], np.float64).reshape(n, c) for name, c, _ in PASSES], axis=1)
-            return self.splat_tile_matrix(x0, y0, tw, th, px, py, V)
+            return self.tile_sums_matrix(x0, y0, tw, th, V)
         S = n // P
-        # Sample values (n, k + 1) float32 of the passes that are not all zero in this
-        # tile (they add nothing); the last column counts the weight sum
-        active, c0 = [], 0                       # (first image channel, channels, array)
+        active, arrays, c0 = [], [], 0
         for name, c, _ in PASSES:
-            a = np.asarray(values[name]).reshape(n, c)
+            a = np.asarray(values[name], np.float64).reshape(n, c)
             if np.any(a):
-                active.append((c0, c, a))
+                active.append((c0, c))
+                arrays.append(a)
             c0 += c
-        k = sum(c for _, c, _ in active)
-        V = np.empty((n, k + 1), np.float32)
-        j = 0
-        for _, c, a in active:
-            V[:, j:j + c] = a
-            j += c
-        V[:, k] = 1.0
-        # Separable filter weights per offset: (n, k) along x and y
-        offsets = self._offsets()
-        r = self.radius
-        if r > 0:
-            px = np.asarray(px, np.float64)
-            py = np.asarray(py, np.float64)
-            o = np.asarray(offsets, np.float32) + np.float32(0.5)
-            wx = _blackman_harris32((np.floor(px) - px).astype(np.float32)[:, None] + o[None, :], r)
-            wy = _blackman_harris32((np.floor(py) - py).astype(np.float32)[:, None] + o[None, :], r)
-        else:
-            wx = wy = np.ones((n, 1), np.float32)
-        k1 = len(offsets)
-        Wk = (wy[:, :, None] * wx[:, None, :]).reshape(P, S, k1 * k1)   # offset k = (iy, ix)
-        sums = np.matmul(Wk.transpose(0, 2, 1), V.reshape(P, S, k + 1))  # (P, K, k + 1)
-        sums = sums.reshape(th, tw, k1 * k1, k + 1)
-        # Shifted block additions into a local window (the tile plus the filter margin)
-        lo, hi = offsets[0], offsets[-1]
-        win = np.zeros((th + hi - lo, tw + hi - lo, k + 1), np.float32)
-        for iy in range(k1):
-            for ix in range(k1):
-                win[iy:iy + th, ix:ix + tw] += sums[:, :, iy * k1 + ix]
-        # The window, clipped to the image, into the accumulators (active passes only)
-        ya, yb = max(y0 + lo, 0), min(y0 + hi + th, self.height)
-        xa, xb = max(x0 + lo, 0), min(x0 + hi + tw, self.width)
-        if ya >= yb or xa >= xb:
-            return None
-        w = win[ya - y0 - lo:yb - y0 - lo, xa - x0 - lo:xb - x0 - lo]
-        return (ya, yb, xa, xb), [(c0, c) for c0, c, _ in active], w
+        V = np.concatenate(arrays + [np.ones((n, 1))], axis=1)
+        w = V.reshape(P, S, -1).sum(axis=1).reshape(th, tw, -1).astype(np.float32)
+        ya, yb, xa, xb = y0, min(y0 + th, self.height), x0, min(x0 + tw, self.width)
+        return (ya, yb, xa, xb), active, w[:yb - ya, :xb - xa]
 
-    def splat_tile_matrix(self, x0: int, y0: int, tw: int, th: int, px: np.ndarray, py: np.ndarray,
-                          V: np.ndarray, combined_is_sum: bool = False, alpha_one: bool = False,
-                          zero: tuple = (), scan: bool = True, channels: np.ndarray | None = None,
-                          columns: np.ndarray | None = None):
-        """:meth:`splat_tile` with the sample values as one matrix V (n, m) float64, by the
-        compiled kernel ``shading_kernels.splat_tile`` (float32 per-pixel sums as in the
-        numpy splat, float64 window).  Needs ``shading_kernels.AVAILABLE``.
+    def tile_sums_matrix(self, x0: int, y0: int, tw: int, th: int, V: np.ndarray, combined_is_sum: bool = False,
+                         alpha_one: bool = False, zero: tuple = (), scan: bool = True,
+                         channels: np.ndarray | None = None, columns: np.ndarray | None = None):
+        """:meth:`tile_sums` with the sample values as one matrix V (n, m) float64, by the
+        compiled kernels ``shading_kernels.pixel_sums`` and ``tile_finish`` (float64
+        sums).  Needs ``shading_kernels.AVAILABLE``.
 
         channels (m,): the image channel (:data:`PASSES` order, 0 .. 19) of
         each column of V; None = V has all 20 channels in order.  columns: the
         columns to sum (None: all; with ``scan`` the all-zero ones are then
-        skipped, ``zero`` names passes known to be 0).  The splat is linear in
+        skipped, ``zero`` names passes known to be 0).  The sums are linear in
         V, so channels that are fixed combinations of others need no sums of
         their own: ``combined_is_sum`` (Combined RGB = Emit + Direct + Indirect
         + Caustic for every sample, as the integrator makes it) and
-        ``alpha_one`` (Combined alpha = 1: its sum is the weight sum) take them
-        from the other sums.  Returns the :meth:`splat_tile` window format
+        ``alpha_one`` (Combined alpha = 1: its sum is the sample count) take them
+        from the other sums.  Returns the :meth:`tile_sums` window format
         with every pass.
         """
-        n = px.shape[0]
+        n = V.shape[0]
         P = tw * th
         if n == 0 or P == 0:
             return None
@@ -306,25 +248,18 @@ class Film:
             act = _K.active_channels(V, skip) if scan else np.flatnonzero(~skip)
         else:
             act = np.asarray(columns, np.int64)
-        offsets = self._offsets()
-        lo, k1 = offsets[0], len(offsets)
-        win = _window_buffer((th + k1 - 1, tw + k1 - 1, act.size + 1))
-        _K.splat_tile(tw, th, n // P, np.ascontiguousarray(px, np.float64), np.ascontiguousarray(py, np.float64),
-                      V, act, self.radius, lo, k1, win)
-        ya, yb = max(y0 + lo, 0), min(y0 + lo + th + k1 - 1, self.height)
-        xa, xb = max(x0 + lo, 0), min(x0 + lo + tw + k1 - 1, self.width)
-        if ya >= yb or xa >= xb:
-            return None
+        win = _window_buffer((th, tw, act.size + 1))
+        _K.pixel_sums(tw, th, n // P, V, act, win)
+        yb, xb = min(y0 + th, self.height), min(x0 + tw, self.width)
         # Image channels: the sums, Combined RGB from its parts (in Emit, Direct, Indirect,
-        # Caustic order, float64), Combined alpha from the weight sum
+        # Caustic order, float64), Combined alpha from the sample count
         summed = chan[act]
         comb = np.array([int(np.flatnonzero(summed == c0)[0]) for c0 in
                          (self._first_channel(name) for name in ("Emit", "Direct", "Indirect", "Caustic"))
                          if combined_is_sum and np.any(summed == c0)], np.int64)
-        w = np.empty((yb - ya, xb - xa, C + 1), np.float32)
-        _K.splat_finish(win, ya - y0 - lo, yb - y0 - lo, xa - x0 - lo, xb - x0 - lo, np.ascontiguousarray(summed),
-                        comb, bool(alpha_one), w)
-        return (ya, yb, xa, xb), [(0, C)], w
+        w = np.empty((yb - y0, xb - x0, C + 1), np.float32)
+        _K.tile_finish(win, 0, yb - y0, 0, xb - x0, np.ascontiguousarray(summed), comb, bool(alpha_one), w)
+        return (y0, yb, x0, xb), [(0, C)], w
 
     @staticmethod
     def _first_channel(name: str) -> int:
@@ -337,10 +272,10 @@ class Film:
         raise KeyError(name)
 
     def resolve(self) -> dict[str, np.ndarray]:
-        """The passes as name -> (H, W, C) float32: weighted sums over weight sums.
+        """The passes as name -> (H, W, C) float32: sums over sample counts.
 
-        A pixel that no sample reached (only possible with a very narrow filter)
-        is 0, with Depth = :data:`DEPTH_BACKGROUND`.
+        A pixel that no sample reached (a film no tile was added to) is 0, with
+        Depth = :data:`DEPTH_BACKGROUND`.
         """
         w = self._wsum[:, None]
         img = np.where(w > 0, self._sum / np.where(w > 0, w, 1.0), 0.0)

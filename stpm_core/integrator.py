@@ -42,7 +42,7 @@ from . import shading_kernels as _K
 from .bsdf import MaterialTable, bsdf_eval, bsdf_sample, diffuse_albedo, emission, has_nondelta
 from .camera import camera_to_world, generate_rays, image_plane
 from .errors import RenderCancelled
-from .film import DEPTH_BACKGROUND, PASSES, Film
+from .film import BH_INVERSE_CDF, DEPTH_BACKGROUND, PASSES, Film, filter_offsets
 from .sampling import rng_for, skip_uniforms
 
 __all__ = ["TraceStats", "trace_image", "camera_samples", "shade_paths"]
@@ -83,14 +83,18 @@ class TraceStats:
 # Camera samples: stratified positions and decorrelated stratified times
 # ----------------------------------------------------------------------------
 def camera_samples(ix: np.ndarray, iy: np.ndarray, spp: int, shutter, rng: np.random.Generator,
-                   time_override: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   time_override: float | None = None, *, filter_width: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Film positions and times for ``spp`` samples in each of the pixels (ix, iy) (P,).
 
     Returns px, py (P*spp,) continuous pixel coordinates and times (P*spp,)
     normalised shutter times (sample-major within each pixel).
 
-    Position: a rows x cols jittered grid per pixel (rows = floor(sqrt spp),
-    cols = spp // rows), leftover samples uniform.  Time: xi = (pi_p(j) + U) / spp
+    Position: uniforms u on a rows x cols jittered grid per pixel (rows =
+    floor(sqrt spp), cols = spp // rows), leftover samples uniform, placed by
+    the pixel filter (filter importance sampling, ``film.filter_offsets``):
+    px = ix + 1/2 + filter_offsets(u_x, filter_width), likewise py; the box
+    filter (``filter_width`` 0) keeps px = ix + u_x.  Time: xi = (pi_p(j) + U) / spp
     with pi_p a random permutation per pixel, mapped through ``shutter.sample``
     (the shutter curve's inverse CDF); ``time_override`` fixes every time.
     The time numbers take their place in the random stream in every case (an
@@ -105,8 +109,12 @@ def camera_samples(ix: np.ndarray, iy: np.ndarray, spp: int, shutter, rng: np.ra
     jit = rng.random((P, S, 2))
     ux = np.concatenate([np.broadcast_to((cx / cols), (P, m)) + jit[:, :m, 0] / cols, jit[:, m:, 0]], axis=1)
     uy = np.concatenate([np.broadcast_to((cy / rows), (P, m)) + jit[:, :m, 1] / rows, jit[:, m:, 1]], axis=1)
-    px = (ix[:, None] + ux).ravel()
-    py = (iy[:, None] + uy).ravel()
+    if filter_width > 0:
+        px = (ix[:, None] + 0.5 + filter_offsets(ux, filter_width)).ravel()
+        py = (iy[:, None] + 0.5 + filter_offsets(uy, filter_width)).ravel()
+    else:
+        px = (ix[:, None] + ux).ravel()
+        py = (iy[:, None] + uy).ravel()
     # Time strata, permuted independently in each pixel (when every time is the same the
     # numbers are skipped, not made: the stream stays where drawing them would leave it)
     if time_override is not None or shutter.is_instant:
@@ -449,8 +457,8 @@ def _compact_layout(ctx) -> dict[str, tuple[int, int]]:
     Depth, Normal, Emit, Direct always; Indirect / Caustic with their photon
     map; ``Alpha`` (the coverage, Combined's alpha) with a transparent film.
     Combined RGB (= Emit + Direct + Indirect + Caustic) and an alpha of 1 are
-    formed by the splat.  Narrow rows: the tile's matrix is streamed from
-    memory several times (first hit, next-event estimation, splat).
+    formed by the film sums.  Narrow rows: the tile's matrix is streamed from
+    memory several times (first hit, next-event estimation, per-pixel sums).
     """
     names = [("Depth", 1), ("Normal", 3), ("Emit", 3), ("Direct", 3)]
     if "Indirect" not in ctx.zero_passes:
@@ -547,7 +555,7 @@ def _shade_paths_fast(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, 
     shading / continuing rows index the caster's arrays directly (no gathers).
     layout: pass name -> (first, end) column of V; None: every pass in
     PASSES order (20 columns, Combined included).  Other layouts come from
-    :func:`_compact_layout` (no Combined: ``Film.splat_tile_matrix`` derives it).
+    :func:`_compact_layout` (no Combined: ``Film.tile_sums_matrix`` derives it).
     V: an (n, width) float64 buffer to fill, any content (None: a new one).
     touched: a set that receives the names of the passes among Emit, Direct,
     Indirect and Caustic that got any value (the others are 0 everywhere).
@@ -565,7 +573,7 @@ def _shade_paths_fast(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, 
     world_L = np.asarray(ctx.world_radiance, np.float64)
     world_on = bool(np.any(world_L > 0))
     table = ctx.table
-    # Passes that received something (the others stay 0: the splat can skip them)
+    # Passes that received something (the others stay 0: the film sums can skip them)
     touched = set() if touched is None else touched
     idx = None
     beta = None
@@ -735,7 +743,7 @@ def _trace_tile_fast(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, r
 
     Draws the camera uniforms in :func:`camera_samples`' order, makes rays with
     ``camera_rays`` (the formulas of ``camera.generate_rays``), shades with
-    :func:`_shade_paths_fast` and splats with ``Film.splat_tile_matrix``.
+    :func:`_shade_paths_fast` and sums per pixel with ``Film.tile_sums_matrix``.
     """
     P, S = tw * th, int(spp)
     n = P * S
@@ -749,7 +757,7 @@ def _trace_tile_fast(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, r
     else:
         skip_uniforms(rng, 2 * P * S)
         perm_u = time_u = np.zeros((P, 0))
-    _K.camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, px, py, xi)
+    _K.camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, film.radius, BH_INVERSE_CDF, px, py, xi)
     if time_override is not None:
         times = np.full(n, float(time_override))
     else:
@@ -772,7 +780,7 @@ def _trace_tile_fast(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, r
         c0 = _COL["Combined"][0] + 3 if name == "Alpha" else _COL[name][0]
         chan.extend(range(c0, c0 + b - a))
         keep.extend([name not in ("Emit", "Direct", "Indirect", "Caustic") or name in touched] * (b - a))
-    return film.splat_tile_matrix(x0, y0, tw, th, px, py, V, combined_is_sum=True,
+    return film.tile_sums_matrix(x0, y0, tw, th, V, combined_is_sum=True,
                                   alpha_one=not ctx.film_transparent, channels=np.asarray(chan),
                                   columns=np.flatnonzero(keep)), tstats
 
@@ -813,7 +821,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                              for l in lights.lights)
     ctx.rough_any = bool(np.any(table.rough_lobe))
     ctx.kernels = _K.AVAILABLE
-    # Passes no sample can reach: photon passes without that map (the splat skips them)
+    # Passes no sample can reach: photon passes without that map (the film sums skip them)
     ctx.zero_passes = tuple(name for name, kind in (("Caustic", "caustic"), ("Indirect", "global"))
                             if maps is None or not ctx.map_kinds.get(kind, False))
     ctx.layout = _compact_layout(ctx)
@@ -826,7 +834,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     static_cam = cam.transform.is_static
 
     def trace_tile(ti: int):
-        """Tile ti traced and splatted: (film window, TraceStats).  Pure function of (seed, stream, ti)."""
+        """Tile ti traced and summed per pixel: (film window, TraceStats).  Pure function of (seed, stream, ti)."""
         x0, y0 = tiles[ti]
         tstats = TraceStats()
         # Pixels of the tile and their camera samples
@@ -841,7 +849,8 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                 _K.disable(f"{type(exc).__name__}: {exc}")
                 tstats = TraceStats()
                 rng = rng_for(settings.seed, STREAM_CAMERA, stream, ti)
-        px, py, times = camera_samples(gx.ravel(), gy.ravel(), spp, scene.shutter, rng, time_override)
+        px, py, times = camera_samples(gx.ravel(), gy.ravel(), spp, scene.shutter, rng, time_override,
+                                       filter_width=film.radius)
         o, d = generate_rays(cam, (W, H), px, py, times)
         # Camera pose per sample (once for a static camera) for Depth and clipping
         R, pos = camera_to_world(cam, times[:1] if static_cam else times)
@@ -853,8 +862,8 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
         else:
             tmax0 = cam.clip_end / np.maximum(np.sum(d * axis, axis=1), 1e-12)
         values = shade_paths(ctx, o, d, times, tmax0, rng, tstats, pos, axis)
-        # Filter splat here (on the worker); the film only adds the window, in tile order
-        return film.splat_tile(x0, y0, gx.shape[1], gx.shape[0], px, py, values), tstats
+        # Per-pixel sums here (on the worker); the film only adds the window, in tile order
+        return film.tile_sums(x0, y0, gx.shape[1], gx.shape[0], values), tstats
 
     # Trace tiles on worker threads (embree and most numpy kernels release the GIL);
     # the film takes them in tile order, so the result does not depend on the threads.

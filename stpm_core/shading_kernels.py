@@ -4,8 +4,9 @@ and the fallback).
 
 Kernels (docs/rendering.md, "Performance", has the equations with these names):
 
-* :func:`camera_tile` -- stratified film positions and permuted stratified
-  shutter numbers of one tile (``integrator.camera_samples``);
+* :func:`camera_tile` -- stratified film positions (placed by the pixel
+  filter's inverse CDF) and permuted stratified shutter numbers of one tile
+  (``integrator.camera_samples``);
 * :func:`camera_rays` -- pinhole / ortho rays, camera clipping ``tmax0``
   (``camera.generate_rays``);
 * :func:`classify_hits` -- one bounce's bookkeeping: world radiance of misses,
@@ -18,8 +19,8 @@ Kernels (docs/rendering.md, "Performance", has the equations with these names):
   the shadow rays of the rows where it is positive (``integrator._direct``);
 * :func:`nee_accumulate`, :func:`scatter_add` -- add the unblocked
   contributions, add per-row values into per-sample passes (weighted by beta);
-* :func:`splat_tile` -- the Blackman-Harris (or box) splat of one tile's
-  samples (``film.Film.splat_tile``), float32 products per pixel (as the numpy splat).
+* :func:`pixel_sums`, :func:`tile_finish` -- per-pixel sums of one tile's
+  samples and the film window they make (``film.Film.tile_sums``).
 
 They use the same random numbers as the numpy code and agree with it to float
 rounding (tests/test_shading_kernels.py; e.g. a normalisation multiplies by
@@ -40,7 +41,7 @@ import os
 import numpy as np
 
 __all__ = ["AVAILABLE", "CompileError", "camera_tile", "camera_rays", "classify_hits", "nee_point", "nee_given",
-           "nee_accumulate", "scatter_add", "active_channels", "splat_tile", "disable", "IMPORT_ERROR"]
+           "nee_accumulate", "scatter_add", "active_channels", "pixel_sums", "tile_finish", "disable", "IMPORT_ERROR"]
 
 AVAILABLE = False
 IMPORT_ERROR = ""
@@ -82,17 +83,21 @@ _INV_PI = 1.0 / np.pi
 # Camera
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, px, py, xi):
+def camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, radius, table, px, py, xi):
     """Film positions px, py (P*S,) and shutter numbers xi (P*S,) of a tile's P = tw*th pixels.
 
     jit (P, S, 2), perm_u (P, S), time_u (P, S): the uniforms
     ``integrator.camera_samples`` draws, in its order.  Position: cell j of a
-    rows x cols grid (j < rows*cols) jittered, else uniform; xi = (pi_p(j) + U) / S
-    with pi_p = argsort(perm_u[p]) (only when with_time; xi is left unset otherwise).
+    rows x cols grid (j < rows*cols) jittered, else uniform, giving u in
+    [0, 1)^2; then px = ix + 1/2 + radius F^-1(u_x) with F^-1 linear in
+    ``table`` (``film.BH_INVERSE_CDF``, as ``film.filter_offsets``), or
+    px = ix + u_x for the box filter (radius 0).  xi = (pi_p(j) + U) / S with
+    pi_p = argsort(perm_u[p]) (only when with_time; xi is left unset otherwise).
     """
     rows = max(1, int(math.floor(math.sqrt(S))))
     cols = max(1, S // rows)
     m = rows * cols
+    M1 = table.shape[0] - 1
     order = np.empty(S, np.int64)
     for p in range(tw * th):
         ix = x0 + p % tw
@@ -106,8 +111,18 @@ def camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, px, py, xi):
             else:
                 ux = jit[p, j, 0]
                 uy = jit[p, j, 1]
-            px[base + j] = ix + ux
-            py[base + j] = iy + uy
+            if radius > 0:
+                s = ux * M1
+                k = min(int(s), M1 - 1)
+                f = s - k
+                px[base + j] = ix + 0.5 + radius * (table[k] * (1.0 - f) + table[k + 1] * f)
+                s = uy * M1
+                k = min(int(s), M1 - 1)
+                f = s - k
+                py[base + j] = iy + 0.5 + radius * (table[k] * (1.0 - f) + table[k + 1] * f)
+            else:
+                px[base + j] = ix + ux
+                py[base + j] = iy + uy
         if not with_time:
             continue
         # argsort of perm_u[p] (insertion sort: S is small; random keys have no ties)
@@ -379,33 +394,6 @@ def nee_accumulate(dst, rows, idx, use_idx, beta, use_beta, contrib, live, block
 # ----------------------------------------------------------------------------
 # Film
 # ----------------------------------------------------------------------------
-@njit(**_JIT_INLINE)
-def _bh(x, inv_r):
-    """Blackman-Harris window at x for |x| < r (``film.blackman_harris``), 0 outside; inv_r = 1 / r.
-
-    cos(pi x / r) = 1 - 2 sin^2(y), y = pi x / (2 r) in (-pi/2, pi/2), with sin
-    by its Taylor series to y^19 (error < 3e-16).  A polynomial and a select,
-    no branch and no libm call, so loops over samples vectorise.
-    """
-    t = x * inv_r
-    y = 1.5707963267948966 * t
-    y2 = y * y
-    sn = -1.0 / 121645100408832000.0
-    sn = sn * y2 + 1.0 / 355687428096000.0
-    sn = sn * y2 - 1.0 / 1307674368000.0
-    sn = sn * y2 + 1.0 / 6227020800.0
-    sn = sn * y2 - 1.0 / 39916800.0
-    sn = sn * y2 + 1.0 / 362880.0
-    sn = sn * y2 - 1.0 / 5040.0
-    sn = sn * y2 + 1.0 / 120.0
-    sn = sn * y2 - 1.0 / 6.0
-    sn = sn * y2 + 1.0
-    sn = sn * y
-    c = 1.0 - 2.0 * sn * sn
-    b = 0.35875 + 0.48829 * c + 0.14128 * (2 * c * c - 1) + 0.01168 * c * (4 * c * c - 3)
-    return b if abs(t) < 1.0 else 0.0
-
-
 @njit(**_JIT)
 def active_channels(V, skip):
     """Indices (k,) of the columns c of V (n, C) with skip[c] False that are not zero for every sample."""
@@ -424,84 +412,35 @@ def active_channels(V, skip):
 
 
 @njit(**_JIT)
-def splat_tile(tw, th, S, px, py, V, act, radius, lo, k1, win):
-    """Filter-weighted sums of a tile's samples into win (th + k1 - 1, tw + k1 - 1, k + 1) float64.
+def pixel_sums(tw, th, S, V, act, win):
+    """Per-pixel sums of a tile's samples into win (th, tw, k + 1) float64 (zeroed by the caller).
 
     Samples as ``integrator.camera_samples`` lays them out (pixel p = (p % tw,
     p // tw) of the tile, its S samples consecutive); V (n, C) sample values,
-    act (k,) the columns to sum (the others add nothing, e.g. all zero).
-    Sample i in pixel (ix, iy) of the tile adds w_x(ox) w_y(oy) [V_i[act], 1]
-    at window cell (iy + oy, ix + ox), oy, ox = 0 .. k1 - 1 standing for the
-    pixel offsets lo .. lo + k1 - 1, w_x(o) = BH(floor(px) + lo + o + 1/2 - px)
-    (1 for the box filter, radius 0).
-
-    Layout: one tile row at a time, with the row's pixels as the innermost
-    (contiguous) axis, so every loop over them vectorises:
-    sums[k, a, ix] = sum_s W[s, k, ix] Vt[s, a, ix] in float32 (weights from
-    float64, as the numpy splat's float32 product), then added to the window.
+    act (k,) the columns to sum (the others add nothing, e.g. all zero):
+    win[iy, ix, a] = sum_s V[p S + s, act[a]], win[iy, ix, k] = S.
     """
     na = act.shape[0]
-    na1 = na + 1
-    K = k1 * k1
-    Vt = np.empty((S, na1, tw), np.float32)
-    Wx = np.empty((k1, tw))
-    Wy = np.empty((k1, tw))
-    Wk = np.empty((S, K, tw), np.float32)
-    acc = np.empty((K, na1, tw), np.float32)
-    fx = np.empty(tw)
-    fy = np.empty(tw)
-    inv_r = 1.0 / radius if radius > 0 else 0.0
-    for iy in range(th):
+    for p in range(tw * th):
+        cell = win[p // tw, p % tw]
         for s in range(S):
-            for ix in range(tw):
-                i = (iy * tw + ix) * S + s
-                fx[ix] = math.floor(px[i]) - px[i] + (0.5 + lo)
-                fy[ix] = math.floor(py[i]) - py[i] + (0.5 + lo)
-                Vt[s, na, ix] = 1.0
-            # (channel by channel: measured 25 ns per sample faster than sample by sample)
+            row = V[p * S + s]
             for a in range(na):
-                c = act[a]
-                for ix in range(tw):
-                    Vt[s, a, ix] = V[(iy * tw + ix) * S + s, c]
-            if radius > 0:
-                for o in range(k1):
-                    for ix in range(tw):
-                        Wx[o, ix] = _bh(fx[ix] + o, inv_r)
-                        Wy[o, ix] = _bh(fy[ix] + o, inv_r)
-            else:
-                Wx[:] = 1.0
-                Wy[:] = 1.0
-            for oy in range(k1):
-                for ox in range(k1):
-                    k = oy * k1 + ox
-                    for ix in range(tw):
-                        Wk[s, k, ix] = Wy[oy, ix] * Wx[ox, ix]
-        acc[:] = 0.0
-        for s in range(S):
-            for k in range(K):
-                for a in range(na1):
-                    for ix in range(tw):
-                        acc[k, a, ix] += Wk[s, k, ix] * Vt[s, a, ix]
-        for oy in range(k1):
-            for ox in range(k1):
-                k = oy * k1 + ox
-                for ix in range(tw):
-                    cell = win[iy + oy, ix + ox]
-                    for a in range(na1):
-                        cell[a] += acc[k, a, ix]
+                cell[a] += row[act[a]]
+        cell[na] = S
 
 
 @njit(**_JIT)
-def splat_finish(win, y0, y1, x0, x1, chan, comb, alpha_one, out):
+def tile_finish(win, y0, y1, x0, x1, chan, comb, alpha_one, out):
     """The image-channel window out (y1 - y0, x1 - x0, C + 1) float32 from the kernel sums.
 
-    win (h, w, k + 1) float64 from :func:`splat_tile` (rows y0 .. y1, columns
+    win (h, w, k + 1) float64 from :func:`pixel_sums` (rows y0 .. y1, columns
     x0 .. x1 of it are kept), chan (k,) the image channel of each summed
-    column, last column the weight sum (out[..., C]).  comb (j,): columns of
+    column, last column the sample count (out[..., C]).  comb (j,): columns of
     win whose three consecutive sums add up to Combined RGB (channels 0 .. 2:
     the first column of each of Emit / Direct / Indirect / Caustic that was
     summed; empty: Combined is one of chan), added in float64; alpha_one:
-    Combined alpha (3) = the weight sum.  Channels neither summed nor derived are 0.
+    Combined alpha (3) = the sample count.  Channels neither summed nor derived are 0.
     """
     k = chan.shape[0]
     C = out.shape[2] - 1

@@ -12,7 +12,7 @@ import pytest
 from scenes import (box_mesh, look_at, make_scene, moving, ortho_camera_down, persp_camera, plane_mesh, point_light,
                     sphere_mesh, translate)
 from stpm_core import shading_kernels as K
-from stpm_core.film import PASSES, Film, blackman_harris
+from stpm_core.film import BH_INVERSE_CDF, PASSES, Film
 from stpm_core.integrator import camera_samples
 from stpm_core.motion import MotionTransform
 from stpm_core.render import render
@@ -94,36 +94,31 @@ def test_kernels_match_numpy_ortho_box_filter_with_photons(monkeypatch):
     assert a["Indirect"].max() > 0
 
 
-def test_camera_tile_equals_camera_samples():
-    """camera_tile reproduces camera_samples bit for bit from the same uniforms (spp with leftovers too)."""
+@pytest.mark.parametrize("radius", [0.0, 1.5, 2.3])
+def test_camera_tile_equals_camera_samples(radius):
+    """camera_tile reproduces camera_samples bit for bit from the same uniforms (spp with leftovers
+    too), the film positions placed by the filter's inverse CDF."""
     for spp in (1, 5, 16):
         x0, y0, tw, th = 3, 7, 6, 4
         gy, gx = np.mgrid[y0:y0 + th, x0:x0 + tw]
-        px, py, xi = camera_samples(gx.ravel(), gy.ravel(), spp, Shutter(1.0, 1.5), np.random.default_rng(spp))
+        px, py, xi = camera_samples(gx.ravel(), gy.ravel(), spp, Shutter(1.0, 1.5), np.random.default_rng(spp),
+                                    filter_width=radius)
         rng = np.random.default_rng(spp)
         P = tw * th
         jit, perm_u, time_u = rng.random((P, spp, 2)), rng.random((P, spp)), rng.random((P, spp))
         out = [np.empty(P * spp) for _ in range(3)]
-        K.camera_tile(x0, y0, tw, th, spp, jit, perm_u, time_u, True, *out)
+        K.camera_tile(x0, y0, tw, th, spp, jit, perm_u, time_u, True, radius, BH_INVERSE_CDF, *out)
         for x, y in zip((px, py, xi), out):
             assert np.array_equal(x, y)
 
 
-@pytest.mark.parametrize("radius", [0.7, 1.5, 2.3, 4.0])
-def test_filter_polynomial_matches_blackman_harris(radius):
-    x = np.linspace(-radius - 0.5, radius + 0.5, 2001)
-    got = np.array([K._bh(v, 1.0 / radius) for v in x])
-    assert np.abs(got - blackman_harris(x, radius)).max() < 1e-13
-
-
-def test_splat_matrix_with_derived_combined_equals_add_samples():
-    """Combined derived from its parts (and alpha from the weights) splats like the full matrix."""
+def test_tile_sums_matrix_with_derived_combined_equals_add_samples():
+    """Combined derived from its parts (and alpha from the sample count) sums like the full matrix."""
     rng = np.random.default_rng(4)
     W, H, spp = 19, 13, 6
     fa, fb = Film(W, H, 1.5), Film(W, H, 1.5)
     gy, gx = np.mgrid[0:H, 0:W]
-    px, py, _ = camera_samples(gx.ravel(), gy.ravel(), spp, Shutter(), rng)
-    n = px.size
+    n = gx.size * spp
     V = rng.random((n, 20))
     V[:, 17:20] = 0.0                                      # Caustic all zero
     V[:, 0:3] = V[:, 8:11] + V[:, 11:14] + V[:, 14:17]      # Combined = Emit + Direct + Indirect (+ Caustic)
@@ -132,9 +127,9 @@ def test_splat_matrix_with_derived_combined_equals_add_samples():
     for name, c, _ in PASSES:
         vals[name] = V[:, c0:c0 + c]
         c0 += c
-    fa.add_samples(px, py, vals)
-    fb.add_window(fb.splat_tile_matrix(0, 0, W, H, px, py, V, combined_is_sum=True, alpha_one=True,
-                                       zero=("Caustic",), scan=False))
+    fa.add_samples(np.repeat(gx.ravel(), spp), np.repeat(gy.ravel(), spp), vals)
+    fb.add_window(fb.tile_sums_matrix(0, 0, W, H, V, combined_is_sum=True, alpha_one=True,
+                                      zero=("Caustic",), scan=False))
     A, B = fa.resolve(), fb.resolve()
     for name in A:
         assert np.allclose(A[name], B[name], rtol=2e-6, atol=1e-6), name

@@ -7,26 +7,30 @@ import pytest
 
 from scenes import box_mesh, make_scene, moving, persp_camera, plane_mesh, point_light, sphere_mesh, translate
 from stpm_core.film import PASSES, Film
-from stpm_core.integrator import camera_samples
 from stpm_core.render import render
 from stpm_core.scene import Material
 from stpm_core.settings import RenderSettings
 from stpm_core.shutter import Shutter
 
 
-@pytest.mark.parametrize("radius", [1.5, 0.0, 0.7, 2.3])
-def test_film_add_tile_equals_add_samples(radius):
-    """Film.add_tile (batched per-pixel splat) gives the same image as the general add_samples."""
+@pytest.mark.parametrize("kernels", [True, False])
+def test_film_tile_sums_equal_add_samples(kernels, monkeypatch):
+    """Film.tile_sums (per-pixel sums of a tile's layout; compiled or numpy) gives the same
+    image as the general add_samples by pixel index."""
+    from stpm_core import shading_kernels
+    if kernels and not shading_kernels.AVAILABLE:
+        pytest.skip("numba kernels unavailable")
+    monkeypatch.setattr(shading_kernels, "AVAILABLE", kernels)
     rng = np.random.default_rng(0)
     W, H, spp = 23, 17, 5
-    fa, fb = Film(W, H, radius), Film(W, H, radius)
+    fa, fb = Film(W, H, 1.5), Film(W, H, 1.5)
     for (x0, y0, tw, th) in [(0, 0, 8, 8), (8, 0, 15, 8), (0, 8, 23, 9)]:
         gy, gx = np.mgrid[y0:y0 + th, x0:x0 + tw]
-        px, py, _ = camera_samples(gx.ravel(), gy.ravel(), spp, Shutter(), rng)
-        vals = {name: rng.random((px.size, c)) for name, c, _ in PASSES}
-        vals["Caustic"][:] = 0.0                      # an all-zero pass is skipped by add_tile
-        fa.add_samples(px, py, vals)
-        fb.add_tile(x0, y0, tw, th, px, py, vals)
+        n = gx.size * spp
+        vals = {name: rng.random((n, c)) for name, c, _ in PASSES}
+        vals["Caustic"][:] = 0.0                      # an all-zero pass is skipped by tile_sums
+        fa.add_samples(np.repeat(gx.ravel(), spp), np.repeat(gy.ravel(), spp), vals)
+        fb.add_window(fb.tile_sums(x0, y0, tw, th, vals))
     A, B = fa.resolve(), fb.resolve()
     for name in A:
         assert np.allclose(A[name], B[name], rtol=2e-6, atol=1e-6), name
