@@ -65,6 +65,27 @@ class Mesh:
     def is_deforming(self) -> bool:
         return self.vertex_times is not None and np.asarray(self.vertices).ndim == 3 and len(self.vertex_times) > 1
 
+    def vertex_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Object-space bounds lo, hi (3,) float64 of the vertices at every time step.
+
+        Cached while ``vertices`` is the same array object (a scene's bounds are
+        asked for several times per render; axis-0 reductions of a (V, 3)
+        array cost about 1.3 ms per 40k vertices).  Assigning a new array
+        recomputes them; editing the array in place is not noticed.
+        """
+        v = self.vertices
+        cached = self.__dict__.get("_vertex_bounds")
+        if cached is not None and cached[0] is v:
+            return cached[1], cached[2]
+        a = np.asarray(v, dtype=np.float64).reshape(-1, 3)
+        if a.shape[0] == 0:
+            lo = hi = np.full(3, np.nan)
+        else:
+            t = np.ascontiguousarray(a.T)                # contiguous rows: fast reductions
+            lo, hi = t.min(axis=1), t.max(axis=1)
+        self.__dict__["_vertex_bounds"] = (v, lo, hi)
+        return lo, hi
+
     def vertices_at(self, t: float) -> np.ndarray:
         """Object-space vertex positions (V, 3) at normalised time t (scalar)."""
         if not self.is_deforming:
@@ -260,10 +281,10 @@ class Scene:
         """World-space bounds (3,), (3,) of all geometry over the whole shutter."""
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
         for inst in self.instances:
-            v = np.asarray(self.meshes[inst.mesh].vertices).reshape(-1, 3)
-            if v.shape[0] == 0:
-                continue
-            a, b = inst.transform.bounds_of(v.min(0), v.max(0))
+            vlo, vhi = self.meshes[inst.mesh].vertex_bounds()
+            if not np.all(np.isfinite(vlo)):
+                continue                                  # no vertices
+            a, b = inst.transform.bounds_of(vlo, vhi)
             lo, hi = np.minimum(lo, a), np.maximum(hi, b)
         if not np.all(np.isfinite(lo)):
             return np.zeros(3), np.zeros(3)

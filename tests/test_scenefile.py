@@ -439,3 +439,24 @@ def test_format_constants():
     header, _ = _parts()
     assert header["format"] == FORMAT_NAME == "stpm-scene"
     assert header["version"] == SCENE_FORMAT_VERSION
+
+
+def test_scene_bounds_follow_the_vertices_and_motion():
+    """Scene.bounds: all vertices (every deformation step) through the motion over the shutter;
+    Mesh.vertex_bounds is cached per vertex array and recomputed when the array is replaced."""
+    from scenes import box_mesh, make_scene, moving, persp_camera
+    sc = make_scene([box_mesh((0, 0, 0), (1, 2, 3))], [Material.diffuse((0.5, 0.5, 0.5))],
+                    persp_camera((0, -5, 1), (0, 0, 0)))
+    mesh = sc.meshes[0]
+    v = np.asarray(mesh.vertices, np.float64).reshape(-1, 3)
+    lo, hi = sc.bounds()
+    np.testing.assert_array_equal(lo, v.min(0))
+    np.testing.assert_array_equal(hi, v.max(0))
+    assert mesh.vertex_bounds()[0] is mesh.vertex_bounds()[0]          # cached
+    mesh.vertices = np.asarray(mesh.vertices) * 2.0                    # a new array: recomputed
+    np.testing.assert_array_equal(sc.bounds()[1], 2 * v.max(0))
+    # A moving instance: (conservatively) the union of its bounds over the shutter
+    sc.instances[0].transform = moving((0, 0, 0), (5, 0, 0))
+    lo, hi = sc.bounds()
+    assert 2 * v.min(0)[0] - 0.5 < lo[0] <= 2 * v.min(0)[0]
+    assert 2 * v.max(0)[0] + 5 <= hi[0] < 2 * v.max(0)[0] + 5.5

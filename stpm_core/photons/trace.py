@@ -61,16 +61,16 @@ def specular_targets(scene, table) -> list[tuple[int, np.ndarray, float]]:
         mats = np.unique(np.asarray(mesh.material_ids))
         if mats.size == 0 or not np.any(has_delta(table, mats)):
             continue
-        v = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
-        if v.shape[0] == 0:
-            continue
+        vlo, vhi = mesh.vertex_bounds()
+        if not np.all(np.isfinite(vlo)):
+            continue                                     # no vertices
         if scene.shutter.is_instant:
             # A closed shutter: every path is at u = 0.5, so aim at the instance as it is then
             M = inst.transform.at(0.5)
             w = np.asarray(mesh.vertices_at(0.5), dtype=np.float64) @ M[:3, :3].T + M[:3, 3]
             lo, hi = w.min(0), w.max(0)
         else:
-            lo, hi = inst.transform.bounds_of(v.min(0), v.max(0))
+            lo, hi = inst.transform.bounds_of(vlo, vhi)
         out.append((ii, 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6)))
     return out
 
