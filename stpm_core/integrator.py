@@ -31,9 +31,7 @@ cannot be weighted by a glossy lobe without incoming directions).
 """
 from __future__ import annotations
 
-import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,8 +39,8 @@ import numpy as np
 from . import shading_kernels as _K
 from .bsdf import MaterialTable, bsdf_eval, bsdf_sample, diffuse_albedo, emission, has_nondelta
 from .camera import camera_to_world, generate_rays, image_plane
-from .errors import RenderCancelled
 from .film import BH_INVERSE_CDF, DEPTH_BACKGROUND, PASSES, Film, filter_offsets
+from .parallel import ordered_map, worker_count
 from .sampling import rng_for, skip_uniforms
 
 __all__ = ["TraceStats", "trace_image", "camera_samples", "shade_paths"]
@@ -693,12 +691,6 @@ def _has_delta_lobe(materials) -> np.ndarray:
     return out
 
 
-def _worker_count(settings) -> int:
-    """Tile worker threads: settings.threads, 0 = all cores."""
-    n = int(getattr(settings, "threads", 0) or 0)
-    return max(1, n if n > 0 else (os.cpu_count() or 1))
-
-
 def _map_kinds(maps) -> dict:
     """Which photon maps exist: {'caustic': bool, 'global': bool}."""
     if maps is None:
@@ -867,31 +859,11 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
 
     # Trace tiles on worker threads (embree and most numpy kernels release the GIL);
     # the film takes them in tile order, so the result does not depend on the threads.
-    workers = _worker_count(settings)
     f0, f1 = progress_span
-    pool = ThreadPoolExecutor(max_workers=workers) if workers > 1 else None
-    pending: dict = {}
-    try:
-        for ti in range(len(tiles)):
-            if cancel is not None and cancel():
-                raise RenderCancelled("render cancelled")
-            if pool is None:
-                result = trace_tile(ti)
-            else:
-                # Keep up to 2 tiles per worker in flight
-                for tj in range(ti, min(ti + 2 * workers, len(tiles))):
-                    if tj not in pending:
-                        pending[tj] = pool.submit(trace_tile, tj)
-                result = pending.pop(ti).result()
-            window, tstats = result
-            film.add_window(window)
-            stats.merge(tstats)
-            if progress is not None:
-                progress(f0 + (f1 - f0) * (ti + 1) / len(tiles), f"tracing tile {ti + 1}/{len(tiles)}")
-    finally:
-        if pool is not None:
-            for fut in pending.values():
-                fut.cancel()
-            pool.shutdown(wait=True)
+    for ti, (window, tstats) in enumerate(ordered_map(trace_tile, len(tiles), worker_count(settings), cancel)):
+        film.add_window(window)
+        stats.merge(tstats)
+        if progress is not None:
+            progress(f0 + (f1 - f0) * (ti + 1) / len(tiles), f"tracing tile {ti + 1}/{len(tiles)}")
     stats.seconds = _time.perf_counter() - t_start
     return film.resolve(), stats

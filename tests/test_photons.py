@@ -240,3 +240,23 @@ def test_time_override_stills_reduce_to_standard():
     E = still.estimate("caustic", p, np.tile(UP, (2, 1)), np.zeros(2))[:, 0]
     assert abs(E[0] / caustic_irradiance(p[:1])[0] - 1) < 0.2 and E[1] < 0.05 * E[0]  # x = 1.4 is dark at t = 0
     assert maps.maps["caustic"].time.std() > 0.2               # whole-shutter map: times spread
+
+
+def test_photon_batches_on_threads_give_the_same_records():
+    """Batches are traced on worker threads and taken in batch order: the caustic and global
+    records do not depend on the thread count (several batches per map)."""
+    from stpm_core.photons.trace import BATCH, trace_caustic_map, trace_global_map
+    scene = mirror_scene(mirror=moving((-0.25, 0, Z_MIRROR), (0.25, 0, Z_MIRROR)))
+    caster, lights, table = make_caster(scene), LightSet(scene), MaterialTable(scene.materials)
+    n = 2 * BATCH + 1000
+    got = {}
+    for threads in (1, 2):
+        st = RenderSettings(photons_caustic=n, photons_global=n, threads=threads, seed=3)
+        seen = []
+        rc, ic = trace_caustic_map(scene, st, caster, lights, table, progress=lambda f, m: seen.append(f))
+        rg, ig = trace_global_map(scene, st, caster, lights, table)
+        got[threads] = (rc, rg)
+        assert ic["photons_emitted_caustic"] == n and ig["photons_emitted_global"] == n
+        assert seen == sorted(seen) and seen[-1] == pytest.approx(1.0) and len(seen) == 3
+    for a, b in zip(got[1], got[2]):
+        assert a.size > 1000 and a.tobytes() == b.tobytes()

@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..bsdf import bsdf_sample, has_nondelta
-from ..errors import RenderCancelled
+from ..parallel import ordered_map, worker_count
 from ..sampling import rng_for, stratified_1d
 from .record import make_records, photon_origin, PHOTON_DTYPE
 
@@ -173,9 +173,20 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     return np.concatenate(stored)
 
 
-def _check_cancel(cancel) -> None:
-    if cancel is not None and cancel():
-        raise RenderCancelled("render cancelled")
+def _run_batches(trace_batch, jobs: list, settings, progress, cancel, message: str) -> list:
+    """Records of every batch, in batch order, traced on ``settings.threads`` worker threads.
+
+    jobs: (source, first photon, photons, source's photons) per batch; progress
+    is reported as the photons of finished batches over all of them.
+    """
+    total = max(sum(job[2] for job in jobs), 1)
+    out, emitted = [], 0
+    for j, recs in enumerate(ordered_map(trace_batch, len(jobs), worker_count(settings), cancel)):
+        out.append(recs)
+        emitted += jobs[j][2]
+        if progress is not None:
+            progress(emitted / total, message)
+    return out
 
 
 def _scene_eps(scene) -> tuple[float, float]:
@@ -212,23 +223,23 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
             pairs.append((li, ii, c, r))
             weights.append(P * frac)
     counts = split_counts(int(settings.photons_caustic), np.asarray(weights))
-    out, emitted = [], 0
-    total = max(int(counts.sum()), 1)
-    for pi, ((li, ii, c, r), n_pair) in enumerate(zip(pairs, counts)):
-        for b0 in range(0, int(n_pair), BATCH):
-            _check_cancel(cancel)
-            n = min(BATCH, int(n_pair) - b0)
-            rng = rng_for(settings.seed, STREAM_CAUSTIC, pi, b0 // BATCH)
-            t = _times(scene, n, rng, time_override)
-            o, d, Phi = lights.emit_toward(li, n, t, rng, c, r)
-            Phi = Phi * (n / float(n_pair))              # this batch's share of the pair's photons
-            out.append(trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="caustic",
-                                          max_depth=settings.max_depth, eps=eps, target_instance=ii))
-            emitted += n
-            if progress is not None:
-                progress(emitted / total, "tracing caustic photons")
+    jobs = [(pi, b0, min(BATCH, int(n_pair) - b0), int(n_pair)) for pi, n_pair in enumerate(counts)
+            for b0 in range(0, int(n_pair), BATCH)]
+
+    def trace_batch(j: int) -> np.ndarray:
+        """Records of batch j: a pure function of (seed, pair, batch), so threads do not change them."""
+        pi, b0, n, n_pair = jobs[j]
+        li, ii, c, r = pairs[pi]
+        rng = rng_for(settings.seed, STREAM_CAUSTIC, pi, b0 // BATCH)
+        t = _times(scene, n, rng, time_override)
+        o, d, Phi = lights.emit_toward(li, n, t, rng, c, r)
+        Phi = Phi * (n / float(n_pair))                  # this batch's share of the pair's photons
+        return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="caustic",
+                                  max_depth=settings.max_depth, eps=eps, target_instance=ii)
+
+    out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing caustic photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
-    return recs, {"photons_emitted_caustic": emitted, "caustic_targets": len(targets)}
+    return recs, {"photons_emitted_caustic": int(counts.sum()), "caustic_targets": len(targets)}
 
 
 def trace_global_map(scene, settings, caster, lights, table, *, time_override=None,
@@ -237,22 +248,21 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
     eps, _ = _scene_eps(scene)
     origin = photon_origin(scene)
     counts = split_counts(int(settings.photons_global), np.asarray(lights.power, dtype=np.float64))
-    out, emitted = [], 0
-    total = max(int(counts.sum()), 1)
-    for li, n_light in enumerate(counts):
-        for b0 in range(0, int(n_light), BATCH):
-            _check_cancel(cancel)
-            n = min(BATCH, int(n_light) - b0)
-            rng = rng_for(settings.seed, STREAM_GLOBAL, li, b0 // BATCH)
-            t = _times(scene, n, rng, time_override)
-            # Each light's emit() spreads its flux over the photons it is given: scale
-            # to this batch's share of the light's photons.
-            o, d, Phi = lights.emit(li, n, t, rng)
-            Phi = Phi * (n / float(n_light))
-            out.append(trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global",
-                                          max_depth=settings.max_depth, eps=eps, min_nondelta=min_nondelta))
-            emitted += n
-            if progress is not None:
-                progress(emitted / total, "tracing global photons")
+    jobs = [(li, b0, min(BATCH, int(n_light) - b0), int(n_light)) for li, n_light in enumerate(counts)
+            for b0 in range(0, int(n_light), BATCH)]
+
+    def trace_batch(j: int) -> np.ndarray:
+        """Records of batch j: a pure function of (seed, light, batch), so threads do not change them."""
+        li, b0, n, n_light = jobs[j]
+        rng = rng_for(settings.seed, STREAM_GLOBAL, li, b0 // BATCH)
+        t = _times(scene, n, rng, time_override)
+        # Each light's emit() spreads its flux over the photons it is given: scale
+        # to this batch's share of the light's photons.
+        o, d, Phi = lights.emit(li, n, t, rng)
+        Phi = Phi * (n / float(n_light))
+        return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global",
+                                  max_depth=settings.max_depth, eps=eps, min_nondelta=min_nondelta)
+
+    out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing global photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
-    return recs, {"photons_emitted_global": emitted}
+    return recs, {"photons_emitted_global": int(counts.sum())}
