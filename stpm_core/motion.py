@@ -184,8 +184,11 @@ class MotionTransform:
         pads by 1 % of the box diagonal.
         """
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        ts = np.linspace(0, 1, 1 if self.is_static else 33)
-        M = self.at(ts)
+        M = self.__dict__.get("_bounds_samples")
+        if M is None:
+            # The 33 sampled matrices, kept: scenes ask for the same bounds several times
+            # per render, and a scene may hold thousands of moving instances
+            M = self.__dict__["_bounds_samples"] = self.at(np.linspace(0, 1, 1 if self.is_static else 33))
         pts = np.einsum("kij,cj->kci", M[:, :3, :3], corners) + M[:, None, :3, 3]
         pts = pts.reshape(-1, 3)
         a, b = pts.min(0), pts.max(0)

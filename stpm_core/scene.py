@@ -19,6 +19,7 @@ so does the renderer, so a half-built scene never renders.
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -85,6 +86,29 @@ class Mesh:
             lo, hi = t.min(axis=1), t.max(axis=1)
         self.__dict__["_vertex_bounds"] = (v, lo, hi)
         return lo, hi
+
+    def content_digest(self) -> bytes:
+        """16-byte digest of the geometry (vertices, triangles, material ids, normals, vertex times).
+
+        Equal digests mean equal meshes: copies of one object (each exported
+        as its own Mesh) can share work (the ray caster's object-space scene,
+        the effects plan's per-mesh tests).  Cached while the arrays are the
+        same objects.
+        """
+        arrays = (self.vertices, self.triangles, self.material_ids, self.normals, self.vertex_times)
+        cached = self.__dict__.get("_digest")
+        if cached is not None and all(a is b for a, b in zip(cached[0], arrays)):
+            return cached[1]
+        h = hashlib.blake2b(digest_size=16)
+        for a in arrays:
+            if a is None:
+                h.update(b"none")
+                continue
+            a = np.ascontiguousarray(a)
+            h.update(str((a.dtype.str, a.shape)).encode())
+            h.update(a.data)
+        self.__dict__["_digest"] = (arrays, h.digest())
+        return h.digest()
 
     def vertices_at(self, t: float) -> np.ndarray:
         """Object-space vertex positions (V, 3) at normalised time t (scalar)."""

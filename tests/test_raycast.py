@@ -160,6 +160,41 @@ def test_many_moving_instances_agree():
     np.testing.assert_array_equal(blocked[clear], (hn.t < tmax)[clear])
 
 
+@needs_embree
+def test_moving_copies_group_and_pairs_in_chunks(monkeypatch):
+    """40 moving copies of one mesh, each its own Mesh object (duplicated objects): one group (one
+    object-space scene), BVH-paired; pairs made in chunks of 50 (many chunks per ray block) give the
+    same hits and occlusion as in one chunk."""
+    import copy
+    from stpm_core.raycast import embree_backend
+    rng = np.random.default_rng(5)
+    mesh = soup(rng, 6, spread=0.2, size=0.15)
+    meshes, inst = [], []
+    for k in range(40):
+        p0, p1 = rng.uniform(-2, 2, 3), rng.uniform(-2, 2, 3)
+        meshes.append(copy.deepcopy(mesh))
+        inst.append(Instance(k, MotionTransform(np.array([0.0, 1.0]), np.stack([trs(p0, 0.3 * k), trs(p1, 1.0)]))))
+    scene = Scene(meshes=meshes, instances=inst, materials=[Material(), Material()])
+    o, d, t = random_rays(rng, 3000)
+    tmax = rng.uniform(0, 1.5, len(o))
+    whole = make_caster(scene, "embree")
+    groups = [p for p in whole.parts if hasattr(p, "instances")]
+    assert len(groups) == 1 and len(groups[0].instances) == 40
+    if groups[0].fused:
+        assert groups[0].bvh is not None
+    h1, b1 = whole.intersect(o, d, t), whole.occluded(o, d, t, tmax)
+    monkeypatch.setattr(embree_backend, "PAIR_CHUNK", 50)
+    chunked = make_caster(scene, "embree")
+    h2, b2 = chunked.intersect(o, d, t), chunked.occluded(o, d, t, tmax)
+    assert h1.hit.sum() > 200
+    for name in ("t", "instance", "prim", "u", "v"):
+        np.testing.assert_array_equal(getattr(h1, name), getattr(h2, name))
+    np.testing.assert_array_equal(b1, b2)
+    hn = make_caster(scene, "numpy").intersect(o, d, t)
+    np.testing.assert_array_equal(h1.instance, hn.instance)
+    np.testing.assert_allclose(h1.t[h1.hit], hn.t[h1.hit], rtol=1e-9)
+
+
 def test_numpy_bvh_matches_brute_force(monkeypatch):
     """The numpy backend's BVH (swept boxes) returns exactly the brute-force hits."""
     from stpm_core.raycast import numpy_backend
@@ -618,11 +653,12 @@ def test_fused_world_to_object_matches_motion_keys():
             d = np.zeros((n, 3))
             d[:, c] = 1.0
             lo, hi = np.full((3, 3), -1e9), np.full((3, 3), 1e9)
-            got = K.rigid_pairs(np.zeros((n, 3)), d, times[sel], np.zeros(n), np.ones(n), np.zeros(n, np.bool_),
-                                -big[0], big[0], lo[k:k + 1], hi[k:k + 1], keys.T, keys.Q, keys.S, arc,
-                                keys.knots, first[k:k + 1], last[k:k + 1], np.zeros(3),
-                                ray, inst, o64, d64, o32, d32, far)
-            assert got == n and np.all(ray == np.arange(n))
+            none = np.empty((1, 0, 3))                         # no time-slice boxes: whole swept boxes
+            got = K.rigid_pairs_timed(np.zeros((n, 3)), d, times[sel], np.zeros(n), np.ones(n),
+                                      np.zeros(n, np.bool_), 0, -big[0], big[0], lo[k:k + 1], hi[k:k + 1], none,
+                                      none, keys.T, keys.Q, keys.S, arc, keys.knots, first[k:k + 1],
+                                      last[k:k + 1], np.zeros(3), ray, inst, o64, d64, o32, d32, far)
+            assert got == (n, n) and np.all(ray == np.arange(n))
             np.testing.assert_allclose(d64, A_ref[sel, :, c], rtol=0, atol=1e-12)
             np.testing.assert_allclose(o64, b_ref[sel], rtol=0, atol=1e-12)
 

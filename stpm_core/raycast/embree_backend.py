@@ -59,6 +59,8 @@ _SLACK = 4.0                   # deforming buckets: search margin in units of th
 
 # Moving instances of one mesh: above this many, pairs come from a BVH of their boxes.
 _GROUP_BVH_MIN = 24
+# (ray, instance) pairs made at once by the fused kernels (about 92 bytes each, per thread)
+PAIR_CHUNK = 1 << 18
 
 # Deforming meshes: about this many embree scenes (time buckets) per mesh
 # (at least one per vertex step).
@@ -398,8 +400,14 @@ class RigidGroup:
         self.bounds = (self.lo.min(0), self.hi.max(0))
         self.bvh = PairBVH(self.lo, self.hi, leaf=2) if len(instances) > _GROUP_BVH_MIN else None
         self.shading = InstanceShading(mesh, None)
-        # Fused kernels (box tests + per-ray transforms in one pass) below the BVH threshold
-        self.fused = fused and FUSED_AVAILABLE and self.bvh is None
+        # Fused kernels: box tests (each instance's, or the BVH's) + per-ray transforms in one pass
+        self.fused = fused and FUSED_AVAILABLE
+        if self.fused and self.bvh is not None:
+            lv = self.bvh.levels
+            self._bvh_flat = (np.ascontiguousarray(np.concatenate([a for a, _ in lv]), np.float64),
+                              np.ascontiguousarray(np.concatenate([b for _, b in lv]), np.float64),
+                              np.cumsum([0] + [a.shape[0] for a, _ in lv]).astype(np.int64),
+                              int(self.bvh.leaf), np.ascontiguousarray(self.bvh.order, np.int64))
         self._local = threading.local()
         if self.fused:
             k = self.keys
@@ -459,9 +467,17 @@ class RigidGroup:
 
     # ------------------------------------------------ fused (numba) path
     def _fused_pairs(self, o, d, times, t0, t1, skip, full: bool):
-        """Kernel :func:`.embree_kernels.rigid_pairs` over m rays -> ray, j, o64, d64, (o32, d32, far32)."""
+        """Pairs of m rays in chunks: yields (ray, j, o64, d64, (o32, d32, far32)) per chunk.
+
+        Kernel :func:`.embree_kernels.rigid_pairs_timed` (or ``rigid_pairs_bvh``
+        for a group with a BVH); a chunk holds every pair of its rays, and the
+        rays of successive chunks follow each other, so callers can finish one
+        chunk before the next is made.  The buffers hold at most
+        ``max(J, PAIR_CHUNK)`` pairs (J instances): about 92 bytes a pair.
+        """
         m = o.shape[0]
-        cap = m * self.lo.shape[0]
+        J = self.lo.shape[0]
+        cap = max(J, min(m * J, PAIR_CHUNK))
         # This thread's pair buffers, reused between calls (valid until its next call)
         buf = getattr(self._local, "pairs", None)
         if buf is None or buf[0].shape[0] < cap:
@@ -472,69 +488,76 @@ class RigidGroup:
         if not full:
             o64, d64 = o64[:0], d64[:0]
         c = np.ascontiguousarray
-        n = _K.rigid_pairs_timed(c(o), c(d), c(times), c(t0), c(t1), skip, *self._box, self.lo, self.hi,
-                                 *self._slices, *self._keys, self.emesh.centre, ray, j, o64, d64, o32, d32, far32)
-        return ray[:n], j[:n], o64[:n], d64[:n], (o32[:n], d32[:n], far32[:n])
+        o, d, times, t0, t1 = c(o), c(d), c(times), c(t0), c(t1)
+        start = 0
+        while start < m:
+            if self.bvh is None:
+                n, start = _K.rigid_pairs_timed(o, d, times, t0, t1, skip, start, *self._box, self.lo, self.hi,
+                                                *self._slices, *self._keys, self.emesh.centre, ray, j, o64, d64,
+                                                o32, d32, far32)
+            else:
+                n, start = _K.rigid_pairs_bvh(o, d, times, t0, t1, skip, start, *self._bvh_flat, self.lo, self.hi,
+                                              *self._slices, *self._keys, self.emesh.centre, ray, j, o64, d64,
+                                              o32, d32, far32)
+            if n:
+                yield ray[:n], j[:n], o64[:n], d64[:n], (o32[:n], d32[:n], far32[:n])
 
     def _cast_all(self, o, d, times, t0, t1):
         """:meth:`cast` over every ray (m,), box tests included (the caster skips its own)."""
         m = o.shape[0]
         t, prim, u, v = np.full(m, np.inf), np.full(m, -1, np.int64), np.zeros(m), np.zeros(m)
-        ray, j, oo, dd, r32 = self._fused_pairs(o, d, times, t0, t1, np.zeros(m, np.bool_), True)
-        if ray.size == 0:
-            return t, prim, u, v
-        tp, pp, up, vp = self.emesh.cast(oo, dd, t0[ray], t1[ray], rays32=r32)
-        if self.lo.shape[0] == 1:
-            # One instance: at most one pair per ray, a plain scatter
-            t[ray], prim[ray], u[ray], v[ray] = tp, pp, up, vp
-            return t, prim, u, v
-        # Nearest pair per ray
-        np.minimum.at(t, ray, tp)
-        w = np.flatnonzero(np.isfinite(tp) & (tp == t[ray]))
-        prim[ray[w]] = j[w] * self.n_tri + pp[w]
-        u[ray[w]], v[ray[w]] = up[w], vp[w]
+        for ray, j, oo, dd, r32 in self._fused_pairs(o, d, times, t0, t1, np.zeros(m, np.bool_), True):
+            tp, pp, up, vp = self.emesh.cast(oo, dd, t0[ray], t1[ray], rays32=r32)
+            if self.lo.shape[0] == 1:
+                # One instance: at most one pair per ray, a plain scatter
+                t[ray], prim[ray], u[ray], v[ray] = tp, pp, up, vp
+                continue
+            # Nearest pair per ray (a ray's pairs are all in one chunk)
+            np.minimum.at(t, ray, tp)
+            w = np.flatnonzero(np.isfinite(tp) & (tp == t[ray]))
+            prim[ray[w]] = j[w] * self.n_tri + pp[w]
+            u[ray[w]], v[ray[w]] = up[w], vp[w]
         return t, prim, u, v
 
     def _cast_into(self, o, d, times, t0, k, best_t, best_part, prim, u, v) -> None:
         """:meth:`cast_all` merged straight into the caster's arrays (m rows each, contiguous).
 
         best_t (m,) is read as t1 and lowered where a pair wins; best_part (set to ``k``), prim
-        (``j * F + triangle``), u, v written there.  One kernel pass after embree's call
-        (:func:`.embree_kernels.group_finish`); a block with a hit inside the guard goes through
-        :meth:`cast_all`'s numpy path instead (re-casts; rare).
+        (``j * F + triangle``), u, v written there.  One kernel pass after embree's call per
+        chunk of pairs (:func:`.embree_kernels.group_finish`); a chunk with a hit inside the
+        guard goes through :meth:`cast_all`'s numpy path instead (re-casts; rare).
         """
         m = o.shape[0]
-        ray, j, oo, dd, (o32, d32, far32) = self._fused_pairs(o, d, times, t0, best_t, np.zeros(m, np.bool_), True)
-        if ray.size == 0:
-            return
-        far_in = far32.copy()                   # run() overwrites it with tfar
-        r = self.emesh.scene.run(o32, d32, dists=far32, output=1)
         buf = getattr(self._local, "blk", None)
         if buf is None or buf[0].shape[0] < m:
             buf = (np.empty(m), np.empty(m, np.int64), np.empty(m), np.empty(m))
             self._local.blk = buf
         em = self.emesh
-        if _K.group_finish(oo, dd, ray, j, t0, best_t, r["tfar"], r["primID"], r["u"], r["v"], em.plane_n,
-                           em.plane_w, self.n_tri, k, *(b[:m] for b in buf), best_t, best_part, prim, u, v):
-            return
-        # Guard re-casts: the numpy path on the same pairs (as cast_all, then the caster's merge)
-        t_k, p_k, u_k, v_k = np.full(m, np.inf), np.full(m, -1, np.int64), np.zeros(m), np.zeros(m)
-        tp, pp, up, vp = em.cast(oo, dd, t0[ray], best_t[ray], rays32=(o32, d32, far_in))
-        if self.lo.shape[0] == 1:
-            t_k[ray], p_k[ray], u_k[ray], v_k[ray] = tp, pp, up, vp
-        else:
-            np.minimum.at(t_k, ray, tp)
-            w = np.flatnonzero(np.isfinite(tp) & (tp == t_k[ray]))
-            p_k[ray[w]] = j[w] * self.n_tri + pp[w]
-            u_k[ray[w]], v_k[ray[w]] = up[w], vp[w]
-        won = np.flatnonzero(t_k < best_t)
-        best_t[won], best_part[won], prim[won], u[won], v[won] = t_k[won], k, p_k[won], u_k[won], v_k[won]
+        for ray, j, oo, dd, (o32, d32, far32) in self._fused_pairs(o, d, times, t0, best_t,
+                                                                   np.zeros(m, np.bool_), True):
+            far_in = far32.copy()                   # run() overwrites it with tfar
+            r = em.scene.run(o32, d32, dists=far32, output=1)
+            if _K.group_finish(oo, dd, ray, j, t0, best_t, r["tfar"], r["primID"], r["u"], r["v"], em.plane_n,
+                               em.plane_w, self.n_tri, k, *(b[:m] for b in buf), best_t, best_part, prim, u, v):
+                continue
+            # Guard re-casts: the numpy path on the same pairs (as cast_all, then the caster's merge)
+            t_k, p_k, u_k, v_k = np.full(m, np.inf), np.full(m, -1, np.int64), np.zeros(m), np.zeros(m)
+            tp, pp, up, vp = em.cast(oo, dd, t0[ray], best_t[ray], rays32=(o32, d32, far_in))
+            if self.lo.shape[0] == 1:
+                t_k[ray], p_k[ray], u_k[ray], v_k[ray] = tp, pp, up, vp
+            else:
+                np.minimum.at(t_k, ray, tp)
+                w = np.flatnonzero(np.isfinite(tp) & (tp == t_k[ray]))
+                p_k[ray[w]] = j[w] * self.n_tri + pp[w]
+                u_k[ray[w]], v_k[ray[w]] = up[w], vp[w]
+            won = np.flatnonzero(t_k < best_t)
+            best_t[won], best_part[won], prim[won], u[won], v[won] = t_k[won], k, p_k[won], u_k[won], v_k[won]
 
     def _occluded_all(self, o, d, times, t0, t1, skip):
         """(m,) bool over every ray, rays with ``skip`` (m,) bool ignored (left False)."""
         blocked = np.zeros(o.shape[0], bool)
-        ray, _, _, _, (o32, d32, far32) = self._fused_pairs(o, d, times, t0, t1, np.ascontiguousarray(skip), False)
-        if ray.size:
+        for ray, _, _, _, (o32, d32, far32) in self._fused_pairs(o, d, times, t0, t1, np.ascontiguousarray(skip),
+                                                                 False):
             blocked[ray[self.emesh.scene.run(o32, d32, dists=far32, query="OCCLUDED") != -1]] = True
         return blocked
 
@@ -689,12 +712,16 @@ def slice_bounds(mesh, transforms, lo, hi, slices: int = TIME_SLICES, samples: i
     for j, tr in enumerate(transforms):
         pad = 0.02 * float(np.linalg.norm(hi[j] - lo[j])) + 1e-300
         knots = np.asarray(tr.times, dtype=np.float64)
+        # Every slice's sample times in one transform evaluation; slice l's rows start at starts[l]
+        ts, starts = [], []
         for l in range(slices):
             t_a, t_b = l / slices, (l + 1) / slices
-            ts = np.concatenate([np.linspace(t_a, t_b, samples), knots[(knots > t_a) & (knots < t_b)]])
-            M = tr.at(ts)
-            pts = (np.einsum("kij,cj->kci", M[:, :3, :3], corners) + M[:, None, :3, 3]).reshape(-1, 3)
-            s_lo[j, l], s_hi[j, l] = pts.min(0) - pad, pts.max(0) + pad
+            starts.append(sum(x.size for x in ts))
+            ts.append(np.concatenate([np.linspace(t_a, t_b, samples), knots[(knots > t_a) & (knots < t_b)]]))
+        M = tr.at(np.concatenate(ts))
+        pts = np.einsum("kij,cj->kci", M[:, :3, :3], corners) + M[:, None, :3, 3]      # (K, 8, 3)
+        s_lo[j] = np.minimum.reduceat(pts.min(1), starts, axis=0) - pad
+        s_hi[j] = np.maximum.reduceat(pts.max(1), starts, axis=0) + pad
     return s_lo, s_hi
 
 
@@ -721,12 +748,14 @@ def build_parts(scene, scale: float, fused: bool | None = None) -> list:
     parts = []
     if static:
         parts.append(StaticPart(scene, static, fused))
-    # Moving rigid instances: one object-space embree scene per mesh; several moving
-    # instances of one mesh form one group (one transform pass, one embree call)
-    by_mesh: dict[int, list[int]] = {}
+    # Moving rigid instances: one object-space embree scene per distinct mesh; several
+    # moving instances of one mesh -- or of equal copies of it (duplicated objects are
+    # exported as separate meshes) -- form one group (one transform pass, one embree call)
+    by_mesh: dict[bytes, list[int]] = {}
     for i in rigid:
-        by_mesh.setdefault(scene.instances[i].mesh, []).append(i)
-    for m, members in by_mesh.items():
+        by_mesh.setdefault(scene.meshes[scene.instances[i].mesh].content_digest(), []).append(i)
+    for members in by_mesh.values():
+        m = scene.instances[members[0]].mesh
         V = np.asarray(scene.meshes[m].vertices, dtype=np.float64).reshape(-1, 3)
         emesh = EmbreeMesh(V, scene.meshes[m].triangles, fused=fused)
         if len(members) == 1 and not fused:

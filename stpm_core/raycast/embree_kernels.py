@@ -16,10 +16,12 @@ numpy path to rounding (tests/test_raycast.py compares them):
   result arrays - misses too (``init``), so the caster pre-fills nothing;
 * :func:`rigid_pairs_timed` - moving rigid instances of one mesh: box tests
   of each ray against the group box and each instance's box for the ray's
-  time slice (:func:`rigid_pairs`: whole swept boxes), and for every (ray,
-  instance) pair met, the inverse transform at the ray's time
-  (:class:`.geometry.MotionKeys`: lerp, slerp, stretch inverse) applied to
-  the ray, written as float64 object-space rays and float32 embree rays;
+  time slice (or whole swept boxes), and for every (ray, instance) pair met,
+  the inverse transform at the ray's time (:class:`.geometry.MotionKeys`:
+  lerp, slerp, stretch inverse) applied to the ray, written as float64
+  object-space rays and float32 embree rays, in chunks that fit the caller's
+  buffers; :func:`rigid_pairs_bvh` the same for many instances, through a
+  BVH of their boxes;
 * :func:`rigid_shade` / :func:`rigid_shade_rows` - normals and material of
   moving hits at their times (the latter straight into the result rows);
 * :func:`group_finish` - after embree's call on a group's pairs: refinement,
@@ -41,7 +43,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
-__all__ = ["rays32", "guard_rays32", "occluded_of", "static_finish", "rigid_pairs", "rigid_pairs_timed",
+__all__ = ["rays32", "guard_rays32", "occluded_of", "static_finish", "rigid_pairs_timed", "rigid_pairs_bvh",
            "rigid_shade", "rigid_shade_rows", "group_finish", "finish_hits", "refine_plane", "slerp_table", "warm_up"]
 
 FAR32 = float(np.float32(1e37))     # embree's "no tfar" value, as float64
@@ -303,34 +305,44 @@ def _world_to_object(T, Q, S, arc, knots, f, l, time, A, b):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def rigid_pairs(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, T, Q, S, arc, knots, first, last, centre,
-                ray, inst, o64, d64, o32, d32, far32):
-    """(ray, instance) pairs of moving instances of one mesh, mapped to object space.
-
-    o, d (m, 3), times, t0, t1 (m,) world rays; ``skip`` (m,) bool rays to
-    ignore (already blocked); box_lo, box_hi (3,) the group's swept box; lo,
-    hi (J, 3) each instance's.  T, Q, S, knots, first, last: the stacked keys of
-    :class:`.geometry.MotionKeys`, arc their :func:`slerp_table`; centre (3,) the object-space embree
-    scene's centre.  For each pair k written: ray[k], inst[k] (index j),
-    object-space o64, d64 (k, 3) float64 (if o64 has rows) and the float32
-    embree rays o32, d32, far32 starting at t0.  Returns the pair count.
-    (:func:`rigid_pairs_timed` without time-slice boxes.)
-    """
-    none = np.empty((lo.shape[0], 0, 3))
-    return rigid_pairs_timed(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, none, none, T, Q, S, arc, knots,
-                             first, last, centre, ray, inst, o64, d64, o32, d32, far32)
+def _emit_pair(i, j, tr, ox, oy, oz, dx, dy, dz, s, e, T, Q, S, arc, knots, first, last, centre, full, A, b,
+               n, ray, inst, o64, d64, o32, d32, far32):
+    """Write pair n: ray i mapped to instance j's object space at its time tr (directions not renormalised)."""
+    _world_to_object(T, Q, S, arc, knots, first[j], last[j], tr, A, b)
+    for r in range(3):
+        oo = A[r, 0] * ox + A[r, 1] * oy + A[r, 2] * oz + b[r]
+        dd = A[r, 0] * dx + A[r, 1] * dy + A[r, 2] * dz
+        if full:
+            o64[n, r] = oo
+            d64[n, r] = dd
+        o32[n, r] = np.float32((s * dd + oo) - centre[r])
+        d32[n, r] = np.float32(dd)
+    far32[n] = np.float32(min(max(e - s, 0.0), FAR32))
+    ray[n] = i
+    inst[n] = j
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def rigid_pairs_timed(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, slice_lo, slice_hi, T, Q, S, arc, knots,
-                      first, last, centre, ray, inst, o64, d64, o32, d32, far32):
-    """:func:`rigid_pairs` with per-time-slice instance boxes.
+def rigid_pairs_timed(o, d, times, t0, t1, skip, start, box_lo, box_hi, lo, hi, slice_lo, slice_hi, T, Q, S, arc,
+                      knots, first, last, centre, ray, inst, o64, d64, o32, d32, far32):
+    """(ray, instance) pairs of moving instances of one mesh, mapped to object space.
 
-    slice_lo, slice_hi (J, L, 3): instance j's world box over shutter slice
-    [l / L, (l + 1) / L] (L = 0: none).  A ray whose time lies in [0, 1] is
-    tested against the box of its slice instead of the whole swept box lo,
-    hi (J, 3) (both conservative; the slice box is much smaller for fast
-    motion, so fewer pairs are transformed and cast).
+    o, d (m, 3), times, t0, t1 (m,) world rays, from ray ``start`` on; ``skip``
+    (m,) bool rays to ignore (already blocked); box_lo, box_hi (3,) the group's
+    swept box; lo, hi (J, 3) each instance's; slice_lo, slice_hi (J, L, 3):
+    instance j's world box over shutter slice [l / L, (l + 1) / L] (L = 0:
+    none).  A ray whose time lies in [0, 1] is tested against the box of its
+    slice instead of the whole swept box (both conservative; the slice box is
+    much smaller for fast motion, so fewer pairs are transformed and cast).
+    T, Q, S, knots, first, last: the stacked keys of :class:`.geometry.MotionKeys`,
+    arc their :func:`slerp_table`; centre (3,) the object-space embree scene's
+    centre.  For each pair k written: ray[k], inst[k] (index j), object-space
+    o64, d64 (k, 3) float64 (if o64 has rows) and the float32 embree rays
+    o32, d32, far32 starting at t0.
+
+    Returns (pairs written, next ray): the pair buffers (capacity C >= J) are
+    never overrun -- the kernel stops before a ray that might not fit, and the
+    caller calls again from ``next ray`` (< m) after using the pairs.
     """
     A = np.empty((3, 3))
     b = np.empty(3)
@@ -338,9 +350,12 @@ def rigid_pairs_timed(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, slice_l
     full = o64.shape[0] > 0
     J = lo.shape[0]
     L = slice_lo.shape[1]
-    for i in range(o.shape[0]):
+    cap = ray.shape[0]
+    for i in range(start, o.shape[0]):
         if skip[i]:
             continue
+        if n + J > cap:
+            return n, i
         ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
         ix, iy, iz = _inv(dx), _inv(dy), _inv(dz)
@@ -357,21 +372,83 @@ def rigid_pairs_timed(o, d, times, t0, t1, skip, box_lo, box_hi, lo, hi, slice_l
                     continue
             elif not _meets(lo[j], hi[j], ox, oy, oz, ix, iy, iz, s, e):
                 continue
-            # Ray to object space at its own time (directions not renormalised)
-            _world_to_object(T, Q, S, arc, knots, first[j], last[j], tr, A, b)
-            for r in range(3):
-                oo = A[r, 0] * ox + A[r, 1] * oy + A[r, 2] * oz + b[r]
-                dd = A[r, 0] * dx + A[r, 1] * dy + A[r, 2] * dz
-                if full:
-                    o64[n, r] = oo
-                    d64[n, r] = dd
-                o32[n, r] = np.float32((s * dd + oo) - centre[r])
-                d32[n, r] = np.float32(dd)
-            far32[n] = np.float32(min(max(e - s, 0.0), FAR32))
-            ray[n] = i
-            inst[n] = j
+            _emit_pair(i, j, tr, ox, oy, oz, dx, dy, dz, s, e, T, Q, S, arc, knots, first, last, centre, full, A, b,
+                       n, ray, inst, o64, d64, o32, d32, far32)
             n += 1
-    return n
+    return n, o.shape[0]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def rigid_pairs_bvh(o, d, times, t0, t1, skip, start, node_lo, node_hi, level_off, leaf, order, lo, hi, slice_lo,
+                    slice_hi, T, Q, S, arc, knots, first, last, centre, ray, inst, o64, d64, o32, d32, far32):
+    """:func:`rigid_pairs_timed` for many instances: a BVH of their swept boxes instead of testing each.
+
+    The BVH is :class:`.pair_bvh.PairBVH`'s, flattened: level l's nodes are
+    rows level_off[l] .. level_off[l + 1] of node_lo, node_hi (N, 3); node j of
+    level l has children 2j, 2j + 1 on level l + 1; leaf j (last level) holds
+    instances order[j * leaf .. j * leaf + leaf - 1] (those < J).  Depth
+    first with an explicit stack; at a leaf each instance's slice box (or
+    swept box) decides, then the pair is written as there.  Same pairs as
+    :func:`rigid_pairs_timed` (possibly in another order within a ray).
+    Returns (pairs written, next ray).
+    """
+    A = np.empty((3, 3))
+    b = np.empty(3)
+    n = 0
+    full = o64.shape[0] > 0
+    J = lo.shape[0]
+    L = slice_lo.shape[1]
+    cap = ray.shape[0]
+    n_levels = level_off.shape[0] - 1
+    stack_l = np.empty(2 * n_levels + 2, np.int64)
+    stack_j = np.empty(2 * n_levels + 2, np.int64)
+    for i in range(start, o.shape[0]):
+        if skip[i]:
+            continue
+        if n + J > cap:
+            return n, i
+        ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
+        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+        ix, iy, iz = _inv(dx), _inv(dy), _inv(dz)
+        s, e = t0[i], t1[i]
+        tr = times[i]
+        sl = -1
+        if L > 0 and tr >= 0.0 and tr <= 1.0:
+            sl = min(int(tr * L), L - 1)
+        top = 0
+        stack_l[0] = 0
+        stack_j[0] = 0
+        top = 1
+        while top > 0:
+            top -= 1
+            lv = stack_l[top]
+            nj = stack_j[top]
+            row = level_off[lv] + nj
+            if not _meets(node_lo[row], node_hi[row], ox, oy, oz, ix, iy, iz, s, e):
+                continue
+            if lv < n_levels - 1:
+                count = level_off[lv + 2] - level_off[lv + 1]
+                for c in range(1, -1, -1):
+                    child = 2 * nj + c
+                    if child < count:
+                        stack_l[top] = lv + 1
+                        stack_j[top] = child
+                        top += 1
+                continue
+            for q in range(leaf):
+                slot = nj * leaf + q
+                if slot >= J:
+                    break
+                j = order[slot]
+                if sl >= 0:
+                    if not _meets(slice_lo[j, sl], slice_hi[j, sl], ox, oy, oz, ix, iy, iz, s, e):
+                        continue
+                elif not _meets(lo[j], hi[j], ox, oy, oz, ix, iy, iz, s, e):
+                    continue
+                _emit_pair(i, j, tr, ox, oy, oz, dx, dy, dz, s, e, T, Q, S, arc, knots, first, last, centre, full,
+                           A, b, n, ray, inst, o64, d64, o32, d32, far32)
+                n += 1
+    return n, o.shape[0]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
