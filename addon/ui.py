@@ -81,43 +81,37 @@ class _STPMPanel:
     bl_context = "render"
     COMPAT_ENGINES = {"STPM"}
 
+    # Properties of scene.stpm drawn one per row by the default draw (panels with more set PROPS = ())
+    PROPS: tuple = ()
+
     @classmethod
     def poll(cls, context):
         return context.engine in cls.COMPAT_ENGINES
 
+    def _column(self):
+        """A column of the panel's layout with Blender's property-split style."""
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        return layout.column()
+
+    def draw(self, context):
+        col = self._column()
+        for name in self.PROPS:
+            col.prop(context.scene.stpm, name)
+
 
 class STPM_RENDER_PT_sampling(_STPMPanel, bpy.types.Panel):
     bl_label = "Sampling"
+    PROPS = ("samples", "seed", "max_depth", "filter_width", "threads")
 
     def draw_header_preset(self, context):
         self.layout.menu(STPM_MT_presets.bl_idname, text="", icon="PRESET")
 
-    def draw(self, context):
-        props = context.scene.stpm
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        col = layout.column()
-        col.prop(props, "samples")
-        col.prop(props, "seed")
-        col.prop(props, "max_depth")
-        col.prop(props, "filter_width")
-        col.prop(props, "threads")
-
 
 class STPM_RENDER_PT_photons(_STPMPanel, bpy.types.Panel):
     bl_label = "Photons"
-
-    def draw(self, context):
-        props = context.scene.stpm
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        col = layout.column()
-        col.prop(props, "photons_global")
-        col.prop(props, "photons_caustic")
-        col.prop(props, "k_nearest")
-        col.prop(props, "kernel")
+    PROPS = ("photons_global", "photons_caustic", "k_nearest", "kernel")
 
 
 class STPM_RENDER_PT_method(_STPMPanel, bpy.types.Panel):
@@ -126,9 +120,7 @@ class STPM_RENDER_PT_method(_STPMPanel, bpy.types.Panel):
     def draw(self, context):
         props = context.scene.stpm
         layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        col = layout.column()
+        col = self._column()
         col.prop(props, "method")
         if props.method == "ACCUMULATION":
             col.prop(props, "accumulation_steps")
@@ -154,11 +146,8 @@ class STPM_RENDER_PT_motion_blur(_STPMPanel, bpy.types.Panel):
 
     def draw(self, context):
         rd = context.scene.render
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        layout.active = rd.use_motion_blur
-        col = layout.column()
+        self.layout.active = rd.use_motion_blur
+        col = self._column()
         col.prop(rd, "motion_blur_position", text="Position")
         col.prop(rd, "motion_blur_shutter")
         col.prop(context.scene.stpm, "motion_steps")
@@ -173,9 +162,7 @@ class STPM_RENDER_PT_effects(_STPMPanel, bpy.types.Panel):
     def draw(self, context):
         props = context.scene.stpm
         layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        col = layout.column()
+        col = self._column()
         col.prop(props, "effects")
         sub = col.column()
         sub.active = props.effects == "MANUAL"

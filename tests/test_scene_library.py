@@ -153,7 +153,8 @@ def test_effects_panel_lists_the_plan_and_its_reasons():
     bpy.ops.wm.open_mainfile(filepath=str(SCENES / "cornell_moving_cube.blend"))
     scene = bpy.context.scene
     labels = []
-    panel = types.SimpleNamespace(layout=_Layout(labels))
+    panel = type("Drawn", (ui._STPMPanel,), {})()          # the panels' shared helpers, no bpy panel
+    panel.layout = _Layout(labels)
     ui.STPM_RENDER_PT_effects.draw(panel, types.SimpleNamespace(scene=scene))
     assert labels == [("No plan yet: compute it or render", "INFO")]
     bpy.ops.stpm.compute_plan()
