@@ -21,8 +21,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))  # the checkout's add-on registers the STPM engine
 
 
-def _material(name: str, node: str, **inputs):
-    """A node material whose surface is one BSDF ``node`` with ``inputs`` set."""
+def node_material(name: str, node: str, **inputs):
+    """A node material whose surface is one shader ``node`` with ``inputs`` set -> (material, node)."""
     mat = bpy.data.materials.new(name)
     if bpy.app.version < (5, 0, 0):
         mat.use_nodes = True
@@ -31,11 +31,16 @@ def _material(name: str, node: str, **inputs):
         if n.bl_idname != "ShaderNodeOutputMaterial":
             tree.nodes.remove(n)
     out = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
-    bsdf = tree.nodes.new(node)
+    shader = tree.nodes.new(node)
     for key, value in inputs.items():
-        bsdf.inputs[key].default_value = value
-    tree.links.new(bsdf.outputs[0], out.inputs["Surface"])
-    return mat
+        shader.inputs[key].default_value = value
+    tree.links.new(shader.outputs[0], out.inputs["Surface"])
+    return mat, shader
+
+
+def _material(name: str, node: str, **inputs):
+    """:func:`node_material`'s material alone."""
+    return node_material(name, node, **inputs)[0]
 
 
 def build(path: Path) -> Path:

@@ -14,11 +14,13 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 ROOT = Path(__file__).resolve().parent.parent
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+for _p in (ROOT, ROOT / "blend_scenes"):
+    if str(_p) not in sys.path:
+        sys.path.insert(0, str(_p))
 
 import addon  # noqa: E402
 from addon.export import export_scene  # noqa: E402
+from make_demo import node_material  # noqa: E402,F401  (the scene scripts' material helper, shared)
 
 
 def fresh() -> "bpy.types.Scene":
@@ -45,23 +47,6 @@ def linear_keys(idblock) -> None:
     for fc in curves:
         for kp in fc.keyframe_points:
             kp.interpolation = "LINEAR"
-
-
-def node_material(name: str, node: str, **inputs):
-    """A material whose surface is one shader ``node`` with ``inputs`` set; returns (mat, node)."""
-    mat = bpy.data.materials.new(name)
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    tree = mat.node_tree
-    for n in list(tree.nodes):
-        if n.bl_idname != "ShaderNodeOutputMaterial":
-            tree.nodes.remove(n)
-    out = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
-    shader = tree.nodes.new(node)
-    for key, value in inputs.items():
-        shader.inputs[key].default_value = value
-    tree.links.new(shader.outputs[0], out.inputs["Surface"])
-    return mat, shader
 
 
 def add_mesh(kind: str = "cube", name: str = "Obj", location=(0, 0, 0), material=None, **kw):
