@@ -92,6 +92,9 @@ class STPMRenderEngine(bpy.types.RenderEngine):
             if self.cancel_requested():
                 return
             render = _core.render_function()
+            # Blender's "Persistent Data" (Render > Performance): keep the baked static geometry
+            # between frames while it does not change; off frees it
+            _core.sub("raycast").set_persistent_static(bool(scene.render.use_persistent_data))
             result = render(stpm_scene, settings, progress=self._progress, cancel=self.cancel_requested)
         except _core.RenderCancelled:
             self.update_stats("STPM", "Cancelled")

@@ -305,10 +305,6 @@ class _CancelFlag:
 # Subcommands
 # ----------------------------------------------------------------------------
 def _cmd_render(args) -> int:
-    from .imageio import write_exr, write_png
-    from .progress import ProgressBar
-    from .render import render
-
     t_start = time.perf_counter()
     scene_path = Path(args.scene)
     frames = parse_frames(args.frame) if args.frame is not None else [None]
@@ -318,6 +314,20 @@ def _cmd_render(args) -> int:
         raise UsageError(f"--output must end in .exr, got {template!r}")
 
     overrides = _checked_overrides(args)
+    # A frame range keeps the baked static geometry from frame to frame while it does not change
+    from .raycast import set_persistent_static
+    set_persistent_static(many)
+    try:
+        return _render_frames(args, frames, many, template, overrides, scene_path, t_start)
+    finally:
+        set_persistent_static(False)
+
+
+def _render_frames(args, frames, many, template, overrides, scene_path, t_start) -> int:
+    """The frame loop of :func:`_cmd_render`: load, render and write each frame."""
+    from .imageio import write_exr, write_png
+    from .progress import ProgressBar
+    from .render import render
 
     for frame in frames:
         t_frame = time.perf_counter() if many else t_start

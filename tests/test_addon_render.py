@@ -115,6 +115,21 @@ def test_cancel_stops_the_render(monkeypatch):
     assert LAST_RENDER == {}  # nothing written after a cancel
 
 
+def test_persistent_data_keeps_the_static_bake_between_renders():
+    """Blender's Render > Performance > Persistent Data: a second render of unchanged static geometry
+    reuses the baked static scene; with it off nothing is kept."""
+    bpy.ops.wm.open_mainfile(filepath=str(DEMO))
+    scene = bpy.context.scene
+    _tiny(scene, photons=200)
+    reused = []
+    for persistent in (True, True, False, False):
+        scene.render.use_persistent_data = persistent
+        LAST_RENDER.clear()
+        bpy.ops.render.render()
+        reused.append(LAST_RENDER["stats"]["caster"]["static_reused"])
+    assert reused == [False, True, False, False]
+
+
 def test_unsupported_node_warns_and_still_renders(tmp_path):
     scene = fresh()
     scene.render.engine = "STPM"

@@ -235,7 +235,10 @@ def test_blend_input_frame_range(tmp_path):
     assert r.returncode == 0, r.stderr
     for f in (1, 2):
         assert read_exr(tmp_path / f"f_{f:02d}.exr")["Combined"].shape == (6, 8, 4)
-        assert json.loads((tmp_path / f"s_{f:04d}.json").read_text())["frame"] == f
+        stats = json.loads((tmp_path / f"s_{f:04d}.json").read_text())
+        assert stats["frame"] == f
+        # the static floor is baked once for the range (frame 2 reuses frame 1's)
+        assert stats["caster"]["static_reused"] == (f == 2)
 
 
 def test_internal_error_is_one_line_and_exit_3(tiny, tmp_path, monkeypatch, capsys):

@@ -719,3 +719,35 @@ def test_without_numba_the_embree_caster_keeps_its_numpy_path(monkeypatch):
     rigid = he.hit & hn.hit & (he.instance == hn.instance) & (he.prim == hn.prim) & (hn.instance != 3)
     assert rigid.sum() > 400 and (he.hit != hn.hit).mean() < 0.01
     np.testing.assert_allclose(he.t[rigid], hn.t[rigid], rtol=1e-6)
+
+
+@needs_embree
+def test_persistent_static_part_is_reused_only_while_nothing_static_changes():
+    """set_persistent_static(True): a second caster of the same static geometry reuses the baked
+    part (same hits, bit for bit); moving a static object, or turning persistence off, rebuilds."""
+    from stpm_core.raycast import set_persistent_static
+    rng = np.random.default_rng(8)
+    mesh = soup(rng, 40, spread=1.0, size=0.3)
+
+    def scene(shift=0.0):
+        inst = [Instance(0, MotionTransform.static(trs((shift, 0, 0)))),
+                Instance(0, MotionTransform(np.array([0.0, 1.0]), np.stack([trs((0, 1, 0)), trs((0.5, 1, 0))])))]
+        return Scene(meshes=[mesh], instances=inst, materials=[Material(), Material()])
+
+    o, d, t = random_rays(rng, 2000)
+    try:
+        set_persistent_static(True)
+        a = make_caster(scene(), "embree")
+        b = make_caster(scene(), "embree")                 # a new Scene object, same content
+        assert not a.stats["static_reused"] and b.stats["static_reused"] and b.parts[0] is a.parts[0]
+        ha, hb = a.intersect(o, d, t), b.intersect(o, d, t)
+        assert ha.hit.sum() > 100
+        for name in ("t", "instance", "prim", "u", "v", "ng", "ns"):
+            np.testing.assert_array_equal(getattr(ha, name), getattr(hb, name))
+        c = make_caster(scene(shift=0.1), "embree")         # a static object moved between frames
+        assert not c.stats["static_reused"] and c.parts[0] is not a.parts[0]
+        set_persistent_static(False)
+        e = make_caster(scene(shift=0.1), "embree")
+        assert not e.stats["static_reused"] and e.parts[0] is not c.parts[0]
+    finally:
+        set_persistent_static(False)

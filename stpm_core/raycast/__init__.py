@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Hits", "make_caster", "TMIN_REL"]
+__all__ = ["Hits", "make_caster", "set_persistent_static", "TMIN_REL"]
 
 
 @dataclass
@@ -68,3 +68,15 @@ def make_caster(scene, backend: str = "auto"):
     """Build a ray caster for ``scene`` ('auto': $STPM_RAYCAST_BACKEND, else embree, numba or numpy)."""
     from .build import make_caster as _make
     return _make(scene, backend=backend)
+
+
+def set_persistent_static(on: bool) -> None:
+    """Keep the baked static geometry between renders while nothing static changes (embree backend).
+
+    Blender's "Persistent Data" (``scene.render.use_persistent_data``) and the
+    CLI's frame ranges turn it on; off frees what is kept.  See docs/raycast.md.
+    """
+    from .build import embree_available
+    if embree_available():
+        from .embree_backend import set_persistent_static as _set
+        _set(on)

@@ -120,7 +120,11 @@ def make_caster(scene, backend: str = "auto", fused: bool | None = None) -> "Cas
     else:
         from .numpy_backend import build_parts
     scale = scene_scale(scene)
-    return Caster(scene, build_parts(scene, scale), scale, backend)
+    t0 = _time.perf_counter()
+    caster = Caster(scene, build_parts(scene, scale), scale, backend)
+    caster.stats["build_s"] = _time.perf_counter() - t0
+    caster.stats["static_reused"] = bool(caster.parts and getattr(caster.parts[0], "reused_now", False))
+    return caster
 
 
 def _as_rays(origins, dirs, times, tmax):

@@ -29,6 +29,7 @@ the whole shutter.  Deforming meshes: see :class:`DeformingPart`.
 """
 from __future__ import annotations
 
+import hashlib
 import threading
 
 import numpy as np
@@ -225,6 +226,8 @@ class StaticPart:
 
     def __init__(self, scene, instances: list[int], fused: bool = False):
         self.fused = fused and FUSED_AVAILABLE
+        self.reused = 0                  # renders that took this part from the persistent cache
+        self.reused_now = False          # the last build_parts took it from there
         self._local = threading.local()
         if self.fused:
             self.intersect_into, self.occluded_into = self._intersect_into, self._occluded_into
@@ -725,6 +728,56 @@ def slice_bounds(mesh, transforms, lo, hi, slices: int = TIME_SLICES, samples: i
     return s_lo, s_hi
 
 
+# ---------------------------------------------------------------- persistent static part
+_PERSIST_LOCK = threading.Lock()
+_PERSIST = {"on": False, "key": None, "part": None}
+
+
+def set_persistent_static(on: bool) -> None:
+    """Keep the last static part between renders (Blender's "Persistent Data"; the CLI's frame ranges).
+
+    When on, :func:`build_parts` reuses the previous render's baked static scene
+    if the static instances are the same (:func:`_static_key`), saving the bake
+    (about 1.2 us per triangle: 2.7 s for 2.3M triangles).  Turning it off frees
+    the kept part.
+    """
+    with _PERSIST_LOCK:
+        _PERSIST["on"] = bool(on)
+        if not on:
+            _PERSIST["key"] = _PERSIST["part"] = None
+
+
+def _static_key(scene, static: list[int], fused: bool) -> bytes:
+    """Digest of everything a StaticPart is baked from: instance indices, mesh contents, matrices."""
+    h = hashlib.blake2b(digest_size=16)
+    h.update(b"fused" if fused else b"numpy")
+    for i in static:
+        inst = scene.instances[i]
+        h.update(np.int64(i).tobytes())
+        h.update(scene.meshes[inst.mesh].content_digest())
+        h.update(np.ascontiguousarray(inst.transform.matrices[0], np.float64).tobytes())
+    return h.digest()
+
+
+def _static_part(scene, static: list[int], fused: bool) -> "StaticPart":
+    """The static part, reused from the previous build when persistence is on and nothing static changed."""
+    with _PERSIST_LOCK:
+        if _PERSIST["part"] is not None:
+            _PERSIST["part"].reused_now = False
+        if not _PERSIST["on"]:
+            return StaticPart(scene, static, fused)
+        key = _static_key(scene, static, fused)
+        if _PERSIST["key"] == key:
+            part = _PERSIST["part"]
+            part.reused += 1
+            part.reused_now = True
+            return part
+        _PERSIST["key"] = _PERSIST["part"] = None          # free the old bake before making the new one
+        part = StaticPart(scene, static, fused)
+        _PERSIST["key"], _PERSIST["part"] = key, part
+        return part
+
+
 def build_parts(scene, scale: float, fused: bool | None = None) -> list:
     """Static part first (cheapest, shrinks t1 for the rest), then moving, then deforming.
 
@@ -747,7 +800,7 @@ def build_parts(scene, scale: float, fused: bool | None = None) -> list:
             rigid.append(i)
     parts = []
     if static:
-        parts.append(StaticPart(scene, static, fused))
+        parts.append(_static_part(scene, static, fused))
     # Moving rigid instances: one object-space embree scene per distinct mesh; several
     # moving instances of one mesh -- or of equal copies of it (duplicated objects are
     # exported as separate meshes) -- form one group (one transform pass, one embree call)
