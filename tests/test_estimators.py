@@ -278,24 +278,6 @@ def test_numba_search_gives_the_scipy_estimates(estimator, kernel, alpha):
         assert (E_ref > 0).mean() > 0.3      # most estimates non-trivial
 
 
-def test_candidate_cache_changes_nothing():
-    pytest.importorskip("numba")
-    from stpm_core.photons import kdtree
-    if not kdtree.AVAILABLE:
-        pytest.skip("numba disabled")
-    rng = np.random.default_rng(22)
-    m = random_scene_map(30_000, rng, "numba")
-    p, ns, t = mixed_queries(rng, 4000)
-    for dims, mode, q4, kq in ((3, kdtree.MODE_STANDARD, t, 30), (3, kdtree.MODE_TEMPORAL, t, 120),
-                               (4, kdtree.MODE_KD4D, m.time_scale * t, 30)):
-        q = np.column_stack([p, q4])
-        tree = m.flat_tree(dims)
-        with_cache = tree.lookup(mode, q, ns, kq, 20, False, 1.1, 1, cache=True)
-        without = tree.lookup(mode, q, ns, kq, 20, False, 1.1, 1, cache=False)
-        for a, b in zip(with_cache, without):
-            assert np.allclose(a, b, rtol=1e-12, atol=0.0)
-
-
 def test_scipy_fallback_when_numba_is_unavailable():
     # A fresh interpreter with numba switched off picks scipy and answers the same
     import json

@@ -44,13 +44,12 @@ buffer of 2 kq and cut back to the kq nearest by quickselect when it fills
 Warm start: the previous query's kq nearest lie within r_prev + |q - q_prev|
 of q, so that radius already bounds the search from its first node.
 
-Candidate cache (:func:`_lookup`): queries are processed in Morton order,
-and after a full search at c with kq-th distance r_c every photon within
-r_c + 2 rho of c (rho = beta r_c) is copied to a small block; every later
-query within rho of c has all its kq nearest in that block (proof in
-:func:`_lookup`), so it is answered by one pass over the block.  It pays
-when queries are dense relative to the photon radius (several samples per
-pixel footprint that is small against r_k); otherwise it is rarely entered.
+Queries are processed in Morton order, so consecutive queries are neighbours
+(warm start, tree nodes in cache).  An exact candidate cache (photons within
+r_c + 2 beta r_c of the last full search, reused by the queries within beta
+r_c of it) was measured slower than a warm-started search in every render
+tried (2026-11-25: STANDARD 0.49 -> 0.31 s, TEMPORAL 0.59 -> 0.46 s, KD4D
+0.74 -> 0.51 s of render_s without it) and was removed.
 
 Threads: the compiled functions release the GIL (``nogil``) and run one
 query range each; :func:`run_chunks` splits a batch of queries over a small
@@ -74,10 +73,6 @@ __all__ = ["AVAILABLE", "LEAF_SIZE", "MODE_STANDARD", "MODE_TEMPORAL", "MODE_KD4
 
 LEAF_SIZE = 16           # at most this many photons per leaf (2^L leaves of 8..16; 12..32 measured within 10 %)
 MODE_STANDARD, MODE_TEMPORAL, MODE_KD4D = 0, 1, 2
-CACHE_BETA_3D = 0.5      # candidate cache radius rho = beta r_c (3D: photons on surfaces, ~(1+2 beta)^2 kq cached)
-CACHE_BETA_LARGE_K = 0.25  # 3D with kq > 64 (e.g. TEMPORAL's m): a smaller block, ~2.25 kq photons
-CACHE_BETA_4D = 0.3      # 4D: photons fill surface x time, ~(1+2 beta)^3 kq cached
-CACHE_CAP_FACTOR = 12    # at most this many x kq cached photons (else no cache for that query)
 _CHUNK_MIN = 2048        # fewer queries than this per thread are not split
 
 AVAILABLE = False
@@ -407,91 +402,13 @@ if AVAILABLE:
         return True
 
     @_jit
-    def _range(P, box, n_leaves, q0, q1, q2, q3, D, s, R2, cx, ci, stack):
-        """All photons with squared distance <= R2 from the query: coordinates into cx (cap, 4)
-        float64 (x, y, z and t or s t, exactly as the search computes them) and rows into ci.
-        Returns their count, or -1 when more than the capacity cx.shape[0]."""
-        cap = cx.shape[0]
-        N = P.shape[0]
-        first_leaf = n_leaves - 1
-        n = 0
-        top = 1
-        stack[0] = 0
-        while top > 0:
-            top -= 1
-            node = stack[top]
-            if _box_dist2(box, node + 1, q0, q1, q2, q3, D) > R2:
-                continue
-            if node < first_leaf:
-                stack[top] = 2 * node + 1
-                stack[top + 1] = 2 * node + 2
-                top += 2
-                continue
-            leaf = node - first_leaf
-            for j in range((leaf * N) // n_leaves, ((leaf + 1) * N) // n_leaves):
-                x0 = np.float64(P[j, 0])
-                x1 = np.float64(P[j, 1])
-                x2 = np.float64(P[j, 2])
-                x3 = s * np.float64(P[j, 3]) if D == 4 else np.float64(P[j, 3])
-                e0 = x0 - q0
-                e1 = x1 - q1
-                e2 = x2 - q2
-                d2 = e0 * e0 + e1 * e1 + e2 * e2
-                if D == 4:
-                    e3 = x3 - q3
-                    d2 += e3 * e3
-                if d2 <= R2:
-                    if n == cap:
-                        return -1
-                    cx[n, 0] = x0
-                    cx[n, 1] = x1
-                    cx[n, 2] = x2
-                    cx[n, 3] = x3
-                    ci[n] = j
-                    n += 1
-        return n
-
-    @_jit
-    def _scan_cache(cx, ci, n_c, q0, q1, q2, q3, D, kq, bd, bi, bx):
-        """The kq nearest among the cached candidates (same arithmetic and buffer as _knn)."""
-        cap = bd.shape[0]
-        cnt = 0
-        bound = np.inf
-        for a in range(n_c):
-            e0 = cx[a, 0] - q0
-            e1 = cx[a, 1] - q1
-            e2 = cx[a, 2] - q2
-            d2 = e0 * e0 + e1 * e1 + e2 * e2
-            if D == 4:
-                e3 = cx[a, 3] - q3
-                d2 += e3 * e3
-            if d2 < bound:
-                bd[cnt] = d2
-                bi[cnt] = ci[a]
-                cnt += 1
-                if cnt == cap:
-                    _select(bd, bx, bi, 0, cnt, kq - 1)
-                    cnt = kq
-                    bound = bd[kq - 1]
-        _select(bd, bx, bi, 0, cnt, kq - 1)
-
-    @_jit
-    def _lookup(P, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, beta, cache_cap,
-                out_phi, out_r, out_tau):
+    def _lookup(P, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, out_phi, out_r, out_tau):
         """Fused search + reduction for queries q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32.
 
         mode STANDARD / KD4D: kq = k nearest (3D / 4D); TEMPORAL: kq = m candidates, then the k
         nearest in time among the m - 1 inner ones.  Writes out_phi (n, 3) W (sum of w Phi over
         the k - 1 inner / selected photons on the ns side), out_r (n,) distance of the kq-th
         photon (m) and out_tau (n,) TEMPORAL's window half-width (shutter units).
-
-        Candidate cache (queries in spatially coherent order): after a full search at c with
-        kq-th distance r_c, if the next query lies within rho = beta r_c, every photon within
-        r_c + 2 rho of c is cached.  For any query q with |q - c| <= rho the ball of radius
-        r_c + |q - c| around q contains the ball of radius r_c around c, hence >= kq photons,
-        so q's kq nearest lie within r_c + rho of q, i.e. within r_c + 2 rho of c: all cached.
-        The kq nearest among the cache are then exactly q's kq nearest (same distances, same
-        selection), found by one pass over a small block in cache instead of a tree search.
         """
         D = 4 if mode == MODE_KD4D else 3
         bd = np.empty(2 * kq)
@@ -503,44 +420,20 @@ if AVAILABLE:
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
-        cx = np.empty((cache_cap, 4))
-        ci = np.empty(cache_cap, np.int64)
-        stack = np.empty(256, np.int64)
-        have, n_c = False, 0
-        c0 = c1 = c2 = c3 = 0.0
-        rho2 = -1.0
         r_prev = np.inf
         n = q.shape[0]
         for i in range(n):
             q0, q1, q2, q3 = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
-            # -- the kq nearest: from the candidate cache when it covers q, else a tree search
-            e0, e1, e2, e3 = q0 - c0, q1 - c1, q2 - c2, q3 - c3
-            dc2 = e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0)
-            if have and dc2 <= rho2:
-                _scan_cache(cx, ci, n_c, q0, q1, q2, q3, D, kq, bd, bi, bx)
-            else:
-                qq[0], qq[1], qq[2], qq[3] = q0, q1, q2, q3
-                # warm start: the previous query's kq nearest lie within r_prev + |q - q_prev|
-                bound0 = np.inf
-                if i > 0:
-                    e0, e1, e2, e3 = q0 - q[i - 1, 0], q1 - q[i - 1, 1], q2 - q[i - 1, 2], q3 - q[i - 1, 3]
-                    dp = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0))
-                    bound0 = ((r_prev + dp) * (1.0 + 1e-9)) ** 2
-                if not _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0):
-                    _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, np.inf)
-                have = False
-                if beta > 0.0 and i + 1 < n:
-                    rc = np.sqrt(bd[kq - 1])
-                    rho = beta * rc
-                    e0, e1, e2, e3 = q[i + 1, 0] - q0, q[i + 1, 1] - q1, q[i + 1, 2] - q2, q[i + 1, 3] - q3
-                    dn2 = e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0)
-                    if dn2 < rho * rho:
-                        R = rc + 2.0 * rho
-                        n_c = _range(P, box, n_leaves, q0, q1, q2, q3, D, s, R * R * (1.0 + 1e-9), cx, ci, stack)
-                        if n_c >= kq:
-                            have = True
-                            c0, c1, c2, c3 = q0, q1, q2, q3
-                            rho2 = rho * rho * (1.0 - 1e-9)
+            # -- the kq nearest by a tree search, warm-started: the previous query's kq nearest
+            # lie within r_prev + |q - q_prev|
+            qq[0], qq[1], qq[2], qq[3] = q0, q1, q2, q3
+            bound0 = np.inf
+            if i > 0:
+                e0, e1, e2, e3 = q0 - q[i - 1, 0], q1 - q[i - 1, 1], q2 - q[i - 1, 2], q3 - q[i - 1, 3]
+                dp = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0))
+                bound0 = ((r_prev + dp) * (1.0 + 1e-9)) ** 2
+            if not _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0):
+                _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, np.inf)
             # slot kq - 1 = the kq-th neighbour (fixes the radius); slots 0 .. kq - 2 are inner
             r = np.sqrt(bd[kq - 1])
             out_r[i] = r
@@ -638,12 +531,12 @@ class FlatTree:
         self.pts[:, 4:12] = packed[perm]
 
     def lookup(self, mode: int, q: np.ndarray, ns: np.ndarray, kq: int, k: int, cone: bool, cone_k: float,
-               workers: int, cache: bool = True):
+               workers: int):
         """Sums Phi (n, 3) W, radius r (n,) m of the kq-th neighbour and TEMPORAL's tau (n,) for queries q (n, 4).
 
         Queries are processed in Morton order (of x, y, z, plus s t for KD4D; results come back in the
         input order), so consecutive queries are neighbours: the tree nodes they read stay in
-        cache and the candidate cache (``cache``) serves most of them.
+        cache and each search starts from the previous one's radius.
         """
         n = q.shape[0]
         q = np.ascontiguousarray(q, dtype=np.float64)
@@ -656,17 +549,9 @@ class FlatTree:
         phi = np.zeros((n, 3))
         r = np.zeros(n)
         tau = np.zeros(n)
-        if not cache:
-            beta = 0.0
-        elif mode == MODE_KD4D:
-            beta = CACHE_BETA_4D
-        else:
-            beta = CACHE_BETA_3D if kq <= 64 else CACHE_BETA_LARGE_K
-        cap = CACHE_CAP_FACTOR * kq
-
         def part(a, b):
             _lookup(self.pts, self.box, self.n_leaves, qs[a:b], nss[a:b], mode, kq, k, self.s, cone, cone_k,
-                    beta, cap, phi[a:b], r[a:b], tau[a:b])
+                    phi[a:b], r[a:b], tau[a:b])
 
         run_chunks(part, n, workers)
         out_phi, out_r, out_tau = np.empty_like(phi), np.empty_like(r), np.empty_like(tau)
