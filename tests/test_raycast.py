@@ -654,10 +654,11 @@ def test_fused_world_to_object_matches_motion_keys():
             d[:, c] = 1.0
             lo, hi = np.full((3, 3), -1e9), np.full((3, 3), 1e9)
             none = np.empty((1, 0, 3))                         # no time-slice boxes: whole swept boxes
-            got = K.rigid_pairs_timed(np.zeros((n, 3)), d, times[sel], np.zeros(n), np.ones(n),
-                                      np.zeros(n, np.bool_), 0, -big[0], big[0], lo[k:k + 1], hi[k:k + 1], none,
-                                      none, keys.T, keys.Q, keys.S, arc, keys.knots, first[k:k + 1],
-                                      last[k:k + 1], np.zeros(3), ray, inst, o64, d64, o32, d32, far)
+            one_node = (-big, big.copy(), np.array([0, 1]), 1, np.zeros(1, np.int64))   # a one-instance group
+            got = K.rigid_pairs(np.zeros((n, 3)), d, times[sel], np.zeros(n), np.ones(n), np.zeros(n, np.bool_), 0,
+                                *one_node, lo[k:k + 1], hi[k:k + 1], none, none, keys.T, keys.Q, keys.S, arc,
+                                keys.knots, first[k:k + 1], last[k:k + 1], np.zeros(3), ray, inst, o64, d64, o32,
+                                d32, far)
             assert got == (n, n) and np.all(ray == np.arange(n))
             np.testing.assert_allclose(d64, A_ref[sel, :, c], rtol=0, atol=1e-12)
             np.testing.assert_allclose(o64, b_ref[sel], rtol=0, atol=1e-12)

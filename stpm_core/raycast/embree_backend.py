@@ -405,12 +405,16 @@ class RigidGroup:
         self.shading = InstanceShading(mesh, None)
         # Fused kernels: box tests (each instance's, or the BVH's) + per-ray transforms in one pass
         self.fused = fused and FUSED_AVAILABLE
-        if self.fused and self.bvh is not None:
-            lv = self.bvh.levels
+        if self.fused:
+            # The kernel's BVH: the PairBVH flattened, or for a small group one node (the group
+            # box) whose one leaf holds every instance
+            lv = self.bvh.levels if self.bvh is not None else [(self.bounds[0][None], self.bounds[1][None])]
             self._bvh_flat = (np.ascontiguousarray(np.concatenate([a for a, _ in lv]), np.float64),
                               np.ascontiguousarray(np.concatenate([b for _, b in lv]), np.float64),
                               np.cumsum([0] + [a.shape[0] for a, _ in lv]).astype(np.int64),
-                              int(self.bvh.leaf), np.ascontiguousarray(self.bvh.order, np.int64))
+                              int(self.bvh.leaf) if self.bvh is not None else len(instances),
+                              np.ascontiguousarray(self.bvh.order if self.bvh is not None
+                                                   else np.arange(len(instances)), np.int64))
         self._local = threading.local()
         if self.fused:
             k = self.keys
@@ -472,8 +476,8 @@ class RigidGroup:
     def _fused_pairs(self, o, d, times, t0, t1, skip, full: bool):
         """Pairs of m rays in chunks: yields (ray, j, o64, d64, (o32, d32, far32)) per chunk.
 
-        Kernel :func:`.embree_kernels.rigid_pairs_timed` (or ``rigid_pairs_bvh``
-        for a group with a BVH); a chunk holds every pair of its rays, and the
+        Kernel :func:`.embree_kernels.rigid_pairs` (through the instance BVH, or
+        one node for a small group); a chunk holds every pair of its rays, and the
         rays of successive chunks follow each other, so callers can finish one
         chunk before the next is made.  The buffers hold at most
         ``max(J, PAIR_CHUNK)`` pairs (J instances): about 92 bytes a pair.
@@ -494,14 +498,9 @@ class RigidGroup:
         o, d, times, t0, t1 = c(o), c(d), c(times), c(t0), c(t1)
         start = 0
         while start < m:
-            if self.bvh is None:
-                n, start = _K.rigid_pairs_timed(o, d, times, t0, t1, skip, start, *self._box, self.lo, self.hi,
-                                                *self._slices, *self._keys, self.emesh.centre, ray, j, o64, d64,
-                                                o32, d32, far32)
-            else:
-                n, start = _K.rigid_pairs_bvh(o, d, times, t0, t1, skip, start, *self._bvh_flat, self.lo, self.hi,
-                                              *self._slices, *self._keys, self.emesh.centre, ray, j, o64, d64,
-                                              o32, d32, far32)
+            n, start = _K.rigid_pairs(o, d, times, t0, t1, skip, start, *self._bvh_flat, self.lo, self.hi,
+                                      *self._slices, *self._keys, self.emesh.centre, ray, j, o64, d64, o32, d32,
+                                      far32)
             if n:
                 yield ray[:n], j[:n], o64[:n], d64[:n], (o32[:n], d32[:n], far32[:n])
 
@@ -705,7 +704,7 @@ def slice_bounds(mesh, transforms, lo, hi, slices: int = TIME_SLICES, samples: i
     (J, 3), from :func:`.geometry.swept_bounds`), the pad that box itself got
     from 33 samples over the whole shutter: the slice samples are 4x denser,
     so the slice box is at least as safe.  Rays at times in [0, 1] are tested
-    against the slice box of their time (:func:`.embree_kernels.rigid_pairs_timed`).
+    against the slice box of their time (:func:`.embree_kernels.rigid_pairs`).
     """
     V = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
     a, b = V.min(0), V.max(0)

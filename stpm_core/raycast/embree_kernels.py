@@ -14,14 +14,13 @@ numpy path to rounding (tests/test_raycast.py compares them):
   :class:`~stpm_core.raycast.Hits` field (instance, prim, material, ng, the
   corner-normal blend ns, position) written straight into the caster's
   result arrays - misses too (``init``), so the caster pre-fills nothing;
-* :func:`rigid_pairs_timed` - moving rigid instances of one mesh: box tests
+* :func:`rigid_pairs` - moving rigid instances of one mesh: box tests
   of each ray against the group box and each instance's box for the ray's
   time slice (or whole swept boxes), and for every (ray, instance) pair met,
   the inverse transform at the ray's time (:class:`.geometry.MotionKeys`:
   lerp, slerp, stretch inverse) applied to the ray, written as float64
   object-space rays and float32 embree rays, in chunks that fit the caller's
-  buffers; :func:`rigid_pairs_bvh` the same for many instances, through a
-  BVH of their boxes;
+  buffers; many instances are found through a BVH of their boxes;
 * :func:`rigid_shade` / :func:`rigid_shade_rows` - normals and material of
   moving hits at their times (the latter straight into the result rows);
 * :func:`group_finish` - after embree's call on a group's pairs: refinement,
@@ -43,7 +42,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
-__all__ = ["rays32", "guard_rays32", "occluded_of", "static_finish", "rigid_pairs_timed", "rigid_pairs_bvh",
+__all__ = ["rays32", "guard_rays32", "occluded_of", "static_finish", "rigid_pairs",
            "rigid_shade", "rigid_shade_rows", "group_finish", "finish_hits", "refine_plane", "slerp_table", "warm_up"]
 
 FAR32 = float(np.float32(1e37))     # embree's "no tfar" value, as float64
@@ -323,74 +322,31 @@ def _emit_pair(i, j, tr, ox, oy, oz, dx, dy, dz, s, e, T, Q, S, arc, knots, firs
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def rigid_pairs_timed(o, d, times, t0, t1, skip, start, box_lo, box_hi, lo, hi, slice_lo, slice_hi, T, Q, S, arc,
-                      knots, first, last, centre, ray, inst, o64, d64, o32, d32, far32):
+def rigid_pairs(o, d, times, t0, t1, skip, start, node_lo, node_hi, level_off, leaf, order, lo, hi, slice_lo,
+                slice_hi, T, Q, S, arc, knots, first, last, centre, ray, inst, o64, d64, o32, d32, far32):
     """(ray, instance) pairs of moving instances of one mesh, mapped to object space.
 
     o, d (m, 3), times, t0, t1 (m,) world rays, from ray ``start`` on; ``skip``
-    (m,) bool rays to ignore (already blocked); box_lo, box_hi (3,) the group's
-    swept box; lo, hi (J, 3) each instance's; slice_lo, slice_hi (J, L, 3):
-    instance j's world box over shutter slice [l / L, (l + 1) / L] (L = 0:
-    none).  A ray whose time lies in [0, 1] is tested against the box of its
-    slice instead of the whole swept box (both conservative; the slice box is
-    much smaller for fast motion, so fewer pairs are transformed and cast).
-    T, Q, S, knots, first, last: the stacked keys of :class:`.geometry.MotionKeys`,
-    arc their :func:`slerp_table`; centre (3,) the object-space embree scene's
-    centre.  For each pair k written: ray[k], inst[k] (index j), object-space
-    o64, d64 (k, 3) float64 (if o64 has rows) and the float32 embree rays
-    o32, d32, far32 starting at t0.
+    (m,) bool rays to ignore (already blocked).  Instances are found through a
+    BVH of their swept boxes, :class:`.pair_bvh.PairBVH`'s flattened: level l's
+    nodes are rows level_off[l] .. level_off[l + 1] of node_lo, node_hi (N, 3);
+    node j of level l has children 2j, 2j + 1 on level l + 1; leaf j (last
+    level) holds instances order[j * leaf .. j * leaf + leaf - 1] (those < J).
+    A small group passes a one-node "BVH" (its swept box, one leaf of all J
+    instances): the group box test, then every instance.  Walked depth first
+    with an explicit stack.  At a leaf, lo, hi (J, 3) each instance's swept
+    box, or for a ray whose time lies in [0, 1] its box over that time slice,
+    slice_lo, slice_hi (J, L, 3) (slice l = [l / L, (l + 1) / L]; L = 0: none;
+    the slice box is much smaller for fast motion, so fewer pairs are
+    transformed and cast), decides.  T, Q, S, knots, first, last: the stacked
+    keys of :class:`.geometry.MotionKeys`, arc their :func:`slerp_table`;
+    centre (3,) the object-space embree scene's centre.  For each pair k
+    written: ray[k], inst[k] (index j), object-space o64, d64 (k, 3) float64
+    (if o64 has rows) and the float32 embree rays o32, d32, far32 starting at t0.
 
     Returns (pairs written, next ray): the pair buffers (capacity C >= J) are
     never overrun -- the kernel stops before a ray that might not fit, and the
     caller calls again from ``next ray`` (< m) after using the pairs.
-    """
-    A = np.empty((3, 3))
-    b = np.empty(3)
-    n = 0
-    full = o64.shape[0] > 0
-    J = lo.shape[0]
-    L = slice_lo.shape[1]
-    cap = ray.shape[0]
-    for i in range(start, o.shape[0]):
-        if skip[i]:
-            continue
-        if n + J > cap:
-            return n, i
-        ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
-        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
-        ix, iy, iz = _inv(dx), _inv(dy), _inv(dz)
-        s, e = t0[i], t1[i]
-        if not _meets(box_lo, box_hi, ox, oy, oz, ix, iy, iz, s, e):
-            continue
-        tr = times[i]
-        sl = -1
-        if L > 0 and tr >= 0.0 and tr <= 1.0:
-            sl = min(int(tr * L), L - 1)
-        for j in range(J):
-            if sl >= 0:
-                if not _meets(slice_lo[j, sl], slice_hi[j, sl], ox, oy, oz, ix, iy, iz, s, e):
-                    continue
-            elif not _meets(lo[j], hi[j], ox, oy, oz, ix, iy, iz, s, e):
-                continue
-            _emit_pair(i, j, tr, ox, oy, oz, dx, dy, dz, s, e, T, Q, S, arc, knots, first, last, centre, full, A, b,
-                       n, ray, inst, o64, d64, o32, d32, far32)
-            n += 1
-    return n, o.shape[0]
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def rigid_pairs_bvh(o, d, times, t0, t1, skip, start, node_lo, node_hi, level_off, leaf, order, lo, hi, slice_lo,
-                    slice_hi, T, Q, S, arc, knots, first, last, centre, ray, inst, o64, d64, o32, d32, far32):
-    """:func:`rigid_pairs_timed` for many instances: a BVH of their swept boxes instead of testing each.
-
-    The BVH is :class:`.pair_bvh.PairBVH`'s, flattened: level l's nodes are
-    rows level_off[l] .. level_off[l + 1] of node_lo, node_hi (N, 3); node j of
-    level l has children 2j, 2j + 1 on level l + 1; leaf j (last level) holds
-    instances order[j * leaf .. j * leaf + leaf - 1] (those < J).  Depth
-    first with an explicit stack; at a leaf each instance's slice box (or
-    swept box) decides, then the pair is written as there.  Same pairs as
-    :func:`rigid_pairs_timed` (possibly in another order within a ray).
-    Returns (pairs written, next ray).
     """
     A = np.empty((3, 3))
     b = np.empty(3)
