@@ -36,26 +36,19 @@ kernels included), later processes load them from numba's cache.
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
+
+from .numba_probe import probe
 
 __all__ = ["AVAILABLE", "CompileError", "camera_tile", "camera_rays", "classify_hits", "nee_point", "nee_given",
            "nee_accumulate", "scatter_add", "active_channels", "pixel_sums", "tile_finish", "disable", "IMPORT_ERROR"]
 
-AVAILABLE = False
-IMPORT_ERROR = ""
-if os.environ.get("STPM_NO_NUMBA", "") not in ("", "0"):
-    IMPORT_ERROR = "disabled by STPM_NO_NUMBA"
+AVAILABLE, IMPORT_ERROR = probe()
+if AVAILABLE:
+    from numba import njit
+    from numba.core.errors import NumbaError as CompileError
 else:
-    try:
-        from numba import njit
-        from numba.core.errors import NumbaError as CompileError
-        AVAILABLE = True
-    except Exception as exc:  # noqa: BLE001 -- any import failure: numpy path
-        IMPORT_ERROR = f"{type(exc).__name__}: {exc}"
-
-if not AVAILABLE:
     class CompileError(Exception):
         """Stands for numba's errors when numba is missing (never raised)."""
 
@@ -237,14 +230,19 @@ def classify_hits(t, mat, nondelta, has_delta, emissive, emission, world, add_wo
     return n_hit, n_sh, n_spec, n_emit
 
 
+@njit(**_JIT_INLINE)
+def _add_row(dst, r, idx, use_idx, beta, use_beta, val, k):
+    """dst[idx[r]] += beta[r] * val[k] (3 channels; idx / beta optional)."""
+    i = idx[r] if use_idx else r
+    for c in range(3):
+        dst[i, c] += (beta[r, c] * val[k, c]) if use_beta else val[k, c]
+
+
 @njit(**_JIT)
 def scatter_add(dst, rows, idx, use_idx, beta, use_beta, val):
     """dst[idx[rows[k]]] += beta[rows[k]] * val[k] for every k (idx / beta optional), val (k, 3)."""
     for k in range(rows.shape[0]):
-        r = rows[k]
-        i = idx[r] if use_idx else r
-        for c in range(3):
-            dst[i, c] += (beta[r, c] * val[k, c]) if use_beta else val[k, c]
+        _add_row(dst, rows[k], idx, use_idx, beta, use_beta, val, k)
 
 
 # ----------------------------------------------------------------------------
@@ -382,13 +380,9 @@ def nee_accumulate(dst, rows, idx, use_idx, beta, use_beta, contrib, live, block
     idx / beta optional as in :func:`scatter_add`.
     """
     for j in range(live.shape[0]):
-        if blocked[j]:
-            continue
-        k = live[j]
-        r = rows[k]
-        i = idx[r] if use_idx else r
-        for c in range(3):
-            dst[i, c] += (beta[r, c] * contrib[k, c]) if use_beta else contrib[k, c]
+        if not blocked[j]:
+            k = live[j]
+            _add_row(dst, rows[k], idx, use_idx, beta, use_beta, contrib, k)
 
 
 # ----------------------------------------------------------------------------

@@ -68,6 +68,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..numba_probe import probe
+
 __all__ = ["AVAILABLE", "LEAF_SIZE", "MODE_STANDARD", "MODE_TEMPORAL", "MODE_KD4D", "FlatTree", "run_chunks",
            "disable"]
 
@@ -75,16 +77,9 @@ LEAF_SIZE = 16           # at most this many photons per leaf (2^L leaves of 8..
 MODE_STANDARD, MODE_TEMPORAL, MODE_KD4D = 0, 1, 2
 _CHUNK_MIN = 2048        # fewer queries than this per thread are not split
 
-AVAILABLE = False
-_IMPORT_ERROR = ""
-if os.environ.get("STPM_NO_NUMBA", "") not in ("", "0"):
-    _IMPORT_ERROR = "disabled by STPM_NO_NUMBA"
-else:
-    try:
-        import numba as _nb
-        AVAILABLE = True
-    except Exception as exc:  # noqa: BLE001 -- any import failure means: use scipy
-        _IMPORT_ERROR = f"{type(exc).__name__}: {exc}"
+AVAILABLE, _IMPORT_ERROR = probe()
+if AVAILABLE:
+    import numba as _nb
 
 
 def disable(reason: str) -> None:
