@@ -286,6 +286,41 @@ def _seen_lights(lights, o: np.ndarray, d: np.ndarray, t: np.ndarray, t_scene: n
 # ----------------------------------------------------------------------------
 # Paths of one batch of camera samples
 # ----------------------------------------------------------------------------
+def _cast_bounce(ctx, o, d, times, idx, tmax, m: int, bounce: int, stats: TraceStats):
+    """One bounce's m rays o, d (m, 3) cast at their times (idx (m,): their samples, None = all).
+
+    Counts them as camera (bounce 0) or bounce rays; returns (times t (m,), Hits).
+    """
+    t = times if idx is None else times[idx]
+    hits = ctx.caster.intersect(o, d, t, tmax)
+    if bounce == 0:
+        stats.camera_rays += m
+    else:
+        stats.bounce_rays += m
+    return t, hits
+
+
+def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int):
+    """Continue the rows spec (k,) through their delta lobes: (idx, beta, wi, go) of those rows.
+
+    mat (k,), wo, ns, ng (k, 3) the hits at those rows; idx / beta (None: every sample / unit
+    throughput) are narrowed to them and beta takes the lobe's weight; go (k,) keeps the rows
+    that sampled a delta lobe with some throughput left and (from RR_START on) survived Russian
+    roulette, beta / q.  Random numbers: (k, 3) for the lobes, then (k,) for the roulette.
+    """
+    u = rng.random((spec.size, 3))
+    idx = spec if idx is None else idx[spec]
+    beta = None if beta is None else beta[spec]
+    wi, weight, is_delta = bsdf_sample(ctx.table, mat, wo, ns, ng, u)
+    beta = weight if beta is None else beta * weight
+    go = is_delta & np.any(beta > 0.0, axis=1)
+    if bounce + 1 >= RR_START:
+        q = np.clip(np.max(beta, axis=1), 0.05, 1.0)
+        go &= rng.random(idx.size) < q
+        beta = beta / q[:, None]
+    return idx, beta, wi, go
+
+
 def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.ndarray,
                 rng: np.random.Generator, stats: TraceStats, cam_pos: np.ndarray,
                 cam_axis: np.ndarray) -> dict[str, np.ndarray]:
@@ -338,12 +373,7 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         m = n if idx is None else idx.size
         if m == 0:
             break
-        t = times if idx is None else times[idx]
-        hits = ctx.caster.intersect(o, d, t, tmax)
-        if bounce == 0:
-            stats.camera_rays += m
-        else:
-            stats.bounce_rays += m
+        t, hits = _cast_bounce(ctx, o, d, times, idx, tmax, m, bounce, stats)
         hit = hits.hit
         all_hit = bool(hit.all())
 
@@ -410,20 +440,8 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         spec = np.nonzero(ctx.has_delta[mat])[0]
         if spec.size == 0:
             break
-        u = rng.random((spec.size, 3))
-        idx = spec if idx is None else idx[spec]
-        beta = None if beta is None else beta[spec]
-        p, ng, ns, wo, mat = p[spec], ng[spec], ns[spec], wo[spec], mat[spec]
-        wi, weight, is_delta = bsdf_sample(ctx.table, mat, wo, ns, ng, u)
-        beta = weight if beta is None else beta * weight
-        go = is_delta & np.any(beta > 0.0, axis=1)
-
-        # -- Possibly terminate the chain with Russian roulette -------------------------------
-        if bounce + 1 >= RR_START:
-            q = np.clip(np.max(beta, axis=1), 0.05, 1.0)
-            go &= rng.random(idx.size) < q
-            beta = beta / q[:, None]
-
+        p, ng = p[spec], ng[spec]
+        idx, beta, wi, go = _specular_step(ctx, rng, spec, idx, beta, mat[spec], wo[spec], ns[spec], ng, bounce)
         idx, beta = idx[go], beta[go]
         o = _offset(p[go], ng[go], wi[go], ctx.eps)
         d = wi[go]
@@ -580,12 +598,7 @@ def _shade_paths_fast(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, 
         m = n if idx is None else idx.size
         if m == 0:
             break
-        t = times if idx is None else times[idx]
-        hits = ctx.caster.intersect(o, d, t, tmax)
-        if bounce == 0:
-            stats.camera_rays += m
-        else:
-            stats.bounce_rays += m
+        t, hits = _cast_bounce(ctx, o, d, times, idx, tmax, m, bounce, stats)
         use_idx, use_beta = idx is not None, beta is not None
         idx_k = idx if use_idx else _NO_IDX
         beta_k = beta if use_beta else _NO_ROWS3
@@ -623,18 +636,9 @@ def _shade_paths_fast(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, 
         if bounce == ctx.max_depth or n_spec == 0:
             break
         # -- Continue through delta lobes only (as in shade_paths) ---------------------------
-        u = rng.random((n_spec, 3))
-        idx = spec if idx is None else idx[spec]
-        beta = None if beta is None else beta[spec]
-        p, ng, ns, mat = hits.position[spec], hits.ng[spec], hits.ns[spec], hits.material[spec]
-        wo = -d[spec]
-        wi, weight, is_delta = bsdf_sample(table, mat, wo, ns, ng, u)
-        beta = weight if beta is None else beta * weight
-        go = is_delta & np.any(beta > 0.0, axis=1)
-        if bounce + 1 >= RR_START:
-            q = np.clip(np.max(beta, axis=1), 0.05, 1.0)
-            go &= rng.random(idx.size) < q
-            beta = beta / q[:, None]
+        p, ng = hits.position[spec], hits.ng[spec]
+        idx, beta, wi, go = _specular_step(ctx, rng, spec, idx, beta, hits.material[spec], -d[spec], hits.ns[spec],
+                                           ng, bounce)
         idx, beta = idx[go], np.ascontiguousarray(beta[go])
         o = _offset(p[go], ng[go], wi[go], ctx.eps)
         d = np.ascontiguousarray(wi[go])
