@@ -226,8 +226,7 @@ class StaticPart:
 
     def __init__(self, scene, instances: list[int], fused: bool = False):
         self.fused = fused and FUSED_AVAILABLE
-        self.reused = 0                  # renders that took this part from the persistent cache
-        self.reused_now = False          # the last build_parts took it from there
+        self.reused_now = False          # the last build_parts took it from the persistent cache
         self._local = threading.local()
         if self.fused:
             self.intersect_into, self.occluded_into = self._intersect_into, self._occluded_into
@@ -768,7 +767,6 @@ def _static_part(scene, static: list[int], fused: bool) -> "StaticPart":
         key = _static_key(scene, static, fused)
         if _PERSIST["key"] == key:
             part = _PERSIST["part"]
-            part.reused += 1
             part.reused_now = True
             return part
         _PERSIST["key"] = _PERSIST["part"] = None          # free the old bake before making the new one

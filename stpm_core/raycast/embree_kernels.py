@@ -62,6 +62,15 @@ def rays32(o, d, start, t1, centre, o32, d32, far32):
         far32[i] = np.float32(min(far, FAR32))
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _plane_t(plane_n, plane_w, p, o, d, i, fallback):
+    """Float64 t of ray i of o, d (m, 3) on triangle p's plane n . x = w; ``fallback`` (embree's
+    own t) where the plane test is undefined (ray parallel to the plane)."""
+    n0, n1, n2 = plane_n[p, 0], plane_n[p, 1], plane_n[p, 2]
+    t = (plane_w[p] - (n0 * o[i, 0] + n1 * o[i, 1] + n2 * o[i, 2])) / (n0 * d[i, 0] + n1 * d[i, 1] + n2 * d[i, 2])
+    return t if np.isfinite(t) else fallback
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def refine_plane(o, d, p, start, tfar, plane_n, plane_w, tt):
     """Float64 t (m,) into tt of rays o, d on the planes of triangles p (m,) (p < 0: left alone).
@@ -73,12 +82,7 @@ def refine_plane(o, d, p, start, tfar, plane_n, plane_w, tt):
         q = p[i]
         if q < 0:
             continue
-        n0, n1, n2 = plane_n[q, 0], plane_n[q, 1], plane_n[q, 2]
-        t = (plane_w[q] - (n0 * o[i, 0] + n1 * o[i, 1] + n2 * o[i, 2])) / (n0 * d[i, 0] + n1 * d[i, 1]
-                                                                          + n2 * d[i, 2])
-        if not np.isfinite(t):
-            t = start[i] + np.float64(tfar[i])
-        tt[i] = t
+        tt[i] = _plane_t(plane_n, plane_w, q, o, d, i, start[i] + np.float64(tfar[i]))
 
 
 # ---------------------------------------------------------------- static part
@@ -146,11 +150,7 @@ def static_finish(o, d, start, tfar, primID, u32, v32, t0, plane_n, plane_w, ids
         t = 0.0
         if q >= 0:
             # Float64 t on the triangle's plane (embree's where undefined)
-            n0, n1, n2 = plane_n[q, 0], plane_n[q, 1], plane_n[q, 2]
-            t = (plane_w[q] - (n0 * o[i, 0] + n1 * o[i, 1] + n2 * o[i, 2])) / (n0 * d[i, 0] + n1 * d[i, 1]
-                                                                              + n2 * d[i, 2])
-            if not np.isfinite(t):
-                t = start[i] + np.float64(tfar[i])
+            t = _plane_t(plane_n, plane_w, q, o, d, i, start[i] + np.float64(tfar[i]))
             if t <= t0[i]:
                 again[n_again] = i
                 n_again += 1
@@ -429,11 +429,7 @@ def group_finish(o64, d64, ray, inst, t0, t1, tfar, primID, u32, v32, plane_n, p
         if p < 0:
             continue
         i = ray[q]
-        n0, n1, n2 = plane_n[p, 0], plane_n[p, 1], plane_n[p, 2]
-        t = (plane_w[p] - (n0 * o64[q, 0] + n1 * o64[q, 1] + n2 * o64[q, 2])) / (n0 * d64[q, 0] + n1 * d64[q, 1]
-                                                                                + n2 * d64[q, 2])
-        if not np.isfinite(t):
-            t = t0[i] + np.float64(tfar[q])
+        t = _plane_t(plane_n, plane_w, p, o64, d64, q, t0[i] + np.float64(tfar[q]))
         if t <= t0[i]:
             return False
         if t < t1[i] and t <= t_blk[i]:
@@ -451,6 +447,18 @@ def group_finish(o64, d64, ray, inst, t0, t1, tfar, primID, u32, v32, plane_n, p
     return True
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _unit_through_At(A, x, y, z):
+    """A^T (x, y, z) normalised (a normal mapped by the inverse-transpose; zero stays zero)."""
+    a = A[0, 0] * x + A[1, 0] * y + A[2, 0] * z
+    b = A[0, 1] * x + A[1, 1] * y + A[2, 1] * z
+    c = A[0, 2] * x + A[1, 2] * y + A[2, 2] * z
+    L = np.sqrt(a * a + b * b + c * c)
+    if L > 0:
+        a, b, c = a / L, b / L, c / L
+    return a, b, c
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _shade_one(q, jj, uk, vk, tk, T, Q, S, arc, knots, first, last, V, F, normals, smooth, A, b, ng, ns, row):
     """ng[row], ns[row] (world, unit) of triangle q of instance jj at barycentrics uk, vk and time tk."""
@@ -460,12 +468,7 @@ def _shade_one(q, jj, uk, vk, tk, T, Q, S, arc, knots, first, last, V, F, normal
     e10, e11, e12 = V[a1, 0] - V[a0, 0], V[a1, 1] - V[a0, 1], V[a1, 2] - V[a0, 2]
     e20, e21, e22 = V[a2, 0] - V[a0, 0], V[a2, 1] - V[a0, 1], V[a2, 2] - V[a0, 2]
     n0, n1, n2 = e11 * e22 - e12 * e21, e12 * e20 - e10 * e22, e10 * e21 - e11 * e20
-    g0 = A[0, 0] * n0 + A[1, 0] * n1 + A[2, 0] * n2
-    g1 = A[0, 1] * n0 + A[1, 1] * n1 + A[2, 1] * n2
-    g2 = A[0, 2] * n0 + A[1, 2] * n1 + A[2, 2] * n2
-    L = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
-    if L > 0:
-        g0, g1, g2 = g0 / L, g1 / L, g2 / L
+    g0, g1, g2 = _unit_through_At(A, n0, n1, n2)
     ng[row, 0], ng[row, 1], ng[row, 2] = g0, g1, g2
     if not smooth:
         ns[row, 0], ns[row, 1], ns[row, 2] = g0, g1, g2
@@ -475,12 +478,7 @@ def _shade_one(q, jj, uk, vk, tk, T, Q, S, arc, knots, first, last, V, F, normal
     m0 = w0 * normals[q, 0, 0] + w1 * normals[q, 1, 0] + w2 * normals[q, 2, 0]
     m1 = w0 * normals[q, 0, 1] + w1 * normals[q, 1, 1] + w2 * normals[q, 2, 1]
     m2 = w0 * normals[q, 0, 2] + w1 * normals[q, 1, 2] + w2 * normals[q, 2, 2]
-    s0 = A[0, 0] * m0 + A[1, 0] * m1 + A[2, 0] * m2
-    s1 = A[0, 1] * m0 + A[1, 1] * m1 + A[2, 1] * m2
-    s2 = A[0, 2] * m0 + A[1, 2] * m1 + A[2, 2] * m2
-    L = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-    if L > 0:
-        s0, s1, s2 = s0 / L, s1 / L, s2 / L
+    s0, s1, s2 = _unit_through_At(A, m0, m1, m2)
     if s0 == 0 and s1 == 0 and s2 == 0:
         s0, s1, s2 = g0, g1, g2
     ns[row, 0], ns[row, 1], ns[row, 2] = s0, s1, s2
