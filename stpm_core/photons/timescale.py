@@ -10,8 +10,9 @@ Rule (docs/photon-mapping.md, "KD4D's time scale"):
 
 where v_max is the fastest speed of anything that moves photons, in scene
 units per shutter: every moving instance's vertices (rigid motion and
-deformation, sampled densely over the shutter) and every moving light's
-position.  A receiver edge moving at v sweeps R/s * v = R / sqrt(2) during
+deformation, sampled densely over the shutter), every moving light's
+position and, for a SUN (whose position does not matter), the angular speed of
+its direction times the scene's radius (the speed of the shadows it sweeps).  A receiver edge moving at v sweeps R/s * v = R / sqrt(2) during
 the ball's half-height, so the ball blurs a moving edge as much in time as
 it does in space.  The prototype found this choice best, and the error flat up
 to about 3x it.
@@ -22,9 +23,12 @@ time and reaches across the whole shutter as soon as R exceeds half a
 millimetre per metre of scene, i.e. KD4D becomes STANDARD (the slab clip keeps
 its normalisation exact).  The same floor applies to very slow motion.
 
-Known limit: speeds are measured on the moving objects, not on the light
+Known limits: speeds are measured on the moving objects, not on the light
 patterns they throw; a rotating mirror's caustic can move faster than the
-mirror (by about twice the angular speed times the throw distance).  Set
+mirror (by about twice the angular speed times the throw distance).  And the
+fastest mover anywhere sets s, even one far from what the camera sees: a fast
+object that throws no light on the visible receivers makes the ball short in
+time there, and KD4D noisier (TEMPORAL, the default, has no such scale).  Set
 ``settings.time_scale`` by hand for such scenes.
 """
 from __future__ import annotations
@@ -71,12 +75,22 @@ def max_motion_speed(scene) -> float:
         world = np.einsum("tij,tvj->tvi", M[:, :3, :3], obj) + M[:, None, :3, 3]
         speed = np.linalg.norm(np.diff(world, axis=0), axis=-1) / dt[:, None]
         v_max = max(v_max, float(speed.max()))
-    # Moving lights: speed of the light's origin
+    # Moving lights: speed of the light's origin; a SUN has no position (only its direction
+    # moves photons): the angular speed of its direction times the scene's radius
+    radius = None
     for light in scene.lights:
         if light.transform.is_static:
             continue
-        pos = light.transform.at(ts)[:, :3, 3]
-        speed = np.linalg.norm(np.diff(pos, axis=0), axis=-1) / dt
+        M = light.transform.at(ts)
+        if light.type == "SUN":
+            if radius is None:
+                lo, hi = scene.bounds()
+                radius = 0.5 * float(np.linalg.norm(hi - lo)) if np.all(np.isfinite([lo, hi])) else 0.0
+            z = M[:, :3, 2] / np.maximum(np.linalg.norm(M[:, :3, 2], axis=1, keepdims=True), 1e-300)
+            angle = np.arccos(np.clip(np.sum(z[1:] * z[:-1], axis=1), -1.0, 1.0))   # rad per step
+            speed = angle * radius / dt
+        else:
+            speed = np.linalg.norm(np.diff(M[:, :3, 3], axis=0), axis=-1) / dt
         v_max = max(v_max, float(speed.max()))
     return v_max
 
