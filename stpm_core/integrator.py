@@ -41,6 +41,7 @@ from .bsdf import MaterialTable, bsdf_eval, bsdf_sample, diffuse_albedo, emissio
 from .camera import camera_to_world, generate_rays, image_plane
 from .film import BH_INVERSE_CDF, DEPTH_BACKGROUND, PASSES, Film, filter_offsets
 from .parallel import ordered_map, worker_count
+from .raycast.geometry import instance_offsets, offset_lengths
 from .sampling import rng_for, skip_uniforms
 
 __all__ = ["TraceStats", "trace_image", "camera_samples", "shade_paths"]
@@ -127,10 +128,16 @@ def camera_samples(ix: np.ndarray, iy: np.ndarray, spp: int, shutter, rng: np.ra
 # ----------------------------------------------------------------------------
 # Shading helpers
 # ----------------------------------------------------------------------------
-def _offset(p: np.ndarray, ng: np.ndarray, w: np.ndarray, eps: float) -> np.ndarray:
-    """Ray origin p moved by eps along ng to the side w (n, 3) points to."""
+def _offset(p: np.ndarray, ng: np.ndarray, w: np.ndarray, eps: np.ndarray) -> np.ndarray:
+    """Ray origin p moved by eps (n,) along ng to the side w (n, 3) points to."""
     side = np.where(np.sum(ng * w, axis=1) >= 0.0, 1.0, -1.0)
     return p + (eps * side)[:, None] * ng
+
+
+def _eps_rows(ctx, instance: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Origin offsets (n,) for secondary rays leaving hits on ``instance`` (n,) at p (n, 3): local to
+    the object hit and to the point's float32 resolution (raycast.geometry.offset_lengths)."""
+    return offset_lengths(ctx.inst_offset, instance, p)
 
 
 def _face_forward(n: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -168,8 +175,10 @@ def _fill(a: np.ndarray, value: float) -> np.ndarray:
     return a
 
 
-def _direct(ctx, p, ng, ns, wo, mat, times, rng, stats: TraceStats) -> np.ndarray:
+def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats) -> np.ndarray:
     """Next-event estimate (n, 3): sum over lights of f(wo, wi) |cos(ns, wi)| L_i / p * V.
+
+    eps (n,): each point's shadow-ray origin offset (``_eps_rows``).
 
     Lights of zero power are skipped; shadow rays are cast only for samples
     whose unshadowed contribution is positive (light in front, BSDF > 0).
@@ -191,15 +200,15 @@ def _direct(ctx, p, ng, ns, wo, mat, times, rng, stats: TraceStats) -> np.ndarra
         # Shadow rays at the same time, stopping just short of the light
         all_rows = live.size == n
         sel = None if all_rows else live
-        wl, pl, dl = _rows(wi, sel), _rows(p, sel), _rows(dist, sel)
-        o = _offset(pl, _rows(ng, sel), wl, ctx.eps)
+        wl, pl, dl, el = _rows(wi, sel), _rows(p, sel), _rows(dist, sel), _rows(eps, sel)
+        o = _offset(pl, _rows(ng, sel), wl, el)
         # Aim from the offset origin at the light point itself and stop a margin short of
         # it: emissive triangles are geometry the shadow ray must not reach
         fin = np.isfinite(dl)
         v = np.where(fin[:, None], pl + np.where(fin, dl, 0.0)[:, None] * wl - o, wl)
         s = np.sqrt(np.einsum("ij,ij->i", v, v))
         dirs = v / s[:, None]
-        tmax = np.where(fin, s * (1.0 - 1e-6) - 2.0 * ctx.eps, np.inf)
+        tmax = np.where(fin, s * (1.0 - 1e-6) - 2.0 * el, np.inf)
         blocked = ctx.caster.occluded(o, dirs, _rows(times, sel), tmax)
         stats.shadow_rays += live.size
         contrib[live[blocked]] = 0.0
@@ -408,9 +417,11 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
             beta = None if beta is None else beta[keep]
             t = t[keep]
             p, ng, ns, mat = hits.position[keep], hits.ng[keep], hits.ns[keep], hits.material[keep]
+            eps = _eps_rows(ctx, hits.instance[keep], p)
             wo = -d[keep]                     # directions are unit (camera, bsdf_sample)
         else:
             p, ng, ns, mat = hits.position, hits.ng, hits.ns, hits.material
+            eps = _eps_rows(ctx, hits.instance, p)
             wo = -d
 
         # -- Emission of surfaces seen along the chain ---------------------------------------
@@ -426,7 +437,7 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
             p_s, ng_s, ns_s, wo_s = _rows(p, sh), _rows(ng, sh), _rows(ns, sh), _rows(wo, sh)
             mat_s, t_s = _rows(mat, sh), _rows(t, sh)
             if len(ctx.lights):
-                add(L_direct, sh, _direct(ctx, p_s, ng_s, ns_s, wo_s, mat_s, t_s, rng, stats))
+                add(L_direct, sh, _direct(ctx, p_s, ng_s, ns_s, wo_s, mat_s, t_s, _rows(eps, sh), rng, stats))
             if ctx.maps is not None:
                 ns_f = _face_forward(ns_s, wo_s)
                 for kind, dst in (("caustic", L_caustic), ("global", L_indirect)):
@@ -440,10 +451,10 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         spec = np.nonzero(ctx.has_delta[mat])[0]
         if spec.size == 0:
             break
-        p, ng = p[spec], ng[spec]
+        p, ng, eps = p[spec], ng[spec], eps[spec]
         idx, beta, wi, go = _specular_step(ctx, rng, spec, idx, beta, mat[spec], wo[spec], ns[spec], ng, bounce)
         idx, beta = idx[go], beta[go]
-        o = _offset(p[go], ng[go], wi[go], ctx.eps)
+        o = _offset(p[go], ng[go], wi[go], eps[go])
         d = wi[go]
         tmax = None
 
@@ -517,6 +528,8 @@ def _direct_fast(ctx, sh: np.ndarray, hits, d: np.ndarray, t_s: np.ndarray, rng,
     cast_any = False
     lights, table = ctx.lights, ctx.table
     P, NG, NS, mat = hits.position, hits.ng, hits.ns, hits.material
+    EPS = _scratch("eps", (P.shape[0],))
+    EPS[sh] = _eps_rows(ctx, hits.instance[sh], P[sh])      # shadow-ray offsets of the shaded rows
     gathered = None
     so, sd = _scratch("so", (k, 3)), _scratch("sd", (k, 3))
     stmax, live = _scratch("stmax", (k,)), _scratch("live", (k,), np.int64)
@@ -534,7 +547,7 @@ def _direct_fast(ctx, sh: np.ndarray, hits, d: np.ndarray, t_s: np.ndarray, rng,
             smooth = (1.0 - cos_half) * float(light.spot_blend) if spot else 0.0
             m = _K.nee_point(sh, P, NG, NS, d, mat, _first_pose(C), lights.intensity(li), spot, cos_half, smooth,
                              _first_pose(Z), _NO_ROWS3, False, table.w_base, table.coat, table.specular,
-                             table.ior, table.base_color, ctx.eps, contrib, so, sd, stmax, live)
+                             table.ior, table.base_color, EPS, contrib, so, sd, stmax, live)
         else:
             if gathered is None:
                 gathered = (P[sh], NG[sh], NS[sh], -d[sh], mat[sh])
@@ -548,7 +561,7 @@ def _direct_fast(ctx, sh: np.ndarray, hits, d: np.ndarray, t_s: np.ndarray, rng,
             else:
                 f, use_f = _NO_ROWS3, False
             m = _K.nee_given(sh, P, NG, NS, d, mat, wi, dist, weight, f, use_f, table.w_base, table.coat,
-                             table.specular, table.ior, table.base_color, ctx.eps, contrib, so, sd, stmax, live)
+                             table.specular, table.ior, table.base_color, EPS, contrib, so, sd, stmax, live)
         if m == 0:
             continue
         lv = live[:m]
@@ -640,7 +653,7 @@ def _shade_paths_fast(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, 
         idx, beta, wi, go = _specular_step(ctx, rng, spec, idx, beta, hits.material[spec], -d[spec], hits.ns[spec],
                                            ng, bounce)
         idx, beta = idx[go], np.ascontiguousarray(beta[go])
-        o = _offset(p[go], ng[go], wi[go], ctx.eps)
+        o = _offset(p[go], ng[go], wi[go], _eps_rows(ctx, hits.instance[spec[go]], p[go]))
         d = np.ascontiguousarray(wi[go])
         tmax = None
 
@@ -667,7 +680,7 @@ class _Context:
     maps: object
     map_kinds: dict
     max_depth: int
-    eps: float
+    inst_offset: np.ndarray                  # (n_instances,) object part of the ray offsets (_eps_rows)
     world_radiance: np.ndarray
     film_transparent: bool
     has_delta: np.ndarray = None             # (M + 1,) bool per material; last row = miss
@@ -802,11 +815,9 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     stats = TraceStats()
     if table is None:
         table = MaterialTable(scene.materials)
-    lo, hi = scene.bounds()
-    extent = float(np.linalg.norm(hi - lo))
     ctx = _Context(scene=scene, caster=caster, lights=lights, table=table, maps=maps,
                    map_kinds=_map_kinds(maps), max_depth=int(settings.max_depth),
-                   eps=1e-5 * max(extent, 1e-3) + 1e-7 * float(np.max(np.abs(np.concatenate([lo, hi])), initial=0.0)),
+                   inst_offset=instance_offsets(scene),
                    world_radiance=np.asarray(scene.world.radiance, float),
                    film_transparent=bool(scene.metadata.get("film_transparent", False)))
     ctx.has_delta = _has_delta_lobe(scene.materials)

@@ -41,6 +41,7 @@ import numpy as np
 
 from .bsdf import MaterialTable
 from .photons.trace import trace_photon_paths
+from .raycast.geometry import instance_offsets
 from .sampling import rng_for, stratified_1d
 
 __all__ = ["make_plan", "apply_plan", "format_plan", "plan_summary", "EFFECT_KEYS",
@@ -198,15 +199,14 @@ def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[i
     seed = int(getattr(settings, "seed", 0)) if settings is not None else 0
     max_depth = int(getattr(settings, "max_depth", 8)) if settings is not None else 8
     table = MaterialTable(scene.materials)
-    lo, hi = scene.bounds()
-    eps = max(1e-5 * max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3), 1e-7)
+    inst_offset = instance_offsets(scene)
     out = {"reach_specular": {}, "lit_diffuse": set(), "caustic_stored": 0, "aimed": 0, "emitted": 0}
     # -- Aimed photons: does each light reach each specular object, and a diffuse one after it?
     #    A second, larger round only when the first one found no caustic path at all.
     for rnd, n in enumerate((PROBE_PHOTONS_AIMED, PROBE_PHOTONS_AIMED_RETRY)):
         if rnd == 1 and (out["caustic_stored"] > 0 or not out["reach_specular"]):
             break
-        _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, eps)
+        _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, inst_offset)
     # -- Photons over each light's whole emission: which diffuse objects are lit directly
     for li in emitting:
         n = PROBE_PHOTONS_LIGHT
@@ -225,7 +225,7 @@ def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[i
     return out
 
 
-def _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, eps) -> None:
+def _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, inst_offset) -> None:
     """n photons per (light, specular object) pair: first hits on the object, caustic photons stored."""
     for li in emitting:
         for pi, (ii, (c, r)) in enumerate(spec_targets.items()):
@@ -240,7 +240,7 @@ def _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, s
             if np.any(hits.instance == ii):
                 out["reach_specular"].setdefault(li, set()).add(ii)
                 recs = trace_photon_paths(caster, table, o[live], d[live], Phi[live], t[live], rng, mode="caustic",
-                                          max_depth=max_depth, eps=eps, target_instance=ii)
+                                          max_depth=max_depth, inst_offset=inst_offset, target_instance=ii)
                 out["caustic_stored"] += int(recs.shape[0])
 
 

@@ -263,8 +263,9 @@ def _fresnel_dielectric(cos_i, eta):
 
 @njit(**_JIT_INLINE)
 def _nee_row(k, r, wi0, wi1, wi2, dist, w0, w1, w2, P, NG, NS, D, mat, f_in, use_f,
-             w_base, coat, specular, ior, base_color, eps, contrib, so, sd, stmax, live, n_live):
-    """Shared tail of the NEE kernels for shading row k (hit row r): BSDF, contribution, shadow ray."""
+             w_base, coat, specular, ior, base_color, EPS, contrib, so, sd, stmax, live, n_live):
+    """Shared tail of the NEE kernels for shading row k (hit row r): BSDF, contribution, shadow ray
+    (origin offset EPS[r] along the geometric normal)."""
     g0, g1, g2 = NG[r, 0], NG[r, 1], NG[r, 2]
     s0, s1, s2 = NS[r, 0], NS[r, 1], NS[r, 2]
     if use_f:
@@ -297,6 +298,7 @@ def _nee_row(k, r, wi0, wi1, wi2, dist, w0, w1, w2, P, NG, NS, D, mat, f_in, use
     if not (c0 > 0.0 or c1 > 0.0 or c2 > 0.0):
         return n_live
     # Shadow ray from p offset along ng to wi's side, aimed at the light point, stopping short
+    eps = EPS[r]
     side = eps * (1.0 if g0 * wi0 + g1 * wi1 + g2 * wi2 >= 0.0 else -1.0)
     p0, p1, p2 = P[r, 0], P[r, 1], P[r, 2]
     o0, o1, o2 = p0 + side * g0, p1 + side * g1, p2 + side * g2
@@ -317,13 +319,14 @@ def _nee_row(k, r, wi0, wi1, wi2, dist, w0, w1, w2, P, NG, NS, D, mat, f_in, use
 
 @njit(**_JIT)
 def nee_point(rows, P, NG, NS, D, mat, C, I, spot, cos_half, smooth, Z, f_in, use_f,
-              w_base, coat, specular, ior, base_color, eps, contrib, so, sd, stmax, live):
+              w_base, coat, specular, ior, base_color, EPS, contrib, so, sd, stmax, live):
     """NEE of a POINT / SPOT light of radius 0 at the hit rows ``rows`` (n,); returns the shadow-ray count.
 
     C, Z (k, 3) light position and unit axis (k = 1 static, else per row of
     ``rows``), I (3,) intensity W/sr; spot mask with cos_half / smooth as
     ``lights.spot_attenuation``.  f_in (n, 3) is used when use_f (materials
     with rough lobes), else the shortcut BSDF from the material arrays.
+    EPS (n_hits,): shadow-ray origin offset of each hit row (scene units).
     Writes contrib (n, 3) = f |ns . wi| I / d^2 (x mask) and, for the rows
     where it is positive, shadow rays so, sd (n, 3), stmax (n,) and the
     shading row index live (n,).
@@ -353,13 +356,13 @@ def nee_point(rows, P, NG, NS, D, mat, C, I, spot, cos_half, smooth, Z, f_in, us
                 a = 0.0
             w0, w1, w2 = w0 * a, w1 * a, w2 * a
         n_live = _nee_row(k, r, -t0, -t1, -t2, dd, w0, w1, w2, P, NG, NS, D, mat, f_in, use_f,
-                          w_base, coat, specular, ior, base_color, eps, contrib, so, sd, stmax, live, n_live)
+                          w_base, coat, specular, ior, base_color, EPS, contrib, so, sd, stmax, live, n_live)
     return n_live
 
 
 @njit(**_JIT)
 def nee_given(rows, P, NG, NS, D, mat, wi, dist, weight, f_in, use_f,
-              w_base, coat, specular, ior, base_color, eps, contrib, so, sd, stmax, live):
+              w_base, coat, specular, ior, base_color, EPS, contrib, so, sd, stmax, live):
     """NEE at hit rows ``rows`` (n,) for a light sampled elsewhere: wi (n, 3), dist (n,), weight (n, 3).
 
     Same outputs as :func:`nee_point`; returns the shadow-ray count.
@@ -368,7 +371,7 @@ def nee_given(rows, P, NG, NS, D, mat, wi, dist, weight, f_in, use_f,
     for k in range(rows.shape[0]):
         n_live = _nee_row(k, rows[k], wi[k, 0], wi[k, 1], wi[k, 2], dist[k], weight[k, 0], weight[k, 1],
                           weight[k, 2], P, NG, NS, D, mat, f_in, use_f, w_base, coat, specular, ior,
-                          base_color, eps, contrib, so, sd, stmax, live, n_live)
+                          base_color, EPS, contrib, so, sd, stmax, live, n_live)
     return n_live
 
 

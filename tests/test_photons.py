@@ -194,7 +194,7 @@ def test_furnace_first_hits_carry_exactly_the_emitted_power():
     t = rng.random(20_000)
     o, d, Phi = lights.emit(0, 20_000, t, rng)
     rec = trace_photon_paths(make_caster(scene), MaterialTable(scene.materials), o, d, Phi, t, rng,
-                             mode="global", max_depth=0, eps=1e-6, min_nondelta=0)
+                             mode="global", max_depth=0, inst_offset=np.full(len(scene.instances), 1e-6), min_nondelta=0)
     assert len(rec) == 20_000                                   # closed: every photon lands
     assert np.allclose(rec["power"].astype(float).sum(0), P, rtol=1e-5)
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..bsdf import bsdf_sample, has_nondelta
 from ..parallel import ordered_map, worker_count
+from ..raycast.geometry import instance_offsets, offset_lengths
 from ..sampling import rng_for, stratified_1d
 from .record import make_records, photon_origin, PHOTON_DTYPE
 
@@ -95,7 +96,7 @@ def _times(scene, n: int, rng, time_override) -> np.ndarray:
     return scene.shutter.sample(stratified_1d(n, rng))
 
 
-def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, eps: float,
+def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, inst_offset: np.ndarray,
                        target_instance: int | None = None, min_nondelta: int = 1,
                        origin: np.ndarray | None = None) -> np.ndarray:
     """Trace photon paths and return the stored records.
@@ -110,7 +111,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         after >= ``min_nondelta`` non-delta bounces; 0 also stores first hits,
         which only tests use).
     max_depth : bounces followed.
-    eps : ray-origin offset along the geometric normal (scene units).
+    inst_offset : (n_instances,) per-object part of the ray-origin offset along the geometric
+        normal (scene units; ``raycast.geometry.instance_offsets``, applied by ``offset_lengths``).
     origin : (3,) world point stored positions are relative to (record.photon_origin).
 
     Returns
@@ -164,7 +166,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         n_nondelta = n_nondelta + ~is_delta
         # -- Spawn the continuation rays, offset off the surface ------------------------------
         side = np.where(np.sum(wi * ng, axis=1) >= 0.0, 1.0, -1.0)
-        o = p + (eps * side)[:, None] * ng
+        o = p + (offset_lengths(inst_offset, hits.instance[idx], p) * side)[:, None] * ng
         sel = np.nonzero(alive)[0]
         o, d, Phi, t = o[sel], wi[sel], Phi[sel], t[sel]
         n_delta, n_nondelta = n_delta[sel], n_nondelta[sel]
@@ -189,11 +191,10 @@ def _run_batches(trace_batch, jobs: list, settings, progress, cancel, message: s
     return out
 
 
-def _scene_eps(scene) -> tuple[float, float]:
-    """(ray offset eps, scene bounding radius) in scene units."""
+def _scene_radius(scene) -> float:
+    """Scene bounding radius (scene units, at least 1e-3)."""
     lo, hi = scene.bounds()
-    radius = 0.5 * float(np.linalg.norm(hi - lo))
-    return max(1e-5 * max(radius, 1e-3), 1e-7), max(radius, 1e-3)
+    return max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
 
 
 def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=None,
@@ -206,7 +207,7 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
     every pair unbiased.
     """
     targets = specular_targets(scene, table)
-    eps, r_scene = _scene_eps(scene)
+    r_scene, inst_offset = _scene_radius(scene), instance_offsets(scene)
     origin = photon_origin(scene)
     pairs, weights = [], []
     for li, light in enumerate(lights.lights):
@@ -235,7 +236,7 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
         o, d, Phi = lights.emit_toward(li, n, t, rng, c, r)
         Phi = Phi * (n / float(n_pair))                  # this batch's share of the pair's photons
         return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="caustic",
-                                  max_depth=settings.max_depth, eps=eps, target_instance=ii)
+                                  max_depth=settings.max_depth, inst_offset=inst_offset, target_instance=ii)
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing caustic photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
@@ -245,7 +246,7 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
 def trace_global_map(scene, settings, caster, lights, table, *, time_override=None,
                      progress=None, cancel=None, min_nondelta: int = 1) -> tuple[np.ndarray, dict]:
     """Global map records and counts: ``settings.photons_global`` photons split over lights by power."""
-    eps, _ = _scene_eps(scene)
+    inst_offset = instance_offsets(scene)
     origin = photon_origin(scene)
     counts = split_counts(int(settings.photons_global), np.asarray(lights.power, dtype=np.float64))
     jobs = [(li, b0, min(BATCH, int(n_light) - b0), int(n_light)) for li, n_light in enumerate(counts)
@@ -261,7 +262,7 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
         o, d, Phi = lights.emit(li, n, t, rng)
         Phi = Phi * (n / float(n_light))
         return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global",
-                                  max_depth=settings.max_depth, eps=eps, min_nondelta=min_nondelta)
+                                  max_depth=settings.max_depth, inst_offset=inst_offset, min_nondelta=min_nondelta)
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing global photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)

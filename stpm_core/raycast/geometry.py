@@ -12,6 +12,8 @@ Everything here is exact double precision and vectorised over rays:
 * :class:`InstanceShading` - hit point data (geometric normal, shading normal,
   material) of one instance at the ray's time, in world space.
 * :func:`scene_scale`, :func:`tmin_of` - the self-intersection guard.
+* :func:`instance_offsets`, :func:`offset_lengths` - how far secondary rays
+  start off the surface they leave (local to the object hit).
 * :func:`swept_bounds` - world box of an instance over the whole shutter.
 """
 from __future__ import annotations
@@ -22,6 +24,7 @@ __all__ = [
     "TMIN_REL", "ray_triangle", "cross", "world_to_object", "triangles_at",
     "InstanceShading", "scene_scale", "tmin_of", "segment_of",
     "swept_bounds", "apply_affine", "apply_linear", "MotionKeys", "normal_matrix",
+    "OFFSET_REL", "OFFSET_POS", "instance_offsets", "offset_lengths",
 ]
 
 # Self-intersection guard: a ray never reports a hit closer than
@@ -29,6 +32,13 @@ __all__ = [
 # the scene bounds over the whole shutter).  Callers still offset origins
 # along the normal; this only stops a ray re-hitting the surface it left.
 TMIN_REL = 1e-6
+
+# Secondary-ray origin offset along the geometric normal (a distance, per hit):
+# OFFSET_REL x the size of the object hit + OFFSET_POS x the hit point's largest
+# coordinate (float32 resolution there), so a huge or far object elsewhere in the
+# scene does not push every ray off its surface (docs/raycast.md).
+OFFSET_REL = 1e-5
+OFFSET_POS = 1e-7
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -349,6 +359,30 @@ def scene_scale(scene) -> float:
     lo, hi = scene.bounds()
     s = float(np.linalg.norm(hi - lo))
     return s if np.isfinite(s) and s > 0 else 1.0
+
+
+def instance_offsets(scene) -> np.ndarray:
+    """Per-instance offset length (n_instances,) = OFFSET_REL x the object's own size (scene units).
+
+    Size = diagonal of the mesh's object-space vertex box times the transform's largest axis
+    scale over its keys, so motion (a box sliding 1 km) does not count, only the object;
+    floored at 1e-12 x the scene scale so that a degenerate object still gets a positive offset.
+    """
+    floor = 1e-12 * scene_scale(scene)
+    out = np.empty(len(scene.instances))
+    for i, inst in enumerate(scene.instances):
+        lo, hi = scene.meshes[inst.mesh].vertex_bounds()
+        M = inst.transform.matrices                              # (K, 4, 4)
+        axis_scale = np.sqrt(np.max(np.sum(M[:, :3, :3] ** 2, axis=1)))   # largest column norm
+        size = float(np.linalg.norm(hi - lo) * axis_scale)
+        out[i] = OFFSET_REL * (size if np.isfinite(size) and size > floor else floor)
+    return out
+
+
+def offset_lengths(inst_offset: np.ndarray, instance: np.ndarray, position: np.ndarray) -> np.ndarray:
+    """Origin offsets (n,) for hits on ``instance`` (n,) (all >= 0) at ``position`` (n, 3): the
+    object's offset (:func:`instance_offsets`) + OFFSET_POS x the largest |coordinate| of the hit."""
+    return inst_offset[instance] + OFFSET_POS * np.max(np.abs(position), axis=1, initial=0.0)
 
 
 def tmin_of(dirs: np.ndarray, scale: float) -> np.ndarray:
