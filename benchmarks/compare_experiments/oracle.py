@@ -1,0 +1,64 @@
+"""Error floor of *any* per-instant estimator at S samples per pixel (not in the project).
+
+Every time-dependent estimator here (TEMPORAL, KD4D, a sheared ball) gives each camera sample an
+estimate of the irradiance at its own point and time.  With a perfect estimate -- the exact
+radiance L(x, y, t) of the benchmark scene (tests/test_compare.py: analytic_moving_caustic's
+formulas, evaluated per sample) -- the only error left is camera sampling: the film's
+filter-importance-sampled positions and stratified times (integrator.camera_samples).  This
+script renders that oracle at several S and compares its RMSE with ACCUMULATION N=16's (0.0169,
+bias-dominated): a photon estimator at S samples per pixel can never be better than the oracle.
+
+    .venv/bin/python benchmarks/compare_experiments/oracle.py
+"""
+from common import *  # noqa: F401,F403
+
+from stpm_core.integrator import camera_samples
+
+I = 100.0 / (4 * np.pi)
+RHO_PI = 0.8 / np.pi
+
+
+def radiance(x, y, t):
+    """Exact radiance (n,) of the benchmark scene seen from above at (x, y) and shutter time t (n,)."""
+    shade = (np.abs(x) < 0.15) & (np.abs(y) < 0.15)
+    c, b = -0.25 + 0.5 * t, 0.8 - 1.6 * t
+    on_box = (np.abs(x - b) < 0.3) & (np.abs(y) < 0.3) & ~shade
+    z = np.where(on_box, 0.3, 0.0)
+    h = 3.0 - z
+    E_c = I * h / (x * x + y * y + h * h) ** 1.5
+    aperture = (np.abs(x / h - c) < 0.3) & (np.abs(y / h) < 0.3)
+    shaded = (np.abs(2.1 * x / h) < 0.15) & (np.abs(2.1 * y / h) < 0.15)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f_hi = np.minimum(1.0, np.where(y != 0, 0.3 / np.abs(y), np.inf))
+        a1, a2 = (b - 0.3) / x, (b + 0.3) / x
+        lo = np.maximum(0.9, np.where(x > 0, a1, np.where(x < 0, a2, -np.inf)))
+        hi = np.minimum(f_hi, np.where(x > 0, a2, np.where(x < 0, a1, np.inf)))
+    behind_box = (lo < hi) & ~on_box & ~((x == 0) & (np.abs(b) >= 0.3))
+    E = np.where(aperture & ~shaded & ~behind_box, E_c, 0.0)
+    hl = 1.0 - z
+    lit = ~((np.abs(0.1 * x / hl) < 0.15) & (np.abs(0.1 * y / hl) < 0.15))
+    E = E + np.where(lit, I * hl / (x * x + y * y + hl * hl) ** 1.5, 0.0)
+    return np.where(shade, 0.0, RHO_PI * E)
+
+
+def oracle_image(scene, S, seed, time_override=None, res=(96, 64)):
+    """(H, W) mean of the exact radiance over S camera samples per pixel (FIS positions, stratified times)."""
+    W, H = res
+    iy, ix = np.divmod(np.arange(W * H), W)
+    px, py, t = camera_samples(ix, iy, S, scene.shutter, np.random.default_rng(seed), time_override,
+                               filter_width=1.5)
+    pix = 2.4 / W
+    L = radiance(-1.2 + px * pix, 0.8 - py * pix, t)            # t: normalised shutter times
+    return L.reshape(W * H, S).mean(axis=1).reshape(H, W)
+
+
+if __name__ == "__main__":
+    scene, ref = moving_caustic_scene((96, 64)), exact((96, 64))[..., 0]
+    print("per-instant oracle (exact irradiance per camera sample):")
+    for S in (1, 2, 4, 8, 16, 32, 64):
+        e = [rmse(oracle_image(scene, S, seed), ref) for seed in (1, 2, 3)]
+        print(f"  S = {S:3d} samples/pixel: RMSE {np.mean(e):.4f} (seeds {min(e):.4f}-{max(e):.4f})", flush=True)
+    print("accumulation's camera side (16 exact stills at (i + 1/2)/16, S samples each):")
+    for S in (1, 4):
+        img = np.mean([oracle_image(scene, S, 100 + i, time_override=(i + 0.5) / 16) for i in range(16)], axis=0)
+        print(f"  S = {S}: RMSE {rmse(img, ref):.4f}")
