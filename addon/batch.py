@@ -2,8 +2,9 @@
 
 * :func:`load_blend` -- used by ``stpm render/plan/compare SCENE.blend``: opens
   the file with bpy and exports one frame (no RenderEngine: time steps through
-  ``scene.frame_set(frame, subframe=...)`` on the view-layer depsgraph, so
-  modifiers are evaluated with their viewport settings).
+  ``scene.frame_set(frame, subframe=...)`` on the view-layer depsgraph, with
+  viewport visibility and subdivision levels set to their render values for
+  the time of the export: :func:`render_visibility`).
 * :func:`render_blend` -- renders frames through Blender itself
   (``bpy.ops.render.render``), exactly what ``blender -b f.blend -E STPM -f N``
   does, and writes Blender's multilayer EXR plus a PNG preview per frame.
@@ -105,26 +106,102 @@ def load_blend(path, frame=None) -> tuple:
     return stpm_scene, settings
 
 
+def _editable(idblock) -> bool:
+    """Can this ID's properties be set (not linked from a library without an override)?"""
+    return getattr(idblock, "library", None) is None or getattr(idblock, "override_library", None) is not None
+
+
+# Modifiers whose viewport / render subdivision levels differ: (viewport property, render property)
+_LEVELS = {"SUBSURF": ("levels", "render_levels"), "MULTIRES": ("levels", "render_levels")}
+
+
+@contextlib.contextmanager
+def render_visibility(view_layer):
+    """Make the view-layer (viewport) depsgraph see what F12 renders, for the time of the block.
+
+    Outside a render there is no render-mode depsgraph, so the viewport flags
+    are set to their render counterparts and restored afterwards:
+
+    * objects: ``hide_viewport`` (monitor icon) := ``hide_render``; the eye icon
+      (``hide_get``) is cleared: it never affects a render;
+    * collections: ``hide_viewport`` := ``hide_render``; view-layer collections'
+      eye icon cleared (``exclude`` is shared by viewport and render: kept);
+    * modifiers: ``show_viewport`` := ``show_render``; Subdivision Surface and
+      Multires viewport ``levels`` := ``render_levels``.
+
+    Left as the viewport has them (docs/blender.md): particle display amount,
+    geometry nodes' *Is Viewport*, curve/text viewport resolution and other
+    modifier-specific viewport settings.
+    """
+    undo = []  # (callable, args) that restore one value each, run in reverse order
+
+    def put(target, attr, value):
+        old = getattr(target, attr)
+        if old != value:
+            setattr(target, attr, value)
+            undo.append((setattr, (target, attr, old)))
+
+    try:
+        for coll in bpy.data.collections:
+            if _editable(coll):
+                put(coll, "hide_viewport", coll.hide_render)
+        stack = [view_layer.layer_collection]
+        while stack:
+            lc = stack.pop()
+            if not lc.exclude:
+                put(lc, "hide_viewport", False)
+            stack.extend(lc.children)
+        for obj in bpy.data.objects:
+            if not _editable(obj):
+                continue
+            put(obj, "hide_viewport", obj.hide_render)
+            for mod in obj.modifiers:
+                put(mod, "show_viewport", mod.show_render)
+                levels = _LEVELS.get(mod.type)
+                if levels is not None:
+                    put(mod, levels[0], getattr(mod, levels[1]))
+        for obj in view_layer.objects:
+            if obj.hide_get(view_layer=view_layer):
+                obj.hide_set(False, view_layer=view_layer)
+                undo.append((lambda o: o.hide_set(True, view_layer=view_layer), (obj,)))
+        yield
+    finally:
+        for fn, args in reversed(undo):
+            try:
+                fn(*args)
+            except (AttributeError, ReferenceError, RuntimeError, TypeError):  # removed meanwhile: nothing to restore
+                pass
+
+
 def export_current(scene, frame=None) -> tuple:
     """Export the open Blender ``scene`` at ``frame`` (None = its current frame).
 
     Outside a RenderEngine, time moves with ``scene.frame_set``; the current
-    frame is restored afterwards.  Returns (Scene, settings dict) as
+    frame is restored afterwards.  Objects, collections and modifiers are
+    exported with their *render* visibility (:func:`render_visibility`), so the
+    same objects as an F12 render.  Returns (Scene, settings dict) as
     :func:`load_blend` does.
     """
     frame_before, subframe_before = scene.frame_current, scene.frame_subframe
     f = float(scene.frame_current if frame is None else frame)
     fi = int(f // 1)
-    scene.frame_set(fi, subframe=f - fi)
-    try:
-        depsgraph = bpy.context.evaluated_depsgraph_get()
+    view_layer = bpy.context.view_layer if bpy.context.scene == scene else scene.view_layers[0]
+    with render_visibility(view_layer):
+        scene.frame_set(fi, subframe=f - fi)
+        try:
+            return _export_at(scene)
+        finally:
+            scene.frame_set(frame_before, subframe=subframe_before)
 
-        def frame_set(frame_int: int, subframe: float) -> None:
-            scene.frame_set(frame_int, subframe=subframe)
 
-        stpm_scene, warnings = export_scene(depsgraph, frame_set, motion_steps=scene.stpm.motion_steps)
-    finally:
-        scene.frame_set(frame_before, subframe=subframe_before)
+def _export_at(scene) -> tuple:
+    """The body of :func:`export_current`: export at the frame already set."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+
+    def frame_set(frame_int: int, subframe: float) -> None:
+        scene.frame_set(frame_int, subframe=subframe)
+
+    stpm_scene, warnings = export_scene(depsgraph, frame_set, motion_steps=scene.stpm.motion_steps)
     stpm_scene.metadata["warnings"] = list(warnings)
     return stpm_scene, settings_dict(scene.stpm)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import time
+import traceback
 
 import bpy
 import numpy as np
@@ -29,33 +30,112 @@ def pass_type(channel_ids: str) -> str:
     return _PASS_TYPE.get(channel_ids, "VALUE" if len(channel_ids) == 1 else "COLOR")
 
 
-def write_passes(engine, passes: dict, width: int, height: int, layer_name: str = "") -> list[str]:
-    """Copy core passes ((H, W, C) float32, row 0 = top) into a new render result.
+# Blender's view-layer pass switches STPM fills (the rest of ``use_pass_*`` stay empty)
+_PRODUCED = {"use_pass_combined", "use_pass_z", "use_pass_normal", "use_pass_emit"}
+_NOT_PASSES = {"use_pass_cryptomatte_accurate"}  # a quality option, not a pass
 
-    Returns the names written.  Blender stores rows bottom-up, so each image is
-    flipped vertically, flattened and handed over with one ``foreach_set``.
+
+def unsupported_passes(view_layer) -> list[str]:
+    """UI names of the passes enabled on ``view_layer`` that STPM does not produce (Mist, AO, ...)."""
+    names = []
+    for owner in (view_layer, getattr(view_layer, "eevee", None), getattr(view_layer, "cycles", None)):
+        if owner is None:
+            continue
+        for prop in owner.bl_rna.properties:
+            ident = prop.identifier
+            if (ident.startswith("use_pass_") and prop.type == "BOOLEAN" and ident not in _PRODUCED
+                    and ident not in _NOT_PASSES and getattr(owner, ident, False)):
+                names.append(prop.name or ident[len("use_pass_"):])
+    if len(getattr(view_layer, "aovs", ()) or ()):
+        names.append("Shader AOVs")
+    if len(getattr(view_layer, "lightgroups", ()) or ()):
+        names.append("Light Groups")
+    return names
+
+
+def border_region(render, width: int, height: int) -> tuple | None:
+    """Blender's Render Region (``render.use_border``) in pixels of the full frame, or None.
+
+    Returns (x, y, w, h): x, y the region's lower-left pixel with y counted from
+    the *bottom* row (Blender's convention), w x h its size.  Blender computes
+    it in C as ``(int)(border.xmin * winx)`` etc. in single precision; the same
+    arithmetic is done here in float32 so the two always agree.
     """
-    result = engine.begin_result(0, 0, width, height, layer=layer_name)
+    if not getattr(render, "use_border", False):
+        return None
+    f32 = np.float32
+
+    def edge(frac, size):
+        return int(f32(min(max(float(frac), 0.0), 1.0)) * f32(size))
+
+    x0, x1 = edge(render.border_min_x, width), edge(render.border_max_x, width)
+    y0, y1 = edge(render.border_min_y, height), edge(render.border_max_y, height)
+    if x1 <= x0 or y1 <= y0 or (x0, y0, x1, y1) == (0, 0, width, height):
+        return None
+    return x0, y0, x1 - x0, y1 - y0
+
+
+def result_views(render) -> list[str]:
+    """Names of the views Blender renders: [''] for mono, e.g. ['left', 'right'] for stereo 3D."""
+    if not getattr(render, "use_multiview", False):
+        return [""]
+    if render.views_format == "STEREO_3D":
+        names = [v.name for v in render.views if v.use and v.name in ("left", "right")]
+    else:
+        names = [v.name for v in render.views if v.use]
+    return names or [""]
+
+
+def write_passes(engine, passes: dict, width: int, height: int, layer_name: str = "",
+                 region: tuple | None = None, views=("",)) -> list[str]:
+    """Copy core passes ((H, W, C) float32, row 0 = top) into new render results.
+
+    Parameters
+    ----------
+    passes : name -> (height, width, C) image of the full frame.
+    width, height : full frame size in pixels.
+    region : (x, y, w, h) from :func:`border_region` (y from the bottom) or None:
+        Blender's result of a Render Region render is region-sized, so only the
+        region's pixels are written, at offset (0, 0) of that result.
+    views : view names to fill (multiview / stereo): each gets the same image.
+
+    Returns the pass names written.  Blender stores rows bottom-up, so each
+    image is flipped vertically, cut to the region, flattened and handed over
+    with one ``foreach_set``.
+    """
+    x0, y0, w, h = region if region is not None else (0, 0, width, height)
+    images = {}
+    for name, _channels, _ids in _core.passes_table():
+        img = passes.get(name)
+        if img is not None:
+            img = np.asarray(img, dtype=np.float32).reshape(height, width, -1)[::-1]  # bottom-up
+            images[name] = img[y0:y0 + h, x0:x0 + w]
     written = []
-    try:
-        layer = result.layers[0]  # begin_result(layer=...) holds just the view layer being rendered
-        for name, channels, _ids in _core.passes_table():
-            img = passes.get(name)
-            bpass = layer.passes.find_by_name(name, "") if hasattr(layer.passes, "find_by_name") else None
-            if bpass is None:
-                bpass = layer.passes.get(name)
-            if img is None or bpass is None:
-                continue
-            img = np.asarray(img, dtype=np.float32).reshape(height, width, -1)
-            if img.shape[2] != bpass.channels:  # e.g. Combined given as RGB: add alpha 1
-                fixed = np.ones((height, width, bpass.channels), dtype=np.float32)
-                c = min(img.shape[2], bpass.channels)
-                fixed[..., :c] = img[..., :c]
-                img = fixed
-            bpass.rect.foreach_set(np.ascontiguousarray(img[::-1]).reshape(-1))
-            written.append(name)
-    finally:
-        engine.end_result(result)
+    for view in views:
+        result = engine.begin_result(0, 0, w, h, layer=layer_name, view=view)
+        try:
+            layer = result.layers[0]  # begin_result(layer=...) holds just the view layer being rendered
+            for name, img in images.items():
+                bpass = layer.passes.find_by_name(name, view) if hasattr(layer.passes, "find_by_name") else None
+                if bpass is None:
+                    bpass = layer.passes.get(name)
+                if bpass is None:
+                    continue
+                if img.shape[2] != bpass.channels:  # e.g. Combined given as RGB: add alpha 1
+                    fixed = np.ones((h, w, bpass.channels), dtype=np.float32)
+                    c = min(img.shape[2], bpass.channels)
+                    fixed[..., :c] = img[..., :c]
+                    img = fixed
+                rh, rw = result.resolution_y, result.resolution_x
+                if (rh, rw) != (h, w):  # Blender disagrees on the size: fill what overlaps, never raise
+                    out = np.zeros((rh, rw, bpass.channels), dtype=np.float32)
+                    out[:min(rh, h), :min(rw, w)] = img[:min(rh, h), :min(rw, w)]
+                    img = out
+                bpass.rect.foreach_set(np.ascontiguousarray(img).reshape(-1))
+                if name not in written:
+                    written.append(name)
+        finally:
+            engine.end_result(result)
     return written
 
 
@@ -76,6 +156,18 @@ class STPMRenderEngine(bpy.types.RenderEngine):
 
     # Final render
     def render(self, depsgraph):
+        """Blender's entry point: :meth:`_render`, with any unexpected exception turned into one
+        ERROR line in the render report (the traceback goes to the console for bug reports)."""
+        try:
+            self._render(depsgraph)
+        except Exception as exc:  # a bug or an unforeseen scene: never a raw traceback in the UI
+            traceback.print_exc()
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+            self.update_stats("STPM", "Failed")
+            self.report({"ERROR"}, f"STPM: render failed ({type(exc).__name__}{': ' + first if first else ''}); "
+                                   f"the traceback is in the console, please report it")
+
+    def _render(self, depsgraph):
         scene = depsgraph.scene
         self.stpm_warnings = []
         self.stpm_stats = {}
@@ -87,6 +179,11 @@ class STPMRenderEngine(bpy.types.RenderEngine):
                 depsgraph, lambda f, sub: self.frame_set(f, subframe=sub),
                 motion_steps=scene.stpm.motion_steps)
             export_s = time.perf_counter() - t0
+            missing = unsupported_passes(depsgraph.view_layer)
+            if missing:
+                warnings.append(f"view layer {depsgraph.view_layer.name!r}: passes STPM does not produce stay empty: "
+                                f"{', '.join(missing)} (STPM writes "
+                                f"{', '.join(n for n, _c, _i in _core.passes_table())})")
             for w in warnings:
                 self.report({"WARNING"}, w)
             if self.cancel_requested():
@@ -117,7 +214,14 @@ class STPMRenderEngine(bpy.types.RenderEngine):
             meta = {"STPM Plan": json.dumps(plan), "STPM Plan Summary": summary}
             store_plan(scene, plan)
         w, h = stpm_scene.resolution
-        written = write_passes(self, result.passes, w, h, depsgraph.view_layer.name)
+        views = result_views(scene.render)
+        if len(views) > 1:
+            text = (f"stereoscopy / multiview is not supported: every view ({', '.join(views)}) gets the same "
+                    f"mono image from the scene camera")
+            self.report({"WARNING"}, text)
+            warnings = list(warnings) + [text]
+        written = write_passes(self, result.passes, w, h, depsgraph.view_layer.name,
+                               region=border_region(scene.render, w, h), views=views)
         add_metadata(self, meta)
         stats = dict(getattr(result, "stats", {}) or {})
         stats["export_s"] = export_s

@@ -52,22 +52,17 @@ class STPM_OT_compute_plan(bpy.types.Operator):
 
     def execute(self, context):
         from . import _core
+        from .batch import export_current
         from .engine import store_plan
-        from .export import export_scene
         from .properties import settings_from_scene
         scene = context.scene
-        frame, subframe = scene.frame_current, scene.frame_subframe
-        try:
+        try:  # the same export as the compare operator: render visibility, F12's objects
             settings = settings_from_scene(scene)
-            stpm_scene, _warnings = export_scene(
-                context.evaluated_depsgraph_get(), lambda f, sub: scene.frame_set(f, subframe=sub),
-                motion_steps=scene.stpm.motion_steps)
+            stpm_scene, _settings = export_current(scene)
             plan = _core.sub("plan").make_plan(stpm_scene, settings)
         except _core.StpmError as exc:
             self.report({"ERROR"}, f"STPM: {exc}")
             return {"CANCELLED"}
-        finally:
-            scene.frame_set(frame, subframe=subframe)
         store_plan(scene, plan)
         self.report({"INFO"}, "STPM plan: " + _core.sub("plan").plan_summary(plan))
         return {"FINISHED"}

@@ -84,6 +84,9 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
     cam_obj = scene.camera
     if cam_obj is None:
         raise StpmError(f"scene {scene.name!r} has no active camera")
+    if cam_obj.type != "CAMERA":  # Blender lets an Empty or a Light be the scene camera
+        raise StpmError(f"the scene camera {cam_obj.name!r} is not a camera object (object type {cam_obj.type}); "
+                        f"set a Camera in Scene Properties > Camera")
     cam_name = cam_obj.name_full
 
     # 1. Everything at the current frame
@@ -113,6 +116,9 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
             continue
         if obj.type not in mesh_export.GEOMETRY_TYPES or _hidden_instancer_child(inst):
             continue
+        if not inst.is_instance:
+            _warn_hair_particles(obj, warnings)
+            _warn_ignored_object_flags(obj, warnings)
         if not inst.is_instance and not inst.show_self:  # e.g. a particle emitter set not to render
             continue
         if not mesh_export.has_mesh(obj):
@@ -145,6 +151,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
                                obj.original.name_full, M, mesh=mesh_cache[data_key], use_motion=use_mb,
                                use_deform=use_deform and not inst.is_instance and obj.type == "MESH",
                                is_instance=inst.is_instance)
+    _warn_holdout_collections(getattr(depsgraph, "view_layer", None), warnings)
     if cam_matrix is None:  # a camera hidden from render still defines the view
         cam_eval = cam_obj.evaluated_get(depsgraph)
         cam_matrix = np.array(cam_eval.matrix_world, dtype=np.float64)
@@ -219,6 +226,44 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
                   "film_transparent": bool(render.film_transparent),
                   "light_visible_camera": light_seen})
     return out, warnings
+
+
+def _warn_ignored_object_flags(obj, warnings: list) -> None:
+    """Object > Visibility switches a Cycles render honours and STPM does not."""
+    if not getattr(obj, "visible_camera", True):
+        _warn_once(warnings, f"object {obj.name!r}: Ray Visibility > Camera off is ignored (the camera sees it)")
+    if not getattr(obj, "visible_shadow", True):
+        _warn_once(warnings, f"object {obj.name!r}: Ray Visibility > Shadow off is ignored (it casts shadows)")
+    if getattr(obj, "is_holdout", False):
+        _warn_once(warnings, f"object {obj.name!r}: Holdout is not supported, rendered as a normal object")
+
+
+def _warn_holdout_collections(view_layer, warnings: list) -> None:
+    """View-layer collections set to Holdout (their objects render normally in STPM)."""
+    stack = [view_layer.layer_collection] if view_layer is not None else []
+    while stack:
+        lc = stack.pop()
+        if lc.exclude:
+            continue
+        if lc.holdout:
+            _warn_once(warnings, f"collection {lc.name!r}: Holdout is not supported, its objects render normally")
+        if lc.indirect_only:
+            _warn_once(warnings, f"collection {lc.name!r}: Indirect Only is not supported, its objects render normally")
+        stack.extend(lc.children)
+
+
+def _warn_hair_particles(obj, warnings: list) -> None:
+    """Particle-system hair drawn as strands (render as Path) has no triangles: say it is dropped.
+
+    Hair rendered as Object / Collection arrives as instances and is exported.
+    """
+    for mod in getattr(obj, "modifiers", ()):
+        if mod.type != "PARTICLE_SYSTEM" or not mod.show_render:
+            continue
+        settings = mod.particle_system.settings
+        if settings is not None and settings.type == "HAIR" and settings.render_type == "PATH":
+            _warn_once(warnings, f"object {obj.name!r}: hair particles ({mod.particle_system.name!r}) "
+                                 f"are not rendered (strand hair is not supported)")
 
 
 def _attach_deformation(mesh, shapes: list, times: np.ndarray, name: str, warnings: list) -> None:

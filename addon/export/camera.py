@@ -6,9 +6,13 @@ from .motion import transform_from_samples, without_scale
 
 
 def render_resolution(render) -> tuple[int, int]:
-    """Output size in pixels (width, height), with ``resolution_percentage`` applied."""
-    pct = render.resolution_percentage / 100.0
-    return max(1, int(render.resolution_x * pct)), max(1, int(render.resolution_y * pct))
+    """Output size in pixels (width, height), with ``resolution_percentage`` applied.
+
+    Integer arithmetic exactly as Blender's ``(size * xsch) / 100``: 29 % of 100 is 29, not
+    ``int(100 * 0.29) = 28``.
+    """
+    pct = int(render.resolution_percentage)
+    return max(1, int(render.resolution_x) * pct // 100), max(1, int(render.resolution_y) * pct // 100)
 
 
 def export_camera(cam_obj, times, matrices, warnings: list) -> "scene_model.Camera":

@@ -27,6 +27,13 @@ def export_light(light_obj, times, matrices, warnings: list) -> "scene_model.Lig
     power = float(lamp.energy) * 2.0 ** float(getattr(lamp, "exposure", 0.0))
     if getattr(lamp, "use_nodes", False) and lamp.node_tree is not None:
         warnings.append(f"light {light_obj.name!r}: light node trees are ignored (colour and power only)")
+    if power < 0.0 or np.any(color < 0.0):
+        warnings.append(f"light {light_obj.name!r}: negative power {power:g} W is not supported (Cycles subtracts "
+                        f"light), clamped to 0: the light is off" if power < 0.0 else
+                        f"light {light_obj.name!r}: negative colour components clamped to 0")
+        color = np.maximum(color, 0.0)
+    if not getattr(lamp, "use_shadow", True):
+        warnings.append(f"light {light_obj.name!r}: Cast Shadow off is ignored (STPM lights always cast shadows)")
     M = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
     scale = np.linalg.norm(M[len(M) // 2, :3, :3], axis=0)  # object scale (x, y, z)
     kw = dict(type=lamp.type, color=color, power=max(power, 0.0),

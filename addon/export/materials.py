@@ -18,9 +18,19 @@ Anything else becomes the grey diffuse default and a warning; nothing raises.
 """
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from .._core import scene_model
+
+# Cycles' colour for an image that cannot be loaded
+MISSING_IMAGE = np.array([1.0, 0.0, 1.0])
+# Image means: at most this many pixels are read for one mean (a regular strided grid)
+MAX_MEAN_PIXELS = 256 * 1024
+# Means of images already seen in this Blender session: key (see _image_key) -> (3,) float64
+_IMAGE_MEANS: dict = {}
+_IMAGE_MEANS_MAX = 512
 
 FIELDS = ("base_color", "metallic", "transmission", "roughness", "specular", "ior", "emission")
 
@@ -31,6 +41,65 @@ def _uses_nodes(idblock) -> bool:
     if bpy.app.version >= (5, 0, 0):
         return idblock.node_tree is not None
     return bool(idblock.use_nodes)
+
+
+def _image_key(image) -> tuple | None:
+    """What identifies an image's pixels within this process, or None (unsaved edits: no caching).
+
+    Name, size, channels, source, file path, colour space and the generator's
+    settings; an image with unsaved edits (``is_dirty``, e.g. painted or set
+    by a script) is read every time.
+    """
+    if getattr(image, "is_dirty", False):
+        return None
+    gen = (image.generated_type, image.generated_width, image.generated_height, tuple(image.generated_color),
+           bool(image.use_generated_float)) if image.source == "GENERATED" else ()
+    return (image.name_full, getattr(image, "session_uid", 0), tuple(image.size), image.channels,
+            bool(image.is_float), image.source, image.filepath_raw, image.colorspace_settings.name, gen)
+
+
+def sampled_mean(image, max_pixels: int = MAX_MEAN_PIXELS) -> np.ndarray:
+    """Mean linear RGB (3,) float64 of ``image`` from at most ``max_pixels`` pixels.
+
+    The pixels are read once as float32 (Blender's ``pixels`` has no partial
+    read).  The image is cut into ``s x s`` cells, ``s = ceil(sqrt(W H /
+    max_pixels))``, and one pixel at a jittered position (fixed seed) is taken
+    from each cell: stratified, so a smooth image is sampled evenly and a
+    pattern with period ``s`` (a 1-pixel checker and stride 2) cannot alias the
+    way a plain ``[::s, ::s]`` grid does.  Only those pixels are converted
+    (sRGB -> linear for 8-bit sRGB images) and averaged.
+    """
+    w, h = image.size[:]
+    c = image.channels
+    px = np.empty(w * h * c, dtype=np.float32)
+    image.pixels.foreach_get(px)
+    step = max(1, int(np.ceil(np.sqrt(w * h / float(max_pixels)))))
+    if step == 1:
+        rgb = px.reshape(-1, c)[:, :3]
+    else:
+        rng = np.random.default_rng(0x5EED)
+        ny, nx = -(-h // step), -(-w // step)
+        ys = np.minimum(np.arange(ny)[:, None] * step + rng.integers(0, step, (ny, nx)), h - 1)
+        xs = np.minimum(np.arange(nx)[None, :] * step + rng.integers(0, step, (ny, nx)), w - 1)
+        rgb = px.reshape(-1, c)[(ys * w + xs).reshape(-1), :3]
+    del px
+    if not image.is_float and image.colorspace_settings.name == "sRGB":
+        rgb = np.where(rgb <= np.float32(0.04045), rgb / np.float32(12.92),
+                       ((rgb + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4))  # sRGB -> linear
+    return rgb.mean(axis=0, dtype=np.float64)
+
+
+def image_mean(image) -> np.ndarray:
+    """:func:`sampled_mean` of ``image``, cached per image (:func:`_image_key`) for the process."""
+    key = _image_key(image)
+    if key is not None and key in _IMAGE_MEANS:
+        return _IMAGE_MEANS[key].copy()
+    mean = sampled_mean(image)
+    if key is not None:
+        if len(_IMAGE_MEANS) >= _IMAGE_MEANS_MAX:
+            _IMAGE_MEANS.pop(next(iter(_IMAGE_MEANS)))
+        _IMAGE_MEANS[key] = mean
+    return mean.copy()
 
 
 def default_material(name: str = "STPM default") -> "scene_model.Material":
@@ -53,7 +122,6 @@ class MaterialExporter:
         self.warnings = warnings
         self.materials: list = []
         self._index: dict = {}
-        self._image_means: dict = {}
 
     # Public entry
     def index_of(self, mat) -> int:
@@ -73,6 +141,10 @@ class MaterialExporter:
                         metallic=float(mat.metallic), roughness=float(mat.roughness))
         else:
             out = self._output_node(tree)
+            for ignored in ("Displacement", "Volume"):
+                other = out.inputs.get(ignored) if out is not None else None
+                if other is not None and other.is_linked:
+                    self._warn(f"Material Output {ignored} is ignored (STPM renders the Surface only)")
             sock = out.inputs.get("Surface") if out is not None else None
             if sock is None or not sock.is_linked:
                 self._warn("no surface shader connected, using grey diffuse")
@@ -87,12 +159,19 @@ class MaterialExporter:
         if text not in self.warnings:
             self.warnings.append(text)
 
-    @staticmethod
-    def _output_node(tree):
-        outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
-                and getattr(n, "target", "ALL") in ("ALL", "CYCLES")]
-        active = [n for n in outs if getattr(n, "is_active_output", False)]
-        return (active or outs or [None])[0]
+    def _output_node(self, tree):
+        """The Material Output STPM renders: the active one of those for All / Cycles, else the first such;
+        with only EEVEE outputs, an EEVEE one (warned: Cycles would not use it)."""
+        every = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+        for outs in ([n for n in every if getattr(n, "target", "ALL") in ("ALL", "CYCLES")], every):
+            active = [n for n in outs if getattr(n, "is_active_output", False)]
+            node = (active or outs or [None])[0]
+            if node is not None:
+                if getattr(node, "target", "ALL") not in ("ALL", "CYCLES"):
+                    self._warn(f"the only Material Output ({node.name!r}) has target {node.target} (EEVEE only); "
+                               f"STPM renders it anyway (Cycles would ignore it): set its target to All")
+                return node
+        return None
 
     @staticmethod
     def _follow(link):
@@ -106,6 +185,8 @@ class MaterialExporter:
         base = np.asarray(p["base_color"], dtype=np.float64)
         if np.any(base > 1.0):
             self._warn("base colour above 1 clipped (energy conservation)")
+        if np.any(np.asarray(p["emission"], float) < 0.0):
+            self._warn("negative emission is not supported, clamped to 0")
         return scene_model.Material(
             base_color=np.clip(base, 0.0, 1.0),
             metallic=float(np.clip(p["metallic"], 0, 1)), transmission=float(np.clip(p["transmission"], 0, 1)),
@@ -133,9 +214,10 @@ class MaterialExporter:
         if sock.is_linked:
             src = self._follow(sock.links[0])
             if src.bl_idname == "ShaderNodeTexImage":
-                mean = self._image_mean(src.image)
+                mean, loaded = self._image_mean(src.image)
                 if mean is not None:
-                    self._warn(f"image texture {src.image.name!r} approximated by its mean colour")
+                    if loaded:
+                        self._warn(f"image texture {src.image.name!r} approximated by its mean colour")
                     return mean
             elif src.bl_idname == "ShaderNodeRGB":
                 return np.array(src.outputs[0].default_value[:3], dtype=np.float64)
@@ -143,26 +225,28 @@ class MaterialExporter:
                 self._warn(f"{node.name}.{name} driven by {src.bl_idname} is not supported, using its colour")
         return np.array(sock.default_value[:3], dtype=np.float64)
 
-    def _image_mean(self, image) -> np.ndarray | None:
-        """Mean linear RGB (3,) of an image, or None (missing / empty image: warned)."""
+    def _image_mean(self, image) -> tuple:
+        """(mean linear RGB (3,) or None, loaded: bool) of an image node's image.
+
+        No image: (None, False), the socket's colour is used.  A file that is
+        missing or cannot be loaded: Cycles' magenta, (MISSING_IMAGE, False), warned
+        with the path.
+        """
+        import bpy
         if image is None:
             self._warn("image texture without an image, using its colour")
-            return None
-        if image.name_full in self._image_means:
-            return self._image_means[image.name_full]
+            return None, False
+        if image.source in ("FILE", "SEQUENCE", "MOVIE") and image.packed_file is None:
+            path = bpy.path.abspath(image.filepath, library=image.library)
+            if not os.path.exists(path):
+                self._warn(f"image {image.name!r}: file {path!r} is missing, rendered magenta (1, 0, 1) as in Cycles")
+                return MISSING_IMAGE.copy(), False
         w, h = image.size[:]
-        c = image.channels
-        if w * h == 0 or c < 3:
-            self._warn(f"image {image.name!r} has no pixels, using its colour")
-            return None
-        px = np.empty(w * h * c, dtype=np.float32)
-        image.pixels.foreach_get(px)
-        rgb = px.reshape(-1, c)[:, :3].astype(np.float64)
-        if not image.is_float and image.colorspace_settings.name == "sRGB":
-            rgb = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)  # sRGB -> linear
-        mean = rgb.mean(axis=0)
-        self._image_means[image.name_full] = mean
-        return mean
+        if w * h == 0 or image.channels < 3:
+            where = f"file {bpy.path.abspath(image.filepath, library=image.library)!r}" if image.filepath else "it"
+            self._warn(f"image {image.name!r}: {where} could not be loaded, rendered magenta (1, 0, 1) as in Cycles")
+            return MISSING_IMAGE.copy(), False
+        return image_mean(image), True
 
     # The shader tree walk
     def _shader(self, node, depth: int) -> dict:
@@ -170,6 +254,14 @@ class MaterialExporter:
         kind = node.bl_idname
         if depth > 16:
             self._warn("shader tree too deep, using grey diffuse")
+            return _params()
+        for sock in node.inputs:  # Normal, Coat Normal, Clearcoat Normal, ...
+            if sock.is_linked and sock.name.endswith("Normal") and sock.type == "VECTOR":
+                src = self._follow(sock.links[0])
+                self._warn(f"{node.name}.{sock.name} driven by {src.bl_idname} is ignored "
+                           f"(no bump or normal mapping: the surface normal is used)")
+        if kind == "ShaderNodeHoldout":
+            self._warn("Holdout shader is not supported, rendered as grey diffuse")
             return _params()
         if kind == "ShaderNodeBsdfPrincipled":
             for name in ("Coat Weight", "Sheen Weight", "Subsurface Weight"):

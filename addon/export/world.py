@@ -22,7 +22,20 @@ def _output_node(tree):
 
 
 def export_world(world, warnings: list) -> "scene_model.World":
-    """Background colour * strength from the Background node (or ``world.color``)."""
+    """Background colour * strength from the Background node (or ``world.color``).
+
+    The core has no environment light: a non-black world is what the camera
+    sees behind everything, but it lights nothing (warned).
+    """
+    out = _export_world(world, warnings)
+    if world is not None and float(np.max(out.color * out.strength)) > 0.0:
+        warnings.append(f"world {world.name!r}: the world is shown as background only and does not light the "
+                        f"scene in STPM (no environment lighting); use an area light or an emissive plane "
+                        f"to light with it")
+    return out
+
+
+def _export_world(world, warnings: list) -> "scene_model.World":
     if world is None:
         return scene_model.World(color=np.zeros(3), strength=1.0)
     tree = world.node_tree if _uses_nodes(world) else None
