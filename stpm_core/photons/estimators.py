@@ -66,7 +66,6 @@ CONE_K = 1.1                 # cone kernel: w(d) = 1 - d / (CONE_K * r)
 TEMPORAL_SLICE_C = 0.25      # automatic time slices B = max(1, round(C * (N / k)^(1/3)))
 TEMPORAL_SLICE_ALPHA = 1.5   # candidates per estimate inside a slice, as a multiple of k (the paper's 1.5)
 _QUERY_BATCH_ELEMS = 1 << 21 # neighbours gathered per batch (bounds memory)
-_GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(8)
 
 
 # ---------------------------------------------------------------------------
@@ -90,42 +89,32 @@ def morton_codes(position: np.ndarray, bits: int = 10) -> np.ndarray:
 # ---------------------------------------------------------------------------
 
 def _shutter_cdf(shutter, u: np.ndarray) -> np.ndarray:
-    """Exact CDF of the shutter density at u (n,) in [0, 1] (piecewise quadratic for a curve)."""
-    u = np.clip(np.asarray(u, dtype=np.float64), 0.0, 1.0)
-    if shutter.curve is None:
-        return u
-    uu, c, cdf = shutter._cdf_u, shutter.curve, shutter._cdf
-    i = np.clip(np.searchsorted(uu, u, side="right") - 1, 0, len(uu) - 2)
-    h = uu[i + 1] - uu[i]
-    x = u - uu[i]
-    slope = (c[i + 1] - c[i]) / h
-    total = 0.5 * (c[1:] + c[:-1]) @ np.diff(uu)
-    return cdf[i] + (c[i] * x + 0.5 * slope * x * x) / total
+    """Exact CDF of the shutter density at u (n,) clipped to [0, 1] (piecewise quadratic for a curve).
+
+    :meth:`Shutter.cdf`, the inverse of ``Shutter.sample`` (one set of tables), so window masses
+    and photon times agree.
+    """
+    return shutter.cdf(u)
 
 
 def shutter_mass(shutter, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Probability mass (n,) of shutter times in [a, b] clipped to [0, 1] (dimensionless)."""
+    """Probability mass (n,) of shutter times in [a, b] clipped to [0, 1] (dimensionless, >= 0)."""
     return np.maximum(_shutter_cdf(shutter, b) - _shutter_cdf(shutter, a), 0.0)
 
 
 def slab_ball_volume(shutter, R: np.ndarray, t: np.ndarray, s: float) -> np.ndarray:
-    """Area x shutter-mass measure (m^2) of a 3-ball in (u, v, s*t) clipped to t in [0, 1].
+    """Area x shutter-mass measure (n,) m^2 of 3-balls in (u, v, s*t) clipped to t in [0, 1].
 
-    ``V/s = integral_{[t - R/s, t + R/s] cut to [0, 1]} pi (R^2 - s^2 (tau - t)^2) g(tau) dtau``:
-    the disc the ball cuts at time tau, weighted by the shutter density g.
-    Exact (8-point Gauss-Legendre on a quadratic) for a box shutter.
-    Unclipped and g = 1 it is (4/3) pi R^3 / s.
+    ``V/s = integral_{[a, b]} pi (R^2 - s^2 (tau - t)^2) g(tau) dtau = pi s^2 I(t, R/s)`` over the
+    ball's time span ``[a, b] = [t - R/s, t + R/s]`` cut to [0, 1]: the disc the ball cuts at
+    time tau, weighted by the shutter density g.  R (n,) m, t (n,) normalised shutter time,
+    s in m per shutter.  ``I = Shutter.parabola_integral`` is exact for the piecewise-linear g:
+    closed form for a box shutter ((4/3) pi R^3 / s unclipped), per curve segment otherwise; it is
+    > 0 wherever [a, b] overlaps the density's support and exactly 0 where it does not (no photon
+    can be there: the caller's Phi is 0 too).
     """
     R = np.asarray(R, dtype=np.float64)
-    t = np.asarray(t, dtype=np.float64)
-    a = np.clip(t - R / s, 0.0, 1.0)
-    b = np.clip(t + R / s, 0.0, 1.0)
-    half = 0.5 * (b - a)
-    mid = 0.5 * (b + a)
-    tau = mid[:, None] + half[:, None] * _GAUSS_X[None, :]                 # (n, 8)
-    disc = np.pi * np.maximum(R[:, None] ** 2 - (s * (tau - t[:, None])) ** 2, 0.0)
-    g = shutter.density(tau) if shutter.curve is not None else 1.0
-    return (disc * g) @ _GAUSS_W * half
+    return np.pi * s * s * shutter.parabola_integral(np.asarray(t, dtype=np.float64), R / s)
 
 
 # ---------------------------------------------------------------------------
@@ -453,7 +442,9 @@ class PhotonMap:
         if estimator == "KD4D":
             norm = 1.0 - 3.0 / (4.0 * CONE_K) if cone else 1.0   # mean cone weight over a 3-ball
             measure = norm * slab_ball_volume(self.shutter, np.maximum(r, 1e-12), t, self.time_scale)
-            return Phi / np.maximum(measure, 1e-300)[:, None]
+            # measure 0: the ball's time span misses the shutter curve's support; a photon there can
+            # only be a float32 time rounded just past its end, so read 0, never Phi / 0
+            return np.where((measure > 0)[:, None], Phi / np.maximum(measure, 1e-300)[:, None], 0.0)
         norm = 1.0 - 2.0 / (3.0 * CONE_K) if cone else 1.0       # mean cone weight over a disc
         area = norm * np.pi * np.maximum(r, 1e-12) ** 2          # m^2
         if estimator == "TEMPORAL":
