@@ -170,6 +170,12 @@ def _light_uniforms(light, n: int, rng: np.random.Generator, out: np.ndarray | N
     return rng.random((n, 2)) if out is None else rng.random(out=out)
 
 
+def _world_normals(light, ng: np.ndarray, wo: np.ndarray) -> np.ndarray | None:
+    """For the world light: geometric normals (n, 3) turned toward wo, about which its NEE samples
+    cosine-distributed directions (none below the surface); None for every other light."""
+    return _face_forward(ng, wo) if light.type == "WORLD" else None
+
+
 def _fill(a: np.ndarray, value: float) -> np.ndarray:
     a[...] = value
     return a
@@ -190,7 +196,8 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats) -> np.n
         if lights.power[li] <= 0.0:
             continue
         # Sample a point / direction on the light at each sample's time
-        wi, dist, weight = lights.sample_direct(li, p, times, _light_uniforms(lights.lights[li], n, rng))
+        wi, dist, weight = lights.sample_direct(li, p, times, _light_uniforms(lights.lights[li], n, rng),
+                                                normals=_world_normals(lights.lights[li], ng, wo))
         f = bsdf_eval(ctx.table, mat, wo, wi, ns, ng)
         contrib = f * (np.abs(np.einsum("ij,ij->i", ns, wi)))[:, None]
         contrib *= weight
@@ -243,13 +250,13 @@ def _seen_lights(lights, o: np.ndarray, d: np.ndarray, t: np.ndarray, t_scene: n
     Radius-0 lights and suns are not visible.  Same shapes and units as
     :class:`stpm_core.lights.LightSet`.
     """
-    from .lights import spot_attenuation
+    from .lights import area_light_normal, spot_attenuation
 
     n = o.shape[0]
     L = np.zeros((n, 3))
     for li, light in enumerate(lights.lights):
-        if light.type == "MESH":
-            continue                          # emissive triangles: the caster hits them (Emit)
+        if light.type in ("MESH", "WORLD"):
+            continue                          # emissive triangles: the caster hits them (Emit); world: misses
         color = np.asarray(light.color, float)
         if light.power <= 0 or not np.any(color > 0):
             continue
@@ -261,9 +268,7 @@ def _seen_lights(lights, o: np.ndarray, d: np.ndarray, t: np.ndarray, t_scene: n
             sy = light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size
             ex, ey = 0.5 * light.size * M[:, :3, 0], 0.5 * sy * M[:, :3, 1]
             c = M[:, :3, 3]
-            cross = np.cross(ex, ey)
-            A4 = np.linalg.norm(cross, axis=1)
-            n_emit = -cross / np.maximum(A4, 1e-300)[:, None]
+            n_emit, A4 = area_light_normal(ex, ey, M[:, :3, 2])   # -Z side, as LightSet (Cycles' rule)
             cos_d = np.sum(d * n_emit, axis=1)
             with np.errstate(divide="ignore", invalid="ignore"):
                 s_hit = np.sum((c - o) * n_emit, axis=1) / cos_d
@@ -552,7 +557,7 @@ def _direct_fast(ctx, sh: np.ndarray, hits, d: np.ndarray, t_s: np.ndarray, rng,
             if gathered is None:
                 gathered = (P[sh], NG[sh], NS[sh], -d[sh], mat[sh])
             p_s, ng_s, ns_s, wo_s, mat_s = gathered
-            wi, dist, weight = lights.sample_direct(li, p_s, t_s, u)
+            wi, dist, weight = lights.sample_direct(li, p_s, t_s, u, normals=_world_normals(light, ng_s, wo_s))
             wi = np.ascontiguousarray(wi, np.float64)
             weight = np.ascontiguousarray(np.broadcast_to(weight, (k, 3)), np.float64)
             dist = np.ascontiguousarray(np.broadcast_to(dist, (k,)), np.float64)

@@ -10,7 +10,9 @@ code name is in docs/lights-and-materials.md):
   on = a disk of radius r facing the shading point, off = a sphere.
 * AREA of power P W: one-sided Lambertian emitter facing local -Z with
   radiance ``L = color * P / (pi A)`` (A in world units, object scale
-  included, as Cycles does).
+  included, as Cycles does).  The emitting side follows the transform's -Z
+  column, as for SPOT and SUN, even under a mirroring scale
+  (:func:`area_light_normal`).
 * SUN of strength S: irradiance ``color * S`` W/m^2 on a facing surface;
   ``angle`` > 0 spreads it uniformly over a cone of that angular diameter.
 * MESH (:class:`MeshLight`, one per instance with emissive triangles, after
@@ -33,9 +35,10 @@ import numpy as np
 from .sampling import (concentric_disk, cosine_hemisphere, orthonormal_basis, uniform_cone,
                        uniform_sphere)
 
-__all__ = ["LightSet", "MeshLight", "mesh_lights", "spot_attenuation"]
+__all__ = ["LightSet", "MeshLight", "area_light_normal", "mesh_lights", "spot_attenuation"]
 
 INV_4PI = 1.0 / (4.0 * np.pi)
+_UNIT_Z = np.array([0.0, 0.0, 1.0])
 
 
 # ---------------------------------------------------------------------------
@@ -58,6 +61,17 @@ def _normalize(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors (n, 3) and lengths (n,)."""
     length = np.sqrt(np.einsum("ij,ij->i", v, v))
     return v / np.maximum(length, 1e-300)[:, None], length
+
+
+def _axis_or_z(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit axes (n, 3), with +Z standing in where ``axis`` is zero, and where it was usable (n,) bool.
+
+    A light whose transform has a zero scale along its Z axis has no direction
+    (``_frame`` returns a zero Z); its samples get this stand-in axis, so that
+    every direction stays unit length, and zero weight or power.
+    """
+    ok = np.einsum("ij,ij->i", axis, axis) > 0.5
+    return np.where(ok[:, None], axis, _UNIT_Z), ok
 
 
 def _smoothstep(x: np.ndarray) -> np.ndarray:
@@ -88,6 +102,25 @@ def _spot_solid_angle(light) -> float:
     """
     one_minus = 1.0 - np.cos(0.5 * light.spot_size)
     return 2.0 * np.pi * one_minus * (1.0 - 0.5 * light.spot_blend)
+
+
+def area_light_normal(ex: np.ndarray, ey: np.ndarray, z_col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Emitting normal of an AREA light and its |ex x ey|, from its half-extent vectors and -Z.
+
+    ex, ey : (n, 3) half-extent vectors (the transform's X and Y columns times
+        half the size); z_col : (n, 3) the transform's Z column.
+    Returns n_emit (n, 3): the unit normal of the light's plane on the side of
+    the -Z column (Cycles takes every light's direction from -Z, so a mirrored
+    transform turns an AREA light exactly as it turns a SPOT or SUN: scale
+    (1, 1, -1) faces it away, (-1, 1, 1) does not); zero when -Z lies in the
+    plane or is zero (the light then emits nothing).  And A4 (n,) = |ex x ey|
+    = area / 4 for a rectangle (m^2).
+    """
+    cross = np.cross(ex, ey)
+    A4 = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+    g = cross / np.maximum(A4, 1e-300)[:, None]               # unit plane normal (+Z for a plain transform)
+    side = np.sign(-np.einsum("ij,ij->i", g, z_col))           # +1 where g points along -Z
+    return g * side[:, None], A4
 
 
 def _ray_sphere_far(o: np.ndarray, d: np.ndarray, c: np.ndarray, r: float, inside: np.ndarray) -> np.ndarray:
@@ -277,8 +310,11 @@ class LightSet:
     ----------
     lights : list: the scene's lights (``scene.Light``, same indices as
         ``scene.lights``) followed by one :class:`MeshLight` (``type == 'MESH'``)
-        per instance with emissive triangles.  Every query below takes an index
-        into this list and treats both kinds alike.
+        per instance with emissive triangles, then, when the world's radiance
+        ``color * strength`` is > 0 in some channel, one
+        :class:`~stpm_core.world_light.WorldLight` (``type == 'WORLD'``) around
+        the scene's bounding sphere.  Every query below takes an index into
+        this list and treats all kinds alike.
     n_scene_lights : how many of them are ``scene.lights``.
     power : (L,) float64 total emitted flux per light in W (mean over RGB), for
         splitting photons in proportion to power.
@@ -294,6 +330,14 @@ class LightSet:
         # Bounding sphere of the scene (suns emit from a disc covering it)
         self._scene_center = 0.5 * (self.scene_bounds[0] + self.scene_bounds[1])
         self._scene_radius = max(0.5 * float(np.linalg.norm(self.scene_bounds[1] - self.scene_bounds[0])), 1e-3)
+        # The world, when it shines: a light entry like the others (stpm_core/world_light.py)
+        radiance = np.asarray(scene.world.radiance, float)
+        if np.any(radiance > 0):
+            from .world_light import WorldLight
+            self.lights.append(WorldLight(radiance, self._scene_center, self._scene_radius))
+        # SPOT / SUN / AREA lights with no emitting direction at any key (zero Z scale,
+        # zero area): they emit nothing, so flux 0 and no photon budget
+        self._dead = [self._no_direction(i) for i in range(len(self.lights))]
         self.power = np.array([float(np.mean(self.flux(i))) for i in range(len(self.lights))])
 
     def __len__(self) -> int:
@@ -314,11 +358,31 @@ class LightSet:
         R = self._scene_radius
         return R * (1.0 + 3.0 * np.tan(0.5 * min(l.angle, 3.0)))
 
-    def flux(self, li: int) -> np.ndarray:
-        """Total emitted flux (3,) W of light li (what :meth:`emit` photons sum to)."""
+    def _no_direction(self, li: int) -> bool:
+        """Does SPOT / SUN / AREA light li lack an emitting direction at every key of its motion?"""
         l = self.lights[li]
+        if l.type not in ("SPOT", "SUN", "AREA"):
+            return False
+        t = np.asarray(l.transform.times, float)
+        if l.type == "AREA":
+            axis = self._area_shape(li, t)[4]
+        else:
+            axis = self._frame(li, t)[3]
+        return not bool(np.any(np.einsum("ij,ij->i", axis, axis) > 0.5))
+
+    def flux(self, li: int) -> np.ndarray:
+        """Total emitted flux (3,) W of light li (what :meth:`emit` photons sum to).
+
+        0 for a SPOT / SUN / AREA light with no emitting direction (zero Z scale
+        or zero area at every key of its motion: ``scene_warnings`` names it).
+        """
+        l = self.lights[li]
+        if getattr(self, "_dead", None) is not None and self._dead[li]:
+            return np.zeros(3)
         if l.type == "MESH":
             return l.flux_at(0.5)
+        if l.type == "WORLD":
+            return l.flux()
         color = np.asarray(l.color, float)
         if l.type == "POINT":
             return color * float(l.power)
@@ -365,13 +429,11 @@ class LightSet:
         sy = float(l.size_y) if l.shape in ("RECTANGLE", "ELLIPSE") else sx
         ex = 0.5 * sx * M[:, :3, 0]
         ey = 0.5 * sy * M[:, :3, 1]
-        cross = np.cross(ex, ey)
-        A4 = np.linalg.norm(cross, axis=-1)           # |ex x ey| = A_rect / 4
+        n_emit, A4 = area_light_normal(ex, ey, M[:, :3, 2])   # A4 = |ex x ey| = A_rect / 4
         if l.shape in ("DISK", "ELLIPSE"):
             A = np.pi * A4
         else:
             A = 4.0 * A4
-        n_emit = -cross / np.maximum(A4, 1e-300)[:, None]  # faces local -Z
         return M[:, :3, 3], ex, ey, A, n_emit
 
     def _area_points(self, li: int, ex, ey, c, u: np.ndarray) -> np.ndarray:
@@ -387,7 +449,8 @@ class LightSet:
     # Direct lighting
     # -----------------------------------------------------------------------
 
-    def sample_direct(self, li: int, p: np.ndarray, times: np.ndarray, u: np.ndarray):
+    def sample_direct(self, li: int, p: np.ndarray, times: np.ndarray, u: np.ndarray,
+                      normals: np.ndarray | None = None):
         """Sample light li as seen from points p at their times.
 
         Parameters
@@ -396,6 +459,10 @@ class LightSet:
         p : (n, 3) world shading points.
         times : (n,) normalised shutter times.
         u : (n, 2) uniform samples in [0, 1).
+        normals : (n, 3) unit normals facing the shaded side, or None; used only
+            by an entry of type 'WORLD' (``world_light.WorldLight.sample``, which
+            samples cosine-distributed directions about them); other lights
+            ignore it.
 
         Returns
         -------
@@ -416,6 +483,8 @@ class LightSet:
             return self._sample_area(li, p, times, u)
         if l.type == "MESH":
             return self._sample_mesh(li, p, times, u)
+        if l.type == "WORLD":
+            return l.sample(p, u, normals)
         return self._sample_sun(li, p, times, u)
 
     def _sample_mesh(self, li, p, times, u):
@@ -450,10 +519,10 @@ class LightSet:
             # sphere from inside).  Radiance L = I / (pi r^2); weight = L / pdf.
             inside = d <= r
             one_minus_cos = np.where(inside, 2.0, _one_minus_cos_from_sin2((r * r) / np.maximum(d * d, 1e-300)))
+            # (cos_max = -1 is the uniform sphere; it needs no axis, and p at the
+            # very centre has none: +Z stands in)
             local = uniform_cone(u, 1.0 - one_minus_cos)
-            if inside.any():
-                local[inside] = uniform_sphere(u[inside])
-            wi = _local_to_world(local, -to_p)
+            wi = _local_to_world(local, np.where(inside[:, None], _UNIT_Z, -to_p))
             dist = _ray_sphere_far(p, wi, c, r, inside)
             omega = 2.0 * np.pi * one_minus_cos
             g = omega / (np.pi * r * r)
@@ -481,12 +550,13 @@ class LightSet:
         """
         l = self.lights[li]
         _, _, _, Z = self._frame(li, times)
+        Z, ok = _axis_or_z(Z)                    # zero Z scale: no direction, no light
         n = p.shape[0]
         if l.angle > 0.0:
             wi = _local_to_world(uniform_cone(u, np.cos(0.5 * l.angle)), Z)
         else:
             wi = Z.copy()
-        weight = np.broadcast_to(np.asarray(l.color, float) * float(l.power), (n, 3)).copy()
+        weight = np.broadcast_to(np.asarray(l.color, float) * float(l.power), (n, 3)) * ok[:, None]
         return wi, np.full(n, np.inf), weight
 
     # -----------------------------------------------------------------------
@@ -521,8 +591,8 @@ class LightSet:
         L = np.zeros((n, 3))
         found = np.zeros(n, bool)
         for li, l in enumerate(self.lights):
-            if l.type in ("SUN", "MESH") or (l.type in ("POINT", "SPOT") and l.radius <= 0.0):
-                continue          # MESH: the caster hits the triangles themselves
+            if l.type in ("SUN", "MESH", "WORLD") or (l.type in ("POINT", "SPOT") and l.radius <= 0.0):
+                continue          # MESH: the caster hits the triangles themselves; WORLD: escaping rays
             t, Le = self._hit_one(li, o, d, times)
             closer = (t > 0) & (t < t_best)
             t_best = np.where(closer, t, t_best)
@@ -600,6 +670,8 @@ class LightSet:
         (:meth:`_point_origins`), so caustics get the same soft edges as shadows.
         """
         l = self.lights[li]
+        if l.type == "WORLD":
+            return l.emit(n, rng)                # every direction, through the scene's sphere
         times = np.atleast_1d(np.asarray(times, float))
         u = rng.random((n, 2))
         if l.type == "POINT":
@@ -611,7 +683,8 @@ class LightSet:
             # Uniform in the spot cone (solid angle Omega_c), power I * att * Omega_c / n
             c, _, _, Z = self._frame(li, times)
             cos_half = np.cos(0.5 * l.spot_size)
-            dirs = _local_to_world(uniform_cone(u, cos_half), -Z)
+            axis, _ = _axis_or_z(np.broadcast_to(-Z, (n, 3)))     # zero Z scale: att = 0 below
+            dirs = _local_to_world(uniform_cone(u, cos_half), axis)
             att = spot_attenuation(l, np.sum(dirs * -Z, axis=-1))
             omega_c = 2.0 * np.pi * (1.0 - cos_half)
             power = self.intensity(li)[None, :] * (att * omega_c / n)[:, None]
@@ -628,8 +701,9 @@ class LightSet:
             # Uniform point, cosine-weighted direction: power = L pi A / n = color P / n
             c, ex, ey, A, n_emit = self._area_shape(li, times)
             q = self._area_points(li, ex, ey, c, rng.random((n, 2)))
-            dirs = _local_to_world(cosine_hemisphere(u), n_emit)
-            power = np.broadcast_to(self.flux(li) / n, (n, 3)).copy()
+            axis, ok = _axis_or_z(np.broadcast_to(n_emit, (n, 3)))  # no emitting side: no power
+            dirs = _local_to_world(cosine_hemisphere(u), axis)
+            power = np.broadcast_to(self.flux(li) / n, (n, 3)) * ok[:, None]
             return q, dirs, power
         # SUN: a disc perpendicular to the sun covering the scene's bounding sphere
         _, _, _, Z = self._frame(li, times)
@@ -668,6 +742,7 @@ class LightSet:
         give power = color * S * pi R^2 * cos(theta) / n per photon.
         """
         l = self.lights[li]
+        Z, ok = _axis_or_z(np.broadcast_to(Z, (n, 3)))     # zero Z scale: no direction, no power
         R = np.broadcast_to(np.asarray(R, float), (n,))
         disc = concentric_disk(rng.random((n, 2))) * R[:, None]
         origins = center + back * Z + _local_to_world(np.concatenate([disc, np.zeros((n, 1))], axis=1), Z)
@@ -678,7 +753,7 @@ class LightSet:
         else:
             dirs = -Z.copy()
             cos_t = np.ones(n)
-        power = (np.asarray(l.color, float) * float(l.power))[None, :] * (np.pi * R * R * cos_t / n)[:, None]
+        power = (np.asarray(l.color, float) * float(l.power))[None, :] * (np.pi * R * R * cos_t * ok / n)[:, None]
         return origins, dirs, power
 
     def emit_toward(self, li: int, n: int, times: np.ndarray, rng: np.random.Generator,
@@ -698,6 +773,14 @@ class LightSet:
         times = np.atleast_1d(np.asarray(times, float))
         centers = np.broadcast_to(np.asarray(centers, float), (n, 3))
         radius = float(radius)
+        if l.type == "WORLD":
+            # Every direction through the target sphere (power 4 pi * pi r^2 * L / n), each
+            # photon started outside the whole scene on its own line (as the sun's), so that
+            # occluders anywhere are traced; per-photon centres shift the lines with them.
+            o, d, P = l.emit(n, rng, centers[0], radius)
+            back = np.linalg.norm(centers - self._scene_center, axis=-1) + self._scene_radius + radius
+            o = o + (centers - centers[0]) - d * np.maximum(back - 2.0 * radius, 0.0)[:, None]
+            return o, d, P
         u = rng.random((n, 2))
         if l.type == "SUN":
             # Disc perpendicular to the sun covering the target sphere, upstream of the
@@ -720,12 +803,17 @@ class LightSet:
         else:
             origins, _, _, Z = self._frame(li, times)
             reach = radius + float(l.radius)
-        # Cone toward the sphere: cos_max from sin = reach / d
+        # Cone toward the sphere: cos_max from sin = reach / d.  Inside the sphere
+        # (d <= reach, which includes an emission point at the very centre, where
+        # the axis is undefined) every direction reaches it: the whole sphere of
+        # directions (Omega = 4 pi), as :meth:`emit` for a point light.  An axis
+        # that does not normalise (d too small for its direction to be resolved)
+        # is treated the same way.
         axis, d = _normalize(centers - origins)
-        inside = d <= reach
+        inside = (d <= reach) | ~(np.abs(np.einsum("ij,ij->i", axis, axis) - 1.0) < 1e-6)
         one_minus_cos = np.where(inside, 2.0, _one_minus_cos_from_sin2((reach * reach) / np.maximum(d * d, 1e-300)))
-        local = np.where(inside[:, None], uniform_sphere(u), uniform_cone(u, 1.0 - one_minus_cos))
-        dirs = _local_to_world(local, axis)
+        # (a cone with cos_max = -1 is the uniform sphere; it needs no axis, so +Z stands in)
+        dirs = _local_to_world(uniform_cone(u, 1.0 - one_minus_cos), np.where(inside[:, None], _UNIT_Z, axis))
         if l.type not in ("AREA", "MESH"):
             origins = self._point_origins(li, origins, dirs, rng)
         omega = 2.0 * np.pi * one_minus_cos           # cone solid angle (4 pi inside)

@@ -166,7 +166,7 @@ def _bounding_sphere(scene, inst) -> tuple[np.ndarray, float] | None:
 
 def _light_faces(light, c: np.ndarray, r: float) -> bool:
     """Can the light emit toward the sphere (c, r) at some sampled time?  (spot cone, area side)."""
-    if light.type in ("POINT", "SUN"):
+    if light.type in ("POINT", "SUN", "WORLD"):
         return True
     M = light.transform.at(np.linspace(0.0, 1.0, 1 if light.transform.is_static else 9))
     pos, axis = M[:, :3, 3], -M[:, :3, 2]
@@ -183,19 +183,42 @@ def _light_faces(light, c: np.ndarray, r: float) -> bool:
     return bool(np.any(inside | (ang <= 0.5 * float(light.spot_size))))
 
 
+def world_shines(scene) -> bool:
+    """Does the world light the scene (some channel of color * strength > 0)?"""
+    return bool(np.any(np.asarray(scene.world.radiance, float) > 0))
+
+
+def world_light(scene):
+    """The world as a light entry (:class:`~stpm_core.world_light.WorldLight`) around the scene's sphere."""
+    from .world_light import WorldLight
+    lo, hi = scene.bounds()
+    return WorldLight(scene.world.radiance, 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3))
+
+
+def _lightset_index(lights, n_scene: int) -> list[int]:
+    """Plan light index -> LightSet index: the scene's lights keep theirs; the world is LightSet's WORLD entry."""
+    idx = list(range(n_scene))
+    idx += [i for i, l in enumerate(lights.lights) if l.type == "WORLD"]
+    return idx
+
+
 # ----------------------------------------------------------------------------
 # Photon probe (a few thousand rays through the real caster)
 # ----------------------------------------------------------------------------
 def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[int], diffuse_inst: set,
-           closed_inst: set) -> dict:
+           closed_inst: set, ls_index=None) -> dict:
     """First hits of probe photons: which specular / diffuse instances light reaches.
 
     A hit on the inside (back face) of a closed mesh is light shut in that
     object: it cannot bounce out onto anything else, so it does not count as lit.
 
+    ``emitting`` are plan light indices (the scene's lights, then the world); ``ls_index`` maps
+    them to ``lights`` (LightSet) indices (None: the same).
+
     Returns {'reach_specular': {li: set(instance)}, 'lit_diffuse': set(instance),
     'caustic_stored': int, 'aimed': int, 'emitted': int}.
     """
+    ls_index = ls_index if ls_index is not None else list(range(len(lights)))
     seed = int(getattr(settings, "seed", 0)) if settings is not None else 0
     max_depth = int(getattr(settings, "max_depth", 8)) if settings is not None else 8
     table = MaterialTable(scene.materials)
@@ -206,13 +229,14 @@ def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[i
     for rnd, n in enumerate((PROBE_PHOTONS_AIMED, PROBE_PHOTONS_AIMED_RETRY)):
         if rnd == 1 and (out["caustic_stored"] > 0 or not out["reach_specular"]):
             break
-        _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, inst_offset)
+        _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, inst_offset,
+                     ls_index)
     # -- Photons over each light's whole emission: which diffuse objects are lit directly
     for li in emitting:
         n = PROBE_PHOTONS_LIGHT
         rng = rng_for(seed, STREAM_PLAN, 2, li)
         t = scene.shutter.sample(stratified_1d(n, rng))
-        o, d, Phi = lights.emit(li, n, t, rng)
+        o, d, Phi = lights.emit(ls_index[li], n, t, rng)
         live = np.any(Phi > 0, axis=1)
         if not np.any(live):
             continue
@@ -225,13 +249,14 @@ def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[i
     return out
 
 
-def _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, inst_offset) -> None:
+def _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, seed, rnd, max_depth, inst_offset,
+                 ls_index) -> None:
     """n photons per (light, specular object) pair: first hits on the object, caustic photons stored."""
     for li in emitting:
         for pi, (ii, (c, r)) in enumerate(spec_targets.items()):
             rng = rng_for(seed, STREAM_PLAN, 1, rnd, li, pi)
             t = scene.shutter.sample(stratified_1d(n, rng))
-            o, d, Phi = lights.emit_toward(li, n, t, rng, c, r)
+            o, d, Phi = lights.emit_toward(ls_index[li], n, t, rng, c, r)
             live = np.any(Phi > 0, axis=1)
             if not np.any(live):
                 continue
@@ -286,13 +311,15 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
     reasons: list[str] = []
 
     # -- Motion within the shutter --------------------------------------------------------
-    emits = [l.power > 0 and bool(np.any(np.asarray(l.color, float) > 0)) for l in scene.lights]
+    # The scene's lights, then the world when it shines (it lights every object it can see)
+    plan_lights = list(scene.lights) + ([world_light(scene)] if world_shines(scene) else [])
+    emits = [l.power > 0 and bool(np.any(np.asarray(l.color, float) > 0)) for l in plan_lights]
     moving = [i for i, inst in enumerate(scene.instances)
               if not inst.transform.is_static and not scene.meshes[inst.mesh].is_deforming]
     deforming = [i for i, inst in enumerate(scene.instances) if scene.meshes[inst.mesh].is_deforming]
     # a deforming mesh that also moves rigidly is listed once, as deforming
     camera_moves = not scene.camera.transform.is_static
-    moving_lights = [li for li, l in enumerate(scene.lights) if not l.transform.is_static and emits[li]]
+    moving_lights = [li for li, l in enumerate(plan_lights) if not l.transform.is_static and emits[li]]
     something_moves = bool(moving or deforming or camera_moves or moving_lights)
     lighting_moves = bool(moving or deforming or moving_lights)
     motion_blur = shutter_open and something_moves
@@ -304,7 +331,7 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
         what = ([f"objects {_names(inst_names[i] for i in moving)[:4]}"] if moving else []) \
             + ([f"deforming {_names(inst_names[i] for i in deforming)[:4]}"] if deforming else []) \
             + (["the camera"] if camera_moves else []) \
-            + ([f"lights {_names(scene.lights[i].name for i in moving_lights)[:4]}"] if moving_lights else [])
+            + ([f"lights {_names(plan_lights[i].name for i in moving_lights)[:4]}"] if moving_lights else [])
         reasons.append(f"motion_blur: moving within the {scene.shutter.length:g}-frame shutter: {', '.join(what)}")
 
     # -- Specular objects, diffuse objects, lights ----------------------------------------
@@ -323,12 +350,12 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
     spheres = {i: _bounding_sphere(scene, scene.instances[i]) for i in spec_inst}
     spheres = {i: s for i, s in spheres.items() if s is not None}
     # Geometric reach: a light's cone / side faces the specular object's bounding sphere
-    geo_reach = {li: {i for i, (c, r) in spheres.items() if _light_faces(scene.lights[li], c, r)}
+    geo_reach = {li: {i for i, (c, r) in spheres.items() if _light_faces(plan_lights[li], c, r)}
                  for li in emitting}
     geo_reach = {li: s for li, s in geo_reach.items() if s}
     lit_geo = {i for i in diff_inst for li in emitting
                if (s := _bounding_sphere(scene, scene.instances[i])) is not None
-               and _light_faces(scene.lights[li], *s)}
+               and _light_faces(plan_lights[li], *s)}
 
     # -- Photon probe through the real geometry (occlusion, closed objects) ----------------
     probe_info = None
@@ -342,7 +369,8 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
             caster = make_caster(scene)
         targets = {i: spheres[i] for i in sorted({i for s in geo_reach.values() for i in s})}
         closed = {i for i in lit_geo if per_mesh(_mesh_is_closed, i)}
-        pr = _probe(scene, settings, caster, lights, targets, emitting, set(lit_geo), closed)
+        pr = _probe(scene, settings, caster, lights, targets, emitting, set(lit_geo), closed,
+                    ls_index=_lightset_index(lights, len(scene.lights)))
         reach = {li: s for li, s in pr["reach_specular"].items() if s}
         lit_diffuse = pr["lit_diffuse"]
         probe_info = {"photons_aimed": pr["aimed"], "photons_emitted": pr["emitted"],
@@ -417,13 +445,13 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
         "moving_objects": _names(inst_names[i] for i in moving),
         "deforming_objects": _names(inst_names[i] for i in deforming),
         "camera_moves": bool(camera_moves),
-        "moving_lights": _names(scene.lights[i].name for i in moving_lights),
+        "moving_lights": _names(plan_lights[i].name for i in moving_lights),
         "specular_objects": _names(inst_names[i] for i in spec_inst),
         "diffuse_objects": _names(inst_names[i] for i in diff_inst),
         "self_reflecting_objects": _names(inst_names[i] for i in self_refl),
-        "lights": _names(scene.lights[i].name for i in emitting),
-        "dark_lights": _names(scene.lights[i].name for i in dark),
-        "lights_reaching_specular": {scene.lights[li].name: _names(inst_names[i] for i in sorted(s))
+        "lights": _names(plan_lights[i].name for i in emitting),
+        "dark_lights": _names(plan_lights[i].name for i in dark),
+        "lights_reaching_specular": {plan_lights[li].name: _names(inst_names[i] for i in sorted(s))
                                      for li, s in sorted(reach.items())},
         "lit_diffuse_objects": _names(inst_names[i] for i in lit),
         "probe": probe_info,

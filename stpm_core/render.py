@@ -29,7 +29,7 @@ from .photons import build_photon_maps
 from .plan import apply_plan, make_plan
 from .raycast import make_caster
 from .sampling import rng_for
-from .scene import validate_scene
+from .scene import scene_warnings, validate_scene
 
 __all__ = ["render", "RenderResult", "PASSES", "PASS_NAMES"]
 
@@ -113,7 +113,7 @@ def render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     t_wall = _time.perf_counter()
     settings.validate()
     validate_scene(scene)
-    warnings: list[str] = []
+    warnings: list[str] = scene_warnings(scene)     # lights that emit nothing (zero area / scale)
     if cancel is not None and cancel():
         raise RenderCancelled("render cancelled")
     global _FIRST_RENDER

@@ -31,10 +31,23 @@ from .shutter import Shutter
 
 __all__ = [
     "Mesh", "Instance", "Camera", "Light", "Material", "World", "Scene",
-    "validate_scene", "SCENE_FORMAT_VERSION",
+    "validate_scene", "scene_warnings", "SCENE_FORMAT_VERSION", "MAX_EMISSION",
 ]
 
 SCENE_FORMAT_VERSION = 1
+
+#: Largest emission :func:`validate_scene` accepts (docs/scene-format.md, "Limits"):
+#: light ``power * max(color)`` (W, or W/m^2 for a sun), material ``emission``
+#: and ``world.color * world.strength`` (W/(m^2 sr)).  The passes and the photon
+#: records are float32 (largest finite 3.4e38); 1e30 leaves a factor 3.4e8 for
+#: what geometry multiplies in (a point light's P / (4 pi d^2) stays finite down
+#: to d = 1.5e-5 m, a photon's share of the flux P / n for any n >= 1, density
+#: estimates over gather radii >= 1e-4 m).
+MAX_EMISSION = 1e30
+
+#: A transform axis shorter than this (scene units per local unit) counts as
+#: zero scale: the direction it should give is undefined.
+_ZERO_SCALE = 1e-150
 
 
 @dataclass
@@ -137,7 +150,8 @@ class Camera:
     Attributes
     ----------
     type : 'PERSP' or 'ORTHO'.
-    transform : camera-to-world motion (scale is ignored).
+    transform : camera-to-world motion (scale is ignored, but its three axis
+        columns must be non-zero and not parallel: :func:`validate_scene`).
     lens : focal length in mm (perspective).
     sensor_width, sensor_height : mm.
     sensor_fit : 'AUTO', 'HORIZONTAL' or 'VERTICAL' (Blender semantics).
@@ -168,7 +182,9 @@ class Light:
     type : 'POINT', 'SPOT', 'AREA' or 'SUN'.
     color : (3,) linear RGB multiplier.
     power : watts for POINT / SPOT / AREA; for SUN, strength in W/m^2.
-    transform : light-to-world motion.
+    transform : light-to-world motion.  SPOT, SUN and AREA lights shine along
+        its -Z column (a mirroring scale turns them; a zero Z scale leaves
+        them no direction: :func:`scene_warnings`).
     radius : POINT / SPOT sphere radius in scene units (0 = a true point).
     use_soft_falloff : POINT / SPOT: Blender's soft falloff near the sphere.
     spot_size : SPOT full cone angle in radians.
@@ -335,11 +351,99 @@ def _check_range(name: str, v, lo: float, hi: float = np.inf) -> None:
         raise SceneError(f"{name} must be in [{lo}, {hi}], got {v}")
 
 
+def _check_emission(name: str, value: float, what: str) -> None:
+    """Raise SceneError when an emission quantity exceeds :data:`MAX_EMISSION`."""
+    if value > MAX_EMISSION:
+        raise SceneError(f"{name} is {value:g} {what}, above the limit {MAX_EMISSION:g} "
+                         f"(the float32 image and photon records would overflow to inf)")
+
+
+def _transform_samples(tr: MotionTransform) -> np.ndarray:
+    """Matrices (m, 4, 4) of a motion at its keys and halfway between them (where an animated scale may cross 0)."""
+    if tr.is_static:
+        return tr.matrices
+    mid = 0.5 * (tr.times[1:] + tr.times[:-1])
+    return np.concatenate([tr.matrices, tr.at(mid)], axis=0)
+
+
+def _axis_lengths(M: np.ndarray) -> np.ndarray:
+    """Lengths (m, 3) of the X, Y, Z columns of matrices M (m, 4, 4), without underflow."""
+    A = np.abs(M[:, :3, :3])
+    big = np.maximum(A.max(axis=1), 1e-300)                 # (m, 3) per column
+    return big * np.sqrt(np.sum((A / big[:, None, :]) ** 2, axis=1))
+
+
+def _check_camera_transform(c: Camera) -> None:
+    """A camera whose axes cannot form rays (zero scale, collapsed axes) is an error.
+
+    The camera ignores scale (its columns are normalised), so a scale of any
+    size and sign renders, but a zero column or two parallel columns leave the
+    ray directions undefined: |det| of the column-normalised rotation < 1e-6.
+    """
+    if not isinstance(c.transform, MotionTransform):
+        raise SceneError("camera.transform must be a MotionTransform")
+    M = _transform_samples(c.transform)
+    ln = _axis_lengths(M)
+    Rn = M[:, :3, :3] / np.where(ln > _ZERO_SCALE, ln, np.inf)[:, None, :]
+    det = np.abs(np.linalg.det(Rn))
+    bad = np.nonzero(~(det >= 1e-6))[0]
+    if bad.size:
+        k = int(bad[0])
+        raise SceneError(f"camera.transform cannot form rays: its X, Y, Z axes have lengths "
+                         f"{', '.join(f'{v:.3g}' for v in ln[k])} and |det| {det[k]:.3g} of the normalised axes "
+                         f"(zero scale or collapsed axes; any non-zero scale works, the camera ignores it)")
+
+
+def scene_warnings(scene: Scene) -> list[str]:
+    """Inputs that are valid but render a light black without saying so: one line each.
+
+    * an AREA light with size 0 (or size_y 0 for RECTANGLE / ELLIPSE), or
+      whose transform has a zero X or Y scale (zero area);
+    * a SPOT, SUN or AREA light whose transform has a zero Z scale (its
+      direction, the -Z column, is undefined), or an AREA light whose -Z
+      column lies in its plane (no emitting side).
+
+    Transforms are checked at their keys and halfway between them.  A
+    mirroring (negative) scale is not a warning: it turns SPOT, SUN and AREA
+    lights alike, as in Cycles.  The renderer appends these to its warnings.
+    """
+    out = []
+    for li, l in enumerate(scene.lights):
+        tr = l.transform
+        if l.type not in ("SPOT", "SUN", "AREA") or not isinstance(tr, MotionTransform):
+            continue
+        who = f"light {l.name!r} ({l.type})"
+        M = _transform_samples(tr)
+        ln = _axis_lengths(M)
+        if l.type == "AREA":
+            sy = l.size_y if l.shape in ("RECTANGLE", "ELLIPSE") else l.size
+            if l.size <= 0 or sy <= 0:
+                out.append(f"{who}: size {l.size:g} x {sy:g} has zero area: the light emits nothing")
+                continue
+            if np.any(ln[:, :2] <= _ZERO_SCALE):
+                out.append(f"{who}: its transform has zero X or Y scale (zero area): the light emits nothing")
+                continue
+        if np.any(ln[:, 2] <= _ZERO_SCALE):
+            out.append(f"{who}: its transform has zero Z scale, so its direction (-Z) is undefined: "
+                       f"the light emits nothing")
+            continue
+        if l.type == "AREA":
+            g = np.cross(M[:, :3, 0] / ln[:, 0:1], M[:, :3, 1] / ln[:, 1:2])
+            z = M[:, :3, 2] / ln[:, 2:3]
+            if np.any(np.abs(np.sum(g * z, axis=1)) < 1e-9):
+                out.append(f"{who}: its -Z axis lies in the light's plane (sheared transform): "
+                           f"the light emits nothing")
+    return out
+
+
 def validate_scene(scene: Scene) -> None:
     """Check every field; raise :class:`SceneError` naming the first bad one.
 
-    Checks shapes, dtypes, NaN/inf, index ranges, enum values and physical
-    ranges (negative power, albedo > 1, IOR < 1 ...).
+    Checks shapes, dtypes, NaN/inf, index ranges, enum values, physical
+    ranges (negative power, albedo > 1, IOR < 1 ...), emission up to
+    :data:`MAX_EMISSION` and a camera transform that can form rays.  Valid
+    but suspicious inputs (a light that emits nothing) are reported by
+    :func:`scene_warnings` instead.
     """
     for mi, m in enumerate(scene.meshes):
         p = f"meshes[{mi}] ({m.name!r})"
@@ -387,12 +491,16 @@ def validate_scene(scene: Scene) -> None:
         _check_range(f"camera.{name}", getattr(c, name), -1e6, 1e6)
     if not np.isfinite(c.clip_end) or c.clip_end <= c.clip_start:
         raise SceneError(f"camera.clip_end must be finite and > clip_start, got {c.clip_end}")
+    _check_camera_transform(c)
     for li, l in enumerate(scene.lights):
         p = f"lights[{li}] ({l.name!r})"
         if l.type not in ("POINT", "SPOT", "AREA", "SUN"):
             raise SceneError(f"{p}.type must be POINT, SPOT, AREA or SUN, got {l.type!r}")
         _check_vec3(f"{p}.color", l.color, nonneg=True)
         _check_range(f"{p}.power", l.power, 0.0)
+        unit = "W/m^2" if l.type == "SUN" else "W"
+        _check_emission(f"{p}.power", float(l.power), unit)
+        _check_emission(f"{p}.power * max(color)", float(l.power) * float(np.max(l.color)), unit)
         _check_range(f"{p}.radius", l.radius, 0.0)
         _check_range(f"{p}.spot_size", l.spot_size, 0.0, np.pi)
         _check_range(f"{p}.spot_blend", l.spot_blend, 0.0, 1.0)
@@ -408,11 +516,15 @@ def validate_scene(scene: Scene) -> None:
         if np.any(np.asarray(m.base_color) > 1.0):
             raise SceneError(f"{p}.base_color must be <= 1 (energy conserving), got {np.asarray(m.base_color).tolist()}")
         _check_vec3(f"{p}.emission", m.emission, nonneg=True)
+        _check_emission(f"{p}.emission", float(np.max(m.emission)), "W/(m^2 sr)")
         for name in ("metallic", "transmission", "roughness", "specular"):
             _check_range(f"{p}.{name}", getattr(m, name), 0.0, 1.0)
         _check_range(f"{p}.ior", m.ior, 1.0, 10.0)
     _check_vec3("world.color", scene.world.color, nonneg=True)
     _check_range("world.strength", scene.world.strength, 0.0)
+    _check_emission("world.strength", float(scene.world.strength), "W/(m^2 sr)")
+    _check_emission("world.color * strength", float(np.max(scene.world.color)) * float(scene.world.strength),
+                    "W/(m^2 sr)")
     w, h = scene.resolution
     if int(w) != w or int(h) != h or not (1 <= w <= 65536 and 1 <= h <= 65536):
         raise SceneError(f"resolution must be two integers in [1, 65536], got {scene.resolution}")

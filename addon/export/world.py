@@ -1,4 +1,4 @@
-"""Blender world -> :class:`stpm_core.scene.World` (a constant background)."""
+"""Blender world -> :class:`stpm_core.scene.World` (a constant environment: background and light)."""
 from __future__ import annotations
 
 import numpy as np
@@ -24,15 +24,10 @@ def _output_node(tree):
 def export_world(world, warnings: list) -> "scene_model.World":
     """Background colour * strength from the Background node (or ``world.color``).
 
-    The core has no environment light: a non-black world is what the camera
-    sees behind everything, but it lights nothing (warned).
+    The core lights the scene with it as a constant environment (stpm_core/world_light.py), as
+    Cycles does; a textured background lights and shows as its default colour (warned).
     """
-    out = _export_world(world, warnings)
-    if world is not None and float(np.max(out.color * out.strength)) > 0.0:
-        warnings.append(f"world {world.name!r}: the world is shown as background only and does not light the "
-                        f"scene in STPM (no environment lighting); use an area light or an emissive plane "
-                        f"to light with it")
-    return out
+    return _export_world(world, warnings)
 
 
 def _export_world(world, warnings: list) -> "scene_model.World":

@@ -216,7 +216,7 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
             continue
         pos = light.transform.at(0.5)[:3, 3]
         for (ii, c, r) in targets:
-            if light.type == "SUN":
+            if light.type in ("SUN", "WORLD"):
                 frac = min(1.0, (r / r_scene) ** 2)
             else:
                 dist = float(np.linalg.norm(c - pos))
