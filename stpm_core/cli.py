@@ -16,7 +16,7 @@ settings; a .blend's ``scene.stpm``), else the :class:`RenderSettings` defaults.
 
 Exit status: 0 success; 1 a user error (one ``stpm: error: ...`` line on
 stderr); 2 bad command-line syntax; 3 an internal error (a bug: please
-report); 130 cancelled with Ctrl-C.  See docs/cli.md.
+report); 130 cancelled with Ctrl-C (143 with SIGTERM).  See docs/cli.md.
 """
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ import os
 import re
 import signal
 import sys
+import tempfile
 import time
 from dataclasses import fields
 from pathlib import Path
@@ -35,6 +36,9 @@ from .errors import RenderCancelled, SceneError, SettingsError, StpmError
 __all__ = ["main", "parse_frames", "load_any_scene"]
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_INTERNAL, EXIT_CANCELLED = 0, 1, 2, 3, 130
+
+# Blender's frame limits (MINAFRAME, MAXFRAME): --frame beyond them is refused.
+FRAME_MIN, FRAME_MAX = -1_048_574, 1_048_574
 
 
 class UsageError(StpmError):
@@ -61,6 +65,9 @@ def parse_frames(text: str) -> list[int]:
         raise UsageError(f"--frame must be F or A-B with integer frames, got {text!r}")
     a = int(m.group(1))
     b = int(m.group(2)) if m.group(2) is not None else a
+    for f in (a, b):
+        if not FRAME_MIN <= f <= FRAME_MAX:
+            raise UsageError(f"--frame {f} is outside Blender's frame limits [{FRAME_MIN}, {FRAME_MAX}]")
     if b < a:
         raise UsageError(f"--frame range {text!r} ends before it starts")
     if b - a >= 100_000:
@@ -86,20 +93,23 @@ def _lower_choice(*allowed):
 
 def _build_parser() -> _Parser:
     p = _Parser(prog="stpm", description="STPM: time-dependent photon mapping renderer.")
+    p.add_argument("--version", action="version", version=f"stpm {_version()}")
     sub = p.add_subparsers(dest="command", metavar="{render,plan,compare}", parser_class=_Parser)
 
     r = sub.add_parser("render", help="render a scene to a multilayer EXR and a PNG preview")
     r.add_argument("scene", help="scene file: .stpm / .npz (core) or .blend")
-    r.add_argument("--frame", help="frame F or range A-B (default: the file's frame)")
-    r.add_argument("--output", "-o", help="output .exr (default: next to the scene, same stem); "
+    r.add_argument("--frame", help=f"frame F or range A-B (A..B), integers in [{FRAME_MIN}, {FRAME_MAX}]; "
+                   "a range needs a .blend (default: the file's frame)")
+    r.add_argument("--output", "-o", metavar="OUT.exr",
+                   help="output .exr (default: next to the scene, same stem); "
                    "'#' characters are replaced by the zero-padded frame number")
     _add_setting_options(r)
     r.add_argument("--stats", metavar="STATS.json", help="write timings, counts and settings as JSON")
-    r.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    r.add_argument("--quiet", "-q", action="store_true", help="no progress bar, timing line or Blender log")
 
     pl = sub.add_parser("plan", help="print which effects the scene calls for, and why")
     pl.add_argument("scene")
-    pl.add_argument("--frame", help="frame F (default: the file's frame)")
+    pl.add_argument("--frame", help=f"frame F, an integer in [{FRAME_MIN}, {FRAME_MAX}] (default: the file's frame)")
     pl.add_argument("--json", action="store_true", help="print the plan as JSON")
 
     # `compare` has many options of its own: its parser lives with it (stpm_core.compare.command).
@@ -121,18 +131,34 @@ def _add_setting_options(parser, skip: tuple[str, ...] = ()) -> None:
     def opt(*names, **kw):
         if kw.get("dest", names[0].lstrip("-")) not in skip:
             add(*names, **kw)
-    opt("--method", dest="method", type=_lower_choice("photon", "accumulation"), metavar="{photon,accumulation}")
+    opt("--method", dest="method", type=_lower_choice("photon", "accumulation"), metavar="{photon,accumulation}",
+        help="photon: time-stamped photon maps; accumulation: the average of N stills (the baseline)")
     opt("--estimator", dest="estimator", type=_lower_choice("standard", "temporal", "kd4d"),
-                        metavar="{standard,temporal,kd4d}")
-    opt("--accumulation-steps", type=int, dest="accumulation_steps", metavar="N")
-    opt("--samples", type=int, dest="samples", metavar="S")
-    opt("--photons-global", type=int, dest="photons_global", metavar="N")
-    opt("--photons-caustic", type=int, dest="photons_caustic", metavar="N")
-    opt("--k", type=int, dest="k_nearest", metavar="K")
-    opt("--temporal-alpha", type=float, dest="temporal_alpha", metavar="A")
-    opt("--time-scale", type=float, dest="time_scale", metavar="S")
-    opt("--seed", type=int, dest="seed", metavar="S")
-    opt("--resolution", type=_resolution, dest="resolution", metavar="WxH")
+        metavar="{standard,temporal,kd4d}", help="photon density estimate (method photon only)")
+    opt("--accumulation-steps", type=int, dest="accumulation_steps", metavar="N",
+        help="stills averaged by --method accumulation, integer in [1, 4096]")
+    opt("--samples", type=int, dest="samples", metavar="S", help="camera samples per pixel, integer in [1, 65536]")
+    opt("--photons-global", type=int, dest="photons_global", metavar="N",
+        help="photons emitted for the global (indirect) map, integer in [0, 2^31]")
+    opt("--photons-caustic", type=int, dest="photons_caustic", metavar="N",
+        help="photons emitted for the caustic map, integer in [0, 2^31]")
+    opt("--k", type=int, dest="k_nearest", metavar="K", help="photons per estimate, integer in [1, 100000]")
+    opt("--temporal-alpha", type=float, dest="temporal_alpha", metavar="A",
+        help="TEMPORAL candidates as a multiple of k: 0 (automatic) or a number in [1, 1e6]")
+    opt("--time-scale", type=float, dest="time_scale", metavar="S",
+        help="KD4D's scene units per shutter, >= 0 (0: automatic)")
+    opt("--seed", type=int, dest="seed", metavar="S", help="random seed, integer in [0, 2^63 - 1]")
+    opt("--resolution", type=_resolution, dest="resolution", metavar="WxH",
+        help="image size, W and H integers in [1, 65536] (default: the scene's)")
+
+
+def _version() -> str:
+    """The installed package's version (pyproject.toml), or 'unknown' when run from a bare checkout."""
+    try:
+        from importlib.metadata import version
+        return version("stpm")
+    except Exception:  # noqa: BLE001 -- not installed: no metadata
+        return "unknown"
 
 
 # Command-line option -> RenderSettings field (only the ones the user gave override).
@@ -193,11 +219,76 @@ class _stdout_to_stderr:
         return False
 
 
-def load_any_scene(path, frame: int | None):
+class _BlenderOutput:
+    """Capture file descriptors 1 and 2 while Blender loads a file, then pass on what the user should see.
+
+    Blender writes its log ("Read blend: ...") and its own error lines ("Error:
+    File format is not supported ...") straight to the descriptors from C.  On
+    success the captured lines go to stderr (stdout stays clean for ``plan
+    --json``), without the "Read blend:" line when ``quiet``.  On failure they
+    are dropped: the ``stpm: error:`` line says it once (``STPM_DEBUG`` keeps
+    them).  Ctrl-C messages printed meanwhile go to the real stderr at once.
+    """
+
+    def __init__(self, quiet: bool = False):
+        self.quiet = quiet
+        self._saved = None
+        self.text = ""
+
+    def __enter__(self):
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        try:
+            self._tmp = tempfile.TemporaryFile()
+            self._saved = (os.dup(1), os.dup(2))
+        except OSError:  # no real descriptors (embedded): leave them alone
+            self._saved = None
+            return self
+        os.dup2(self._tmp.fileno(), 1)
+        os.dup2(self._tmp.fileno(), 2)
+        flag = _CancelFlag.active
+        if flag is not None:
+            self._flag_fd, flag.err_fd = flag.err_fd, self._saved[1]
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if self._saved is None:
+            return False
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os.dup2(self._saved[0], 1)
+        os.dup2(self._saved[1], 2)
+        for fd in self._saved:
+            os.close(fd)
+        flag = _CancelFlag.active
+        if flag is not None:
+            flag.err_fd = self._flag_fd
+        self._tmp.seek(0)
+        self.text = self._tmp.read().decode("utf-8", errors="replace")
+        self._tmp.close()
+        if exc_type is not None and not os.environ.get("STPM_DEBUG"):
+            return False
+        keep = [line for line in self.text.splitlines()
+                if line.strip() and not (self.quiet and "Read blend:" in line)]
+        if keep:
+            sys.stderr.write("\n".join(keep) + "\n")
+            sys.stderr.flush()
+        return False
+
+
+def load_any_scene(path, frame: int | None, *, quiet: bool = False):
     """(Scene, RenderSettings, export seconds) from a core scene file or a .blend.
 
     A core file holds one frame: asking for another is an error.  A .blend is
-    loaded through ``addon.batch.load_blend(path, frame)`` (bpy, imported lazily).
+    loaded through ``addon.batch.load_blend(path, frame)`` (bpy, imported lazily);
+    Blender's own console output is handled by :class:`_BlenderOutput`
+    (``quiet`` drops its "Read blend:" line).
     """
     path = Path(path)
     if not path.exists():
@@ -215,21 +306,49 @@ def load_any_scene(path, frame: int | None):
         if settings is None:
             settings = _settings_from_dict(None, path.name)
     else:
-        try:
-            from addon import batch  # bpy lives only in addon/
-        except ImportError as e:
-            raise StpmError(f"cannot load {path.name}: .blend files need Blender's bpy module and "
-                            f"addon.batch ({e}); install the 'test' extra or export a .stpm scene") from None
-        with _stdout_to_stderr():  # Blender's own log lines must not pollute stdout (plan --json)
-            scene, d = batch.load_blend(str(path), frame)
+        with _BlenderOutput(quiet=quiet):  # Blender's log: to stderr, or dropped when it failed
+            try:
+                from addon import batch  # bpy lives only in addon/
+            except ImportError as e:
+                raise StpmError(f"cannot load {path.name}: .blend files need Blender's bpy module and "
+                                f"addon.batch ({e}); install the 'test' extra or export a .stpm scene") from None
+            try:
+                scene, d = batch.load_blend(str(path), frame)
+            except StpmError as e:  # "cannot open x.blend: Error: File format ...": say "Error" once
+                raise type(e)(str(e).replace(": Error: ", ": ")) from None
         settings = _settings_from_dict(d, path.name)
     return scene, settings, time.perf_counter() - t0
 
 
-def _default_output(scene_path: Path, frame: int | None, many: bool) -> str:
+def _blend_frame_range(scene) -> tuple[int, int] | None:
+    """(frame_start, frame_end) of the .blend ``scene`` was exported from, or None if unknown.
+
+    From ``scene.metadata['frame_range']`` when the exporter records it, else from
+    the bpy module already loaded by the export (stpm_core never imports bpy).
+    """
+    meta = scene.metadata if isinstance(scene.metadata, dict) else {}
+    rng = meta.get("frame_range")
+    if rng is not None:
+        try:
+            return int(rng[0]), int(rng[1])
+        except (TypeError, ValueError, IndexError):
+            return None
+    bpy = sys.modules.get("bpy")
+    try:
+        bscene = bpy.data.scenes[meta["blender_scene"]] if "blender_scene" in meta else bpy.context.scene
+        return int(bscene.frame_start), int(bscene.frame_end)
+    except Exception:  # noqa: BLE001 -- no bpy or no such scene: no range to check
+        return None
+
+
+def _default_exr(scene_path: Path, frame: int | None, numbered: bool) -> Path:
+    """The default output: next to the scene, same stem, ``_NNNN`` when numbered.
+
+    Built directly rather than through a '#' template, so a '#' in the scene's
+    own name (``shot #1.stpm``) stays as it is.
+    """
     stem = scene_path.with_suffix("")
-    return f"{stem}_####.exr" if many or (frame is not None and scene_path.suffix.lower() == ".blend") \
-        else f"{stem}.exr"
+    return Path(f"{stem}_{frame:04d}.exr") if numbered and frame is not None else Path(f"{stem}.exr")
 
 
 def _frame_path(template: str, frame: int | None, many: bool) -> Path:
@@ -263,42 +382,190 @@ def _option_message(message: str, overrides: dict) -> str:
     return message
 
 
-def _check_writable_dir(path: Path, what: str) -> None:
+def _check_output_path(path: Path, what: str, probed: set | None = None) -> None:
+    """Refuse, before any rendering, an output that cannot be written: one line naming the problem.
+
+    ``path`` must not be a directory, and its folder must exist and take a new
+    file (probed by creating and removing a hidden file: this also catches
+    read-only file systems, which ``os.access`` misses for root).  ``probed``:
+    folders already probed (a frame range writes many files to one folder).
+    """
+    if path.is_dir():
+        raise StpmError(f"cannot write {what} {path}: it is a directory")
     parent = path.resolve().parent
     if not parent.is_dir():
-        raise StpmError(f"cannot write {what} {path}: directory {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise StpmError(f"cannot write {what} {path}: directory {parent} is not writable")
+        state = "is not a directory" if parent.exists() else "does not exist"
+        raise StpmError(f"cannot write {what} {path}: directory {parent} {state}")
+    if probed is not None and parent in probed:
+        return
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".stpm-probe-", dir=parent)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise StpmError(f"cannot write {what} {path}: directory {parent} is not writable "
+                        f"({e.strerror or e})") from None
+    if probed is not None:
+        probed.add(parent)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Do two paths name the same file (resolved real paths; an existing file also by inode)?"""
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def _check_outputs(out_exr: Path, out_png: Path, stats: Path | None, scene_path: Path,
+                   probed: set | None = None) -> None:
+    """Every output of one frame writable, and no two of them (or the scene) the same file."""
+    _check_output_path(out_exr, "output", probed)
+    _check_output_path(out_png, "PNG preview", probed)
+    if stats is not None:
+        _check_output_path(stats, "stats file", probed)
+    for p, what in ((out_exr, "output EXR"), (out_png, "PNG preview")):
+        if _same_file(p, scene_path):
+            raise StpmError(f"the {what} {p} is the scene file itself: choose another --output")
+    if stats is not None:
+        for p, what in ((out_exr, "output EXR"), (out_png, "PNG preview"), (scene_path, "scene file")):
+            if _same_file(stats, p):
+                raise StpmError(f"--stats {stats} is the same file as the {what}: choose another name")
+
+
+# Peak bytes per pixel of one frame, measured (peak RSS of `stpm render` at 2000x1500 minus at
+# 100x100, 1 sample): 239 (PHOTON: the film's float32 sums, resolve()'s temporaries, the passes,
+# the EXR / PNG writers' copies) and 481 (ACCUMULATION: also a float64 sum and one still's passes).
+# Rounded up; photon maps and per-tile buffers come on top (docs/cli.md, "Memory").
+BYTES_PER_PIXEL = {"PHOTON": 256, "ACCUMULATION": 512}
+
+
+def _available_memory() -> int | None:
+    """Bytes of memory available now: /proc/meminfo MemAvailable, else physical memory; None if unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def image_memory(resolution, method: str = "PHOTON") -> int:
+    """Estimated peak bytes of the image buffers of one frame at ``resolution`` (W, H)."""
+    w, h = int(resolution[0]), int(resolution[1])
+    return w * h * BYTES_PER_PIXEL.get(str(method).upper(), BYTES_PER_PIXEL["ACCUMULATION"])
+
+
+def _check_memory(resolution, method: str) -> None:
+    """Refuse, before rendering, an image whose buffers cannot fit in the memory available."""
+    need = image_memory(resolution, method)
+    avail = _available_memory()
+    if avail is not None and need > avail:
+        w, h = int(resolution[0]), int(resolution[1])
+        raise StpmError(f"{w}x{h} needs about {need / 2**30:.1f} GiB of memory for the image buffers, "
+                        f"more than the {avail / 2**30:.1f} GiB available: lower --resolution")
 
 
 # ----------------------------------------------------------------------------
-# Ctrl-C: first press cancels the render cleanly, a second one aborts
+# Ctrl-C / SIGTERM: the first one cancels cleanly, a second one aborts at once
 # ----------------------------------------------------------------------------
 class _CancelFlag:
+    """SIGINT and SIGTERM handling, and the ``cancel() -> bool`` the renderer polls.
+
+    The first signal only sets the flag (so it is safe at any moment, even inside
+    ``import bpy`` or a .blend load, where a KeyboardInterrupt can crash Blender):
+    the command stops at its next check (the renderer polls it per tile and per
+    photon batch; the CLI before rendering and before committing outputs) and
+    exits 130 (143 for SIGTERM).  A second signal aborts at once: it removes the
+    temporary output files being written and ends the process with ``os._exit``.
+
+    ``main`` installs one for the whole command; a nested ``with _CancelFlag()``
+    (``stpm compare``) returns that one.  ``err_fd``: where the messages go (a
+    descriptor; None = sys.stderr).
+    """
+
+    active: "_CancelFlag | None" = None
+
     def __init__(self):
-        self.set = False
-        self._old = None
+        self.signum: int | None = None
+        self.err_fd: int | None = None
+        self._old: dict = {}
+        self._outer = None
+
+    @property
+    def set(self) -> bool:
+        return self.signum is not None
 
     def __call__(self) -> bool:
-        return self.set
+        return self.signum is not None
+
+    def exit_status(self) -> int:
+        return 128 + int(self.signum) if self.signum is not None else EXIT_CANCELLED
+
+    def _say(self, text: str) -> None:
+        try:
+            if self.err_fd is not None:
+                os.write(self.err_fd, text.encode())
+            else:
+                sys.stderr.write(text)
+                sys.stderr.flush()
+        except (OSError, ValueError, RuntimeError):
+            pass
 
     def _handler(self, signum, frame):
-        if self.set:
-            raise KeyboardInterrupt
-        self.set = True
-        print("\nstpm: cancelling (Ctrl-C again to abort)", file=sys.stderr, flush=True)
+        if self.signum is not None:
+            from .imageio import remove_pending_temps
+            remove_pending_temps()
+            lead = "\n" if getattr(sys.stderr, "isatty", lambda: False)() else ""
+            self._say(f"{lead}stpm: aborted\n")
+            try:
+                sys.stdout.flush()
+            except (OSError, ValueError, RuntimeError):
+                pass
+            os._exit(128 + int(signum))
+        self.signum = signum
+        lead = "\n" if getattr(sys.stderr, "isatty", lambda: False)() else ""
+        what = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+        self._say(f"{lead}stpm: cancelling ({what} again to abort)\n")
 
     def __enter__(self):
+        outer = _CancelFlag.active
+        if outer is not None:
+            self._outer = outer
+            return outer
         try:
-            self._old = signal.signal(signal.SIGINT, self._handler)
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self._handler)
         except ValueError:  # not the main thread (embedded use): no handler
-            self._old = None
+            for sig, old in self._old.items():
+                signal.signal(sig, old)
+            self._old = {}
+            return self
+        _CancelFlag.active = self
         return self
 
     def __exit__(self, *exc):
-        if self._old is not None:
-            signal.signal(signal.SIGINT, self._old)
+        if self._outer is not None:
+            return False
+        for sig, old in self._old.items():
+            signal.signal(sig, old if old is not None else signal.SIG_DFL)
+        self._old = {}
+        if _CancelFlag.active is self:
+            _CancelFlag.active = None
         return False
+
+
+def _check_cancel(cancel) -> None:
+    """Raise RenderCancelled if a Ctrl-C came (between the steps the renderer polls itself)."""
+    if cancel is not None and cancel():
+        raise RenderCancelled("cancelled")
 
 
 # ----------------------------------------------------------------------------
@@ -309,83 +576,146 @@ def _cmd_render(args) -> int:
     scene_path = Path(args.scene)
     frames = parse_frames(args.frame) if args.frame is not None else [None]
     many = len(frames) > 1
-    template = args.output or _default_output(scene_path, frames[0], many)
-    if not template.lower().endswith(".exr"):
-        raise UsageError(f"--output must end in .exr, got {template!r}")
+    if args.output is not None and not args.output.lower().endswith(".exr"):
+        raise UsageError(f"--output must end in .exr, got {args.output!r}")
+    if args.output is not None:
+        def exr_for(f):
+            return _frame_path(args.output, f, many)
+    else:  # a .blend frame or a range -> shot_0001.exr (docs/cli.md)
+        numbered = many or (frames[0] is not None and scene_path.suffix.lower() == ".blend")
+
+        def exr_for(f):
+            return _default_exr(scene_path, f, numbered)
 
     overrides = _checked_overrides(args)
+    if not scene_path.exists():  # the first thing to say (before any complaint about outputs)
+        raise StpmError(f"scene file not found: {scene_path}")
+    # A core scene file holds one frame: a range is refused before anything renders
+    if many and scene_path.is_file() and _scene_kind(scene_path) == "core":
+        scene, _, _ = load_any_scene(scene_path, None)
+        raise StpmError(f"{scene_path.name} holds frame {scene.frame:g} only (a core scene file is one frame); "
+                        f"cannot render the range {args.frame.strip()}: render a .blend for several frames")
+    # Fail fast on outputs that cannot be written, before any loading or rendering
+    probed: set = set()
+    for frame in frames:
+        out_exr = exr_for(frame)
+        _check_outputs(out_exr, out_exr.with_suffix(".png"),
+                       _frame_path(args.stats, frame, many) if args.stats else None, scene_path, probed)
     # A frame range keeps the baked static geometry from frame to frame while it does not change
     from .raycast import set_persistent_static
     set_persistent_static(many)
     try:
-        return _render_frames(args, frames, many, template, overrides, scene_path, t_start)
+        return _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start)
     finally:
         set_persistent_static(False)
 
 
-def _render_frames(args, frames, many, template, overrides, scene_path, t_start) -> int:
-    """The frame loop of :func:`_cmd_render`: load, render and write each frame."""
-    from .imageio import write_exr, write_png
+def _warn(line: str) -> None:
+    print(f"stpm: warning: {line}", file=sys.stderr, flush=True)
+
+
+def _warn_frames_outside(scene, frames) -> None:
+    """A warning line when frames of the range lie outside the .blend's frame_start..frame_end."""
+    rng = _blend_frame_range(scene)
+    if rng is None or frames == [None]:
+        return
+    outside = [f for f in frames if not rng[0] <= f <= rng[1]]
+    if outside:
+        which = f"frame {outside[0]}" if len(outside) == 1 else f"{len(outside)} frames ({outside[0]}..{outside[-1]})"
+        _warn(f"{which} outside the file's frame range {rng[0]}..{rng[1]} (rendered anyway, as Blender does)")
+
+
+def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) -> int:
+    """The frame loop of :func:`_cmd_render`: load, render and write each frame.
+
+    The outputs of a frame (EXR, PNG, stats) are written to temporary files and
+    renamed into place together once all are written, so a failure, a kill or a
+    Ctrl-C leaves either all of them or none under the final names.
+    """
+    from .imageio import atomic_output, commit_temp, discard_temp, write_exr, write_json, write_png
     from .progress import ProgressBar
     from .render import render
 
-    for frame in frames:
+    cancel = _CancelFlag.active
+    probed: set = set()
+    for index, frame in enumerate(frames):
         t_frame = time.perf_counter() if many else t_start
-        # Fail fast on an unwritable output folder, before any loading or rendering
-        _check_writable_dir(_frame_path(template, frame, many), "output")
-        if args.stats:
-            _check_writable_dir(_frame_path(args.stats, frame, many), "stats")
+        _check_cancel(cancel)
 
         # -- Scene and settings: file values, then command-line overrides -------------
-        scene, settings, export_s = load_any_scene(scene_path, frame)
+        scene, settings, export_s = load_any_scene(scene_path, frame, quiet=args.quiet)
+        _check_cancel(cancel)  # a Ctrl-C while Blender loaded: stop before rendering
         f_out = frame if frame is not None else (int(scene.frame) if float(scene.frame).is_integer() else None)
-        out_exr = _frame_path(template, f_out, many)
+        out_exr = exr_for(f_out)
         out_png = out_exr.with_suffix(".png")
         stats_path = _frame_path(args.stats, f_out, many) if args.stats else None
+        _check_outputs(out_exr, out_png, stats_path, scene_path, probed)
         try:
             settings = settings.replace(**overrides)
         except SettingsError as e:
             raise SettingsError(_option_message(str(e), overrides)) from None
         if args.resolution is not None:
             scene.resolution = args.resolution
+        _check_memory(scene.resolution, settings.method)
+        if index == 0:
+            if scene_path.suffix.lower() == ".blend" or _scene_kind(scene_path) == "blend":
+                _warn_frames_outside(scene, frames)
+            if settings.method == "ACCUMULATION" and args.estimator not in (None, "STANDARD"):
+                _warn(f"--estimator {args.estimator.lower()} has no effect with --method accumulation: "
+                      "each still is read with STANDARD")
         for w in scene.metadata.get("warnings", []) if isinstance(scene.metadata, dict) else []:
-            print(f"stpm: warning: {w}", file=sys.stderr)
+            _warn(w)
 
         # -- Render, with a progress bar and Ctrl-C cancelling ---------------------------
         bar = ProgressBar(quiet=args.quiet)
         label = f"frame {frame}: " if frame is not None else ""
-        with _CancelFlag() as cancel:
-            try:
-                result = render(scene, settings, progress=lambda f, m: bar(f, label + m), cancel=cancel)
-            finally:
-                bar.close()
+        try:
+            result = render(scene, settings, progress=lambda f, m: bar(f, label + m), cancel=cancel)
+        finally:
+            bar.close()
 
-        # -- Outputs: EXR, PNG preview, stats ---------------------------------------------
+        # -- Outputs: temporary files, renamed into place together -------------------------
         t_write = time.perf_counter()
         plan = getattr(result, "plan", None) or {}
         stats = dict(result.stats)
         stats["export_s"] = float(export_s) + float(stats.get("export_s", 0.0) or 0.0)
         meta = {"stpm:settings": settings.to_dict(), "stpm:plan": plan,
                 "stpm:scene": str(scene_path), "stpm:frame": str(scene.frame if frame is None else frame)}
-        write_exr(out_exr, result, {**meta, "stpm:stats": stats})
-        write_png(out_png, result.passes["Combined"][:, :, :3])
-        stats.update({
-            "render_wall_s": float(result.stats.get("wall_s", 0.0)),
-            "write_s": time.perf_counter() - t_write,
-            "wall_s": time.perf_counter() - t_frame,
-            "scene": str(scene_path), "frame": scene.frame if frame is None else frame,
-            "output_exr": str(out_exr), "output_png": str(out_png),
-            "settings": settings.to_dict(), "plan": plan,
-            "warnings": list(getattr(result, "warnings", []) or []),
-        })
+        staged: list[tuple[Path, Path]] = []
+        try:
+            with atomic_output(out_exr, commit=False) as tmp:
+                write_exr(tmp, result, {**meta, "stpm:stats": stats}, atomic=False)
+            staged.append((tmp, out_exr))
+            with atomic_output(out_png, commit=False) as tmp:
+                write_png(tmp, result.passes["Combined"][:, :, :3], atomic=False)
+            staged.append((tmp, out_png))
+            stats.update({
+                "render_wall_s": float(result.stats.get("wall_s", 0.0)),
+                "write_s": time.perf_counter() - t_write,
+                "wall_s": time.perf_counter() - t_frame,
+                "scene": str(scene_path), "frame": scene.frame if frame is None else frame,
+                "output_exr": str(out_exr), "output_png": str(out_png),
+                "settings": settings.to_dict(), "plan": plan,
+                "warnings": list(getattr(result, "warnings", []) or []),
+            })
+            if stats_path is not None:
+                with atomic_output(stats_path, commit=False) as tmp:
+                    write_json(tmp, stats, atomic=False)
+                staged.append((tmp, stats_path))
+            _check_cancel(cancel)  # a Ctrl-C while writing: none of this frame's outputs
+            while staged:
+                commit_temp(*staged[0])
+                staged.pop(0)
+        finally:
+            for tmp, _ in staged:
+                discard_temp(tmp)
         for w in stats["warnings"]:
-            print(f"stpm: warning: {w}", file=sys.stderr)
+            _warn(w)
         print(f"wrote {out_exr}")
         print(f"wrote {out_png}")
         if stats_path is not None:
-            from .imageio import _json_default
-            stats_path.write_text(json.dumps(stats, indent=2, default=_json_default) + "\n")
             print(f"wrote {stats_path}")
+        sys.stdout.flush()
         if not args.quiet:
             print(f"{label}{stats['wall_s']:.2f} s (render {stats.get('render_s', 0.0):.2f} s, "
                   f"photons {stats.get('photon_trace_s', 0.0) + stats.get('photon_map_build_s', 0.0):.2f} s)",
@@ -399,6 +729,7 @@ def _cmd_plan(args) -> int:
     if len(frames) > 1:
         raise UsageError("stpm plan takes one frame, not a range")
     scene, settings, _ = load_any_scene(args.scene, frames[0])
+    _check_cancel(_CancelFlag.active)
     plan = make_plan(scene, settings)
     if args.json:
         print(json.dumps(plan, indent=2))
@@ -422,8 +753,18 @@ def _os_error_line(e: OSError) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the CLI; returns (and, as a console script, exits with) the status code."""
+    """Run the CLI; returns (and, as a console script, exits with) the status code.
+
+    SIGINT / SIGTERM are handled from the start (:class:`_CancelFlag`), so a
+    Ctrl-C at any moment, loading included, ends with one line and status 130.
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
+    with _CancelFlag() as cancel:
+        return _main(argv, cancel)
+
+
+def _main(argv: list[str], cancel: _CancelFlag) -> int:
+    command = argv[0] if argv and argv[0] in ("render", "plan", "compare") else ""
     try:
         parser = _build_parser()
         if argv[:1] == ["compare"]:
@@ -434,16 +775,15 @@ def main(argv: list[str] | None = None) -> int:
         if args.command is None:
             parser.print_help()
             return EXIT_USAGE
-        command = {"render": _cmd_render, "plan": _cmd_plan, "compare": _cmd_compare}[args.command]
-        return command(args)
+        return {"render": _cmd_render, "plan": _cmd_plan, "compare": _cmd_compare}[args.command](args)
     except UsageError as e:
-        command = argv[0] if argv and argv[0] in ("render", "plan", "compare") else ""
         print(f"stpm: error: {e} (see stpm {command} --help)".replace("  ", " "), file=sys.stderr)
         return EXIT_USAGE
     except RenderCancelled:
-        print("stpm: render cancelled", file=sys.stderr)
-        return EXIT_CANCELLED
-    except KeyboardInterrupt:
+        print("stpm: render cancelled" if command in ("render", "compare") else "stpm: cancelled",
+              file=sys.stderr)
+        return cancel.exit_status()
+    except KeyboardInterrupt:  # a SIGINT with no handler (not the main thread)
         print("stpm: aborted", file=sys.stderr)
         return EXIT_CANCELLED
     except (StpmError, SceneError) as e:
@@ -452,7 +792,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as e:
         print(f"stpm: error: {_os_error_line(e)}", file=sys.stderr)
         return EXIT_ERROR
-    except SystemExit as e:  # --help inside argparse
+    except SystemExit as e:  # --help / --version inside argparse
         return int(e.code or 0) if isinstance(e.code, int) else EXIT_OK
     except Exception as e:  # a bug in STPM: one line, unless STPM_DEBUG asks for the traceback
         if os.environ.get("STPM_DEBUG"):

@@ -12,6 +12,8 @@ the EXR / PNG scanline order: no flip here.
 from __future__ import annotations
 
 import json
+import os
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -19,9 +21,91 @@ import numpy as np
 from .errors import StpmError
 
 __all__ = ["write_exr", "read_exr", "write_png", "read_png", "linear_to_srgb",
-           "channel_names", "VIEW_LAYER"]
+           "channel_names", "VIEW_LAYER", "write_json", "atomic_output", "temp_path", "remove_pending_temps"]
 
 VIEW_LAYER = "ViewLayer"
+
+
+# ----------------------------------------------------------------------------
+# Atomic outputs: write a hidden temporary file in the same folder, rename it into place
+# ----------------------------------------------------------------------------
+_PENDING: set[str] = set()   # temporary files being written (removed by remove_pending_temps on a hard abort)
+
+
+def temp_path(path) -> Path:
+    """The temporary name :func:`atomic_output` writes ``path`` under: hidden, same folder, same suffix.
+
+    Same folder, so the final ``os.replace`` is a rename on one file system (atomic);
+    same suffix, so OpenImageIO picks the same format from the name.
+    """
+    path = Path(path)
+    return path.with_name(f".{path.stem}.stpm-tmp-{os.getpid()}{path.suffix}")
+
+
+def _unlink_quietly(path) -> None:
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+
+
+@contextmanager
+def atomic_output(path, *, commit: bool = True):
+    """Yield a temporary path to write ``path``'s content to; rename it over ``path`` at the end.
+
+    Any exception (or KeyboardInterrupt) inside the block removes the temporary
+    file, so a failed or interrupted write never leaves a partial file under the
+    final name, nor a stray temporary one.  ``commit=False`` leaves the
+    temporary file for the caller to rename (several outputs committed together)
+    or remove; it stays registered for :func:`remove_pending_temps` until then.
+    """
+    path = Path(path)
+    tmp = temp_path(path)
+    _PENDING.add(str(tmp))
+    try:
+        yield tmp
+        if commit:
+            os.replace(tmp, path)
+    except BaseException:
+        _unlink_quietly(tmp)
+        _PENDING.discard(str(tmp))
+        raise
+    if commit:
+        _PENDING.discard(str(tmp))
+
+
+def commit_temp(tmp, path) -> None:
+    """Rename a temporary file left by ``atomic_output(..., commit=False)`` into place."""
+    os.replace(tmp, path)
+    _PENDING.discard(str(tmp))
+
+
+def discard_temp(tmp) -> None:
+    """Remove a temporary file left by ``atomic_output(..., commit=False)``."""
+    _unlink_quietly(tmp)
+    _PENDING.discard(str(tmp))
+
+
+def remove_pending_temps() -> None:
+    """Remove every temporary output file still being written (a hard abort calls this before exiting)."""
+    for name in list(_PENDING):
+        discard_temp(name)
+
+
+def _oiio_write(path: Path, spec, pixels: np.ndarray, what: str) -> None:
+    """Write ``pixels`` with ``spec`` to ``path`` through OpenImageIO (StpmError on failure)."""
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(str(path))
+    if out is None or not out.open(str(path), spec):
+        raise StpmError(f"cannot write {what}: {oiio.geterror() or 'open failed'}")
+    try:
+        ok = out.write_image(pixels)
+        err = out.geterror()
+    finally:
+        out.close()
+    if not ok:
+        raise StpmError(f"cannot write {what}: {err}")
 
 
 def _passes_table():
@@ -55,8 +139,11 @@ def channel_names(passes: dict, view_layer: str = VIEW_LAYER) -> list[tuple[str,
 
 
 def write_exr(path, result, metadata: dict | None = None, *, half: bool = False,
-              view_layer: str = VIEW_LAYER) -> Path:
+              view_layer: str = VIEW_LAYER, atomic: bool = True) -> Path:
     """Write a multilayer OpenEXR (ZIP compression) with Blender's channel names.
+
+    ``atomic``: write a temporary file next to ``path`` and rename it into place
+    (:func:`atomic_output`), so ``path`` is never a partial file.
 
     Parameters
     ----------
@@ -108,14 +195,11 @@ def write_exr(path, result, metadata: dict | None = None, *, half: bool = False,
         spec.attribute(key if ":" in key else f"stpm:{key}", text)
 
     path = Path(path)
-    out = oiio.ImageOutput.create(str(path))
-    if out is None or not out.open(str(path), spec):
-        raise StpmError(f"cannot write EXR {path}: {oiio.geterror() or 'open failed'}")
-    ok = out.write_image(pixels)
-    err = out.geterror()
-    out.close()
-    if not ok:
-        raise StpmError(f"cannot write EXR {path}: {err}")
+    if not atomic:
+        _oiio_write(path, spec, pixels, f"EXR {path}")
+        return path
+    with atomic_output(path) as tmp:
+        _oiio_write(tmp, spec, pixels, f"EXR {path}")
     return path
 
 
@@ -169,8 +253,10 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
-def write_png(path, rgb: np.ndarray) -> Path:
+def write_png(path, rgb: np.ndarray, *, atomic: bool = True) -> Path:
     """Write an 8-bit sRGB preview of linear RGB(A) ``rgb`` (H, W, 3|4), row 0 = top.
+
+    ``atomic``: through a temporary file renamed into place, as :func:`write_exr`.
 
     Colour channels are clipped to [0, 1] and sRGB-encoded; alpha (if given)
     is dropped: the preview is opaque, as the world colour is rendered.
@@ -185,14 +271,23 @@ def write_png(path, rgb: np.ndarray) -> Path:
     spec = oiio.ImageSpec(W, H, 3, oiio.UINT8)
     spec.attribute("oiio:ColorSpace", "sRGB")
     path = Path(path)
-    out = oiio.ImageOutput.create(str(path))
-    if out is None or not out.open(str(path), spec):
-        raise StpmError(f"cannot write PNG {path}: {oiio.geterror() or 'open failed'}")
-    ok = out.write_image(np.ascontiguousarray(v))
-    err = out.geterror()
-    out.close()
-    if not ok:
-        raise StpmError(f"cannot write PNG {path}: {err}")
+    if not atomic:
+        _oiio_write(path, spec, np.ascontiguousarray(v), f"PNG {path}")
+        return path
+    with atomic_output(path) as tmp:
+        _oiio_write(tmp, spec, np.ascontiguousarray(v), f"PNG {path}")
+    return path
+
+
+def write_json(path, data, *, atomic: bool = True) -> Path:
+    """Write ``data`` as indented JSON (numpy values made plain), atomically as :func:`write_exr`."""
+    path = Path(path)
+    text = json.dumps(data, indent=2, default=_json_default) + "\n"
+    if not atomic:
+        path.write_text(text)
+        return path
+    with atomic_output(path) as tmp:
+        tmp.write_text(text)
     return path
 
 

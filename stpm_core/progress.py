@@ -5,15 +5,25 @@
     bar.close()
 
 Writes one self-overwriting line to stderr (``\\r``) when stderr is a terminal;
-otherwise (logs, CI, pipes) it prints a plain line only when the phase message
-changes or every 10 %, so log files stay short.  ``quiet=True`` prints nothing.
+otherwise (logs, CI, pipes) it prints a plain line only when the phase changes
+or every 10 %, so log files stay short.  The phase is the message without its
+counters: ``tracing tile 3/130`` and ``tracing tile 4/130`` are one phase
+(:func:`phase_of`).  ``quiet=True`` prints nothing.
 """
 from __future__ import annotations
 
+import re
 import sys
 import time
 
-__all__ = ["ProgressBar"]
+__all__ = ["ProgressBar", "phase_of"]
+
+_COUNTER = re.compile(r"\s*\d+\s*/\s*\d+")
+
+
+def phase_of(message: str) -> str:
+    """The phase a progress message belongs to: the message with its ``N/M`` counters removed."""
+    return _COUNTER.sub("", message or "").strip()
 
 
 class ProgressBar:
@@ -37,9 +47,10 @@ class ProgressBar:
         f = min(max(float(fraction), 0.0), 1.0)
         now = time.perf_counter()
         elapsed = now - self.t0
+        phase = phase_of(message)
         if self.tty:
             # Redraw at most every min_interval seconds, always at the end and on a new phase
-            if now - self._last_draw < self.min_interval and f < 1.0 and message == self._last_msg:
+            if now - self._last_draw < self.min_interval and f < 1.0 and phase == self._last_msg:
                 return
             filled = int(round(f * self.width))
             line = f"[{'#' * filled}{'.' * (self.width - filled)}] {100 * f:5.1f}%  {message}  {elapsed:6.1f} s"
@@ -47,12 +58,12 @@ class ProgressBar:
             self._drawn = True
         else:
             decile = int(f * 10)
-            if message == self._last_msg and decile == self._last_decile:
+            if phase == self._last_msg and decile == self._last_decile:
                 return
             self.stream.write(f"{100 * f:5.1f}%  {message}  {elapsed:.1f} s\n")
             self._last_decile = decile
         self.stream.flush()
-        self._last_draw, self._last_msg = now, message
+        self._last_draw, self._last_msg = now, phase
 
     def close(self) -> None:
         """End the bar's line (call once the render finished or failed)."""

@@ -148,9 +148,33 @@ def _headline(report: dict) -> list[str]:
     return lines
 
 
+def _check_reference(path: str) -> None:
+    """Refuse a --reference that is not an OpenEXR file (by its magic number), in one line.
+
+    The reference must hold linear radiance (its Combined pass); an 8-bit sRGB
+    PNG / JPEG preview would compare a tone-mapped image with linear renders.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise StpmError(f"reference image not found: {path}")
+    with open(p, "rb") as f:
+        magic = f.read(4)
+    if magic != EXR_MAGIC:
+        kind = next((name for m, name in _OTHER_IMAGES if magic.startswith(m)), None)
+        what = f"a {kind} image" if kind else "not an OpenEXR file"
+        raise StpmError(f"--reference {path} is {what}: give a linear OpenEXR with a Combined pass "
+                        "(e.g. the .exr of stpm render)")
+
+
+EXR_MAGIC = b"\x76\x2f\x31\x01"
+_OTHER_IMAGES = ((b"\x89PNG", "PNG"), (b"\xff\xd8", "JPEG"), (b"II*\x00", "TIFF"), (b"MM\x00*", "TIFF"),
+                 (b"#?", "Radiance HDR"))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``stpm compare``; returns the exit status (errors are raised as StpmError for the CLI to print)."""
-    from ..cli import _CancelFlag, _checked_overrides, load_any_scene
+    from ..cli import (FRAME_MAX, FRAME_MIN, _CancelFlag, _check_cancel, _check_memory, _checked_overrides,
+                       load_any_scene)
     from ..progress import ProgressBar
 
     args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
@@ -160,22 +184,29 @@ def main(argv: list[str] | None = None) -> int:
         raise StpmError("--time-budget must be >= 0 seconds")
     if any(v is not None and v < 1 for v in (args.reference_photons, args.reference_samples, args.reference_steps)):
         raise StpmError("--reference-photons, --reference-samples and --reference-steps must be >= 1")
+    if args.frame is not None and not FRAME_MIN <= args.frame <= FRAME_MAX:
+        raise _usage_error_class()(f"--frame {args.frame} is outside Blender's frame limits [{FRAME_MIN}, {FRAME_MAX}]")
+    if args.samples is not None and args.samples < 1:
+        raise StpmError("--samples must be >= 1")
     overrides = _checked_overrides(args, skip=_OWN_OPTIONS)
     scene_path = Path(args.scene)
-    scene, settings, _export_s = load_any_scene(scene_path, args.frame)
-    settings = settings.replace(**overrides)
-    if args.resolution is not None:
-        scene = dataclasses.replace(scene, resolution=tuple(args.resolution))
-    if args.samples is not None:
-        if args.samples < 1:
-            raise StpmError("--samples must be >= 1")
-        settings = settings.replace(samples=args.samples)
-    out_dir = Path(args.output) if args.output else scene_path.with_name(scene_path.stem + "_compare")
-    if args.reference is not None and not Path(args.reference).is_file():
-        raise StpmError(f"reference image not found: {args.reference}")
+    if args.reference is not None and scene_path.exists():
+        _check_reference(args.reference)
 
-    bar = ProgressBar(quiet=args.quiet)
-    with _CancelFlag() as cancel:
+    with _CancelFlag() as cancel:   # main's, installed before loading (a Ctrl-C while Blender loads)
+        scene, settings, _export_s = load_any_scene(scene_path, args.frame, quiet=args.quiet)
+        _check_cancel(cancel)
+        settings = settings.replace(**overrides)
+        if args.resolution is not None:
+            scene = dataclasses.replace(scene, resolution=tuple(args.resolution))
+        if args.samples is not None:
+            settings = settings.replace(samples=args.samples)
+        out_dir = Path(args.output) if args.output else scene_path.with_name(scene_path.stem + "_compare")
+        if out_dir.exists() and not out_dir.is_dir():
+            raise StpmError(f"report folder {out_dir} is a file, not a directory: choose another --output")
+        _check_memory(scene.resolution, "ACCUMULATION")   # the sweep renders accumulation too
+
+        bar = ProgressBar(quiet=args.quiet)
         try:
             report = run_compare(scene, settings, out_dir, reference=args.reference, time_budget=args.time_budget,
                                  photon_budgets=args.photon_budgets, accumulation_steps=args.accumulation_steps,
