@@ -78,6 +78,35 @@ def moving_caustic_scene(resolution=(96, 64)):
                       metadata={"name": "moving caustic"})
 
 
+def moving_caustic_radiance(x, y, t):
+    """Exact radiance (W m^-2 sr^-1) of :func:`moving_caustic_scene` seen from above at (x, y) and
+    normalised shutter time t (arrays broadcast together): the terms :func:`analytic_moving_caustic`
+    integrates (its docstring derives them)."""
+    I = 100.0 / (4 * np.pi)                               # point-light intensity (W/sr)
+    shade = (np.abs(x) < 0.15) & (np.abs(y) < 0.15)
+    c, b = -0.25 + 0.5 * t, 0.8 - 1.6 * t                 # mirror and box centres (x)
+    on_box = (np.abs(x - b) < 0.3) & (np.abs(y) < 0.3) & ~shade
+    z = np.where(on_box, 0.3, 0.0)
+    # -- Caustic: virtual source through the moving aperture ----------------------------
+    h = 3.0 - z
+    E_c = I * h / (x * x + y * y + h * h) ** 1.5
+    aperture = (np.abs(x / h - c) < 0.3) & (np.abs(y / h) < 0.3)
+    shaded = (np.abs(2.1 * x / h) < 0.15) & (np.abs(2.1 * y / h) < 0.15)
+    # floor point behind the box: f = 1 - 0.1 u in [0.9, 1] with f |y| < 0.3 and |f x - b| < 0.3
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f_hi = np.minimum(1.0, np.where(y != 0, 0.3 / np.abs(y), np.inf))
+        a1, a2 = (b - 0.3) / x, (b + 0.3) / x
+        lo = np.maximum(0.9, np.where(x > 0, a1, np.where(x < 0, a2, -np.inf)))
+        hi = np.minimum(f_hi, np.where(x > 0, a2, np.where(x < 0, a1, np.inf)))
+    behind_box = (lo < hi) & ~on_box & ~((x == 0) & (np.abs(b) >= 0.3))
+    E = np.where(aperture & ~shaded & ~behind_box, E_c, 0.0)
+    # -- Direct light, unless the shade is in the way -------------------------------------
+    hl = 1.0 - z
+    lit = ~((np.abs(0.1 * x / hl) < 0.15) & (np.abs(0.1 * y / hl) < 0.15))
+    E = E + np.where(lit, I * hl / (x * x + y * y + hl * hl) ** 1.5, 0.0)
+    return np.where(shade, 0.0, 0.8 / np.pi * E)
+
+
 def analytic_moving_caustic(resolution=(96, 64), filter_width: float = 1.5, sub: int = 8,
                             n_t: int = 256) -> np.ndarray:
     """The exact pixel values (H, W, 3) of :func:`moving_caustic_scene`, by quadrature (no photons).
@@ -104,36 +133,13 @@ def analytic_moving_caustic(resolution=(96, 64), filter_width: float = 1.5, sub:
 
     W, H = resolution
     pix = 2.4 / W
-    I = 100.0 / (4 * np.pi)                               # point-light intensity (W/sr)
-    rho_pi = 0.8 / np.pi
     # -- Fine grid: sub x sub points per pixel -------------------------------------------
     u = (np.arange(W * sub) + 0.5) / sub                  # continuous pixel coordinates
     v = (np.arange(H * sub) + 0.5) / sub
     x, y = np.meshgrid(-1.2 + u * pix, 0.8 - v * pix)
-    shade = (np.abs(x) < 0.15) & (np.abs(y) < 0.15)
     F = np.zeros_like(x)
     for t in (np.arange(n_t) + 0.5) / n_t:
-        c, b = -0.25 + 0.5 * t, 0.8 - 1.6 * t             # mirror and box centres (x)
-        on_box = (np.abs(x - b) < 0.3) & (np.abs(y) < 0.3) & ~shade
-        z = np.where(on_box, 0.3, 0.0)
-        # -- Caustic: virtual source through the moving aperture ----------------------------
-        h = 3.0 - z
-        E_c = I * h / (x * x + y * y + h * h) ** 1.5
-        aperture = (np.abs(x / h - c) < 0.3) & (np.abs(y / h) < 0.3)
-        shaded = (np.abs(2.1 * x / h) < 0.15) & (np.abs(2.1 * y / h) < 0.15)
-        # floor point behind the box: f = 1 - 0.1 u in [0.9, 1] with f |y| < 0.3 and |f x - b| < 0.3
-        with np.errstate(divide="ignore", invalid="ignore"):
-            f_hi = np.minimum(1.0, np.where(y != 0, 0.3 / np.abs(y), np.inf))
-            a1, a2 = (b - 0.3) / x, (b + 0.3) / x
-            lo = np.maximum(0.9, np.where(x > 0, a1, np.where(x < 0, a2, -np.inf)))
-            hi = np.minimum(f_hi, np.where(x > 0, a2, np.where(x < 0, a1, np.inf)))
-        behind_box = (lo < hi) & ~on_box & ~((x == 0) & (abs(b) >= 0.3))
-        E = np.where(aperture & ~shaded & ~behind_box, E_c, 0.0)
-        # -- Direct light, unless the shade is in the way -------------------------------------
-        hl = 1.0 - z
-        lit = ~((np.abs(0.1 * x / hl) < 0.15) & (np.abs(0.1 * y / hl) < 0.15))
-        E += np.where(lit, I * hl / (x * x + y * y + hl * hl) ** 1.5, 0.0)
-        F += np.where(shade, 0.0, rho_pi * E)
+        F += moving_caustic_radiance(x, y, t)
     F /= n_t
 
     # -- Pixel filter: separable Blackman-Harris over the fine points inside the image ---------

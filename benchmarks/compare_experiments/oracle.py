@@ -2,9 +2,10 @@
 
 Every time-dependent estimator here (TEMPORAL, KD4D, a sheared ball) gives each camera sample an
 estimate of the irradiance at its own point and time.  With a perfect estimate -- the exact
-radiance L(x, y, t) of the benchmark scene (tests/test_compare.py: analytic_moving_caustic's
-formulas, evaluated per sample) -- the only error left is camera sampling: the film's
-filter-importance-sampled positions and stratified times (integrator.camera_samples).  This
+radiance L(x, y, t) of the benchmark scene (tests/test_compare.py: moving_caustic_radiance, what
+analytic_moving_caustic integrates, evaluated per sample) -- the only error left is camera
+sampling: the film's filter-importance-sampled positions and stratified times
+(integrator.camera_samples).  This
 script renders that oracle at several S and compares its RMSE with ACCUMULATION N=16's (0.0169,
 bias-dominated): a photon estimator at S samples per pixel can never be better than the oracle.
 
@@ -13,32 +14,7 @@ bias-dominated): a photon estimator at S samples per pixel can never be better t
 from common import *  # noqa: F401,F403
 
 from stpm_core.integrator import camera_samples
-
-I = 100.0 / (4 * np.pi)
-RHO_PI = 0.8 / np.pi
-
-
-def radiance(x, y, t):
-    """Exact radiance (n,) of the benchmark scene seen from above at (x, y) and shutter time t (n,)."""
-    shade = (np.abs(x) < 0.15) & (np.abs(y) < 0.15)
-    c, b = -0.25 + 0.5 * t, 0.8 - 1.6 * t
-    on_box = (np.abs(x - b) < 0.3) & (np.abs(y) < 0.3) & ~shade
-    z = np.where(on_box, 0.3, 0.0)
-    h = 3.0 - z
-    E_c = I * h / (x * x + y * y + h * h) ** 1.5
-    aperture = (np.abs(x / h - c) < 0.3) & (np.abs(y / h) < 0.3)
-    shaded = (np.abs(2.1 * x / h) < 0.15) & (np.abs(2.1 * y / h) < 0.15)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        f_hi = np.minimum(1.0, np.where(y != 0, 0.3 / np.abs(y), np.inf))
-        a1, a2 = (b - 0.3) / x, (b + 0.3) / x
-        lo = np.maximum(0.9, np.where(x > 0, a1, np.where(x < 0, a2, -np.inf)))
-        hi = np.minimum(f_hi, np.where(x > 0, a2, np.where(x < 0, a1, np.inf)))
-    behind_box = (lo < hi) & ~on_box & ~((x == 0) & (np.abs(b) >= 0.3))
-    E = np.where(aperture & ~shaded & ~behind_box, E_c, 0.0)
-    hl = 1.0 - z
-    lit = ~((np.abs(0.1 * x / hl) < 0.15) & (np.abs(0.1 * y / hl) < 0.15))
-    E = E + np.where(lit, I * hl / (x * x + y * y + hl * hl) ** 1.5, 0.0)
-    return np.where(shade, 0.0, RHO_PI * E)
+from test_compare import moving_caustic_radiance as radiance  # tests/ on sys.path (common)
 
 
 def oracle_image(scene, S, seed, time_override=None, res=(96, 64)):
