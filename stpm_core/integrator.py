@@ -526,8 +526,9 @@ def _direct_fast(ctx, sh: np.ndarray, hits, d: np.ndarray, t_s: np.ndarray, rng,
     light); returns whether any shadow ray was cast.
 
     Same random numbers as :func:`_direct` (one (k, 2) block per light);
-    POINT / SPOT lights of radius 0 are sampled in the kernel, other lights by
-    ``LightSet.sample_direct``; materials with rough lobes get f from ``bsdf_eval``.
+    POINT / SPOT lights of radius 0 and the world are sampled in the kernels, other lights by
+    ``LightSet.sample_direct``; materials with rough lobes get f from ``bsdf_eval`` (and every
+    light through ``sample_direct``).
     """
     k = sh.size
     cast_any = False
@@ -553,6 +554,9 @@ def _direct_fast(ctx, sh: np.ndarray, hits, d: np.ndarray, t_s: np.ndarray, rng,
             m = _K.nee_point(sh, P, NG, NS, d, mat, _first_pose(C), lights.intensity(li), spot, cos_half, smooth,
                              _first_pose(Z), _NO_ROWS3, False, table.w_base, table.coat, table.specular,
                              table.ior, table.base_color, EPS, contrib, so, sd, stmax, live)
+        elif light.type == "WORLD" and not ctx.rough_any:
+            m = _K.nee_world(sh, P, NG, NS, d, mat, u, np.asarray(light.color, np.float64), table.w_base, table.coat,
+                             table.specular, table.ior, table.base_color, EPS, contrib, so, sd, stmax, live)
         else:
             if gathered is None:
                 gathered = (P[sh], NG[sh], NS[sh], -d[sh], mat[sh])

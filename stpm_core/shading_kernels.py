@@ -41,7 +41,7 @@ import numpy as np
 
 from .numba_probe import probe
 
-__all__ = ["AVAILABLE", "CompileError", "camera_tile", "camera_rays", "classify_hits", "nee_point", "nee_given",
+__all__ = ["AVAILABLE", "CompileError", "camera_tile", "camera_rays", "classify_hits", "nee_point", "nee_given", "nee_world",
            "nee_accumulate", "scatter_add", "active_channels", "pixel_sums", "tile_finish", "disable", "IMPORT_ERROR"]
 
 AVAILABLE, IMPORT_ERROR = probe()
@@ -372,6 +372,52 @@ def nee_given(rows, P, NG, NS, D, mat, wi, dist, weight, f_in, use_f,
         n_live = _nee_row(k, rows[k], wi[k, 0], wi[k, 1], wi[k, 2], dist[k], weight[k, 0], weight[k, 1],
                           weight[k, 2], P, NG, NS, D, mat, f_in, use_f, w_base, coat, specular, ior,
                           base_color, EPS, contrib, so, sd, stmax, live, n_live)
+    return n_live
+
+
+@njit(**_JIT)
+def nee_world(rows, P, NG, NS, D, mat, U, L, w_base, coat, specular, ior, base_color, EPS, contrib, so, sd, stmax,
+              live):
+    """NEE of the world light (constant radiance L (3,)) at the hit rows ``rows`` (n,), uniforms U (n, 2).
+
+    As ``WorldLight.sample`` with the geometric normal turned toward -D (the integrator's
+    ``_world_normals``): wi cosine-distributed about it (Shirley-Chiu disc, Duff et al. basis, the
+    same float operations as ``sampling.cosine_hemisphere`` / ``to_world``), weight = L pi / cos,
+    shadow rays to infinity.  Same outputs as :func:`nee_point`; returns the shadow-ray count.
+    Materials without rough lobes only (the shortcut BSDF of :func:`_nee_row`).
+    """
+    n_live = 0
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        # normal n: ng turned toward wo = -D
+        g0, g1, g2 = NG[r, 0], NG[r, 1], NG[r, 2]
+        if -(g0 * D[r, 0] + g1 * D[r, 1] + g2 * D[r, 2]) < 0.0:
+            g0, g1, g2 = -g0, -g1, -g2
+        # cosine hemisphere from the concentric disc
+        a = 2.0 * U[k, 0] - 1.0
+        b = 2.0 * U[k, 1] - 1.0
+        if abs(a) > abs(b):
+            rr = a
+            phi = 0.25 * np.pi * (b / (1.0 if a == 0.0 else a))
+        else:
+            rr = b
+            phi = 0.5 * np.pi - 0.25 * np.pi * (a / (1.0 if b == 0.0 else b))
+        lx, ly = rr * math.cos(phi), rr * math.sin(phi)
+        lz = math.sqrt(max(0.0, 1.0 - (lx * lx + ly * ly)))
+        # orthonormal basis about n
+        sg = 1.0 if g2 >= 0.0 else -1.0
+        aa = -1.0 / (sg + g2)
+        bb = g0 * g1 * aa
+        t0, t1, t2 = 1.0 + sg * g0 * g0 * aa, sg * bb, -sg * g0
+        b0, b1, b2 = bb, sg + g1 * g1 * aa, -g1
+        wi0 = lx * t0 + ly * b0 + lz * g0
+        wi1 = lx * t1 + ly * b1 + lz * g1
+        wi2 = lx * t2 + ly * b2 + lz * g2
+        c = np.pi / max(lz, 1e-12)
+        # (f_in = contrib: a placeholder, not read without rough lobes)
+        n_live = _nee_row(k, r, wi0, wi1, wi2, np.inf, c * L[0], c * L[1], c * L[2], P, NG, NS, D, mat,
+                          contrib, False, w_base, coat, specular, ior, base_color, EPS, contrib, so, sd, stmax,
+                          live, n_live)
     return n_live
 
 

@@ -26,6 +26,7 @@ pytestmark = pytest.mark.skipif(not K.AVAILABLE, reason=f"numba kernels unavaila
 def _both(scene, settings, monkeypatch):
     """(kernels, numpy) passes of the same render."""
     a = render(scene, settings).passes
+    assert K.AVAILABLE, f"a kernel failed to compile, the render fell back to numpy: {K.IMPORT_ERROR}"
     with monkeypatch.context() as m:
         m.setattr(K, "AVAILABLE", False)
         b = render(scene, settings).passes
