@@ -4,7 +4,8 @@
 Scene: :func:`benchmarks.bench_rays.bench_scene` (about 107k triangles: an
 82k-triangle icosphere on a 20k-triangle floor grid, four small icospheres),
 one diffuse material, a point light, a pinhole camera; 320 x 240 pixels at
-16 samples per pixel, no photons (Combined = Direct + world).  Two variants:
+16 samples per pixel, no photons (Combined = Direct + world; the grey world is also a light:
+one more NEE sample and shadow ray per shading point, since 2026-11-25).  Two variants:
 
 * ``static``: nothing moves;
 * ``motion``: the four small spheres translate and turn across an open
