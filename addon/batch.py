@@ -98,11 +98,13 @@ def load_blend(path, frame=None) -> tuple:
 
     Returns (Scene, settings dict) -- the dict holds the file's ``scene.stpm``
     values under RenderSettings' names (the CLI overlays its options on it).
-    The Scene's ``metadata['warnings']`` lists what the export approximated.
+    The Scene's ``metadata['warnings']`` lists what the export approximated;
+    ``metadata['frame_range']`` holds the file's [frame_start, frame_end].
     """
     scene = _open(path)
     stpm_scene, settings = export_current(scene, frame)
     stpm_scene.metadata["source"] = str(path)
+    stpm_scene.metadata["frame_range"] = [int(scene.frame_start), int(scene.frame_end)]   # for the CLI's check
     return stpm_scene, settings
 
 

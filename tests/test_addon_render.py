@@ -162,6 +162,8 @@ def test_batch_load_and_render_frames(tmp_path):
     scene, settings = batch.load_blend(DEMO, 1)
     assert settings["estimator"] == "TEMPORAL" and settings["samples"] >= 1
     assert (scene.shutter.open, scene.shutter.close) == (0.75, 1.25)  # CENTER, 0.5 frames
+    import bpy
+    assert scene.metadata["frame_range"] == [bpy.context.scene.frame_start, bpy.context.scene.frame_end]
     sphere = next(i for i in scene.instances if i.name == "GlassSphere")
     np.testing.assert_allclose(sphere.transform.matrices[[0, -1], 0, 3], (-0.75, -0.25), atol=1e-5)
     assert batch.parse_frames("1-3,7") == [1, 2, 3, 7]
