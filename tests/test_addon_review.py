@@ -426,3 +426,45 @@ def test_eevee_only_material_output_is_said_and_all_output_preferred():
     np.testing.assert_allclose(next(m for m in scene.materials if m.name == "Outs").base_color, [1, 0, 0])
     hits = [w for w in warnings if "EEVEE" in w]
     assert len(hits) == 1 and "target EEVEE" in hits[0] and "'Outs'" in hits[0]
+
+
+def _env_world(image):
+    world = bpy.data.worlds.new("EnvWorld")
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    env = nodes.new("ShaderNodeTexEnvironment")
+    env.image = image
+    links.new(env.outputs["Color"], nodes["Background"].inputs["Color"])
+    nodes["Background"].inputs["Strength"].default_value = 2.0
+    bpy.context.scene.world = world
+    return world
+
+
+def test_environment_texture_lights_with_its_mean_over_the_sphere():
+    """An equirectangular sky bright above the horizon only: its mean over directions is half its value
+    (rows weighted by cos(latitude)); a plain pixel mean would say the same here, so the image is also
+    bright in a polar cap only, where the two differ."""
+    fresh()
+    add_camera()
+    add_mesh("plane", "Floor")
+    img = bpy.data.images.new("sky", 64, 32, float_buffer=True)
+    px = np.zeros((32, 64, 4), np.float32)
+    px[..., 3] = 1.0
+    px[16:, :, :3] = (1.0, 0.5, 0.25)                       # rows 16..31: the upper hemisphere
+    img.pixels.foreach_set(px.ravel())
+    _env_world(img)
+    scene, warnings = export_now()
+    np.testing.assert_allclose(scene.world.color, (0.5, 0.25, 0.125), rtol=1e-3)
+    assert scene.world.strength == 2.0
+    assert any("environment texture 'sky'" in w and "mean radiance" in w for w in warnings), warnings
+    # A cap: only the top 4 rows (latitude above 67.5 deg) bright: solid-angle share 1 - sin(67.5 deg)
+    px[..., :3] = 0.0
+    px[28:, :, :3] = 1.0
+    img.pixels.foreach_set(px.ravel())
+    img.update()
+    scene, _ = export_now()
+    lat = -0.5 * np.pi + np.pi * (np.arange(32) + 0.5) / 32
+    want = np.cos(lat)[28:].sum() / np.cos(lat).sum()        # 0.0385, the plain pixel mean is 0.125
+    np.testing.assert_allclose(scene.world.color, want, rtol=1e-6)
+    assert abs(want - 0.5 * (1 - np.sin(np.radians(67.5)))) < 0.005

@@ -25,7 +25,8 @@ def export_world(world, warnings: list) -> "scene_model.World":
     """Background colour * strength from the Background node (or ``world.color``).
 
     The core lights the scene with it as a constant environment (stpm_core/world_light.py), as
-    Cycles does; a textured background lights and shows as its default colour (warned).
+    Cycles does.  An Environment Texture on the colour becomes its mean radiance over the sphere
+    (:func:`environment_mean`); other textures fall back to the node's own colour (both warned).
     """
     return _export_world(world, warnings)
 
@@ -45,9 +46,44 @@ def _export_world(world, warnings: list) -> "scene_model.World":
         warnings.append(f"world {world.name!r}: {node.bl_idname} is not supported, using black")
         return scene_model.World(color=np.zeros(3), strength=1.0)
     color_in, strength_in = node.inputs["Color"], node.inputs["Strength"]
+    color = np.maximum(np.array(color_in.default_value[:3], dtype=np.float64), 0.0)
     if color_in.is_linked:
-        warnings.append(f"world {world.name!r}: textured background is not supported, using its default colour")
+        src = color_in.links[0].from_node
+        image = getattr(src, "image", None) if src.bl_idname == "ShaderNodeTexEnvironment" else None
+        if src.bl_idname != "ShaderNodeTexEnvironment":
+            warnings.append(f"world {world.name!r}: {src.bl_idname} on the background is not supported, using "
+                            f"the Background node's own colour")
+        elif image is None or image.size[0] * image.size[1] == 0 or image.channels < 3:
+            what = "has no image" if image is None else f"image {image.name!r} could not be loaded"
+            warnings.append(f"world {world.name!r}: the environment texture {what}, using the Background "
+                            f"node's own colour")
+        else:
+            color = np.maximum(environment_mean(image), 0.0)
+            warnings.append(f"world {world.name!r}: environment texture {image.name!r} is used as its mean "
+                            f"radiance {np.round(color, 4).tolist()} (a constant sky: no sun spots, no "
+                            f"reflections of the picture), as background and light")
     if strength_in.is_linked:
         warnings.append(f"world {world.name!r}: linked background strength is not supported, using its default value")
-    color = np.maximum(np.array(color_in.default_value[:3], dtype=np.float64), 0.0)
     return scene_model.World(color=color, strength=max(float(strength_in.default_value), 0.0))
+
+
+def environment_mean(image, max_rows: int = 512) -> np.ndarray:
+    """Mean radiance (3,) over the sphere of an equirectangular environment image (linear RGB).
+
+    Row y (of h, bottom-up) spans latitude ``phi = -pi/2 + pi (y + 1/2) / h``; a pixel's solid
+    angle is proportional to cos(phi), so the mean over directions is
+    ``sum_y cos(phi_y) rowmean_y / sum_y cos(phi_y)``.  At most ``max_rows`` rows (evenly
+    strided) are averaged, each over all its pixels; 8-bit sRGB images are linearised.
+    """
+    w, h = image.size[:]
+    c = image.channels
+    px = np.empty(w * h * c, dtype=np.float32)
+    image.pixels.foreach_get(px)
+    rows = np.unique(np.linspace(0, h - 1, min(h, max_rows)).round().astype(np.int64))
+    rgb = px.reshape(h, w, c)[rows, :, :3]
+    del px
+    if not image.is_float and image.colorspace_settings.name == "sRGB":
+        rgb = np.where(rgb <= np.float32(0.04045), rgb / np.float32(12.92),
+                       ((rgb + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4))
+    weight = np.cos(-0.5 * np.pi + np.pi * (rows + 0.5) / h)
+    return (weight[:, None] * rgb.mean(axis=1, dtype=np.float64)).sum(axis=0) / weight.sum()
