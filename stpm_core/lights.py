@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .spherical_rect import spherical_rect_sample
 from .sampling import (concentric_disk, cosine_hemisphere, orthonormal_basis, uniform_cone,
                        uniform_sphere)
 
@@ -533,14 +534,30 @@ class LightSet:
         return wi, dist, weight
 
     def _sample_area(self, li, p, times, u):
-        """AREA: uniform by area, weight = L cos_l A / t^2 (one-sided, faces local -Z)."""
+        """AREA (one-sided, faces local -Z).  SQUARE / RECTANGLE: uniform in the solid angle S the
+        rectangle subtends (:func:`~stpm_core.spherical_rect.spherical_rect_sample`), weight = L S
+        where the point is in front; elsewhere (disc, ellipse, sheared transform, S below 1e-7 sr)
+        uniform by area, weight = L cos_l A / t^2.  Both use the same two uniforms per sample."""
         l = self.lights[li]
         c, ex, ey, A, n_emit = self._area_shape(li, times)
+        L = np.asarray(l.color, float)[None, :] * (float(l.power) / (np.pi * np.maximum(A, 1e-300)))[:, None]
         q = self._area_points(li, ex, ey, c, u)
         wi, dist = _normalize(q - p)
         cos_l = np.maximum(-np.sum(wi * n_emit, axis=-1), 0.0)
-        L = np.asarray(l.color, float)[None, :] * (float(l.power) / (np.pi * np.maximum(A, 1e-300)))[:, None]
         g = cos_l * A / np.maximum(dist * dist, 1e-300)
+        if l.shape in ("SQUARE", "RECTANGLE"):
+            n = p.shape[0]
+            exb, eyb = np.broadcast_to(ex, (n, 3)), np.broadcast_to(ey, (n, 3))
+            ortho = np.abs(np.einsum("ij,ij->i", exb, eyb)) <= 1e-9 * np.linalg.norm(exb, axis=1) * np.linalg.norm(eyb, axis=1)
+            if np.any(ortho):
+                corner = np.broadcast_to(c, (n, 3)) - exb - eyb
+                qs, S = spherical_rect_sample(p, corner, 2.0 * exb, 2.0 * eyb, u)
+                use = ortho & (S > 1e-7)
+                wi_s, dist_s = _normalize(qs - p)
+                front = -np.sum(wi_s * np.broadcast_to(n_emit, (n, 3)), axis=-1) > 0.0
+                wi = np.where(use[:, None], wi_s, wi)
+                dist = np.where(use, dist_s, dist)
+                g = np.where(use, np.where(front, S, 0.0), g)
         return wi, dist, L * g[:, None]
 
     def _sample_sun(self, li, p, times, u):
