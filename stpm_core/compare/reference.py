@@ -59,7 +59,8 @@ REFERENCE_STEPS = 64             # instants of the accumulation-buffer reference
 # (photons x, samples x) of the file's, per recipe (per instant for ACCUMULATION)
 REFERENCE_FACTORS = {"ACCUMULATION": (4.0, 1.0), "TEMPORAL": (16.0, 4.0), "KD4D": (16.0, 4.0)}
 REFERENCE_PHOTON_FACTOR, REFERENCE_SAMPLE_FACTOR = REFERENCE_FACTORS[REFERENCE_METHOD]
-_CACHE_VERSION = 1               # bump when the reference recipe changes
+_CACHE_VERSION = 2               # bump when the reference recipe or what a render computes changes
+#                                  (2: the world lights the scene, 2026-11-25)
 _STREAM_REFERENCE = 0x5EF        # seed stream: the reference's noise is independent of the runs'
 
 
