@@ -731,6 +731,7 @@ def _cmd_plan(args) -> int:
     scene, settings, _ = load_any_scene(args.scene, frames[0])
     _check_cancel(_CancelFlag.active)
     plan = make_plan(scene, settings)
+    _check_cancel(_CancelFlag.active)         # a signal during the plan's probe: no plan printed, 130 / 143
     if args.json:
         print(json.dumps(plan, indent=2))
     else:

@@ -536,7 +536,8 @@ class LightSet:
     def _sample_area(self, li, p, times, u):
         """AREA (one-sided, faces local -Z).  SQUARE / RECTANGLE: uniform in the solid angle S the
         rectangle subtends (:func:`~stpm_core.spherical_rect.spherical_rect_sample`), weight = L S
-        where the point is in front; elsewhere (disc, ellipse, sheared transform, S below 1e-7 sr)
+        where the point is in front; elsewhere (disc, ellipse, sheared transform: |cos(ex, ey)| above
+        1e-5, S below 1e-7 sr)
         uniform by area, weight = L cos_l A / t^2.  Both use the same two uniforms per sample."""
         l = self.lights[li]
         c, ex, ey, A, n_emit = self._area_shape(li, times)
@@ -548,10 +549,16 @@ class LightSet:
         if l.shape in ("SQUARE", "RECTANGLE"):
             n = p.shape[0]
             exb, eyb = np.broadcast_to(ex, (n, 3)), np.broadcast_to(ey, (n, 3))
-            ortho = np.abs(np.einsum("ij,ij->i", exb, eyb)) <= 1e-9 * np.linalg.norm(exb, axis=1) * np.linalg.norm(eyb, axis=1)
+            # Blender's float32 matrices leave |cos(ex, ey)| ~ 1e-8 on rotated lights: treat up to 1e-5
+            # as orthogonal (ey made exactly so: the rectangle moves by < 1e-5 of its size); real
+            # shear stays with area sampling
+            exx = np.einsum("ij,ij->i", exb, exb)
+            dot = np.einsum("ij,ij->i", exb, eyb)
+            ortho = np.abs(dot) <= 1e-5 * np.sqrt(exx * np.einsum("ij,ij->i", eyb, eyb))
             if np.any(ortho):
-                corner = np.broadcast_to(c, (n, 3)) - exb - eyb
-                qs, S = spherical_rect_sample(p, corner, 2.0 * exb, 2.0 * eyb, u)
+                eyo = eyb - (dot / np.maximum(exx, 1e-300))[:, None] * exb
+                corner = np.broadcast_to(c, (n, 3)) - exb - eyo
+                qs, S = spherical_rect_sample(p, corner, 2.0 * exb, 2.0 * eyo, u)
                 use = ortho & (S > 1e-7)
                 wi_s, dist_s = _normalize(qs - p)
                 front = -np.sum(wi_s * np.broadcast_to(n_emit, (n, 3)), axis=-1) > 0.0

@@ -68,3 +68,15 @@ def test_sampled_points_lie_on_the_rectangle_and_cover_it():
     X, Y = np.meshgrid(-1 + 2 * g, -1 + 2 * g)
     d2 = (X - 0.2) ** 2 + (Y + 0.1) ** 2 + 1.0
     assert S[0] == pytest.approx(np.sum(1.0 / d2 ** 1.5) * (2 / 400) ** 2, rel=1e-4)
+
+
+def test_rotated_light_from_float32_matrices_is_sampled_by_solid_angle():
+    """Blender hands over float32 matrices: a rotated light's X and Y columns are orthogonal only to
+    ~1e-8.  The solid-angle path must still be taken (std/mean of the per-sample irradiance stays low)."""
+    from scenes import look_at
+    M = look_at((0.3, -0.2, 1.0), (0.35, -0.1, 0.0), up=(0.3, 1.0, 0.2)).astype(np.float32).astype(np.float64)
+    X, Y = M[:3, 0], M[:3, 1]
+    assert 1e-10 < abs(X @ Y) / (np.linalg.norm(X) * np.linalg.norm(Y)) < 1e-5
+    light = Light(type="AREA", shape="SQUARE", size=6.0, power=1000.0, transform=MotionTransform.static(M))
+    e = _estimates(light, np.zeros(3))
+    assert e.std() / e.mean() < 0.6

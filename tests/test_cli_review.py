@@ -448,3 +448,20 @@ def test_compare_checks_report_folder_and_memory_before_running(tiny, tmp_path):
     assert r.returncode == 1
     _one_error_line(r.stderr, "GiB")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
+
+
+def test_sigterm_during_plan_prints_no_plan_and_exits_143(tiny, monkeypatch, capsys):
+    """A SIGTERM while `stpm plan` computes the plan: no plan on stdout, 'stpm: cancelled', status 143."""
+    import os
+
+    import stpm_core.plan as plan_mod
+    real = plan_mod.make_plan
+
+    def signalled(*a, **k):
+        os.kill(os.getpid(), signal.SIGTERM)
+        return real(*a, **k)
+
+    monkeypatch.setattr(plan_mod, "make_plan", signalled)
+    assert cli.main(["plan", str(tiny), "--json"]) == 143
+    out, err = capsys.readouterr()
+    assert out == "" and err.strip().splitlines()[-1] == "stpm: cancelled", (out, err)
