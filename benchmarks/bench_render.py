@@ -113,16 +113,16 @@ class RecordingCaster:
         self.stats = caster.stats
         self.batches: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = []
 
-    def intersect(self, o, d, t, tmax=None):
+    def intersect(self, o, d, t, tmax=None, guard=None):
         n = np.asarray(o).shape[0]
         tm = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, float), (n,))
         self.batches.append(("intersect", np.array(o, float), np.array(d, float), np.array(tm)))
-        return self.caster.intersect(o, d, t, tmax)
+        return self.caster.intersect(o, d, t, tmax, guard=guard)
 
-    def occluded(self, o, d, t, tmax):
+    def occluded(self, o, d, t, tmax, guard=None):
         self.batches.append(("occluded", np.array(o, float), np.array(d, float),
                              np.array(np.broadcast_to(np.asarray(tmax, float), (np.asarray(o).shape[0],)))))
-        return self.caster.occluded(o, d, t, tmax)
+        return self.caster.occluded(o, d, t, tmax, guard=guard)
 
 
 class TimingCaster:

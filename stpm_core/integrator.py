@@ -134,6 +134,12 @@ def _offset(p: np.ndarray, ng: np.ndarray, w: np.ndarray, eps: np.ndarray) -> np
     return p + (eps * side)[:, None] * ng
 
 
+# A secondary ray starts eps off the surface it leaves and ignores hits closer than
+# GUARD_FRACTION * eps (raycast.geometry.ray_guard): local, like eps, so thin geometry near a
+# surface still shadows it in a scene with a far object (docs/raycast.md).
+GUARD_FRACTION = 0.5
+
+
 def _eps_rows(ctx, instance: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Origin offsets (n,) for secondary rays leaving hits on ``instance`` (n,) at p (n, 3): local to
     the object hit and to the point's float32 resolution (raycast.geometry.offset_lengths)."""
@@ -216,7 +222,7 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats) -> np.n
         s = np.sqrt(np.einsum("ij,ij->i", v, v))
         dirs = v / s[:, None]
         tmax = np.where(fin, s * (1.0 - 1e-6) - 2.0 * el, np.inf)
-        blocked = ctx.caster.occluded(o, dirs, _rows(times, sel), tmax)
+        blocked = ctx.caster.occluded(o, dirs, _rows(times, sel), tmax, guard=GUARD_FRACTION * el)
         stats.shadow_rays += live.size
         contrib[live[blocked]] = 0.0
         Ld += contrib
@@ -300,13 +306,15 @@ def _seen_lights(lights, o: np.ndarray, d: np.ndarray, t: np.ndarray, t_scene: n
 # ----------------------------------------------------------------------------
 # Paths of one batch of camera samples
 # ----------------------------------------------------------------------------
-def _cast_bounce(ctx, o, d, times, idx, tmax, m: int, bounce: int, stats: TraceStats):
+def _cast_bounce(ctx, o, d, times, idx, tmax, m: int, bounce: int, stats: TraceStats, guard=None):
     """One bounce's m rays o, d (m, 3) cast at their times (idx (m,): their samples, None = all).
 
-    Counts them as camera (bounce 0) or bounce rays; returns (times t (m,), Hits).
+    guard (m,): the rays' own self-intersection guards (``GUARD_FRACTION`` of their origin
+    offsets; None for camera rays).  Counts them as camera (bounce 0) or bounce rays; returns
+    (times t (m,), Hits).
     """
     t = times if idx is None else times[idx]
-    hits = ctx.caster.intersect(o, d, t, tmax)
+    hits = ctx.caster.intersect(o, d, t, tmax, guard=guard)
     if bounce == 0:
         stats.camera_rays += m
     else:
@@ -362,6 +370,7 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
     idx = None
     beta = None
     tmax = tmax0                             # camera clipping for the first segment
+    guard = None                             # camera rays: the caster's own guard
     # Per-sample outputs
     L_emit = np.zeros((n, 3))
     L_direct = np.zeros((n, 3))
@@ -387,7 +396,7 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         m = n if idx is None else idx.size
         if m == 0:
             break
-        t, hits = _cast_bounce(ctx, o, d, times, idx, tmax, m, bounce, stats)
+        t, hits = _cast_bounce(ctx, o, d, times, idx, tmax, m, bounce, stats, guard)
         hit = hits.hit
         all_hit = bool(hit.all())
 
@@ -460,6 +469,7 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         idx, beta, wi, go = _specular_step(ctx, rng, spec, idx, beta, mat[spec], wo[spec], ns[spec], ng, bounce)
         idx, beta = idx[go], beta[go]
         o = _offset(p[go], ng[go], wi[go], eps[go])
+        guard = GUARD_FRACTION * eps[go]
         d = wi[go]
         tmax = None
 
@@ -574,7 +584,8 @@ def _direct_fast(ctx, sh: np.ndarray, hits, d: np.ndarray, t_s: np.ndarray, rng,
         if m == 0:
             continue
         lv = live[:m]
-        blocked = ctx.caster.occluded(so[:m], sd[:m], np.take(t_s, lv, out=_scratch("t_live", (m,))), stmax[:m])
+        blocked = ctx.caster.occluded(so[:m], sd[:m], np.take(t_s, lv, out=_scratch("t_live", (m,))), stmax[:m],
+                                      guard=GUARD_FRACTION * EPS[sh[lv]])
         stats.shadow_rays += m
         cast_any = True
         _K.nee_accumulate(dst, sh, idx_k, use_idx, beta_k, use_beta, contrib, lv,
@@ -616,11 +627,12 @@ def _shade_paths_fast(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, 
     idx = None
     beta = None
     tmax = tmax0
+    guard = None                             # camera rays: the caster's own guard
     for bounce in range(ctx.max_depth + 1):
         m = n if idx is None else idx.size
         if m == 0:
             break
-        t, hits = _cast_bounce(ctx, o, d, times, idx, tmax, m, bounce, stats)
+        t, hits = _cast_bounce(ctx, o, d, times, idx, tmax, m, bounce, stats, guard)
         use_idx, use_beta = idx is not None, beta is not None
         idx_k = idx if use_idx else _NO_IDX
         beta_k = beta if use_beta else _NO_ROWS3
@@ -662,7 +674,9 @@ def _shade_paths_fast(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, 
         idx, beta, wi, go = _specular_step(ctx, rng, spec, idx, beta, hits.material[spec], -d[spec], hits.ns[spec],
                                            ng, bounce)
         idx, beta = idx[go], np.ascontiguousarray(beta[go])
-        o = _offset(p[go], ng[go], wi[go], _eps_rows(ctx, hits.instance[spec[go]], p[go]))
+        e = _eps_rows(ctx, hits.instance[spec[go]], p[go])
+        o = _offset(p[go], ng[go], wi[go], e)
+        guard = GUARD_FRACTION * e
         d = np.ascontiguousarray(wi[go])
         tmax = None
 

@@ -52,3 +52,19 @@ def test_offsets_follow_the_object_not_its_motion_or_the_scene():
     p = np.array([[0.0, 0.0, 0.0], [2e3, -5.0, 1.0]])
     e = offset_lengths(off, np.array([2, 2]), p)
     np.testing.assert_allclose(e, off[2] + OFFSET_POS * np.array([0.0, 2e3]))      # + float32 resolution at p
+
+
+def test_a_far_object_leaves_the_shadow_of_a_thin_sheet_near_the_floor():
+    """The guard of secondary rays is local too.  A one-quad sheet 8 cm above the floor, lit from low
+    (light at x = 3 m, z = 0.5 m), throws its shadow beside itself; the floor's shadow rays meet the
+    sheet about 0.5 m from their origin.  With a box 1000 km away the old global guard (1e-6 x the
+    diagonal: 1 m) skipped it and the shadow was gone."""
+    def scene(extra=()):
+        objs = [plane_mesh(6.0), (plane_mesh(1.0), translate(0.0, 0.0, 0.08))] + list(extra)
+        return make_scene(objs, MATS, ortho_camera_down(5.0, 4.0), [point_light((3.0, 0.0, 0.5), 300.0)],
+                          resolution=(32, 24))
+    near, floor = _floor_direct(scene())
+    far, _ = _floor_direct(scene([(box_mesh((0, 0, 0), (1, 1, 1)), translate(1e6, 0, 0))]))
+    shadow = floor & (near == 0.0)
+    assert shadow.sum() > 20                               # the sheet's shadow, beside it on the floor
+    assert np.mean(far[shadow] == 0.0) > 0.95

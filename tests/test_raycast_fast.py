@@ -92,9 +92,13 @@ def test_guard_rays32_is_tmin_of_then_rays32():
     for tm, has in ((tmax, True), (np.zeros(1), False)):
         tmin = np.empty(n)
         o32, d32, far = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.float32)
-        K.guard_rays32(o, d, tm, has, TMIN_REL * scale, centre, tmin, o32, d32, far)
+        K.guard_rays32(o, d, tm, has, np.array([TMIN_REL * scale]), centre, tmin, o32, d32, far)
         ref_tmin = tmin_of(d, scale)
         np.testing.assert_array_equal(tmin, ref_tmin)
+        per_ray = rng.uniform(0.0, TMIN_REL * scale, n)                 # each ray its own guard
+        tmin2 = np.empty(n)
+        K.guard_rays32(o, d, tm, has, per_ray, centre, tmin2, np.empty_like(o32), np.empty_like(d32), np.empty_like(far))
+        np.testing.assert_array_equal(tmin2, tmin_of(d, scale, per_ray))
         r_o, r_d, r_far = np.empty_like(o32), np.empty_like(d32), np.empty_like(far)
         K.rays32(o, d, ref_tmin, tmax if has else np.full(n, np.inf), centre, r_o, r_d, r_far)
         for a, b in ((o32, r_o), (d32, r_d), (far, r_far)):

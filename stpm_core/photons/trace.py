@@ -129,11 +129,12 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     n_delta = np.zeros(o.shape[0], dtype=np.int32)      # delta bounces so far
     n_nondelta = np.zeros(o.shape[0], dtype=np.int32)   # non-delta bounces so far
     stored = []
+    guard = None                                         # emitted rays: the caster's own guard
     for depth in range(max_depth + 1):
         if o.shape[0] == 0:
             break
         # -- Intersect every path at its own time -------------------------------------
-        hits = caster.intersect(o, d, t, None)
+        hits = caster.intersect(o, d, t, None, guard=guard)
         keep = hits.hit
         if mode == "caustic" and depth == 0 and target_instance is not None:
             keep &= hits.instance == target_instance     # this target's cone owns only its own first hits
@@ -166,9 +167,11 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         n_nondelta = n_nondelta + ~is_delta
         # -- Spawn the continuation rays, offset off the surface ------------------------------
         side = np.where(np.sum(wi * ng, axis=1) >= 0.0, 1.0, -1.0)
-        o = p + (offset_lengths(inst_offset, hits.instance[idx], p) * side)[:, None] * ng
+        e = offset_lengths(inst_offset, hits.instance[idx], p)
+        o = p + (e * side)[:, None] * ng
         sel = np.nonzero(alive)[0]
         o, d, Phi, t = o[sel], wi[sel], Phi[sel], t[sel]
+        guard = 0.5 * e[sel]                             # local guard, as the integrator's (GUARD_FRACTION)
         n_delta, n_nondelta = n_delta[sel], n_nondelta[sel]
     if not stored:
         return np.empty(0, dtype=PHOTON_DTYPE)

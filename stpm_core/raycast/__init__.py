@@ -3,8 +3,8 @@
 Public API (implemented by the backends in this package; one interface):
 
     caster = make_caster(scene, backend="auto")   # 'embree' | 'numba' | 'numpy' | 'auto'
-    hits = caster.intersect(origins, dirs, times, tmax=None)
-    blocked = caster.occluded(origins, dirs, times, tmax)
+    hits = caster.intersect(origins, dirs, times, tmax=None, guard=None)
+    blocked = caster.occluded(origins, dirs, times, tmax, guard=None)
 
 Arrays
 ------
@@ -16,7 +16,8 @@ tmax    : (n,) float64 or None (= inf): hits at t >= tmax are ignored.
 
 A ray never reports a hit with ``t * |dir| <= TMIN_REL * scale`` (a distance;
 ``scale`` = diagonal of the scene bounds over the shutter; self-intersection
-guard, callers also offset origins along the normal).  See docs/raycast.md.
+guard, callers also offset origins along the normal); ``guard`` (n,) gives
+rays their own, smaller guards (``geometry.ray_guard``).  See docs/raycast.md.
 
 :class:`Hits` fields (n rows; misses have ``t = inf`` and ``instance = -1``):
 t (n,) float64; instance (n,) int32 index into ``scene.instances``;

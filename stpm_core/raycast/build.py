@@ -45,7 +45,7 @@ import time as _time
 import numpy as np
 
 from . import Hits
-from .geometry import TMIN_REL, scene_scale, tmin_of
+from .geometry import ray_guard, scene_scale, tmin_of
 from .pair_bvh import PairBVH, RaySlabs, segments_meet_boxes
 
 __all__ = ["make_caster", "Caster", "BACKENDS"]
@@ -204,8 +204,11 @@ class Caster:
         return out
 
     # ------------------------------------------------------------------ intersect
-    def intersect(self, origins, dirs, times, tmax=None) -> Hits:
-        """Nearest hit of each ray at its own time -> :class:`Hits` (see package docstring)."""
+    def intersect(self, origins, dirs, times, tmax=None, guard=None) -> Hits:
+        """Nearest hit of each ray at its own time -> :class:`Hits` (see package docstring).
+
+        guard: None (every ray ignores hits closer than TMIN_REL * scale) or (n,) distances, each
+        ray's own (capped at that; :func:`~.geometry.ray_guard`)."""
         start = _time.perf_counter()
         n_tmax = tmax
         o, d, times, tmax = _as_rays(origins, dirs, times, tmax)
@@ -220,7 +223,7 @@ class Caster:
             o, d, times = (np.ascontiguousarray(a) for a in (o, d, times))
             tm = None if n_tmax is None else np.ascontiguousarray(tmax)
             best_t = out.t
-            guard = TMIN_REL * self.scale
+            G = ray_guard(self.scale, guard)
             # Part index, part primitive and guard of every ray: needed by the parts that follow,
             # else one block's worth (cache-resident) reused block after block
             rows = min(n, CHUNK) if only else n
@@ -228,7 +231,8 @@ class Caster:
             for a in range(0, n, CHUNK):
                 sl = slice(a, min(n, a + CHUNK))
                 bl = slice(0, sl.stop - a) if only else sl
-                first.intersect_into(o[sl], d[sl], times[sl], None if tm is None else tm[sl], guard, 0,
+                first.intersect_into(o[sl], d[sl], times[sl], None if tm is None else tm[sl],
+                                     G if G.shape[0] == 1 else G[sl], 0,
                                      (best_t[sl], best_part[bl], prim[bl], out.u[sl], out.v[sl],
                                       out.instance[sl], out.prim[sl], out.material[sl], out.ng[sl],
                                       out.ns[sl], out.position[sl]), tmin[bl], only)
@@ -238,7 +242,7 @@ class Caster:
                 return out
             parts = list(enumerate(self.parts))[1:]
         else:
-            tmin = tmin_of(d, self.scale)
+            tmin = tmin_of(d, self.scale, None if guard is None else ray_guard(self.scale, guard))
             out.t[:] = tmax
             out.instance.fill(-1)
             out.prim.fill(-1)
@@ -333,8 +337,8 @@ class Caster:
         return out
 
     # ------------------------------------------------------------------ occluded
-    def occluded(self, origins, dirs, times, tmax) -> np.ndarray:
-        """(n,) bool: is anything hit at tmin < t < tmax at the ray's time?"""
+    def occluded(self, origins, dirs, times, tmax, guard=None) -> np.ndarray:
+        """(n,) bool: is anything hit at tmin < t < tmax at the ray's time?  (guard: as :meth:`intersect`)"""
         start = _time.perf_counter()
         o, d, times, tmax = _as_rays(origins, dirs, times, tmax)
         n = o.shape[0]
@@ -347,14 +351,15 @@ class Caster:
             blocked = np.empty(n, bool)
             only = len(self.parts) == 1
             tmin = np.empty(min(n, CHUNK) if only else n)           # the guard: kept if parts follow
-            guard = TMIN_REL * self.scale
+            G = ray_guard(self.scale, guard)
             for a in range(0, n, CHUNK):
                 sl = slice(a, min(n, a + CHUNK))
-                first.occluded_into(o[sl], d[sl], tm[sl], guard, tmin[:sl.stop - a] if only else tmin[sl],
+                first.occluded_into(o[sl], d[sl], tm[sl], G if G.shape[0] == 1 else G[sl],
+                                    tmin[:sl.stop - a] if only else tmin[sl],
                                     blocked[sl])
             parts = list(enumerate(self.parts))[1:]
         else:
-            tmin = tmin_of(d, self.scale)
+            tmin = tmin_of(d, self.scale, None if guard is None else ray_guard(self.scale, guard))
             blocked = np.zeros(n, bool)
             parts = list(enumerate(self.parts))
         for k, part in parts:

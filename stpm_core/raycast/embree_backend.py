@@ -273,7 +273,7 @@ class StaticPart:
         """Cast m rays as the caster's first part and write every result field in place.
 
         o, d (m, 3), times (m,) C-contiguous; tmax (m,) or None (+inf);
-        guard = TMIN_REL * scale.  ``fields`` = views (m rows, any content) of
+        guard (1,) or (m,) distances (``geometry.ray_guard``).  ``fields`` = views (m rows, any content) of
         the caster's arrays: best_t, best_part (``k`` where won), part prim, u,
         v, instance, prim, material, ng, ns, position; ``tmin`` (m,) receives
         the guard t.  Rays that miss get the miss values (t = +inf if

@@ -91,7 +91,8 @@ def guard_rays32(o, d, tmax, has_tmax, guard, centre, tmin, o32, d32, far32):
     """Guard and embree rays in one pass (``tmin_of`` + :func:`rays32` from tmin).
 
     o, d (m, 3) float64 world rays; tmax (m,) (read only if ``has_tmax``,
-    else +inf); guard = TMIN_REL * scale.  Writes tmin (m,) = guard / |d|
+    else +inf); guard (1,) or (m,) distances: one for every ray (TMIN_REL *
+    scale) or each ray's own.  Writes tmin (m,) = guard / |d|
     (|d| = 0 or NaN: guard), and the float32 rays o32, d32 (m, 3), far32 (m,)
     starting at tmin, shifted to the mesh centre (3,) - the same float64
     operations as ``tmin_of`` then ``rays32``.
@@ -99,7 +100,7 @@ def guard_rays32(o, d, tmax, has_tmax, guard, centre, tmin, o32, d32, far32):
     for i in range(o.shape[0]):
         d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
         L = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        s = guard / (L if L > 0 else 1.0)
+        s = (guard[i] if guard.shape[0] > 1 else guard[0]) / (L if L > 0 else 1.0)
         tmin[i] = s
         for c in range(3):
             o32[i, c] = np.float32((s * d[i, c] + o[i, c]) - centre[c])

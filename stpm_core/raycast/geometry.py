@@ -22,7 +22,7 @@ import numpy as np
 
 __all__ = [
     "TMIN_REL", "ray_triangle", "cross", "world_to_object", "triangles_at",
-    "InstanceShading", "scene_scale", "tmin_of", "segment_of",
+    "InstanceShading", "scene_scale", "tmin_of", "ray_guard", "segment_of",
     "swept_bounds", "apply_affine", "apply_linear", "MotionKeys", "normal_matrix",
     "OFFSET_REL", "OFFSET_POS", "instance_offsets", "offset_lengths",
 ]
@@ -385,10 +385,27 @@ def offset_lengths(inst_offset: np.ndarray, instance: np.ndarray, position: np.n
     return inst_offset[instance] + OFFSET_POS * np.max(np.abs(position), axis=1, initial=0.0)
 
 
-def tmin_of(dirs: np.ndarray, scale: float) -> np.ndarray:
-    """Per-ray guard (n,) in units of |dir|: TMIN_REL * scale / |dir|."""
+def tmin_of(dirs: np.ndarray, scale: float, guard: np.ndarray | None = None) -> np.ndarray:
+    """Per-ray guard (n,) in units of |dir|: TMIN_REL * scale / |dir|, or guard (n,) (a distance
+    per ray, see :func:`ray_guard`) / |dir|."""
     L = np.sqrt(_dot(dirs, dirs))
-    return TMIN_REL * scale / np.where(L > 0, L, 1.0)
+    g = TMIN_REL * scale if guard is None else guard
+    return g / np.where(L > 0, L, 1.0)
+
+
+def ray_guard(scale: float, guard) -> np.ndarray:
+    """Guard distances as the casters use them: (1,) = TMIN_REL * scale for every ray (guard None),
+    else each ray's own guard (n,), never more than TMIN_REL * scale.
+
+    Callers that offset a ray's origin by e off the surface it leaves pass about e / 2: the
+    surface is then behind the origin, and a float32 re-hit of it is refined to t <= 0 and
+    re-cast, so the guard can be local where the global one (1e-6 x the scene diagonal) would
+    skip thin geometry near the surface in a scene with a far object (docs/raycast.md).
+    """
+    cap = TMIN_REL * scale
+    if guard is None:
+        return np.array([cap])
+    return np.ascontiguousarray(np.minimum(np.asarray(guard, np.float64), cap))
 
 
 def swept_bounds(mesh, transform):
