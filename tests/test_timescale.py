@@ -53,3 +53,12 @@ def test_turning_sun_counts_its_angular_speed_times_the_scene_radius():
     lo, hi = sc.bounds()
     radius = 0.5 * np.linalg.norm(hi - lo)
     assert np.isclose(max_motion_speed(sc), 0.2 * radius, rtol=1e-3)
+
+
+def test_sun_with_a_zero_direction_at_some_time_does_not_count():
+    """Z scaled to 0 at one key: the sun has no direction there and emits nothing; no bogus speed."""
+    flat = np.eye(4)
+    flat[2, 2] = 0.0
+    turn = MotionTransform(times=np.array([0.0, 1.0]), matrices=np.stack([np.eye(4), flat]))
+    sc = _scene([plane_mesh(4.0)], [_sun(turn)])
+    assert max_motion_speed(sc) == 0.0

@@ -86,7 +86,10 @@ def max_motion_speed(scene) -> float:
             if radius is None:
                 lo, hi = scene.bounds()
                 radius = 0.5 * float(np.linalg.norm(hi - lo)) if np.all(np.isfinite([lo, hi])) else 0.0
-            z = M[:, :3, 2] / np.maximum(np.linalg.norm(M[:, :3, 2], axis=1, keepdims=True), 1e-300)
+            zn = np.linalg.norm(M[:, :3, 2], axis=1)
+            if not np.all(zn > 0):
+                continue                     # no direction at some time: it emits nothing (scene_warnings)
+            z = M[:, :3, 2] / zn[:, None]
             angle = np.arccos(np.clip(np.sum(z[1:] * z[:-1], axis=1), -1.0, 1.0))   # rad per step
             speed = angle * radius / dt
         else:
