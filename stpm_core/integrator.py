@@ -41,7 +41,7 @@ from .bsdf import MaterialTable, bsdf_eval, bsdf_sample, diffuse_albedo, emissio
 from .camera import camera_to_world, generate_rays, image_plane
 from .film import BH_INVERSE_CDF, DEPTH_BACKGROUND, PASSES, Film, filter_offsets
 from .parallel import ordered_map, worker_count
-from .raycast.geometry import instance_offsets, offset_lengths
+from .raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from .sampling import rng_for, skip_uniforms
 
 __all__ = ["TraceStats", "trace_image", "camera_samples", "shade_paths"]
@@ -132,12 +132,6 @@ def _offset(p: np.ndarray, ng: np.ndarray, w: np.ndarray, eps: np.ndarray) -> np
     """Ray origin p moved by eps (n,) along ng to the side w (n, 3) points to."""
     side = np.where(np.sum(ng * w, axis=1) >= 0.0, 1.0, -1.0)
     return p + (eps * side)[:, None] * ng
-
-
-# A secondary ray starts eps off the surface it leaves and ignores hits closer than
-# GUARD_FRACTION * eps (raycast.geometry.ray_guard): local, like eps, so thin geometry near a
-# surface still shadows it in a scene with a far object (docs/raycast.md).
-GUARD_FRACTION = 0.5
 
 
 def _eps_rows(ctx, instance: np.ndarray, p: np.ndarray) -> np.ndarray:

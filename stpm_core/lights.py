@@ -328,14 +328,12 @@ class LightSet:
         self.n_scene_lights = len(scene.lights)
         lo, hi = scene.bounds()
         self.scene_bounds = (np.asarray(lo, float), np.asarray(hi, float))
-        # Bounding sphere of the scene (suns emit from a disc covering it)
-        self._scene_center = 0.5 * (self.scene_bounds[0] + self.scene_bounds[1])
-        self._scene_radius = max(0.5 * float(np.linalg.norm(self.scene_bounds[1] - self.scene_bounds[0])), 1e-3)
+        # Bounding sphere of the scene (suns and the world emit from a disc covering it)
+        self._scene_center, self._scene_radius = scene.bounding_sphere()
         # The world, when it shines: a light entry like the others (stpm_core/world_light.py)
-        radiance = np.asarray(scene.world.radiance, float)
-        if np.any(radiance > 0):
+        if scene.world.shines:
             from .world_light import WorldLight
-            self.lights.append(WorldLight(radiance, self._scene_center, self._scene_radius))
+            self.lights.append(WorldLight(scene.world.radiance, self._scene_center, self._scene_radius))
         # SPOT / SUN / AREA lights with no emitting direction at any key (zero Z scale,
         # zero area): they emit nothing, so flux 0 and no photon budget
         self._dead = [self._no_direction(i) for i in range(len(self.lights))]
@@ -536,18 +534,16 @@ class LightSet:
     def _sample_area(self, li, p, times, u):
         """AREA (one-sided, faces local -Z).  SQUARE / RECTANGLE: uniform in the solid angle S the
         rectangle subtends (:func:`~stpm_core.spherical_rect.spherical_rect_sample`), weight = L S
-        where the point is in front; elsewhere (disc, ellipse, sheared transform: |cos(ex, ey)| above
-        1e-5, S below 1e-7 sr)
-        uniform by area, weight = L cos_l A / t^2.  Both use the same two uniforms per sample."""
+        where the point is in front; the other rows (disc, ellipse, sheared transform: |cos(ex, ey)|
+        above 1e-5, S below 1e-7 sr) uniform by area, weight = L cos_l A / t^2.  Both use the same
+        two uniforms per sample; each row is computed by one of them only."""
         l = self.lights[li]
         c, ex, ey, A, n_emit = self._area_shape(li, times)
+        n = p.shape[0]
         L = np.asarray(l.color, float)[None, :] * (float(l.power) / (np.pi * np.maximum(A, 1e-300)))[:, None]
-        q = self._area_points(li, ex, ey, c, u)
-        wi, dist = _normalize(q - p)
-        cos_l = np.maximum(-np.sum(wi * n_emit, axis=-1), 0.0)
-        g = cos_l * A / np.maximum(dist * dist, 1e-300)
+        wi, dist, g = np.empty((n, 3)), np.empty(n), np.empty(n)
+        rest = np.ones(n, bool)
         if l.shape in ("SQUARE", "RECTANGLE"):
-            n = p.shape[0]
             exb, eyb = np.broadcast_to(ex, (n, 3)), np.broadcast_to(ey, (n, 3))
             # Blender's float32 matrices leave |cos(ex, ey)| ~ 1e-8 on rotated lights: treat up to 1e-5
             # as orthogonal (ey made exactly so: the rectangle moves by < 1e-5 of its size); real
@@ -560,11 +556,19 @@ class LightSet:
                 corner = np.broadcast_to(c, (n, 3)) - exb - eyo
                 qs, S = spherical_rect_sample(p, corner, 2.0 * exb, 2.0 * eyo, u)
                 use = ortho & (S > 1e-7)
-                wi_s, dist_s = _normalize(qs - p)
-                front = -np.sum(wi_s * np.broadcast_to(n_emit, (n, 3)), axis=-1) > 0.0
-                wi = np.where(use[:, None], wi_s, wi)
-                dist = np.where(use, dist_s, dist)
-                g = np.where(use, np.where(front, S, 0.0), g)
+                wi[use], dist[use] = _normalize(qs[use] - p[use])
+                front = -np.sum(wi[use] * np.broadcast_to(n_emit, (n, 3))[use], axis=-1) > 0.0
+                g[use] = np.where(front, S[use], 0.0)
+                rest = ~use
+        if np.any(rest):
+            def rows(a):
+                """The fallback rows of a per-sample (or broadcast) array."""
+                return np.broadcast_to(a, (n,) + np.shape(a)[1:])[rest]
+
+            q = self._area_points(li, rows(ex), rows(ey), rows(c), u[rest])
+            wi[rest], dist[rest] = _normalize(q - p[rest])
+            cos_l = np.maximum(-np.sum(wi[rest] * rows(n_emit), axis=-1), 0.0)
+            g[rest] = cos_l * rows(A) / np.maximum(dist[rest] * dist[rest], 1e-300)
         return wi, dist, L * g[:, None]
 
     def _sample_sun(self, li, p, times, u):

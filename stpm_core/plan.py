@@ -183,16 +183,10 @@ def _light_faces(light, c: np.ndarray, r: float) -> bool:
     return bool(np.any(inside | (ang <= 0.5 * float(light.spot_size))))
 
 
-def world_shines(scene) -> bool:
-    """Does the world light the scene (some channel of color * strength > 0)?"""
-    return bool(np.any(np.asarray(scene.world.radiance, float) > 0))
-
-
 def world_light(scene):
     """The world as a light entry (:class:`~stpm_core.world_light.WorldLight`) around the scene's sphere."""
     from .world_light import WorldLight
-    lo, hi = scene.bounds()
-    return WorldLight(scene.world.radiance, 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3))
+    return WorldLight(scene.world.radiance, *scene.bounding_sphere())
 
 
 def _lightset_index(lights, n_scene: int) -> list[int]:
@@ -312,7 +306,7 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
 
     # -- Motion within the shutter --------------------------------------------------------
     # The scene's lights, then the world when it shines (it lights every object it can see)
-    plan_lights = list(scene.lights) + ([world_light(scene)] if world_shines(scene) else [])
+    plan_lights = list(scene.lights) + ([world_light(scene)] if scene.world.shines else [])
     emits = [l.power > 0 and bool(np.any(np.asarray(l.color, float) > 0)) for l in plan_lights]
     moving = [i for i, inst in enumerate(scene.instances)
               if not inst.transform.is_static and not scene.meshes[inst.mesh].is_deforming]

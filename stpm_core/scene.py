@@ -280,6 +280,11 @@ class World:
     def radiance(self) -> np.ndarray:
         return np.asarray(self.color, float) * float(self.strength)
 
+    @property
+    def shines(self) -> bool:
+        """Does the world light the scene (some channel of color * strength > 0)?"""
+        return bool(np.any(self.radiance > 0))
+
 
 @dataclass
 class Scene:
@@ -329,6 +334,12 @@ class Scene:
         if not np.all(np.isfinite(lo)):
             return np.zeros(3), np.zeros(3)
         return lo, hi
+
+    def bounding_sphere(self) -> tuple[np.ndarray, float]:
+        """Centre (3,) and radius (scene units, at least 1e-3) of the sphere around :meth:`bounds`:
+        where suns and the world send their photons from."""
+        lo, hi = self.bounds()
+        return 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
 
 
 def _check_finite(name: str, a) -> np.ndarray:

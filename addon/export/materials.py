@@ -83,10 +83,15 @@ def sampled_mean(image, max_pixels: int = MAX_MEAN_PIXELS) -> np.ndarray:
         xs = np.minimum(np.arange(nx)[None, :] * step + rng.integers(0, step, (ny, nx)), w - 1)
         rgb = px.reshape(-1, c)[(ys * w + xs).reshape(-1), :3]
     del px
+    return linear_rgb(rgb, image).mean(axis=0, dtype=np.float64)
+
+
+def linear_rgb(rgb: np.ndarray, image) -> np.ndarray:
+    """Pixel values (..., 3) float32 of ``image`` in linear RGB: 8-bit sRGB images are converted."""
     if not image.is_float and image.colorspace_settings.name == "sRGB":
-        rgb = np.where(rgb <= np.float32(0.04045), rgb / np.float32(12.92),
-                       ((rgb + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4))  # sRGB -> linear
-    return rgb.mean(axis=0, dtype=np.float64)
+        return np.where(rgb <= np.float32(0.04045), rgb / np.float32(12.92),
+                        ((rgb + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4))
+    return rgb
 
 
 def image_mean(image) -> np.ndarray:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._core import scene_model
+from .materials import linear_rgb
 
 
 def _uses_nodes(idblock) -> bool:
@@ -82,8 +83,6 @@ def environment_mean(image, max_rows: int = 512) -> np.ndarray:
     rows = np.unique(np.linspace(0, h - 1, min(h, max_rows)).round().astype(np.int64))
     rgb = px.reshape(h, w, c)[rows, :, :3]
     del px
-    if not image.is_float and image.colorspace_settings.name == "sRGB":
-        rgb = np.where(rgb <= np.float32(0.04045), rgb / np.float32(12.92),
-                       ((rgb + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4))
+    rgb = linear_rgb(rgb, image)
     weight = np.cos(-0.5 * np.pi + np.pi * (rows + 0.5) / h)
     return (weight[:, None] * rgb.mean(axis=1, dtype=np.float64)).sum(axis=0) / weight.sum()

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..bsdf import bsdf_sample, has_nondelta
 from ..parallel import ordered_map, worker_count
-from ..raycast.geometry import instance_offsets, offset_lengths
+from ..raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from ..sampling import rng_for, stratified_1d
 from .record import make_records, photon_origin, PHOTON_DTYPE
 
@@ -171,7 +171,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         o = p + (e * side)[:, None] * ng
         sel = np.nonzero(alive)[0]
         o, d, Phi, t = o[sel], wi[sel], Phi[sel], t[sel]
-        guard = 0.5 * e[sel]                             # local guard, as the integrator's (GUARD_FRACTION)
+        guard = GUARD_FRACTION * e[sel]                  # the rays' own guards (geometry.ray_guard)
         n_delta, n_nondelta = n_delta[sel], n_nondelta[sel]
     if not stored:
         return np.empty(0, dtype=PHOTON_DTYPE)
@@ -194,12 +194,6 @@ def _run_batches(trace_batch, jobs: list, settings, progress, cancel, message: s
     return out
 
 
-def _scene_radius(scene) -> float:
-    """Scene bounding radius (scene units, at least 1e-3)."""
-    lo, hi = scene.bounds()
-    return max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
-
-
 def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=None,
                       progress=None, cancel=None) -> tuple[np.ndarray, dict]:
     """Caustic map records and counts: ``settings.photons_caustic`` photons aimed at specular instances.
@@ -210,7 +204,7 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
     every pair unbiased.
     """
     targets = specular_targets(scene, table)
-    r_scene, inst_offset = _scene_radius(scene), instance_offsets(scene)
+    r_scene, inst_offset = scene.bounding_sphere()[1], instance_offsets(scene)
     origin = photon_origin(scene)
     pairs, weights = [], []
     for li, light in enumerate(lights.lights):

@@ -24,7 +24,7 @@ __all__ = [
     "TMIN_REL", "ray_triangle", "cross", "world_to_object", "triangles_at",
     "InstanceShading", "scene_scale", "tmin_of", "ray_guard", "segment_of",
     "swept_bounds", "apply_affine", "apply_linear", "MotionKeys", "normal_matrix",
-    "OFFSET_REL", "OFFSET_POS", "instance_offsets", "offset_lengths",
+    "OFFSET_REL", "OFFSET_POS", "GUARD_FRACTION", "instance_offsets", "offset_lengths",
 ]
 
 # Self-intersection guard: a ray never reports a hit closer than
@@ -39,6 +39,10 @@ TMIN_REL = 1e-6
 # scene does not push every ray off its surface (docs/raycast.md).
 OFFSET_REL = 1e-5
 OFFSET_POS = 1e-7
+# A secondary ray started eps off a surface ignores hits closer than GUARD_FRACTION * eps
+# (its own guard, :func:`ray_guard`): local like eps, so thin geometry near the surface still
+# counts in a scene with a far object.
+GUARD_FRACTION = 0.5
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
