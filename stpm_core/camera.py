@@ -74,7 +74,8 @@ def image_plane(camera, resolution) -> tuple[float, float, float, float]:
 
 
 def generate_rays(camera, resolution, px: np.ndarray, py: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Primary rays through continuous pixel positions at their own times.
+    """Primary rays through continuous pixel positions at their own times (``kernels.paths.camera_rays``,
+    the tracer's own kernel).
 
     Parameters
     ----------
@@ -89,28 +90,21 @@ def generate_rays(camera, resolution, px: np.ndarray, py: np.ndarray, times: np.
         plane at ``clip_start`` in front of the camera).
     dirs : (n, 3) unit world directions.
     """
-    px = np.asarray(px, dtype=np.float64)
-    py = np.asarray(py, dtype=np.float64)
+    from .kernels.paths import camera_rays
+
+    px = np.ascontiguousarray(px, dtype=np.float64)
+    py = np.ascontiguousarray(py, dtype=np.float64)
+    times = np.broadcast_to(np.asarray(times, dtype=np.float64), px.shape)
     W, H = int(resolution[0]), int(resolution[1])
     half_w, half_h, cx, cy = image_plane(camera, resolution)
-    # Image-plane point: x right, y up (row 0 = top)
-    x = cx + (2.0 * px / W - 1.0) * half_w
-    y = cy + (1.0 - 2.0 * py / H) * half_h
-    R, pos = camera_to_world(camera, times)
-    if camera.transform.is_static:
-        R, pos = R[:1], pos[:1]                  # one pose: matrix products, not per-ray einsum
-    if camera.type == "ORTHO":
-        # Parallel rays down -Z from the plane at clip_start
-        local_o = np.stack([x, y, np.full_like(x, -float(camera.clip_start))], axis=-1)
-        origins = (local_o @ R[0].T + pos[0]) if R.shape[0] == 1 else np.einsum("nij,nj->ni", R, local_o) + pos
-        dirs = np.broadcast_to(-R[:, :, 2], (x.shape[0], 3))
-    else:
-        # Pinhole: the ray through (x, y, -1) on the plane at unit distance
-        local_d = np.stack([x, y, -np.ones_like(x)], axis=-1)
-        dirs = (local_d @ R[0].T) if R.shape[0] == 1 else np.einsum("nij,nj->ni", R, local_d)
-        dirs /= np.sqrt(np.einsum("ij,ij->i", dirs, dirs))[:, None]
-        origins = np.broadcast_to(pos, (x.shape[0], 3)).copy()
-    return origins, np.ascontiguousarray(dirs)
+    static = camera.transform.is_static
+    R, pos = camera_to_world(camera, times[:1] if static else times)
+    n = px.shape[0]
+    o, d, tmax0 = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
+    camera_rays(px, py, W, H, float(half_w), float(half_h), float(cx), float(cy), np.ascontiguousarray(R, np.float64),
+                np.ascontiguousarray(pos, np.float64), camera.type == "ORTHO", float(camera.clip_start),
+                float(camera.clip_end), o, d, tmax0)
+    return o, d
 
 
 def view_axis(camera, times: np.ndarray) -> np.ndarray:

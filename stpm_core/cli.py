@@ -10,13 +10,16 @@
                  [the settings options of render]
 
 SCENE is a core scene file (``.stpm`` / ``.npz``, see docs/scene-format.md) or
-a ``.blend`` (loaded through ``addon.batch.load_blend``, which needs bpy).
+a ``.blend`` (loaded through :mod:`stpm_core.blend_loader`, which needs bpy).
 Options not given come from the file's settings (a core file's optional
 settings; a .blend's ``scene.stpm``), else the :class:`RenderSettings` defaults.
 
 Exit status: 0 success; 1 a user error (one ``stpm: error: ...`` line on
 stderr); 2 bad command-line syntax; 3 an internal error (a bug: please
 report); 130 cancelled with Ctrl-C (143 with SIGTERM).  See docs/cli.md.
+
+What ``stpm compare`` (:mod:`stpm_core.compare.command`) shares with these
+commands lives in :mod:`stpm_core.command_common`.
 """
 from __future__ import annotations
 
@@ -24,33 +27,18 @@ import argparse
 import json
 import os
 import re
-import signal
 import sys
 import tempfile
 import time
-from dataclasses import fields
 from pathlib import Path
 
+from .command_common import (EXIT_CANCELLED, EXIT_ERROR, EXIT_INTERNAL, EXIT_OK, EXIT_USAGE, FRAME_MAX,
+                             FRAME_MIN, CancelFlag, CommandParser, UsageError, add_setting_options,
+                             check_cancel, check_memory, checked_overrides, load_any_scene, option_message,
+                             scene_kind)
 from .errors import RenderCancelled, SceneError, SettingsError, StpmError
 
 __all__ = ["main", "parse_frames", "load_any_scene"]
-
-EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_INTERNAL, EXIT_CANCELLED = 0, 1, 2, 3, 130
-
-# Blender's frame limits (MINAFRAME, MAXFRAME): --frame beyond them is refused.
-FRAME_MIN, FRAME_MAX = -1_048_574, 1_048_574
-
-
-class UsageError(StpmError):
-    """Bad command-line syntax (exit status 2)."""
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse that reports a syntax error as one line instead of usage + message + exit."""
-
-    def error(self, message):
-        raise UsageError(message)
-
 
 # ----------------------------------------------------------------------------
 # Argument parsing helpers
@@ -75,26 +63,10 @@ def parse_frames(text: str) -> list[int]:
     return list(range(a, b + 1))
 
 
-def _resolution(text: str) -> tuple[int, int]:
-    m = re.match(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$", text)
-    if not m or not (1 <= int(m.group(1)) <= 65536 and 1 <= int(m.group(2)) <= 65536):
-        raise argparse.ArgumentTypeError(f"must be WxH with integers in [1, 65536], got {text!r}")
-    return int(m.group(1)), int(m.group(2))
-
-
-def _lower_choice(*allowed):
-    def conv(text: str) -> str:
-        if text.lower() not in allowed:
-            raise argparse.ArgumentTypeError(f"must be one of {', '.join(allowed)}, got {text!r}")
-        return text.upper()
-    conv.__name__ = "choice"
-    return conv
-
-
-def _build_parser() -> _Parser:
-    p = _Parser(prog="stpm", description="STPM: time-dependent photon mapping renderer.")
+def _build_parser() -> CommandParser:
+    p = CommandParser(prog="stpm", description="STPM: time-dependent photon mapping renderer.")
     p.add_argument("--version", action="version", version=f"stpm {_version()}")
-    sub = p.add_subparsers(dest="command", metavar="{render,plan,compare}", parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", metavar="{render,plan,compare}", parser_class=CommandParser)
 
     r = sub.add_parser("render", help="render a scene to a multilayer EXR and a PNG preview")
     r.add_argument("scene", help="scene file: .stpm / .npz (core) or .blend")
@@ -103,7 +75,7 @@ def _build_parser() -> _Parser:
     r.add_argument("--output", "-o", metavar="OUT.exr",
                    help="output .exr (default: next to the scene, same stem); "
                    "'#' characters are replaced by the zero-padded frame number")
-    _add_setting_options(r)
+    add_setting_options(r)
     r.add_argument("--stats", metavar="STATS.json", help="write timings, counts and settings as JSON")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar, timing line or Blender log")
 
@@ -120,38 +92,6 @@ def _build_parser() -> _Parser:
     return p
 
 
-def _add_setting_options(parser, skip: tuple[str, ...] = ()) -> None:
-    """The RenderSettings options shared by ``render`` and ``compare`` (names fixed by interface.md).
-
-    ``skip``: option destinations the caller defines differently (``compare`` sweeps
-    accumulation steps and has its own --samples / --resolution).
-    """
-    add = parser.add_argument
-
-    def opt(*names, **kw):
-        if kw.get("dest", names[0].lstrip("-")) not in skip:
-            add(*names, **kw)
-    opt("--method", dest="method", type=_lower_choice("photon", "accumulation"), metavar="{photon,accumulation}",
-        help="photon: time-stamped photon maps; accumulation: the average of N stills (the baseline)")
-    opt("--estimator", dest="estimator", type=_lower_choice("standard", "temporal", "kd4d"),
-        metavar="{standard,temporal,kd4d}", help="photon density estimate (method photon only)")
-    opt("--accumulation-steps", type=int, dest="accumulation_steps", metavar="N",
-        help="stills averaged by --method accumulation, integer in [1, 4096]")
-    opt("--samples", type=int, dest="samples", metavar="S", help="camera samples per pixel, integer in [1, 65536]")
-    opt("--photons-global", type=int, dest="photons_global", metavar="N",
-        help="photons emitted for the global (indirect) map, integer in [0, 2^31]")
-    opt("--photons-caustic", type=int, dest="photons_caustic", metavar="N",
-        help="photons emitted for the caustic map, integer in [0, 2^31]")
-    opt("--k", type=int, dest="k_nearest", metavar="K", help="photons per estimate, integer in [1, 100000]")
-    opt("--temporal-alpha", type=float, dest="temporal_alpha", metavar="A",
-        help="TEMPORAL candidates as a multiple of k: 0 (automatic) or a number in [1, 1e6]")
-    opt("--time-scale", type=float, dest="time_scale", metavar="S",
-        help="KD4D's scene units per shutter, >= 0 (0: automatic)")
-    opt("--seed", type=int, dest="seed", metavar="S", help="random seed, integer in [0, 2^63 - 1]")
-    opt("--resolution", type=_resolution, dest="resolution", metavar="WxH",
-        help="image size, W and H integers in [1, 65536] (default: the scene's)")
-
-
 def _version() -> str:
     """The installed package's version (pyproject.toml), or 'unknown' when run from a bare checkout."""
     try:
@@ -161,186 +101,9 @@ def _version() -> str:
         return "unknown"
 
 
-# Command-line option -> RenderSettings field (only the ones the user gave override).
-_SETTING_OPTIONS = ("method", "estimator", "accumulation_steps", "samples", "photons_global",
-                    "photons_caustic", "k_nearest", "temporal_alpha", "time_scale", "seed")
-_OPTION_FLAGS = {"k_nearest": "--k"}
-
-
 # ----------------------------------------------------------------------------
-# Scenes: core files and .blend
+# Output paths
 # ----------------------------------------------------------------------------
-def _scene_kind(path: Path) -> str:
-    """'core' or 'blend' from the suffix, else from the file's first bytes."""
-    from .scenefile import SCENE_SUFFIXES
-    suffix = path.suffix.lower()
-    if suffix in SCENE_SUFFIXES:
-        return "core"
-    if suffix == ".blend":
-        return "blend"
-    with open(path, "rb") as f:
-        magic = f.read(7)
-    if magic[:4] == b"PK\x03\x04":
-        return "core"
-    if magic == b"BLENDER" or magic[:2] in (b"\x1f\x8b", b"\x28\xb5"):  # plain, gzip, zstd .blend
-        return "blend"
-    raise StpmError(f"{path.name}: unknown scene file type (expected .stpm, .npz or .blend)")
-
-
-def _settings_from_dict(d: dict | None, source: str):
-    """RenderSettings from a settings dict (unknown keys are the add-on's UI-only ones: ignored)."""
-    from .settings import RenderSettings
-    if d is None:
-        return RenderSettings()
-    known = {f.name for f in fields(RenderSettings)}
-    try:
-        return RenderSettings.from_dict({k: v for k, v in dict(d).items() if k in known})
-    except SettingsError as e:
-        raise SettingsError(f"{source} settings: {e}") from None
-
-
-class _stdout_to_stderr:
-    """Point file descriptor 1 at stderr for a while (bpy writes its log straight to fd 1)."""
-
-    def __enter__(self):
-        sys.stdout.flush()
-        try:
-            self._saved = os.dup(1)
-            os.dup2(2, 1)
-        except OSError:  # no real descriptors (embedded): leave stdout alone
-            self._saved = None
-        return self
-
-    def __exit__(self, *exc):
-        if self._saved is not None:
-            sys.stdout.flush()
-            os.dup2(self._saved, 1)
-            os.close(self._saved)
-        return False
-
-
-class _BlenderOutput:
-    """Capture file descriptors 1 and 2 while Blender loads a file, then pass on what the user should see.
-
-    Blender writes its log ("Read blend: ...") and its own error lines ("Error:
-    File format is not supported ...") straight to the descriptors from C.  On
-    success the captured lines go to stderr (stdout stays clean for ``plan
-    --json``), without the "Read blend:" line when ``quiet``.  On failure they
-    are dropped: the ``stpm: error:`` line says it once (``STPM_DEBUG`` keeps
-    them).  Ctrl-C messages printed meanwhile go to the real stderr at once.
-    """
-
-    def __init__(self, quiet: bool = False):
-        self.quiet = quiet
-        self._saved = None
-        self.text = ""
-
-    def __enter__(self):
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):
-                pass
-        try:
-            self._tmp = tempfile.TemporaryFile()
-            self._saved = (os.dup(1), os.dup(2))
-        except OSError:  # no real descriptors (embedded): leave them alone
-            self._saved = None
-            return self
-        os.dup2(self._tmp.fileno(), 1)
-        os.dup2(self._tmp.fileno(), 2)
-        flag = _CancelFlag.active
-        if flag is not None:
-            self._flag_fd, flag.err_fd = flag.err_fd, self._saved[1]
-        return self
-
-    def __exit__(self, exc_type, exc, tb):
-        if self._saved is None:
-            return False
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):
-                pass
-        os.dup2(self._saved[0], 1)
-        os.dup2(self._saved[1], 2)
-        for fd in self._saved:
-            os.close(fd)
-        flag = _CancelFlag.active
-        if flag is not None:
-            flag.err_fd = self._flag_fd
-        self._tmp.seek(0)
-        self.text = self._tmp.read().decode("utf-8", errors="replace")
-        self._tmp.close()
-        if exc_type is not None and not os.environ.get("STPM_DEBUG"):
-            return False
-        keep = [line for line in self.text.splitlines()
-                if line.strip() and not (self.quiet and "Read blend:" in line)]
-        if keep:
-            sys.stderr.write("\n".join(keep) + "\n")
-            sys.stderr.flush()
-        return False
-
-
-def load_any_scene(path, frame: int | None, *, quiet: bool = False):
-    """(Scene, RenderSettings, export seconds) from a core scene file or a .blend.
-
-    A core file holds one frame: asking for another is an error.  A .blend is
-    loaded through ``addon.batch.load_blend(path, frame)`` (bpy, imported lazily);
-    Blender's own console output is handled by :class:`_BlenderOutput`
-    (``quiet`` drops its "Read blend:" line).
-    """
-    path = Path(path)
-    if not path.exists():
-        raise StpmError(f"scene file not found: {path}")
-    if path.is_dir():
-        raise StpmError(f"scene path is a directory, not a file: {path}")
-    t0 = time.perf_counter()
-    kind = _scene_kind(path)
-    if kind == "core":
-        from .scenefile import load_scene_with_settings
-        scene, settings = load_scene_with_settings(path)
-        if frame is not None and float(frame) != float(scene.frame):
-            raise StpmError(f"{path.name} holds frame {scene.frame:g} only (a core scene file is one frame); "
-                            f"cannot render frame {frame}")
-        if settings is None:
-            settings = _settings_from_dict(None, path.name)
-    else:
-        with _BlenderOutput(quiet=quiet):  # Blender's log: to stderr, or dropped when it failed
-            try:
-                from addon import batch  # bpy lives only in addon/
-            except ImportError as e:
-                raise StpmError(f"cannot load {path.name}: .blend files need Blender's bpy module and "
-                                f"addon.batch ({e}); install the 'test' extra or export a .stpm scene") from None
-            try:
-                scene, d = batch.load_blend(str(path), frame)
-            except StpmError as e:  # "cannot open x.blend: Error: File format ...": say "Error" once
-                raise type(e)(str(e).replace(": Error: ", ": ")) from None
-        settings = _settings_from_dict(d, path.name)
-    return scene, settings, time.perf_counter() - t0
-
-
-def _blend_frame_range(scene) -> tuple[int, int] | None:
-    """(frame_start, frame_end) of the .blend ``scene`` was exported from, or None if unknown.
-
-    From ``scene.metadata['frame_range']`` when the exporter records it, else from
-    the bpy module already loaded by the export (stpm_core never imports bpy).
-    """
-    meta = scene.metadata if isinstance(scene.metadata, dict) else {}
-    rng = meta.get("frame_range")
-    if rng is not None:
-        try:
-            return int(rng[0]), int(rng[1])
-        except (TypeError, ValueError, IndexError):
-            return None
-    bpy = sys.modules.get("bpy")
-    try:
-        bscene = bpy.data.scenes[meta["blender_scene"]] if "blender_scene" in meta else bpy.context.scene
-        return int(bscene.frame_start), int(bscene.frame_end)
-    except Exception:  # noqa: BLE001 -- no bpy or no such scene: no range to check
-        return None
-
-
 def _default_exr(scene_path: Path, frame: int | None, numbered: bool) -> Path:
     """The default output: next to the scene, same stem, ``_NNNN`` when numbered.
 
@@ -359,27 +122,6 @@ def _frame_path(template: str, frame: int | None, many: bool) -> Path:
     if many and frame is not None:
         return p.with_name(f"{p.stem}_{frame:04d}{p.suffix}")
     return p
-
-
-def _checked_overrides(args, skip: tuple[str, ...] = ()) -> dict:
-    """The settings options the user gave, checked before any (possibly slow, .blend) loading."""
-    from .settings import RenderSettings
-    overrides = {k: getattr(args, k) for k in _SETTING_OPTIONS
-                 if k not in skip and getattr(args, k, None) is not None}
-    try:
-        RenderSettings().replace(**overrides)
-    except SettingsError as e:
-        raise SettingsError(_option_message(str(e), overrides)) from None
-    return overrides
-
-
-def _option_message(message: str, overrides: dict) -> str:
-    """A SettingsError about an option the user typed, named as typed (``--samples must ...``)."""
-    for key in overrides:
-        if message.startswith(key + " "):
-            flag = _OPTION_FLAGS.get(key, "--" + key.replace("_", "-"))
-            return flag + message[len(key):]
-    return message
 
 
 def _check_output_path(path: Path, what: str, probed: set | None = None) -> None:
@@ -435,139 +177,6 @@ def _check_outputs(out_exr: Path, out_png: Path, stats: Path | None, scene_path:
                 raise StpmError(f"--stats {stats} is the same file as the {what}: choose another name")
 
 
-# Peak bytes per pixel of one frame, measured (peak RSS of `stpm render` at 2000x1500 minus at
-# 100x100, 1 sample): 239 (PHOTON: the film's float32 sums, resolve()'s temporaries, the passes,
-# the EXR / PNG writers' copies) and 481 (ACCUMULATION: also a float64 sum and one still's passes).
-# Rounded up; photon maps and per-tile buffers come on top (docs/cli.md, "Memory").
-BYTES_PER_PIXEL = {"PHOTON": 256, "ACCUMULATION": 512}
-
-
-def _available_memory() -> int | None:
-    """Bytes of memory available now: /proc/meminfo MemAvailable, else physical memory; None if unknown."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (OSError, ValueError, AttributeError):
-        return None
-
-
-def image_memory(resolution, method: str = "PHOTON") -> int:
-    """Estimated peak bytes of the image buffers of one frame at ``resolution`` (W, H)."""
-    w, h = int(resolution[0]), int(resolution[1])
-    return w * h * BYTES_PER_PIXEL.get(str(method).upper(), BYTES_PER_PIXEL["ACCUMULATION"])
-
-
-def _check_memory(resolution, method: str) -> None:
-    """Refuse, before rendering, an image whose buffers cannot fit in the memory available."""
-    need = image_memory(resolution, method)
-    avail = _available_memory()
-    if avail is not None and need > avail:
-        w, h = int(resolution[0]), int(resolution[1])
-        raise StpmError(f"{w}x{h} needs about {need / 2**30:.1f} GiB of memory for the image buffers, "
-                        f"more than the {avail / 2**30:.1f} GiB available: lower --resolution")
-
-
-# ----------------------------------------------------------------------------
-# Ctrl-C / SIGTERM: the first one cancels cleanly, a second one aborts at once
-# ----------------------------------------------------------------------------
-class _CancelFlag:
-    """SIGINT and SIGTERM handling, and the ``cancel() -> bool`` the renderer polls.
-
-    The first signal only sets the flag (so it is safe at any moment, even inside
-    ``import bpy`` or a .blend load, where a KeyboardInterrupt can crash Blender):
-    the command stops at its next check (the renderer polls it per tile and per
-    photon batch; the CLI before rendering and before committing outputs) and
-    exits 130 (143 for SIGTERM).  A second signal aborts at once: it removes the
-    temporary output files being written and ends the process with ``os._exit``.
-
-    ``main`` installs one for the whole command; a nested ``with _CancelFlag()``
-    (``stpm compare``) returns that one.  ``err_fd``: where the messages go (a
-    descriptor; None = sys.stderr).
-    """
-
-    active: "_CancelFlag | None" = None
-
-    def __init__(self):
-        self.signum: int | None = None
-        self.err_fd: int | None = None
-        self._old: dict = {}
-        self._outer = None
-
-    @property
-    def set(self) -> bool:
-        return self.signum is not None
-
-    def __call__(self) -> bool:
-        return self.signum is not None
-
-    def exit_status(self) -> int:
-        return 128 + int(self.signum) if self.signum is not None else EXIT_CANCELLED
-
-    def _say(self, text: str) -> None:
-        try:
-            if self.err_fd is not None:
-                os.write(self.err_fd, text.encode())
-            else:
-                sys.stderr.write(text)
-                sys.stderr.flush()
-        except (OSError, ValueError, RuntimeError):
-            pass
-
-    def _handler(self, signum, frame):
-        if self.signum is not None:
-            from .imageio import remove_pending_temps
-            remove_pending_temps()
-            lead = "\n" if getattr(sys.stderr, "isatty", lambda: False)() else ""
-            self._say(f"{lead}stpm: aborted\n")
-            try:
-                sys.stdout.flush()
-            except (OSError, ValueError, RuntimeError):
-                pass
-            os._exit(128 + int(signum))
-        self.signum = signum
-        lead = "\n" if getattr(sys.stderr, "isatty", lambda: False)() else ""
-        what = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
-        self._say(f"{lead}stpm: cancelling ({what} again to abort)\n")
-
-    def __enter__(self):
-        outer = _CancelFlag.active
-        if outer is not None:
-            self._outer = outer
-            return outer
-        try:
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._old[sig] = signal.signal(sig, self._handler)
-        except ValueError:  # not the main thread (embedded use): no handler
-            for sig, old in self._old.items():
-                signal.signal(sig, old)
-            self._old = {}
-            return self
-        _CancelFlag.active = self
-        return self
-
-    def __exit__(self, *exc):
-        if self._outer is not None:
-            return False
-        for sig, old in self._old.items():
-            signal.signal(sig, old if old is not None else signal.SIG_DFL)
-        self._old = {}
-        if _CancelFlag.active is self:
-            _CancelFlag.active = None
-        return False
-
-
-def _check_cancel(cancel) -> None:
-    """Raise RenderCancelled if a Ctrl-C came (between the steps the renderer polls itself)."""
-    if cancel is not None and cancel():
-        raise RenderCancelled("cancelled")
-
-
 # ----------------------------------------------------------------------------
 # Subcommands
 # ----------------------------------------------------------------------------
@@ -587,11 +196,11 @@ def _cmd_render(args) -> int:
         def exr_for(f):
             return _default_exr(scene_path, f, numbered)
 
-    overrides = _checked_overrides(args)
+    overrides = checked_overrides(args)
     if not scene_path.exists():  # the first thing to say (before any complaint about outputs)
         raise StpmError(f"scene file not found: {scene_path}")
     # A core scene file holds one frame: a range is refused before anything renders
-    if many and scene_path.is_file() and _scene_kind(scene_path) == "core":
+    if many and scene_path.is_file() and scene_kind(scene_path) == "core":
         scene, _, _ = load_any_scene(scene_path, None)
         raise StpmError(f"{scene_path.name} holds frame {scene.frame:g} only (a core scene file is one frame); "
                         f"cannot render the range {args.frame.strip()}: render a .blend for several frames")
@@ -616,7 +225,8 @@ def _warn(line: str) -> None:
 
 def _warn_frames_outside(scene, frames) -> None:
     """A warning line when frames of the range lie outside the .blend's frame_start..frame_end."""
-    rng = _blend_frame_range(scene)
+    from .blend_loader import blend_frame_range
+    rng = blend_frame_range(scene)
     if rng is None or frames == [None]:
         return
     outside = [f for f in frames if not rng[0] <= f <= rng[1]]
@@ -636,15 +246,15 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
     from .progress import ProgressBar
     from .render import render
 
-    cancel = _CancelFlag.active
+    cancel = CancelFlag.active
     probed: set = set()
     for index, frame in enumerate(frames):
         t_frame = time.perf_counter() if many else t_start
-        _check_cancel(cancel)
+        check_cancel(cancel)
 
         # -- Scene and settings: file values, then command-line overrides -------------
         scene, settings, export_s = load_any_scene(scene_path, frame, quiet=args.quiet)
-        _check_cancel(cancel)  # a Ctrl-C while Blender loaded: stop before rendering
+        check_cancel(cancel)  # a Ctrl-C while Blender loaded: stop before rendering
         f_out = frame if frame is not None else (int(scene.frame) if float(scene.frame).is_integer() else None)
         out_exr = exr_for(f_out)
         out_png = out_exr.with_suffix(".png")
@@ -653,12 +263,12 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
         try:
             settings = settings.replace(**overrides)
         except SettingsError as e:
-            raise SettingsError(_option_message(str(e), overrides)) from None
+            raise SettingsError(option_message(str(e), overrides)) from None
         if args.resolution is not None:
             scene.resolution = args.resolution
-        _check_memory(scene.resolution, settings.method)
+        check_memory(scene.resolution, settings.method)
         if index == 0:
-            if scene_path.suffix.lower() == ".blend" or _scene_kind(scene_path) == "blend":
+            if scene_path.suffix.lower() == ".blend" or scene_kind(scene_path) == "blend":
                 _warn_frames_outside(scene, frames)
             if settings.method == "ACCUMULATION" and args.estimator not in (None, "STANDARD"):
                 _warn(f"--estimator {args.estimator.lower()} has no effect with --method accumulation: "
@@ -702,7 +312,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
                 with atomic_output(stats_path, commit=False) as tmp:
                     write_json(tmp, stats, atomic=False)
                 staged.append((tmp, stats_path))
-            _check_cancel(cancel)  # a Ctrl-C while writing: none of this frame's outputs
+            check_cancel(cancel)  # a Ctrl-C while writing: none of this frame's outputs
             while staged:
                 commit_temp(*staged[0])
                 staged.pop(0)
@@ -729,9 +339,9 @@ def _cmd_plan(args) -> int:
     if len(frames) > 1:
         raise UsageError("stpm plan takes one frame, not a range")
     scene, settings, _ = load_any_scene(args.scene, frames[0])
-    _check_cancel(_CancelFlag.active)
+    check_cancel(CancelFlag.active)
     plan = make_plan(scene, settings)
-    _check_cancel(_CancelFlag.active)         # a signal during the plan's probe: no plan printed, 130 / 143
+    check_cancel(CancelFlag.active)         # a signal during the plan's probe: no plan printed, 130 / 143
     if args.json:
         print(json.dumps(plan, indent=2))
     else:
@@ -756,15 +366,15 @@ def _os_error_line(e: OSError) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns (and, as a console script, exits with) the status code.
 
-    SIGINT / SIGTERM are handled from the start (:class:`_CancelFlag`), so a
+    SIGINT / SIGTERM are handled from the start (:class:`CancelFlag`), so a
     Ctrl-C at any moment, loading included, ends with one line and status 130.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
-    with _CancelFlag() as cancel:
+    with CancelFlag() as cancel:
         return _main(argv, cancel)
 
 
-def _main(argv: list[str], cancel: _CancelFlag) -> int:
+def _main(argv: list[str], cancel: CancelFlag) -> int:
     command = argv[0] if argv and argv[0] in ("render", "plan", "compare") else ""
     try:
         parser = _build_parser()

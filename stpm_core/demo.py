@@ -7,8 +7,9 @@ both sharp in space and correctly blurred in time.
 
 Where the scene comes from:
 
-1. ``blend_scenes/demo.blend`` through ``addon.batch.load_blend`` (Blender's
-   bpy) when both exist, so the demo renders what an artist would open;
+1. ``blend_scenes/demo.blend`` through :func:`stpm_core.blend_loader.load_blend`
+   (the add-on, Blender's bpy) when both exist, so the demo renders what an
+   artist would open;
 2. otherwise the same scene built here directly in numpy (:func:`demo_scene`).
 
 Either way it is saved as ``out/demo/demo.stpm`` (the core scene file) and
@@ -130,14 +131,14 @@ def _blend_scene():
     """(Scene, RenderSettings) from blend_scenes/demo.blend through the add-on, or None if unavailable."""
     if not DEMO_BLEND.exists():
         return None
+    from .blend_loader import BlendSupportMissing, load_blend
+    from .command_common import settings_from_dict, stdout_to_stderr
     try:
-        from addon.batch import load_blend  # needs bpy
-    except ImportError:
+        with stdout_to_stderr():  # Blender's log lines
+            scene, d = load_blend(DEMO_BLEND, 1)
+    except BlendSupportMissing:  # no bpy / add-on here: the numpy scene instead
         return None
-    from .cli import _settings_from_dict, _stdout_to_stderr
-    with _stdout_to_stderr():  # Blender's log lines
-        scene, d = load_blend(str(DEMO_BLEND), 1)
-    return scene, _settings_from_dict(d, DEMO_BLEND.name)
+    return scene, settings_from_dict(d, DEMO_BLEND.name)
 
 
 # ----------------------------------------------------------------------------

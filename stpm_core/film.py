@@ -23,7 +23,7 @@ import threading
 
 import numpy as np
 
-from . import shading_kernels as _K
+from .kernels import paths as _K
 
 __all__ = ["PASSES", "PASS_NAMES", "pass_channels", "blackman_harris", "filter_offsets", "BH_INVERSE_CDF", "Film"]
 
@@ -86,7 +86,7 @@ def _inverse_cdf_table(m: int = 4097, fine: int = 1 << 17) -> np.ndarray:
 
 
 # Inverse CDF of the unit-radius Blackman-Harris window at m = 4097 evenly spaced
-# probabilities (linear in between: filter_offsets, shading_kernels.camera_tile).
+# probabilities (linear in between: filter_offsets, kernels.paths.camera_tile).
 BH_INVERSE_CDF: np.ndarray = _inverse_cdf_table()
 
 
@@ -187,8 +187,8 @@ class Film:
         passes it holds, and w (yb - ya, xb - xa, k + 1) float32 sums (last
         channel: the sample count), for :meth:`add_window`.
 
-        The samples must be laid out as :func:`stpm_core.integrator.camera_samples`
-        makes them: the tile's pixels [x0, x0 + tw) x [y0, y0 + th) in row-major
+        The samples must be laid out as the integrator's tiles
+        (``kernels.paths.camera_tile``) make them: the tile's pixels [x0, x0 + tw) x [y0, y0 + th) in row-major
         order, each pixel's S = n / (tw th) samples consecutive, so
         ``w[p, c] = sum_s V[p, s, c]``.  Passes that are all zero in the tile
         (e.g. Caustic without photons) are skipped.  Sums in float64.
@@ -197,28 +197,15 @@ class Film:
         n = next(iter(values.values())).shape[0] if values else 0
         if n == 0 or P == 0:
             return None
-        if _K.AVAILABLE:
-            V = np.concatenate([np.asarray(values[name], np.float64).reshape(n, c) for name, c, _ in PASSES], axis=1)
-            return self.tile_sums_matrix(x0, y0, tw, th, V)
-        S = n // P
-        active, arrays, c0 = [], [], 0
-        for name, c, _ in PASSES:
-            a = np.asarray(values[name], np.float64).reshape(n, c)
-            if np.any(a):
-                active.append((c0, c))
-                arrays.append(a)
-            c0 += c
-        V = np.concatenate(arrays + [np.ones((n, 1))], axis=1)
-        w = V.reshape(P, S, -1).sum(axis=1).reshape(th, tw, -1).astype(np.float32)
-        ya, yb, xa, xb = y0, min(y0 + th, self.height), x0, min(x0 + tw, self.width)
-        return (ya, yb, xa, xb), active, w[:yb - ya, :xb - xa]
+        V = np.concatenate([np.asarray(values[name], np.float64).reshape(n, c) for name, c, _ in PASSES], axis=1)
+        return self.tile_sums_matrix(x0, y0, tw, th, V)
 
     def tile_sums_matrix(self, x0: int, y0: int, tw: int, th: int, V: np.ndarray, combined_is_sum: bool = False,
                          alpha_one: bool = False, zero: tuple = (), scan: bool = True,
                          channels: np.ndarray | None = None, columns: np.ndarray | None = None):
         """:meth:`tile_sums` with the sample values as one matrix V (n, m) float64, by the
-        compiled kernels ``shading_kernels.pixel_sums`` and ``tile_finish`` (float64
-        sums).  Needs ``shading_kernels.AVAILABLE``.
+        compiled kernels ``kernels.paths.pixel_sums`` and ``tile_finish`` (float64
+        sums).
 
         channels (m,): the image channel (:data:`PASSES` order, 0 .. 19) of
         each column of V; None = V has all 20 channels in order.  columns: the

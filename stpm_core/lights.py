@@ -21,58 +21,45 @@ code name is in docs/lights-and-materials.md):
   power, points uniform, at each sample's time.
 
 Queries (all vectorised, each sample at its own shutter time; a light's pose
-is ``light.transform.at(times)``):
+is ``light.transform.at(times)``), all computed by compiled kernels from the
+light's data packed once per LightSet (:func:`stpm_core.kernels.light_params.kernel_light`):
 
-* :meth:`LightSet.sample_direct` -- next-event estimation (incident-radiance estimator);
-* :meth:`LightSet.emit`, :meth:`LightSet.emit_toward` -- photons, whole or aimed;
-* :meth:`LightSet.intersect`, :meth:`LightSet.sky_radiance` -- lights seen along
-  camera rays and specular chains.
+* :meth:`LightSet.sample_direct` -- next-event estimation (incident-radiance
+  estimator; :mod:`stpm_core.kernels.lights`);
+* :meth:`LightSet.emit`, :meth:`LightSet.emit_toward` -- photons, whole or aimed
+  (:mod:`stpm_core.kernels.emission`).
+
+Light shapes seen along camera rays and specular chains are the integrator's
+(``kernels.lights.seen_light``).  What stays here in numpy: the per-light
+constants (:meth:`LightSet.flux`, :meth:`LightSet.intensity`, the sun's disc),
+the poses and AREA shapes at given times (``_frame``, ``_area_shape``, which
+find lights with no emitting direction), :func:`spot_attenuation`,
+:func:`area_light_normal` and the mesh lights' triangles and areas.  The numpy
+sampling and emission code the kernels replaced is the test oracles
+(tests/oracles/lights_numpy.py, tests/oracles/emission_numpy.py).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .spherical_rect import spherical_rect_sample
-from .sampling import (concentric_disk, cosine_hemisphere, orthonormal_basis, uniform_cone,
-                       uniform_sphere)
+from .kernels import emission as _emission
+from .kernels.light_params import kernel_light, light_poses
+from .kernels.lights import sample_direct_batch
 
 __all__ = ["LightSet", "MeshLight", "area_light_normal", "mesh_lights", "spot_attenuation"]
 
 INV_4PI = 1.0 / (4.0 * np.pi)
-_UNIT_Z = np.array([0.0, 0.0, 1.0])
+_NO_NORMALS = np.zeros((1, 3))          # sample_direct without normals (not read)
 
 
 # ---------------------------------------------------------------------------
 # Small geometric helpers
 # ---------------------------------------------------------------------------
 
-def _one_minus_cos_from_sin2(sin2: np.ndarray) -> np.ndarray:
-    """1 - sqrt(1 - sin^2) without cancellation for small angles."""
-    sin2 = np.clip(sin2, 0.0, 1.0)
-    return sin2 / (1.0 + np.sqrt(1.0 - sin2))
-
-
-def _local_to_world(local: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    """Rotate (n, 3) local directions (z = axis) into the frame about unit axis (n, 3)."""
-    t, b = orthonormal_basis(axis)
-    return local[:, 0:1] * t + local[:, 1:2] * b + local[:, 2:3] * axis
-
-
 def _normalize(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors (n, 3) and lengths (n,)."""
     length = np.sqrt(np.einsum("ij,ij->i", v, v))
     return v / np.maximum(length, 1e-300)[:, None], length
-
-
-def _axis_or_z(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit axes (n, 3), with +Z standing in where ``axis`` is zero, and where it was usable (n,) bool.
-
-    A light whose transform has a zero scale along its Z axis has no direction
-    (``_frame`` returns a zero Z); its samples get this stand-in axis, so that
-    every direction stays unit length, and zero weight or power.
-    """
-    ok = np.einsum("ij,ij->i", axis, axis) > 0.5
-    return np.where(ok[:, None], axis, _UNIT_Z), ok
 
 
 def _smoothstep(x: np.ndarray) -> np.ndarray:
@@ -122,15 +109,6 @@ def area_light_normal(ex: np.ndarray, ey: np.ndarray, z_col: np.ndarray) -> tupl
     g = cross / np.maximum(A4, 1e-300)[:, None]               # unit plane normal (+Z for a plain transform)
     side = np.sign(-np.einsum("ij,ij->i", g, z_col))           # +1 where g points along -Z
     return g * side[:, None], A4
-
-
-def _ray_sphere_far(o: np.ndarray, d: np.ndarray, c: np.ndarray, r: float, inside: np.ndarray) -> np.ndarray:
-    """Distance along unit d (n, 3) from o to a sphere (c, r): near hit from outside, far hit from inside."""
-    oc = o - c
-    b = np.einsum("ij,ij->i", oc, d)
-    disc = np.maximum(b * b - (np.einsum("ij,ij->i", oc, oc) - r * r), 0.0)
-    s = np.sqrt(disc)
-    return np.where(inside, -b + s, np.maximum(-b - s, 0.0))
 
 
 # ---------------------------------------------------------------------------
@@ -219,20 +197,6 @@ class MeshLight:
         self.power = float(np.mean(self.flux_at(0.5)))
 
     # -- geometry at times ------------------------------------------------------------
-    def corners(self, j: np.ndarray, times: np.ndarray) -> np.ndarray:
-        """World corners (n, 3, 3) of emitting triangles j (n,) at times (n,)."""
-        if self._world_static is not None:
-            return self._world_static[j]
-        if self._steps is None:
-            C = self._corners[j]
-        else:
-            K = self._steps.shape[0]
-            i = np.clip(np.searchsorted(self._steps, times, side="right") - 1, 0, K - 2)
-            a = np.clip((times - self._steps[i]) / (self._steps[i + 1] - self._steps[i]), 0.0, 1.0)
-            C = (1.0 - a)[:, None, None] * self._corners[i, j] + a[:, None, None] * self._corners[i + 1, j]
-        M = self._inst_transform.at(times)
-        return np.einsum("nij,nkj->nki", M[:, :3, :3], C) + M[:, None, :3, 3]
-
     def _all_corners_at(self, t: float) -> np.ndarray:
         """World corners (F_e, 3, 3) of every emitting triangle at one time t (one matrix)."""
         if self._world_static is not None:
@@ -263,30 +227,6 @@ class MeshLight:
             A = 0.5 * np.linalg.norm(np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0]), axis=-1)
             out[k] = np.sum(C.mean(axis=1) * A[:, None], axis=0) / max(A.sum(), 1e-300)
         return out
-
-    def sample_points(self, times: np.ndarray, u: np.ndarray):
-        """Points on the emitter at times (n,) from u (n, 2).
-
-        u[:, 0] picks the triangle (by the CDF of q) and is then rescaled to
-        [0, 1) inside the chosen interval, so two numbers give both the
-        triangle and the point.
-
-        Returns q (n, 3) points, nrm (n, 3) unit geometric normals, A (n,)
-        world areas of their triangles, Le (n, 3) radiance, pq (n,) = q_j.
-        """
-        j = np.minimum(np.searchsorted(self.cdf, u[:, 0], side="right"), self.q.shape[0] - 1)
-        lo = self.cdf[j] - self.q[j]
-        u0 = np.clip((u[:, 0] - lo) / self.q[j], 0.0, 1.0 - 1e-12)
-        C = self.corners(j, times)
-        e1, e2 = C[:, 1] - C[:, 0], C[:, 2] - C[:, 0]
-        cr = np.cross(e1, e2)
-        two_A = np.sqrt(np.einsum("ij,ij->i", cr, cr))
-        nrm = cr / np.maximum(two_A, 1e-300)[:, None]
-        # Uniform point: barycentrics (1 - s, s (1 - v), s v) with s = sqrt(u0)
-        s = np.sqrt(u0)
-        b1, b2 = s * (1.0 - u[:, 1]), s * u[:, 1]
-        q = C[:, 0] + b1[:, None] * e1 + b2[:, None] * e2
-        return q, nrm, 0.5 * two_A, self.Le[j], self.q[j]
 
 
 def mesh_lights(scene) -> list[MeshLight]:
@@ -435,429 +375,87 @@ class LightSet:
             A = 4.0 * A4
         return M[:, :3, 3], ex, ey, A, n_emit
 
-    def _area_points(self, li: int, ex, ey, c, u: np.ndarray) -> np.ndarray:
-        """Uniform points (n, 3) on the area light's shape from u (n, 2)."""
-        l = self.lights[li]
-        if l.shape in ("DISK", "ELLIPSE"):
-            d = concentric_disk(u)
-        else:
-            d = 2.0 * u - 1.0
-        return c + d[:, 0:1] * ex + d[:, 1:2] * ey
-
     # -----------------------------------------------------------------------
     # Direct lighting
     # -----------------------------------------------------------------------
 
+    def kernel_light(self, li: int):
+        """Light li as kernel data, packed once per LightSet: (prm, static_poses, steps, corners,
+        q, cdf, Le) (:func:`stpm_core.kernels.light_params.kernel_light`, which next-event
+        estimation, photon emission and the integrator share).  Packed on first use: the light's
+        attributes are read then (change a light before that, or make a new LightSet).
+        """
+        return kernel_light(self, li)
+
     def sample_direct(self, li: int, p: np.ndarray, times: np.ndarray, u: np.ndarray,
                       normals: np.ndarray | None = None):
-        """Sample light li as seen from points p at their times.
+        """Sample light li as seen from points p at their times (the kernel
+        :func:`stpm_core.kernels.lights.sample_light` per row).
 
         Parameters
         ----------
         li : light index.
         p : (n, 3) world shading points.
-        times : (n,) normalised shutter times.
+        times : (n,) normalised shutter times (or (1,): one time for every row).
         u : (n, 2) uniform samples in [0, 1).
         normals : (n, 3) unit normals facing the shaded side, or None; used only
-            by an entry of type 'WORLD' (``world_light.WorldLight.sample``, which
-            samples cosine-distributed directions about them); other lights
-            ignore it.
+            by an entry of type 'WORLD' (cosine-distributed directions about
+            them; None: uniform on the sphere); other lights ignore it.
 
         Returns
         -------
         wi : (n, 3) unit direction from p toward the light sample.
-        dist : (n,) distance to the light sample (inf for SUN); shadow rays
-            test [eps, dist).
+        dist : (n,) distance to the light sample (inf for SUN and WORLD);
+            shadow rays test [eps, dist).
         weight : (n, 3) W/(m^2 sr) incident-radiance estimator L_e * G / pdf,
             so reflected radiance = f * |cos(ns, wi)| * weight * visible; 0
-            where the light gives nothing (behind an area light, outside a spot).
+            where the light gives nothing (behind an area light, outside a
+            spot, a light with no emitting direction).
         """
-        l = self.lights[li]
-        p = np.asarray(p, float)
-        times = np.atleast_1d(np.asarray(times, float))
-        u = np.asarray(u, float)
-        if l.type in ("POINT", "SPOT"):
-            return self._sample_point(li, p, times, u)
-        if l.type == "AREA":
-            return self._sample_area(li, p, times, u)
-        if l.type == "MESH":
-            return self._sample_mesh(li, p, times, u)
-        if l.type == "WORLD":
-            return l.sample(p, u, normals)
-        return self._sample_sun(li, p, times, u)
-
-    def _sample_mesh(self, li, p, times, u):
-        """MESH: triangle by power, uniform point; weight = Le |cos_l| A / (q_j t^2) (two-sided)."""
-        q, nrm, A, Le, pq = self.lights[li].sample_points(np.broadcast_to(times, (p.shape[0],)), u)
-        wi, dist = _normalize(q - p)
-        cos_l = np.abs(np.einsum("ij,ij->i", wi, nrm))
-        g = cos_l * A / (pq * np.maximum(dist * dist, 1e-300))
-        return wi, dist, Le * g[:, None]
-
-    def _sample_point(self, li, p, times, u):
-        """POINT / SPOT: true point (r = 0), disk facing p (soft falloff) or sphere."""
-        l = self.lights[li]
-        c, _, _, Z = self._frame(li, times)
-        I = self.intensity(li)
-        r = float(l.radius)
-        to_p, d = _normalize(p - c)              # light -> p, unit
+        prm, poses, steps, corners, q, cdf, Le = kernel_light(self, li)
+        p = np.ascontiguousarray(p, np.float64).reshape(-1, 3)
         n = p.shape[0]
-        if r <= 0.0:
-            # Point: E-estimator I / d^2 along the exact direction
-            wi, dist = -to_p, d
-            g = np.where(d > 0.0, 1.0 / np.maximum(d * d, 1e-300), 0.0)   # nothing at the light itself
-        elif l.use_soft_falloff:
-            # Disk of radius r centred on the light, facing p (Cycles' soft falloff).
-            # Radiance L = I / (pi r^2); pdf_A = 1 / (pi r^2) -> weight = I cos_q / t^2
-            q = c + r * _local_to_world(np.concatenate([concentric_disk(u), np.zeros((n, 1))], axis=1), to_p)
-            wi, dist = _normalize(q - p)
-            cos_q = np.maximum(-np.sum(wi * to_p, axis=-1), 0.0)
-            g = cos_q / np.maximum(dist * dist, 1e-300)
-        else:
-            # Sphere of radius r: uniform in the cone it subtends (or the whole
-            # sphere from inside).  Radiance L = I / (pi r^2); weight = L / pdf.
-            inside = d <= r
-            one_minus_cos = np.where(inside, 2.0, _one_minus_cos_from_sin2((r * r) / np.maximum(d * d, 1e-300)))
-            # (cos_max = -1 is the uniform sphere; it needs no axis, and p at the
-            # very centre has none: +Z stands in)
-            local = uniform_cone(u, 1.0 - one_minus_cos)
-            wi = _local_to_world(local, np.where(inside[:, None], _UNIT_Z, -to_p))
-            dist = _ray_sphere_far(p, wi, c, r, inside)
-            omega = 2.0 * np.pi * one_minus_cos
-            g = omega / (np.pi * r * r)
-        weight = I[None, :] * g[:, None]
-        if l.type == "SPOT":
-            # Spot mask on the direction the light leaves along (toward p)
-            weight = weight * spot_attenuation(l, np.sum(-wi * -Z, axis=-1))[:, None]
+        times = np.atleast_1d(np.asarray(times, np.float64))
+        if poses is None:
+            poses = light_poses(self, li, times)     # (1, 4, 4) when every row has the same time
+        times = np.ascontiguousarray(np.broadcast_to(times, (n,)))
+        u = np.ascontiguousarray(u, np.float64).reshape(n, 2)
+        use_normals = normals is not None
+        normals = np.ascontiguousarray(normals, np.float64).reshape(n, 3) if use_normals else _NO_NORMALS
+        wi, dist, weight = np.empty((n, 3)), np.empty(n), np.empty((n, 3))
+        sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, p, times, u, normals, use_normals,
+                            wi, dist, weight)
         return wi, dist, weight
-
-    def _sample_area(self, li, p, times, u):
-        """AREA (one-sided, faces local -Z).  SQUARE / RECTANGLE: uniform in the solid angle S the
-        rectangle subtends (:func:`~stpm_core.spherical_rect.spherical_rect_sample`), weight = L S
-        where the point is in front; the other rows (disc, ellipse, sheared transform: |cos(ex, ey)|
-        above 1e-5, S below 1e-7 sr) uniform by area, weight = L cos_l A / t^2.  Both use the same
-        two uniforms per sample; each row is computed by one of them only."""
-        l = self.lights[li]
-        c, ex, ey, A, n_emit = self._area_shape(li, times)
-        n = p.shape[0]
-        L = np.asarray(l.color, float)[None, :] * (float(l.power) / (np.pi * np.maximum(A, 1e-300)))[:, None]
-        wi, dist, g = np.empty((n, 3)), np.empty(n), np.empty(n)
-        rest = np.ones(n, bool)
-        if l.shape in ("SQUARE", "RECTANGLE"):
-            exb, eyb = np.broadcast_to(ex, (n, 3)), np.broadcast_to(ey, (n, 3))
-            # Blender's float32 matrices leave |cos(ex, ey)| ~ 1e-8 on rotated lights: treat up to 1e-5
-            # as orthogonal (ey made exactly so: the rectangle moves by < 1e-5 of its size); real
-            # shear stays with area sampling
-            exx = np.einsum("ij,ij->i", exb, exb)
-            dot = np.einsum("ij,ij->i", exb, eyb)
-            ortho = np.abs(dot) <= 1e-5 * np.sqrt(exx * np.einsum("ij,ij->i", eyb, eyb))
-            if np.any(ortho):
-                eyo = eyb - (dot / np.maximum(exx, 1e-300))[:, None] * exb
-                corner = np.broadcast_to(c, (n, 3)) - exb - eyo
-                qs, S = spherical_rect_sample(p, corner, 2.0 * exb, 2.0 * eyo, u)
-                use = ortho & (S > 1e-7)
-                wi[use], dist[use] = _normalize(qs[use] - p[use])
-                front = -np.sum(wi[use] * np.broadcast_to(n_emit, (n, 3))[use], axis=-1) > 0.0
-                g[use] = np.where(front, S[use], 0.0)
-                rest = ~use
-        if np.any(rest):
-            def rows(a):
-                """The fallback rows of a per-sample (or broadcast) array."""
-                return np.broadcast_to(a, (n,) + np.shape(a)[1:])[rest]
-
-            q = self._area_points(li, rows(ex), rows(ey), rows(c), u[rest])
-            wi[rest], dist[rest] = _normalize(q - p[rest])
-            cos_l = np.maximum(-np.sum(wi[rest] * rows(n_emit), axis=-1), 0.0)
-            g[rest] = cos_l * rows(A) / np.maximum(dist[rest] * dist[rest], 1e-300)
-        return wi, dist, L * g[:, None]
-
-    def _sample_sun(self, li, p, times, u):
-        """SUN: direction +Z of the light (toward the sun); cone of angular diameter ``angle``.
-
-        Radiance S / Omega uniform in the cone, pdf 1 / Omega -> weight = color * S.
-        """
-        l = self.lights[li]
-        _, _, _, Z = self._frame(li, times)
-        Z, ok = _axis_or_z(Z)                    # zero Z scale: no direction, no light
-        n = p.shape[0]
-        if l.angle > 0.0:
-            wi = _local_to_world(uniform_cone(u, np.cos(0.5 * l.angle)), Z)
-        else:
-            wi = Z.copy()
-        weight = np.broadcast_to(np.asarray(l.color, float) * float(l.power), (n, 3)) * ok[:, None]
-        return wi, np.full(n, np.inf), weight
-
-    # -----------------------------------------------------------------------
-    # Lights seen along rays (camera rays and specular chains)
-    # -----------------------------------------------------------------------
-
-    def intersect(self, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax: np.ndarray | None = None):
-        """Nearest light surface along rays and the radiance it sends back along them.
-
-        Lights are not scene geometry; a path that can only reach them by
-        chance (a camera ray, a chain of delta bounces) asks here.  AREA lights
-        (one-sided), and POINT / SPOT lights with radius > 0 (the sphere, or with
-        ``use_soft_falloff`` the disc of radius r facing the ray origin, as in
-        :meth:`sample_direct`) are visible; true points and suns are not (see
-        :meth:`sky_radiance` for suns with an angle).
-
-        Parameters
-        ----------
-        o, d : (n, 3) ray origins and unit directions; times : (n,).
-        tmax : (n,) or None: only hits closer than tmax count (e.g. the geometry hit).
-
-        Returns
-        -------
-        t : (n,) distance to the nearest light hit (inf: none).
-        L : (n, 3) radiance W/(m^2 sr) arriving at o along -d from that light.
-        """
-        o = np.asarray(o, float)
-        d = np.asarray(d, float)
-        n = o.shape[0]
-        times = np.broadcast_to(np.atleast_1d(np.asarray(times, float)), (n,))
-        t_best = np.full(n, np.inf) if tmax is None else np.asarray(tmax, float).copy()
-        L = np.zeros((n, 3))
-        found = np.zeros(n, bool)
-        for li, l in enumerate(self.lights):
-            if l.type in ("SUN", "MESH", "WORLD") or (l.type in ("POINT", "SPOT") and l.radius <= 0.0):
-                continue          # MESH: the caster hits the triangles themselves; WORLD: escaping rays
-            t, Le = self._hit_one(li, o, d, times)
-            closer = (t > 0) & (t < t_best)
-            t_best = np.where(closer, t, t_best)
-            L[closer] = Le[closer]
-            found |= closer
-        return np.where(found, t_best, np.inf), L
-
-    def _hit_one(self, li, o, d, times):
-        """Hit distance (n,) (inf: miss) and radiance (n, 3) of light li along rays."""
-        l = self.lights[li]
-        n = o.shape[0]
-        if l.type == "AREA":
-            # Plane of the light, inside the shape, seen from its emitting side
-            c, ex, ey, A, n_emit = self._area_shape(li, times)
-            dn = np.sum(d * n_emit, axis=-1)
-            t = np.sum((c - o) * n_emit, axis=-1) / np.where(dn == 0, np.inf, dn)
-            q = o + t[:, None] * d - c
-            a = np.sum(q * ex, axis=-1) / np.maximum(np.sum(ex * ex, axis=-1), 1e-300)
-            b = np.sum(q * ey, axis=-1) / np.maximum(np.sum(ey * ey, axis=-1), 1e-300)
-            if l.shape in ("DISK", "ELLIPSE"):
-                inside = a * a + b * b <= 1.0
-            else:
-                inside = (np.abs(a) <= 1.0) & (np.abs(b) <= 1.0)
-            ok = inside & (dn < 0) & (t > 0)
-            Le = np.asarray(l.color, float)[None, :] * (float(l.power) / (np.pi * np.maximum(A, 1e-300)))[:, None]
-            return np.where(ok, t, np.inf), np.where(ok[:, None], Le, 0.0)
-        # POINT / SPOT with radius: sphere, or the disc facing the ray origin
-        c, _, _, Z = self._frame(li, times)
-        r = float(l.radius)
-        oc = o - c
-        if l.use_soft_falloff:
-            nd, dist_c = _normalize(oc)
-            dn = np.sum(d * nd, axis=-1)
-            t = -np.sum(oc * nd, axis=-1) / np.where(dn == 0, np.inf, dn)
-            q = o + t[:, None] * d - c
-            ok = (np.sum(q * q, axis=-1) <= r * r) & (t > 0) & (dist_c > 0)
-        else:
-            b = np.sum(oc * d, axis=-1)
-            disc = b * b - (np.sum(oc * oc, axis=-1) - r * r)
-            s = np.sqrt(np.maximum(disc, 0.0))
-            t0, t1 = -b - s, -b + s
-            t = np.where(t0 > 0, t0, t1)
-            ok = (disc >= 0) & (t > 0)
-        Le = np.broadcast_to(self.intensity(li) / (np.pi * r * r), (n, 3))
-        if l.type == "SPOT":
-            Le = Le * spot_attenuation(l, np.sum(-d * -Z, axis=-1))[:, None]
-        return np.where(ok, t, np.inf), np.where(ok[:, None], Le, 0.0)
-
-    def sky_radiance(self, d: np.ndarray, times: np.ndarray) -> np.ndarray:
-        """Radiance (n, 3) of suns with angle > 0 seen along escaping rays d (n, 3): color S / Omega inside their cone."""
-        d = np.asarray(d, float)
-        n = d.shape[0]
-        times = np.broadcast_to(np.atleast_1d(np.asarray(times, float)), (n,))
-        L = np.zeros((n, 3))
-        for li, l in enumerate(self.lights):
-            if l.type != "SUN" or l.angle <= 0.0:
-                continue
-            _, _, _, Z = self._frame(li, times)
-            cos_half = np.cos(0.5 * l.angle)
-            omega = 2.0 * np.pi * (1.0 - cos_half)
-            inside = np.sum(d * Z, axis=-1) >= cos_half
-            L += inside[:, None] * (np.asarray(l.color, float) * float(l.power) / omega)[None, :]
-        return L
 
     # -----------------------------------------------------------------------
     # Photon emission
     # -----------------------------------------------------------------------
 
     def emit(self, li: int, n: int, times: np.ndarray, rng: np.random.Generator):
-        """Emit n photons from light li over its whole emission.
+        """Emit n photons from light li over its whole emission (the kernel
+        :func:`stpm_core.kernels.emission.emit_photons`).
 
+        times : (n,) normalised shutter times (or (1,) / a scalar: one time for every photon).
         Returns origins (n, 3), unit dirs (n, 3), power (n, 3) W per photon;
         E[sum of power] = :meth:`flux` (exactly, for POINT and AREA).
-        Points and spots with a radius emit from their sphere / disc
-        (:meth:`_point_origins`), so caustics get the same soft edges as shadows.
+        Points and spots with a radius emit from their sphere / disc, so
+        caustics get the same soft edges as shadows.
         """
-        l = self.lights[li]
-        if l.type == "WORLD":
-            return l.emit(n, rng)                # every direction, through the scene's sphere
-        times = np.atleast_1d(np.asarray(times, float))
-        u = rng.random((n, 2))
-        if l.type == "POINT":
-            c, _, _, _ = self._frame(li, times)
-            dirs = uniform_sphere(u)
-            power = np.broadcast_to(self.flux(li) / n, (n, 3)).copy()
-            return self._point_origins(li, c, dirs, rng), dirs, power
-        if l.type == "SPOT":
-            # Uniform in the spot cone (solid angle Omega_c), power I * att * Omega_c / n
-            c, _, _, Z = self._frame(li, times)
-            cos_half = np.cos(0.5 * l.spot_size)
-            axis, _ = _axis_or_z(np.broadcast_to(-Z, (n, 3)))     # zero Z scale: att = 0 below
-            dirs = _local_to_world(uniform_cone(u, cos_half), axis)
-            att = spot_attenuation(l, np.sum(dirs * -Z, axis=-1))
-            omega_c = 2.0 * np.pi * (1.0 - cos_half)
-            power = self.intensity(li)[None, :] * (att * omega_c / n)[:, None]
-            return self._point_origins(li, c, dirs, rng), dirs, power
-        if l.type == "MESH":
-            # Triangle by q_j, uniform point, random side, cosine direction:
-            # power = Le cos / (q_j / A * 1/2 * cos / pi) / n = 2 pi Le A / (q_j n)
-            q, nrm, A, Le, pq = l.sample_points(times if times.shape[0] == n else np.broadcast_to(times, (n,)), u)
-            side = np.where(rng.random(n) < 0.5, 1.0, -1.0)[:, None]
-            dirs = _local_to_world(cosine_hemisphere(rng.random((n, 2))), side * nrm)
-            power = Le * (2.0 * np.pi * A / (pq * n))[:, None]
-            return q, dirs, power
-        if l.type == "AREA":
-            # Uniform point, cosine-weighted direction: power = L pi A / n = color P / n
-            c, ex, ey, A, n_emit = self._area_shape(li, times)
-            q = self._area_points(li, ex, ey, c, rng.random((n, 2)))
-            axis, ok = _axis_or_z(np.broadcast_to(n_emit, (n, 3)))  # no emitting side: no power
-            dirs = _local_to_world(cosine_hemisphere(u), axis)
-            power = np.broadcast_to(self.flux(li) / n, (n, 3)) * ok[:, None]
-            return q, dirs, power
-        # SUN: a disc perpendicular to the sun covering the scene's bounding sphere
-        _, _, _, Z = self._frame(li, times)
-        R = self._sun_disc_radius(li)
-        return self._sun_photons(li, n, Z, np.broadcast_to(self._scene_center, (n, 3)),
-                                 R, 2.0 * self._scene_radius, u, rng)
-
-    def _point_origins(self, li, c, dirs, rng) -> np.ndarray:
-        """Where photons leaving along dirs (n, 3) start on a POINT / SPOT light of radius r.
-
-        A Lambertian sphere of radiance L seen from direction w is a uniformly
-        bright disc of radius r perpendicular to w, so photons along w start at a
-        uniform point of that disc: on the sphere's front (``use_soft_falloff``
-        off) or in the disc through the centre (on: Cycles' disc facing the
-        receiver).  Direction and power are those of the point light.  r = 0:
-        the centre.
-        """
-        l = self.lights[li]
-        r = float(l.radius)
-        if r <= 0.0:
-            return np.array(c)                   # a writable copy (c may be a broadcast view)
-        n = dirs.shape[0]
-        d = concentric_disk(rng.random((n, 2))) * r
-        t, b = orthonormal_basis(dirs)
-        origins = c + d[:, 0:1] * t + d[:, 1:2] * b
-        if not l.use_soft_falloff:
-            origins = origins + dirs * np.sqrt(np.maximum(r * r - np.sum(d * d, axis=1), 0.0))[:, None]
-        return origins
-
-    def _sun_photons(self, li, n, Z, center, R, back, u, rng):
-        """Sun photons through a disc of radius R (scalar or (n,)) perpendicular to Z, ``back`` upstream of center.
-
-        The sun's radiance is S / Omega in its cone, so the flux through the
-        disc is dPhi = (S / Omega) cos(theta) dA dw.  Points uniform on the disc
-        (pdf 1 / (pi R^2)) and directions uniform in the cone (pdf 1 / Omega)
-        give power = color * S * pi R^2 * cos(theta) / n per photon.
-        """
-        l = self.lights[li]
-        Z, ok = _axis_or_z(np.broadcast_to(Z, (n, 3)))     # zero Z scale: no direction, no power
-        R = np.broadcast_to(np.asarray(R, float), (n,))
-        disc = concentric_disk(rng.random((n, 2))) * R[:, None]
-        origins = center + back * Z + _local_to_world(np.concatenate([disc, np.zeros((n, 1))], axis=1), Z)
-        if l.angle > 0.0:
-            local = uniform_cone(u, np.cos(0.5 * l.angle))
-            dirs = _local_to_world(local, -Z)
-            cos_t = local[:, 2]
-        else:
-            dirs = -Z.copy()
-            cos_t = np.ones(n)
-        power = (np.asarray(l.color, float) * float(l.power))[None, :] * (np.pi * R * R * cos_t * ok / n)[:, None]
-        return origins, dirs, power
+        return _emission.emit(self, li, n, times, rng)
 
     def emit_toward(self, li: int, n: int, times: np.ndarray, rng: np.random.Generator,
                     centers: np.ndarray, radius: float):
-        """Emit n photons aimed at a sphere (centers (n, 3) or (3,), radius) only.
+        """Emit n photons aimed at a sphere (centers (n, 3) or (3,), radius) only (the kernel
+        :func:`stpm_core.kernels.emission.emit_toward_photons`).
 
         Directions are uniform in the cone the sphere subtends from each
         emission point, and power = emitted intensity toward the direction *
         cone solid angle / n, so the expected power reaching anything inside the
         sphere equals that of :meth:`emit` with the same n (no photons wasted
         elsewhere).  Emission points inside the sphere fall back to
-        :meth:`emit`'s distribution.
+        :meth:`emit`'s distribution.  Suns and the world emit from a disc
+        covering the sphere, started outside the whole scene.
 
         Returns origins (n, 3), unit dirs (n, 3), power (n, 3).
         """
-        l = self.lights[li]
-        times = np.atleast_1d(np.asarray(times, float))
-        centers = np.broadcast_to(np.asarray(centers, float), (n, 3))
-        radius = float(radius)
-        if l.type == "WORLD":
-            # Every direction through the target sphere (power 4 pi * pi r^2 * L / n), each
-            # photon started outside the whole scene on its own line (as the sun's), so that
-            # occluders anywhere are traced; per-photon centres shift the lines with them.
-            o, d, P = l.emit(n, rng, centers[0], radius)
-            back = np.linalg.norm(centers - self._scene_center, axis=-1) + self._scene_radius + radius
-            o = o + (centers - centers[0]) - d * np.maximum(back - 2.0 * radius, 0.0)[:, None]
-            return o, d, P
-        u = rng.random((n, 2))
-        if l.type == "SUN":
-            # Disc perpendicular to the sun covering the target sphere, upstream of the
-            # whole scene so that occluders anywhere are still traced.
-            _, _, _, Z = self._frame(li, times)
-            back = (np.linalg.norm(centers - self._scene_center, axis=-1) + self._scene_radius + radius)
-            R = radius + (back + radius) * np.tan(0.5 * min(l.angle, 3.0))
-            return self._sun_photons(li, n, Z, centers, R, back[:, None], u, rng)
-        # Emission point (and, for area lights, its emitting normal and radiance).
-        # A point / spot of radius r aims from its centre at the sphere grown by r,
-        # then starts each photon on its disc (every ray from the light that can
-        # reach the target lies in that wider cone).
-        reach = radius
-        if l.type == "AREA":
-            c, ex, ey, A, n_emit = self._area_shape(li, times)
-            origins = self._area_points(li, ex, ey, c, rng.random((n, 2)))
-        elif l.type == "MESH":
-            origins, n_emit, A, Le_m, pq = l.sample_points(
-                times if times.shape[0] == n else np.broadcast_to(times, (n,)), rng.random((n, 2)))
-        else:
-            origins, _, _, Z = self._frame(li, times)
-            reach = radius + float(l.radius)
-        # Cone toward the sphere: cos_max from sin = reach / d.  Inside the sphere
-        # (d <= reach, which includes an emission point at the very centre, where
-        # the axis is undefined) every direction reaches it: the whole sphere of
-        # directions (Omega = 4 pi), as :meth:`emit` for a point light.  An axis
-        # that does not normalise (d too small for its direction to be resolved)
-        # is treated the same way.
-        axis, d = _normalize(centers - origins)
-        inside = (d <= reach) | ~(np.abs(np.einsum("ij,ij->i", axis, axis) - 1.0) < 1e-6)
-        one_minus_cos = np.where(inside, 2.0, _one_minus_cos_from_sin2((reach * reach) / np.maximum(d * d, 1e-300)))
-        # (a cone with cos_max = -1 is the uniform sphere; it needs no axis, so +Z stands in)
-        dirs = _local_to_world(uniform_cone(u, 1.0 - one_minus_cos), np.where(inside[:, None], _UNIT_Z, axis))
-        if l.type not in ("AREA", "MESH"):
-            origins = self._point_origins(li, origins, dirs, rng)
-        omega = 2.0 * np.pi * one_minus_cos           # cone solid angle (4 pi inside)
-        if l.type == "MESH":
-            # dPhi = Le |cos_l| dA dw (both sides); point pdf q_j / A, direction pdf 1 / omega
-            cos_l = np.abs(np.einsum("ij,ij->i", dirs, n_emit))
-            power = Le_m * (cos_l * A / pq * omega / n)[:, None]
-        elif l.type == "AREA":
-            # dPhi = L cos_l dA dw; point pdf 1 / A, direction pdf 1 / omega
-            L = np.asarray(l.color, float)[None, :] * (float(l.power) / (np.pi * np.maximum(A, 1e-300)))[:, None]
-            cos_l = np.maximum(np.sum(dirs * n_emit, axis=-1), 0.0)
-            power = L * (cos_l * A * omega / n)[:, None]
-        else:
-            I = self.intensity(li)
-            att = np.ones(n)
-            if l.type == "SPOT":
-                att = spot_attenuation(l, np.sum(dirs * -Z, axis=-1))
-            power = I[None, :] * (att * omega / n)[:, None]
-        return origins, dirs, power
+        return _emission.emit_toward(self, li, n, times, rng, centers, radius)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["probe"]
+__all__ = ["probe", "njit", "AVAILABLE", "IMPORT_ERROR"]
 
 
 def probe() -> tuple[bool, str]:
@@ -22,3 +22,17 @@ def probe() -> tuple[bool, str]:
     except Exception as exc:  # noqa: BLE001 -- any import failure: the numpy / scipy path
         return False, f"{type(exc).__name__}: {exc}"
     return True, ""
+
+
+AVAILABLE, IMPORT_ERROR = probe()
+
+if AVAILABLE:
+    from numba import njit  # noqa: F401  (the compiled kernels' decorator)
+else:                                          # pragma: no cover - depends on the platform
+    def njit(*args, **kwargs):                 # noqa: D103 -- placeholder so kernel modules import
+        if len(args) == 1 and callable(args[0]) and not kwargs:
+            return args[0]
+
+        def wrap(f):
+            return f
+        return wrap

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import kernels
 from .bsdf import MaterialTable
 from .errors import RenderCancelled
 from .film import PASSES, PASS_NAMES
@@ -95,6 +96,18 @@ _FIRST_RENDER = True     # this process has not rendered yet (the compiled kerne
 
 
 def render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
+    """Render ``scene`` with ``settings``: :func:`_render`, with numba's own errors (a kernel that could
+    not be compiled or loaded on this machine) turned into one :class:`KernelsUnavailable` line."""
+    kernels.require()
+    try:
+        return _render(scene, settings, progress=progress, cancel=cancel)
+    except Exception as exc:
+        if kernels.is_numba_error(exc):
+            raise kernels.KernelsUnavailable(f"a compiled kernel failed on this machine: {kernels.compile_error(exc)}") from exc
+        raise
+
+
+def _render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     """Render ``scene`` with ``settings`` (RenderSettings).
 
     progress(fraction in [0, 1], message) is called at least once per tile;

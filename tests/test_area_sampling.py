@@ -1,4 +1,5 @@
-"""Rectangular AREA lights sampled uniformly in solid angle (stpm_core/spherical_rect.py).
+"""Rectangular AREA lights sampled uniformly in solid angle (the spherical rectangle of
+stpm_core/kernels/lights.py; its numpy oracle in tests/oracles/lights_numpy.py).
 
 Analytic reference: a Lambertian rectangle of radiance L parallel to a surface point's plane, one
 corner above the point at height c, sides a, b: irradiance E = pi L F with the form factor
@@ -10,11 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from oracles.lights_numpy import spherical_rect_sample
 from scenes import make_scene, ortho_camera_down, plane_mesh, translate
 from stpm_core.lights import LightSet
 from stpm_core.motion import MotionTransform
 from stpm_core.scene import Light, Material
-from stpm_core.spherical_rect import spherical_rect_sample
 
 
 def _quadrant_F(a, b, c):

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stpm_core import cli, imageio
+from stpm_core import cli, command_common, imageio
 from stpm_core.demo import demo_scene
 from stpm_core.errors import StpmError
 from stpm_core.imageio import read_exr, read_png
@@ -278,8 +278,9 @@ def test_ctrl_c_while_loading_a_blend_exits_130_without_traceback(tmp_path):
 # 6. Memory
 # ----------------------------------------------------------------------------
 def test_image_too_big_for_memory_refused(tiny, tmp_path, no_render, monkeypatch, capsys):
-    monkeypatch.setattr(cli, "_available_memory", lambda: 1 << 30)      # 1 GiB
-    assert cli.image_memory((4000, 3000), "PHOTON") > 1 << 30 > cli.image_memory((400, 300), "ACCUMULATION")
+    monkeypatch.setattr(command_common, "available_memory", lambda: 1 << 30)      # 1 GiB
+    assert (command_common.image_memory((4000, 3000), "PHOTON") > 1 << 30
+            > command_common.image_memory((400, 300), "ACCUMULATION"))
     assert cli.main(["render", str(tiny), "--resolution", "4000x3000", "-o", str(tmp_path / "x.exr"), "-q"]) == 1
     line = _one_error_line(capsys.readouterr().err, "GiB")
     assert "4000x3000 needs about 2.9 GiB" in line and "1.0 GiB available" in line
@@ -292,7 +293,7 @@ def test_image_too_big_for_memory_refused(tiny, tmp_path, no_render, monkeypatch
 
 
 def test_available_memory_is_plausible():
-    avail = cli._available_memory()
+    avail = command_common.available_memory()
     total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     assert avail is not None and 0 < avail <= total
 

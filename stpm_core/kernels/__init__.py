@@ -1,0 +1,61 @@
+"""The compiled (numba) kernels: the one implementation of shading.
+
+* :mod:`.closure` -- the material closure row every BSDF kernel reads;
+* :mod:`.bsdf` -- BSDF evaluation, pdf and sampling per hit;
+* :mod:`.lights` -- next-event light sampling and light shapes seen along rays;
+* :mod:`.emission` -- photon emission per light;
+* :mod:`.paths` -- camera-path bookkeeping, next-event estimation, specular steps, film sums;
+* :mod:`.photon_paths` -- one bounce of photon paths: deposit, BSDF sampling, Russian roulette.
+
+Ray casting (embree, or the numba BVH of :mod:`stpm_core.raycast`) happens
+between kernel calls, one wavefront bounce at a time.
+"""
+from __future__ import annotations
+
+from ..errors import StpmError
+from ..numba_probe import AVAILABLE, IMPORT_ERROR
+
+__all__ = ["KernelsUnavailable", "require", "compile_error", "is_numba_error"]
+
+
+class KernelsUnavailable(StpmError):
+    """numba cannot be imported or cannot compile the kernels on this machine (one line: why)."""
+
+
+_CHECKED = False
+
+
+def require() -> None:
+    """Raise :class:`KernelsUnavailable` unless the compiled kernels can run in this process.
+
+    Checks once per process that numba imports (and is not switched off by
+    ``STPM_NO_NUMBA``) and that it compiles a trivial function; STPM has no
+    slow numpy path to fall back on.
+    """
+    global _CHECKED
+    if _CHECKED:
+        return
+    if not AVAILABLE:
+        raise KernelsUnavailable(f"STPM's compiled kernels need numba, which is unavailable here ({IMPORT_ERROR})")
+    try:
+        from numba import njit
+
+        @njit(cache=False)
+        def _probe(x):
+            return x + 1.0
+
+        _probe(1.0)
+    except Exception as exc:  # noqa: BLE001 -- any failure of numba / LLVM here is the cause to name
+        raise KernelsUnavailable(f"numba cannot compile on this machine: {compile_error(exc)}") from exc
+    _CHECKED = True
+
+
+def compile_error(exc: BaseException) -> str:
+    """One line naming why a kernel failed to compile or load: the exception type and its first line."""
+    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return f"{type(exc).__name__}: {first}" if first else type(exc).__name__
+
+
+def is_numba_error(exc: BaseException) -> bool:
+    """Was exc raised by numba or llvmlite (a kernel that failed to compile or to load)?"""
+    return type(exc).__module__.split(".")[0] in ("numba", "llvmlite")

@@ -1,0 +1,550 @@
+"""The layered material's BSDF per hit, compiled: the one implementation of shading.
+
+Every function reads one closure row ``c`` (:mod:`stpm_core.kernels.closure`,
+columns ``C_*``), never a ``MaterialTable``, so the same code serves constant
+materials and, later, closures filled per hit by the shader-node interpreter.
+Vectors are 3-tuples of float64; ``wo`` and ``wi`` point away from the surface.
+docs/lights-and-materials.md ("Materials") has the formulas with these names.
+
+Six lobes, weights w_base = (1 - metallic)(1 - transmission),
+w_metal = metallic, w_glass = (1 - metallic) transmission:
+
+=========  =======================================================================
+DIFFUSE    w_base (1 - F_coat(wo)) base_color / pi, F_coat = specular F_diel(cos_o, ior)
+COAT       w_base specular F_diel(ior): delta mirror (roughness 0) or GGX
+METAL      w_metal Schlick(base_color): delta mirror or GGX
+GLASS_R    w_glass F_diel(eta): delta mirror or GGX
+GLASS_T    w_glass (1 - F_diel(cos_o, eta)) base_color: always a delta refraction
+METAL_MS   w_metal F_ms (1 - E(mu_o))(1 - E(mu_i)) / (pi (1 - E_avg)), rough metal only
+=========  =======================================================================
+
+GGX lobes: D G2 / (4 cos_o cos_i) times their Fresnel at wo.h (alpha =
+roughness^2, at least 1e-4), height-correlated Smith G2, visible-normal
+sampling with pdf G1(wo) D / (4 cos_o).  Glass: wo on ng's side is entering
+(eta = ior), else leaving (eta = 1 / ior).  Each call flips ng toward wo and
+ns onto ng's side; a reflection lobe is 0 unless wi is above both, a
+refraction unless wi is below ng.
+
+Per-hit functions (inlined into the kernels that call them):
+
+* :func:`bsdf_eval_pdf` -- f (1/sr) of the non-delta lobes and the
+  mixture solid-angle pdf ``pdf_nd = sum_j p_j pdf_j(wi)`` with which
+  :func:`bsdf_sample` returns wi through a non-delta lobe (for MIS);
+* :func:`bsdf_eval` -- the same f; materials without a rough lobe take the
+  short form ``w_base (1 - F_coat(wo)) base_color / pi`` (equal to rounding);
+* :func:`bsdf_sample` -- wi from the lobe u0 picks (probability p_j
+  proportional to an albedo estimate at wo) and the direction u1, u2 pick;
+  weight = f_nd |cos| / pdf_nd for a non-delta lobe, throughput / p_j for a
+  delta lobe, 0 for a failed sample;
+* :func:`diffuse_albedo` -- w_base (1 - F_coat(|wo . ns|)) base_color, what
+  multiplies photon irradiance;
+* :func:`fresnel_dielectric` -- F_diel(cos_i, eta), exact unpolarised, 1 under TIR;
+* :func:`ggx_albedo`, :func:`ggx_albedo_avg` -- look-ups of the single-scattering
+  GGX albedo E(mu, alpha) (bilinear) and E_avg(alpha) (linear) in the tables
+  of :func:`ggx_albedo_tables` (a plain function, built once per process).
+
+Batch kernels (loops over hits, used by ``stpm_core.bsdf`` and the tests):
+:func:`eval_batch`, :func:`sample_batch`, :func:`albedo_batch`.
+
+Same random numbers and formulas as the numpy oracle (tests/oracles/bsdf_numpy.py),
+equal to float rounding (tests/test_kernel_bsdf.py).  Dot products are summed
+x + y + z in order (numpy's einsum adds x + z first on this machine's SIMD
+path), so results may differ in the last bit.
+"""
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+
+from ..numba_probe import njit
+from .sampling import basis, cosine_hemisphere, dot
+from .closure import (C_ALPHA, C_BASE, C_COAT, C_IOR, C_ROUGH_LOBE, C_ROUGHNESS, C_SPECULAR, C_W_BASE,
+                      C_W_GLASS, C_W_METAL, closure_row)
+
+__all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS",
+           "bsdf_eval_pdf", "bsdf_eval", "bsdf_sample", "diffuse_albedo", "fresnel_dielectric",
+           "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch"]
+
+DIFFUSE, COAT, METAL, GLASS_R, GLASS_T, METAL_MS = range(6)
+
+_JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+_JIT_INLINE = dict(_JIT, inline="always")
+_EPS = 1e-9
+_PI = math.pi
+_INV_PI = 1.0 / math.pi
+_N_MU = 32                      # table rows: cos(theta_o) midpoints (k + 0.5) / 32
+_N_ALPHA = 32                   # table columns: alpha = k / 31 (np.linspace(0, 1, 32))
+_ALPHA_STEP = 1.0 / 31.0        # np.linspace's step: grid point k is k * step (the last is 1.0)
+
+
+# ----------------------------------------------------------------------------
+# Vectors and frames
+# ----------------------------------------------------------------------------
+@njit(**_JIT_INLINE)
+def _normalized(v, floor):
+    """v / max(|v|, floor) (a division, as numpy's ``v /= norm``)."""
+    n = max(math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), floor)
+    return (v[0] / n, v[1] / n, v[2] / n)
+
+
+@njit(**_JIT_INLINE)
+def _reflect(w, n):
+    """2 (w . n) n - w."""
+    d = 2.0 * dot(w, n)
+    return (d * n[0] - w[0], d * n[1] - w[1], d * n[2] - w[2])
+
+
+@njit(**_JIT_INLINE)
+def _to_frame(loc, t, b, n):
+    """loc_x t + loc_y b + loc_z n."""
+    return (loc[0] * t[0] + loc[1] * b[0] + loc[2] * n[0],
+            loc[0] * t[1] + loc[1] * b[1] + loc[2] * n[1],
+            loc[0] * t[2] + loc[1] * b[2] + loc[2] * n[2])
+
+
+@njit(**_JIT_INLINE)
+def _oriented(wo, ns, ng):
+    """Normals flipped toward wo: (ns', ng', entering = wo on ng's side)."""
+    entering = dot(wo, ng) >= 0.0
+    s = 1.0 if entering else -1.0
+    ngf = (ng[0] * s, ng[1] * s, ng[2] * s)
+    t = 1.0 if dot(ns, ngf) >= 0.0 else -1.0
+    return (ns[0] * t, ns[1] * t, ns[2] * t), ngf, entering
+
+
+# ----------------------------------------------------------------------------
+# Fresnel
+# ----------------------------------------------------------------------------
+@njit(**_JIT_INLINE)
+def fresnel_dielectric(cos_i, eta):
+    """Unpolarised dielectric reflectance F_diel for cos_i (clamped to [0, 1]) and eta = n_t / n_i; 1 under TIR."""
+    cos_i = min(max(cos_i, 0.0), 1.0)
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    if sin2_t >= 1.0:
+        return 1.0
+    cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
+    r_s = (cos_i - eta * cos_t) / max(cos_i + eta * cos_t, 1e-300)
+    r_p = (eta * cos_i - cos_t) / max(eta * cos_i + cos_t, 1e-300)
+    return 0.5 * (r_s * r_s + r_p * r_p)
+
+
+@njit(**_JIT_INLINE)
+def _fresnel_schlick(c, cos):
+    """Schlick(F0 = base colour of closure c, cos) = F0 + (1 - F0)(1 - cos)^5, an RGB tuple."""
+    m = math.pow(min(max(1.0 - cos, 0.0), 1.0), 5.0)       # (numpy's ** 5 is pow; x*x*x*x*x rounds differently)
+    b0, b1, b2 = c[C_BASE], c[C_BASE + 1], c[C_BASE + 2]
+    return (b0 + (1.0 - b0) * m, b1 + (1.0 - b1) * m, b2 + (1.0 - b2) * m)
+
+
+# ----------------------------------------------------------------------------
+# GGX
+# ----------------------------------------------------------------------------
+@njit(**_JIT_INLINE)
+def _ggx_D(cos_h, alpha):
+    """GGX normal distribution D(h) per sr of microfacet normals (cos_h = h . n)."""
+    if not cos_h > 0:
+        return 0.0
+    a2 = alpha * alpha
+    c2 = cos_h * cos_h
+    denom = c2 * (a2 - 1.0) + 1.0
+    return a2 / max(_PI * denom * denom, 1e-300)
+
+
+@njit(**_JIT_INLINE)
+def _ggx_lambda(cos, alpha):
+    """Smith Lambda(w) for GGX: (sqrt(1 + alpha^2 tan^2) - 1) / 2."""
+    c2 = max(cos * cos, 1e-300)
+    tan2 = max(1.0 - c2, 0.0) / c2
+    return 0.5 * (math.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
+
+
+@njit(**_JIT_INLINE)
+def _ggx_sample_vndf(wx, wy, wz, alpha, u0, u1):
+    """Visible-normal sample h (local, unit) for the local view direction (wx, wy, wz), wz > 0 (Heitz 2018)."""
+    # Stretch the view direction to the hemisphere configuration
+    v0, v1, v2 = _normalized((alpha * wx, alpha * wy, wz), 0.0)
+    lensq = v0 * v0 + v1 * v1
+    if lensq > 0:
+        inv = 1.0 / math.sqrt(max(lensq, 1e-300))
+        T1 = (-v1 * inv, v0 * inv, 0.0)
+    else:
+        T1 = (1.0, 0.0, 0.0)
+    T2 = (v1 * T1[2] - v2 * T1[1], v2 * T1[0] - v0 * T1[2], v0 * T1[1] - v1 * T1[0])
+    # Sample the projected disk, warped toward the visible half
+    r = math.sqrt(u0)
+    phi = 2.0 * _PI * u1
+    t1 = r * math.cos(phi)
+    t2 = r * math.sin(phi)
+    s = 0.5 * (1.0 + v2)
+    t2 = (1.0 - s) * math.sqrt(max(0.0, 1.0 - t1 * t1)) + s * t2
+    tz = math.sqrt(max(0.0, 1.0 - t1 * t1 - t2 * t2))
+    n0 = t1 * T1[0] + t2 * T2[0] + tz * v0
+    n1 = t1 * T1[1] + t2 * T2[1] + tz * v1
+    n2 = t1 * T1[2] + t2 * T2[2] + tz * v2
+    # Unstretch
+    return _normalized((alpha * n0, alpha * n1, max(n2, 1e-12)), 0.0)
+
+
+# ----------------------------------------------------------------------------
+# GGX albedo tables (multiple-scattering energy compensation, Kulla & Conty 2017)
+# ----------------------------------------------------------------------------
+_MU = (np.arange(_N_MU) + 0.5) / _N_MU           # cos(theta_o) midpoints
+_ALPHA = np.linspace(0.0, 1.0, _N_ALPHA)         # GGX alpha grid
+_TABLES: tuple[np.ndarray, np.ndarray] | None = None
+_TABLES_LOCK = threading.Lock()
+
+
+@njit(**_JIT)
+def _albedo_table_weights(mu, al, g, w):
+    """Sample weights w (n_mu, n_alpha, K*K) of the albedo table: G2 / G1(wo) of the visible-normal
+    sample (g[i], g[j]) for wo = (sqrt(1 - mu^2), 0, mu), 0 when the reflection leaves the hemisphere."""
+    K = g.shape[0]
+    for a in range(mu.shape[0]):
+        m = mu[a]
+        wx = math.sqrt(1.0 - m * m)
+        for b in range(al.shape[0]):
+            alpha = al[b]
+            lam_o = _ggx_lambda(m, alpha)
+            for i in range(K):
+                for j in range(K):
+                    h = _ggx_sample_vndf(wx, 0.0, m, alpha, g[i], g[j])
+                    wi_z = 2.0 * (wx * h[0] + 0.0 * h[1] + m * h[2]) * h[2] - m
+                    lam_i = _ggx_lambda(wi_z, alpha)
+                    w[a, b, i * K + j] = (1.0 + lam_o) / (1.0 + lam_o + lam_i) if wi_z > 0 else 0.0
+
+
+def ggx_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
+    """(E (32, 32), E_avg (32,)) float64 C-contiguous, built on first use and cached.
+
+    E[i, j] = single-scattering GGX albedo (F = 1) at mu = (i + 0.5) / 32 and
+    alpha = j / 31 (at least 1e-4): the mean of the visible-normal sample weight
+    G2 / G1(wo) over a 24 x 24 stratified grid, samples leaving the hemisphere
+    counting 0; E_avg[j] = 2 int E(mu) mu dmu (midpoint rule).
+    """
+    global _TABLES
+    with _TABLES_LOCK:
+        if _TABLES is None:
+            K = 24
+            g = (np.arange(K) + 0.5) / K
+            w = np.empty((_MU.size, _ALPHA.size, K * K))
+            _albedo_table_weights(_MU, np.maximum(_ALPHA, 1e-4), g, w)
+            E = np.ascontiguousarray(np.clip(w.mean(-1), 0.0, 1.0))
+            E_avg = np.ascontiguousarray(2.0 * np.mean(E * _MU[:, None], axis=0))
+            E.flags.writeable = False
+            E_avg.flags.writeable = False
+            _TABLES = (E, E_avg)
+        return _TABLES
+
+
+@njit(**_JIT_INLINE)
+def ggx_albedo(E, mu, alpha):
+    """E(mu, alpha): bilinear look-up in the table E (32, 32), clamped at the edges."""
+    x = min(max(mu * 32 - 0.5, 0.0), 31 - 1e-9)
+    y = min(max(alpha * 31, 0.0), 31 - 1e-9)
+    i = min(int(x), 30)
+    j = min(int(y), 30)
+    fx = x - i
+    fy = y - j
+    return ((1 - fx) * (1 - fy) * E[i, j] + fx * (1 - fy) * E[i + 1, j]
+            + (1 - fx) * fy * E[i, j + 1] + fx * fy * E[i + 1, j + 1])
+
+
+@njit(**_JIT_INLINE)
+def _alpha_grid(k):
+    return 1.0 if k == _N_ALPHA - 1 else k * _ALPHA_STEP
+
+
+@njit(**_JIT_INLINE)
+def ggx_albedo_avg(E_avg, alpha):
+    """E_avg(alpha): linear interpolation on the alpha grid k / 31 (``np.interp``'s formula, clamped)."""
+    last = _N_ALPHA - 1
+    if alpha <= 0.0:
+        return E_avg[0]
+    if alpha >= 1.0:
+        return E_avg[last]
+    j = min(int(alpha * 31.0), last - 1)
+    while j > 0 and _alpha_grid(j) > alpha:
+        j -= 1
+    while j < last - 1 and _alpha_grid(j + 1) <= alpha:
+        j += 1
+    xj = _alpha_grid(j)
+    if xj == alpha:
+        return E_avg[j]
+    slope = (E_avg[j + 1] - E_avg[j]) / (_alpha_grid(j + 1) - xj)
+    return slope * (alpha - xj) + E_avg[j]
+
+
+# ----------------------------------------------------------------------------
+# The hit: oriented normals, Fresnel at wo, lobe selection probabilities
+# ----------------------------------------------------------------------------
+@njit(**_JIT_INLINE)
+def _hit(c, E, E_avg, wo, ns, ng):
+    """Everything about closure c at wo that does not depend on wi.
+
+    Returns (ns', ng', cos_o = wo . ns' (not clamped), eta_glass, alpha, F_coat, F_glass,
+    F_metal (RGB), ms_scale (RGB) = F_ms / (pi (1 - E_avg)), ms_Eo = E(mu_o), p_lobe (6 lobes)).
+    """
+    nsf, ngf, entering = _oriented(wo, ns, ng)
+    alpha = max(c[C_ALPHA], 1e-4)
+    rough = c[C_ROUGHNESS] > 0.0
+    spec = c[C_SPECULAR]
+    w_base, w_metal, w_glass = c[C_W_BASE], c[C_W_METAL], c[C_W_GLASS]
+    ior = c[C_IOR]
+    eta_glass = ior if entering else 1.0 / ior          # n_t / n_i for glass
+    cos_o = dot(wo, nsf)
+    cos_oc = min(max(cos_o, 0.0), 1.0)
+    # Fresnel at wo for each lobe the closure has
+    F_coat = spec * fresnel_dielectric(cos_oc, ior) if (w_base > 0 and spec > 0) else 0.0
+    F_glass = fresnel_dielectric(cos_oc, eta_glass) if w_glass > 0 else 0.0
+    F_metal = _fresnel_schlick(c, cos_oc) if w_metal > 0 else (0.0, 0.0, 0.0)
+    # METAL_MS (rough metal): f_ms = ms_scale (1 - E(mu_o)) (1 - E(mu_i))
+    ms_scale = (0.0, 0.0, 0.0)
+    ms_Eo = 1.0
+    ms_albedo = 0.0                                     # (1 - E(mu_o)) mean(F_ms): the lobe's albedo
+    if w_metal > 0 and rough:
+        e_avg = ggx_albedo_avg(E_avg, alpha)
+        b0, b1, b2 = c[C_BASE], c[C_BASE + 1], c[C_BASE + 2]
+        a0 = b0 + (1.0 - b0) / 21.0
+        a1 = b1 + (1.0 - b1) / 21.0
+        a2 = b2 + (1.0 - b2) / 21.0
+        F_ms0 = a0 * a0 * e_avg / (1.0 - a0 * (1.0 - e_avg))
+        F_ms1 = a1 * a1 * e_avg / (1.0 - a1 * (1.0 - e_avg))
+        F_ms2 = a2 * a2 * e_avg / (1.0 - a2 * (1.0 - e_avg))
+        ms_Eo = ggx_albedo(E, cos_oc, alpha)
+        if (1.0 - e_avg) > 1e-4:
+            k = _PI * max(1.0 - e_avg, 1e-4)
+            ms_scale = (F_ms0 / k, F_ms1 / k, F_ms2 / k)
+            ms_albedo = (1.0 - ms_Eo) * ((F_ms0 + F_ms1 + F_ms2) / 3.0)
+    # Lobe selection probabilities proportional to an albedo estimate
+    mean_base = (c[C_BASE] + c[C_BASE + 1] + c[C_BASE + 2]) / 3.0
+    e0 = w_base * (1.0 - F_coat) * mean_base                          # DIFFUSE
+    e1 = w_base * F_coat                                              # COAT
+    e2 = w_metal * ((F_metal[0] + F_metal[1] + F_metal[2]) / 3.0)     # METAL
+    e3 = w_glass * F_glass                                            # GLASS_R
+    e4 = w_glass * (1.0 - F_glass) * mean_base                        # GLASS_T
+    e5 = w_metal * ms_albedo                                          # METAL_MS
+    total = e0 + e1 + e2 + e3 + e4 + e5
+    if total > 0:
+        t = max(total, 1e-300)
+        p_lobe = (e0 / t, e1 / t, e2 / t, e3 / t, e4 / t, e5 / t)
+    else:
+        p_lobe = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    return nsf, ngf, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, p_lobe
+
+
+# ----------------------------------------------------------------------------
+# Evaluation: f and pdf of the non-delta lobes
+# ----------------------------------------------------------------------------
+@njit(**_JIT_INLINE)
+def _eval_pdf_hit(c, E, hit, wo, wi):
+    """(f0, f1, f2, pdf) of the non-delta lobes at wi for the hit of :func:`_hit`."""
+    ns, ng, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, p_lobe = hit
+    w_base, w_metal, w_glass = c[C_W_BASE], c[C_W_METAL], c[C_W_GLASS]
+    b0, b1, b2 = c[C_BASE], c[C_BASE + 1], c[C_BASE + 2]
+    cos_i = dot(wi, ns)
+    above_ng = dot(wi, ng) > 0
+    # -- DIFFUSE: base / pi under the coat's Fresnel at wo
+    f0 = f1 = f2 = pdf = 0.0
+    if cos_i > 0 and above_ng:
+        d = w_base * (1.0 - F_coat)
+        f0 = d * b0 / _PI
+        f1 = d * b1 / _PI
+        f2 = d * b2 / _PI
+        pdf = p_lobe[DIFFUSE] * cos_i / _PI
+    if not c[C_ROUGH_LOBE] > 0:
+        return f0, f1, f2, pdf
+    # -- GGX reflection terms (rough COAT / METAL / GLASS_R)
+    if not (cos_i > 0 and cos_o > 0 and above_ng):
+        return f0, f1, f2, pdf
+    hv = _normalized((wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]), 1e-300)
+    cos_h = dot(hv, ns)
+    wo_h = min(max(dot(wo, hv), 0.0), 1.0)
+    D = _ggx_D(cos_h, alpha)
+    lam_o = _ggx_lambda(cos_o, alpha)
+    lam_i = _ggx_lambda(cos_i, alpha)
+    G2 = 1.0 / (1.0 + lam_o + lam_i)
+    G1o = 1.0 / (1.0 + lam_o)
+    cos_oe = max(cos_o, _EPS)
+    p_ggx = G1o * D / (4.0 * cos_oe)                     # VNDF pdf of wi (solid angle)
+    spec = D * G2 / max(4.0 * cos_oe * max(cos_i, _EPS), 1e-300)
+    # COAT: specular F_diel(wo.h, ior); METAL: Schlick(base, wo.h); GLASS_R: F_diel(wo.h, eta)
+    F_c = c[C_SPECULAR] * fresnel_dielectric(wo_h, c[C_IOR])
+    F_m = _fresnel_schlick(c, wo_h)
+    F_g = fresnel_dielectric(wo_h, eta_glass)
+    s = (w_base * F_c + w_glass * F_g) * spec
+    sm = w_metal * spec
+    f0 = f0 + (s + sm * F_m[0])
+    f1 = f1 + (s + sm * F_m[1])
+    f2 = f2 + (s + sm * F_m[2])
+    pdf = pdf + p_ggx * (p_lobe[COAT] + p_lobe[METAL] + p_lobe[GLASS_R])
+    # -- METAL_MS: the energy single scattering loses, a broad cosine-sampled lobe
+    if w_metal > 0:
+        E_i = ggx_albedo(E, min(max(cos_i, 0.0), 1.0), alpha)
+        k = w_metal * (1.0 - ms_Eo) * (1.0 - E_i)
+        f0 = f0 + k * ms_scale[0]
+        f1 = f1 + k * ms_scale[1]
+        f2 = f2 + k * ms_scale[2]
+        pdf = pdf + p_lobe[METAL_MS] * cos_i / _PI
+    return f0, f1, f2, pdf
+
+
+@njit(**_JIT_INLINE)
+def bsdf_eval_pdf(c, E, E_avg, wo, wi, ns, ng):
+    """(f0, f1, f2, pdf): f (1/sr) of the non-delta lobes of closure c at (wo, wi) and the
+    mixture solid-angle pdf with which :func:`bsdf_sample` returns wi through them."""
+    return _eval_pdf_hit(c, E, _hit(c, E, E_avg, wo, ns, ng), wo, wi)
+
+
+@njit(**_JIT_INLINE)
+def bsdf_eval(c, E, E_avg, wo, wi, ns, ng):
+    """(f0, f1, f2): f (1/sr) of the non-delta lobes; without a rough lobe, the diffuse lobe
+    w_base (1 - F_coat(wo)) base_color / pi directly (no hit set-up)."""
+    if c[C_ROUGH_LOBE] > 0:
+        f0, f1, f2, _ = bsdf_eval_pdf(c, E, E_avg, wo, wi, ns, ng)
+        return f0, f1, f2
+    nsf, ngf, _ = _oriented(wo, ns, ng)
+    scale = 0.0
+    if dot(wi, nsf) > 0 and dot(wi, ngf) > 0:
+        scale = c[C_W_BASE]
+        if c[C_COAT] > 0:
+            cos_o = min(max(dot(wo, nsf), 0.0), 1.0)
+            scale *= 1.0 - c[C_SPECULAR] * fresnel_dielectric(cos_o, c[C_IOR])
+    return (scale * c[C_BASE] * _INV_PI, scale * c[C_BASE + 1] * _INV_PI, scale * c[C_BASE + 2] * _INV_PI)
+
+
+# ----------------------------------------------------------------------------
+# Sampling
+# ----------------------------------------------------------------------------
+@njit(**_JIT_INLINE)
+def bsdf_sample(c, E, E_avg, wo, ns, ng, u0, u1, u2):
+    """(wi0, wi1, wi2, w0, w1, w2, is_delta): wi from closure c at wo.
+
+    u0 picks the lobe by the CDF of p_lobe (and so reflect / refract for
+    glass), u1, u2 the direction.  Weight: throughput / p_lobe for a delta
+    lobe (0 if a reflection lands below ng or a refraction above it), else
+    f_nd |cos| / pdf_nd over all non-delta lobes; wi = 0 and weight 0 when the
+    chosen lobe has probability 0.
+    """
+    hit = _hit(c, E, E_avg, wo, ns, ng)
+    nsf, ngf, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, p_lobe = hit
+    rough = c[C_ROUGHNESS] > 0.0
+    # -- Choose a lobe by the CDF of p_lobe
+    lobe = 0                                            # number of CDF entries <= u0
+    cdf = 0.0
+    for k in range(6):
+        cdf += p_lobe[k]
+        if u0 >= cdf:
+            lobe += 1
+    lobe = min(lobe, METAL_MS)
+    p_chosen = p_lobe[lobe]
+    if not p_chosen > 0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
+    is_refl = lobe == COAT or lobe == METAL or lobe == GLASS_R
+    is_delta = lobe == GLASS_T or (is_refl and not rough)
+    # -- Direction
+    if lobe == DIFFUSE or lobe == METAL_MS:
+        # Cosine hemisphere about ns
+        t, b = basis(nsf)
+        wi = _to_frame(cosine_hemisphere(u1, u2), t, b, nsf)
+    elif is_refl and rough:
+        # GGX visible normal, then mirror about it
+        t, b = basis(nsf)
+        lx, ly, lz = _normalized((dot(wo, t), dot(wo, b), max(cos_o, 1e-6)), 0.0)
+        hw = _to_frame(_ggx_sample_vndf(lx, ly, lz, alpha, u1, u2), t, b, nsf)
+        wi = _reflect(wo, hw)
+    elif is_refl:
+        # Smooth reflection: mirror about ns
+        wi = _reflect(wo, nsf)
+    else:
+        # GLASS_T: refraction through ns (entering: eta = ior; leaving: 1 / ior)
+        eta = eta_glass
+        co = min(max(cos_o, 0.0), 1.0)
+        cos_t = math.sqrt(max(0.0, 1.0 - (1.0 - co * co) / (eta * eta)))
+        k = co / eta - cos_t
+        wi = (-wo[0] / eta + k * nsf[0], -wo[1] / eta + k * nsf[1], -wo[2] / eta + k * nsf[2])
+    wi = _normalized(wi, 1e-300)
+    wi0, wi1, wi2 = wi
+    # -- Delta lobes: Fresnel / colour throughput over the selection probability
+    if is_delta:
+        side = dot(wi, ngf)
+        if not (side < 0 if lobe == GLASS_T else side > 0):
+            return wi0, wi1, wi2, 0.0, 0.0, 0.0, True     # a leak through the shading normal
+        if lobe == COAT:
+            thr = c[C_W_BASE] * F_coat
+            t0 = t1 = t2 = thr
+        elif lobe == METAL:
+            w_metal = c[C_W_METAL]
+            t0, t1, t2 = w_metal * F_metal[0], w_metal * F_metal[1], w_metal * F_metal[2]
+        elif lobe == GLASS_R:
+            thr = c[C_W_GLASS] * F_glass
+            t0 = t1 = t2 = thr
+        else:
+            thr = c[C_W_GLASS] * (1.0 - F_glass)
+            t0, t1, t2 = thr * c[C_BASE], thr * c[C_BASE + 1], thr * c[C_BASE + 2]
+        return wi0, wi1, wi2, t0 / p_chosen, t1 / p_chosen, t2 / p_chosen, True
+    # -- Non-delta lobes: mixture f cos / pdf over every non-delta lobe
+    f0, f1, f2, pdf = _eval_pdf_hit(c, E, hit, wo, wi)
+    if not pdf > 0:
+        return wi0, wi1, wi2, 0.0, 0.0, 0.0, False
+    r = abs(dot(wi, nsf)) / max(pdf, 1e-300)
+    return wi0, wi1, wi2, f0 * r, f1 * r, f2 * r, False
+
+
+# ----------------------------------------------------------------------------
+# Other queries
+# ----------------------------------------------------------------------------
+@njit(**_JIT_INLINE)
+def diffuse_albedo(c, wo, ns):
+    """(r, g, b) = w_base (1 - specular F_diel(|wo . ns|, ior)) base_color: the diffuse reflectance
+    after the coat (photon radiance = diffuse_albedo / pi * irradiance); ns may face either way."""
+    F = c[C_SPECULAR] * fresnel_dielectric(abs(dot(wo, ns)), c[C_IOR])
+    k = c[C_W_BASE] * (1.0 - F)
+    return k * c[C_BASE], k * c[C_BASE + 1], k * c[C_BASE + 2]
+
+
+# ----------------------------------------------------------------------------
+# Batch kernels
+# ----------------------------------------------------------------------------
+@njit(**_JIT)
+def eval_batch(closures, E, E_avg, mat, wo, wi, ns, ng, f_out, pdf_out):
+    """f_out (n, 3) = :func:`bsdf_eval` and pdf_out (n,) = the pdf of :func:`bsdf_eval_pdf` for
+    material ids mat (n,) (-1 = miss: the inert last closure row); pdf_out of length 0 skips the pdf."""
+    want_pdf = pdf_out.shape[0] > 0
+    for i in range(mat.shape[0]):
+        c = closures[closure_row(closures, mat[i])]
+        o = (wo[i, 0], wo[i, 1], wo[i, 2])
+        d = (wi[i, 0], wi[i, 1], wi[i, 2])
+        s = (ns[i, 0], ns[i, 1], ns[i, 2])
+        g = (ng[i, 0], ng[i, 1], ng[i, 2])
+        if want_pdf:
+            f0, f1, f2, pdf = bsdf_eval_pdf(c, E, E_avg, o, d, s, g)
+            pdf_out[i] = pdf
+            if not c[C_ROUGH_LOBE] > 0:
+                f0, f1, f2 = bsdf_eval(c, E, E_avg, o, d, s, g)
+        else:
+            f0, f1, f2 = bsdf_eval(c, E, E_avg, o, d, s, g)
+        f_out[i, 0], f_out[i, 1], f_out[i, 2] = f0, f1, f2
+
+
+@njit(**_JIT)
+def sample_batch(closures, E, E_avg, mat, wo, ns, ng, u, wi_out, weight_out, delta_out):
+    """:func:`bsdf_sample` per row: wi_out, weight_out (n, 3), delta_out (n,) bool from u (n, 3)."""
+    for i in range(mat.shape[0]):
+        c = closures[closure_row(closures, mat[i])]
+        wi0, wi1, wi2, w0, w1, w2, dl = bsdf_sample(
+            c, E, E_avg, (wo[i, 0], wo[i, 1], wo[i, 2]), (ns[i, 0], ns[i, 1], ns[i, 2]),
+            (ng[i, 0], ng[i, 1], ng[i, 2]), u[i, 0], u[i, 1], u[i, 2])
+        wi_out[i, 0], wi_out[i, 1], wi_out[i, 2] = wi0, wi1, wi2
+        weight_out[i, 0], weight_out[i, 1], weight_out[i, 2] = w0, w1, w2
+        delta_out[i] = dl
+
+
+@njit(**_JIT)
+def albedo_batch(closures, mat, wo, ns, out):
+    """:func:`diffuse_albedo` per row into out (n, 3)."""
+    for i in range(mat.shape[0]):
+        c = closures[closure_row(closures, mat[i])]
+        r, g, b = diffuse_albedo(c, (wo[i, 0], wo[i, 1], wo[i, 2]), (ns[i, 0], ns[i, 1], ns[i, 2]))
+        out[i, 0], out[i, 1], out[i, 2] = r, g, b

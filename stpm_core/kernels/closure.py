@@ -1,0 +1,117 @@
+"""The material closure: what the compiled kernels know about a surface at a hit.
+
+A closure is one float64 row of ``N_CLOSURE`` numbers (columns named ``C_*``
+below).  Today every hit on material ``m`` reads the constant row
+``closures[m]`` of :func:`pack_materials`; the shader-node interpreter
+(the next step, in the manner of Cycles' SVM) will fill the same row per hit
+from the material's instruction array and then call :func:`finish_closure`,
+so the BSDF kernels (:mod:`stpm_core.kernels.bsdf`) never change when a node
+is added.  Materials are data: a new scene never compiles a new kernel.
+
+Primary columns (what a Principled BSDF sets; ``Material`` in
+:mod:`stpm_core.scene`): base colour RGB, emission RGB (W m^-2 sr^-1),
+metallic, transmission, roughness, specular, ior.  Derived columns
+(:func:`finish_closure`; the same formulas as ``bsdf.MaterialTable``):
+
+=================  =============================================================
+``C_ALPHA``        GGX alpha = roughness^2
+``C_W_BASE``       (1 - metallic)(1 - transmission): diffuse + coat weight
+``C_W_METAL``      metallic
+``C_W_GLASS``      (1 - metallic) transmission
+``C_ROUGH_LOBE``   1 if some GGX lobe (roughness > 0 and a metal, glass or coat lobe)
+``C_NONDELTA``     1 if some lobe is not a delta (shade / store photons here)
+``C_COAT``         1 if the diffuse base has a coat (w_base > 0 and specular > 0)
+``C_HAS_DELTA``    1 if some lobe is a delta (paths / photons continue specularly)
+``C_EMISSIVE``     1 if some emission channel is > 0
+``C_PROGRAM``      first instruction of the material's node program; -1 = constant
+=================  =============================================================
+
+The last row (index M, where hit material -1 lands) is an inert black closure.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..numba_probe import njit
+
+__all__ = ["N_CLOSURE", "pack_materials", "finish_closure", "closure_row"] + [
+    "C_BASE", "C_EMIT", "C_METALLIC", "C_TRANSMISSION", "C_ROUGHNESS", "C_SPECULAR", "C_IOR", "C_ALPHA",
+    "C_W_BASE", "C_W_METAL", "C_W_GLASS", "C_ROUGH_LOBE", "C_NONDELTA", "C_COAT", "C_HAS_DELTA",
+    "C_EMISSIVE", "C_PROGRAM"]
+
+C_BASE = 0            # 3 columns: base colour RGB
+C_EMIT = 3            # 3 columns: emitted radiance RGB
+C_METALLIC = 6
+C_TRANSMISSION = 7
+C_ROUGHNESS = 8
+C_SPECULAR = 9
+C_IOR = 10
+C_ALPHA = 11
+C_W_BASE = 12
+C_W_METAL = 13
+C_W_GLASS = 14
+C_ROUGH_LOBE = 15
+C_NONDELTA = 16
+C_COAT = 17
+C_HAS_DELTA = 18
+C_EMISSIVE = 19
+C_PROGRAM = 20
+N_CLOSURE = 21
+
+
+@njit(cache=True, nogil=True, inline="always")
+def finish_closure(c):
+    """Fill the derived columns of closure row c (N_CLOSURE,) from its primary columns, in place."""
+    metallic = c[C_METALLIC]
+    transmission = c[C_TRANSMISSION]
+    rough = c[C_ROUGHNESS]
+    c[C_ALPHA] = rough * rough
+    c[C_W_METAL] = metallic
+    c[C_W_GLASS] = (1.0 - metallic) * transmission
+    w_base = (1.0 - metallic) * (1.0 - transmission)
+    c[C_W_BASE] = w_base
+    coat = w_base > 0.0 and c[C_SPECULAR] > 0.0
+    rough_lobe = rough > 0.0 and (metallic > 0.0 or c[C_W_GLASS] > 0.0 or coat)
+    base_max = max(c[C_BASE], max(c[C_BASE + 1], c[C_BASE + 2]))
+    c[C_ROUGH_LOBE] = 1.0 if rough_lobe else 0.0
+    c[C_NONDELTA] = 1.0 if ((w_base > 0.0 and base_max > 0.0) or rough_lobe) else 0.0
+    c[C_COAT] = 1.0 if coat else 0.0
+    smooth = rough == 0.0
+    c[C_HAS_DELTA] = 1.0 if (c[C_W_GLASS] > 0.0 or (smooth and (metallic > 0.0 or coat))) else 0.0
+    c[C_EMISSIVE] = 1.0 if (c[C_EMIT] > 0.0 or c[C_EMIT + 1] > 0.0 or c[C_EMIT + 2] > 0.0) else 0.0
+
+
+@njit(cache=True, nogil=True)
+def _finish_all(rows):
+    for i in range(rows.shape[0] - 1):
+        finish_closure(rows[i])
+
+
+def pack_materials(materials) -> np.ndarray:
+    """Closure rows (M + 1, N_CLOSURE) float64 of the scene's materials; row M is inert (black, no lobes).
+
+    Same numbers as ``bsdf.MaterialTable`` (tested): a material row is what every hit on it reads
+    until node programs fill rows per hit.
+    """
+    mats = list(materials)
+    M = len(mats)
+    rows = np.zeros((M + 1, N_CLOSURE))
+    for i, m in enumerate(mats):
+        rows[i, C_BASE:C_BASE + 3] = np.asarray(m.base_color, float)
+        rows[i, C_EMIT:C_EMIT + 3] = np.asarray(m.emission, float)
+        rows[i, C_METALLIC] = m.metallic
+        rows[i, C_TRANSMISSION] = m.transmission
+        rows[i, C_ROUGHNESS] = m.roughness
+        rows[i, C_SPECULAR] = m.specular
+        rows[i, C_IOR] = m.ior
+        rows[i, C_PROGRAM] = -1.0
+    rows[M, C_IOR] = 1.0
+    rows[M, C_PROGRAM] = -1.0
+    _finish_all(rows)
+    return rows
+
+
+@njit(cache=True, nogil=True, inline="always")
+def closure_row(closures, m):
+    """Row index of material id m (-1, a miss, reads the inert last row)."""
+    return closures.shape[0] - 1 if m < 0 else m

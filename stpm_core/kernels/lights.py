@@ -1,0 +1,368 @@
+"""Next-event light sampling and light shapes seen along rays, one row at a time (numba).
+
+The one implementation of what :meth:`stpm_core.lights.LightSet.sample_direct` returns, for
+every kind of light entry (units and equations: docs/lights-and-materials.md; the numpy
+implementation it replaced is the test oracle ``tests/oracles/lights_numpy.py``):
+
+* :func:`sample_light` -- one light sample for one shading point: unit direction toward the
+  light, distance (inf for SUN / WORLD) and weight, the incident-radiance estimator
+  ``L_e G / pdf`` W m^-2 sr^-1 (reflected radiance = f |cos(ns, wi)| weight, times visibility);
+  the camera-path kernels (:mod:`.paths`) call it per row;
+* :func:`seen_light` -- radiance of the light's shape hit by one ray (AREA lights, one-sided;
+  POINT / SPOT spheres of radius > 0), as ``integrator._seen_lights`` for one light;
+* :func:`spherical_rect_sample` -- a point of a rectangle uniform in the solid angle it subtends;
+* :func:`sample_direct_batch`, :func:`seen_batch`, :func:`spherical_rect_batch` -- the same over
+  arrays of rows (``LightSet.sample_direct`` and the tests call these).
+
+Photon emission is :mod:`.emission`; the vector helpers, warps and light shapes (area shape
+from a pose, mesh-light points, spot mask, ...) both use are :mod:`.sampling`.
+
+Inputs are data (:func:`.light_params.kernel_light`): a light's parameter row ``prm`` (columns
+``P_*``), its object-to-world matrix ``M`` (4, 4) at the row's time (MESH: the instance's matrix,
+identity for a static mesh whose corners are packed in world space; WORLD: identity), and for
+MESH lights the triangle arrays of ``mesh_arrays`` (empty for the others).  Vectors are 3-tuples
+of floats; nothing is allocated per row.
+
+Every row uses the same random numbers and, operation for operation, the same float arithmetic
+as the numpy code (divisions where it divides, the same association order, numpy's summation
+order of each dot product: ``sampling.dot`` / ``sampling.edot``), so results agree to rounding,
+in practice bit for bit (tests/test_kernel_lights.py asks for 1e-9).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..numba_probe import njit
+from .light_params import P_ANGLE, P_COLOR, P_DEAD, P_POWER, P_RADIUS, P_SOFT, P_TYPE, T_AREA, T_MESH, T_POINT, \
+    T_SPOT, T_SUN, T_WORLD
+from .sampling import (JIT, JIT_INLINE, TWO_PI, area_point, area_shape, axis_or_z, clip, column, concentric_disk,
+                       cosine_hemisphere, cross, dot, edot, intensity, light_axis, madd, mesh_point, neg, normalize,
+                       one_minus_cos_from_sin2, scale, sign, spot_attenuation, sub, to_world, uniform_cone,
+                       uniform_sphere, unit, vec3)
+
+__all__ = ["sample_light", "seen_light", "sample_direct_batch", "seen_batch", "spherical_rect_sample",
+           "spherical_rect_batch"]
+
+
+# ----------------------------------------------------------------------------
+# Spherical rectangle (Urena, Fajardo and King 2013)
+# ----------------------------------------------------------------------------
+@njit(**JIT_INLINE)
+def spherical_rect_sample(o, s, ex, ey, u0, u1):
+    """A point q (3-tuple) on the rectangle (corner s, orthogonal full edges ex, ey) uniform in the
+    solid angle S (sr) it subtends from o; returns (q, S).  S = 0 where o lies in its plane.
+
+    Row for row the float operations of the numpy version (``tests/oracles/lights_numpy.py``):
+    local frame x = ex / |ex|, y = ey / |ey|, z = x cross y flipped so the rectangle lies at
+    z0 <= 0; S from the angles of the four great-circle edges; x by inverting the solid angle's
+    cumulative, y uniform in h = y / sqrt(d^2 + y^2).
+    """
+    x, lx = unit(ex)
+    y, ly = unit(ey)
+    z = cross(x, y)
+    d = sub(s, o)
+    z0 = edot(d, z)
+    if z0 > 0.0:
+        z = neg(z)
+        z0 = -z0
+    x0 = edot(d, x)
+    y0 = edot(d, y)
+    x1, y1 = x0 + lx, y0 + ly
+    # Inner normals of the four great-circle edges
+    n0, _ = unit((0.0, z0, -y0))
+    n1, _ = unit((-z0, 0.0, x1))
+    n2, _ = unit((0.0, -z0, y1))
+    n3, _ = unit((z0, 0.0, -x0))
+    g0 = math.acos(clip(-edot(n0, n1), -1.0, 1.0))
+    g1 = math.acos(clip(-edot(n1, n2), -1.0, 1.0))
+    g2 = math.acos(clip(-edot(n2, n3), -1.0, 1.0))
+    g3 = math.acos(clip(-edot(n3, n0), -1.0, 1.0))
+    b0, b1 = n0[2], n2[2]
+    k = TWO_PI - g2 - g3
+    S = max(g0 + g1 - k, 0.0)
+    # x by the solid angle's cumulative
+    au = u0 * S + k
+    sin_au = math.sin(au)
+    fu = (math.cos(au) * b0 - b1) / (1e-300 if sin_au == 0.0 else sin_au)
+    if fu == 0.0:
+        cu = 0.0
+    else:
+        cu = clip(sign(fu) / math.sqrt(fu * fu + b0 * b0 + 1e-300), -1.0, 1.0)
+    xu = clip(-(cu * z0) / math.sqrt(max(1.0 - cu * cu, 1e-300)), x0, x1)
+    # y uniform in h = y / sqrt(d^2 + y^2)
+    dd = math.sqrt(xu * xu + z0 * z0)
+    h0 = y0 / math.sqrt(dd * dd + y0 * y0 + 1e-300)
+    h1 = y1 / math.sqrt(dd * dd + y1 * y1 + 1e-300)
+    hv = h0 + u1 * (h1 - h0)
+    hv2 = hv * hv
+    if hv2 < 1.0 - 1e-12:
+        yv = hv * dd / math.sqrt(max(1.0 - hv2, 1e-300))
+    else:
+        yv = y1
+    yv = clip(yv, y0, y1)
+    q = (o[0] + xu * x[0] + yv * y[0] + z0 * z[0],
+         o[1] + xu * x[1] + yv * y[1] + z0 * z[1],
+         o[2] + xu * x[2] + yv * y[2] + z0 * z[2])
+    return q, S
+
+
+# ----------------------------------------------------------------------------
+# One sample per light type: (wi0, wi1, wi2, dist, w0, w1, w2)
+# ----------------------------------------------------------------------------
+@njit(**JIT_INLINE)
+def _sample_point(prm, M, p, u0, u1):
+    """POINT / SPOT of intensity I = color P / (4 pi) W/sr at M's translation.
+
+    Radius 0: the exact direction, weight I / d^2 (0 at the light itself).  Radius r > 0 with soft
+    falloff: a uniform point of the disc of radius r facing p, weight I cos_q / t^2.  Without: the
+    sphere of radius r, directions uniform in the cone it subtends (every direction from inside;
+    distance to its far side there), weight I Omega / (pi r^2).  SPOT: times the cone mask of the
+    direction the light leaves along (its axis: M's -Z column, normalised).
+    """
+    c = column(M, 3)
+    I0, I1, I2 = intensity(prm)
+    r = prm[P_RADIUS]
+    to_p, d = normalize(sub(p, c))                  # light -> p
+    if r <= 0.0:
+        # -- a true point
+        wi = neg(to_p)
+        dist = d
+        g = 1.0 / max(d * d, 1e-300) if d > 0.0 else 0.0
+    elif prm[P_SOFT] != 0.0:
+        # -- soft falloff: disc of radius r through c facing p; pdf_A = 1 / (pi r^2), L = I / (pi r^2)
+        dx, dy = concentric_disk(u0, u1)
+        wi, dist = normalize(sub(madd(c, r, to_world((dx, dy, 0.0), to_p)), p))
+        cos_q = max(-dot(wi, to_p), 0.0)
+        g = cos_q / max(dist * dist, 1e-300)
+    else:
+        # -- sphere of radius r: uniform in its cone (the whole sphere from inside, about +Z)
+        inside = d <= r
+        if inside:
+            one_minus_cos = 2.0
+            axis = (0.0, 0.0, 1.0)
+        else:
+            one_minus_cos = one_minus_cos_from_sin2((r * r) / max(d * d, 1e-300))
+            axis = neg(to_p)
+        wi = to_world(uniform_cone(u0, u1, 1.0 - one_minus_cos), axis)
+        # distance along wi to the sphere: near hit from outside, far hit from inside
+        oc = sub(p, c)
+        b = edot(oc, wi)
+        disc = max(b * b - (edot(oc, oc) - r * r), 0.0)
+        sq = math.sqrt(disc)
+        dist = -b + sq if inside else max(-b - sq, 0.0)
+        omega = TWO_PI * one_minus_cos
+        g = omega / (np.pi * r * r)
+    w0, w1, w2 = I0 * g, I1 * g, I2 * g
+    if int(prm[P_TYPE]) == T_SPOT:
+        a = spot_attenuation(prm, dot(wi, light_axis(M)))   # (-wi) . (-Z): the direction leaving the light
+        w0, w1, w2 = w0 * a, w1 * a, w2 * a
+    return wi[0], wi[1], wi[2], dist, w0, w1, w2
+
+
+@njit(**JIT_INLINE)
+def _sample_area(prm, M, p, u0, u1):
+    """AREA light, one-sided, radiance L = color P / (pi A) toward n_emit.
+
+    SQUARE / RECTANGLE whose edges are orthogonal within |cos| <= 1e-5 (Blender's float32
+    matrices; ey then made exactly orthogonal) and whose solid angle S > 1e-7 sr: a point uniform
+    in S (:func:`spherical_rect_sample`), weight L S where p is in front, else 0.  Every other
+    row (DISK / ELLIPSE, sheared or tiny rectangles): a uniform point of the shape, weight
+    L cos_l A / t^2 with cos_l = max(0, -wi . n_emit).
+    """
+    c, ex, ey, A, n_emit, disk = area_shape(prm, M)
+    k = prm[P_POWER] / (np.pi * max(A, 1e-300))
+    L0, L1, L2 = prm[P_COLOR] * k, prm[P_COLOR + 1] * k, prm[P_COLOR + 2] * k
+    done = False
+    wi = (0.0, 0.0, 1.0)
+    dist = 0.0
+    g = 0.0
+    if not disk:
+        exx = edot(ex, ex)
+        exy = edot(ex, ey)
+        if abs(exy) <= 1e-5 * math.sqrt(exx * edot(ey, ey)):
+            eyo = sub(ey, scale(ex, exy / max(exx, 1e-300)))
+            qs, S = spherical_rect_sample(p, sub(sub(c, ex), eyo), scale(ex, 2.0), scale(eyo, 2.0), u0, u1)
+            if S > 1e-7:
+                wi, dist = normalize(sub(qs, p))
+                g = S if -dot(wi, n_emit) > 0.0 else 0.0
+                done = True
+    if not done:
+        wi, dist = normalize(sub(area_point(c, ex, ey, disk, u0, u1), p))
+        cos_l = max(-dot(wi, n_emit), 0.0)
+        g = cos_l * A / max(dist * dist, 1e-300)
+    return wi[0], wi[1], wi[2], dist, L0 * g, L1 * g, L2 * g
+
+
+@njit(**JIT_INLINE)
+def _sample_sun(prm, M, u0, u1):
+    """SUN of strength S: toward its unit Z axis, uniform in the cone of angular diameter
+    ``angle`` (radiance S / Omega, pdf 1 / Omega): weight color S, distance inf.
+    A zero Z scale has no direction: +Z stands in and the weight is 0."""
+    Z, ok = axis_or_z(light_axis(M))
+    angle = prm[P_ANGLE]
+    wi = to_world(uniform_cone(u0, u1, math.cos(0.5 * angle)), Z) if angle > 0.0 else Z
+    power = prm[P_POWER]
+    return (wi[0], wi[1], wi[2], np.inf, prm[P_COLOR] * power * ok, prm[P_COLOR + 1] * power * ok,
+            prm[P_COLOR + 2] * power * ok)
+
+
+@njit(**JIT_INLINE)
+def _sample_mesh(M, steps, corners, q, cdf, Le, t, p, u0, u1):
+    """MESH: triangle j with probability q_j, a uniform point of it at time t
+    (``sampling.mesh_point``); two-sided radiance Le[j]: weight Le |cos_l| A / (q_j t^2)."""
+    qp, nrm, A, j, qj = mesh_point(M, steps, corners, q, cdf, t, u0, u1)
+    wi, dist = normalize(sub(qp, p))
+    g = abs(edot(wi, nrm)) * A / (qj * max(dist * dist, 1e-300))
+    return wi[0], wi[1], wi[2], dist, Le[j, 0] * g, Le[j, 1] * g, Le[j, 2] * g
+
+
+@njit(**JIT_INLINE)
+def _sample_world(prm, n, u0, u1):
+    """WORLD of radiance L (the row's colour): cosine-distributed about n (pdf cos / pi), weight
+    L pi / cos; a zero n: uniform on the sphere, weight 4 pi L.  Distance inf."""
+    L = vec3(prm, P_COLOR)
+    if n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0:
+        wi = uniform_sphere(u0, u1)
+        c = 4.0 * np.pi
+    else:
+        local = cosine_hemisphere(u0, u1)
+        wi = to_world(local, n)
+        c = np.pi / max(local[2], 1e-12)
+    return wi[0], wi[1], wi[2], np.inf, c * L[0], c * L[1], c * L[2]
+
+
+# ----------------------------------------------------------------------------
+# One light sample
+# ----------------------------------------------------------------------------
+@njit(**JIT_INLINE)
+def sample_light(prm, M, steps, corners, q, cdf, Le, t, p, n, u0, u1):
+    """One sample of light ``prm`` for the shading point p (3-tuple, world) at normalised time t.
+
+    prm (N_LIGHT_PARAMS,): the light's parameter row; M (4, 4): its object-to-world matrix at this
+    row's time (MESH: its instance's, identity for a static one; WORLD: identity; scale is removed
+    where the light only needs a direction); steps (K,), corners (K, F, 3, 3), q, cdf (F,),
+    Le (F, 3): a MESH light's triangles (``light_params.mesh_arrays``; empty for other lights);
+    n (3-tuple): the geometric normal turned toward the viewer, read by WORLD only (cosine
+    sampling about it; (0, 0, 0): uniform sphere); u0, u1: the row's two uniforms in [0, 1).
+
+    Returns (wi0, wi1, wi2, dist, w0, w1, w2): the unit direction from p toward the light sample,
+    its distance (inf for SUN / WORLD; shadow rays test [eps, dist)) and the weight W m^-2 sr^-1,
+    0 where the light gives nothing (behind an area light, outside a spot, a dead light).
+    """
+    typ = int(prm[P_TYPE])
+    if typ == T_POINT or typ == T_SPOT:
+        r = _sample_point(prm, M, p, u0, u1)
+    elif typ == T_AREA:
+        r = _sample_area(prm, M, p, u0, u1)
+    elif typ == T_SUN:
+        r = _sample_sun(prm, M, u0, u1)
+    elif typ == T_MESH:
+        r = _sample_mesh(M, steps, corners, q, cdf, Le, t, p, u0, u1)
+    elif typ == T_WORLD:
+        r = _sample_world(prm, n, u0, u1)
+    else:
+        r = (0.0, 0.0, 1.0, np.inf, 0.0, 0.0, 0.0)   # (no other type codes)
+    if prm[P_DEAD] != 0.0:
+        # no emitting direction at any key (zero Z scale, zero area): nothing
+        return r[0], r[1], r[2], r[3], 0.0, 0.0, 0.0
+    return r
+
+
+# ----------------------------------------------------------------------------
+# Light shapes seen along one ray
+# ----------------------------------------------------------------------------
+@njit(**JIT_INLINE)
+def seen_light(prm, M, o, d, t_scene, camera_ray):
+    """Radiance (L0, L1, L2) W m^-2 sr^-1 of this light's shape hit by the ray o + s d (unit d,
+    3-tuples) at 0 < s < t_scene, as ``integrator._seen_lights`` for one light; M its matrix at
+    the ray's time (scale kept).
+
+    AREA: one-sided (seen where d . n_emit < 0), radiance color P / (pi A).  POINT / SPOT of
+    radius r > 0: the sphere (also with soft falloff), seen from outside only, radiance
+    I / (pi r^2), spots masked by the cone about M's -Z (normalised).  Radius-0 lights, suns,
+    meshes (the caster hits their triangles) and the world: 0; lights of power <= 0 or black
+    colour: 0.  ``camera_ray`` is accepted for symmetry: Blender's camera-visibility flag is the
+    caller's test.
+    """
+    typ = int(prm[P_TYPE])
+    power = prm[P_POWER]
+    c0, c1, c2 = vec3(prm, P_COLOR)
+    if power <= 0.0 or not (c0 > 0.0 or c1 > 0.0 or c2 > 0.0):
+        return 0.0, 0.0, 0.0
+    if typ == T_AREA:
+        # -- the light's plane; local coordinates of the crossing
+        c, ex, ey, area, n_emit, disk = area_shape(prm, M)
+        cos_d = dot(d, n_emit)
+        s_hit = dot(sub(c, o), n_emit) / cos_d
+        qv = sub(madd(o, s_hit if np.isfinite(s_hit) else 0.0, d), c)
+        a = dot(qv, ex) / max(dot(ex, ex), 1e-300)
+        b = dot(qv, ey) / max(dot(ey, ey), 1e-300)
+        inside = (a * a + b * b <= 1.0) if disk else (abs(a) <= 1.0 and abs(b) <= 1.0)
+        if inside and cos_d < 0.0 and s_hit > 0.0 and s_hit < t_scene and area > 0.0:
+            den = np.pi * area
+            return c0 * power / den, c1 * power / den, c2 * power / den
+        return 0.0, 0.0, 0.0
+    if (typ == T_POINT or typ == T_SPOT) and prm[P_RADIUS] > 0.0:
+        # -- sphere of radius r about M's translation
+        r = prm[P_RADIUS]
+        oc = sub(o, column(M, 3))
+        bq = dot(oc, d)
+        disc = bq * bq - (dot(oc, oc) - r * r)
+        s_hit = -bq - math.sqrt(max(disc, 0.0))
+        if not (disc > 0.0 and s_hit > 0.0 and s_hit < t_scene):
+            return 0.0, 0.0, 0.0
+        den = np.pi * r * r
+        L0 = c0 * power / (4.0 * np.pi) / den
+        L1 = c1 * power / (4.0 * np.pi) / den
+        L2 = c2 * power / (4.0 * np.pi) / den
+        if typ == T_SPOT:
+            Z = column(M, 2)
+            nz = math.sqrt(dot(Z, Z))                # (no 1e-300 guard, as the numpy code)
+            att = spot_attenuation(prm, dot(neg(d), (-Z[0] / nz, -Z[1] / nz, -Z[2] / nz)))
+            L0, L1, L2 = L0 * att, L1 * att, L2 * att
+        return L0, L1, L2
+    return 0.0, 0.0, 0.0
+
+
+# ----------------------------------------------------------------------------
+# Batch kernels (LightSet.sample_direct, tests)
+# ----------------------------------------------------------------------------
+@njit(**JIT)
+def sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, p, times, u, normals, use_normals,
+                        wi_out, dist_out, weight_out):
+    """:func:`sample_light` for rows i of p (n, 3) at times (n,) with uniforms u (n, 2).
+
+    poses (k, 4, 4): the light's matrices, row i reads poses[0] when k = 1 else poses[i].
+    normals (n, 3): read when use_normals (WORLD cosine sampling), else every row gets
+    (0, 0, 0) (WORLD: uniform sphere).  Writes wi_out (n, 3), dist_out (n,), weight_out (n, 3).
+    """
+    one = poses.shape[0] == 1
+    for i in range(p.shape[0]):
+        nrm = vec3(normals[i], 0) if use_normals else (0.0, 0.0, 0.0)
+        r = sample_light(prm, poses[0 if one else i], steps, corners, q, cdf, Le, times[i], vec3(p[i], 0), nrm,
+                         u[i, 0], u[i, 1])
+        wi_out[i, 0], wi_out[i, 1], wi_out[i, 2] = r[0], r[1], r[2]
+        dist_out[i] = r[3]
+        weight_out[i, 0], weight_out[i, 1], weight_out[i, 2] = r[4], r[5], r[6]
+
+
+@njit(**JIT)
+def seen_batch(prm, poses, o, d, t_scene, camera_ray, L_out):
+    """:func:`seen_light` for rays o + s d (n, 3) before t_scene (n,): writes L_out (n, 3)
+    (overwrites; sum over lights in the caller).  poses (k, 4, 4): k = 1 or one per ray."""
+    one = poses.shape[0] == 1
+    for i in range(o.shape[0]):
+        L = seen_light(prm, poses[0 if one else i], vec3(o[i], 0), vec3(d[i], 0), t_scene[i], camera_ray)
+        L_out[i, 0], L_out[i, 1], L_out[i, 2] = L[0], L[1], L[2]
+
+
+@njit(**JIT)
+def spherical_rect_batch(o, s, ex, ey, u, q_out, S_out):
+    """:func:`spherical_rect_sample` per row of (n, 3) arrays o, s, ex, ey and u (n, 2): writes
+    q_out (n, 3), S_out (n,) (tests)."""
+    for i in range(o.shape[0]):
+        qv, S = spherical_rect_sample(vec3(o[i], 0), vec3(s[i], 0), vec3(ex[i], 0), vec3(ey[i], 0), u[i, 0], u[i, 1])
+        q_out[i, 0], q_out[i, 1], q_out[i, 2] = qv[0], qv[1], qv[2]
+        S_out[i] = S

@@ -1,0 +1,504 @@
+"""Camera paths in compiled (numba) kernels: the one implementation of the
+tracer's per-sample work.  Python (``stpm_core.integrator``) only drives the
+wavefront: it draws the random numbers in a fixed order, casts each bounce's
+rays (embree or the numba BVH) and calls these kernels in between.
+
+Kernels, in the order a bounce uses them (docs/rendering.md has the
+equations with these names):
+
+* :func:`camera_tile` -- stratified film positions (placed by the pixel
+  filter's inverse CDF) and permuted stratified shutter numbers of one tile;
+* :func:`camera_rays` -- pinhole / ortho rays, camera clipping ``tmax0``;
+* :func:`gather_closures` -- the material closure of every hit
+  (:mod:`stpm_core.kernels.closure`): today the material's constant row; the
+  shader-node interpreter will fill it here, per hit, and nothing after it
+  changes;
+* :func:`classify_hits` -- one bounce's bookkeeping: world radiance of misses,
+  surface emission, Depth / Normal / coverage of the first hit, and the rows to
+  shade (non-delta lobe) and to continue (delta lobe);
+* :func:`nee_light` -- next-event estimation of one light at the shaded rows:
+  the light sample (:func:`stpm_core.kernels.lights.sample_light`, every light
+  type), the BSDF (:func:`stpm_core.kernels.bsdf.bsdf_eval`), the unshadowed
+  contribution and the shadow rays where it is positive; then
+  :func:`nee_accumulate` adds the unblocked ones;
+* :func:`seen_lights_add` -- light shapes (area lights, spheres) hit by camera
+  rays and delta chains;
+* :func:`photon_albedo` / :func:`photon_add` -- the diffuse albedo and the
+  query rows of the photon-map look-ups, and rho / pi E added into a pass;
+* :func:`specular_step` -- continue through delta lobes: BSDF sample,
+  throughput, Russian roulette, offset origins of the next rays;
+* :func:`scatter_add`, :func:`active_channels`, :func:`pixel_sums`,
+  :func:`tile_finish` -- per-sample passes and per-pixel sums of one tile.
+
+Every kernel is serial and releases the GIL (tiles run on the tracer's thread
+pool).  numba is required: :func:`stpm_core.kernels.require` names the cause in
+one line when it cannot be imported or a kernel cannot be compiled.  First use
+compiles the kernels (tens of seconds with numba's cache cold); later
+processes load them from numba's on-disk cache.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..numba_probe import njit
+from .bsdf import bsdf_eval, bsdf_sample, diffuse_albedo
+from .closure import (C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, closure_row)
+from .lights import sample_light, seen_light
+from .sampling import offset_origin
+
+__all__ = ["camera_tile", "camera_rays", "gather_closures", "classify_hits", "nee_light", "nee_accumulate",
+           "seen_lights_add", "photon_albedo", "photon_add", "specular_step", "scatter_add", "active_channels",
+           "pixel_sums", "tile_finish"]
+
+_JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+# Small helpers called per row: inlined into the kernels (a call with many array arguments is costly)
+_JIT_INLINE = dict(_JIT, inline="always")
+_INV_PI = 1.0 / np.pi
+
+
+# ----------------------------------------------------------------------------
+# Camera
+# ----------------------------------------------------------------------------
+@njit(**_JIT)
+def camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, radius, table, px, py, xi):
+    """Film positions px, py (P*S,) and shutter numbers xi (P*S,) of a tile's P = tw*th pixels.
+
+    jit (P, S, 2), perm_u (P, S), time_u (P, S): the uniforms
+    ``integrator.camera_samples`` draws, in its order.  Position: cell j of a
+    rows x cols grid (j < rows*cols) jittered, else uniform, giving u in
+    [0, 1)^2; then px = ix + 1/2 + radius F^-1(u_x) with F^-1 linear in
+    ``table`` (``film.BH_INVERSE_CDF``, as ``film.filter_offsets``), or
+    px = ix + u_x for the box filter (radius 0).  xi = (pi_p(j) + U) / S with
+    pi_p = argsort(perm_u[p]) (only when with_time; xi is left unset otherwise).
+    """
+    rows = max(1, int(math.floor(math.sqrt(S))))
+    cols = max(1, S // rows)
+    m = rows * cols
+    M1 = table.shape[0] - 1
+    order = np.empty(S, np.int64)
+    for p in range(tw * th):
+        ix = x0 + p % tw
+        iy = y0 + p // tw
+        base = p * S
+        for j in range(S):
+            if j < m:
+                cy, cx = j // cols, j % cols
+                ux = cx / cols + jit[p, j, 0] / cols
+                uy = cy / rows + jit[p, j, 1] / rows
+            else:
+                ux = jit[p, j, 0]
+                uy = jit[p, j, 1]
+            if radius > 0:
+                s = ux * M1
+                k = min(int(s), M1 - 1)
+                f = s - k
+                px[base + j] = ix + 0.5 + radius * (table[k] * (1.0 - f) + table[k + 1] * f)
+                s = uy * M1
+                k = min(int(s), M1 - 1)
+                f = s - k
+                py[base + j] = iy + 0.5 + radius * (table[k] * (1.0 - f) + table[k + 1] * f)
+            else:
+                px[base + j] = ix + ux
+                py[base + j] = iy + uy
+        if not with_time:
+            continue
+        # argsort of perm_u[p] (insertion sort: S is small; random keys have no ties)
+        for j in range(S):
+            order[j] = j
+        for j in range(1, S):
+            k = order[j]
+            key = perm_u[p, k]
+            i = j - 1
+            while i >= 0 and perm_u[p, order[i]] > key:
+                order[i + 1] = order[i]
+                i -= 1
+            order[i + 1] = k
+        for j in range(S):
+            xi[base + j] = (order[j] + time_u[p, j]) / S
+
+
+@njit(**_JIT)
+def camera_rays(px, py, W, H, half_w, half_h, cx, cy, R, pos, ortho, clip_start, clip_end, o, d, tmax0):
+    """Rays o, d (n, 3) and clipping distances tmax0 (n,) through film positions px, py (n,).
+
+    R (k, 3, 3) unit-column rotations and pos (k, 3) camera positions, k = 1
+    (static camera) or n (one pose per sample).  Same formulas as
+    ``camera.generate_rays`` and the clipping in ``integrator.trace_image``.
+    """
+    n = px.shape[0]
+    one = R.shape[0] == 1
+    for i in range(n):
+        r = 0 if one else i
+        x = cx + (2.0 * px[i] / W - 1.0) * half_w
+        y = cy + (1.0 - 2.0 * py[i] / H) * half_h
+        ax0, ax1, ax2 = -R[r, 0, 2], -R[r, 1, 2], -R[r, 2, 2]
+        if ortho:
+            z = -clip_start
+            for a in range(3):
+                o[i, a] = R[r, a, 0] * x + R[r, a, 1] * y + R[r, a, 2] * z + pos[r, a]
+                d[i, a] = -R[r, a, 2]
+            tmax0[i] = clip_end - clip_start
+        else:
+            d0 = R[r, 0, 0] * x + R[r, 0, 1] * y - R[r, 0, 2]
+            d1 = R[r, 1, 0] * x + R[r, 1, 1] * y - R[r, 1, 2]
+            d2 = R[r, 2, 0] * x + R[r, 2, 1] * y - R[r, 2, 2]
+            inv = 1.0 / math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)      # (one division, not three)
+            d0, d1, d2 = d0 * inv, d1 * inv, d2 * inv
+            d[i, 0], d[i, 1], d[i, 2] = d0, d1, d2
+            o[i, 0], o[i, 1], o[i, 2] = pos[r, 0], pos[r, 1], pos[r, 2]
+            tmax0[i] = clip_end / max(d0 * ax0 + d1 * ax1 + d2 * ax2, 1e-12)
+
+
+# ----------------------------------------------------------------------------
+# One bounce's bookkeeping
+# ----------------------------------------------------------------------------
+@njit(**_JIT)
+def gather_closures(mat, closures, C):
+    """C[r] = the closure of hit r (m,) on material mat[r] (-1 = miss: the inert row).
+
+    closures (M + 1, N_CLOSURE) from ``closure.pack_materials``; C (m, N_CLOSURE).  The
+    place of the shader-node interpreter: it will evaluate each hit's node program here.
+    """
+    for r in range(mat.shape[0]):
+        row = closures[closure_row(closures, mat[r])]
+        for c in range(closures.shape[1]):
+            C[r, c] = row[c]
+
+
+@njit(**_JIT)
+def classify_hits(t, C, world, add_world, idx, use_idx, beta, use_beta, V, c_emit, first, c_depth, c_normal,
+                  depth_bg, P, NS, cam_pos, cam_axis, covered, sh, spec):
+    """Bookkeeping of m rays' hits; returns (n_hit, n_sh, n_spec, n_emit) (n_emit: rows added to Emit).
+
+    t (m,) hit distances (inf: miss), C (m, N_CLOSURE) the hits' closures
+    (:func:`gather_closures`).  Row r belongs to sample ``idx[r]`` (``r`` when
+    not use_idx) with throughput ``beta[r]`` (1 when not use_beta).  V (n, K)
+    holds the samples' pass values, Emit in columns c_emit .. c_emit + 2.  The
+    first bounce (every sample once, in order) starts each sample's row of V:
+    0, Depth (column c_depth) = depth_bg, then for a hit Depth = (P - cam_pos)
+    . cam_axis, Normal (c_normal ..) = NS and covered = 1 (cam_pos, cam_axis
+    (k, 3), k = 1 or n).  Adds world (3,) radiance of misses (if add_world)
+    and emission of emissive hits into Emit.  Writes the hit rows with a
+    non-delta lobe into sh and those with a delta lobe into spec, in row order.
+    """
+    m = t.shape[0]
+    K = V.shape[1]
+    n_hit = 0
+    n_sh = 0
+    n_spec = 0
+    n_emit = 0
+    one = cam_pos.shape[0] == 1
+    for r in range(m):
+        i = idx[r] if use_idx else r
+        if first:
+            for c in range(K):
+                V[i, c] = 0.0
+            V[i, c_depth] = depth_bg
+            covered[i] = 0.0
+        if not np.isfinite(t[r]):
+            if add_world:
+                n_emit += 1
+                for c in range(3):
+                    V[i, c_emit + c] += (beta[r, c] * world[c]) if use_beta else world[c]
+            continue
+        n_hit += 1
+        if first:
+            k = 0 if one else i
+            V[i, c_depth] = ((P[r, 0] - cam_pos[k, 0]) * cam_axis[k, 0] + (P[r, 1] - cam_pos[k, 1]) * cam_axis[k, 1]
+                             + (P[r, 2] - cam_pos[k, 2]) * cam_axis[k, 2])
+            for c in range(3):
+                V[i, c_normal + c] = NS[r, c]
+            covered[i] = 1.0
+        if C[r, C_EMISSIVE] > 0.0:
+            n_emit += 1
+            for c in range(3):
+                V[i, c_emit + c] += (beta[r, c] * C[r, C_EMIT + c]) if use_beta else C[r, C_EMIT + c]
+        if C[r, C_NONDELTA] > 0.0:
+            sh[n_sh] = r
+            n_sh += 1
+        if C[r, C_HAS_DELTA] > 0.0:
+            spec[n_spec] = r
+            n_spec += 1
+    return n_hit, n_sh, n_spec, n_emit
+
+
+@njit(**_JIT_INLINE)
+def _add_row(dst, r, idx, use_idx, beta, use_beta, val, k):
+    """dst[idx[r]] += beta[r] * val[k] (3 channels; idx / beta optional)."""
+    i = idx[r] if use_idx else r
+    for c in range(3):
+        dst[i, c] += (beta[r, c] * val[k, c]) if use_beta else val[k, c]
+
+
+@njit(**_JIT)
+def scatter_add(dst, rows, idx, use_idx, beta, use_beta, val):
+    """dst[idx[rows[k]]] += beta[rows[k]] * val[k] for every k (idx / beta optional), val (k, 3)."""
+    for k in range(rows.shape[0]):
+        _add_row(dst, rows[k], idx, use_idx, beta, use_beta, val, k)
+
+
+# ----------------------------------------------------------------------------
+# Next-event estimation
+# ----------------------------------------------------------------------------
+@njit(**_JIT)
+def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cdf, Le, T, U, EPS,
+              contrib, so, sd, stmax, live):
+    """Next-event estimation of one light at the hit rows ``rows`` (n,); returns the shadow-ray count.
+
+    P, NG, NS, D (m, 3): hit points, geometric / shading normals and ray
+    directions of the bounce; C (m, N_CLOSURE) the hits' closures; E, E_avg
+    the GGX albedo tables (``kernels.bsdf.ggx_albedo_tables``).  The light:
+    its parameter row prm, poses (k, 4, 4) (k = 1 static, else one per row of
+    ``rows``) and mesh arrays (``kernels.light_params``).  T (n,) the rows'
+    times, U (n, 2) the light's uniforms, EPS (m,) each hit's shadow-ray
+    origin offset (scene units).
+
+    Per row k (hit r = rows[k]), with wo = -D[r]: (wi, dist, weight) =
+    ``sample_light`` (the WORLD samples cosine directions about ng turned
+    toward wo), f = ``bsdf_eval``(C[r], wo, wi), contrib[k] = f |ns . wi|
+    weight.  Where it is positive, a shadow ray from p offset by EPS[r] along
+    ng to wi's side, aimed at the light point, stopping a margin short of it
+    (emissive triangles are geometry the shadow ray must not reach): so, sd
+    (n, 3), stmax (n,), and live (n,) the row k it belongs to.
+    """
+    one = poses.shape[0] == 1
+    n_live = 0
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        g0, g1, g2 = NG[r, 0], NG[r, 1], NG[r, 2]
+        wo = (-D[r, 0], -D[r, 1], -D[r, 2])
+        # Normal about which the world samples: ng turned toward wo
+        if wo[0] * g0 + wo[1] * g1 + wo[2] * g2 < 0.0:
+            nw = (-g0, -g1, -g2)
+        else:
+            nw = (g0, g1, g2)
+        p = (P[r, 0], P[r, 1], P[r, 2])
+        # -- Sample the light at this row's time ---------------------------------------
+        wi0, wi1, wi2, dist, w0, w1, w2 = sample_light(prm, poses[0 if one else k], steps, corners, q, cdf, Le,
+                                                       T[k], p, nw, U[k, 0], U[k, 1])
+        # -- BSDF and the unshadowed contribution ------------------------------------------
+        ns = (NS[r, 0], NS[r, 1], NS[r, 2])
+        f0, f1, f2 = bsdf_eval(C[r], E, E_avg, wo, (wi0, wi1, wi2), ns, (g0, g1, g2))
+        cosa = abs(ns[0] * wi0 + ns[1] * wi1 + ns[2] * wi2)
+        c0 = f0 * cosa * w0
+        c1 = f1 * cosa * w1
+        c2 = f2 * cosa * w2
+        contrib[k, 0], contrib[k, 1], contrib[k, 2] = c0, c1, c2
+        if not (c0 > 0.0 or c1 > 0.0 or c2 > 0.0):
+            continue
+        # -- Shadow ray toward the light point --------------------------------------------------
+        eps = EPS[r]
+        o0, o1, o2 = offset_origin(p, (g0, g1, g2), eps, (wi0, wi1, wi2))
+        so[n_live, 0], so[n_live, 1], so[n_live, 2] = o0, o1, o2
+        if np.isfinite(dist):
+            v0, v1, v2 = p[0] + dist * wi0 - o0, p[1] + dist * wi1 - o1, p[2] + dist * wi2 - o2
+            s = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+            inv = 1.0 / s
+            sd[n_live, 0], sd[n_live, 1], sd[n_live, 2] = v0 * inv, v1 * inv, v2 * inv
+            stmax[n_live] = s * (1.0 - 1e-6) - 2.0 * eps
+        else:
+            s = math.sqrt(wi0 * wi0 + wi1 * wi1 + wi2 * wi2)
+            sd[n_live, 0], sd[n_live, 1], sd[n_live, 2] = wi0 / s, wi1 / s, wi2 / s
+            stmax[n_live] = np.inf
+        live[n_live] = k
+        n_live += 1
+    return n_live
+
+
+@njit(**_JIT)
+def nee_accumulate(dst, rows, idx, use_idx, beta, use_beta, contrib, live, blocked):
+    """dst[idx[rows[k]]] += beta[rows[k]] * contrib[k], k = live[j], for every shadow ray j not blocked.
+
+    dst (n, 3) the Direct pass of the samples; rows (K,) the hit rows shaded;
+    idx / beta optional as in :func:`scatter_add`.
+    """
+    for j in range(live.shape[0]):
+        if not blocked[j]:
+            k = live[j]
+            _add_row(dst, rows[k], idx, use_idx, beta, use_beta, contrib, k)
+
+
+# ----------------------------------------------------------------------------
+# Light shapes seen along rays
+# ----------------------------------------------------------------------------
+@njit(**_JIT)
+def seen_lights_add(prm, poses, O, D, t_scene, camera_ray, L):
+    """L[r] += radiance of this light's shape hit by ray r (O + s D, unit D) before t_scene[r].
+
+    ``kernels.lights.seen_light`` per row; poses (k, 4, 4), k = 1 or one per ray.  The
+    caller skips lights that camera rays may not see (Blender's visible_camera).
+    """
+    one = poses.shape[0] == 1
+    for r in range(O.shape[0]):
+        l0, l1, l2 = seen_light(prm, poses[0 if one else r], (O[r, 0], O[r, 1], O[r, 2]),
+                                (D[r, 0], D[r, 1], D[r, 2]), t_scene[r], camera_ray)
+        L[r, 0] += l0
+        L[r, 1] += l1
+        L[r, 2] += l2
+
+
+# ----------------------------------------------------------------------------
+# Photon-map look-ups at shaded vertices
+# ----------------------------------------------------------------------------
+@njit(**_JIT)
+def photon_albedo(rows, P, NS, D, C, T, rho, p_q, n_q, t_q, live):
+    """Diffuse albedo rho (n, 3) of the shaded rows ``rows`` (n,) and the query rows of a look-up.
+
+    rho[k] = ``diffuse_albedo``(C[r], wo, ns_f) with ns_f the shading normal
+    turned toward wo = -D[r].  Rows with some rho > 0 are queried: their
+    point, ns_f and time go to p_q, n_q (n, 3) and t_q (n,), their k to live;
+    returns how many.
+    """
+    n_live = 0
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        wo = (-D[r, 0], -D[r, 1], -D[r, 2])
+        s0, s1, s2 = NS[r, 0], NS[r, 1], NS[r, 2]
+        if s0 * wo[0] + s1 * wo[1] + s2 * wo[2] < 0.0:
+            s0, s1, s2 = -s0, -s1, -s2
+        a0, a1, a2 = diffuse_albedo(C[r], wo, (s0, s1, s2))
+        rho[k, 0], rho[k, 1], rho[k, 2] = a0, a1, a2
+        if a0 > 0.0 or a1 > 0.0 or a2 > 0.0:
+            p_q[n_live, 0], p_q[n_live, 1], p_q[n_live, 2] = P[r, 0], P[r, 1], P[r, 2]
+            n_q[n_live, 0], n_q[n_live, 1], n_q[n_live, 2] = s0, s1, s2
+            t_q[n_live] = T[k]
+            live[n_live] = k
+            n_live += 1
+    return n_live
+
+
+@njit(**_JIT)
+def photon_add(dst, rows, live, rho, E, idx, use_idx, beta, use_beta):
+    """dst[idx[rows[k]]] += beta[rows[k]] * rho[k] / pi * E[j], k = live[j]: a photon pass (n, 3) gets
+    the radiance of the irradiance estimates E (j, 3) W/m^2 at the queried rows."""
+    for j in range(live.shape[0]):
+        k = live[j]
+        r = rows[k]
+        i = idx[r] if use_idx else r
+        for c in range(3):
+            v = rho[k, c] / np.pi * E[j, c]
+            dst[i, c] += (beta[r, c] * v) if use_beta else v
+
+
+# ----------------------------------------------------------------------------
+# Continuing through delta lobes
+# ----------------------------------------------------------------------------
+@njit(**_JIT)
+def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg, U, rr, U_rr, EPS, guard_fraction,
+                  idx_out, beta_out, o_out, d_out, guard_out):
+    """Continue the hit rows spec (k,) through their delta lobes; returns how many paths go on.
+
+    Per row j (hit r = spec[j]): (wi, weight, is_delta) = ``bsdf_sample``(C[r],
+    wo = -D[r], U[j]); beta' = beta[r] * weight (weight alone when not
+    use_beta).  The path goes on if a delta lobe was chosen and some beta' > 0,
+    and, when rr (Russian roulette from ``integrator.RR_START`` bounces on), if
+    U_rr[j] < q = clip(max beta', 0.05, 1), then beta' /= q.  For those:
+    idx_out = the sample (idx[r], or r), beta_out = beta', the next ray from p
+    offset by EPS[j] along ng to wi's side (o_out, d_out = wi) and its
+    self-intersection guard guard_out = guard_fraction * EPS[j].
+    """
+    n_go = 0
+    for j in range(spec.shape[0]):
+        r = spec[j]
+        wo = (-D[r, 0], -D[r, 1], -D[r, 2])
+        g = (NG[r, 0], NG[r, 1], NG[r, 2])
+        wi0, wi1, wi2, w0, w1, w2, is_delta = bsdf_sample(C[r], E, E_avg, wo, (NS[r, 0], NS[r, 1], NS[r, 2]), g,
+                                                          U[j, 0], U[j, 1], U[j, 2])
+        if use_beta:
+            b0, b1, b2 = beta[r, 0] * w0, beta[r, 1] * w1, beta[r, 2] * w2
+        else:
+            b0, b1, b2 = w0, w1, w2
+        go = is_delta and (b0 > 0.0 or b1 > 0.0 or b2 > 0.0)
+        if rr:
+            q = min(max(max(b0, max(b1, b2)), 0.05), 1.0)
+            go = go and U_rr[j] < q
+            b0, b1, b2 = b0 / q, b1 / q, b2 / q
+        if not go:
+            continue
+        idx_out[n_go] = idx[r] if use_idx else r
+        beta_out[n_go, 0], beta_out[n_go, 1], beta_out[n_go, 2] = b0, b1, b2
+        e = EPS[j]
+        o_out[n_go, 0], o_out[n_go, 1], o_out[n_go, 2] = offset_origin((P[r, 0], P[r, 1], P[r, 2]), g, e,
+                                                                       (wi0, wi1, wi2))
+        d_out[n_go, 0], d_out[n_go, 1], d_out[n_go, 2] = wi0, wi1, wi2
+        guard_out[n_go] = guard_fraction * e
+        n_go += 1
+    return n_go
+
+
+# ----------------------------------------------------------------------------
+# Film
+# ----------------------------------------------------------------------------
+@njit(**_JIT)
+def active_channels(V, skip):
+    """Indices (k,) of the columns c of V (n, C) with skip[c] False that are not zero for every sample."""
+    n, C = V.shape
+    act = np.empty(C, np.int64)
+    na = 0
+    for c in range(C):
+        if skip[c]:
+            continue
+        for i in range(n):
+            if V[i, c] != 0.0:
+                act[na] = c
+                na += 1
+                break
+    return act[:na]
+
+
+@njit(**_JIT)
+def pixel_sums(tw, th, S, V, act, win):
+    """Per-pixel sums of a tile's samples into win (th, tw, k + 1) float64 (zeroed by the caller).
+
+    Samples as ``integrator.camera_samples`` lays them out (pixel p = (p % tw,
+    p // tw) of the tile, its S samples consecutive); V (n, C) sample values,
+    act (k,) the columns to sum (the others add nothing, e.g. all zero):
+    win[iy, ix, a] = sum_s V[p S + s, act[a]], win[iy, ix, k] = S.
+    """
+    na = act.shape[0]
+    for p in range(tw * th):
+        cell = win[p // tw, p % tw]
+        for s in range(S):
+            row = V[p * S + s]
+            for a in range(na):
+                cell[a] += row[act[a]]
+        cell[na] = S
+
+
+@njit(**_JIT)
+def tile_finish(win, y0, y1, x0, x1, chan, comb, alpha_one, out):
+    """The image-channel window out (y1 - y0, x1 - x0, C + 1) float32 from the kernel sums.
+
+    win (h, w, k + 1) float64 from :func:`pixel_sums` (rows y0 .. y1, columns
+    x0 .. x1 of it are kept), chan (k,) the image channel of each summed
+    column, last column the sample count (out[..., C]).  comb (j,): columns of
+    win whose three consecutive sums add up to Combined RGB (channels 0 .. 2:
+    the first column of each of Emit / Direct / Indirect / Caustic that was
+    summed; empty: Combined is one of chan), added in float64; alpha_one:
+    Combined alpha (3) = the sample count.  Channels neither summed nor derived are 0.
+    """
+    k = chan.shape[0]
+    C = out.shape[2] - 1
+    for y in range(y1 - y0):
+        for x in range(x1 - x0):
+            cell = win[y0 + y, x0 + x]
+            o = out[y, x]
+            for c in range(C + 1):
+                o[c] = 0.0
+            for a in range(k):
+                o[chan[a]] = cell[a]
+            o[C] = cell[k]
+            if comb.shape[0] > 0:
+                r = 0.0
+                g = 0.0
+                b = 0.0
+                for j in range(comb.shape[0]):
+                    a = comb[j]
+                    r += cell[a]
+                    g += cell[a + 1]
+                    b += cell[a + 2]
+                o[0], o[1], o[2] = r, g, b
+            if alpha_one:
+                o[3] = cell[k]

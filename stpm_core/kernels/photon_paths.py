@@ -1,0 +1,84 @@
+"""Photon paths in compiled kernels: one bounce of a batch of photons.
+
+``stpm_core.photons.trace.trace_photon_paths`` drives the wavefront (cast the
+batch at each photon's own time, draw the random numbers, pack the stored
+records); :func:`photon_bounce` does the per-photon work of a bounce,
+docs/photon-mapping.md ("Tracing") has the equations:
+
+* **deposit**: a photon is stored at a hit with a non-delta lobe when its
+  path qualifies: the caustic map after >= 1 delta bounce (L S+ D), the
+  global map after >= ``min_nondelta`` non-delta bounces;
+* **scatter**: (wi, weight, is_delta) = ``bsdf_sample`` at the hit, with
+  weight = f |cos| / pdf (n, 3) or a delta lobe's throughput;
+* **Russian roulette by albedo**: the photon survives with
+  q = min(1, max_c weight_c) and its power becomes Phi weight / q, so stored
+  powers stay even; caustic paths go on only through delta lobes;
+* **spawn**: the next ray starts at p offset by EPS along ng to wi's side,
+  with its own self-intersection guard ``guard_fraction`` x EPS.
+"""
+from __future__ import annotations
+
+from ..numba_probe import njit
+from .bsdf import bsdf_sample
+from .closure import C_NONDELTA
+from .sampling import offset_origin
+
+__all__ = ["photon_bounce"]
+
+_JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+
+
+@njit(**_JIT)
+def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, caustic, min_nondelta, last, U, U_rr,
+                  EPS, guard_fraction, store, o_next, d_next, Phi_next, T_next, nd_next, nn_next, guard_next):
+    """One bounce of the photons whose rays hit: rows (k,) index the bounce's hit arrays.
+
+    P, NG, NS (m, 3) hit points and normals; D (k, 3), Phi (k, 3) W, T (k,),
+    n_delta, n_nondelta (k,) int32: direction, power, time and bounce counts of
+    each kept photon (row j of these belongs to hit rows[j]); C (k, N_CLOSURE)
+    the closures of its hit.  caustic: the caustic map's rules (else global with
+    ``min_nondelta``).  last: the final bounce (store only; U, U_rr unused).
+    U (k, 3), U_rr (k,) uniforms for the BSDF sample and the roulette; EPS (k,)
+    origin offsets (scene units).
+
+    Writes the j of the photons to store into ``store`` and the surviving
+    photons' next rays and state into the ``*_next`` arrays; returns
+    (n_store, n_next).
+    """
+    n_store = 0
+    n_next = 0
+    for j in range(rows.shape[0]):
+        r = rows[j]
+        nondelta = C[j, C_NONDELTA] > 0.0
+        # -- Store the photon -------------------------------------------------------------
+        if nondelta and ((caustic and n_delta[j] >= 1) or (not caustic and n_nondelta[j] >= min_nondelta)):
+            store[n_store] = j
+            n_store += 1
+        if last:
+            continue
+        # -- Sample the next direction from the BSDF ---------------------------------------
+        g = (NG[r, 0], NG[r, 1], NG[r, 2])
+        wi0, wi1, wi2, w0, w1, w2, is_delta = bsdf_sample(C[j], E, E_avg, (-D[j, 0], -D[j, 1], -D[j, 2]),
+                                                          (NS[r, 0], NS[r, 1], NS[r, 2]), g, U[j, 0], U[j, 1], U[j, 2])
+        # -- Possibly terminate the path with Russian roulette (by albedo) -------------------
+        q = min(max(max(w0, max(w1, w2)), 0.0), 1.0)
+        alive = U_rr[j] < q
+        if caustic:
+            alive = alive and is_delta
+        if not alive:
+            continue
+        qq = q if q > 0.0 else 1.0
+        # -- Spawn the continuation ray, offset off the surface --------------------------------
+        e = EPS[j]
+        o_next[n_next, 0], o_next[n_next, 1], o_next[n_next, 2] = offset_origin((P[r, 0], P[r, 1], P[r, 2]), g, e,
+                                                                                (wi0, wi1, wi2))
+        d_next[n_next, 0], d_next[n_next, 1], d_next[n_next, 2] = wi0, wi1, wi2
+        Phi_next[n_next, 0] = Phi[j, 0] * w0 / qq
+        Phi_next[n_next, 1] = Phi[j, 1] * w1 / qq
+        Phi_next[n_next, 2] = Phi[j, 2] * w2 / qq
+        T_next[n_next] = T[j]
+        nd_next[n_next] = n_delta[j] + (1 if is_delta else 0)
+        nn_next[n_next] = n_nondelta[j] + (0 if is_delta else 1)
+        guard_next[n_next] = guard_fraction * e
+        n_next += 1
+    return n_store, n_next

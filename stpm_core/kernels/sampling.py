@@ -1,0 +1,365 @@
+"""Scalar helpers of the light kernels (numba, one row at a time): vectors, warps, frames, light shapes.
+
+:mod:`.lights` (next-event sampling, shapes seen along rays) and :mod:`.emission` (photons) are
+built from these; neither defines a helper of its own that the other needs.
+
+Conventions
+-----------
+* Vectors are 3-tuples of floats, points of the unit disc 2-tuples; nothing allocates.  ``M`` is
+  a (4, 4) object-to-world matrix (:func:`column` j of its upper 3 x 4; j = 3 the translation).
+* Warps take two uniforms u0, u1 in [0, 1) and give the same float operations, in the same
+  order, as the numpy warps of :mod:`stpm_core.sampling` (``concentric_disk``,
+  ``cosine_hemisphere``, ``uniform_sphere``, ``uniform_cone``): local directions about +z,
+  turned into the world about a unit axis by :func:`to_world` (Duff et al.'s basis,
+  ``sampling.orthonormal_basis``).
+* Two summation orders of a 3-component dot product, so that the kernels reproduce the numpy
+  code they replaced bit for bit (the numpy code is kept as the test oracles
+  ``tests/oracles/lights_numpy.py`` and ``emission_numpy.py``; the tests ask for 1e-9):
+  :func:`dot` adds the products in index order, as ``np.sum(a * b, axis=-1)``,
+  ``np.linalg.norm`` and ``np.einsum("ij,ij->i", a, b)`` of a strided operand (a matrix column
+  such as ``M[:, :3, 2]``) do; :func:`edot` adds them as that einsum does over contiguous rows
+  of 3 (numpy 1.26, SIMD pairs): (a0 b0 + a2 b2) + a1 b1.  Every call site uses the order of
+  the numpy expression it stands for; :func:`normalize` (einsum order, ``lights._normalize``)
+  and :func:`unit` (index order) likewise.  A numpy whose einsum or sin / cos differ would move
+  results by an ulp.
+* Light helpers read a light's parameter row ``prm`` (columns ``P_*`` of :mod:`.light_params`).
+
+Every function is compiled inline into the kernels that call it.  numba's on-disk cache of a
+kernel is invalidated by edits of the kernel's own file only: after editing this file, clear the
+caches of the kernels that inline it (``stpm_core/kernels/__pycache__``: lights, emission, paths).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..numba_probe import njit
+from .light_params import P_COLOR, P_COS_HALF, P_POWER, P_SHAPE, P_SIZE, P_SIZE_Y, P_SMOOTH, S_DISK, S_ELLIPSE
+
+__all__ = ["JIT", "JIT_INLINE", "TWO_PI", "INV_4PI", "dot", "edot", "cross", "normalize", "unit", "column",
+           "vec3", "sub", "add", "neg", "scale", "madd", "plane_point", "clip", "sign", "basis", "to_world",
+           "concentric_disk", "cosine_hemisphere", "uniform_sphere", "uniform_cone", "axis_or_z",
+           "one_minus_cos_from_sin2", "light_axis", "intensity", "spot_attenuation", "area_shape", "area_point",
+           "search_right", "mesh_point"]
+
+JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+JIT_INLINE = dict(JIT, inline="always")          # per-row functions: inlined into their callers
+
+TWO_PI = 2.0 * np.pi
+INV_4PI = 1.0 / (4.0 * np.pi)                    # lights.INV_4PI
+
+
+# ----------------------------------------------------------------------------
+# Vectors (3-tuples)
+# ----------------------------------------------------------------------------
+@njit(**JIT_INLINE)
+def dot(a, b):
+    """a . b summed in index order (``np.sum(a * b, axis=-1)``, ``np.linalg.norm``, einsum of a column)."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(**JIT_INLINE)
+def edot(a, b):
+    """a . b summed as ``np.einsum("ij,ij->i", a, b)`` sums contiguous rows: (a0 b0 + a2 b2) + a1 b1."""
+    return a[0] * b[0] + a[2] * b[2] + a[1] * b[1]
+
+
+@njit(**JIT_INLINE)
+def cross(a, b):
+    """a x b (numpy.cross's formula)."""
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@njit(**JIT_INLINE)
+def normalize(v):
+    """(unit v, |v|) as ``lights._normalize``: |v| = sqrt(edot(v, v)), v / max(|v|, 1e-300); zero stays zero."""
+    length = math.sqrt(edot(v, v))
+    s = max(length, 1e-300)
+    return (v[0] / s, v[1] / s, v[2] / s), length
+
+
+@njit(**JIT_INLINE)
+def unit(v):
+    """(unit v, |v|) with |v| summed in index order (``np.linalg.norm``; ``lights._normalize`` of a
+    matrix column, as ``LightSet._frame`` does), v / max(|v|, 1e-300)."""
+    length = math.sqrt(dot(v, v))
+    s = max(length, 1e-300)
+    return (v[0] / s, v[1] / s, v[2] / s), length
+
+
+@njit(**JIT_INLINE)
+def column(M, j):
+    """Column j (3-tuple) of the upper 3 x 4 of M (j = 3: the translation)."""
+    return (M[0, j], M[1, j], M[2, j])
+
+
+@njit(**JIT_INLINE)
+def vec3(a, k):
+    """(a[k], a[k + 1], a[k + 2]) of a 1-D array (a parameter row's 3 columns from k, a row of an (n, 3))."""
+    return (a[k], a[k + 1], a[k + 2])
+
+
+@njit(**JIT_INLINE)
+def sub(a, b):
+    """a - b."""
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@njit(**JIT_INLINE)
+def add(a, b):
+    """a + b."""
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
+@njit(**JIT_INLINE)
+def neg(a):
+    """-a."""
+    return (-a[0], -a[1], -a[2])
+
+
+@njit(**JIT_INLINE)
+def scale(a, s):
+    """a s (each component times the scalar s)."""
+    return (a[0] * s, a[1] * s, a[2] * s)
+
+
+@njit(**JIT_INLINE)
+def madd(a, s, b):
+    """a + s b."""
+    return (a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2])
+
+
+@njit(**JIT_INLINE)
+def plane_point(c, x, ex, y, ey):
+    """c + x ex + y ey, added left to right (a point of a plane spanned by ex, ey through c)."""
+    return (c[0] + x * ex[0] + y * ey[0], c[1] + x * ex[1] + y * ey[1], c[2] + x * ex[2] + y * ey[2])
+
+
+@njit(**JIT_INLINE)
+def clip(x, lo, hi):
+    """np.clip(x, lo, hi) for one float."""
+    return min(max(x, lo), hi)
+
+
+@njit(**JIT_INLINE)
+def sign(x):
+    """np.sign(x): -1, 0 or 1 (nan stays nan)."""
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    return x * 0.0
+
+
+# ----------------------------------------------------------------------------
+# Frames and warps (stpm_core.sampling, one row)
+# ----------------------------------------------------------------------------
+@njit(**JIT_INLINE)
+def basis(n):
+    """(tangent, bitangent) about the unit vector n (``sampling.orthonormal_basis``, Duff et al. 2017)."""
+    x, y, z = n[0], n[1], n[2]
+    sg = 1.0 if z >= 0.0 else -1.0
+    a = -1.0 / (sg + z)
+    b = x * y * a
+    return (1.0 + sg * x * x * a, sg * b, -sg * x), (b, sg + y * y * a, -y)
+
+
+@njit(**JIT_INLINE)
+def to_world(l, n):
+    """Local direction l (z = the unit axis n) in the world: l0 t + l1 b + l2 n (``sampling.to_world``)."""
+    t, b = basis(n)
+    return (l[0] * t[0] + l[1] * b[0] + l[2] * n[0], l[0] * t[1] + l[1] * b[1] + l[2] * n[1],
+            l[0] * t[2] + l[1] * b[2] + l[2] * n[2])
+
+
+@njit(**JIT_INLINE)
+def concentric_disk(u0, u1):
+    """Uniform point (x, y) of the unit disc (Shirley-Chiu; ``sampling.concentric_disk``)."""
+    a = 2.0 * u0 - 1.0
+    b = 2.0 * u1 - 1.0
+    if abs(a) > abs(b):
+        r = a
+        phi = 0.25 * np.pi * (b / (1.0 if a == 0.0 else a))
+    else:
+        r = b
+        phi = 0.5 * np.pi - 0.25 * np.pi * (a / (1.0 if b == 0.0 else b))
+    return r * math.cos(phi), r * math.sin(phi)
+
+
+@njit(**JIT_INLINE)
+def cosine_hemisphere(u0, u1):
+    """Cosine-distributed local direction about +z, pdf cos / pi (``sampling.cosine_hemisphere``)."""
+    x, y = concentric_disk(u0, u1)
+    return x, y, math.sqrt(max(0.0, 1.0 - (x * x + y * y)))
+
+
+@njit(**JIT_INLINE)
+def uniform_sphere(u0, u1):
+    """Uniform direction on the unit sphere, pdf 1 / (4 pi) (``sampling.uniform_sphere``)."""
+    z = 1.0 - 2.0 * u0
+    r = math.sqrt(max(0.0, 1.0 - z * z))
+    phi = TWO_PI * u1
+    return r * math.cos(phi), r * math.sin(phi), z
+
+
+@njit(**JIT_INLINE)
+def uniform_cone(u0, u1, cos_max):
+    """Uniform local direction about +z with cos(theta) >= cos_max (``sampling.uniform_cone``)."""
+    cos_t = 1.0 - u0 * (1.0 - cos_max)
+    sin_t = math.sqrt(max(0.0, 1.0 - cos_t * cos_t))
+    phi = TWO_PI * u1
+    return sin_t * math.cos(phi), sin_t * math.sin(phi), cos_t
+
+
+@njit(**JIT_INLINE)
+def axis_or_z(v):
+    """(axis, ok): v where edot(v, v) > 0.5, else +Z, and ok = 1.0 / 0.0 (the oracles' ``_axis_or_z``).
+
+    A light whose transform has a zero scale along Z has no direction (:func:`light_axis` is then
+    zero): its rows get +Z, so every direction stays unit, and zero weight or power (times ok).
+    """
+    if edot(v, v) > 0.5:
+        return v, 1.0
+    return (0.0, 0.0, 1.0), 0.0
+
+
+@njit(**JIT_INLINE)
+def one_minus_cos_from_sin2(sin2):
+    """1 - sqrt(1 - sin^2) without cancellation for small angles (sin^2 clipped to [0, 1])."""
+    sin2 = clip(sin2, 0.0, 1.0)
+    return sin2 / (1.0 + math.sqrt(1.0 - sin2))
+
+
+# ----------------------------------------------------------------------------
+# Light geometry (parameter rows of light_params, one pose M)
+# ----------------------------------------------------------------------------
+@njit(**JIT_INLINE)
+def light_axis(M):
+    """The light's unit Z axis, M's Z column normalised (``LightSet._frame``: scale removed; zero
+    for a zero Z scale).  The light shines along -Z; a SUN sits toward +Z."""
+    Z, _ = unit(column(M, 2))
+    return Z
+
+
+@njit(**JIT_INLINE)
+def intensity(prm):
+    """POINT / SPOT radiant intensity I = color P / (4 pi) W/sr (``LightSet.intensity``)."""
+    power = prm[P_POWER]
+    return (prm[P_COLOR] * power * INV_4PI, prm[P_COLOR + 1] * power * INV_4PI, prm[P_COLOR + 2] * power * INV_4PI)
+
+
+@njit(**JIT_INLINE)
+def spot_attenuation(prm, cos_axis):
+    """Spot mask at cosine cos_axis to the spot axis (``lights.spot_attenuation``): 0 outside the
+    cone (``P_COS_HALF``), smoothstep over the blend band ``P_SMOOTH`` in cosine, 1 inside."""
+    x = cos_axis - prm[P_COS_HALF]
+    smooth = prm[P_SMOOTH]
+    if smooth <= 0.0:
+        return 1.0 if x > 0.0 else 0.0
+    if x > 0.0:
+        s = clip(x / smooth, 0.0, 1.0)
+        return s * s * (3.0 - 2.0 * s)
+    return 0.0
+
+
+@njit(**JIT_INLINE)
+def area_shape(prm, M):
+    """AREA light at pose M (scale kept) as ``LightSet._area_shape``: (c, ex, ey, A, n_emit, disk).
+
+    c the centre, ex, ey the half-extent vectors (size / 2 times M's X, Y columns), A the area
+    (m^2; pi |ex x ey| for DISK / ELLIPSE, 4 |ex x ey| else), n_emit the unit normal of the plane
+    on the side of M's -Z column (``lights.area_light_normal``; zero when -Z lies in the plane or
+    the area is zero), disk whether the shape is a disc / ellipse.
+    """
+    hx = 0.5 * prm[P_SIZE]
+    hy = 0.5 * prm[P_SIZE_Y]
+    ex = (hx * M[0, 0], hx * M[1, 0], hx * M[2, 0])
+    ey = (hy * M[0, 1], hy * M[1, 1], hy * M[2, 1])
+    g, A4 = normalize(cross(ex, ey))                 # A4 = |ex x ey| = rectangle area / 4
+    side = sign(-dot(g, column(M, 2)))               # +1 where g points along -Z
+    shape = int(prm[P_SHAPE])
+    disk = shape == S_DISK or shape == S_ELLIPSE
+    A = np.pi * A4 if disk else 4.0 * A4
+    return column(M, 3), ex, ey, A, scale(g, side), disk
+
+
+@njit(**JIT_INLINE)
+def area_point(c, ex, ey, disk, u0, u1):
+    """Uniform point of an AREA shape (``lights_numpy.area_points``): c + a ex + b ey, (a, b) from
+    ``concentric_disk`` (disc / ellipse) or 2u - 1 (square / rectangle)."""
+    if disk:
+        a, b = concentric_disk(u0, u1)
+    else:
+        a, b = 2.0 * u0 - 1.0, 2.0 * u1 - 1.0
+    return plane_point(c, a, ex, b, ey)
+
+
+@njit(**JIT_INLINE)
+def search_right(a, x):
+    """np.searchsorted(a, x, side='right') for sorted a (n,): the first index i with a[i] > x."""
+    lo, hi = 0, a.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if x < a[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@njit(**JIT_INLINE)
+def _mesh_corner(M, corners, i, j, v, a):
+    """World position of corner v of emitting triangle j: object space at vertex step i (and
+    i + 1, weight a, when the mesh deforms), then M x + T, the products summed in einsum's order
+    (``lights_numpy.mesh_corners``)."""
+    if corners.shape[0] > 1:
+        ca = 1.0 - a
+        x = ca * corners[i, j, v, 0] + a * corners[i + 1, j, v, 0]
+        y = ca * corners[i, j, v, 1] + a * corners[i + 1, j, v, 1]
+        z = ca * corners[i, j, v, 2] + a * corners[i + 1, j, v, 2]
+    else:
+        x, y, z = corners[0, j, v, 0], corners[0, j, v, 1], corners[0, j, v, 2]
+    p = (x, y, z)
+    return (edot((M[0, 0], M[0, 1], M[0, 2]), p) + M[0, 3], edot((M[1, 0], M[1, 1], M[1, 2]), p) + M[1, 3],
+            edot((M[2, 0], M[2, 1], M[2, 2]), p) + M[2, 3])
+
+
+@njit(**JIT_INLINE)
+def mesh_point(M, steps, corners, q, cdf, t, u0, u1):
+    """A point of a MESH light (``lights_numpy.mesh_sample_points``): (point, unit normal, A, j, q_j).
+
+    Triangle j with probability q[j] (u0 picks it by the cdf, then is rescaled to [0, 1) inside
+    its interval); corners (``light_params.mesh_arrays``: K steps, object space, or world space
+    with an identity M for a static mesh) linear in the normalised time t between vertex steps,
+    then M; a uniform point of it, barycentrics (1 - s, s (1 - u1), s u1), s = sqrt(u0'); the
+    unit geometric normal e1 x e2 / |e1 x e2| and the triangle's world area A.
+    """
+    F = q.shape[0]
+    j = min(search_right(cdf, u0), F - 1)
+    qj = q[j]
+    lo = cdf[j] - qj
+    uu = clip((u0 - lo) / qj, 0.0, 1.0 - 1e-12)
+    K = steps.shape[0]
+    i = 0
+    a = 0.0
+    if K > 1:
+        i = min(max(search_right(steps, t) - 1, 0), K - 2)
+        a = clip((t - steps[i]) / (steps[i + 1] - steps[i]), 0.0, 1.0)
+    C0 = _mesh_corner(M, corners, i, j, 0, a)
+    e1 = sub(_mesh_corner(M, corners, i, j, 1, a), C0)
+    e2 = sub(_mesh_corner(M, corners, i, j, 2, a), C0)
+    nrm, two_A = normalize(cross(e1, e2))
+    s = math.sqrt(uu)
+    return plane_point(C0, s * (1.0 - u1), e1, s * u1, e2), nrm, 0.5 * two_A, j, qj
+
+
+# ----------------------------------------------------------------------------
+# Ray origins
+# ----------------------------------------------------------------------------
+@njit(**JIT_INLINE)
+def offset_origin(p, g, e, w):
+    """p moved by e (scene units) along the geometric normal g to the side direction w leaves on:
+    p + e g if w . g >= 0, else p - e g (the origin of a ray leaving a surface at p)."""
+    side = e if dot(w, g) >= 0.0 else -e
+    return p[0] + side * g[0], p[1] + side * g[1], p[2] + side * g[2]

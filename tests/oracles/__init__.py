@@ -1,0 +1,1 @@
+"""Independent numpy implementations the compiled kernels are tested against."""

@@ -1,0 +1,431 @@
+"""The numpy BSDF the compiled kernels (:mod:`stpm_core.kernels.bsdf`) are tested against.
+
+This is the vectorised numpy implementation that shaded the renderer before the
+kernels became the one implementation (``stpm_core/bsdf.py`` up to that change),
+kept verbatim as an oracle: same lobes (DIFFUSE, COAT, METAL, GLASS_R, GLASS_T,
+METAL_MS), same formulas (docs/lights-and-materials.md), same random numbers.
+Material data comes from :class:`stpm_core.bsdf.MaterialTable`, the GGX albedo
+tables from :func:`stpm_core.kernels.bsdf.ggx_albedo_tables`;
+:func:`_ggx_albedo_table_numpy` is the original table construction, kept so a
+test can check the kernels module builds the same numbers.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from stpm_core.bsdf import MaterialTable
+from stpm_core.kernels.bsdf import ggx_albedo_tables
+from stpm_core.sampling import cosine_hemisphere, orthonormal_basis
+
+__all__ = ["MaterialTable", "bsdf_eval", "bsdf_pdf", "bsdf_sample", "diffuse_albedo",
+           "has_nondelta", "emission", "fresnel_dielectric", "fresnel_schlick"]
+
+DIFFUSE, COAT, METAL, GLASS_R, GLASS_T, METAL_MS = range(6)
+_EPS = 1e-9
+
+# ---------------------------------------------------------------------------
+# Fresnel and GGX
+# ---------------------------------------------------------------------------
+
+def fresnel_dielectric(cos_i: np.ndarray, eta: np.ndarray) -> np.ndarray:
+    """Unpolarised Fresnel reflectance (n,) for cos_i >= 0 and eta = n_t / n_i; 1 under TIR."""
+    cos_i = np.clip(cos_i, 0.0, 1.0)
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    tir = sin2_t >= 1.0
+    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
+    r_s = (cos_i - eta * cos_t) / np.maximum(cos_i + eta * cos_t, 1e-300)
+    r_p = (eta * cos_i - cos_t) / np.maximum(eta * cos_i + cos_t, 1e-300)
+    return np.where(tir, 1.0, 0.5 * (r_s * r_s + r_p * r_p))
+
+
+def fresnel_schlick(F0: np.ndarray, cos: np.ndarray) -> np.ndarray:
+    """Schlick's approximation (n, 3): F0 + (1 - F0)(1 - cos)^5."""
+    m = np.clip(1.0 - cos, 0.0, 1.0) ** 5
+    return F0 + (1.0 - F0) * m[:, None]
+
+
+def _ggx_D(cos_h: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """GGX normal distribution D(h) (n,) per sr of microfacet normals (cos_h = h . n)."""
+    a2 = alpha * alpha
+    c2 = cos_h * cos_h
+    denom = c2 * (a2 - 1.0) + 1.0
+    return np.where(cos_h > 0, a2 / np.maximum(np.pi * denom * denom, 1e-300), 0.0)
+
+
+def _ggx_lambda(cos: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Smith Lambda(w) (n,) for GGX: (sqrt(1 + alpha^2 tan^2) - 1) / 2."""
+    c2 = np.maximum(cos * cos, 1e-300)
+    tan2 = np.maximum(1.0 - c2, 0.0) / c2
+    return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
+
+
+def _ggx_sample_vndf(wo_local: np.ndarray, alpha: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Visible-normal sample h (n, 3) local (Heitz 2018) for wo_local (n, 3) with z > 0."""
+    # Stretch the view direction to the hemisphere configuration
+    vh = np.stack([alpha * wo_local[:, 0], alpha * wo_local[:, 1], wo_local[:, 2]], axis=-1)
+    vh /= np.linalg.norm(vh, axis=-1, keepdims=True)
+    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
+    inv = 1.0 / np.sqrt(np.maximum(lensq, 1e-300))
+    T1 = np.where((lensq > 0)[:, None], np.stack([-vh[:, 1] * inv, vh[:, 0] * inv, np.zeros_like(inv)], -1),
+                  np.array([1.0, 0.0, 0.0]))
+    T2 = np.cross(vh, T1)
+    # Sample the projected disk, warped toward the visible half
+    r = np.sqrt(u[:, 0])
+    phi = 2.0 * np.pi * u[:, 1]
+    t1 = r * np.cos(phi)
+    t2 = r * np.sin(phi)
+    s = 0.5 * (1.0 + vh[:, 2])
+    t2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - t1 * t1)) + s * t2
+    nh = t1[:, None] * T1 + t2[:, None] * T2 + np.sqrt(np.maximum(0.0, 1.0 - t1 * t1 - t2 * t2))[:, None] * vh
+    # Unstretch
+    h = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 1e-12)], axis=-1)
+    return h / np.linalg.norm(h, axis=-1, keepdims=True)
+
+
+# Directional albedo of single-scattering GGX (F = 1), for multiple-scattering
+# energy compensation (Kulla & Conty 2017), tabulated once on first use.
+_MU = (np.arange(32) + 0.5) / 32                 # cos(theta_o) midpoints
+_ALPHA = np.linspace(0.0, 1.0, 32)              # GGX alpha grid
+
+
+def _ggx_albedo_table_numpy() -> tuple[np.ndarray, np.ndarray]:
+    """E(mu, alpha) (32, 32) = integral of f_ggx cos over wi for F = 1, and E_avg(alpha) = 2 int E mu dmu (32,).
+
+    Deterministic: a 24 x 24 stratified grid of visible-normal samples per cell,
+    E = mean of the sample weight G2 / G1(wo) over samples that stay above the surface.
+    """
+    K = 24
+    g = (np.arange(K) + 0.5) / K
+    uu = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    mu, al = np.meshgrid(_MU, np.maximum(_ALPHA, 1e-4), indexing="ij")
+    mu, al = np.repeat(mu.ravel(), K * K), np.repeat(al.ravel(), K * K)
+    u = np.tile(uu, (_MU.size * _ALPHA.size, 1))
+    wo = np.stack([np.sqrt(1 - mu * mu), np.zeros_like(mu), mu], -1)
+    h = _ggx_sample_vndf(wo, al, u)
+    wi_z = 2.0 * np.sum(wo * h, -1) * h[:, 2] - mu
+    lam_o, lam_i = _ggx_lambda(mu, al), _ggx_lambda(wi_z, al)
+    w = np.where(wi_z > 0, (1.0 + lam_o) / (1.0 + lam_o + lam_i), 0.0)
+    E = np.clip(w.reshape(_MU.size, _ALPHA.size, K * K).mean(-1), 0.0, 1.0)
+    E_avg = 2.0 * np.mean(E * _MU[:, None], axis=0)
+    return E, E_avg
+
+
+def _ggx_albedo(mu: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Bilinear look-up of E(mu, alpha) (n,) in the table (clamped at the edges)."""
+    E, _ = ggx_albedo_tables()
+    x = np.clip(mu * 32 - 0.5, 0, 31 - 1e-9)
+    y = np.clip(alpha * 31, 0, 31 - 1e-9)
+    i, j = np.minimum(x.astype(int), 30), np.minimum(y.astype(int), 30)
+    fx, fy = x - i, y - j
+    return ((1 - fx) * (1 - fy) * E[i, j] + fx * (1 - fy) * E[i + 1, j]
+            + (1 - fx) * fy * E[i, j + 1] + fx * fy * E[i + 1, j + 1])
+
+
+def _ggx_albedo_avg(alpha: np.ndarray) -> np.ndarray:
+    """E_avg(alpha) (n,) by linear interpolation."""
+    _, E_avg = ggx_albedo_tables()
+    return np.interp(alpha, _ALPHA, E_avg)
+
+
+# ---------------------------------------------------------------------------
+# Frames and per-hit gathers
+# ---------------------------------------------------------------------------
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", a, b)
+
+
+def _reflect(w: np.ndarray, n: np.ndarray) -> np.ndarray:
+    return 2.0 * _dot(w, n)[:, None] * n - w
+
+
+def _oriented(wo, ns, ng):
+    """Normals flipped toward wo: (ns', ng', entering (n,) bool = wo on ng's side)."""
+    ng = np.asarray(ng, float)
+    ns = np.asarray(ns, float)
+    entering = _dot(wo, ng) >= 0.0
+    s = np.where(entering, 1.0, -1.0)[:, None]
+    ngf = ng * s
+    nsf = ns * np.where(_dot(ns, ngf) >= 0.0, 1.0, -1.0)[:, None]
+    return nsf, ngf, entering
+
+
+class _Hit:
+    """Per-hit gathers for one call: weights, colours, eta and Fresnel at wo."""
+
+    def __init__(self, table: MaterialTable, mat, wo, ns, ng):
+        mat = np.asarray(mat, dtype=np.int64)
+        self.m = np.where(mat < 0, table.size, mat)
+        m = self.m
+        self.wo = np.asarray(wo, float)
+        self.ns, self.ng, self.entering = _oriented(self.wo, ns, ng)
+        self.base = table.base_color[m]
+        self.alpha = np.maximum(table.alpha[m], 1e-4)
+        self.rough = table.roughness[m] > 0.0
+        self.spec = table.specular[m]
+        self.w_base, self.w_metal, self.w_glass = table.w_base[m], table.w_metal[m], table.w_glass[m]
+        ior = table.ior[m]
+        self.eta_glass = np.where(self.entering, ior, 1.0 / ior)   # n_t / n_i for glass
+        self.ior = ior
+        self.cos_o = _dot(self.wo, self.ns)
+        cos_o = np.clip(self.cos_o, 0.0, 1.0)
+        # Fresnel at wo for each lobe (computed only on the rows that have the lobe)
+        n = self.m.shape[0]
+        self.F_coat = np.zeros(n)
+        i = np.nonzero((self.w_base > 0) & (self.spec > 0))[0]
+        if i.size:
+            self.F_coat[i] = self.spec[i] * fresnel_dielectric(cos_o[i], ior[i])
+        self.F_glass = np.zeros(n)
+        i = np.nonzero(self.w_glass > 0)[0]
+        if i.size:
+            self.F_glass[i] = fresnel_dielectric(cos_o[i], self.eta_glass[i])
+        self.F_metal = np.zeros((n, 3))
+        i = np.nonzero(self.w_metal > 0)[0]
+        if i.size:
+            self.F_metal[i] = fresnel_schlick(self.base[i], cos_o[i])
+        # Rough metal: multiple-scattering compensation f_ms = ms_scale (1 - E(mu_o)) (1 - E(mu_i))
+        self.ms_scale = np.zeros((n, 3))         # F_ms / (pi (1 - E_avg))
+        self.ms_Eo = np.ones(n)                  # E(mu_o, alpha)
+        ms_albedo = np.zeros(n)                  # (1 - E(mu_o)) mean(F_ms): the lobe's albedo
+        i = np.nonzero((self.w_metal > 0) & self.rough)[0]
+        if i.size:
+            a = self.alpha[i]
+            E_avg = _ggx_albedo_avg(a)
+            F0 = self.base[i]
+            F_avg = F0 + (1.0 - F0) / 21.0
+            F_ms = F_avg * F_avg * E_avg[:, None] / (1.0 - F_avg * (1.0 - E_avg[:, None]))
+            live = (1.0 - E_avg) > 1e-4
+            self.ms_scale[i] = np.where(live[:, None], F_ms / (np.pi * np.maximum(1.0 - E_avg, 1e-4))[:, None], 0.0)
+            self.ms_Eo[i] = _ggx_albedo(cos_o[i], a)
+            ms_albedo[i] = np.where(live, (1.0 - self.ms_Eo[i]) * F_ms.mean(axis=1), 0.0)
+        # Lobe selection probabilities proportional to an albedo estimate
+        mean_base = self.base.mean(axis=1)
+        est = np.stack([
+            self.w_base * (1.0 - self.F_coat) * mean_base,
+            self.w_base * self.F_coat,
+            self.w_metal * self.F_metal.mean(axis=1),
+            self.w_glass * self.F_glass,
+            self.w_glass * (1.0 - self.F_glass) * mean_base,
+            self.w_metal * ms_albedo,
+        ], axis=-1)
+        total = est.sum(axis=1, keepdims=True)
+        self.p_lobe = np.where(total > 0, est / np.maximum(total, 1e-300), 0.0)
+        # Lobes that are deltas at this hit
+        self.delta = np.stack([np.zeros_like(self.rough), ~self.rough, ~self.rough, ~self.rough,
+                               np.ones_like(self.rough), np.zeros_like(self.rough)], axis=-1)
+
+    def take(self, idx: np.ndarray) -> "_Hit":
+        """The same gathers for rows idx only."""
+        if idx.shape[0] == self.m.shape[0]:
+            return self                            # idx = all rows, in order
+        out = object.__new__(_Hit)
+        for k, v in self.__dict__.items():
+            out.__dict__[k] = v[idx] if isinstance(v, np.ndarray) else v
+        return out
+
+
+def _microfacet(h: _Hit, wi: np.ndarray):
+    """GGX reflection terms for wi (n, 3) -> valid (n,) bool, D G2 / (4 cos_o cos_i) (n,),
+    visible-normal pdf of wi (n,) per sr, and wo . h (n,)."""
+    cos_i = _dot(wi, h.ns)
+    valid = (cos_i > 0) & (h.cos_o > 0) & (_dot(wi, h.ng) > 0)
+    hv = h.wo + wi
+    hv /= np.maximum(np.linalg.norm(hv, axis=-1, keepdims=True), 1e-300)
+    cos_h = _dot(hv, h.ns)
+    wo_h = np.clip(_dot(h.wo, hv), 0.0, 1.0)
+    D = _ggx_D(cos_h, h.alpha)
+    lam_o = _ggx_lambda(h.cos_o, h.alpha)
+    lam_i = _ggx_lambda(cos_i, h.alpha)
+    G2 = 1.0 / (1.0 + lam_o + lam_i)
+    G1o = 1.0 / (1.0 + lam_o)
+    cos_o = np.maximum(h.cos_o, _EPS)
+    pdf = G1o * D / (4.0 * cos_o)                 # VNDF pdf of wi (solid angle)
+    spec = D * G2 / np.maximum(4.0 * cos_o * np.maximum(cos_i, _EPS), 1e-300)
+    return valid, spec, pdf, wo_h
+
+
+def _eval_pdf(h: _Hit, wi: np.ndarray):
+    """Non-delta f (n, 3) and mixture pdf (n,) of the non-delta lobes for directions wi."""
+    n = wi.shape[0]
+    f = np.zeros((n, 3))
+    pdf = np.zeros(n)
+    cos_i = _dot(wi, h.ns)
+    above = (cos_i > 0) & (_dot(wi, h.ng) > 0)
+    # DIFFUSE: base / pi under the coat's Fresnel at wo
+    f += np.where(above, h.w_base * (1.0 - h.F_coat), 0.0)[:, None] * h.base / np.pi
+    pdf += np.where(above, h.p_lobe[:, DIFFUSE] * cos_i / np.pi, 0.0)
+    # Rough lobes (GGX), on the rows that have one
+    r = np.nonzero(h.rough & ((h.w_metal > 0) | (h.w_glass > 0) | ((h.w_base > 0) & (h.spec > 0))))[0]
+    if r.size:
+        hr = h.take(r)
+        valid, spec, p_ggx, wo_h = _microfacet(hr, wi[r])
+        spec = np.where(valid, spec, 0.0)
+        p_ggx = np.where(valid, p_ggx, 0.0)
+        # COAT (rough): specular * F_diel(wo.h, ior)
+        F_c = hr.spec * fresnel_dielectric(wo_h, hr.ior)
+        # METAL (rough): Schlick(base, wo.h)
+        F_m = fresnel_schlick(hr.base, wo_h)
+        # GLASS_R (rough): exact dielectric at wo.h
+        F_g = fresnel_dielectric(wo_h, hr.eta_glass)
+        f[r] += ((hr.w_base * F_c + hr.w_glass * F_g) * spec)[:, None] + (hr.w_metal * spec)[:, None] * F_m
+        pdf[r] += p_ggx * (hr.p_lobe[:, COAT] + hr.p_lobe[:, METAL] + hr.p_lobe[:, GLASS_R])
+        # METAL_MS: energy lost by single scattering, returned as a broad lobe (cosine-sampled)
+        m = np.nonzero((hr.w_metal > 0) & valid)[0]
+        if m.size:
+            cos_i = _dot(wi[r[m]], hr.ns[m])
+            E_i = _ggx_albedo(np.clip(cos_i, 0.0, 1.0), hr.alpha[m])
+            f[r[m]] += (hr.w_metal[m] * (1.0 - hr.ms_Eo[m]) * (1.0 - E_i))[:, None] * hr.ms_scale[m]
+            pdf[r[m]] += hr.p_lobe[m, METAL_MS] * cos_i / np.pi
+    return f, pdf
+
+
+# ---------------------------------------------------------------------------
+# Public API
+# ---------------------------------------------------------------------------
+
+def bsdf_eval(table: MaterialTable, mat, wo, wi, ns, ng) -> np.ndarray:
+    """f(wo, wi) (n, 3) in 1/sr for the non-delta lobes (diffuse, rough coat / metal / glass reflection)."""
+    mat = np.asarray(mat, dtype=np.int64)
+    m = np.where(mat < 0, table.size, mat)
+    wo = np.asarray(wo, float)
+    wi = np.asarray(wi, float)
+    rough = table.rough_lobe[m]
+    if rough.all():
+        h = _Hit(table, mat, wo, ns, ng)
+        f, _ = _eval_pdf(h, wi)
+        return f
+    # Rows without a rough lobe: the diffuse lobe under a smooth coat's Fresnel
+    ns_f, ng_f, _ = _oriented(wo, ns, ng)
+    cos_i = _dot(wi, ns_f)
+    above = (cos_i > 0) & (_dot(wi, ng_f) > 0)
+    scale = np.where(above, table.w_base[m], 0.0)
+    c = np.nonzero(table.coat[m] & above)[0]
+    if c.size:
+        mc = m[c]
+        cos_o = np.clip(_dot(wo[c], ns_f[c]), 0.0, 1.0)
+        scale[c] *= 1.0 - table.specular[mc] * fresnel_dielectric(cos_o, table.ior[mc])
+    f = scale[:, None] * table.base_color[m] * (1.0 / np.pi)
+    # Rows with a rough lobe: the full evaluation
+    r = np.nonzero(rough)[0]
+    if r.size:
+        h = _Hit(table, mat[r], wo[r], np.asarray(ns, float)[r], np.asarray(ng, float)[r])
+        f[r], _ = _eval_pdf(h, wi[r])
+    return f
+
+
+def bsdf_pdf(table: MaterialTable, mat, wo, wi, ns, ng) -> np.ndarray:
+    """Solid-angle density (n,) with which :func:`bsdf_sample` returns wi through a non-delta lobe (for MIS)."""
+    h = _Hit(table, mat, wo, ns, ng)
+    _, pdf = _eval_pdf(h, np.asarray(wi, float))
+    return pdf
+
+
+def bsdf_sample(table: MaterialTable, mat, wo, ns, ng, u):
+    """Sample wi from the material at wo.
+
+    Parameters
+    ----------
+    table : MaterialTable; mat : (n,) int material ids.
+    wo : (n, 3) unit, away from the surface; ns, ng : (n, 3) unit normals.
+    u : (n, 3) uniforms: u[:, 0] picks the lobe (and reflect / refract for
+        glass), u[:, 1:] the direction.
+
+    Returns
+    -------
+    wi : (n, 3) unit direction away from the surface.
+    weight : (n, 3) f * |cos(ns, wi)| / pdf (delta lobes: their Fresnel and
+        colour throughput / selection probability); 0 for failed samples.
+    is_delta : (n,) bool, True when a delta lobe was chosen.
+    """
+    h = _Hit(table, mat, wo, ns, ng)
+    u = np.asarray(u, float)
+    n = u.shape[0]
+    rows = np.arange(n)
+    # Choose a lobe by the CDF of p_lobe
+    cdf = np.cumsum(h.p_lobe, axis=1)
+    lobe = np.minimum(np.sum(u[:, 0:1] >= cdf, axis=1), METAL_MS)
+    p_chosen = h.p_lobe[rows, lobe]
+    ok = p_chosen > 0
+    is_delta = h.delta[rows, lobe] & ok
+    is_refl = (lobe == COAT) | (lobe == METAL) | (lobe == GLASS_R)
+    wi = np.zeros((n, 3))
+    weight = np.zeros((n, 3))
+
+    # -- Directions, each lobe kind on its own rows ---------------------------
+    # Diffuse and the metal's multiple-scattering lobe: cosine hemisphere about ns
+    i = np.nonzero(ok & ((lobe == DIFFUSE) | (lobe == METAL_MS)))[0]
+    if i.size:
+        t_f, b_f = orthonormal_basis(h.ns[i])
+        loc = cosine_hemisphere(u[i, 1:3])
+        wi[i] = loc[:, 0:1] * t_f + loc[:, 1:2] * b_f + loc[:, 2:3] * h.ns[i]
+    # Rough reflection: GGX visible normal, then mirror about it
+    i = np.nonzero(ok & is_refl & h.rough)[0]
+    if i.size:
+        t_f, b_f = orthonormal_basis(h.ns[i])
+        wo_i = h.wo[i]
+        wo_loc = np.stack([_dot(wo_i, t_f), _dot(wo_i, b_f), np.maximum(h.cos_o[i], 1e-6)], axis=-1)
+        wo_loc /= np.linalg.norm(wo_loc, axis=-1, keepdims=True)
+        hl = _ggx_sample_vndf(wo_loc, h.alpha[i], u[i, 1:3])
+        hw = hl[:, 0:1] * t_f + hl[:, 1:2] * b_f + hl[:, 2:3] * h.ns[i]
+        wi[i] = _reflect(wo_i, hw)
+    # Smooth reflection: mirror about ns
+    i = np.nonzero(ok & is_refl & ~h.rough)[0]
+    if i.size:
+        wi[i] = _reflect(h.wo[i], h.ns[i])
+    # Refraction through ns (entering: eta = ior; leaving: 1 / ior)
+    i = np.nonzero(ok & (lobe == GLASS_T))[0]
+    if i.size:
+        eta = h.eta_glass[i]
+        cos_o = np.clip(h.cos_o[i], 0.0, 1.0)
+        cos_t = np.sqrt(np.maximum(0.0, 1.0 - (1.0 - cos_o ** 2) / (eta * eta)))
+        wi[i] = -h.wo[i] / eta[:, None] + (cos_o / eta - cos_t)[:, None] * h.ns[i]
+    wi /= np.maximum(np.linalg.norm(wi, axis=-1, keepdims=True), 1e-300)
+
+    # -- Delta lobes: Fresnel / colour throughput over the selection probability
+    i = np.nonzero(is_delta)[0]
+    if i.size:
+        li = lobe[i]
+        thr = np.zeros((i.size, 3))
+        thr += np.where(li == COAT, h.w_base[i] * h.F_coat[i], 0.0)[:, None]
+        thr += np.where(li == METAL, h.w_metal[i], 0.0)[:, None] * h.F_metal[i]
+        thr += np.where(li == GLASS_R, h.w_glass[i] * h.F_glass[i], 0.0)[:, None]
+        thr += np.where(li == GLASS_T, h.w_glass[i] * (1.0 - h.F_glass[i]), 0.0)[:, None] * h.base[i]
+        # Reflections must stay above ng, refractions cross it (no leaks)
+        side = _dot(wi[i], h.ng[i])
+        good = np.where(li == GLASS_T, side < 0, side > 0)
+        weight[i] = np.where(good[:, None], thr / p_chosen[i][:, None], 0.0)
+
+    # -- Non-delta lobes: mixture f * cos / pdf over every non-delta lobe -----
+    i = np.nonzero(ok & ~is_delta)[0]
+    if i.size:
+        hs = h.take(i)
+        f, pdf = _eval_pdf(hs, wi[i])
+        cos_i = np.abs(_dot(wi[i], hs.ns))
+        weight[i] = np.where((pdf > 0)[:, None], f * (cos_i / np.maximum(pdf, 1e-300))[:, None], 0.0)
+    return wi, weight, is_delta
+
+
+def diffuse_albedo(table: MaterialTable, mat, wo, ns) -> np.ndarray:
+    """Diffuse reflectance (n, 3) after the coat: w_base * (1 - specular F(wo)) * base_color.
+
+    Photon-map radiance = diffuse_albedo / pi * irradiance.  ``ns`` may face
+    either way (the cosine is taken as |wo . ns|).
+    """
+    mat = np.asarray(mat, dtype=np.int64)
+    m = np.where(mat < 0, table.size, mat)
+    cos_o = np.abs(_dot(np.asarray(wo, float), np.asarray(ns, float)))
+    F = table.specular[m] * fresnel_dielectric(cos_o, table.ior[m])
+    return (table.w_base[m] * (1.0 - F))[:, None] * table.base_color[m]
+
+
+def has_nondelta(table: MaterialTable, mat) -> np.ndarray:
+    """(n,) bool: the material has a lobe that is not a delta (diffuse or rough), i.e. shade / store photons here."""
+    mat = np.asarray(mat, dtype=np.int64)
+    return table.nondelta[np.where(mat < 0, table.size, mat)]
+
+
+def emission(table: MaterialTable, mat) -> np.ndarray:
+    """Emitted radiance (n, 3) W/(m^2 sr), both sides; 0 for misses (mat = -1)."""
+    mat = np.asarray(mat, dtype=np.int64)
+    return table.emission[np.where(mat < 0, table.size, mat)]
+

@@ -1,0 +1,98 @@
+"""The numpy photon tracer the compiled kernels replaced, kept as a slow reference.
+
+``trace_photon_paths`` has the signature and the random-number order of
+``stpm_core.photons.trace.trace_photon_paths`` and runs on the numpy BSDF
+oracle, so both store the same records up to float rounding
+(tests/test_kernel_photons.py).  Nothing in ``stpm_core`` imports this module.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from oracles.bsdf_numpy import bsdf_sample, has_nondelta
+from stpm_core.photons.record import PHOTON_DTYPE, make_records
+from stpm_core.raycast.geometry import GUARD_FRACTION, offset_lengths
+
+__all__ = ["trace_photon_paths"]
+
+
+def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, inst_offset: np.ndarray,
+                       target_instance: int | None = None, min_nondelta: int = 1,
+                       origin: np.ndarray | None = None) -> np.ndarray:
+    """Trace photon paths and return the stored records.
+
+    Parameters
+    ----------
+    caster : ray caster (``intersect(o, d, times)``).
+    table : bsdf.MaterialTable.
+    o, d : (n, 3) origins and unit directions; Phi : (n, 3) W; t : (n,) path times.
+    mode : 'caustic' (store after >= 1 delta bounce, continue only through
+        delta lobes, first hit must be ``target_instance``) or 'global' (store
+        after >= ``min_nondelta`` non-delta bounces; 0 also stores first hits,
+        which only tests use).
+    max_depth : bounces followed.
+    inst_offset : (n_instances,) per-object part of the ray-origin offset along the geometric
+        normal (scene units; ``raycast.geometry.instance_offsets``, applied by ``offset_lengths``).
+    origin : (3,) world point stored positions are relative to (record.photon_origin).
+
+    Returns
+    -------
+    (m,) PHOTON_DTYPE records.
+    """
+    o = np.asarray(o, dtype=np.float64)
+    d = np.asarray(d, dtype=np.float64)
+    Phi = np.asarray(Phi, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    # Photons with no power carry nothing
+    live = np.any(Phi > 0.0, axis=1)
+    o, d, Phi, t = o[live], d[live], Phi[live], t[live]
+    n_delta = np.zeros(o.shape[0], dtype=np.int32)      # delta bounces so far
+    n_nondelta = np.zeros(o.shape[0], dtype=np.int32)   # non-delta bounces so far
+    stored = []
+    guard = None                                         # emitted rays: the caster's own guard
+    for depth in range(max_depth + 1):
+        if o.shape[0] == 0:
+            break
+        # -- Intersect every path at its own time -------------------------------------
+        hits = caster.intersect(o, d, t, None, guard=guard)
+        keep = hits.hit
+        if mode == "caustic" and depth == 0 and target_instance is not None:
+            keep &= hits.instance == target_instance     # this target's cone owns only its own first hits
+        idx = np.nonzero(keep)[0]
+        if idx.size == 0:
+            break
+        d, Phi, t = d[idx], Phi[idx], t[idx]
+        n_delta, n_nondelta = n_delta[idx], n_nondelta[idx]
+        p, ng, ns, mat = hits.position[idx], hits.ng[idx], hits.ns[idx], hits.material[idx]
+        wo = -d                                          # toward where the photon came from
+        nondelta = has_nondelta(table, mat)
+        # -- Store the photon ---------------------------------------------------------------
+        if mode == "caustic":
+            store = nondelta & (n_delta >= 1)
+        else:
+            store = nondelta & (n_nondelta >= min_nondelta)
+        if np.any(store):
+            stored.append(make_records(p[store], wo[store], Phi[store], t[store], origin))
+        if depth == max_depth:
+            break
+        # -- Sample the next direction from the BSDF --------------------------------------
+        wi, weight, is_delta = bsdf_sample(table, mat, wo, ns, ng, rng.random((idx.size, 3)))
+        # -- Possibly terminate the path with Russian roulette (by albedo) -------------------
+        q = np.clip(weight.max(axis=1), 0.0, 1.0)
+        alive = rng.random(idx.size) < q
+        if mode == "caustic":
+            alive &= is_delta                            # L S+ D: only specular chains go on
+        Phi = Phi * weight / np.where(q > 0, q, 1.0)[:, None]
+        n_delta = n_delta + is_delta
+        n_nondelta = n_nondelta + ~is_delta
+        # -- Spawn the continuation rays, offset off the surface ------------------------------
+        side = np.where(np.sum(wi * ng, axis=1) >= 0.0, 1.0, -1.0)
+        e = offset_lengths(inst_offset, hits.instance[idx], p)
+        o = p + (e * side)[:, None] * ng
+        sel = np.nonzero(alive)[0]
+        o, d, Phi, t = o[sel], wi[sel], Phi[sel], t[sel]
+        guard = GUARD_FRACTION * e[sel]                  # the rays' own guards (geometry.ray_guard)
+        n_delta, n_nondelta = n_delta[sel], n_nondelta[sel]
+    if not stored:
+        return np.empty(0, dtype=PHOTON_DTYPE)
+    return np.concatenate(stored)

@@ -1,0 +1,73 @@
+"""A new scene never compiles a new kernel: materials, lights and motion reach the kernels as data.
+
+numba compiles a kernel once per distinct argument-type signature.  If a scene
+could change a signature (an int32 array where an int64 one was seen, a
+read-only or non-contiguous array, a Python int where a float was passed),
+every such scene would pay a compile of tens of seconds.  Here every kernel
+is warmed up on the scenes of ``kernel_scenes``; then scenes never seen
+before (other materials, light mixes, counts, resolutions, sample counts,
+photon budgets, a transparent film) must not add a signature to any kernel
+that already had one.
+"""
+from __future__ import annotations
+
+import importlib
+import pkgutil
+
+import numpy as np
+
+import stpm_core.kernels
+from kernel_scenes import kernel_scenes
+from scenes import box_mesh, look_at, make_scene, moving, persp_camera, plane_mesh, point_light, sphere_mesh, translate
+from stpm_core.motion import MotionTransform
+from stpm_core.render import render
+from stpm_core.scene import Light, Material
+from stpm_core.settings import RenderSettings
+from stpm_core.shutter import Shutter
+
+
+def _dispatchers() -> dict:
+    """name -> numba dispatcher of every kernel in stpm_core.kernels."""
+    out = {}
+    for mod in pkgutil.iter_modules(stpm_core.kernels.__path__):
+        m = importlib.import_module(f"stpm_core.kernels.{mod.name}")
+        for name, obj in vars(m).items():
+            if hasattr(obj, "signatures") and hasattr(obj, "py_func"):
+                out[f"{mod.name}.{name}"] = obj
+    return out
+
+
+def _new_scenes():
+    rng = np.random.default_rng(12)
+    mats = [Material(base_color=rng.random(3), roughness=float(r), metallic=float(m), transmission=float(t),
+                     specular=float(s), ior=1.3 + float(rng.random()))
+            for r, m, t, s in [(0.2, 0.0, 0.0, 0.3), (0.0, 1.0, 0.0, 0.0), (0.6, 0.5, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0),
+                               (0.05, 0.0, 0.0, 0.0)]] + [Material.emitter((1.0, 2.0, 3.0))]
+    objs = [plane_mesh(6.0), (sphere_mesh(0.4, 6, 12, material=3), moving((0, 0, 0.5), (0.3, 0.2, 0.6))),
+            (box_mesh(material=1), translate(1.2, 0.0, 0.5)), (box_mesh(material=2), translate(-1.2, 0.3, 0.4)),
+            (box_mesh((-0.1, -0.1, 0), (0.1, 0.1, 0.1), material=5), translate(0.0, 1.2, 1.5)),
+            (sphere_mesh(0.3, 6, 12, material=4), translate(0.5, -1.0, 0.3))]
+    lights = [Light(type="SPOT", power=400.0, spot_size=0.6, spot_blend=0.2, radius=0.05,
+                    transform=MotionTransform.static(look_at((1, -2, 3), (0, 0, 0)))),
+              Light(type="AREA", shape="ELLIPSE", size=0.7, size_y=0.3, power=90.0,
+                    transform=moving((0, 0, 2.5), (0.2, 0, 2.6))),
+              point_light((-1.0, 1.0, 2.0), 250.0, radius=0.1)]
+    cam = persp_camera((0.3, -5.0, 3.0), (0, 0, 0.3), lens=28.0)
+    yield make_scene(objs, mats, cam, lights, world=(0.02, 0.02, 0.03), resolution=(19, 11),
+                     shutter=Shutter(3.0, 3.25)), RenderSettings(samples=1, photons_caustic=3000, photons_global=2000,
+                                                                 k_nearest=8, seed=99, threads=2, estimator="KD4D")
+    yield make_scene(objs[:3], mats[:4], cam, lights[1:], resolution=(13, 17), metadata={"film_transparent": True},
+                     shutter=Shutter(1.0, 1.0)), RenderSettings(samples=3, photons_caustic=0, photons_global=1500,
+                                                                k_nearest=5, seed=1, threads=1, filter_width=0.0)
+
+
+def test_new_scenes_compile_nothing_new():
+    for _, scene, settings in kernel_scenes():
+        render(scene, settings)                    # every kernel sees its usual argument types
+    disp = _dispatchers()
+    assert len(disp) >= 20
+    before = {k: len(d.signatures) for k, d in disp.items()}
+    for scene, settings in _new_scenes():
+        render(scene, settings)
+    grew = {k: (before[k], len(d.signatures)) for k, d in disp.items() if before[k] and len(d.signatures) > before[k]}
+    assert not grew, f"kernels compiled again for a new scene (signatures before, after): {grew}"
