@@ -33,8 +33,8 @@ per ray, moving over static), plus the tracer's split between ray casting
 shading, film).
 Targets (issue 2): tracer_over_raw >= 0.5, motion_over_static_cost <= 1.5
 (``crowd_motion_over_static_cost`` is the same ratio for many moving objects).
-``shading_kernels`` says whether the tracer ran its compiled kernels
-(``stpm_core.shading_kernels``; ``STPM_NO_NUMBA=1`` measures the numpy path).
+``numba`` names the numba version the tracer's kernels (``stpm_core.kernels``) ran on; there is
+no numpy path to measure any more (its code is the test oracle ``tests/oracles/integrator_numpy``).
 """
 from __future__ import annotations
 
@@ -190,10 +190,9 @@ def run(rounds: int = 5) -> dict:
     from stpm_core.raycast import make_caster
     from .bench_rays import _raw_embree
 
-    from stpm_core import shading_kernels
+    import numba
 
-    out: dict = {"resolution": f"{WIDTH}x{HEIGHT}", "spp": SPP, "shading_kernels": shading_kernels.AVAILABLE,
-                 "rounds": rounds}
+    out: dict = {"resolution": f"{WIDTH}x{HEIGHT}", "spp": SPP, "numba": numba.__version__, "rounds": rounds}
     if not embree_available():
         out["skipped"] = "embreex not importable"
         return out

@@ -431,7 +431,7 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
     """
     P, S = tw * th, int(spp)
     n = P * S
-    # The uniforms of camera_samples, in its order (drawn into reused buffers)
+    # The camera uniforms: positions (P, S, 2), then time keys and jitters (P, S) (drawn into reused buffers)
     jit = rng.random(out=_scratch("jit", (P, S, 2)))
     px, py, xi = _scratch("px", (n,)), _scratch("py", (n,)), _scratch("xi", (n,))
     with_time = time_override is None and not shutter.is_instant

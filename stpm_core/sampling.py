@@ -38,7 +38,7 @@ def skip_uniforms(rng: np.random.Generator, n: int) -> None:
 
     ``rng.random`` takes one 64-bit output of the bit generator per float64,
     so advancing the bit generator by n leaves the stream exactly where
-    ``rng.random(n)`` would (tests/test_shading_kernels.py checks it).  For
+    ``rng.random(n)`` would (tests/test_kernel_paths_units.py checks it).  For
     numbers a value ignores (times of an instant shutter, uniforms of a point
     light): the rest of the stream, and so the image, stays the same.
     """

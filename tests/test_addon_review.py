@@ -121,6 +121,20 @@ def test_unexpected_exception_is_reported_as_one_error_line(monkeypatch, capsys)
     assert LAST_RENDER == {}
 
 
+def test_kernels_unavailable_is_one_error_line_in_the_render_report(monkeypatch, capsys):
+    """numba missing or disabled: Blender's render report shows the one line naming the cause."""
+    from stpm_core import kernels
+    scene = _lit_scene()
+    monkeypatch.setattr(kernels, "AVAILABLE", False)
+    monkeypatch.setattr(kernels, "IMPORT_ERROR", "ModuleNotFoundError: No module named 'numba'")
+    monkeypatch.setattr(kernels, "_CHECKED", False)
+    err = _render_ops(scene)
+    assert "STPM: the compiled kernels need numba, which is unavailable here (ModuleNotFoundError" in err
+    assert err.count("\n") <= 1
+    assert "Traceback" not in capsys.readouterr().err
+    assert LAST_RENDER == {}
+
+
 # 9. Resolution percentage
 @pytest.mark.parametrize("w, h, pct", [(100, 100, 29), (90, 60, 70)])
 def test_resolution_percentage_matches_blenders_size(tmp_path, w, h, pct):

@@ -201,3 +201,21 @@ def test_a_kernel_that_fails_to_compile_gives_one_line(monkeypatch):
     with pytest.raises(kernels.KernelsUnavailable, match="TypingError: No implementation") as err:
         render(sc, st)
     assert "\n" not in str(err.value) and "more" not in str(err.value)
+
+
+def test_cli_without_numba_exits_with_one_error_line(tmp_path):
+    """STPM_NO_NUMBA=1 (or numba missing): `stpm render` exits 1 with one `stpm: error:` line naming numba."""
+    import os
+    import subprocess
+    import sys
+
+    from stpm_core.scenefile import save_scene
+    path = save_scene(_scene(_SMOOTH, _LIGHTS[:1]), tmp_path / "tiny.stpm")
+    env = dict(os.environ, STPM_NO_NUMBA="1")
+    r = subprocess.run([sys.executable, "-m", "stpm_core.cli", "render", str(path), "--output",
+                        str(tmp_path / "out.exr"), "--samples", "1"], env=env, capture_output=True, text=True)
+    assert r.returncode == 1, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("stpm: error:")]
+    assert lines == ["stpm: error: the compiled kernels need numba, which is unavailable here "
+                     "(disabled by STPM_NO_NUMBA)"], r.stderr
+    assert "Traceback" not in r.stderr and not (tmp_path / "out.exr").exists()

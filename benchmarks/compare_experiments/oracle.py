@@ -5,7 +5,7 @@ estimate of the irradiance at its own point and time.  With a perfect estimate -
 radiance L(x, y, t) of the benchmark scene (tests/test_compare.py: moving_caustic_radiance, what
 analytic_moving_caustic integrates, evaluated per sample) -- the only error left is camera
 sampling: the film's filter-importance-sampled positions and stratified times
-(integrator.camera_samples).  This
+(the numpy oracle of the tracer's camera samples, tests/oracles/integrator_numpy.camera_samples).  This
 script renders that oracle at several S and compares its RMSE with ACCUMULATION N=16's (0.0169,
 bias-dominated): a photon estimator at S samples per pixel can never be better than the oracle.
 
@@ -13,7 +13,7 @@ bias-dominated): a photon estimator at S samples per pixel can never be better t
 """
 from common import *  # noqa: F401,F403
 
-from stpm_core.integrator import camera_samples
+from oracles.integrator_numpy import camera_samples  # tests/ on sys.path (common)
 from test_compare import moving_caustic_radiance as radiance  # tests/ on sys.path (common)
 
 

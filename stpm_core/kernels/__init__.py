@@ -4,11 +4,24 @@
 * :mod:`.bsdf` -- BSDF evaluation, pdf and sampling per hit;
 * :mod:`.lights` -- next-event light sampling and light shapes seen along rays;
 * :mod:`.emission` -- photon emission per light;
+* :mod:`.sampling` -- scalar helpers inlined into the other kernels (chiefly :mod:`.lights` and
+  :mod:`.emission`): vectors, warps, frames, light shapes (area shape, mesh-light points, spot mask);
+* :mod:`.light_params` -- lights as data: one parameter row per light, its poses and a mesh
+  light's triangles, packed once per LightSet (plain numpy, no kernels);
 * :mod:`.paths` -- camera-path bookkeeping, next-event estimation, specular steps, film sums;
 * :mod:`.photon_paths` -- one bounce of photon paths: deposit, BSDF sampling, Russian roulette.
 
 Ray casting (embree, or the numba BVH of :mod:`stpm_core.raycast`) happens
 between kernel calls, one wavefront bounce at a time.
+
+Every module here with kernels (all but :mod:`.light_params`) takes ``njit`` from
+:mod:`stpm_core.numba_probe`; :func:`require` (called by
+``render.render``, ``integrator.trace_image`` and ``photons.trace.trace_photon_paths``) turns
+"numba unavailable" into one :class:`KernelsUnavailable` line: there is no numpy fallback.  The
+numpy code these kernels replaced is the test oracles in ``tests/oracles/``.  numba's on-disk cache
+of a kernel is invalidated only by edits of the kernel's own file, not of what it inlines from
+other modules: after editing any module here, run ``find stpm_core -name '*.nb[ic]' -delete``
+(docs/architecture.md, "Compiled kernels").
 """
 from __future__ import annotations
 
@@ -36,7 +49,7 @@ def require() -> None:
     if _CHECKED:
         return
     if not AVAILABLE:
-        raise KernelsUnavailable(f"STPM's compiled kernels need numba, which is unavailable here ({IMPORT_ERROR})")
+        raise KernelsUnavailable(f"the compiled kernels need numba, which is unavailable here ({IMPORT_ERROR})")
     try:
         from numba import njit
 

@@ -390,14 +390,14 @@ def _eval_pdf_hit(c, E, hit, wo, wi):
     return f0, f1, f2, pdf
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def bsdf_eval_pdf(c, E, E_avg, wo, wi, ns, ng):
     """(f0, f1, f2, pdf): f (1/sr) of the non-delta lobes of closure c at (wo, wi) and the
     mixture solid-angle pdf with which :func:`bsdf_sample` returns wi through them."""
     return _eval_pdf_hit(c, E, _hit(c, E, E_avg, wo, ns, ng), wo, wi)
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def bsdf_eval(c, E, E_avg, wo, wi, ns, ng):
     """(f0, f1, f2): f (1/sr) of the non-delta lobes; without a rough lobe, the diffuse lobe
     w_base (1 - F_coat(wo)) base_color / pi directly (no hit set-up)."""
@@ -417,7 +417,7 @@ def bsdf_eval(c, E, E_avg, wo, wi, ns, ng):
 # ----------------------------------------------------------------------------
 # Sampling
 # ----------------------------------------------------------------------------
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def bsdf_sample(c, E, E_avg, wo, ns, ng, u0, u1, u2):
     """(wi0, wi1, wi2, w0, w1, w2, is_delta): wi from closure c at wo.
 

@@ -96,7 +96,7 @@ __all__ = ["emit_photons", "emit_toward_photons", "emit", "emit_toward"]
 # ----------------------------------------------------------------------------
 # Origins and whole photons of one row
 # ----------------------------------------------------------------------------
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _point_origin(row, c, d, u2, i):
     """Origin of a photon leaving a POINT / SPOT light (centre c) along unit d.
 
@@ -117,7 +117,7 @@ def _point_origin(row, c, d, u2, i):
     return o
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _sun_photon(row, cos_half, Z, ce, R, back, n, u1, u2, i):
     """Sun photon i through a disc of radius R perpendicular to Z (unit or zero), ``back`` upstream of ce.
 
@@ -141,7 +141,7 @@ def _sun_photon(row, cos_half, Z, ce, R, back, n, u1, u2, i):
     return o, d, (row[P_COLOR] * S * g, row[P_COLOR + 1] * S * g, row[P_COLOR + 2] * S * g)
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _world_photon(row, ce, R, n, u1, u2, i):
     """World photon i: uniform direction d (u1[i]), origin on the disc of radius R about ce perpendicular to d
     (u2[i]) moved 2R back along d; power 4 pi * pi R^2 * L / n.  Returns origin, direction, power (3-tuples)."""

@@ -49,7 +49,7 @@ __all__ = ["sample_light", "seen_light", "sample_direct_batch", "seen_batch", "s
 # ----------------------------------------------------------------------------
 # Spherical rectangle (Urena, Fajardo and King 2013)
 # ----------------------------------------------------------------------------
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def spherical_rect_sample(o, s, ex, ey, u0, u1):
     """A point q (3-tuple) on the rectangle (corner s, orthogonal full edges ex, ey) uniform in the
     solid angle S (sr) it subtends from o; returns (q, S).  S = 0 where o lies in its plane.
@@ -111,7 +111,7 @@ def spherical_rect_sample(o, s, ex, ey, u0, u1):
 # ----------------------------------------------------------------------------
 # One sample per light type: (wi0, wi1, wi2, dist, w0, w1, w2)
 # ----------------------------------------------------------------------------
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _sample_point(prm, M, p, u0, u1):
     """POINT / SPOT of intensity I = color P / (4 pi) W/sr at M's translation.
 
@@ -161,7 +161,7 @@ def _sample_point(prm, M, p, u0, u1):
     return wi[0], wi[1], wi[2], dist, w0, w1, w2
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _sample_area(prm, M, p, u0, u1):
     """AREA light, one-sided, radiance L = color P / (pi A) toward n_emit.
 
@@ -195,7 +195,7 @@ def _sample_area(prm, M, p, u0, u1):
     return wi[0], wi[1], wi[2], dist, L0 * g, L1 * g, L2 * g
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _sample_sun(prm, M, u0, u1):
     """SUN of strength S: toward its unit Z axis, uniform in the cone of angular diameter
     ``angle`` (radiance S / Omega, pdf 1 / Omega): weight color S, distance inf.
@@ -208,7 +208,7 @@ def _sample_sun(prm, M, u0, u1):
             prm[P_COLOR + 2] * power * ok)
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _sample_mesh(M, steps, corners, q, cdf, Le, t, p, u0, u1):
     """MESH: triangle j with probability q_j, a uniform point of it at time t
     (``sampling.mesh_point``); two-sided radiance Le[j]: weight Le |cos_l| A / (q_j t^2)."""
@@ -218,7 +218,7 @@ def _sample_mesh(M, steps, corners, q, cdf, Le, t, p, u0, u1):
     return wi[0], wi[1], wi[2], dist, Le[j, 0] * g, Le[j, 1] * g, Le[j, 2] * g
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _sample_world(prm, n, u0, u1):
     """WORLD of radiance L (the row's colour): cosine-distributed about n (pdf cos / pi), weight
     L pi / cos; a zero n: uniform on the sphere, weight 4 pi L.  Distance inf."""
@@ -236,7 +236,7 @@ def _sample_world(prm, n, u0, u1):
 # ----------------------------------------------------------------------------
 # One light sample
 # ----------------------------------------------------------------------------
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def sample_light(prm, M, steps, corners, q, cdf, Le, t, p, n, u0, u1):
     """One sample of light ``prm`` for the shading point p (3-tuple, world) at normalised time t.
 
@@ -273,7 +273,7 @@ def sample_light(prm, M, steps, corners, q, cdf, Le, t, p, n, u0, u1):
 # ----------------------------------------------------------------------------
 # Light shapes seen along one ray
 # ----------------------------------------------------------------------------
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def seen_light(prm, M, o, d, t_scene, camera_ray):
     """Radiance (L0, L1, L2) W m^-2 sr^-1 of this light's shape hit by the ray o + s d (unit d,
     3-tuples) at 0 < s < t_scene, as ``integrator._seen_lights`` for one light; M its matrix at

@@ -66,7 +66,8 @@ def camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, radius, table
     """Film positions px, py (P*S,) and shutter numbers xi (P*S,) of a tile's P = tw*th pixels.
 
     jit (P, S, 2), perm_u (P, S), time_u (P, S): the uniforms
-    ``integrator.camera_samples`` draws, in its order.  Position: cell j of a
+    ``integrator._trace_tile`` draws, in its order (the numpy oracle
+    ``tests/oracles/integrator_numpy.camera_samples`` makes the same samples).  Position: cell j of a
     rows x cols grid (j < rows*cols) jittered, else uniform, giving u in
     [0, 1)^2; then px = ix + 1/2 + radius F^-1(u_x) with F^-1 linear in
     ``table`` (``film.BH_INVERSE_CDF``, as ``film.filter_offsets``), or
@@ -124,8 +125,9 @@ def camera_rays(px, py, W, H, half_w, half_h, cx, cy, R, pos, ortho, clip_start,
     """Rays o, d (n, 3) and clipping distances tmax0 (n,) through film positions px, py (n,).
 
     R (k, 3, 3) unit-column rotations and pos (k, 3) camera positions, k = 1
-    (static camera) or n (one pose per sample).  Same formulas as
-    ``camera.generate_rays`` and the clipping in ``integrator.trace_image``.
+    (static camera) or n (one pose per sample).  The tracer's only camera-ray
+    code (``camera.generate_rays`` calls it too); the numpy oracle is
+    ``tests/oracles/integrator_numpy.generate_rays``.
     """
     n = px.shape[0]
     one = R.shape[0] == 1
@@ -452,7 +454,7 @@ def active_channels(V, skip):
 def pixel_sums(tw, th, S, V, act, win):
     """Per-pixel sums of a tile's samples into win (th, tw, k + 1) float64 (zeroed by the caller).
 
-    Samples as ``integrator.camera_samples`` lays them out (pixel p = (p % tw,
+    Samples as :func:`camera_tile` lays them out (pixel p = (p % tw,
     p // tw) of the tile, its S samples consecutive); V (n, C) sample values,
     act (k,) the columns to sum (the others add nothing, e.g. all zero):
     win[iy, ix, a] = sum_s V[p S + s, act[a]], win[iy, ix, k] = S.

@@ -24,9 +24,14 @@ Conventions
   results by an ulp.
 * Light helpers read a light's parameter row ``prm`` (columns ``P_*`` of :mod:`.light_params`).
 
-Every function is compiled inline into the kernels that call it.  numba's on-disk cache of a
-kernel is invalidated by edits of the kernel's own file only: after editing this file, clear the
-caches of the kernels that inline it (``stpm_core/kernels/__pycache__``: lights, emission, paths).
+Compile policy (measured 2026-12-01, docs/rendering.md "Compile time"): the small vector
+helpers are inlined into their callers at numba's IR level (``JIT_INLINE``); the large per-hit
+functions (``area_shape``, ``mesh_point`` here, one light type's sample in :mod:`.lights`, the
+BSDF's eval / sample in :mod:`.bsdf`) are ordinary compiled functions (``JIT``) that numba
+compiles once and links into every kernel calling them, which cut the cold compile of a render
+to about a quarter.  numba's on-disk cache of a kernel is invalidated by edits of the kernel's
+own file only, not of the functions it calls from other files: after editing any kernel module,
+delete the caches of all of them (``find stpm_core -name '*.nb[ic]' -delete``).
 """
 from __future__ import annotations
 
@@ -263,7 +268,7 @@ def spot_attenuation(prm, cos_axis):
     return 0.0
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def area_shape(prm, M):
     """AREA light at pose M (scale kept) as ``LightSet._area_shape``: (c, ex, ey, A, n_emit, disk).
 
@@ -325,7 +330,7 @@ def _mesh_corner(M, corners, i, j, v, a):
             edot((M[2, 0], M[2, 1], M[2, 2]), p) + M[2, 3])
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def mesh_point(M, steps, corners, q, cdf, t, u0, u1):
     """A point of a MESH light (``lights_numpy.mesh_sample_points``): (point, unit normal, A, j, q_j).
 
