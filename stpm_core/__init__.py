@@ -10,3 +10,9 @@ import os as _os
 # throughput (docs/raycast.md).  Set before any numba pool starts; the user's own
 # setting wins.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+# numba caches each kernel against its own file only: after an edit of any kernel source, make
+# every cached kernel stale before a kernel module defines its dispatchers (numba_probe).
+from .numba_probe import invalidate_stale_caches as _invalidate_stale_caches  # noqa: E402
+
+_invalidate_stale_caches()

@@ -37,6 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from .kernels import bsdf as _k
+from .kernels import kernel_array
 from .kernels.closure import pack_materials
 
 __all__ = ["MaterialTable", "bsdf_eval", "bsdf_pdf", "bsdf_sample", "diffuse_albedo",
@@ -94,14 +95,14 @@ class MaterialTable:
 # ---------------------------------------------------------------------------
 
 def _ids(mat) -> np.ndarray:
-    return np.ascontiguousarray(np.asarray(mat, dtype=np.int64).reshape(-1))
+    return kernel_array(np.asarray(mat, dtype=np.int64).reshape(-1), np.int64)
 
 
 def _vec(v, n: int) -> np.ndarray:
     a = np.asarray(v, dtype=np.float64)
     if a.shape != (n, 3):
         a = np.broadcast_to(a, (n, 3))
-    return np.ascontiguousarray(a)
+    return kernel_array(a)
 
 
 # ---------------------------------------------------------------------------

@@ -90,6 +90,7 @@ def generate_rays(camera, resolution, px: np.ndarray, py: np.ndarray, times: np.
         plane at ``clip_start`` in front of the camera).
     dirs : (n, 3) unit world directions.
     """
+    from .kernels import kernel_array
     from .kernels.paths import camera_rays
 
     px = np.ascontiguousarray(px, dtype=np.float64)
@@ -101,8 +102,8 @@ def generate_rays(camera, resolution, px: np.ndarray, py: np.ndarray, times: np.
     R, pos = camera_to_world(camera, times[:1] if static else times)
     n = px.shape[0]
     o, d, tmax0 = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
-    camera_rays(px, py, W, H, float(half_w), float(half_h), float(cx), float(cy), np.ascontiguousarray(R, np.float64),
-                np.ascontiguousarray(pos, np.float64), camera.type == "ORTHO", float(camera.clip_start),
+    camera_rays(kernel_array(px), kernel_array(py), W, H, float(half_w), float(half_h), float(cx), float(cy),
+                kernel_array(R), kernel_array(pos), camera.type == "ORTHO", float(camera.clip_start),
                 float(camera.clip_end), o, d, tmax0)
     return o, d
 

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import kernels as _kernels
+from .kernels import kernel_array
 from .camera import camera_to_world, image_plane
 from .film import BH_INVERSE_CDF, DEPTH_BACKGROUND, PASSES, Film
 from .kernels import paths as _K
@@ -447,8 +448,8 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
     else:
         times = shutter.sample(xi if with_time else np.zeros(n))
     R, pos = camera_to_world(cam, times[:1] if cam.transform.is_static else times)
-    R = np.ascontiguousarray(R[:1] if cam.transform.is_static else R, np.float64)
-    pos = np.ascontiguousarray(pos[:1] if cam.transform.is_static else pos, np.float64)
+    R = kernel_array(R[:1] if cam.transform.is_static else R)
+    pos = kernel_array(pos[:1] if cam.transform.is_static else pos)
     half_w, half_h, cx, cy = image_plane(cam, resolution)
     o, d, tmax0 = _scratch("o", (n, 3)), _scratch("d", (n, 3)), _scratch("tmax0", (n,))
     _K.camera_rays(px, py, int(resolution[0]), int(resolution[1]), float(half_w), float(half_h), float(cx),

@@ -43,6 +43,7 @@ from __future__ import annotations
 import numpy as np
 
 from .kernels import emission as _emission
+from .kernels import kernel_array
 from .kernels.light_params import kernel_light, light_poses
 from .kernels.lights import sample_direct_batch
 
@@ -413,15 +414,15 @@ class LightSet:
             spot, a light with no emitting direction).
         """
         prm, poses, steps, corners, q, cdf, Le = kernel_light(self, li)
-        p = np.ascontiguousarray(p, np.float64).reshape(-1, 3)
+        p = kernel_array(np.asarray(p, np.float64).reshape(-1, 3))
         n = p.shape[0]
         times = np.atleast_1d(np.asarray(times, np.float64))
         if poses is None:
             poses = light_poses(self, li, times)     # (1, 4, 4) when every row has the same time
-        times = np.ascontiguousarray(np.broadcast_to(times, (n,)))
-        u = np.ascontiguousarray(u, np.float64).reshape(n, 2)
+        times = kernel_array(np.broadcast_to(times, (n,)))
+        u = kernel_array(np.asarray(u, np.float64).reshape(n, 2))
         use_normals = normals is not None
-        normals = np.ascontiguousarray(normals, np.float64).reshape(n, 3) if use_normals else _NO_NORMALS
+        normals = kernel_array(np.asarray(normals, np.float64).reshape(n, 3)) if use_normals else _NO_NORMALS
         wi, dist, weight = np.empty((n, 3)), np.empty(n), np.empty((n, 3))
         sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, p, times, u, normals, use_normals,
                             wi, dist, weight)

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["probe", "njit", "AVAILABLE", "IMPORT_ERROR"]
+__all__ = ["probe", "njit", "AVAILABLE", "IMPORT_ERROR", "invalidate_stale_caches", "KERNEL_SOURCES"]
 
 
 def probe() -> tuple[bool, str]:
@@ -50,3 +50,47 @@ else:                                          # pragma: no cover - depends on t
         def wrap(f):
             return f
         return wrap
+
+
+# Files whose numba kernels are cached on disk (cache=True), relative to stpm_core/
+KERNEL_SOURCES = ("kernels/*.py", "raycast/embree_kernels.py", "raycast/numba_backend.py", "raycast/bvh_build.py",
+                  "photons/kdtree.py", "numba_probe.py")
+_STAMP = "stpm-kernel-sources.sha256"
+
+
+def invalidate_stale_caches(root=None, patterns=KERNEL_SOURCES) -> bool:
+    """Make numba recompile every cached kernel when any kernel source changed; True if it did.
+
+    numba's on-disk cache of a kernel is checked against its own file's mtime and size only, not
+    against the files of the functions it calls or inlines (numba's "Notes on Caching", issue
+    1833), so an edit of ``kernels/bsdf.py`` would leave ``kernels/paths.py``'s cached kernels
+    running the old BSDF.  Here one SHA-256 over all of ``KERNEL_SOURCES`` is compared with the
+    one recorded in ``stpm_core/__pycache__/stpm-kernel-sources.sha256``; when they differ,
+    every kernel source's mtime is set to now (numba then treats each cached kernel as stale,
+    wherever ``NUMBA_CACHE_DIR`` puts it) and the new digest is recorded.  Runs once, when
+    ``stpm_core`` is imported, before any kernel module is.  A read-only install (whose files
+    change only by reinstalling, which rewrites them) is left alone.  root / patterns: another
+    package and its kernel files (tests).
+    """
+    import hashlib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent if root is None else Path(root)
+    files = sorted({p for pattern in patterns for p in root.glob(pattern)})
+    h = hashlib.sha256()
+    try:
+        for p in files:
+            h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
+        stamp = root / "__pycache__" / _STAMP
+        digest = h.hexdigest()
+        if stamp.exists() and stamp.read_text().strip() == digest:
+            return False
+        for p in files:
+            os.utime(p, None)
+        stamp.parent.mkdir(exist_ok=True)
+        tmp = stamp.with_name(f"{_STAMP}.{os.getpid()}.tmp")
+        tmp.write_text(digest)
+        os.replace(tmp, stamp)
+        return True
+    except OSError:
+        return False

@@ -71,3 +71,7 @@ def test_new_scenes_compile_nothing_new():
         render(scene, settings)
     grew = {k: (before[k], len(d.signatures)) for k, d in disp.items() if before[k] and len(d.signatures) > before[k]}
     assert not grew, f"kernels compiled again for a new scene (signatures before, after): {grew}"
+    # Stronger: over all these scenes every kernel has compiled exactly one version (a read-only or
+    # a non-contiguous array, an int32 id array or an int where a float went before would add one)
+    twice = {k: [str(s) for s in d.signatures] for k, d in disp.items() if len(d.signatures) > 1}
+    assert not twice, f"kernels compiled for more than one argument type: {twice}"

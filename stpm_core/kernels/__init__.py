@@ -25,10 +25,12 @@ other modules: after editing any module here, run ``find stpm_core -name '*.nb[i
 """
 from __future__ import annotations
 
+import numpy as np
+
 from ..errors import StpmError
 from ..numba_probe import AVAILABLE, IMPORT_ERROR
 
-__all__ = ["KernelsUnavailable", "require", "compile_error", "is_numba_error"]
+__all__ = ["KernelsUnavailable", "require", "compile_error", "is_numba_error", "kernel_array"]
 
 
 class KernelsUnavailable(StpmError):
@@ -72,3 +74,15 @@ def compile_error(exc: BaseException) -> str:
 def is_numba_error(exc: BaseException) -> bool:
     """Was exc raised by numba or llvmlite (a kernel that failed to compile or to load)?"""
     return type(exc).__module__.split(".")[0] in ("numba", "llvmlite")
+
+
+def kernel_array(a, dtype=np.float64) -> np.ndarray:
+    """a as a C-contiguous, writable array of dtype (a copy only when it is not one already).
+
+    numba compiles one version of a kernel per argument type, and a read-only array (a
+    ``np.broadcast_to`` view, which ``np.ascontiguousarray`` returns unchanged when its shape is
+    already contiguous) is a different type from a writable one: every array handed to a kernel
+    goes through here, so no scene or call form compiles a kernel twice
+    (tests/test_kernel_signatures.py).
+    """
+    return np.require(a, dtype, ("C", "W"))

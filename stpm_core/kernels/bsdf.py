@@ -1,6 +1,7 @@
 """The layered material's BSDF per hit, compiled: the one implementation of shading.
 
-Every function reads one closure row ``c`` (:mod:`stpm_core.kernels.closure`,
+Every function reads one closure row ``C[cr]`` (passed as the array C and the row index cr, so no
+row view is made per hit) (:mod:`stpm_core.kernels.closure`,
 columns ``C_*``), never a ``MaterialTable``, so the same code serves constant
 materials and, later, closures filled per hit by the shader-node interpreter.
 Vectors are 3-tuples of float64; ``wo`` and ``wi`` point away from the surface.
@@ -131,10 +132,10 @@ def fresnel_dielectric(cos_i, eta):
 
 
 @njit(**_JIT_INLINE)
-def _fresnel_schlick(c, cos):
-    """Schlick(F0 = base colour of closure c, cos) = F0 + (1 - F0)(1 - cos)^5, an RGB tuple."""
+def _fresnel_schlick(C, cr, cos):
+    """Schlick(F0 = base colour of closure row C[cr], cos) = F0 + (1 - F0)(1 - cos)^5, an RGB tuple."""
     m = math.pow(min(max(1.0 - cos, 0.0), 1.0), 5.0)       # (numpy's ** 5 is pow; x*x*x*x*x rounds differently)
-    b0, b1, b2 = c[C_BASE], c[C_BASE + 1], c[C_BASE + 2]
+    b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
     return (b0 + (1.0 - b0) * m, b1 + (1.0 - b1) * m, b2 + (1.0 - b2) * m)
 
 
@@ -280,32 +281,32 @@ def ggx_albedo_avg(E_avg, alpha):
 # The hit: oriented normals, Fresnel at wo, lobe selection probabilities
 # ----------------------------------------------------------------------------
 @njit(**_JIT_INLINE)
-def _hit(c, E, E_avg, wo, ns, ng):
-    """Everything about closure c at wo that does not depend on wi.
+def _hit(C, cr, E, E_avg, wo, ns, ng):
+    """Everything about closure row C[cr] at wo that does not depend on wi.
 
     Returns (ns', ng', cos_o = wo . ns' (not clamped), eta_glass, alpha, F_coat, F_glass,
     F_metal (RGB), ms_scale (RGB) = F_ms / (pi (1 - E_avg)), ms_Eo = E(mu_o), p_lobe (6 lobes)).
     """
     nsf, ngf, entering = _oriented(wo, ns, ng)
-    alpha = max(c[C_ALPHA], 1e-4)
-    rough = c[C_ROUGHNESS] > 0.0
-    spec = c[C_SPECULAR]
-    w_base, w_metal, w_glass = c[C_W_BASE], c[C_W_METAL], c[C_W_GLASS]
-    ior = c[C_IOR]
+    alpha = max(C[cr, C_ALPHA], 1e-4)
+    rough = C[cr, C_ROUGHNESS] > 0.0
+    spec = C[cr, C_SPECULAR]
+    w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
+    ior = C[cr, C_IOR]
     eta_glass = ior if entering else 1.0 / ior          # n_t / n_i for glass
     cos_o = dot(wo, nsf)
     cos_oc = min(max(cos_o, 0.0), 1.0)
     # Fresnel at wo for each lobe the closure has
     F_coat = spec * fresnel_dielectric(cos_oc, ior) if (w_base > 0 and spec > 0) else 0.0
     F_glass = fresnel_dielectric(cos_oc, eta_glass) if w_glass > 0 else 0.0
-    F_metal = _fresnel_schlick(c, cos_oc) if w_metal > 0 else (0.0, 0.0, 0.0)
+    F_metal = _fresnel_schlick(C, cr, cos_oc) if w_metal > 0 else (0.0, 0.0, 0.0)
     # METAL_MS (rough metal): f_ms = ms_scale (1 - E(mu_o)) (1 - E(mu_i))
     ms_scale = (0.0, 0.0, 0.0)
     ms_Eo = 1.0
     ms_albedo = 0.0                                     # (1 - E(mu_o)) mean(F_ms): the lobe's albedo
     if w_metal > 0 and rough:
         e_avg = ggx_albedo_avg(E_avg, alpha)
-        b0, b1, b2 = c[C_BASE], c[C_BASE + 1], c[C_BASE + 2]
+        b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
         a0 = b0 + (1.0 - b0) / 21.0
         a1 = b1 + (1.0 - b1) / 21.0
         a2 = b2 + (1.0 - b2) / 21.0
@@ -318,7 +319,7 @@ def _hit(c, E, E_avg, wo, ns, ng):
             ms_scale = (F_ms0 / k, F_ms1 / k, F_ms2 / k)
             ms_albedo = (1.0 - ms_Eo) * ((F_ms0 + F_ms1 + F_ms2) / 3.0)
     # Lobe selection probabilities proportional to an albedo estimate
-    mean_base = (c[C_BASE] + c[C_BASE + 1] + c[C_BASE + 2]) / 3.0
+    mean_base = (C[cr, C_BASE] + C[cr, C_BASE + 1] + C[cr, C_BASE + 2]) / 3.0
     e0 = w_base * (1.0 - F_coat) * mean_base                          # DIFFUSE
     e1 = w_base * F_coat                                              # COAT
     e2 = w_metal * ((F_metal[0] + F_metal[1] + F_metal[2]) / 3.0)     # METAL
@@ -338,11 +339,11 @@ def _hit(c, E, E_avg, wo, ns, ng):
 # Evaluation: f and pdf of the non-delta lobes
 # ----------------------------------------------------------------------------
 @njit(**_JIT_INLINE)
-def _eval_pdf_hit(c, E, hit, wo, wi):
+def _eval_pdf_hit(C, cr, E, hit, wo, wi):
     """(f0, f1, f2, pdf) of the non-delta lobes at wi for the hit of :func:`_hit`."""
     ns, ng, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, p_lobe = hit
-    w_base, w_metal, w_glass = c[C_W_BASE], c[C_W_METAL], c[C_W_GLASS]
-    b0, b1, b2 = c[C_BASE], c[C_BASE + 1], c[C_BASE + 2]
+    w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
+    b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
     cos_i = dot(wi, ns)
     above_ng = dot(wi, ng) > 0
     # -- DIFFUSE: base / pi under the coat's Fresnel at wo
@@ -353,7 +354,7 @@ def _eval_pdf_hit(c, E, hit, wo, wi):
         f1 = d * b1 / _PI
         f2 = d * b2 / _PI
         pdf = p_lobe[DIFFUSE] * cos_i / _PI
-    if not c[C_ROUGH_LOBE] > 0:
+    if not C[cr, C_ROUGH_LOBE] > 0:
         return f0, f1, f2, pdf
     # -- GGX reflection terms (rough COAT / METAL / GLASS_R)
     if not (cos_i > 0 and cos_o > 0 and above_ng):
@@ -370,8 +371,8 @@ def _eval_pdf_hit(c, E, hit, wo, wi):
     p_ggx = G1o * D / (4.0 * cos_oe)                     # VNDF pdf of wi (solid angle)
     spec = D * G2 / max(4.0 * cos_oe * max(cos_i, _EPS), 1e-300)
     # COAT: specular F_diel(wo.h, ior); METAL: Schlick(base, wo.h); GLASS_R: F_diel(wo.h, eta)
-    F_c = c[C_SPECULAR] * fresnel_dielectric(wo_h, c[C_IOR])
-    F_m = _fresnel_schlick(c, wo_h)
+    F_c = C[cr, C_SPECULAR] * fresnel_dielectric(wo_h, C[cr, C_IOR])
+    F_m = _fresnel_schlick(C, cr, wo_h)
     F_g = fresnel_dielectric(wo_h, eta_glass)
     s = (w_base * F_c + w_glass * F_g) * spec
     sm = w_metal * spec
@@ -391,35 +392,35 @@ def _eval_pdf_hit(c, E, hit, wo, wi):
 
 
 @njit(**_JIT)
-def bsdf_eval_pdf(c, E, E_avg, wo, wi, ns, ng):
-    """(f0, f1, f2, pdf): f (1/sr) of the non-delta lobes of closure c at (wo, wi) and the
+def bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, ng):
+    """(f0, f1, f2, pdf): f (1/sr) of the non-delta lobes of closure row C[cr] at (wo, wi) and the
     mixture solid-angle pdf with which :func:`bsdf_sample` returns wi through them."""
-    return _eval_pdf_hit(c, E, _hit(c, E, E_avg, wo, ns, ng), wo, wi)
+    return _eval_pdf_hit(C, cr, E, _hit(C, cr, E, E_avg, wo, ns, ng), wo, wi)
 
 
-@njit(**_JIT)
-def bsdf_eval(c, E, E_avg, wo, wi, ns, ng):
+@njit(**_JIT_INLINE)
+def bsdf_eval(C, cr, E, E_avg, wo, wi, ns, ng):
     """(f0, f1, f2): f (1/sr) of the non-delta lobes; without a rough lobe, the diffuse lobe
     w_base (1 - F_coat(wo)) base_color / pi directly (no hit set-up)."""
-    if c[C_ROUGH_LOBE] > 0:
-        f0, f1, f2, _ = bsdf_eval_pdf(c, E, E_avg, wo, wi, ns, ng)
+    if C[cr, C_ROUGH_LOBE] > 0:
+        f0, f1, f2, _ = bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, ng)
         return f0, f1, f2
     nsf, ngf, _ = _oriented(wo, ns, ng)
     scale = 0.0
     if dot(wi, nsf) > 0 and dot(wi, ngf) > 0:
-        scale = c[C_W_BASE]
-        if c[C_COAT] > 0:
+        scale = C[cr, C_W_BASE]
+        if C[cr, C_COAT] > 0:
             cos_o = min(max(dot(wo, nsf), 0.0), 1.0)
-            scale *= 1.0 - c[C_SPECULAR] * fresnel_dielectric(cos_o, c[C_IOR])
-    return (scale * c[C_BASE] * _INV_PI, scale * c[C_BASE + 1] * _INV_PI, scale * c[C_BASE + 2] * _INV_PI)
+            scale *= 1.0 - C[cr, C_SPECULAR] * fresnel_dielectric(cos_o, C[cr, C_IOR])
+    return (scale * C[cr, C_BASE] * _INV_PI, scale * C[cr, C_BASE + 1] * _INV_PI, scale * C[cr, C_BASE + 2] * _INV_PI)
 
 
 # ----------------------------------------------------------------------------
 # Sampling
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def bsdf_sample(c, E, E_avg, wo, ns, ng, u0, u1, u2):
-    """(wi0, wi1, wi2, w0, w1, w2, is_delta): wi from closure c at wo.
+def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
+    """(wi0, wi1, wi2, w0, w1, w2, is_delta): wi from closure row C[cr] at wo.
 
     u0 picks the lobe by the CDF of p_lobe (and so reflect / refract for
     glass), u1, u2 the direction.  Weight: throughput / p_lobe for a delta
@@ -427,9 +428,9 @@ def bsdf_sample(c, E, E_avg, wo, ns, ng, u0, u1, u2):
     f_nd |cos| / pdf_nd over all non-delta lobes; wi = 0 and weight 0 when the
     chosen lobe has probability 0.
     """
-    hit = _hit(c, E, E_avg, wo, ns, ng)
+    hit = _hit(C, cr, E, E_avg, wo, ns, ng)
     nsf, ngf, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, p_lobe = hit
-    rough = c[C_ROUGHNESS] > 0.0
+    rough = C[cr, C_ROUGHNESS] > 0.0
     # -- Choose a lobe by the CDF of p_lobe
     lobe = 0                                            # number of CDF entries <= u0
     cdf = 0.0
@@ -472,20 +473,20 @@ def bsdf_sample(c, E, E_avg, wo, ns, ng, u0, u1, u2):
         if not (side < 0 if lobe == GLASS_T else side > 0):
             return wi0, wi1, wi2, 0.0, 0.0, 0.0, True     # a leak through the shading normal
         if lobe == COAT:
-            thr = c[C_W_BASE] * F_coat
+            thr = C[cr, C_W_BASE] * F_coat
             t0 = t1 = t2 = thr
         elif lobe == METAL:
-            w_metal = c[C_W_METAL]
+            w_metal = C[cr, C_W_METAL]
             t0, t1, t2 = w_metal * F_metal[0], w_metal * F_metal[1], w_metal * F_metal[2]
         elif lobe == GLASS_R:
-            thr = c[C_W_GLASS] * F_glass
+            thr = C[cr, C_W_GLASS] * F_glass
             t0 = t1 = t2 = thr
         else:
-            thr = c[C_W_GLASS] * (1.0 - F_glass)
-            t0, t1, t2 = thr * c[C_BASE], thr * c[C_BASE + 1], thr * c[C_BASE + 2]
+            thr = C[cr, C_W_GLASS] * (1.0 - F_glass)
+            t0, t1, t2 = thr * C[cr, C_BASE], thr * C[cr, C_BASE + 1], thr * C[cr, C_BASE + 2]
         return wi0, wi1, wi2, t0 / p_chosen, t1 / p_chosen, t2 / p_chosen, True
     # -- Non-delta lobes: mixture f cos / pdf over every non-delta lobe
-    f0, f1, f2, pdf = _eval_pdf_hit(c, E, hit, wo, wi)
+    f0, f1, f2, pdf = _eval_pdf_hit(C, cr, E, hit, wo, wi)
     if not pdf > 0:
         return wi0, wi1, wi2, 0.0, 0.0, 0.0, False
     r = abs(dot(wi, nsf)) / max(pdf, 1e-300)
@@ -496,12 +497,12 @@ def bsdf_sample(c, E, E_avg, wo, ns, ng, u0, u1, u2):
 # Other queries
 # ----------------------------------------------------------------------------
 @njit(**_JIT_INLINE)
-def diffuse_albedo(c, wo, ns):
+def diffuse_albedo(C, cr, wo, ns):
     """(r, g, b) = w_base (1 - specular F_diel(|wo . ns|, ior)) base_color: the diffuse reflectance
     after the coat (photon radiance = diffuse_albedo / pi * irradiance); ns may face either way."""
-    F = c[C_SPECULAR] * fresnel_dielectric(abs(dot(wo, ns)), c[C_IOR])
-    k = c[C_W_BASE] * (1.0 - F)
-    return k * c[C_BASE], k * c[C_BASE + 1], k * c[C_BASE + 2]
+    F = C[cr, C_SPECULAR] * fresnel_dielectric(abs(dot(wo, ns)), C[cr, C_IOR])
+    k = C[cr, C_W_BASE] * (1.0 - F)
+    return k * C[cr, C_BASE], k * C[cr, C_BASE + 1], k * C[cr, C_BASE + 2]
 
 
 # ----------------------------------------------------------------------------
@@ -513,18 +514,18 @@ def eval_batch(closures, E, E_avg, mat, wo, wi, ns, ng, f_out, pdf_out):
     material ids mat (n,) (-1 = miss: the inert last closure row); pdf_out of length 0 skips the pdf."""
     want_pdf = pdf_out.shape[0] > 0
     for i in range(mat.shape[0]):
-        c = closures[closure_row(closures, mat[i])]
+        cr = closure_row(closures, mat[i])
         o = (wo[i, 0], wo[i, 1], wo[i, 2])
         d = (wi[i, 0], wi[i, 1], wi[i, 2])
         s = (ns[i, 0], ns[i, 1], ns[i, 2])
         g = (ng[i, 0], ng[i, 1], ng[i, 2])
         if want_pdf:
-            f0, f1, f2, pdf = bsdf_eval_pdf(c, E, E_avg, o, d, s, g)
+            f0, f1, f2, pdf = bsdf_eval_pdf(closures, cr, E, E_avg, o, d, s, g)
             pdf_out[i] = pdf
-            if not c[C_ROUGH_LOBE] > 0:
-                f0, f1, f2 = bsdf_eval(c, E, E_avg, o, d, s, g)
+            if not closures[cr, C_ROUGH_LOBE] > 0:
+                f0, f1, f2 = bsdf_eval(closures, cr, E, E_avg, o, d, s, g)
         else:
-            f0, f1, f2 = bsdf_eval(c, E, E_avg, o, d, s, g)
+            f0, f1, f2 = bsdf_eval(closures, cr, E, E_avg, o, d, s, g)
         f_out[i, 0], f_out[i, 1], f_out[i, 2] = f0, f1, f2
 
 
@@ -532,9 +533,9 @@ def eval_batch(closures, E, E_avg, mat, wo, wi, ns, ng, f_out, pdf_out):
 def sample_batch(closures, E, E_avg, mat, wo, ns, ng, u, wi_out, weight_out, delta_out):
     """:func:`bsdf_sample` per row: wi_out, weight_out (n, 3), delta_out (n,) bool from u (n, 3)."""
     for i in range(mat.shape[0]):
-        c = closures[closure_row(closures, mat[i])]
+        cr = closure_row(closures, mat[i])
         wi0, wi1, wi2, w0, w1, w2, dl = bsdf_sample(
-            c, E, E_avg, (wo[i, 0], wo[i, 1], wo[i, 2]), (ns[i, 0], ns[i, 1], ns[i, 2]),
+            closures, cr, E, E_avg, (wo[i, 0], wo[i, 1], wo[i, 2]), (ns[i, 0], ns[i, 1], ns[i, 2]),
             (ng[i, 0], ng[i, 1], ng[i, 2]), u[i, 0], u[i, 1], u[i, 2])
         wi_out[i, 0], wi_out[i, 1], wi_out[i, 2] = wi0, wi1, wi2
         weight_out[i, 0], weight_out[i, 1], weight_out[i, 2] = w0, w1, w2
@@ -545,6 +546,6 @@ def sample_batch(closures, E, E_avg, mat, wo, ns, ng, u, wi_out, weight_out, del
 def albedo_batch(closures, mat, wo, ns, out):
     """:func:`diffuse_albedo` per row into out (n, 3)."""
     for i in range(mat.shape[0]):
-        c = closures[closure_row(closures, mat[i])]
-        r, g, b = diffuse_albedo(c, (wo[i, 0], wo[i, 1], wo[i, 2]), (ns[i, 0], ns[i, 1], ns[i, 2]))
+        cr = closure_row(closures, mat[i])
+        r, g, b = diffuse_albedo(closures, cr, (wo[i, 0], wo[i, 1], wo[i, 2]), (ns[i, 0], ns[i, 1], ns[i, 2]))
         out[i, 0], out[i, 1], out[i, 2] = r, g, b

@@ -82,6 +82,7 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
+from . import kernel_array
 from .light_params import (P_ANGLE, P_COLOR, P_COS_HALF, P_FLUX, P_POWER, P_RADIUS, P_SCENE_C, P_SCENE_R, P_SOFT,
                            P_SUN_R, P_TYPE, T_AREA, T_MESH, T_POINT, T_SPOT, T_SUN, T_WORLD, kernel_light,
                            light_poses)
@@ -188,6 +189,7 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, times, u1, u2, u_side, 
     n = o.shape[0]
     typ = int(row[P_TYPE])
     one_pose = poses.shape[0] == 1
+    M0 = poses[0]                            # a static pose: one view, not one per photon
     one_time = times.shape[0] == 1
     cos_half = row[P_COS_HALF]
     omega_c = TWO_PI * (1.0 - cos_half)              # SPOT: the cone's solid angle
@@ -195,7 +197,7 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, times, u1, u2, u_side, 
         cos_half = math.cos(0.5 * row[P_ANGLE])
     scene_c = vec3(row, P_SCENE_C)
     for i in range(n):
-        M = poses[0 if one_pose else i]
+        M = M0 if one_pose else poses[i]
         # ---- POINT / SPOT: uniform sphere / cone, origin on the light's disc or sphere ----
         if typ == T_POINT or typ == T_SPOT:
             if typ == T_POINT:
@@ -247,6 +249,7 @@ def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, times, centers, 
     n = o.shape[0]
     typ = int(row[P_TYPE])
     one_pose = poses.shape[0] == 1
+    M0 = poses[0]                            # a static pose: one view, not one per photon
     one_time = times.shape[0] == 1
     one_c = centers.shape[0] == 1
     scene_c, scene_r = vec3(row, P_SCENE_C), row[P_SCENE_R]
@@ -257,7 +260,7 @@ def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, times, centers, 
         cos_half = math.cos(0.5 * row[P_ANGLE])
         tan_half = math.tan(0.5 * min(row[P_ANGLE], 3.0))
     for i in range(n):
-        M = poses[0 if one_pose else i]
+        M = M0 if one_pose else poses[i]
         x = vec3(centers[0 if one_c else i], 0)
         # ---- SUN / WORLD: a disc upstream, starting outside the whole scene ----
         if typ == T_WORLD or typ == T_SUN:
@@ -361,7 +364,7 @@ def emit_toward(lights, li: int, n: int, times: np.ndarray, rng: np.random.Gener
     o, d, P = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
     if n > 0:
         centers = np.asarray(centers, np.float64)
-        centers = np.ascontiguousarray(centers.reshape(1, 3) if centers.ndim == 1 else np.broadcast_to(centers, (n, 3)))
+        centers = kernel_array(centers.reshape(1, 3) if centers.ndim == 1 else np.broadcast_to(centers, (n, 3)))
         (u1, _, u2), inputs = _prepare(lights, li, n, times, rng, side=False)
         emit_toward_photons(*inputs, centers, float(radius), u1, u2, o, d, P)
     return o, d, P

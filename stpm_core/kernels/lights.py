@@ -111,7 +111,7 @@ def spherical_rect_sample(o, s, ex, ey, u0, u1):
 # ----------------------------------------------------------------------------
 # One sample per light type: (wi0, wi1, wi2, dist, w0, w1, w2)
 # ----------------------------------------------------------------------------
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def _sample_point(prm, M, p, u0, u1):
     """POINT / SPOT of intensity I = color P / (4 pi) W/sr at M's translation.
 
@@ -195,7 +195,7 @@ def _sample_area(prm, M, p, u0, u1):
     return wi[0], wi[1], wi[2], dist, L0 * g, L1 * g, L2 * g
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def _sample_sun(prm, M, u0, u1):
     """SUN of strength S: toward its unit Z axis, uniform in the cone of angular diameter
     ``angle`` (radiance S / Omega, pdf 1 / Omega): weight color S, distance inf.
@@ -218,7 +218,7 @@ def _sample_mesh(M, steps, corners, q, cdf, Le, t, p, u0, u1):
     return wi[0], wi[1], wi[2], dist, Le[j, 0] * g, Le[j, 1] * g, Le[j, 2] * g
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def _sample_world(prm, n, u0, u1):
     """WORLD of radiance L (the row's colour): cosine-distributed about n (pdf cos / pi), weight
     L pi / cos; a zero n: uniform on the sphere, weight 4 pi L.  Distance inf."""
@@ -236,7 +236,7 @@ def _sample_world(prm, n, u0, u1):
 # ----------------------------------------------------------------------------
 # One light sample
 # ----------------------------------------------------------------------------
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def sample_light(prm, M, steps, corners, q, cdf, Le, t, p, n, u0, u1):
     """One sample of light ``prm`` for the shading point p (3-tuple, world) at normalised time t.
 
@@ -339,9 +339,10 @@ def sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, p, times, u, nor
     (0, 0, 0) (WORLD: uniform sphere).  Writes wi_out (n, 3), dist_out (n,), weight_out (n, 3).
     """
     one = poses.shape[0] == 1
+    M0 = poses[0]
     for i in range(p.shape[0]):
         nrm = vec3(normals[i], 0) if use_normals else (0.0, 0.0, 0.0)
-        r = sample_light(prm, poses[0 if one else i], steps, corners, q, cdf, Le, times[i], vec3(p[i], 0), nrm,
+        r = sample_light(prm, M0 if one else poses[i], steps, corners, q, cdf, Le, times[i], vec3(p[i], 0), nrm,
                          u[i, 0], u[i, 1])
         wi_out[i, 0], wi_out[i, 1], wi_out[i, 2] = r[0], r[1], r[2]
         dist_out[i] = r[3]
@@ -353,8 +354,9 @@ def seen_batch(prm, poses, o, d, t_scene, camera_ray, L_out):
     """:func:`seen_light` for rays o + s d (n, 3) before t_scene (n,): writes L_out (n, 3)
     (overwrites; sum over lights in the caller).  poses (k, 4, 4): k = 1 or one per ray."""
     one = poses.shape[0] == 1
+    M0 = poses[0]
     for i in range(o.shape[0]):
-        L = seen_light(prm, poses[0 if one else i], vec3(o[i], 0), vec3(d[i], 0), t_scene[i], camera_ray)
+        L = seen_light(prm, M0 if one else poses[i], vec3(o[i], 0), vec3(d[i], 0), t_scene[i], camera_ray)
         L_out[i, 0], L_out[i, 1], L_out[i, 2] = L[0], L[1], L[2]
 
 

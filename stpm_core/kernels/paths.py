@@ -266,6 +266,7 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
     (n, 3), stmax (n,), and live (n,) the row k it belongs to.
     """
     one = poses.shape[0] == 1
+    M0 = poses[0]                            # a static light's pose: one view, not one per row
     n_live = 0
     for k in range(rows.shape[0]):
         r = rows[k]
@@ -278,11 +279,11 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
             nw = (g0, g1, g2)
         p = (P[r, 0], P[r, 1], P[r, 2])
         # -- Sample the light at this row's time ---------------------------------------
-        wi0, wi1, wi2, dist, w0, w1, w2 = sample_light(prm, poses[0 if one else k], steps, corners, q, cdf, Le,
+        wi0, wi1, wi2, dist, w0, w1, w2 = sample_light(prm, M0 if one else poses[k], steps, corners, q, cdf, Le,
                                                        T[k], p, nw, U[k, 0], U[k, 1])
         # -- BSDF and the unshadowed contribution ------------------------------------------
         ns = (NS[r, 0], NS[r, 1], NS[r, 2])
-        f0, f1, f2 = bsdf_eval(C[r], E, E_avg, wo, (wi0, wi1, wi2), ns, (g0, g1, g2))
+        f0, f1, f2 = bsdf_eval(C, r, E, E_avg, wo, (wi0, wi1, wi2), ns, (g0, g1, g2))
         cosa = abs(ns[0] * wi0 + ns[1] * wi1 + ns[2] * wi2)
         c0 = f0 * cosa * w0
         c1 = f1 * cosa * w1
@@ -333,8 +334,9 @@ def seen_lights_add(prm, poses, O, D, t_scene, camera_ray, L):
     caller skips lights that camera rays may not see (Blender's visible_camera).
     """
     one = poses.shape[0] == 1
+    M0 = poses[0]
     for r in range(O.shape[0]):
-        l0, l1, l2 = seen_light(prm, poses[0 if one else r], (O[r, 0], O[r, 1], O[r, 2]),
+        l0, l1, l2 = seen_light(prm, M0 if one else poses[r], (O[r, 0], O[r, 1], O[r, 2]),
                                 (D[r, 0], D[r, 1], D[r, 2]), t_scene[r], camera_ray)
         L[r, 0] += l0
         L[r, 1] += l1
@@ -360,7 +362,7 @@ def photon_albedo(rows, P, NS, D, C, T, rho, p_q, n_q, t_q, live):
         s0, s1, s2 = NS[r, 0], NS[r, 1], NS[r, 2]
         if s0 * wo[0] + s1 * wo[1] + s2 * wo[2] < 0.0:
             s0, s1, s2 = -s0, -s1, -s2
-        a0, a1, a2 = diffuse_albedo(C[r], wo, (s0, s1, s2))
+        a0, a1, a2 = diffuse_albedo(C, r, wo, (s0, s1, s2))
         rho[k, 0], rho[k, 1], rho[k, 2] = a0, a1, a2
         if a0 > 0.0 or a1 > 0.0 or a2 > 0.0:
             p_q[n_live, 0], p_q[n_live, 1], p_q[n_live, 2] = P[r, 0], P[r, 1], P[r, 2]
@@ -406,7 +408,7 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg,
         r = spec[j]
         wo = (-D[r, 0], -D[r, 1], -D[r, 2])
         g = (NG[r, 0], NG[r, 1], NG[r, 2])
-        wi0, wi1, wi2, w0, w1, w2, is_delta = bsdf_sample(C[r], E, E_avg, wo, (NS[r, 0], NS[r, 1], NS[r, 2]), g,
+        wi0, wi1, wi2, w0, w1, w2, is_delta = bsdf_sample(C, r, E, E_avg, wo, (NS[r, 0], NS[r, 1], NS[r, 2]), g,
                                                           U[j, 0], U[j, 1], U[j, 2])
         if use_beta:
             b0, b1, b2 = beta[r, 0] * w0, beta[r, 1] * w1, beta[r, 2] * w2

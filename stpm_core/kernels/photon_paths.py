@@ -58,7 +58,7 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
             continue
         # -- Sample the next direction from the BSDF ---------------------------------------
         g = (NG[r, 0], NG[r, 1], NG[r, 2])
-        wi0, wi1, wi2, w0, w1, w2, is_delta = bsdf_sample(C[j], E, E_avg, (-D[j, 0], -D[j, 1], -D[j, 2]),
+        wi0, wi1, wi2, w0, w1, w2, is_delta = bsdf_sample(C, j, E, E_avg, (-D[j, 0], -D[j, 1], -D[j, 2]),
                                                           (NS[r, 0], NS[r, 1], NS[r, 2]), g, U[j, 0], U[j, 1], U[j, 2])
         # -- Possibly terminate the path with Russian roulette (by albedo) -------------------
         q = min(max(max(w0, max(w1, w2)), 0.0), 1.0)

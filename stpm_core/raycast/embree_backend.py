@@ -55,6 +55,12 @@ FUSED_AVAILABLE = _K is not None
 _FAR32 = np.float32(1e37)      # embree's "no tfar" value
 _RECASTS = 3                   # re-casts of rays whose refined hit fell inside the guard
 _NO_T = np.zeros(1)            # stands for an absent tmax in the kernels
+
+
+def _writable(a) -> np.ndarray:
+    """a as a C-contiguous writable float64 array: numba compiles a kernel once per argument type, and
+    a read-only view (np.broadcast_to of an inf tmax or of a still's time) is another type."""
+    return np.require(a, np.float64, ("C", "W"))
 _SCRATCH_ROWS = 8192           # rows of the per-thread ray buffers (the caster's block size)
 _SLACK = 4.0                   # deforming buckets: search margin in units of the shape tolerance
 
@@ -287,7 +293,7 @@ class StaticPart:
         m = o.shape[0]
         em = self.mesh
         has_tmax = tmax is not None
-        tm = tmax if has_tmax else _NO_T
+        tm = _writable(tmax) if has_tmax else _NO_T
         o32, d32, far32, again = self._scratch(m)
         _K.guard_rays32(o, d, tm, has_tmax, guard, em.centre, tmin, o32, d32, far32)
         if em.empty:
@@ -324,6 +330,7 @@ class StaticPart:
         m = o.shape[0]
         em = self.mesh
         o32, d32, far32, _ = self._scratch(m)
+        tmax = _writable(tmax)
         _K.guard_rays32(o, d, tmax, True, guard, em.centre, tmin, o32, d32, far32)
         if em.empty:
             blocked[:] = False
@@ -493,7 +500,7 @@ class RigidGroup:
         ray, j, o64, d64, o32, d32, far32 = (b[:cap] for b in buf)
         if not full:
             o64, d64 = o64[:0], d64[:0]
-        c = np.ascontiguousarray
+        c = _writable
         o, d, times, t0, t1 = c(o), c(d), c(times), c(t0), c(t1)
         start = 0
         while start < m:
