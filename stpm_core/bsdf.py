@@ -38,7 +38,7 @@ import numpy as np
 
 from .kernels import bsdf as _k
 from .kernels import kernel_array
-from .kernels.closure import pack_materials
+from .kernels.closure import C_EMIT, C_NONDELTA, pack_materials
 
 __all__ = ["MaterialTable", "bsdf_eval", "bsdf_pdf", "bsdf_sample", "diffuse_albedo",
            "has_nondelta", "emission"]
@@ -173,12 +173,13 @@ def diffuse_albedo(table: MaterialTable, mat, wo, ns) -> np.ndarray:
 
 
 def has_nondelta(table: MaterialTable, mat) -> np.ndarray:
-    """(n,) bool: the material has a lobe that is not a delta (diffuse or rough), i.e. shade / store photons here."""
+    """(n,) bool: the material has a lobe that is not a delta (diffuse or rough), i.e. shade / store photons here
+    (the closure's ``C_NONDELTA`` flag, what the kernels read)."""
     mat = np.asarray(mat, dtype=np.int64)
-    return table.nondelta[np.where(mat < 0, table.size, mat)]
+    return table.closures[np.where(mat < 0, table.size, mat), C_NONDELTA] > 0.0
 
 
 def emission(table: MaterialTable, mat) -> np.ndarray:
     """Emitted radiance (n, 3) W/(m^2 sr), both sides; 0 for misses (mat = -1)."""
     mat = np.asarray(mat, dtype=np.int64)
-    return table.emission[np.where(mat < 0, table.size, mat)]
+    return table.closures[np.where(mat < 0, table.size, mat), C_EMIT:C_EMIT + 3]

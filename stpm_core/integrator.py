@@ -119,7 +119,6 @@ _c = 0
 for _name, _nc, _ in PASSES:
     _COL[_name] = (_c, _c + _nc)
     _c += _nc
-N_CHANNELS = _c
 _NO_IDX = np.zeros(0, np.int64)
 _NO_U = np.zeros(0)
 _NO_ROWS3 = np.zeros((0, 3))
@@ -146,11 +145,6 @@ def _compact_layout(ctx) -> dict[str, tuple[int, int]]:
         out[name] = (c, c + k)
         c += k
     return out
-
-
-def _pass_views(V: np.ndarray) -> dict[str, np.ndarray]:
-    """Pass name -> (n, C) view of the per-sample matrix V (n, 20)."""
-    return {name: V[:, a:b] for name, (a, b) in _COL.items()}
 
 
 def _first_pose(a: np.ndarray) -> np.ndarray:
