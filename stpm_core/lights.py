@@ -391,7 +391,7 @@ class LightSet:
     def sample_direct(self, li: int, p: np.ndarray, times: np.ndarray, u: np.ndarray,
                       normals: np.ndarray | None = None):
         """Sample light li as seen from points p at their times (the kernel
-        :func:`stpm_core.kernels.lights.sample_light` per row).
+        :func:`stpm_core.kernels.lights.sample_light_rows`).
 
         Parameters
         ----------

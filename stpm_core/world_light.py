@@ -12,7 +12,7 @@ the other entries.  Units and equations (docs/lights-and-materials.md, "World"):
   wi cosine-distributed about n, ``pdf = cos / pi``, so ``weight = L pi / cos``
   and the integrator's ``f |cos| weight`` is ``f pi L`` times visibility (a
   shadow ray to infinity).  Without a normal: uniform on the sphere,
-  ``weight = 4 pi L``.  Computed by ``kernels.lights.sample_light`` (through
+  ``weight = 4 pi L``.  Computed by ``kernels.lights.sample_light_rows`` (through
   ``LightSet.sample_direct``), like every other light entry.
 * Photons: the flux crossing a disc of radius R (the scene's bounding sphere)
   from every direction is ``Phi = 4 pi * pi R^2 * L``.  A photon picks a

@@ -4,7 +4,7 @@
 * :mod:`.bsdf` -- BSDF evaluation, pdf and sampling per hit;
 * :mod:`.lights` -- next-event light sampling and light shapes seen along rays;
 * :mod:`.emission` -- photon emission per light;
-* :mod:`.sampling` -- scalar helpers inlined into the other kernels (chiefly :mod:`.lights` and
+* :mod:`.sampling` -- scalar helpers the other kernels call (chiefly :mod:`.lights` and
   :mod:`.emission`): vectors, warps, frames, light shapes (area shape, mesh-light points, spot mask);
 * :mod:`.light_params` -- lights as data: one parameter row per light, its poses and a mesh
   light's triangles, packed once per LightSet (plain numpy, no kernels);
@@ -19,9 +19,9 @@ Every module here with kernels (all but :mod:`.light_params`) takes ``njit`` fro
 ``render.render``, ``integrator.trace_image`` and ``photons.trace.trace_photon_paths``) turns
 "numba unavailable" into one :class:`KernelsUnavailable` line: there is no numpy fallback.  The
 numpy code these kernels replaced is the test oracles in ``tests/oracles/``.  numba's on-disk cache
-of a kernel is invalidated only by edits of the kernel's own file, not of what it inlines from
-other modules: after editing any module here, run ``find stpm_core -name '*.nb[ic]' -delete``
-(docs/architecture.md, "Compiled kernels").
+of a kernel is invalidated only by edits of the kernel's own file, not of what it calls from
+other modules: ``numba_probe.invalidate_stale_caches`` (run when ``stpm_core`` is imported) touches
+every kernel source when any of them changed (docs/architecture.md, "Compiled kernels").
 """
 from __future__ import annotations
 

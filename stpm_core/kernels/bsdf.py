@@ -26,13 +26,14 @@ sampling with pdf G1(wo) D / (4 cos_o).  Glass: wo on ng's side is entering
 ns onto ng's side; a reflection lobe is 0 unless wi is above both, a
 refraction unless wi is below ng.
 
-Per-hit functions (inlined into the kernels that call them):
+Per-hit functions (compiled once; the kernels call them):
 
 * :func:`bsdf_eval_pdf` -- f (1/sr) of the non-delta lobes and the
   mixture solid-angle pdf ``pdf_nd = sum_j p_j pdf_j(wi)`` with which
   :func:`bsdf_sample` returns wi through a non-delta lobe (for MIS);
 * :func:`bsdf_eval` -- the same f; materials without a rough lobe take the
-  short form ``w_base (1 - F_coat(wo)) base_color / pi`` (equal to rounding);
+  short form :func:`bsdf_eval_smooth`, ``w_base (1 - F_coat(wo)) base_color / pi`` (equal to
+  rounding), which calls nothing (``paths.nee_light`` uses it in a loop of its own);
 * :func:`bsdf_sample` -- wi from the lobe u0 picks (probability p_j
   proportional to an albedo estimate at wo) and the direction u1, u2 pick;
   weight = f_nd |cos| / pdf_nd for a non-delta lobe, throughput / p_j for a
@@ -65,13 +66,12 @@ from .closure import (C_ALPHA, C_BASE, C_COAT, C_IOR, C_ROUGH_LOBE, C_ROUGHNESS,
                       C_W_GLASS, C_W_METAL, closure_row)
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS",
-           "bsdf_eval_pdf", "bsdf_eval", "bsdf_sample", "diffuse_albedo", "fresnel_dielectric",
+           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_sample", "diffuse_albedo", "fresnel_dielectric",
            "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch"]
 
 DIFFUSE, COAT, METAL, GLASS_R, GLASS_T, METAL_MS = range(6)
 
 _JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
-_JIT_INLINE = dict(_JIT, inline="always")
 _EPS = 1e-9
 _PI = math.pi
 _INV_PI = 1.0 / math.pi
@@ -83,21 +83,21 @@ _ALPHA_STEP = 1.0 / 31.0        # np.linspace's step: grid point k is k * step (
 # ----------------------------------------------------------------------------
 # Vectors and frames
 # ----------------------------------------------------------------------------
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _normalized(v, floor):
     """v / max(|v|, floor) (a division, as numpy's ``v /= norm``)."""
     n = max(math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), floor)
     return (v[0] / n, v[1] / n, v[2] / n)
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _reflect(w, n):
     """2 (w . n) n - w."""
     d = 2.0 * dot(w, n)
     return (d * n[0] - w[0], d * n[1] - w[1], d * n[2] - w[2])
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _to_frame(loc, t, b, n):
     """loc_x t + loc_y b + loc_z n."""
     return (loc[0] * t[0] + loc[1] * b[0] + loc[2] * n[0],
@@ -105,7 +105,7 @@ def _to_frame(loc, t, b, n):
             loc[0] * t[2] + loc[1] * b[2] + loc[2] * n[2])
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _oriented(wo, ns, ng):
     """Normals flipped toward wo: (ns', ng', entering = wo on ng's side)."""
     entering = dot(wo, ng) >= 0.0
@@ -118,7 +118,7 @@ def _oriented(wo, ns, ng):
 # ----------------------------------------------------------------------------
 # Fresnel
 # ----------------------------------------------------------------------------
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def fresnel_dielectric(cos_i, eta):
     """Unpolarised dielectric reflectance F_diel for cos_i (clamped to [0, 1]) and eta = n_t / n_i; 1 under TIR."""
     cos_i = min(max(cos_i, 0.0), 1.0)
@@ -131,7 +131,7 @@ def fresnel_dielectric(cos_i, eta):
     return 0.5 * (r_s * r_s + r_p * r_p)
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _fresnel_schlick(C, cr, cos):
     """Schlick(F0 = base colour of closure row C[cr], cos) = F0 + (1 - F0)(1 - cos)^5, an RGB tuple."""
     m = math.pow(min(max(1.0 - cos, 0.0), 1.0), 5.0)       # (numpy's ** 5 is pow; x*x*x*x*x rounds differently)
@@ -142,7 +142,7 @@ def _fresnel_schlick(C, cr, cos):
 # ----------------------------------------------------------------------------
 # GGX
 # ----------------------------------------------------------------------------
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _ggx_D(cos_h, alpha):
     """GGX normal distribution D(h) per sr of microfacet normals (cos_h = h . n)."""
     if not cos_h > 0:
@@ -153,7 +153,7 @@ def _ggx_D(cos_h, alpha):
     return a2 / max(_PI * denom * denom, 1e-300)
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _ggx_lambda(cos, alpha):
     """Smith Lambda(w) for GGX: (sqrt(1 + alpha^2 tan^2) - 1) / 2."""
     c2 = max(cos * cos, 1e-300)
@@ -161,7 +161,7 @@ def _ggx_lambda(cos, alpha):
     return 0.5 * (math.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _ggx_sample_vndf(wx, wy, wz, alpha, u0, u1):
     """Visible-normal sample h (local, unit) for the local view direction (wx, wy, wz), wz > 0 (Heitz 2018)."""
     # Stretch the view direction to the hemisphere configuration
@@ -239,7 +239,7 @@ def ggx_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
         return _TABLES
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def ggx_albedo(E, mu, alpha):
     """E(mu, alpha): bilinear look-up in the table E (32, 32), clamped at the edges."""
     x = min(max(mu * 32 - 0.5, 0.0), 31 - 1e-9)
@@ -252,12 +252,12 @@ def ggx_albedo(E, mu, alpha):
             + (1 - fx) * fy * E[i, j + 1] + fx * fy * E[i + 1, j + 1])
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _alpha_grid(k):
     return 1.0 if k == _N_ALPHA - 1 else k * _ALPHA_STEP
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def ggx_albedo_avg(E_avg, alpha):
     """E_avg(alpha): linear interpolation on the alpha grid k / 31 (``np.interp``'s formula, clamped)."""
     last = _N_ALPHA - 1
@@ -280,7 +280,7 @@ def ggx_albedo_avg(E_avg, alpha):
 # ----------------------------------------------------------------------------
 # The hit: oriented normals, Fresnel at wo, lobe selection probabilities
 # ----------------------------------------------------------------------------
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _hit(C, cr, E, E_avg, wo, ns, ng):
     """Everything about closure row C[cr] at wo that does not depend on wi.
 
@@ -338,7 +338,7 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
 # ----------------------------------------------------------------------------
 # Evaluation: f and pdf of the non-delta lobes
 # ----------------------------------------------------------------------------
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _eval_pdf_hit(C, cr, E, hit, wo, wi):
     """(f0, f1, f2, pdf) of the non-delta lobes at wi for the hit of :func:`_hit`."""
     ns, ng, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, p_lobe = hit
@@ -398,13 +398,21 @@ def bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, ng):
     return _eval_pdf_hit(C, cr, E, _hit(C, cr, E, E_avg, wo, ns, ng), wo, wi)
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def bsdf_eval(C, cr, E, E_avg, wo, wi, ns, ng):
-    """(f0, f1, f2): f (1/sr) of the non-delta lobes; without a rough lobe, the diffuse lobe
-    w_base (1 - F_coat(wo)) base_color / pi directly (no hit set-up)."""
+    """(f0, f1, f2): f (1/sr) of the non-delta lobes: :func:`bsdf_eval_pdf` where the closure has a
+    rough lobe, else :func:`bsdf_eval_smooth`."""
     if C[cr, C_ROUGH_LOBE] > 0:
         f0, f1, f2, _ = bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, ng)
         return f0, f1, f2
+    return bsdf_eval_smooth(C, cr, wo, wi, ns, ng)
+
+
+@njit(**_JIT)
+def bsdf_eval_smooth(C, cr, wo, wi, ns, ng):
+    """(f0, f1, f2) of a closure without a rough lobe (``C[cr, C_ROUGH_LOBE] == 0``): the diffuse
+    lobe w_base (1 - F_coat(wo)) base_color / pi directly (no hit set-up, no call: loops that
+    call it per row stay free of the compiled rough-lobe code, see ``paths.nee_light``)."""
     nsf, ngf, _ = _oriented(wo, ns, ng)
     scale = 0.0
     if dot(wi, nsf) > 0 and dot(wi, ngf) > 0:
@@ -496,7 +504,7 @@ def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
 # ----------------------------------------------------------------------------
 # Other queries
 # ----------------------------------------------------------------------------
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def diffuse_albedo(C, cr, wo, ns):
     """(r, g, b) = w_base (1 - specular F_diel(|wo . ns|, ior)) base_color: the diffuse reflectance
     after the coat (photon radiance = diffuse_albedo / pi * irradiance); ns may face either way."""

@@ -59,7 +59,7 @@ C_PROGRAM = 20
 N_CLOSURE = 21
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def finish_closure(c):
     """Fill the derived columns of closure row c (N_CLOSURE,) from its primary columns, in place."""
     metallic = c[C_METALLIC]
@@ -111,7 +111,7 @@ def pack_materials(materials) -> np.ndarray:
     return rows
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")      # called with int32 and int64 ids: one copy each otherwise
 def closure_row(closures, m):
     """Row index of material id m (-1, a miss, reads the inert last row)."""
     return closures.shape[0] - 1 if m < 0 else m

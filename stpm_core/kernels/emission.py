@@ -86,7 +86,7 @@ from . import kernel_array
 from .light_params import (P_ANGLE, P_COLOR, P_COS_HALF, P_FLUX, P_POWER, P_RADIUS, P_SCENE_C, P_SCENE_R, P_SOFT,
                            P_SUN_R, P_TYPE, T_AREA, T_MESH, T_POINT, T_SPOT, T_SUN, T_WORLD, kernel_light,
                            light_poses)
-from .sampling import (JIT, JIT_INLINE, TWO_PI, add, area_point, area_shape, axis_or_z, basis, column,
+from .sampling import (JIT, TWO_PI, add, area_point, area_shape, axis_or_z, basis, column,
                        concentric_disk, cosine_hemisphere, dot, edot, intensity, light_axis, madd, mesh_point, neg,
                        normalize, one_minus_cos_from_sin2, plane_point, scale, spot_attenuation, sub, to_world,
                        uniform_cone, uniform_sphere, vec3)
@@ -154,7 +154,7 @@ def _world_photon(row, ce, R, n, u1, u2, i):
     return o, d, (g * row[P_COLOR] / n, g * row[P_COLOR + 1] / n, g * row[P_COLOR + 2] / n)
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _store(o_out, d_out, P_out, i, o, d, P):
     """Row i of the three outputs."""
     o_out[i, 0], o_out[i, 1], o_out[i, 2] = o

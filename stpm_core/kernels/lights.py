@@ -4,10 +4,11 @@ The one implementation of what :meth:`stpm_core.lights.LightSet.sample_direct` r
 every kind of light entry (units and equations: docs/lights-and-materials.md; the numpy
 implementation it replaced is the test oracle ``tests/oracles/lights_numpy.py``):
 
-* :func:`sample_light` -- one light sample for one shading point: unit direction toward the
-  light, distance (inf for SUN / WORLD) and weight, the incident-radiance estimator
+* :func:`sample_light_rows` -- one light sample for each of many shading points: unit direction
+  toward the light, distance (inf for SUN / WORLD) and weight, the incident-radiance estimator
   ``L_e G / pdf`` W m^-2 sr^-1 (reflected radiance = f |cos(ns, wi)| weight, times visibility);
-  the camera-path kernels (:mod:`.paths`) call it per row;
+  the light type is chosen once per call, outside the loop; the camera-path kernels
+  (:mod:`.paths`) call it once per light and bounce;
 * :func:`seen_light` -- radiance of the light's shape hit by one ray (AREA lights, one-sided;
   POINT / SPOT spheres of radius > 0), as ``integrator._seen_lights`` for one light;
 * :func:`spherical_rect_sample` -- a point of a rectangle uniform in the solid angle it subtends;
@@ -37,12 +38,12 @@ import numpy as np
 from ..numba_probe import njit
 from .light_params import P_ANGLE, P_COLOR, P_DEAD, P_POWER, P_RADIUS, P_SOFT, P_TYPE, T_AREA, T_MESH, T_POINT, \
     T_SPOT, T_SUN, T_WORLD
-from .sampling import (JIT, JIT_INLINE, TWO_PI, area_point, area_shape, axis_or_z, clip, column, concentric_disk,
+from .sampling import (JIT, TWO_PI, area_point, area_shape, axis_or_z, clip, column, concentric_disk,
                        cosine_hemisphere, cross, dot, edot, intensity, light_axis, madd, mesh_point, neg, normalize,
                        one_minus_cos_from_sin2, scale, sign, spot_attenuation, sub, to_world, uniform_cone,
                        uniform_sphere, unit, vec3)
 
-__all__ = ["sample_light", "seen_light", "sample_direct_batch", "seen_batch", "spherical_rect_sample",
+__all__ = ["sample_light_rows", "seen_light", "sample_direct_batch", "seen_batch", "spherical_rect_sample",
            "spherical_rect_batch"]
 
 
@@ -111,7 +112,7 @@ def spherical_rect_sample(o, s, ex, ey, u0, u1):
 # ----------------------------------------------------------------------------
 # One sample per light type: (wi0, wi1, wi2, dist, w0, w1, w2)
 # ----------------------------------------------------------------------------
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _sample_point(prm, M, p, u0, u1):
     """POINT / SPOT of intensity I = color P / (4 pi) W/sr at M's translation.
 
@@ -195,7 +196,7 @@ def _sample_area(prm, M, p, u0, u1):
     return wi[0], wi[1], wi[2], dist, L0 * g, L1 * g, L2 * g
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _sample_sun(prm, M, u0, u1):
     """SUN of strength S: toward its unit Z axis, uniform in the cone of angular diameter
     ``angle`` (radiance S / Omega, pdf 1 / Omega): weight color S, distance inf.
@@ -218,7 +219,7 @@ def _sample_mesh(M, steps, corners, q, cdf, Le, t, p, u0, u1):
     return wi[0], wi[1], wi[2], dist, Le[j, 0] * g, Le[j, 1] * g, Le[j, 2] * g
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def _sample_world(prm, n, u0, u1):
     """WORLD of radiance L (the row's colour): cosine-distributed about n (pdf cos / pi), weight
     L pi / cos; a zero n: uniform on the sphere, weight 4 pi L.  Distance inf."""
@@ -234,40 +235,66 @@ def _sample_world(prm, n, u0, u1):
 
 
 # ----------------------------------------------------------------------------
-# One light sample
+# Light samples for many shading points
 # ----------------------------------------------------------------------------
-@njit(**JIT_INLINE)
-def sample_light(prm, M, steps, corners, q, cdf, Le, t, p, n, u0, u1):
-    """One sample of light ``prm`` for the shading point p (3-tuple, world) at normalised time t.
+@njit(**JIT)
+def _put(S, k, r):
+    for j in range(7):
+        S[k, j] = r[j]
 
-    prm (N_LIGHT_PARAMS,): the light's parameter row; M (4, 4): its object-to-world matrix at this
-    row's time (MESH: its instance's, identity for a static one; WORLD: identity; scale is removed
-    where the light only needs a direction); steps (K,), corners (K, F, 3, 3), q, cdf (F,),
-    Le (F, 3): a MESH light's triangles (``light_params.mesh_arrays``; empty for other lights);
-    n (3-tuple): the geometric normal turned toward the viewer, read by WORLD only (cosine
-    sampling about it; (0, 0, 0): uniform sphere); u0, u1: the row's two uniforms in [0, 1).
 
-    Returns (wi0, wi1, wi2, dist, w0, w1, w2): the unit direction from p toward the light sample,
-    its distance (inf for SUN / WORLD; shadow rays test [eps, dist)) and the weight W m^-2 sr^-1,
-    0 where the light gives nothing (behind an area light, outside a spot, a dead light).
+@njit(**JIT)
+def _toward(NG, D, r):
+    """Row r's geometric normal turned toward wo = -D[r] (the WORLD's cosine-sampling axis)."""
+    g0, g1, g2 = NG[r, 0], NG[r, 1], NG[r, 2]
+    if -D[r, 0] * g0 - D[r, 1] * g1 - D[r, 2] * g2 < 0.0:
+        return -g0, -g1, -g2
+    return g0, g1, g2
+
+
+@njit(**JIT)
+def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, rows, P, NG, D, T, U, S):
+    """One sample of light ``prm`` for each shading row k, the point p = P[rows[k]] (world) at
+    normalised time T[k] with uniforms U[k] (2,); writes S[k] = (wi0, wi1, wi2, dist, w0, w1, w2).
+
+    prm (N_LIGHT_PARAMS,): the light's parameter row; poses (K, 4, 4): its object-to-world
+    matrices, row k reads poses[0] when K = 1 else poses[k] (MESH: its instance's, identity for a
+    static one; WORLD: identity); steps (K,), corners (K, F, 3, 3), q, cdf (F,), Le (F, 3): a MESH
+    light's triangles (``light_params.mesh_arrays``; empty for other lights).  NG, D (m, 3): the
+    rows' geometric normals and ray directions, read by WORLD only (cosine sampling about ng turned
+    toward wo = -d; a zero ng: uniform sphere).  rows (n,) into P, NG, D; T (n,), U (n, 2), S (n, 7).
+
+    wi: unit direction from p toward the light sample; dist: its distance (inf for SUN / WORLD;
+    shadow rays test [eps, dist)); w: the weight W m^-2 sr^-1, 0 where the light gives nothing
+    (behind an area light, outside a spot, a dead light).  The light type is chosen once, outside
+    the loops: each loop body is one sampler, with no branch or call it does not need.
     """
     typ = int(prm[P_TYPE])
+    one = poses.shape[0] == 1
+    n = rows.shape[0]
     if typ == T_POINT or typ == T_SPOT:
-        r = _sample_point(prm, M, p, u0, u1)
+        for k in range(n):
+            _put(S, k, _sample_point(prm, poses[0 if one else k], vec3(P[rows[k]], 0), U[k, 0], U[k, 1]))
     elif typ == T_AREA:
-        r = _sample_area(prm, M, p, u0, u1)
+        for k in range(n):
+            _put(S, k, _sample_area(prm, poses[0 if one else k], vec3(P[rows[k]], 0), U[k, 0], U[k, 1]))
     elif typ == T_SUN:
-        r = _sample_sun(prm, M, u0, u1)
+        for k in range(n):
+            _put(S, k, _sample_sun(prm, poses[0 if one else k], U[k, 0], U[k, 1]))
     elif typ == T_MESH:
-        r = _sample_mesh(M, steps, corners, q, cdf, Le, t, p, u0, u1)
+        for k in range(n):
+            _put(S, k, _sample_mesh(poses[0 if one else k], steps, corners, q, cdf, Le, T[k], vec3(P[rows[k]], 0),
+                                    U[k, 0], U[k, 1]))
     elif typ == T_WORLD:
-        r = _sample_world(prm, n, u0, u1)
+        for k in range(n):
+            _put(S, k, _sample_world(prm, _toward(NG, D, rows[k]), U[k, 0], U[k, 1]))
     else:
-        r = (0.0, 0.0, 1.0, np.inf, 0.0, 0.0, 0.0)   # (no other type codes)
+        for k in range(n):
+            _put(S, k, (0.0, 0.0, 1.0, np.inf, 0.0, 0.0, 0.0))     # (no other type codes)
     if prm[P_DEAD] != 0.0:
         # no emitting direction at any key (zero Z scale, zero area): nothing
-        return r[0], r[1], r[2], r[3], 0.0, 0.0, 0.0
-    return r
+        for k in range(n):
+            S[k, 4] = S[k, 5] = S[k, 6] = 0.0
 
 
 # ----------------------------------------------------------------------------
@@ -332,21 +359,20 @@ def seen_light(prm, M, o, d, t_scene, camera_ray):
 @njit(**JIT)
 def sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, p, times, u, normals, use_normals,
                         wi_out, dist_out, weight_out):
-    """:func:`sample_light` for rows i of p (n, 3) at times (n,) with uniforms u (n, 2).
+    """:func:`sample_light_rows` for every row i of p (n, 3) at times (n,) with uniforms u (n, 2).
 
     poses (k, 4, 4): the light's matrices, row i reads poses[0] when k = 1 else poses[i].
-    normals (n, 3): read when use_normals (WORLD cosine sampling), else every row gets
+    normals (n, 3): read when use_normals (WORLD cosine sampling about them), else every row gets
     (0, 0, 0) (WORLD: uniform sphere).  Writes wi_out (n, 3), dist_out (n,), weight_out (n, 3).
     """
-    one = poses.shape[0] == 1
-    M0 = poses[0]
-    for i in range(p.shape[0]):
-        nrm = vec3(normals[i], 0) if use_normals else (0.0, 0.0, 0.0)
-        r = sample_light(prm, M0 if one else poses[i], steps, corners, q, cdf, Le, times[i], vec3(p[i], 0), nrm,
-                         u[i, 0], u[i, 1])
-        wi_out[i, 0], wi_out[i, 1], wi_out[i, 2] = r[0], r[1], r[2]
-        dist_out[i] = r[3]
-        weight_out[i, 0], weight_out[i, 1], weight_out[i, 2] = r[4], r[5], r[6]
+    n = p.shape[0]
+    ng = normals if use_normals else np.zeros((n, 3))
+    S = np.empty((n, 7))
+    sample_light_rows(prm, poses, steps, corners, q, cdf, Le, np.arange(n), p, ng, -ng, times, u, S)
+    for i in range(n):
+        wi_out[i, 0], wi_out[i, 1], wi_out[i, 2] = S[i, 0], S[i, 1], S[i, 2]
+        dist_out[i] = S[i, 3]
+        weight_out[i, 0], weight_out[i, 1], weight_out[i, 2] = S[i, 4], S[i, 5], S[i, 6]
 
 
 @njit(**JIT)

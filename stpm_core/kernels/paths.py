@@ -17,7 +17,7 @@ equations with these names):
   surface emission, Depth / Normal / coverage of the first hit, and the rows to
   shade (non-delta lobe) and to continue (delta lobe);
 * :func:`nee_light` -- next-event estimation of one light at the shaded rows:
-  the light sample (:func:`stpm_core.kernels.lights.sample_light`, every light
+  the light samples (:func:`stpm_core.kernels.lights.sample_light_rows`, every light
   type), the BSDF (:func:`stpm_core.kernels.bsdf.bsdf_eval`), the unshadowed
   contribution and the shadow rays where it is positive; then
   :func:`nee_accumulate` adds the unblocked ones;
@@ -43,9 +43,9 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .bsdf import bsdf_eval, bsdf_sample, diffuse_albedo
-from .closure import (C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, closure_row)
-from .lights import sample_light, seen_light
+from .bsdf import bsdf_eval_pdf, bsdf_eval_smooth, bsdf_sample, diffuse_albedo
+from .closure import (C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, closure_row)
+from .lights import sample_light_rows, seen_light
 from .sampling import offset_origin
 
 __all__ = ["camera_tile", "camera_rays", "gather_closures", "classify_hits", "nee_light", "nee_accumulate",
@@ -53,8 +53,6 @@ __all__ = ["camera_tile", "camera_rays", "gather_closures", "classify_hits", "ne
            "pixel_sums", "tile_finish"]
 
 _JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
-# Small helpers called per row: inlined into the kernels (a call with many array arguments is costly)
-_JIT_INLINE = dict(_JIT, inline="always")
 _INV_PI = 1.0 / np.pi
 
 
@@ -226,7 +224,7 @@ def classify_hits(t, C, world, add_world, idx, use_idx, beta, use_beta, V, c_emi
     return n_hit, n_sh, n_spec, n_emit
 
 
-@njit(**_JIT_INLINE)
+@njit(**_JIT)
 def _add_row(dst, r, idx, use_idx, beta, use_beta, val, k):
     """dst[idx[r]] += beta[r] * val[k] (3 channels; idx / beta optional)."""
     i = idx[r] if use_idx else r
@@ -258,32 +256,40 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
     origin offset (scene units).
 
     Per row k (hit r = rows[k]), with wo = -D[r]: (wi, dist, weight) =
-    ``sample_light`` (the WORLD samples cosine directions about ng turned
-    toward wo), f = ``bsdf_eval``(C[r], wo, wi), contrib[k] = f |ns . wi|
+    ``lights.sample_light_rows`` (the WORLD samples cosine directions about ng
+    turned toward wo), f = ``bsdf_eval``(C[r], wo, wi), contrib[k] = f |ns . wi|
     weight.  Where it is positive, a shadow ray from p offset by EPS[r] along
     ng to wi's side, aimed at the light point, stopping a margin short of it
     (emissive triangles are geometry the shadow ray must not reach): so, sd
     (n, 3), stmax (n,), and live (n,) the row k it belongs to.
+
+    Three loops, each with only the code its rows need (a loop that contains a call it never
+    takes still runs about twice slower per row; docs/rendering.md "NEE cost"): the light
+    samples (one sampler, chosen once per call), the mixture BSDF of rows whose closure has a
+    rough lobe, then the smooth BSDF, contribution and shadow ray of every row.
     """
-    one = poses.shape[0] == 1
-    M0 = poses[0]                            # a static light's pose: one view, not one per row
-    n_live = 0
-    for k in range(rows.shape[0]):
+    n = rows.shape[0]
+    S = np.empty((n, 7))
+    sample_light_rows(prm, poses, steps, corners, q, cdf, Le, rows, P, NG, D, T, U, S)
+    # -- The BSDF of rows with a rough lobe: the compiled mixture (bsdf_eval_pdf) -------------
+    F = np.empty((n, 3))
+    for k in range(n):
         r = rows[k]
-        g0, g1, g2 = NG[r, 0], NG[r, 1], NG[r, 2]
-        wo = (-D[r, 0], -D[r, 1], -D[r, 2])
-        # Normal about which the world samples: ng turned toward wo
-        if wo[0] * g0 + wo[1] * g1 + wo[2] * g2 < 0.0:
-            nw = (-g0, -g1, -g2)
-        else:
-            nw = (g0, g1, g2)
-        p = (P[r, 0], P[r, 1], P[r, 2])
-        # -- Sample the light at this row's time ---------------------------------------
-        wi0, wi1, wi2, dist, w0, w1, w2 = sample_light(prm, M0 if one else poses[k], steps, corners, q, cdf, Le,
-                                                       T[k], p, nw, U[k, 0], U[k, 1])
-        # -- BSDF and the unshadowed contribution ------------------------------------------
+        if C[r, C_ROUGH_LOBE] > 0:
+            f0, f1, f2, _ = bsdf_eval_pdf(C, r, E, E_avg, (-D[r, 0], -D[r, 1], -D[r, 2]), (S[k, 0], S[k, 1], S[k, 2]),
+                                          (NS[r, 0], NS[r, 1], NS[r, 2]), (NG[r, 0], NG[r, 1], NG[r, 2]))
+            F[k, 0], F[k, 1], F[k, 2] = f0, f1, f2
+    n_live = 0
+    for k in range(n):
+        r = rows[k]
+        wi0, wi1, wi2, dist, w0, w1, w2 = S[k, 0], S[k, 1], S[k, 2], S[k, 3], S[k, 4], S[k, 5], S[k, 6]
+        g = (NG[r, 0], NG[r, 1], NG[r, 2])
         ns = (NS[r, 0], NS[r, 1], NS[r, 2])
-        f0, f1, f2 = bsdf_eval(C, r, E, E_avg, wo, (wi0, wi1, wi2), ns, (g0, g1, g2))
+        # -- BSDF and the unshadowed contribution ------------------------------------------
+        if C[r, C_ROUGH_LOBE] > 0:
+            f0, f1, f2 = F[k, 0], F[k, 1], F[k, 2]
+        else:
+            f0, f1, f2 = bsdf_eval_smooth(C, r, (-D[r, 0], -D[r, 1], -D[r, 2]), (wi0, wi1, wi2), ns, g)
         cosa = abs(ns[0] * wi0 + ns[1] * wi1 + ns[2] * wi2)
         c0 = f0 * cosa * w0
         c1 = f1 * cosa * w1
@@ -292,8 +298,9 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
         if not (c0 > 0.0 or c1 > 0.0 or c2 > 0.0):
             continue
         # -- Shadow ray toward the light point --------------------------------------------------
+        p = (P[r, 0], P[r, 1], P[r, 2])
         eps = EPS[r]
-        o0, o1, o2 = offset_origin(p, (g0, g1, g2), eps, (wi0, wi1, wi2))
+        o0, o1, o2 = offset_origin(p, g, eps, (wi0, wi1, wi2))
         so[n_live, 0], so[n_live, 1], so[n_live, 2] = o0, o1, o2
         if np.isfinite(dist):
             v0, v1, v2 = p[0] + dist * wi0 - o0, p[1] + dist * wi1 - o1, p[2] + dist * wi2 - o2

@@ -24,14 +24,19 @@ Conventions
   results by an ulp.
 * Light helpers read a light's parameter row ``prm`` (columns ``P_*`` of :mod:`.light_params`).
 
-Compile policy (measured 2026-12-01, docs/rendering.md "Compile time"): the small vector
-helpers are inlined into their callers at numba's IR level (``JIT_INLINE``); the large per-hit
-functions (``area_shape``, ``mesh_point`` here, one light type's sample in :mod:`.lights`, the
-BSDF's eval / sample in :mod:`.bsdf`) are ordinary compiled functions (``JIT``) that numba
-compiles once and links into every kernel calling them, which cut the cold compile of a render
-to about a quarter.  numba's on-disk cache of a kernel is invalidated by edits of the kernel's
-own file only, not of the functions it calls from other files: after editing any kernel module,
-delete the caches of all of them (``find stpm_core -name '*.nb[ic]' -delete``).
+Compile policy (measured 2026-12-01, docs/rendering.md "Compile time"): helpers are ordinary
+compiled functions (``JIT``), compiled once and linked into each kernel that calls it; LLVM
+inlines the small ones there (checked: no call is left in the machine code), so numba-level
+inlining (``inline="always"``) bought no speed and cost compile time: without it a render's cold
+compile is about 18 % shorter (64.6 -> 53.0 s, one run each) at the same tracer speed and
+bit-identical images.  The exceptions (``JIT_INLINE``) are the indexing helpers called with
+constant indices (``vec3``, ``column``, ``_mesh_corner``; and ``closure.closure_row``, called
+with int32 and int64 ids): compiled on their own, numba would specialise them once per literal.  Big per-hit functions (the BSDF's eval / sample, an area light's sample)
+are not inlined by LLVM; a loop that merely contains a call to one, in a branch it never takes,
+runs about twice slower per row (``paths.nee_light`` keeps such calls in loops of their own).
+numba's on-disk cache of a kernel is invalidated by edits of the kernel's own file only, not of
+the functions it calls from other files: ``numba_probe.invalidate_stale_caches`` (run at
+import) touches every kernel source when any of them changed.
 """
 from __future__ import annotations
 
@@ -49,7 +54,9 @@ __all__ = ["JIT", "JIT_INLINE", "TWO_PI", "INV_4PI", "dot", "edot", "cross", "no
            "search_right", "mesh_point"]
 
 JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
-JIT_INLINE = dict(JIT, inline="always")          # per-row functions: inlined into their callers
+# Only for tiny indexing helpers called with constant indices or ids of several integer types:
+# compiled on their own, numba would make one copy per literal index / per integer type.
+JIT_INLINE = dict(JIT, inline="always")
 
 TWO_PI = 2.0 * np.pi
 INV_4PI = 1.0 / (4.0 * np.pi)                    # lights.INV_4PI
@@ -58,25 +65,25 @@ INV_4PI = 1.0 / (4.0 * np.pi)                    # lights.INV_4PI
 # ----------------------------------------------------------------------------
 # Vectors (3-tuples)
 # ----------------------------------------------------------------------------
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def dot(a, b):
     """a . b summed in index order (``np.sum(a * b, axis=-1)``, ``np.linalg.norm``, einsum of a column)."""
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def edot(a, b):
     """a . b summed as ``np.einsum("ij,ij->i", a, b)`` sums contiguous rows: (a0 b0 + a2 b2) + a1 b1."""
     return a[0] * b[0] + a[2] * b[2] + a[1] * b[1]
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def cross(a, b):
     """a x b (numpy.cross's formula)."""
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def normalize(v):
     """(unit v, |v|) as ``lights._normalize``: |v| = sqrt(edot(v, v)), v / max(|v|, 1e-300); zero stays zero."""
     length = math.sqrt(edot(v, v))
@@ -84,7 +91,7 @@ def normalize(v):
     return (v[0] / s, v[1] / s, v[2] / s), length
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def unit(v):
     """(unit v, |v|) with |v| summed in index order (``np.linalg.norm``; ``lights._normalize`` of a
     matrix column, as ``LightSet._frame`` does), v / max(|v|, 1e-300)."""
@@ -105,49 +112,49 @@ def vec3(a, k):
     return (a[k], a[k + 1], a[k + 2])
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def sub(a, b):
     """a - b."""
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def add(a, b):
     """a + b."""
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def neg(a):
     """-a."""
     return (-a[0], -a[1], -a[2])
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def scale(a, s):
     """a s (each component times the scalar s)."""
     return (a[0] * s, a[1] * s, a[2] * s)
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def madd(a, s, b):
     """a + s b."""
     return (a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2])
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def plane_point(c, x, ex, y, ey):
     """c + x ex + y ey, added left to right (a point of a plane spanned by ex, ey through c)."""
     return (c[0] + x * ex[0] + y * ey[0], c[1] + x * ex[1] + y * ey[1], c[2] + x * ex[2] + y * ey[2])
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def clip(x, lo, hi):
     """np.clip(x, lo, hi) for one float."""
     return min(max(x, lo), hi)
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def sign(x):
     """np.sign(x): -1, 0 or 1 (nan stays nan)."""
     if x > 0.0:
@@ -160,7 +167,7 @@ def sign(x):
 # ----------------------------------------------------------------------------
 # Frames and warps (stpm_core.sampling, one row)
 # ----------------------------------------------------------------------------
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def basis(n):
     """(tangent, bitangent) about the unit vector n (``sampling.orthonormal_basis``, Duff et al. 2017)."""
     x, y, z = n[0], n[1], n[2]
@@ -170,7 +177,7 @@ def basis(n):
     return (1.0 + sg * x * x * a, sg * b, -sg * x), (b, sg + y * y * a, -y)
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def to_world(l, n):
     """Local direction l (z = the unit axis n) in the world: l0 t + l1 b + l2 n (``sampling.to_world``)."""
     t, b = basis(n)
@@ -178,7 +185,7 @@ def to_world(l, n):
             l[0] * t[2] + l[1] * b[2] + l[2] * n[2])
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def concentric_disk(u0, u1):
     """Uniform point (x, y) of the unit disc (Shirley-Chiu; ``sampling.concentric_disk``)."""
     a = 2.0 * u0 - 1.0
@@ -192,14 +199,14 @@ def concentric_disk(u0, u1):
     return r * math.cos(phi), r * math.sin(phi)
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def cosine_hemisphere(u0, u1):
     """Cosine-distributed local direction about +z, pdf cos / pi (``sampling.cosine_hemisphere``)."""
     x, y = concentric_disk(u0, u1)
     return x, y, math.sqrt(max(0.0, 1.0 - (x * x + y * y)))
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def uniform_sphere(u0, u1):
     """Uniform direction on the unit sphere, pdf 1 / (4 pi) (``sampling.uniform_sphere``)."""
     z = 1.0 - 2.0 * u0
@@ -208,7 +215,7 @@ def uniform_sphere(u0, u1):
     return r * math.cos(phi), r * math.sin(phi), z
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def uniform_cone(u0, u1, cos_max):
     """Uniform local direction about +z with cos(theta) >= cos_max (``sampling.uniform_cone``)."""
     cos_t = 1.0 - u0 * (1.0 - cos_max)
@@ -217,7 +224,7 @@ def uniform_cone(u0, u1, cos_max):
     return sin_t * math.cos(phi), sin_t * math.sin(phi), cos_t
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def axis_or_z(v):
     """(axis, ok): v where edot(v, v) > 0.5, else +Z, and ok = 1.0 / 0.0 (the oracles' ``_axis_or_z``).
 
@@ -229,7 +236,7 @@ def axis_or_z(v):
     return (0.0, 0.0, 1.0), 0.0
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def one_minus_cos_from_sin2(sin2):
     """1 - sqrt(1 - sin^2) without cancellation for small angles (sin^2 clipped to [0, 1])."""
     sin2 = clip(sin2, 0.0, 1.0)
@@ -239,7 +246,7 @@ def one_minus_cos_from_sin2(sin2):
 # ----------------------------------------------------------------------------
 # Light geometry (parameter rows of light_params, one pose M)
 # ----------------------------------------------------------------------------
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def light_axis(M):
     """The light's unit Z axis, M's Z column normalised (``LightSet._frame``: scale removed; zero
     for a zero Z scale).  The light shines along -Z; a SUN sits toward +Z."""
@@ -247,14 +254,14 @@ def light_axis(M):
     return Z
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def intensity(prm):
     """POINT / SPOT radiant intensity I = color P / (4 pi) W/sr (``LightSet.intensity``)."""
     power = prm[P_POWER]
     return (prm[P_COLOR] * power * INV_4PI, prm[P_COLOR + 1] * power * INV_4PI, prm[P_COLOR + 2] * power * INV_4PI)
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def spot_attenuation(prm, cos_axis):
     """Spot mask at cosine cos_axis to the spot axis (``lights.spot_attenuation``): 0 outside the
     cone (``P_COS_HALF``), smoothstep over the blend band ``P_SMOOTH`` in cosine, 1 inside."""
@@ -289,7 +296,7 @@ def area_shape(prm, M):
     return column(M, 3), ex, ey, A, scale(g, side), disk
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def area_point(c, ex, ey, disk, u0, u1):
     """Uniform point of an AREA shape (``lights_numpy.area_points``): c + a ex + b ey, (a, b) from
     ``concentric_disk`` (disc / ellipse) or 2u - 1 (square / rectangle)."""
@@ -300,7 +307,7 @@ def area_point(c, ex, ey, disk, u0, u1):
     return plane_point(c, a, ex, b, ey)
 
 
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def search_right(a, x):
     """np.searchsorted(a, x, side='right') for sorted a (n,): the first index i with a[i] > x."""
     lo, hi = 0, a.shape[0]
@@ -362,7 +369,7 @@ def mesh_point(M, steps, corners, q, cdf, t, u0, u1):
 # ----------------------------------------------------------------------------
 # Ray origins
 # ----------------------------------------------------------------------------
-@njit(**JIT_INLINE)
+@njit(**JIT)
 def offset_origin(p, g, e, w):
     """p moved by e (scene units) along the geometric normal g to the side direction w leaves on:
     p + e g if w . g >= 0, else p - e g (the origin of a ray leaving a surface at p)."""

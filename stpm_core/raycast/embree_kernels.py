@@ -62,7 +62,7 @@ def rays32(o, d, start, t1, centre, o32, d32, far32):
         far32[i] = np.float32(min(far, FAR32))
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _plane_t(plane_n, plane_w, p, o, d, i, fallback):
     """Float64 t of ray i of o, d (m, 3) on triangle p's plane n . x = w; ``fallback`` (embree's
     own t) where the plane test is undefined (ray parallel to the plane)."""
@@ -448,7 +448,7 @@ def group_finish(o64, d64, ray, inst, t0, t1, tfar, primID, u32, v32, plane_n, p
     return True
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _unit_through_At(A, x, y, z):
     """A^T (x, y, z) normalised (a normal mapped by the inverse-transpose; zero stays zero)."""
     a = A[0, 0] * x + A[1, 0] * y + A[2, 0] * z
