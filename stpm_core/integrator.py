@@ -44,9 +44,11 @@ from .kernels import paths as _K
 from .kernels.bsdf import ggx_albedo_tables
 from .kernels.closure import N_CLOSURE, pack_materials
 from .kernels.light_params import light_params, light_poses, mesh_arrays
+from .kernels.svm import shade
 from .parallel import ordered_map, worker_count
 from .raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from .sampling import rng_for, skip_uniforms
+from .shading import hit_geometry, shading_data
 
 __all__ = ["TraceStats", "trace_image", "shade_paths"]
 
@@ -246,7 +248,7 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     tmax0 (n,) clips the camera rays; cam_pos, cam_axis (k, 3) (k = 1 or n) are
     the camera position and unit view axis at each sample's time (for Depth).
 
-    Per bounce: cast, ``gather_closures`` (the hits' materials), ``classify_hits``
+    Per bounce: cast, ``kernels.svm.shade`` (the hits' closures), ``classify_hits``
     (misses see the world, emission, the first hit's Depth / Normal / coverage, the
     rows to shade and to continue), light shapes seen along the rays, next-event
     estimation (:func:`_direct`) and photon look-ups (:func:`_photon_terms`) at the
@@ -299,9 +301,11 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         use_idx, use_beta = idx is not None, beta is not None
         idx_k = idx if use_idx else _NO_IDX
         beta_k = beta if use_beta else _NO_ROWS3
-        # -- Closures of the hits (the place of the shader-node interpreter) ----------------------
+        # -- Closures of the hits: constant rows, or the material's node program per hit ------------
         C = _scratch("closure", (m, N_CLOSURE))
-        _K.gather_closures(hits.material, ctx.closures, C)
+        sd = ctx.shading
+        shade(sd, hits.material, hit_geometry(hits, d, sd=sd, times=t) if sd.uses_programs else None,
+              int(rng.integers(1 << 62)) if sd.uses_mix else 0, C)
         # -- Misses, emission, first-hit passes; rows to shade and to continue ---------------------
         sh, spec = _scratch("sh", (m,), np.int64), _scratch("spec", (m,), np.int64)
         n_hit, n_sh, n_spec, n_emit = _K.classify_hits(
@@ -367,6 +371,7 @@ class _Context:
     world_radiance: np.ndarray
     film_transparent: bool
     closures: np.ndarray = None              # (M + 1, N_CLOSURE) material closure rows (kernels.closure)
+    shading: object = None                   # shading.ShadingData: node programs, textures, mesh attributes
     ggx: tuple = None                        # (E (32, 32), E_avg (32,)) GGX albedo tables (kernels.bsdf)
     light_data: list = None                  # per light: (parameter row, mesh arrays) (kernels.light_params)
     shaped_lights: tuple = ()                # lights a ray can hit (AREA, POINT / SPOT of radius > 0) with power
@@ -491,6 +496,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                    world_radiance=np.asarray(scene.world.radiance, float),
                    film_transparent=bool(scene.metadata.get("film_transparent", False)),
                    closures=closures, ggx=ggx_albedo_tables())
+    ctx.shading = shading_data(scene, closures)
     ctx.light_data = [(light_params(lights, li), mesh_arrays(lights, li)) for li in range(len(lights))]
     ctx.shaped_lights = tuple(li for li, l in enumerate(lights.lights)
                               if _has_shape(l) and l.power > 0 and np.any(np.asarray(l.color, float) > 0))

@@ -39,6 +39,7 @@ import json
 
 import numpy as np
 
+from .shading import shading_data
 from .bsdf import MaterialTable
 from .photons.trace import trace_photon_paths
 from .raycast.geometry import instance_offsets
@@ -259,7 +260,8 @@ def _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, s
             if np.any(hits.instance == ii):
                 out["reach_specular"].setdefault(li, set()).add(ii)
                 recs = trace_photon_paths(caster, table, o[live], d[live], Phi[live], t[live], rng, mode="caustic",
-                                          max_depth=max_depth, inst_offset=inst_offset, target_instance=ii)
+                                          max_depth=max_depth, inst_offset=inst_offset, target_instance=ii,
+                                          shading=shading_data(scene, table.closures))
                 out["caustic_stored"] += int(recs.shape[0])
 
 

@@ -31,6 +31,7 @@ from .plan import apply_plan, make_plan
 from .raycast import make_caster
 from .sampling import rng_for
 from .scene import scene_warnings, validate_scene
+from .shading import shading_data
 
 __all__ = ["render", "RenderResult", "PASSES", "PASS_NAMES"]
 
@@ -132,14 +133,16 @@ def _render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     global _FIRST_RENDER
     if _FIRST_RENDER and progress is not None:
         # numba compiles the ray-casting, shading and look-up kernels on a machine's first render
-        # (about 20 s, then cached on disk); say so rather than look frozen
-        progress(0.0, "loading compiled kernels (the first render on a machine compiles them: up to ~20 s)")
+        # (about a minute on 2 cores, more with node materials; then cached on disk): say so
+        progress(0.0, "loading compiled kernels (the first render on a machine compiles them: about a minute)")
     _FIRST_RENDER = False
 
     # -- Scene acceleration, lights, materials, plan --------------------------------
     caster = make_caster(scene)
     lights = LightSet(scene)
     table = MaterialTable(scene.materials)
+    shading = shading_data(scene, table.closures)      # node programs compiled, textures packed
+    warnings.extend(shading.unsupported)               # node inputs the interpreter could not evaluate
     t_plan = _time.perf_counter()
     plan = make_plan(scene, settings, caster=caster, lights=lights)
     psettings = apply_plan(settings, plan)      # what the plan rules out gets no photons; STANDARD when static

@@ -34,7 +34,7 @@ __all__ = [
     "validate_scene", "scene_warnings", "SCENE_FORMAT_VERSION", "MAX_EMISSION",
 ]
 
-SCENE_FORMAT_VERSION = 1
+SCENE_FORMAT_VERSION = 2          # 2 (2026-12-01): material graphs, textures, UV maps, tangents
 
 #: Largest emission :func:`validate_scene` accepts (docs/scene-format.md, "Limits"):
 #: light ``power * max(color)`` (W, or W/m^2 for a sun), material ``emission``
@@ -66,6 +66,13 @@ class Mesh:
     normals : (F, 3, 3) float32 per-corner shading normals (object space) or
         ``None`` for flat shading.  Deforming meshes shade flat.
     name : str, for messages.
+    uv_layers : UV maps by name, each (F, 3, 2) float32 per-corner (u, v) in the
+        corner order of ``triangles`` (Blender's loop triangles); {} = no UVs.
+    uv_render : name of the render-active UV map (what an Image Texture with an
+        unconnected Vector reads); None = the first of ``uv_layers``.
+    tangents : per UV map name, (F, 3, 4) float32 per-corner object-space tangent
+        (x, y, z) and bitangent sign (Blender's ``Mesh.calc_tangents``: MikkTSpace),
+        what a tangent-space Normal Map node reads; {} = none.
     """
 
     vertices: np.ndarray
@@ -74,6 +81,9 @@ class Mesh:
     vertex_times: np.ndarray | None = None
     normals: np.ndarray | None = None
     name: str = "mesh"
+    uv_layers: dict = field(default_factory=dict)
+    uv_render: str | None = None
+    tangents: dict = field(default_factory=dict)
 
     @property
     def is_deforming(self) -> bool:
@@ -232,6 +242,10 @@ class Material:
     ior : float >= 1 (1 = index-matched: light passes straight through).
     emission : (3,) radiance.
     name : str.
+    graph : the material's shader-node graph (:class:`stpm_core.nodes.ShaderGraph`)
+        or None.  With a graph, every hit evaluates it (``kernels.svm``); the
+        fields above are then the graph's representative constants (what the
+        effects plan and the photon budget read).
     """
 
     base_color: np.ndarray = field(default_factory=lambda: np.full(3, 0.8))
@@ -242,6 +256,7 @@ class Material:
     ior: float = 1.5
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     name: str = "material"
+    graph: object = None
 
     @classmethod
     def diffuse(cls, color=(0.8, 0.8, 0.8), name: str = "diffuse") -> "Material":
@@ -299,6 +314,8 @@ class Scene:
     resolution : (width, height) pixels.
     frame : the frame being rendered (informational).
     metadata : free-form strings (exporter version, warnings, source file).
+    textures : images the materials' node graphs read (:class:`stpm_core.textures.Texture`),
+        referred to by index (an Image Texture node's ``image`` property).
     """
 
     meshes: list[Mesh] = field(default_factory=list)
@@ -311,6 +328,7 @@ class Scene:
     resolution: tuple[int, int] = (320, 240)
     frame: float = 1.0
     metadata: dict = field(default_factory=dict)
+    textures: list = field(default_factory=list)
 
     @property
     def has_motion(self) -> bool:
@@ -484,6 +502,31 @@ def validate_scene(scene: Scene) -> None:
             n = _check_finite(f"{p}.normals", m.normals)
             if n.shape != (tri.shape[0], 3, 3):
                 raise SceneError(f"{p}.normals must have shape ({tri.shape[0]}, 3, 3), got {n.shape}")
+        for attr, width in (("uv_layers", 2), ("tangents", 4)):
+            layers = getattr(m, attr, None) or {}
+            if not isinstance(layers, dict):
+                raise SceneError(f"{p}.{attr} must be a dict of name -> (F, 3, {width}) arrays")
+            for name, arr in layers.items():
+                a = _check_finite(f"{p}.{attr}[{name!r}]", arr)
+                if a.shape != (tri.shape[0], 3, width):
+                    raise SceneError(f"{p}.{attr}[{name!r}] must have shape ({tri.shape[0]}, 3, {width}), "
+                                     f"got {a.shape}")
+    n_tex = len(getattr(scene, "textures", []) or [])
+    for ti, tx in enumerate(getattr(scene, "textures", []) or []):
+        if not hasattr(tx, "pixels") or getattr(tx, "kind", None) is None:
+            raise SceneError(f"textures[{ti}] is not a stpm_core.textures.Texture")
+    for mi, mat in enumerate(scene.materials):
+        g = getattr(mat, "graph", None)
+        if g is None:
+            continue
+        from .nodes.graph import ShaderGraph
+        if not isinstance(g, ShaderGraph):
+            raise SceneError(f"materials[{mi}] ({mat.name!r}).graph must be a ShaderGraph")
+        for nname, node in g.nodes.items():
+            img = node.props.get("image") if node.type == "ShaderNodeTexImage" else None
+            if img is not None and not (-1 <= int(img) < n_tex):
+                raise SceneError(f"materials[{mi}] ({mat.name!r}).graph node {nname!r}: props['image'] = {img} is "
+                                 f"out of range [-1, {n_tex})")
     for ii, inst in enumerate(scene.instances):
         if not (0 <= inst.mesh < len(scene.meshes)):
             raise SceneError(f"instances[{ii}] ({inst.name!r}).mesh index {inst.mesh} out of range [0, {len(scene.meshes)})")

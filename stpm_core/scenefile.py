@@ -13,8 +13,19 @@ never executes code).  It holds
   name ``"stpm-scene"``, the format ``version`` and every scalar, enum,
   colour and list field of the scene (and optionally the render settings);
 * named arrays for everything bulky: mesh vertices / triangles / material ids /
-  normals / vertex times, the times and matrices of every motion transform and
-  the shutter curve.  Array names are listed in ``docs/scene-format.md``.
+  normals / vertex times / UV maps, the times and matrices of every motion
+  transform, the shutter curve and texture pixels.  Array names are listed in
+  ``docs/scene-format.md``.
+
+Shader-node graphs (``Material.graph``) are JSON in the header (materials[i].graph,
+:meth:`~stpm_core.nodes.ShaderGraph.to_json`); textures are ``textures/<i>/pixels``
+(H, W, C) in their native dtype (uint8, uint16, or float32; half floats as their
+uint16 bit patterns with ``half`` true) plus ``name`` / ``colorspace`` / ``half`` in
+the header (and ``alpha_mode``); a mesh's UV maps are ``meshes/<i>/uv/<j>`` (F, 3, 2)
+float32 with the names in meshes[i].uv_layers and the render-active name in
+meshes[i].uv_render, its tangents ``meshes/<i>/tangents/<j>`` (F, 3, 4) float32 with
+their UV map names in meshes[i].tangents.  These keys are optional: a file without
+them loads with no graphs, textures, UVs or tangents.
 
 Loading
 -------
@@ -30,6 +41,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import tokenize
 import zipfile
 import zlib
 from pathlib import Path
@@ -38,10 +50,13 @@ import numpy as np
 
 from .errors import SceneError, SettingsError
 from .motion import MotionTransform
+from .nodes.compile import MAX_RAMP, compile_graph
+from .nodes.graph import ShaderGraph
 from .scene import (SCENE_FORMAT_VERSION, Camera, Instance, Light, Material, Mesh, Scene,
                     World, validate_scene)
 from .settings import RenderSettings
 from .shutter import Shutter
+from .textures import LINEAR_SPACES, SRGB_SPACES, Texture
 
 __all__ = ["save_scene", "load_scene", "load_scene_with_settings", "FORMAT_NAME",
            "SCENE_FORMAT_VERSION", "SCENE_SUFFIXES"]
@@ -68,6 +83,18 @@ _MATERIAL_FIELDS = {
     "roughness": "num", "specular": "num", "ior": "num", "emission": "vec3",
 }
 _WORLD_FIELDS = {"color": "vec3", "strength": "num"}
+_TEXTURE_FIELDS = {"name": "str", "colorspace": tuple(SRGB_SPACES) + tuple(LINEAR_SPACES), "half": "bool"}
+_ALPHA_MODES = ("STRAIGHT", "PREMUL", "CHANNEL_PACKED", "NONE")      # Texture.alpha_mode (Blender's names)
+_TEXTURE_DTYPES = (np.dtype(np.uint8), np.dtype(np.uint16), np.dtype(np.float32))
+
+# Node properties the compiler (stpm_core.nodes.compile) reads, by the JSON type they must have
+_ENUM_PROPS = ("operation", "blend_type", "data_type", "factor_mode", "vector_type", "interpolation",
+               "extension", "projection", "gradient_type", "clamp_type", "interpolation_type", "color_mode",
+               "mode", "uv_map", "space", "noise_dimensions", "noise_type", "voronoi_dimensions", "feature",
+               "distance", "wave_type", "bands_direction", "rings_direction", "wave_profile")
+_BOOL_PROPS = ("use_clamp", "clamp_factor", "clamp_result", "clamp", "from_instancer", "object", "normalize",
+               "invert")
+_NUM_PROPS = ("offset", "offset_frequency", "squash", "squash_frequency", "turbulence_depth")
 
 
 # ----------------------------------------------------------------------------
@@ -112,8 +139,27 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
             arrays[f"{p}/vertex_times"] = np.asarray(m.vertex_times, dtype=np.float64)
         if m.normals is not None:
             arrays[f"{p}/normals"] = np.asarray(m.normals, dtype=np.float32)
-        meshes.append({"name": str(m.name), "has_vertex_times": m.vertex_times is not None,
-                       "has_normals": m.normals is not None})
+        entry = {"name": str(m.name), "has_vertex_times": m.vertex_times is not None,
+                 "has_normals": m.normals is not None}
+        uv_names = _put_uv_layers(arrays, p, m, f"meshes[{i}] ({m.name!r})")
+        if uv_names:
+            entry["uv_layers"] = uv_names
+            entry["uv_render"] = None if m.uv_render is None else str(m.uv_render)
+        tan_names = _put_tangents(arrays, p, m, f"meshes[{i}] ({m.name!r})", uv_names)
+        if tan_names:
+            entry["tangents"] = tan_names
+        meshes.append(entry)
+
+    # Materials (with their node graphs) and textures
+    textures = []
+    for i, tx in enumerate(getattr(scene, "textures", None) or []):
+        textures.append(_put_texture(arrays, i, tx))
+    materials = []
+    for i, m in enumerate(scene.materials):
+        d = _fields_to_json(m, _MATERIAL_FIELDS)
+        if getattr(m, "graph", None) is not None:
+            d["graph"] = _graph_to_json(m.graph, f"materials[{i}] ({m.name!r}).graph", len(textures))
+        materials.append(d)
 
     # Instances, camera and lights: motion transforms as arrays
     instances = []
@@ -143,15 +189,104 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
                     "has_curve": scene.shutter.curve is not None},
         "camera": _fields_to_json(scene.camera, _CAMERA_FIELDS),
         "world": _fields_to_json(scene.world, _WORLD_FIELDS),
-        "materials": [_fields_to_json(m, _MATERIAL_FIELDS) for m in scene.materials],
+        "materials": materials,
         "lights": lights,
         "meshes": meshes,
         "instances": instances,
         "metadata": metadata,
     }
+    if textures:
+        header["textures"] = textures
     if settings is not None:
         header["settings"] = settings.validate().to_dict()
     return header, arrays
+
+
+def _put_uv_layers(arrays: dict, p: str, m: Mesh, where: str) -> list:
+    """Store mesh m's UV maps as ``p/uv/<j>`` (F, 3, 2) float32 -> their names (checked)."""
+    layers = getattr(m, "uv_layers", None) or {}
+    if not isinstance(layers, dict):
+        raise SceneError(f"{where}.uv_layers must be a dict of name -> (F, 3, 2) array")
+    F = int(np.asarray(m.triangles).shape[0])
+    names = []
+    for j, (name, uv) in enumerate(layers.items()):
+        if not isinstance(name, str):
+            raise SceneError(f"{where}.uv_layers names must be strings, got {name!r}")
+        a = np.asarray(uv, dtype=np.float32)
+        if a.shape != (F, 3, 2):
+            raise SceneError(f"{where}.uv_layers[{name!r}] must have shape ({F}, 3, 2), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise SceneError(f"{where}.uv_layers[{name!r}] contains NaN or inf")
+        arrays[f"{p}/uv/{j}"] = a
+        names.append(name)
+    if m.uv_render is not None and (not isinstance(m.uv_render, str) or m.uv_render not in names):
+        raise SceneError(f"{where}.uv_render {m.uv_render!r} is not one of its UV maps {names}")
+    return names
+
+
+def _put_tangents(arrays: dict, p: str, m: Mesh, where: str, uv_names: list) -> list:
+    """Store mesh m's tangents as ``p/tangents/<j>`` (F, 3, 4) float32 -> their UV map names."""
+    tangents = getattr(m, "tangents", None) or {}
+    if not isinstance(tangents, dict):
+        raise SceneError(f"{where}.tangents must be a dict of UV map name -> (F, 3, 4) array")
+    F = int(np.asarray(m.triangles).shape[0])
+    names = []
+    for j, (name, tan) in enumerate(tangents.items()):
+        if name not in uv_names:
+            raise SceneError(f"{where}.tangents[{name!r}] names no UV map of the mesh {uv_names}")
+        a = np.asarray(tan, dtype=np.float32)
+        if a.shape != (F, 3, 4):
+            raise SceneError(f"{where}.tangents[{name!r}] must have shape ({F}, 3, 4), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise SceneError(f"{where}.tangents[{name!r}] contains NaN or inf")
+        arrays[f"{p}/tangents/{j}"] = a
+        names.append(name)
+    return names
+
+
+def _put_texture(arrays: dict, i: int, tx) -> dict:
+    """Store texture i's pixels as ``textures/<i>/pixels`` (native dtype) -> its header entry."""
+    where = f"textures[{i}] ({getattr(tx, 'name', '?')!r})"
+    if not isinstance(tx, Texture):
+        raise SceneError(f"{where} must be a stpm_core.textures.Texture, got {type(tx).__name__}")
+    entry = {"name": str(tx.name), "colorspace": str(tx.colorspace), "half": bool(tx.half),
+             "alpha_mode": str(getattr(tx, "alpha_mode", "STRAIGHT"))}
+    _check_texture(where, tx.pixels, entry)
+    arrays[f"textures/{i}/pixels"] = np.ascontiguousarray(tx.pixels)
+    return entry
+
+
+def _check_texture(where: str, px: np.ndarray, entry: dict) -> None:
+    """Texture pixels (H, W, C) and header entry: dtype, shape, finiteness, colour space."""
+    if entry["alpha_mode"] not in _ALPHA_MODES:
+        raise SceneError(f"{where}.alpha_mode must be one of {', '.join(_ALPHA_MODES)}, got {entry['alpha_mode']!r}")
+    if entry["colorspace"] not in _TEXTURE_FIELDS["colorspace"]:
+        raise SceneError(f"{where}.colorspace must be one of {', '.join(_TEXTURE_FIELDS['colorspace'])}, "
+                         f"got {entry['colorspace']!r}")
+    if px.dtype not in _TEXTURE_DTYPES:
+        raise SceneError(f"{where}.pixels must be a uint8, uint16 or float32 array, got dtype {px.dtype}")
+    if px.ndim != 3 or px.shape[0] < 1 or px.shape[1] < 1 or px.shape[2] not in (1, 3, 4):
+        raise SceneError(f"{where}.pixels must have shape (H, W, 1|3|4) with H, W >= 1, got {px.shape}")
+    if entry["half"]:
+        if px.dtype != np.uint16:
+            raise SceneError(f"{where}.pixels must be uint16 half-float bit patterns when half is true, "
+                             f"got dtype {px.dtype}")
+        if np.any((px & 0x7C00) == 0x7C00):
+            raise SceneError(f"{where}.pixels contains NaN or inf")
+    elif px.dtype == np.float32 and not np.all(np.isfinite(px)):
+        raise SceneError(f"{where}.pixels contains NaN or inf")
+
+
+def _graph_to_json(graph, where: str, n_textures: int) -> dict:
+    """A material's ShaderGraph -> its (checked) JSON form."""
+    if not callable(getattr(graph, "to_json", None)):
+        raise SceneError(f"{where} must be a stpm_core.nodes.ShaderGraph, got {type(graph).__name__}")
+    try:
+        d = json.loads(json.dumps(graph.to_json(), allow_nan=False))
+    except (TypeError, ValueError) as e:
+        raise SceneError(f"{where} must be JSON-serialisable with finite numbers: {e}".splitlines()[0]) from None
+    _graph_from_json(d, where, n_textures)          # the loader's checks: never write what cannot load
+    return d
 
 
 def save_scene(scene: Scene, path, settings: RenderSettings | None = None) -> Path:
@@ -309,6 +444,121 @@ class _Arrays:
             raise SceneError(f"{field}: {e}") from None
 
 
+def _is_num(v) -> bool:
+    """A JSON number that is a finite float (an integer too large for a float is not)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:
+        return False
+
+
+def _is_nums(v, n: int | None = None) -> bool:
+    return isinstance(v, list) and (n is None or len(v) == n) and all(_is_num(x) for x in v)
+
+
+def _check_prop_value(v, where: str, depth: int = 0) -> None:
+    """A property of a node the compiler does not read: JSON scalars and lists of them."""
+    if v is None or isinstance(v, (bool, str)) or _is_num(v):
+        return
+    if isinstance(v, list) and depth < 4:
+        for k, x in enumerate(v):
+            _check_prop_value(x, f"{where}[{k}]", depth + 1)
+        return
+    raise SceneError(f"{where} must be a string, boolean, finite number or a list of them, got {v!r:.60}")
+
+
+def _check_props(props: dict, ntype: str, where: str, n_textures: int) -> None:
+    """The properties :mod:`stpm_core.nodes.compile` reads, each with the JSON type it needs."""
+    for key, v in props.items():
+        w = f"{where}.props[{key!r}]"
+        if key == "image":
+            if isinstance(v, bool) or not isinstance(v, int) or not -1 <= v < n_textures:
+                raise SceneError(f"{w} must be a texture index in [-1, {n_textures}), got {v!r:.60}")
+        elif key == "elements":
+            ok = isinstance(v, list) and 1 <= len(v) <= MAX_RAMP and all(
+                isinstance(e, list) and len(e) == 2 and _is_num(e[0]) and isinstance(e[1], list)
+                and len(e[1]) in (3, 4) and _is_nums(e[1]) for e in v)
+            if not ok:
+                raise SceneError(f"{w} must be 1 to {MAX_RAMP} [position, [r, g, b, a]] pairs of finite numbers")
+        elif key == "table":
+            ok = (isinstance(v, list) and len(v) == 3 and all(_is_nums(row) for row in v)
+                  and len({len(row) for row in v}) == 1 and len(v[0]) >= 2)
+            if not ok:
+                raise SceneError(f"{w} must be 3 equally long lists (at least 2) of finite numbers")
+        elif key == "value" and ntype == "ShaderNodeRGB":
+            if not _is_nums(v, 3):
+                raise SceneError(f"{w} must be a list of 3 finite numbers, got {v!r:.60}")
+        elif key == "value" and ntype == "ShaderNodeValue":
+            if not _is_num(v):
+                raise SceneError(f"{w} must be a finite number, got {v!r:.60}")
+        elif key in _ENUM_PROPS:
+            if not isinstance(v, str):
+                raise SceneError(f"{w} must be a string, got {v!r:.60}")
+        elif key in _BOOL_PROPS:
+            if not isinstance(v, bool):
+                raise SceneError(f"{w} must be true or false, got {v!r:.60}")
+        elif key in _NUM_PROPS:
+            if not _is_num(v):
+                raise SceneError(f"{w} must be a finite number, got {v!r:.60}")
+        else:
+            _check_prop_value(v, w)
+
+
+def _str_map(f: "_Fields", key: str) -> dict:
+    d = f.raw(key)
+    if not isinstance(d, dict) or not all(isinstance(v, str) for v in d.values()):
+        raise SceneError(f"{f.name(key)} must be a JSON object of socket types (strings)")
+    return d
+
+
+def _graph_from_json(d, where: str, n_textures: int) -> ShaderGraph:
+    """A material's node graph from its JSON form, every field checked (links name existing
+    nodes, inputs are finite numbers / 3 numbers / links, properties have the types the
+    compiler reads); SceneError naming the field otherwise."""
+    g = _Fields(d, where)
+    nodes = g.raw("nodes")
+    if not isinstance(nodes, dict):
+        raise SceneError(f"{where}.nodes must be a JSON object of nodes by name")
+
+    def check_link(v, w):
+        if not (isinstance(v, list) and len(v) == 2 and all(isinstance(x, str) for x in v)):
+            raise SceneError(f"{w} must be a [node name, socket identifier] pair of strings, got {v!r:.60}")
+        if v[0] not in nodes:
+            raise SceneError(f"{w} links to unknown node {v[0]!r}")
+
+    for name, nd in nodes.items():
+        f = _Fields(nd, f"{where}.nodes[{name!r}]")
+        ntype = f.str("type")
+        props = f.raw("props")
+        if not isinstance(props, dict):
+            raise SceneError(f"{f.name('props')} must be a JSON object")
+        _check_props(props, ntype, f.prefix, n_textures)
+        inputs = f.raw("inputs")
+        if not isinstance(inputs, dict):
+            raise SceneError(f"{f.name('inputs')} must be a JSON object")
+        for ident, v in inputs.items():
+            w = f"{f.prefix}.inputs[{ident!r}]"
+            if isinstance(v, dict):
+                if set(v) != {"link"}:
+                    raise SceneError(f"{w} must be a number, 3 numbers or {{\"link\": [node, socket]}}")
+                check_link(v["link"], w)
+            elif not (_is_num(v) or _is_nums(v, 3)):
+                raise SceneError(f"{w} must be a finite number, 3 finite numbers or a link, got {v!r:.60}")
+        _str_map(f, "outputs")
+        _str_map(f, "input_types")
+    surface = g.raw("surface")
+    if surface is not None:
+        check_link(surface, f"{where}.surface")
+    graph = ShaderGraph.from_json(d)
+    try:   # whatever loads must compile (the checks above name the usual problems first)
+        compile_graph(graph, n_textures, [])
+    except Exception as e:  # noqa: BLE001 -- a malformed graph is the file's problem: one line
+        raise SceneError(f"{where} cannot be compiled ({type(e).__name__}: {e})".splitlines()[0]) from None
+    return graph
+
+
 def _read_container(path: Path) -> dict[str, np.ndarray]:
     """All arrays of the .npz at ``path``, read eagerly; SceneError if it is not one."""
     if not path.exists():
@@ -320,9 +570,10 @@ def _read_container(path: Path) -> dict[str, np.ndarray]:
     try:
         with np.load(path, allow_pickle=False) as npz:
             return {k: np.array(npz[k]) for k in npz.files}
-    except (zipfile.BadZipFile, zlib.error, ValueError, EOFError, KeyError,
-            NotImplementedError, RuntimeError, UnicodeError, OSError) as e:
-        # OSError also covers a file that vanished; it is still one line.
+    except (zipfile.BadZipFile, zlib.error, ValueError, EOFError, KeyError, NotImplementedError,
+            RuntimeError, UnicodeError, OSError, SyntaxError, tokenize.TokenError, MemoryError) as e:
+        # OSError also covers a file that vanished; SyntaxError / TokenError come from numpy
+        # parsing a corrupted .npy header (its dict literal); it is still one line.
         raise SceneError(f"corrupt or truncated scene file ({type(e).__name__}: {e})".splitlines()[0]) from None
 
 
@@ -356,11 +607,34 @@ def _read_header(data: dict[str, np.ndarray]) -> _Fields:
 
 def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
     """Build the Scene from a checked header and arrays (version 1)."""
-    # Materials
+    # Textures (optional)
+    textures = []
+    tex_list = h.d.get("textures", [])
+    if not isinstance(tex_list, list):
+        raise SceneError(f"textures must be a list, got {type(tex_list).__name__}")
+    for i, d in enumerate(tex_list):
+        f = _Fields(d, f"textures[{i}]")
+        entry = f.read(_TEXTURE_FIELDS)
+        entry["alpha_mode"] = f.enum("alpha_mode", _ALPHA_MODES) if "alpha_mode" in f.d else "STRAIGHT"
+        key = f"textures/{i}/pixels"
+        if key not in arr.data:
+            raise SceneError(f"missing array {key!r} (textures[{i}].pixels)")
+        px = arr.data[key]
+        _check_texture(f"textures[{i}]", px, entry)
+        try:
+            textures.append(Texture(pixels=px.copy(), colorspace=entry["colorspace"], name=entry["name"],
+                                    half=entry["half"], alpha_mode=entry["alpha_mode"]))
+        except ValueError as e:
+            raise SceneError(f"textures[{i}]: {e}".splitlines()[0]) from None
+
+    # Materials (node graphs optional)
     materials = []
     for i, d in enumerate(h.list("materials")):
         f = _Fields(d, f"materials[{i}]")
-        materials.append(Material(**f.read(_MATERIAL_FIELDS)))
+        m = Material(**f.read(_MATERIAL_FIELDS))
+        if f.d.get("graph") is not None:
+            m.graph = _graph_from_json(f.d["graph"], f"materials[{i}].graph", len(textures))
+        materials.append(m)
 
     # Meshes
     meshes = []
@@ -387,10 +661,13 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
             raise SceneError(f"{a}.triangles index out of range [0, {nv})")
         if mid.size and (mid.min() < 0 or mid.max() >= len(materials)):
             raise SceneError(f"{a}.material_ids index out of range [0, {len(materials)})")
+        uv_layers, uv_render = _read_uv_layers(f, arr, p, a, tri.shape[0])
+        tangents = _read_tangents(f, arr, p, a, tri.shape[0], uv_layers)
         meshes.append(Mesh(vertices=V.astype(np.float32), triangles=tri.astype(np.int32),
                            material_ids=mid.astype(np.int32),
                            vertex_times=None if vt is None else vt.astype(np.float64),
-                           normals=None if N is None else N.astype(np.float32), name=name))
+                           normals=None if N is None else N.astype(np.float32), name=name,
+                           uv_layers=uv_layers, uv_render=uv_render, tangents=tangents))
 
     # Instances
     instances = []
@@ -432,9 +709,51 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
 
     scene = Scene(meshes=meshes, instances=instances, camera=cam, lights=lights,
                   materials=materials, world=world, shutter=shutter,
-                  resolution=(res[0], res[1]), frame=h.num("frame"), metadata=metadata)
+                  resolution=(res[0], res[1]), frame=h.num("frame"), metadata=metadata,
+                  textures=textures)
     validate_scene(scene)
     return scene
+
+
+def _read_tangents(f: _Fields, arr: _Arrays, p: str, a: str, n_tri: int, uv_layers: dict) -> dict:
+    """A mesh's tangents ({UV map name: (F, 3, 4) float32}); optional."""
+    if "tangents" not in f.d:
+        return {}
+    names = f.list("tangents")
+    if not all(isinstance(n, str) for n in names) or len(set(names)) != len(names):
+        raise SceneError(f"{a}.tangents must be a list of distinct strings, got {names!r:.80}")
+    out = {}
+    for j, name in enumerate(names):
+        if name not in uv_layers:
+            raise SceneError(f"{a}.tangents[{name!r}] names no UV map of the mesh")
+        tan = arr.get(f"{p}/tangents/{j}", f"{a}.tangents[{name!r}]", kind="f", ndim=3, tail=(3, 4))
+        if tan.shape[0] != n_tri:
+            raise SceneError(f"{a}.tangents[{name!r}] must have shape ({n_tri}, 3, 4), got {tan.shape}")
+        if np.abs(tan).max(initial=0.0) > 1e15:
+            raise SceneError(f"{a}.tangents[{name!r}] has values beyond 1e15")
+        out[name] = tan.astype(np.float32)
+    return out
+
+
+def _read_uv_layers(f: _Fields, arr: _Arrays, p: str, a: str, n_tri: int) -> tuple:
+    """A mesh's UV maps ({name: (F, 3, 2) float32}, render-active name or None); optional."""
+    if "uv_layers" not in f.d:
+        return {}, None
+    names = f.list("uv_layers")
+    if not all(isinstance(n, str) for n in names) or len(set(names)) != len(names):
+        raise SceneError(f"{a}.uv_layers must be a list of distinct strings, got {names!r:.80}")
+    layers = {}
+    for j, name in enumerate(names):
+        uv = arr.get(f"{p}/uv/{j}", f"{a}.uv_layers[{name!r}]", kind="f", ndim=3, tail=(3, 2))
+        if uv.shape[0] != n_tri:
+            raise SceneError(f"{a}.uv_layers[{name!r}] must have shape ({n_tri}, 3, 2), got {uv.shape}")
+        if np.abs(uv).max(initial=0.0) > 1e15:
+            raise SceneError(f"{a}.uv_layers[{name!r}] has coordinates beyond 1e15")
+        layers[name] = uv.astype(np.float32)
+    render = f.d.get("uv_render")
+    if render is not None and (not isinstance(render, str) or render not in layers):
+        raise SceneError(f"{a}.uv_render must be null or one of {names!r:.80}, got {render!r:.60}")
+    return layers, render
 
 
 def load_scene_with_settings(path) -> tuple[Scene, RenderSettings | None]:

@@ -303,7 +303,6 @@ IGNORED = {
                         "'Light': Cast Shadow off is ignored"),
     "negative power": (lambda o: setattr(bpy.data.lights["Light"], "energy", -800.0),
                        "'Light': negative power -800 W is not supported"),
-    "bump": (_bump, "Principled BSDF.Normal driven by ShaderNodeBump is ignored"),
     "displacement": (_displacement, "Material Output Displacement is ignored"),
 }
 
@@ -322,6 +321,19 @@ def test_ignored_settings_are_warned(case):
     assert sum(text in w for w in after) == 1, after
     if case == "negative power":
         assert scene.lights[0].power == 0.0
+
+
+def test_bump_from_noise_is_rendered_not_warned():
+    # Since the node interpreter: a Noise -> Bump -> Principled Normal tree exports as a graph
+    # (rendered per hit) and is no longer reported as ignored
+    _lit_scene()
+    box = bpy.data.objects["Box"]
+    mat, _ = node_material("BoxMat", "ShaderNodeBsdfPrincipled")
+    box.data.materials.append(mat)
+    _bump(box)
+    scene, warnings = export_now()
+    assert next(m for m in scene.materials if m.name == "BoxMat").graph is not None
+    assert not any("Bump" in w for w in warnings), warnings
 
 
 def test_unproduced_view_layer_passes_are_listed_in_one_warning():
@@ -382,7 +394,9 @@ def test_image_mean_is_a_cached_strided_sample_within_one_percent(tmp_path, monk
         got = next(m for m in stpm_scene.materials if m.name == "Tex").base_color
         np.testing.assert_allclose(got, full_mean, rtol=0.01)
     assert calls == ["gradient.png"]
-    assert any("approximated by its mean colour" in w for w in warnings)
+    # the texture itself renders from its texels (a node graph), so no mean-colour warning
+    assert next(m for m in stpm_scene.materials if m.name == "Tex").graph is not None
+    assert not any("approximated by its mean colour" in w for w in warnings)
     # an image with unsaved edits is read again
     img.pixels[0] = 0.5
     assert img.is_dirty

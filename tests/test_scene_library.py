@@ -23,6 +23,7 @@ EXPECTED = {
     "deforming_caustic": (True, True, True, True),
     "fast_spinner": (True, True, False, True),
     "static_scene": (False, True, True, False),
+    "textured_room": (True, True, True, False),
 }
 KEYS = ("motion_blur", "caustics", "indirect", "time_dependent")
 
@@ -67,6 +68,22 @@ def test_motion_is_exported_as_built(loaded):
     scene, _ = loaded["deforming_caustic"]
     mesh = next(scene.meshes[i.mesh] for i in scene.instances if i.name == "RipplingFloor")
     assert mesh.is_deforming and np.ptp(np.asarray(mesh.vertices)[:, :, 2], axis=0).max() > 0.01
+
+
+def test_textured_room_exports_its_textures_uvs_and_normal_map(loaded):
+    """The artist-built room keeps its images (from files next to the .blend), UV maps, tangents
+    for the normal map and node graphs: nothing is reduced to a mean colour."""
+    scene, _ = loaded["textured_room"]
+    names = sorted(t.name for t in scene.textures)
+    assert names == ["planks.png", "planks_normal.png", "tiles16.png"], names
+    kinds = {t.name: (t.pixels.dtype, t.colorspace) for t in scene.textures}
+    assert kinds["planks.png"] == (np.uint8, "sRGB") and kinds["planks_normal.png"][1] in ("Non-Color", "Linear")
+    assert kinds["tiles16.png"][0] in (np.uint16, np.float32)     # more than 8 bits kept (Blender: linear floats)
+    graphs = {m.name: m.graph for m in scene.materials}
+    assert all(graphs[n] is not None for n in ("Planks", "Wallpaper", "Tiles"))
+    floor = next(scene.meshes[i.mesh] for i in scene.instances if i.name == "Floor")
+    assert floor.uv_layers and floor.tangents
+    assert not any("mean colour" in w for w in scene.metadata.get("warnings", []))
 
 
 def test_fast_spinner_turns_a_full_turn_without_aliasing(loaded):

@@ -15,12 +15,14 @@ from hypothesis import HealthCheck, given, settings as hsettings, strategies as 
 
 from stpm_core.errors import SceneError
 from stpm_core.motion import MotionTransform
+from stpm_core.nodes import Link, Node, ShaderGraph, compile_graph
 from stpm_core.scene import (SCENE_FORMAT_VERSION, Camera, Instance, Light, Material, Mesh, Scene,
                              World, validate_scene)
 from stpm_core.scenefile import (FORMAT_NAME, load_scene, load_scene_with_settings, save_scene,
                                  scene_to_arrays)
 from stpm_core.settings import RenderSettings
 from stpm_core.shutter import Shutter
+from stpm_core.textures import Texture
 
 
 # ----------------------------------------------------------------------------
@@ -39,7 +41,12 @@ def rich_scene() -> Scene:
     V = rng.normal(size=(5, 3)).astype(np.float32)
     tri = np.array([[0, 1, 2], [1, 3, 2], [2, 3, 4]], np.int32)
     N = rng.normal(size=(3, 3, 3)).astype(np.float32)
-    rigid = Mesh(vertices=V, triangles=tri, material_ids=np.array([0, 1, 2], np.int32), normals=N, name="rigid")
+    rigid = Mesh(vertices=V, triangles=tri, material_ids=np.array([0, 1, 2], np.int32), normals=N, name="rigid",
+                 uv_layers={"UVMap": rng.random((3, 3, 2)).astype(np.float32),
+                            "Second/map": rng.normal(size=(3, 3, 2)).astype(np.float32)},
+                 uv_render="Second/map",
+                 tangents={"UVMap": np.concatenate([rng.normal(size=(3, 3, 3)), np.sign(rng.normal(size=(3, 3, 1)))],
+                                                   axis=2).astype(np.float32)})
     deform = Mesh(vertices=rng.normal(size=(3, 5, 3)).astype(np.float32), triangles=tri.copy(),
                   material_ids=np.array([3, 0, 1], np.int32),
                   vertex_times=np.array([0.0, 0.4, 1.0]), name="deforming")
@@ -50,6 +57,12 @@ def rich_scene() -> Scene:
                  Material.glass(ior=1.45, name="g"),
                  Material(base_color=np.array([0.5, 0.25, 1 / 3]), specular=0.5, roughness=0.1,
                           emission=np.array([1.5, 0.0, 2 / 7]), name="coat")]
+    materials[0].graph = node_graph()
+    textures = [Texture(pixels=rng.integers(0, 256, (2, 3, 3)).astype(np.uint8), colorspace="sRGB", name="rgb8"),
+                Texture(pixels=rng.normal(size=(2, 2, 1)).astype(np.float16), colorspace="Linear", name="half"),
+                Texture(pixels=rng.normal(size=(1, 2, 4)).astype(np.float32), colorspace="Non-Color", name="f32",
+                        alpha_mode="PREMUL"),
+                Texture(pixels=rng.integers(0, 65536, (2, 1, 4)).astype(np.uint16), colorspace="Linear", name="u16")]
     lights = [
         Light(type="POINT", color=np.array([1.0, 0.9, 0.8]), power=123.456, radius=0.05, name="pt",
               transform=MotionTransform(times=np.array([0.0, 1.0]),
@@ -69,7 +82,41 @@ def rich_scene() -> Scene:
                  camera=camera, lights=lights, materials=materials,
                  world=World(color=np.array([0.05, 0.1, 0.2]), strength=0.7),
                  shutter=Shutter(open=9.75, close=10.25, curve=np.array([0.0, 1.0, 1.0, 0.5])),
-                 resolution=(37, 23), frame=10.0, metadata={"source": "test", "n": 3, "nested": {"x": [1, 2]}})
+                 resolution=(37, 23), frame=10.0, metadata={"source": "test", "n": 3, "nested": {"x": [1, 2]}},
+                 textures=textures)
+
+
+def node_graph() -> ShaderGraph:
+    """A small graph with every kind of node data: links, constants, enums, a ramp, a curve table,
+    a texture index and a UV map name."""
+    return ShaderGraph(nodes={
+        "UV": Node("ShaderNodeUVMap", props={"uv_map": "Second/map", "from_instancer": False},
+                   outputs={"UV": "VECTOR"}),
+        "Image": Node("ShaderNodeTexImage", props={"image": 0, "interpolation": "Closest", "extension": "EXTEND",
+                                                   "projection": "FLAT"},
+                      inputs={"Vector": Link("UV", "UV")}, input_types={"Vector": "VECTOR"},
+                      outputs={"Color": "RGBA", "Alpha": "VALUE"}),
+        "Ramp": Node("ShaderNodeValToRGB",
+                     props={"elements": [(0.0, (0.0, 0.0, 0.0, 1.0)), (0.625, (1.0, 0.5, 0.25, 1.0))],
+                            "interpolation": "EASE", "color_mode": "RGB"},
+                     inputs={"Fac": Link("Image", "Alpha")}, input_types={"Fac": "VALUE"},
+                     outputs={"Color": "RGBA"}),
+        "Curves": Node("ShaderNodeRGBCurve", props={"table": [[0.0, 0.5, 1.0], [0.0, 0.25, 1.0], [0.1, 0.2, 0.3]]},
+                       inputs={"Fac": 1.0, "Color": Link("Ramp", "Color")},
+                       input_types={"Fac": "VALUE", "Color": "RGBA"}, outputs={"Color": "RGBA"}),
+        "Noise": Node("ShaderNodeTexNoise", props={"noise_dimensions": "3D", "noise_type": "FBM", "normalize": True},
+                      inputs={"Scale": 5.0, "Detail": 2.0}, input_types={"Scale": "VALUE", "Detail": "VALUE"},
+                      outputs={"Fac": "VALUE"}),
+        "Math": Node("ShaderNodeMath", props={"operation": "MULTIPLY", "use_clamp": True},
+                     inputs={"Value": Link("Image", "Alpha"), "Value_001": Link("Noise", "Fac")},
+                     input_types={"Value": "VALUE", "Value_001": "VALUE"}, outputs={"Value": "VALUE"}),
+        "BSDF": Node("ShaderNodeBsdfPrincipled",
+                     inputs={"Base Color": Link("Curves", "Color"), "Roughness": Link("Math", "Value"),
+                             "Metallic": 0.25, "Emission Color": (0.1, 0.2, 0.3)},
+                     input_types={"Base Color": "RGBA", "Roughness": "VALUE", "Metallic": "VALUE",
+                                  "Emission Color": "RGBA"},
+                     outputs={"BSDF": "SHADER"}),
+    }, surface=Link("BSDF", "BSDF"))
 
 
 def _assert_same(a, b, path="scene"):
@@ -111,6 +158,112 @@ def test_round_trip_is_bit_exact(tmp_path):
     assert np.array_equal(scene.instances[1].transform.at(u), loaded.instances[1].transform.at(u))
     assert np.array_equal(scene.shutter.sample(u), loaded.shutter.sample(u))
     assert loaded.has_motion and loaded.meshes[1].is_deforming
+
+
+def test_round_trip_keeps_graphs_textures_and_uvs(tmp_path):
+    """Node graphs compile to the same program, textures keep their native storage, UV maps
+    their names (even with a '/') and the render-active one."""
+    scene = rich_scene()
+    loaded = load_scene(save_scene(scene, tmp_path / "g.stpm"))
+    a, b = compile_graph(scene.materials[0].graph, 4, []), compile_graph(loaded.materials[0].graph, 4, [])
+    assert np.array_equal(a.words, b.words) and a.unsupported == b.unsupported
+    assert [m.graph is None for m in loaded.materials] == [False, True, True, True]
+    kinds = [(t.pixels.dtype, t.half, t.colorspace, t.alpha_mode) for t in loaded.textures]
+    assert kinds == [(np.uint8, False, "sRGB", "STRAIGHT"), (np.uint16, True, "Linear", "STRAIGHT"),
+                     (np.float32, False, "Non-Color", "PREMUL"), (np.uint16, False, "Linear", "STRAIGHT")]
+    for t0, t1 in zip(scene.textures, loaded.textures):
+        np.testing.assert_array_equal(t0.decoded(), t1.decoded())
+    m = loaded.meshes[0]
+    assert list(m.uv_layers) == ["UVMap", "Second/map"] and m.uv_render == "Second/map"
+    assert all(uv.dtype == np.float32 for uv in m.uv_layers.values())
+    assert list(m.tangents) == ["UVMap"] and m.tangents["UVMap"].shape == (3, 3, 4)
+    assert loaded.meshes[1].uv_layers == {} and loaded.meshes[1].uv_render is None
+    assert loaded.meshes[1].tangents == {}
+
+
+def test_files_without_the_node_fields_still_load(tmp_path):
+    """The graph, texture and UV keys are optional (files written before they existed)."""
+    header, arrays = _parts()
+    del header["textures"]
+    for m in header["materials"]:
+        m.pop("graph", None)
+    for m in header["meshes"]:
+        m.pop("uv_layers", None), m.pop("uv_render", None), m.pop("tangents", None)
+    arrays = {k: v for k, v in arrays.items()
+              if not k.startswith("textures/") and "/uv/" not in k and "/tangents/" not in k}
+    _write_raw(tmp_path / "old.stpm", header, arrays)
+    scene = load_scene(tmp_path / "old.stpm")
+    assert scene.textures == [] and all(m.graph is None for m in scene.materials)
+    assert all(m.uv_layers == {} and m.uv_render is None and m.tangents == {} for m in scene.meshes)
+
+
+def _bad_graph_nan(sc):
+    sc.materials[0].graph.nodes["BSDF"].inputs["Metallic"] = float("nan")
+
+
+def _bad_graph_object(sc):
+    sc.materials[0].graph.nodes["Math"].props["operation"] = object()
+
+
+def _bad_graph_image(sc):
+    sc.materials[0].graph.nodes["Image"].props["image"] = 9
+
+
+def _bad_graph_type(sc):
+    sc.materials[1].graph = {"nodes": {}}
+
+
+def _bad_texture_type(sc):
+    sc.textures.append(np.zeros((2, 2, 3), np.uint8))
+
+
+def _bad_texture_space(sc):
+    sc.textures[0].colorspace = "Display P3"
+
+
+def _bad_texture_nan(sc):
+    sc.textures[2].pixels[0, 0, 0] = np.inf
+
+
+def _bad_uv_shape(sc):
+    sc.meshes[0].uv_layers["UVMap"] = np.zeros((2, 3, 2), np.float32)
+
+
+def _bad_uv_render(sc):
+    sc.meshes[0].uv_render = "nope"
+
+
+def _bad_tangent_name(sc):
+    sc.meshes[0].tangents["Other"] = sc.meshes[0].tangents["UVMap"]
+
+
+def _bad_alpha_mode(sc):
+    sc.textures[1].alpha_mode = "MULTIPLY"
+
+
+BAD_SCENES = [
+    ("NaN graph input", _bad_graph_nan, "materials[0] ('d').graph"),
+    ("non-JSON property", _bad_graph_object, "materials[0] ('d').graph"),
+    ("texture index out of range", _bad_graph_image, "props['image']"),
+    ("graph not a ShaderGraph", _bad_graph_type, "materials[1] ('m').graph"),
+    ("texture not a Texture", _bad_texture_type, "textures[4]"),
+    ("unknown colour space", _bad_texture_space, "textures[0] ('rgb8').colorspace"),
+    ("inf texel", _bad_texture_nan, "textures[2] ('f32').pixels"),
+    ("UV shape", _bad_uv_shape, "uv_layers['UVMap']"),
+    ("unknown render UV map", _bad_uv_render, "uv_render"),
+    ("tangents of no UV map", _bad_tangent_name, "tangents['Other']"),
+    ("unknown alpha mode", _bad_alpha_mode, "textures[1] ('half').alpha_mode"),
+]
+
+
+@pytest.mark.parametrize("label,spoil,field", BAD_SCENES, ids=[b[0] for b in BAD_SCENES])
+def test_bad_graphs_textures_and_uvs_are_never_written(tmp_path, label, spoil, field):
+    scene = rich_scene()
+    spoil(scene)
+    with pytest.raises(SceneError) as info:
+        save_scene(scene, tmp_path / "bad.stpm")
+    assert field in str(info.value) and "\n" not in str(info.value), str(info.value)
+    assert not (tmp_path / "bad.stpm").exists()
 
 
 def test_settings_are_optional(tmp_path):
@@ -229,6 +382,102 @@ def _mut_curve(h, a):
     a["shutter/curve"] = np.array([1.0, -1.0, 1.0])
 
 
+def _mut_tex_dtype(h, a):
+    a["textures/0/pixels"] = a["textures/0/pixels"].astype(np.int16)
+
+
+def _mut_tex_shape(h, a):
+    a["textures/0/pixels"] = np.zeros((2, 3, 2), np.uint8)
+
+
+def _mut_tex_nan(h, a):
+    a["textures/2/pixels"] = np.full((1, 2, 4), np.nan, np.float32)
+
+
+def _mut_tex_half_inf(h, a):
+    a["textures/1/pixels"] = np.full((2, 2, 1), np.inf, np.float16).view(np.uint16)
+
+
+def _mut_tex_half_dtype(h, a):
+    a["textures/1/pixels"] = np.zeros((2, 2, 1), np.float32)
+
+
+def _mut_tex_space(h, a):
+    h["textures"][3]["colorspace"] = "Rec.2020"
+
+
+def _mut_tex_missing(h, a):
+    del a["textures/3/pixels"]
+
+
+def _mut_graph_link(h, a):
+    h["materials"][0]["graph"]["nodes"]["Math"]["inputs"]["Value"] = {"link": ["Gone", "Alpha"]}
+
+
+def _mut_graph_input(h, a):
+    h["materials"][0]["graph"]["nodes"]["BSDF"]["inputs"]["Emission Color"] = [0.1, 0.2]
+
+
+def _mut_graph_image(h, a):
+    h["materials"][0]["graph"]["nodes"]["Image"]["props"]["image"] = 4
+
+
+def _mut_graph_ramp(h, a):
+    h["materials"][0]["graph"]["nodes"]["Ramp"]["props"]["elements"] = [[0.0, [1, 1]]]
+
+
+def _mut_graph_table(h, a):
+    h["materials"][0]["graph"]["nodes"]["Curves"]["props"]["table"] = [[0.0, 1.0], [0.0, 1.0]]
+
+
+def _mut_graph_enum(h, a):
+    h["materials"][0]["graph"]["nodes"]["Math"]["props"]["operation"] = ["ADD"]
+
+
+def _mut_graph_surface(h, a):
+    h["materials"][0]["graph"]["surface"] = ["BSDF"]
+
+
+def _mut_graph_noise(h, a):
+    h["materials"][0]["graph"]["nodes"]["Noise"]["props"]["noise_type"] = {"x": 1}
+
+
+def _mut_graph_type(h, a):
+    del h["materials"][0]["graph"]["nodes"]["UV"]["type"]
+
+
+def _mut_uv_shape(h, a):
+    a["meshes/0/uv/1"] = np.zeros((4, 3, 2), np.float32)
+
+
+def _mut_uv_nan(h, a):
+    a["meshes/0/uv/0"] = np.full((3, 3, 2), np.nan, np.float32)
+
+
+def _mut_uv_render(h, a):
+    h["meshes"][0]["uv_render"] = "Missing"
+
+
+def _mut_uv_names(h, a):
+    h["meshes"][0]["uv_layers"] = ["UVMap", "UVMap"]
+
+
+def _mut_uv_missing(h, a):
+    del a["meshes/0/uv/1"]
+
+
+def _mut_tangent_shape(h, a):
+    a["meshes/0/tangents/0"] = np.zeros((3, 3, 3), np.float32)
+
+
+def _mut_tangent_name(h, a):
+    h["meshes"][0]["tangents"] = ["Nope"]
+
+
+def _mut_alpha_mode(h, a):
+    h["textures"][0]["alpha_mode"] = "premul"
+
+
 MALFORMED = [
     ("wrong shape", _mut_shape, "meshes[0].triangles"),
     ("NaN in vertices", _mut_nan_vertices, "meshes[0].vertices"),
@@ -249,6 +498,30 @@ MALFORMED = [
     ("float triangles", _mut_dtype, "meshes[0].triangles"),
     ("short colour", _mut_vec, "world.color"),
     ("negative shutter curve", _mut_curve, "shutter"),
+    ("texture dtype", _mut_tex_dtype, "textures[0].pixels"),
+    ("texture channels", _mut_tex_shape, "textures[0].pixels"),
+    ("NaN texels", _mut_tex_nan, "textures[2].pixels"),
+    ("inf half texels", _mut_tex_half_inf, "textures[1].pixels"),
+    ("half texture not uint16", _mut_tex_half_dtype, "textures[1].pixels"),
+    ("texture colour space", _mut_tex_space, "textures[3].colorspace"),
+    ("missing texture pixels", _mut_tex_missing, "textures/3/pixels"),
+    ("link to unknown node", _mut_graph_link, "materials[0].graph.nodes['Math'].inputs['Value']"),
+    ("short vector input", _mut_graph_input, "materials[0].graph.nodes['BSDF'].inputs['Emission Color']"),
+    ("image index out of range", _mut_graph_image, "materials[0].graph.nodes['Image'].props['image']"),
+    ("bad ramp", _mut_graph_ramp, "nodes['Ramp'].props['elements']"),
+    ("bad curve table", _mut_graph_table, "nodes['Curves'].props['table']"),
+    ("enum not a string", _mut_graph_enum, "nodes['Math'].props['operation']"),
+    ("bad surface link", _mut_graph_surface, "materials[0].graph.surface"),
+    ("node without type", _mut_graph_type, "materials[0].graph.nodes['UV'].type"),
+    ("enum property not a string", _mut_graph_noise, "nodes['Noise'].props['noise_type']"),
+    ("UV map shape", _mut_uv_shape, "meshes[0].uv_layers['Second/map']"),
+    ("NaN UVs", _mut_uv_nan, "meshes[0].uv_layers['UVMap']"),
+    ("unknown render UV map", _mut_uv_render, "meshes[0].uv_render"),
+    ("repeated UV map names", _mut_uv_names, "meshes[0].uv_layers"),
+    ("missing UV array", _mut_uv_missing, "meshes/0/uv/1"),
+    ("tangent shape", _mut_tangent_shape, "meshes[0].tangents['UVMap']"),
+    ("tangents of an unknown UV map", _mut_tangent_name, "meshes[0].tangents['Nope']"),
+    ("unknown alpha mode", _mut_alpha_mode, "textures[0].alpha_mode"),
 ]
 
 
@@ -340,6 +613,9 @@ def _load_or_scene_error(path) -> None:
         assert "\n" not in str(e)
         return
     validate_scene(scene)  # whatever loads is a valid scene
+    for m in scene.materials:  # ... and its node graphs compile (the loader checked what the compiler reads)
+        if m.graph is not None:
+            compile_graph(m.graph, len(scene.textures), [])
 
 
 FUZZ = hsettings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

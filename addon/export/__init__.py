@@ -12,6 +12,11 @@ Steps
 2. If the shutter is open for a while: step through K shutter times, record
    each instance's matrix (and, for meshes that deform, vertex positions).
 3. Assemble MotionTransforms (static when nothing moved) and deformation.
+
+Materials that need it carry their node graph (:mod:`.nodes`); the images those graphs read
+become ``Scene.textures`` and every mesh carries its UV maps, and the tangents its materials'
+tangent-space Normal Maps read (taken at the current frame: a deforming mesh's UVs and
+tangents do not change across the shutter).
 """
 from __future__ import annotations
 
@@ -135,7 +140,8 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
             me, cleanup = mesh_export.evaluated_mesh(obj)
             if me is None:
                 continue
-            arr = mesh_export.mesh_arrays(me)
+            arr = mesh_export.mesh_arrays(me, tangent_maps=mats.tangent_maps(mat_ids.tolist()),
+                                          warn=lambda text: _warn_once(warnings, text))
             cleanup()
             if arr["triangles"].shape[0] == 0:
                 mesh_cache[data_key] = -1
@@ -143,7 +149,8 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
                 slot = np.clip(arr["slots"], 0, len(mat_ids) - 1)
                 meshes.append(scene_model.Mesh(vertices=arr["vertices"], triangles=arr["triangles"],
                                                material_ids=mat_ids[slot], normals=arr["normals"],
-                                               name=obj.name))
+                                               name=obj.name, uv_layers=arr["uv_layers"],
+                                               uv_render=arr["uv_render"], tangents=arr["tangents"]))
                 mesh_cache[data_key] = len(meshes) - 1
         if mesh_cache[data_key] < 0:
             continue
@@ -218,6 +225,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
         warnings.append("non-square pixel aspect is ignored")
     out = scene_model.Scene(
         meshes=meshes, instances=instances, camera=cam, lights=lights, materials=mats.materials,
+        textures=mats.textures.textures,
         world=world_export.export_world(scene.world, warnings), shutter=shutter,
         resolution=camera_export.render_resolution(render), frame=float(frame),
         metadata={"exporter": "stpm-blender", "blender_scene": scene.name, "motion_steps": int(len(times)),

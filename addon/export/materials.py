@@ -11,10 +11,19 @@ Glossy BSDF        Color, Roughness (metallic 1)
 Glass BSDF         Color, Roughness, IOR (transmission 1)
 Emission           Color * Strength (radiance, W m^-2 sr^-1, as in Cycles)
 Mix Shader         every parameter blended by Fac (approximate: warned)
-Image Texture      on a colour input: the image's mean linear colour (warned)
+Image Texture      on a colour input: the image's mean linear colour
 =================  ==============================================================
 
 Anything else becomes the grey diffuse default and a warning; nothing raises.
+
+These constants are every material's *representative* parameters (what the effects plan and
+the photon budgets read).  When the surface reads something they cannot represent (a texture,
+a Math node, a node group, ...), the material also carries its node graph
+(:mod:`.nodes`, ``Material.graph``), which the renderer evaluates per hit; its images become
+the scene's textures (:attr:`MaterialExporter.textures`).  For such materials the constant
+path's warnings about what the graph renders (mean colours, linked inputs, Mix Shader
+blending, bump / normal inputs, unsupported shaders) are dropped and the node compiler's own
+messages name what the graph cannot render (a Noise texture, Coat, a Box projection, ...).
 """
 from __future__ import annotations
 
@@ -22,7 +31,8 @@ import os
 
 import numpy as np
 
-from .._core import scene_model
+from .._core import scene_model, sub
+from . import nodes as node_export
 
 # Cycles' colour for an image that cannot be loaded
 MISSING_IMAGE = np.array([1.0, 0.0, 1.0])
@@ -127,8 +137,23 @@ class MaterialExporter:
         self.warnings = warnings
         self.materials: list = []
         self._index: dict = {}
+        self.textures = node_export.TextureTable()   # .textures: the scene's Texture list
+        self._graph_mode = False   # the material being converted carries its node graph
 
     # Public entry
+    def tangent_maps(self, indices) -> list:
+        """UV map names ("" = render-active) whose tangents the materials ``indices`` (into
+        ``self.materials``) read: their graphs' tangent-space Normal Map nodes."""
+        names = []
+        for i in indices:
+            graph = getattr(self.materials[i], "graph", None)
+            for node in (graph.nodes.values() if graph is not None else ()):
+                if node.type == "ShaderNodeNormalMap" and node.props.get("space", "TANGENT") == "TANGENT":
+                    name = str(node.props.get("uv_map", "") or "")
+                    if name not in names:
+                        names.append(name)
+        return names
+
     def index_of(self, mat) -> int:
         """Index into ``self.materials`` of a Blender material (None -> the grey default)."""
         key = mat.name_full if mat is not None else None
@@ -141,6 +166,7 @@ class MaterialExporter:
         """One Blender material -> Material (never raises for unsupported setups)."""
         self._where = f"material {mat.name!r}"
         tree = mat.node_tree if _uses_nodes(mat) else None
+        graph = None
         if tree is None:
             p = _params(base_color=np.array(mat.diffuse_color[:3], dtype=np.float64),
                         metallic=float(mat.metallic), roughness=float(mat.roughness))
@@ -151,15 +177,72 @@ class MaterialExporter:
                 if other is not None and other.is_linked:
                     self._warn(f"Material Output {ignored} is ignored (STPM renders the Surface only)")
             sock = out.inputs.get("Surface") if out is not None else None
-            if sock is None or not sock.is_linked:
-                self._warn("no surface shader connected, using grey diffuse")
-                p = _params()
-            else:
-                p = self._shader(self._follow(sock.links[0]), depth=0)
-        return self._material(p, mat.name)
+            builder = node_export.GraphBuilder()
+            try:
+                graph = builder.build(out) if out is not None else None
+            except RecursionError:
+                self._warn("the node tree is too deep to export as a graph; rendered with constant parameters")
+                graph = None
+            if graph is None or not node_export.graph_needed(graph, builder):
+                graph = None
+            self._graph_mode = graph is not None
+            try:
+                if sock is None or not sock.is_linked:
+                    self._warn("no surface shader connected, using grey diffuse")
+                    p = _params()
+                else:
+                    p = self._shader(self._follow(sock.links[0]), depth=0)
+            finally:
+                self._graph_mode = False
+            if graph is not None:
+                graph = self._finish_graph(graph, builder)
+        return self._material(p, mat.name, graph)
+
+    def _finish_graph(self, graph, builder):
+        """Resolve the graph's images to texture indices and report what it cannot render.
+
+        The node interpreter's compiler is run once here: its messages (unsupported node types,
+        operations, outputs, shader inputs ...) become the material's export warnings (the
+        constant path's own warnings about what the graph renders were dropped).  Returns the
+        graph (None if it could not be compiled: the constants are rendered, warned).
+        """
+        for msg in builder.warnings:
+            self._warn(msg)
+        for name, image in builder.images.items():
+            node = graph.nodes[name]
+            if image is None:
+                self._warn(f"image texture {name!r} has no image, rendered magenta (1, 0, 1) as in Cycles")
+                continue
+            problem = self._image_problem(image)
+            if problem is not None:
+                self._warn(problem)
+                continue
+            if image.source in ("SEQUENCE", "MOVIE"):
+                self._warn(f"image {image.name!r}: an image {image.source.lower()} is rendered as the one frame "
+                           f"Blender has loaded")
+            elif image.source == "TILED":
+                self._warn(f"image {image.name!r}: UDIM tiles are not supported, only the first tile is used")
+            node.props["image"] = self.textures.index_of(image, self._warn)
+        compile_mod = sub("nodes.compile")
+        try:
+            prog = compile_mod.compile_graph(graph, n_textures=len(self.textures.textures), uv_layers=[])
+        except Exception as e:  # noqa: BLE001 -- never fail an export on the interpreter's compiler
+            self._warn(f"the node graph could not be compiled ({type(e).__name__}: {e}); "
+                       f"rendered with constant parameters")
+            return None
+        for msg in prog.unsupported:
+            node = next((n for k, n in graph.nodes.items() if msg.startswith(f"node {k!r} (")), None)
+            if node is not None and node.type == "ShaderNodeTexImage" and "has no image" in msg:
+                continue  # warned above, with the image's name and path
+            self._warn(msg)
+        return graph
 
     # Helpers
-    def _warn(self, msg: str) -> None:
+    def _warn(self, msg: str, graph_carries: bool = False) -> None:
+        """Record ``msg`` once; ``graph_carries``: an approximation of the constant path that the
+        material's node graph renders exactly (dropped when the material carries its graph)."""
+        if graph_carries and self._graph_mode:
+            return
         text = f"{self._where}: {msg}"
         if text not in self.warnings:
             self.warnings.append(text)
@@ -186,7 +269,7 @@ class MaterialExporter:
             node = node.inputs[0].links[0].from_node
         return node
 
-    def _material(self, p: dict, name: str) -> "scene_model.Material":
+    def _material(self, p: dict, name: str, graph=None) -> "scene_model.Material":
         base = np.asarray(p["base_color"], dtype=np.float64)
         if np.any(base > 1.0):
             self._warn("base colour above 1 clipped (energy conservation)")
@@ -197,7 +280,7 @@ class MaterialExporter:
             metallic=float(np.clip(p["metallic"], 0, 1)), transmission=float(np.clip(p["transmission"], 0, 1)),
             roughness=float(np.clip(p["roughness"], 0, 1)), specular=float(np.clip(p["specular"], 0, 1)),
             ior=float(np.clip(p["ior"], 1.0, 10.0)), emission=np.maximum(np.asarray(p["emission"], float), 0.0),
-            name=name)
+            name=name, graph=graph)
 
     def _value(self, node, name: str, default: float) -> float:
         """A scalar input's value (linked inputs: their default, with a warning)."""
@@ -208,7 +291,8 @@ class MaterialExporter:
             src = self._follow(sock.links[0])
             if src.bl_idname == "ShaderNodeValue":
                 return float(src.outputs[0].default_value)
-            self._warn(f"{node.name}.{name} driven by {src.bl_idname} is not supported, using its value")
+            self._warn(f"{node.name}.{name} driven by {src.bl_idname} is not supported, using its value",
+                       graph_carries=True)
         return float(sock.default_value)
 
     def _color(self, node, name: str, default=(0.8, 0.8, 0.8)) -> np.ndarray:
@@ -222,12 +306,14 @@ class MaterialExporter:
                 mean, loaded = self._image_mean(src.image)
                 if mean is not None:
                     if loaded:
-                        self._warn(f"image texture {src.image.name!r} approximated by its mean colour")
+                        self._warn(f"image texture {src.image.name!r} approximated by its mean colour",
+                                   graph_carries=True)
                     return mean
             elif src.bl_idname == "ShaderNodeRGB":
                 return np.array(src.outputs[0].default_value[:3], dtype=np.float64)
             else:
-                self._warn(f"{node.name}.{name} driven by {src.bl_idname} is not supported, using its colour")
+                self._warn(f"{node.name}.{name} driven by {src.bl_idname} is not supported, using its colour",
+                           graph_carries=True)
         return np.array(sock.default_value[:3], dtype=np.float64)
 
     def _image_mean(self, image) -> tuple:
@@ -237,21 +323,28 @@ class MaterialExporter:
         missing or cannot be loaded: Cycles' magenta, (MISSING_IMAGE, False), warned
         with the path.
         """
-        import bpy
         if image is None:
-            self._warn("image texture without an image, using its colour")
+            self._warn("image texture without an image, using its colour", graph_carries=True)
             return None, False
+        problem = self._image_problem(image)
+        if problem is not None:
+            self._warn(problem)
+            return MISSING_IMAGE.copy(), False
+        return image_mean(image), True
+
+    @staticmethod
+    def _image_problem(image) -> str | None:
+        """Why ``image`` has no pixels to render (missing file, unloadable), or None."""
+        import bpy
         if image.source in ("FILE", "SEQUENCE", "MOVIE") and image.packed_file is None:
             path = bpy.path.abspath(image.filepath, library=image.library)
             if not os.path.exists(path):
-                self._warn(f"image {image.name!r}: file {path!r} is missing, rendered magenta (1, 0, 1) as in Cycles")
-                return MISSING_IMAGE.copy(), False
+                return f"image {image.name!r}: file {path!r} is missing, rendered magenta (1, 0, 1) as in Cycles"
         w, h = image.size[:]
         if w * h == 0 or image.channels < 3:
             where = f"file {bpy.path.abspath(image.filepath, library=image.library)!r}" if image.filepath else "it"
-            self._warn(f"image {image.name!r}: {where} could not be loaded, rendered magenta (1, 0, 1) as in Cycles")
-            return MISSING_IMAGE.copy(), False
-        return image_mean(image), True
+            return f"image {image.name!r}: {where} could not be loaded, rendered magenta (1, 0, 1) as in Cycles"
+        return None
 
     # The shader tree walk
     def _shader(self, node, depth: int) -> dict:
@@ -264,15 +357,18 @@ class MaterialExporter:
             if sock.is_linked and sock.name.endswith("Normal") and sock.type == "VECTOR":
                 src = self._follow(sock.links[0])
                 self._warn(f"{node.name}.{sock.name} driven by {src.bl_idname} is ignored "
-                           f"(no bump or normal mapping: the surface normal is used)")
+                           f"(no bump or normal mapping: the surface normal is used)", graph_carries=True)
         if kind == "ShaderNodeHoldout":
-            self._warn("Holdout shader is not supported, rendered as grey diffuse")
+            self._warn("Holdout shader is not supported, rendered as grey diffuse", graph_carries=True)
             return _params()
         if kind == "ShaderNodeBsdfPrincipled":
             for name in ("Coat Weight", "Sheen Weight", "Subsurface Weight"):
                 if self._value(node, name, 0.0) > 0:
-                    self._warn(f"Principled {name} is ignored")
-            if self._value(node, "Alpha", 1.0) < 1.0:
+                    self._warn(f"Principled {name} is ignored", graph_carries=True)
+            alpha = node.inputs.get("Alpha")
+            alpha_linked = alpha is not None and alpha.is_linked and \
+                self._follow(alpha.links[0]).bl_idname != "ShaderNodeValue"
+            if self._value(node, "Alpha", 1.0) < 1.0 or (alpha_linked and self._graph_mode):
                 self._warn("Principled Alpha is ignored (opaque)")
             emission = self._color(node, "Emission Color", (0, 0, 0)) * self._value(node, "Emission Strength", 0.0)
             return _params(base_color=self._color(node, "Base Color"),
@@ -295,12 +391,13 @@ class MaterialExporter:
                            emission=self._color(node, "Color", (1, 1, 1)) * self._value(node, "Strength", 1.0))
         if kind == "ShaderNodeMixShader":
             fac = float(np.clip(self._value(node, "Fac", 0.5), 0.0, 1.0))
-            self._warn("Mix Shader approximated by blending the two shaders' parameters")
+            self._warn("Mix Shader approximated by blending the two shaders' parameters", graph_carries=True)
             sides = []
             for sock in (node.inputs[1], node.inputs[2]):
                 sides.append(self._shader(self._follow(sock.links[0]), depth + 1) if sock.is_linked
                              else _params(base_color=np.zeros(3)))
             return {k: (1 - fac) * np.asarray(sides[0][k], float) + fac * np.asarray(sides[1][k], float)
                     for k in FIELDS}
-        self._warn(f"shader node {node.bl_idname} ({node.name!r}) is not supported, using grey diffuse")
+        self._warn(f"shader node {node.bl_idname} ({node.name!r}) is not supported, using grey diffuse",
+                   graph_carries=kind == "ShaderNodeGroup")  # a group's shaders: the graph inlines them
         return _params()

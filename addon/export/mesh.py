@@ -1,4 +1,4 @@
-"""Evaluated Blender meshes -> numpy arrays (loop triangles, materials, corner normals).
+"""Evaluated Blender meshes -> numpy arrays (loop triangles, materials, corner normals, UV maps).
 
 Everything goes through ``foreach_get`` into preallocated numpy buffers, no
 per-vertex Python loops.
@@ -41,14 +41,22 @@ def vertex_positions(me) -> np.ndarray:
     return co.reshape(-1, 3)
 
 
-def mesh_arrays(me) -> dict:
+def mesh_arrays(me, tangent_maps=(), warn=None) -> dict:
     """Triangulated arrays of a mesh.
+
+    tangent_maps : UV map names ("" = the render-active one) whose MikkTSpace tangents the
+        mesh's materials read (tangent-space Normal Maps); warn(text) reports what failed.
 
     Returns a dict with
     vertices : (V, 3) float32 object space;
     triangles : (F, 3) int32 vertex indices;
     slots : (F,) int32 material slot index of each triangle;
-    normals : (F, 3, 3) float32 corner normals when any face is smooth, else None.
+    normals : (F, 3, 3) float32 corner normals when any face is smooth, else None;
+    uv_layers : {name: (F, 3, 2) float32} every UV map's (u, v) at each triangle corner, in the
+        corner order of ``triangles`` (see :func:`uv_arrays`);
+    uv_render : the render-active UV map's name, or None without UV maps;
+    tangents : {name: (F, 3, 4) float32} per-corner object-space tangent and bitangent sign of
+        each requested UV map that exists (see :func:`tangent_arrays`).
     """
     me.calc_loop_triangles()
     tris = me.loop_triangles
@@ -63,9 +71,9 @@ def mesh_arrays(me) -> dict:
         tris.foreach_get("use_smooth", smooth)
     # Corner normals: Blender already gives flat faces their face normal here
     normals = None
+    loops = np.empty(F * 3, dtype=np.int32)
+    tris.foreach_get("loops", loops)
     if smooth.any():
-        loops = np.empty(F * 3, dtype=np.int32)
-        tris.foreach_get("loops", loops)
         cn = np.empty(len(me.loops) * 3, dtype=np.float32)
         if hasattr(me, "corner_normals"):
             me.corner_normals.foreach_get("vector", cn)
@@ -74,5 +82,92 @@ def mesh_arrays(me) -> dict:
             sn = np.empty(F * 9, dtype=np.float32)
             tris.foreach_get("split_normals", sn)
             normals = sn.reshape(F, 3, 3)
+    uv_layers, uv_render = uv_arrays(me, loops)
+    names = [uv_render if n == "" else n for n in tangent_maps]
+    names = [n for n in dict.fromkeys(names) if n in uv_layers]
+    tangents = tangent_arrays(me, loops, names, tri.reshape(F, 3), uv_layers, normals, warn) if names and F else {}
     return {"vertices": vertex_positions(me), "triangles": tri.reshape(F, 3),
-            "slots": slots, "normals": normals}
+            "slots": slots, "normals": normals, "uv_layers": uv_layers, "uv_render": uv_render,
+            "tangents": tangents}
+
+
+def tangent_arrays(me, loops: np.ndarray, names: list, tri: np.ndarray, uv_layers: dict, normals, warn=None) -> dict:
+    """MikkTSpace tangents of the UV maps ``names``: {name: (F, 3, 4) float32}, per loop-triangle
+    corner the object-space tangent (x, y, z) and the bitangent sign (+-1), as
+    ``Mesh.calc_tangents`` computes them.
+
+    Blender computes tangents for triangles and quads only; a mesh with n-gons gets them from a
+    temporary copy made of its loop triangles (same corners, UVs and corner normals).
+    """
+    import bpy
+    F = tri.shape[0]
+    out = {}
+    n_loops = len(me.loops)
+    t = np.empty(n_loops * 3, dtype=np.float32)
+    sign = np.empty(n_loops, dtype=np.float32)
+    has_ngons = any(p.loop_total > 4 for p in me.polygons) if len(me.polygons) < 100_000 else None
+    for name in names:
+        try:
+            if has_ngons:
+                raise RuntimeError("n-gons")
+            me.calc_tangents(uvmap=name)
+            me.loops.foreach_get("tangent", t)
+            me.loops.foreach_get("bitangent_sign", sign)
+            corner = np.concatenate([t.reshape(-1, 3), sign[:, None]], axis=1)[loops]
+            out[name] = np.ascontiguousarray(corner.reshape(F, 3, 4))
+            continue
+        except RuntimeError:
+            pass
+        tmp = bpy.data.meshes.new("stpm-tangents")
+        try:
+            tmp.from_pydata(vertex_positions(me).tolist(), [], tri.tolist())
+            layer = tmp.uv_layers.new(name=name)
+            layer.uv.foreach_set("vector", np.ascontiguousarray(uv_layers[name], np.float32).reshape(-1))
+            if normals is not None:
+                tmp.normals_split_custom_set(np.asarray(normals, np.float32).reshape(-1, 3).tolist())
+            tmp.calc_tangents(uvmap=name)
+            tt = np.empty(F * 9, dtype=np.float32)
+            ss = np.empty(F * 3, dtype=np.float32)
+            tmp.loops.foreach_get("tangent", tt)
+            tmp.loops.foreach_get("bitangent_sign", ss)
+            out[name] = np.ascontiguousarray(np.concatenate([tt.reshape(-1, 3), ss[:, None]], axis=1).reshape(F, 3, 4))
+        except (RuntimeError, ValueError, TypeError) as e:
+            if warn is not None:
+                warn(f"mesh {me.name!r}: tangents of UV map {name!r} could not be computed ({e}); "
+                     f"tangent-space Normal Maps use none")
+        finally:
+            bpy.data.meshes.remove(tmp)
+    if hasattr(me, "free_tangents"):
+        try:
+            me.free_tangents()
+        except RuntimeError:
+            pass
+    return out
+
+
+def uv_arrays(me, loops: np.ndarray) -> tuple:
+    """Per-corner UVs of every UV map of ``me``.
+
+    loops : (3 F,) int32 loop index of each loop-triangle corner (``loop_triangles`` "loops").
+    Returns ({name: (F, 3, 2) float32 (u, v)}, render-active map name or None).  UVs are unitless
+    texture coordinates, (0, 0) = the image's bottom-left corner.
+    """
+    layers = getattr(me, "uv_layers", None)
+    if layers is None or len(layers) == 0:
+        return {}, None
+    F = loops.shape[0] // 3
+    n_loops = len(me.loops)
+    out = {}
+    render = None
+    for layer in layers:
+        uv = np.empty(n_loops * 2, dtype=np.float32)
+        if hasattr(layer, "uv"):          # Blender >= 3.5: the UV attribute's vectors
+            layer.uv.foreach_get("vector", uv)
+        else:                             # older: MeshUVLoop.uv
+            layer.data.foreach_get("uv", uv)
+        out[layer.name] = np.ascontiguousarray(uv.reshape(-1, 2)[loops].reshape(F, 3, 2))
+        if render is None and getattr(layer, "active_render", False):
+            render = layer.name
+    if render is None:
+        render = next(iter(out))
+    return out, render

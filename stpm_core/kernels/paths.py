@@ -9,10 +9,9 @@ equations with these names):
 * :func:`camera_tile` -- stratified film positions (placed by the pixel
   filter's inverse CDF) and permuted stratified shutter numbers of one tile;
 * :func:`camera_rays` -- pinhole / ortho rays, camera clipping ``tmax0``;
-* :func:`gather_closures` -- the material closure of every hit
-  (:mod:`stpm_core.kernels.closure`): today the material's constant row; the
-  shader-node interpreter will fill it here, per hit, and nothing after it
-  changes;
+* the closure of every hit comes first, from :func:`stpm_core.kernels.svm.shade_closures`
+  (the material's constant row, or its node program evaluated per hit); nothing after it
+  depends on how it was made;
 * :func:`classify_hits` -- one bounce's bookkeeping: world radiance of misses,
   surface emission, Depth / Normal / coverage of the first hit, and the rows to
   shade (non-delta lobe) and to continue (delta lobe);
@@ -48,7 +47,7 @@ from .closure import (C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE,
 from .lights import sample_light_rows, seen_light
 from .sampling import offset_origin
 
-__all__ = ["camera_tile", "camera_rays", "gather_closures", "classify_hits", "nee_light", "nee_accumulate",
+__all__ = ["camera_tile", "camera_rays", "classify_hits", "nee_light", "nee_accumulate",
            "seen_lights_add", "photon_albedo", "photon_add", "specular_step", "scatter_add", "active_channels",
            "pixel_sums", "tile_finish"]
 
@@ -155,25 +154,12 @@ def camera_rays(px, py, W, H, half_w, half_h, cx, cy, R, pos, ortho, clip_start,
 # One bounce's bookkeeping
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def gather_closures(mat, closures, C):
-    """C[r] = the closure of hit r (m,) on material mat[r] (-1 = miss: the inert row).
-
-    closures (M + 1, N_CLOSURE) from ``closure.pack_materials``; C (m, N_CLOSURE).  The
-    place of the shader-node interpreter: it will evaluate each hit's node program here.
-    """
-    for r in range(mat.shape[0]):
-        row = closures[closure_row(closures, mat[r])]
-        for c in range(closures.shape[1]):
-            C[r, c] = row[c]
-
-
-@njit(**_JIT)
 def classify_hits(t, C, world, add_world, idx, use_idx, beta, use_beta, V, c_emit, first, c_depth, c_normal,
                   depth_bg, P, NS, cam_pos, cam_axis, covered, sh, spec):
     """Bookkeeping of m rays' hits; returns (n_hit, n_sh, n_spec, n_emit) (n_emit: rows added to Emit).
 
     t (m,) hit distances (inf: miss), C (m, N_CLOSURE) the hits' closures
-    (:func:`gather_closures`).  Row r belongs to sample ``idx[r]`` (``r`` when
+    (``kernels.svm.shade_closures``).  Row r belongs to sample ``idx[r]`` (``r`` when
     not use_idx) with throughput ``beta[r]`` (1 when not use_beta).  V (n, K)
     holds the samples' pass values, Emit in columns c_emit .. c_emit + 2.  The
     first bounce (every sample once, in order) starts each sample's row of V:

@@ -30,11 +30,12 @@ import numpy as np
 from .. import kernels as _kernels
 from ..kernels.bsdf import ggx_albedo_tables
 from ..kernels.closure import C_HAS_DELTA, N_CLOSURE, pack_materials
-from ..kernels.paths import gather_closures
+from ..kernels.svm import shade
 from ..kernels.photon_paths import photon_bounce
 from ..parallel import ordered_map, worker_count
 from ..raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from ..sampling import rng_for, stratified_1d
+from ..shading import constant_shading, hit_geometry, shading_data
 from .record import make_records, photon_origin, PHOTON_DTYPE
 
 __all__ = ["specular_targets", "split_counts", "trace_photon_paths", "trace_caustic_map", "trace_global_map"]
@@ -103,7 +104,7 @@ def _times(scene, n: int, rng, time_override) -> np.ndarray:
 
 def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, inst_offset: np.ndarray,
                        target_instance: int | None = None, min_nondelta: int = 1,
-                       origin: np.ndarray | None = None) -> np.ndarray:
+                       origin: np.ndarray | None = None, shading=None) -> np.ndarray:
     """Trace photon paths and return the stored records.
 
     Parameters
@@ -119,6 +120,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     inst_offset : (n_instances,) per-object part of the ray-origin offset along the geometric
         normal (scene units; ``raycast.geometry.instance_offsets``, applied by ``offset_lengths``).
     origin : (3,) world point stored positions are relative to (record.photon_origin).
+    shading : ``shading.ShadingData`` of the scene (node programs, textures, mesh attributes);
+        None: every hit reads its material's constant closure row.
 
     Returns
     -------
@@ -162,7 +165,14 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         d, Phi, t = np.ascontiguousarray(d[idx]), np.ascontiguousarray(Phi[idx]), t[idx]
         n_delta, n_nondelta = n_delta[idx], n_nondelta[idx]
         C = np.empty((k, N_CLOSURE))
-        gather_closures(np.ascontiguousarray(hits.material[idx]), closures, C)
+        sd = shading if shading is not None else constant_shading(closures)
+        if sd.uses_programs:
+            G = hit_geometry(hits, d, idx, sd=sd, times=t)
+            shade(sd, np.ascontiguousarray(hits.material[idx]), G, int(rng.integers(1 << 62)) if sd.uses_mix else 0, C)
+            if sd.uses_normals:
+                hits.ns[idx] = G[2]                      # Normal inputs (normal maps) set the shading normals
+        else:
+            shade(sd, np.ascontiguousarray(hits.material[idx]), None, 0, C)
         last = depth == max_depth
         # -- Random numbers of the bounce: BSDF lobe and direction, then the roulette ----------
         U = rng.random((k, 3)) if not last else _NO_U3
@@ -231,6 +241,7 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
             pairs.append((li, ii, c, r))
             weights.append(P * frac)
     counts = split_counts(int(settings.photons_caustic), np.asarray(weights))
+    shading = shading_data(scene, table.closures)
     jobs = [(pi, b0, min(BATCH, int(n_pair) - b0), int(n_pair)) for pi, n_pair in enumerate(counts)
             for b0 in range(0, int(n_pair), BATCH)]
 
@@ -243,7 +254,8 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
         o, d, Phi = lights.emit_toward(li, n, t, rng, c, r)
         Phi = Phi * (n / float(n_pair))                  # this batch's share of the pair's photons
         return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="caustic",
-                                  max_depth=settings.max_depth, inst_offset=inst_offset, target_instance=ii)
+                                  max_depth=settings.max_depth, inst_offset=inst_offset, target_instance=ii,
+                                  shading=shading)
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing caustic photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
@@ -256,6 +268,7 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
     inst_offset = instance_offsets(scene)
     origin = photon_origin(scene)
     counts = split_counts(int(settings.photons_global), np.asarray(lights.power, dtype=np.float64))
+    shading = shading_data(scene, table.closures)
     jobs = [(li, b0, min(BATCH, int(n_light) - b0), int(n_light)) for li, n_light in enumerate(counts)
             for b0 in range(0, int(n_light), BATCH)]
 
@@ -269,7 +282,8 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
         o, d, Phi = lights.emit(li, n, t, rng)
         Phi = Phi * (n / float(n_light))
         return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global",
-                                  max_depth=settings.max_depth, inst_offset=inst_offset, min_nondelta=min_nondelta)
+                                  max_depth=settings.max_depth, inst_offset=inst_offset, min_nondelta=min_nondelta,
+                                  shading=shading)
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing global photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)

@@ -1,0 +1,240 @@
+"""Image texture look-ups in compiled code (the arrays of :func:`stpm_core.textures.pack_textures`).
+
+:func:`tex_lookup` samples texture ``tid`` at Blender coordinates (x, y) (u, v; (0, 0) the
+bottom-left corner of the image, 1 one image across) as Cycles' CPU image kernel does:
+
+* Closest: the texel floor(x W), floor(y H);
+* Linear: bilinear between the four texels around (x W - 1/2, y H - 1/2);
+* Cubic (and Smart): the uniform cubic B-spline over the 4 x 4 texels around it, weights
+  w0 = (1 - t)^3 / 6, w1 = (3 t^3 - 6 t^2 + 4) / 6, w2 = (-3 t^3 + 3 t^2 + 3 t + 1) / 6, w3 = t^3 / 6;
+* extension Repeat (wrap), Extend (clamp to the edge texel), Clip (texels outside the image read
+  0: within a texel or two of the border the result fades to 0, as in Cycles 3.2+), Mirror
+  (reflect every other tile).
+
+An 8-bit sRGB image is interpolated as stored (sRGB-encoded, as Cycles keeps byte images) and the
+result decoded by the sRGB EOTF; 16-bit, half and float sRGB images are decoded per texel first
+(Blender hands them to Cycles as linear float buffers).  Alpha is never converted.  RGBA images
+that are not data have associated (premultiplied) alpha, as Cycles loads them: 8-bit ones
+premultiplied when packed (``textures.pack_textures``), float / 16-bit ones per texel as read,
+after decoding; the colour is divided by alpha again only when the node's Alpha output is used.  Returns
+(r, g, b, a) linear, a = 1 for images without alpha.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..numba_probe import njit
+from .sampling import JIT
+
+def _eotf_table() -> np.ndarray:
+    c = np.arange(4097) / 4096.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+_EOTF = _eotf_table()
+
+__all__ = ["tex_lookup", "tex_image_rows", "srgb_eotf", "tex_lookup_batch"]
+
+
+@njit(**JIT)
+def srgb_eotf(c):
+    """sRGB-encoded c -> linear (negative values clamp to 0): c / 12.92 up to 0.04045, else
+    ((c + 0.055) / 1.055)^2.4; on [0, 1] through the table ``_EOTF`` (4097 samples, linear
+    interpolation: within 1e-7 of the formula), outside it by the formula."""
+    if c <= 0.04045:
+        return max(c, 0.0) / 12.92
+    if c < 1.0:
+        x = c * 4096.0
+        i = int(x)
+        t = x - i
+        return (1.0 - t) * _EOTF[i] + t * _EOTF[i + 1]
+    return ((c + 0.055) / 1.055) ** 2.4
+
+
+@njit(**JIT)
+def _wrap(i, n, ext):
+    """Texel index i of an axis of n texels under extension ext; -1 = outside (Clip)."""
+    if ext == 0:                       # REPEAT
+        i = i % n
+        return i + n if i < 0 else i
+    if ext == 1:                       # EXTEND
+        return min(max(i, 0), n - 1)
+    if ext == 2:                       # CLIP
+        return i if 0 <= i < n else -1
+    m = i % (2 * n)                    # MIRROR
+    if m < 0:
+        m += 2 * n
+    return m if m < n else 2 * n - 1 - m
+
+
+@njit(**JIT)
+def _chan(kind, u8, u16, f32, half, i):
+    """Decoded value of stored word i of a texture of this kind (U8, U16, HALF, F32)."""
+    if kind == 0:
+        return u8[i] * (1.0 / 255.0)
+    if kind == 1:
+        return u16[i] * (1.0 / 65535.0)
+    if kind == 2:
+        return float(half[u16[i]])
+    return float(f32[i])
+
+
+@njit(**JIT)
+def _texel(hdr, u8, u16, f32, half, tid, ix, iy):
+    """(r, g, b, a) of texel (ix, iy) (already wrapped; -1 -> 0): 8-bit values as stored (an sRGB
+    image stays encoded), other kinds of an sRGB image decoded to linear here, per texel."""
+    if ix < 0 or iy < 0:
+        return 0.0, 0.0, 0.0, 0.0
+    C = hdr[tid, 3]
+    kind = hdr[tid, 4]
+    base = hdr[tid, 0] + (iy * hdr[tid, 1] + ix) * C
+    r = _chan(kind, u8, u16, f32, half, base)
+    if C == 1:
+        g = b = r
+        a = 1.0
+    else:
+        g = _chan(kind, u8, u16, f32, half, base + 1)
+        b = _chan(kind, u8, u16, f32, half, base + 2)
+        a = _chan(kind, u8, u16, f32, half, base + 3) if C == 4 else 1.0
+    if kind != 0:
+        # Blender's linear float32 buffer: straight images decoded then premultiplied in float32;
+        # premultiplied ones kept (sRGB ones: decoded on the straight colour, alpha 0 / 1 directly)
+        assoc = hdr[tid, 6]
+        srgb = hdr[tid, 5] != 0
+        if assoc == 3:
+            if srgb:
+                if a != 0.0 and a != 1.0:
+                    a32 = np.float32(a)
+                    r = float(np.float32(srgb_eotf(r / a)) * a32)
+                    g = float(np.float32(srgb_eotf(g / a)) * a32)
+                    b = float(np.float32(srgb_eotf(b / a)) * a32)
+                else:
+                    r, g, b = srgb_eotf(r), srgb_eotf(g), srgb_eotf(b)
+        else:
+            if srgb:
+                r, g, b = srgb_eotf(r), srgb_eotf(g), srgb_eotf(b)
+            if assoc == 2:
+                a32 = np.float32(a)
+                r, g, b = float(np.float32(r) * a32), float(np.float32(g) * a32), float(np.float32(b) * a32)
+    return r, g, b, a
+
+
+@njit(**JIT)
+def _bspline(t):
+    t2 = t * t
+    t3 = t2 * t
+    return ((1.0 - t) ** 3 / 6.0, (3.0 * t3 - 6.0 * t2 + 4.0) / 6.0, (-3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0) / 6.0,
+            t3 / 6.0)
+
+
+@njit(**JIT)
+def _closest(hdr, u8, u16, f32, half, tid, x, y, ext):
+    W, H = hdr[tid, 1], hdr[tid, 2]
+    return _texel(hdr, u8, u16, f32, half, tid, _wrap(int(math.floor(x * W)), W, ext),
+                  _wrap(int(math.floor(y * H)), H, ext))
+
+
+@njit(**JIT)
+def _bilinear(hdr, u8, u16, f32, half, tid, x, y, ext):
+    W, H = hdr[tid, 1], hdr[tid, 2]
+    fx = x * W - 0.5
+    fy = y * H - 0.5
+    x0 = math.floor(fx)
+    y0 = math.floor(fy)
+    tx = fx - x0
+    ty = fy - y0
+    ix0, iy0 = int(x0), int(y0)
+    ix1, iy1 = _wrap(ix0 + 1, W, ext), _wrap(iy0 + 1, H, ext)
+    ix0, iy0 = _wrap(ix0, W, ext), _wrap(iy0, H, ext)
+    a0, a1, a2, a3 = _texel(hdr, u8, u16, f32, half, tid, ix0, iy0)
+    b0, b1, b2, b3 = _texel(hdr, u8, u16, f32, half, tid, ix1, iy0)
+    c0, c1, c2, c3 = _texel(hdr, u8, u16, f32, half, tid, ix0, iy1)
+    d0, d1, d2, d3 = _texel(hdr, u8, u16, f32, half, tid, ix1, iy1)
+    wa, wb, wc, wd = (1.0 - tx) * (1.0 - ty), tx * (1.0 - ty), (1.0 - tx) * ty, tx * ty
+    return (wa * a0 + wb * b0 + wc * c0 + wd * d0, wa * a1 + wb * b1 + wc * c1 + wd * d1,
+            wa * a2 + wb * b2 + wc * c2 + wd * d2, wa * a3 + wb * b3 + wc * c3 + wd * d3)
+
+
+@njit(**JIT)
+def _bicubic(hdr, u8, u16, f32, half, tid, x, y, ext):
+    W, H = hdr[tid, 1], hdr[tid, 2]
+    fx = x * W - 0.5
+    fy = y * H - 0.5
+    x0 = math.floor(fx)
+    y0 = math.floor(fy)
+    wx = _bspline(fx - x0)
+    wy = _bspline(fy - y0)
+    ix0, iy0 = int(x0), int(y0)
+    r = g = b = a = 0.0
+    for j in range(4):
+        iy = _wrap(iy0 + j - 1, H, ext)
+        for i in range(4):
+            w = wy[j] * wx[i]
+            t0, t1, t2, t3 = _texel(hdr, u8, u16, f32, half, tid, _wrap(ix0 + i - 1, W, ext), iy)
+            r += w * t0
+            g += w * t1
+            b += w * t2
+            a += w * t3
+    return r, g, b, a
+
+
+@njit(**JIT)
+def tex_lookup(hdr, u8, u16, f32, half, tid, x, y, interp, ext, unassociate=False):
+    """(r, g, b, a) of texture tid at (x, y); interp 0 Closest, 1 Linear, 2 Cubic; ext 0 Repeat,
+    1 Extend, 2 Clip, 3 Mirror (see the module docstring).  unassociate: divide the colour by
+    alpha (0 < alpha < 1; images whose alpha is associated), as Cycles does when the Alpha output
+    is used."""
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return 0.0, 0.0, 0.0, 0.0
+    if interp == 0:
+        r, g, b, a = _closest(hdr, u8, u16, f32, half, tid, x, y, ext)
+    elif interp == 1:
+        r, g, b, a = _bilinear(hdr, u8, u16, f32, half, tid, x, y, ext)
+    else:
+        r, g, b, a = _bicubic(hdr, u8, u16, f32, half, tid, x, y, ext)
+    byte = hdr[tid, 4] == 0
+    if unassociate and hdr[tid, 6] != 0 and a != 1.0 and a != 0.0:
+        r, g, b = r / a, g / a, b / a
+    if byte and hdr[tid, 5] != 0:
+        r, g, b = srgb_eotf(r), srgb_eotf(g), srgb_eotf(b)
+    return r, g, b, a
+
+
+@njit(**JIT)
+def tex_image_rows(hdr, u8, u16, f32, half, tid, interp, ext, unassociate, st, vs, cs, as_, n):
+    """Image Texture over a batch of the interpreter's stack st (n_slots, >= n): the vector in
+    slots vs .. vs + 2 of each row k < n -> colour (slots cs ..) and alpha (slot as_; -1 unused).
+    The same values as :func:`tex_lookup`, with the interpolation chosen once per batch."""
+    byte = hdr[tid, 4] == 0
+    srgb = byte and hdr[tid, 5] != 0
+    unassociate = unassociate and hdr[tid, 6] != 0
+    for k in range(n):
+        x, y = st[vs, k], st[vs + 1, k]
+        if not (math.isfinite(x) and math.isfinite(y)):
+            r = g = b = a = 0.0
+        elif interp == 0:
+            r, g, b, a = _closest(hdr, u8, u16, f32, half, tid, x, y, ext)
+        elif interp == 1:
+            r, g, b, a = _bilinear(hdr, u8, u16, f32, half, tid, x, y, ext)
+        else:
+            r, g, b, a = _bicubic(hdr, u8, u16, f32, half, tid, x, y, ext)
+        if unassociate and a != 1.0 and a != 0.0:
+            r, g, b = r / a, g / a, b / a
+        if srgb:
+            r, g, b = srgb_eotf(r), srgb_eotf(g), srgb_eotf(b)
+        if cs >= 0:
+            st[cs, k] = r
+            st[cs + 1, k] = g
+            st[cs + 2, k] = b
+        if as_ >= 0:
+            st[as_, k] = a
+
+
+@njit(**JIT)
+def tex_lookup_batch(hdr, u8, u16, f32, half, tid, xy, interp, ext, out):
+    """:func:`tex_lookup` per row of xy (n, 2) into out (n, 4) (tests)."""
+    for i in range(xy.shape[0]):
+        r, g, b, a = tex_lookup(hdr, u8, u16, f32, half, tid, xy[i, 0], xy[i, 1], interp, ext)
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = r, g, b, a

@@ -1,0 +1,203 @@
+"""What the shader-node interpreter reads for a scene, built once per render.
+
+:func:`shading_data` compiles every material's node graph (:mod:`stpm_core.nodes`) into one
+program array, sets each material's ``C_PROGRAM`` column, packs the textures
+(:mod:`stpm_core.textures`) and the per-corner mesh attributes the nodes read (UV maps, object-space
+corners for Object and Generated coordinates).  Camera paths (``integrator``) and photon paths
+(``photons.trace``) pass the same :class:`ShadingData` to ``kernels.svm.shade_closures``.
+
+A scene whose materials have no graph gets empty attribute arrays and every hit reads its
+material's constant closure row (the same numbers as before node programs existed).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .kernels.closure import C_PROGRAM, pack_materials
+from .nodes.compile import compile_graph
+from .textures import pack_textures
+
+__all__ = ["ShadingData", "shading_data", "constant_shading", "scene_attributes", "hit_geometry", "normal_matrices"]
+
+_I64_0 = np.zeros(0, np.int64)
+
+
+@dataclass
+class ShadingData:
+    """closures (M + 1, N_CLOSURE); prog (W,) float64 programs; n_slots; A and X the attribute and
+    texture tuples of ``kernels.svm``; uses_programs / uses_mix; unsupported: messages naming
+    node inputs the interpreter could not evaluate (they use the socket's default)."""
+
+    closures: np.ndarray
+    prog: np.ndarray
+    n_slots: int
+    A: tuple
+    X: tuple
+    uses_programs: bool = False
+    uses_mix: bool = False
+    uses_normals: bool = False        # some program rewrites hits' shading normals (Normal inputs)
+    uses_frames: bool = False         # some program reads each hit's normal matrix (Normal Map)
+    unsupported: list = field(default_factory=list)
+    uv_layers: list = field(default_factory=list)
+    texture_bytes: int = 0
+    instances: list = field(default_factory=list)     # the scene's instances (normal matrices)
+
+
+def _empty_attributes(n_inst: int) -> tuple:
+    return (np.zeros(max(n_inst, 1), np.int64), np.zeros(1, np.int64), np.full((1, 1), -1, np.int64),
+            np.zeros((1, 3, 2), np.float32), np.zeros((1, 3, 3), np.float32), np.zeros((1, 3)), np.ones((1, 3)),
+            np.zeros((1, 3, 3), np.float32), np.full((1, 1), -1, np.int64), np.zeros((1, 3, 4), np.float32))
+
+
+_NM_IDENTITY = np.eye(3)[None].copy()          # (1, 3, 3): every hit's normal matrix is the identity
+
+
+def constant_shading(closures: np.ndarray) -> ShadingData:
+    """Shading without node programs: every hit reads its material's row of ``closures``."""
+    return ShadingData(closures=closures, prog=np.zeros(1), n_slots=1, A=_empty_attributes(1),
+                       X=pack_textures([]).arrays()[:5])
+
+
+def scene_attributes(scene, uv_layers: list) -> tuple:
+    """The attribute tuple A of ``kernels.svm`` for scene's meshes and the UV layer names
+    (index 0 of a name list: "" = each mesh's render-active map).
+
+    inst_mesh (I,) int64; mesh_tri0 (M,) int64 first triangle of each mesh in corner_obj;
+    uv_off (M, L) int64 first triangle of each (mesh, layer) in corner_uv, -1 = missing;
+    corner_uv (N, 3, 2) float32; corner_obj (T, 3, 3) float32 (first shape of a deforming mesh);
+    gen_lo, gen_inv (M, 3): Generated = (p_obj - gen_lo) * gen_inv, Blender's automatic texture
+    space (the bounding box; an axis of zero extent gets half-size 1, as Blender sets it);
+    corner_nrm (T, 3, 3) float32 object-space corner normals (``Mesh.normals``; flat meshes: the
+    face normal at each corner); tan_off (M, L) int64 and corner_tan (N', 3, 4) float32 the
+    per-corner tangents and signs of each (mesh, layer) (``Mesh.tangents``), -1 = none.
+    """
+    meshes = scene.meshes
+    M = len(meshes)
+    L = max(len(uv_layers), 1)
+    inst_mesh = np.array([inst.mesh for inst in scene.instances] or [0], np.int64)
+    mesh_tri0 = np.zeros(max(M, 1), np.int64)
+    uv_off = np.full((max(M, 1), L), -1, np.int64)
+    gen_lo, gen_inv = np.zeros((max(M, 1), 3)), np.ones((max(M, 1), 3))
+    objs, uvs, nrms, tans = [], [], [], []
+    tan_off = np.full((max(M, 1), L), -1, np.int64)
+    n_tri = n_uv = n_tan = 0
+    for i, m in enumerate(meshes):
+        V = np.asarray(m.vertices, np.float32)
+        if V.ndim == 3:
+            V = V[0]
+        F = np.asarray(m.triangles, np.int64)
+        mesh_tri0[i] = n_tri
+        corners = V[F] if F.size else np.zeros((0, 3, 3), np.float32)
+        objs.append(corners)
+        if m.normals is not None and not m.is_deforming:
+            nrms.append(np.asarray(m.normals, np.float32).reshape(F.shape[0], 3, 3))
+        else:
+            fn = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]).astype(np.float64)
+            fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30)
+            nrms.append(np.repeat(fn[:, None, :], 3, axis=1).astype(np.float32))
+        n_tri += F.shape[0]
+        if V.shape[0]:
+            lo, hi = V.min(axis=0).astype(np.float64), V.max(axis=0).astype(np.float64)
+            loc, size = 0.5 * (lo + hi), 0.5 * (hi - lo)
+            size = np.where(size == 0.0, 1.0, np.where(size < 1e-5, 1e-5, size))
+            gen_lo[i], gen_inv[i] = loc - size, 1.0 / (2.0 * size)
+        layers = getattr(m, "uv_layers", None) or {}
+        for j, name in enumerate(uv_layers):
+            key = name if name else (m.uv_render if m.uv_render in layers else next(iter(layers), None))
+            uv = layers.get(key) if key is not None else None
+            if uv is None:
+                continue
+            uv = np.asarray(uv, np.float32).reshape(F.shape[0], 3, 2)
+            uv_off[i, j] = n_uv
+            uvs.append(uv)
+            n_uv += uv.shape[0]
+            tan = (getattr(m, "tangents", None) or {}).get(key)
+            if tan is not None:
+                tan_off[i, j] = n_tan
+                tans.append(np.asarray(tan, np.float32).reshape(F.shape[0], 3, 4))
+                n_tan += F.shape[0]
+    corner_obj = np.concatenate(objs).astype(np.float32) if n_tri else np.zeros((1, 3, 3), np.float32)
+    corner_uv = np.concatenate(uvs).astype(np.float32) if n_uv else np.zeros((1, 3, 2), np.float32)
+    corner_nrm = np.concatenate(nrms).astype(np.float32) if n_tri else np.zeros((1, 3, 3), np.float32)
+    corner_tan = np.concatenate(tans).astype(np.float32) if n_tan else np.zeros((1, 3, 4), np.float32)
+    return (inst_mesh, mesh_tri0, uv_off, np.ascontiguousarray(corner_uv), np.ascontiguousarray(corner_obj),
+            gen_lo, gen_inv, np.ascontiguousarray(corner_nrm), tan_off, np.ascontiguousarray(corner_tan))
+
+
+def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
+    """Build (or reuse: cached on the scene while its materials, meshes and textures lists are
+    the same objects with the same lengths) the scene's :class:`ShadingData`."""
+    key = (id(scene.materials), len(scene.materials), id(scene.meshes), len(scene.meshes),
+           id(getattr(scene, "textures", [])), len(getattr(scene, "textures", [])), len(scene.instances),
+           tuple(id(m.graph) for m in scene.materials))
+    cached = scene.__dict__.get("_shading_data")
+    if cached is not None and cached[0] == key and (closures is None or cached[1].closures is closures):
+        return cached[1]
+    rows = (pack_materials(scene.materials) if closures is None else closures).copy()
+    textures = list(getattr(scene, "textures", []) or [])
+    uv_layers: list = [""]
+    words, unsupported, uses_mix, uses_normals, uses_frames = [], [], False, False, False
+    at = 0
+    for i, m in enumerate(scene.materials):
+        g = getattr(m, "graph", None)
+        if g is None:
+            continue
+        prog = compile_graph(g, n_textures=len(textures), uv_layers=uv_layers)
+        w = prog.words                 # jumps are relative to the program's start: no relocation
+        words.append(w)
+        rows[i, C_PROGRAM] = float(at)
+        at += w.size
+        uses_mix |= prog.uses_mix
+        uses_normals |= prog.uses_normals
+        uses_frames |= prog.uses_frames
+        unsupported += [f"material {m.name!r}: {u}" for u in prog.unsupported]
+    prog_all = np.concatenate(words) if words else np.zeros(1)
+    starts = [int(r) for r in rows[:-1, C_PROGRAM] if r >= 0]
+    n_slots = max([int(prog_all[s]) for s in starts] + [1])
+    if words:
+        A = scene_attributes(scene, uv_layers)
+        pack = pack_textures(textures)
+    else:
+        A = _empty_attributes(len(scene.instances))
+        pack = pack_textures([])
+    sd = ShadingData(closures=rows, prog=prog_all, n_slots=n_slots, A=A, X=pack.arrays()[:5],
+                     uses_programs=bool(words), uses_mix=uses_mix, uses_normals=uses_normals, uses_frames=uses_frames,
+                     unsupported=unsupported, uv_layers=uv_layers,
+                     texture_bytes=pack.nbytes if words else 0, instances=list(scene.instances))
+    scene.__dict__["_shading_data"] = (key, sd)
+    return sd
+
+
+def normal_matrices(instances, inst: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """(m, 3, 3) object-to-world normal matrices (inverse transpose of each instance's linear part)
+    of hits on ``instances[inst]`` (inst (m,)) at normalised times (m,)."""
+    out = np.empty((inst.shape[0], 3, 3))
+    for i in np.unique(inst):
+        rows = np.flatnonzero(inst == i)
+        tr = instances[int(i)].transform
+        if tr.is_static:
+            M = np.asarray(tr.matrices[0], np.float64)[:3, :3]
+            out[rows] = np.linalg.inv(M).T
+        else:
+            M = np.asarray(tr.at(np.asarray(times, np.float64)[rows]), np.float64)[:, :3, :3]
+            out[rows] = np.transpose(np.linalg.inv(M), (0, 2, 1))
+    return out
+
+
+def hit_geometry(hits, d: np.ndarray, rows: np.ndarray | None = None, *, sd=None, times=None) -> tuple:
+    """The per-hit tuple G of ``kernels.svm`` from a ``raycast.Hits`` and its rays d (m, 3)
+    (rows: a subset of the hits, in that order; d and times are then already that subset's).
+    sd: the scene's :class:`ShadingData`; when its programs read normal matrices (``uses_frames``)
+    each hit's is computed at its time (times (m,)), else G holds the (1, 3, 3) identity.
+    With rows, NS is a copy: write it back (``hits.ns[rows] = G[2]``) when programs set normals."""
+    if rows is None:
+        G = (hits.position, hits.ng, hits.ns, np.ascontiguousarray(d, np.float64), hits.instance, hits.prim,
+             hits.u, hits.v)
+    else:
+        G = (hits.position[rows], hits.ng[rows], hits.ns[rows], np.ascontiguousarray(d, np.float64),
+             hits.instance[rows], hits.prim[rows], hits.u[rows], hits.v[rows])
+    frames = sd is not None and sd.uses_frames
+    NM = normal_matrices(sd.instances, G[4], times) if frames else _NM_IDENTITY
+    return G + (NM,)

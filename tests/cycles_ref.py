@@ -1,0 +1,103 @@
+"""Cycles as the reference: render one bpy scene with Cycles and with STPM, compare blocks.
+
+Both renderers see the same scene (STPM through the add-on's exporter).  Comparisons are
+Z-tests on block means in the manner of Mitsuba's render tests: each renderer renders K seeds,
+every B x B block's mean gets a mean and a variance over the seeds, and
+
+    z_b = (mean_stpm_b - mean_cycles_b) / sqrt(var_stpm_b / K + var_cycles_b / K + floor_b^2)
+
+must stay below ``z_max`` in every block.  ``floor_b`` (a small fraction of the block's level)
+keeps noise-free blocks (a flat texel, a constant background) from turning rounding-level
+differences into large z.  Direct-only renders: Cycles with ``max_bounces = 0``; STPM without
+photons (Combined = Emit + Direct).
+
+Imported by the Cycles comparison tests; needs bpy and OpenImageIO.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["render_cycles", "render_stpm", "block_ztest", "ZResult"]
+
+
+def _read_exr_rgb(path) -> np.ndarray:
+    import OpenImageIO as oiio
+    inp = oiio.ImageInput.open(str(path))
+    assert inp is not None, oiio.geterror()
+    spec = inp.spec()
+    px = inp.read_image(0, 0, 0, spec.nchannels, "float").reshape(spec.height, spec.width, spec.nchannels)
+    inp.close()
+    return np.asarray(px[..., :3], np.float64)
+
+
+def render_cycles(scene, tmp_path, samples: int = 64, seeds=(0, 1, 2, 3), max_bounces: int = 0) -> np.ndarray:
+    """(K, H, W, 3) linear RGB of Cycles (CPU, no denoising, no adaptive sampling), one image per seed."""
+    import bpy
+    scene.render.engine = "CYCLES"
+    cy = scene.cycles
+    cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", samples, False, False
+    cy.max_bounces = max_bounces
+    cy.diffuse_bounces = cy.glossy_bounces = cy.transmission_bounces = min(max_bounces, 12)
+    cy.caustics_reflective = cy.caustics_refractive = max_bounces > 0
+    cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0
+    scene.render.image_settings.media_type = "IMAGE" if hasattr(scene.render.image_settings, "media_type") else None
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.image_settings.color_depth = "32"
+    out = []
+    for s in seeds:
+        cy.seed = int(s)
+        path = tmp_path / f"cycles_{s}.exr"
+        scene.render.filepath = str(path)
+        bpy.ops.render.render(write_still=True)
+        out.append(_read_exr_rgb(path))
+    return np.stack(out)
+
+
+def render_stpm(scene, samples: int = 64, seeds=(0, 1, 2, 3), **settings):
+    """((K, H, W, 3) Combined linear RGB, the last RenderResult) of STPM on the exported scene."""
+    from addon.export import export_scene
+    import bpy
+    from stpm_core.render import render
+    from stpm_core.settings import RenderSettings
+    bl = bpy.context.scene
+    core, _warnings = export_scene(bpy.context.evaluated_depsgraph_get(),
+                                   lambda f, sub: bl.frame_set(f, subframe=sub))[:2]
+    kw = dict(photons_caustic=0, photons_global=0)
+    kw.update(settings)
+    out, res = [], None
+    for s in seeds:
+        res = render(core, RenderSettings(samples=samples, seed=int(s), **kw))
+        out.append(np.asarray(res.passes["Combined"][..., :3], np.float64))
+    return np.stack(out), res
+
+
+@dataclass
+class ZResult:
+    z: np.ndarray            # (by, bx) block z values
+    stpm: np.ndarray         # (by, bx) block means (over seeds)
+    cycles: np.ndarray
+    mean_ratio: float        # mean(STPM) / mean(Cycles) over the image
+
+    @property
+    def z_abs_max(self) -> float:
+        return float(np.max(np.abs(self.z)))
+
+    def summary(self) -> str:
+        return (f"|z| max {self.z_abs_max:.2f}, mean ratio {self.mean_ratio:.4f}, blocks {self.z.size}, "
+                f"|z|>3: {int(np.sum(np.abs(self.z) > 3))}")
+
+
+def block_ztest(a: np.ndarray, b: np.ndarray, block: int = 8, floor: float = 0.002) -> ZResult:
+    """Z-test of (K, H, W, 3) image stacks a (STPM) and b (Cycles) on block x block blocks of the
+    channel-mean image; floor: relative level added in quadrature to the standard error."""
+    def blocks(x):
+        K, H, W, _ = x.shape
+        y = x.mean(axis=-1)[:, :H // block * block, :W // block * block]
+        return y.reshape(K, H // block, block, W // block, block).mean(axis=(2, 4))
+    A, B = blocks(a), blocks(b)
+    ma, mb = A.mean(axis=0), B.mean(axis=0)
+    va, vb = A.var(axis=0, ddof=1), B.var(axis=0, ddof=1)
+    se = np.sqrt(va / A.shape[0] + vb / B.shape[0] + (floor * 0.5 * (ma + mb)) ** 2 + 1e-12)
+    return ZResult(z=(ma - mb) / se, stpm=ma, cycles=mb, mean_ratio=float(a.mean() / max(b.mean(), 1e-300)))
