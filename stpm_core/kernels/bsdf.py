@@ -61,9 +61,9 @@ import threading
 import numpy as np
 
 from ..numba_probe import njit
-from .sampling import basis, cosine_hemisphere, dot
-from .closure import (C_ALPHA, C_BASE, C_COAT, C_IOR, C_ROUGH_LOBE, C_ROUGHNESS, C_SPECULAR, C_W_BASE,
-                      C_W_GLASS, C_W_METAL, closure_row)
+from .sampling import JIT_INLINE, basis, cosine_hemisphere, dot
+from .closure import (C_ALPHA, C_BASE, C_BUMPED, C_COAT, C_IOR, C_NS, C_ROUGH_LOBE, C_ROUGHNESS, C_SPECULAR,
+                      C_W_BASE, C_W_GLASS, C_W_METAL, closure_row)
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS",
            "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_sample", "diffuse_albedo", "fresnel_dielectric",
@@ -338,6 +338,32 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
 # ----------------------------------------------------------------------------
 # Evaluation: f and pdf of the non-delta lobes
 # ----------------------------------------------------------------------------
+@njit(**JIT_INLINE)
+def bump_shadowing(C, cr, wi, nsf, ngf):
+    """Cycles' bump shadowing term of diffuse lobes (kernel/closure/bsdf.h, ``bump_shadowing_term``;
+    Conty Estevez et al. 2019) for a closure whose shading normal nsf (facing) replaced a smooth
+    one Ns (``C_BUMPED``; 1 otherwise): 0 when wi and nsf lie on different sides of Ns; else,
+    with cos_d = |Ns . nsf|, cos_i = |Ns . wi|, alpha^2 = clamp(tan^2(d) / 8, 0, 1), the GGX
+    shadowing G1 = 1 / (1 + (sqrt(1 + alpha^2 tan^2(i)) - 1) / 2)."""
+    if not C[cr, C_BUMPED] > 0:
+        return 1.0
+    s0, s1, s2 = C[cr, C_NS], C[cr, C_NS + 1], C[cr, C_NS + 2]
+    t = 1.0 if s0 * ngf[0] + s1 * ngf[1] + s2 * ngf[2] >= 0.0 else -1.0       # Ns on the facing side
+    s0, s1, s2 = t * s0, t * s1, t * s2
+    cos_si = s0 * wi[0] + s1 * wi[1] + s2 * wi[2]
+    cos_sn = s0 * nsf[0] + s1 * nsf[1] + s2 * nsf[2]
+    if cos_si * cos_sn * dot(nsf, wi) < 0.0:
+        return 0.0
+    cos_i, cos_d = abs(cos_si), abs(cos_sn)
+    if cos_d >= 1.0 or cos_i >= 1.0:
+        return 1.0
+    if cos_i < 1e-6:
+        return 0.0
+    a2 = min(max(0.125 * (1.0 / (cos_d * cos_d) - 1.0), 0.0), 1.0)
+    lam = 0.5 * (math.sqrt(1.0 + a2 * (1.0 / (cos_i * cos_i) - 1.0)) - 1.0)
+    return 1.0 / (1.0 + lam)
+
+
 @njit(**_JIT)
 def _eval_pdf_hit(C, cr, E, hit, wo, wi):
     """(f0, f1, f2, pdf) of the non-delta lobes at wi for the hit of :func:`_hit`."""
@@ -349,7 +375,7 @@ def _eval_pdf_hit(C, cr, E, hit, wo, wi):
     # -- DIFFUSE: base / pi under the coat's Fresnel at wo
     f0 = f1 = f2 = pdf = 0.0
     if cos_i > 0 and above_ng:
-        d = w_base * (1.0 - F_coat)
+        d = w_base * (1.0 - F_coat) * bump_shadowing(C, cr, wi, ns, ng)
         f0 = d * b0 / _PI
         f1 = d * b1 / _PI
         f2 = d * b2 / _PI
@@ -416,7 +442,7 @@ def bsdf_eval_smooth(C, cr, wo, wi, ns, ng):
     nsf, ngf, _ = _oriented(wo, ns, ng)
     scale = 0.0
     if dot(wi, nsf) > 0 and dot(wi, ngf) > 0:
-        scale = C[cr, C_W_BASE]
+        scale = C[cr, C_W_BASE] * bump_shadowing(C, cr, wi, nsf, ngf)
         if C[cr, C_COAT] > 0:
             cos_o = min(max(dot(wo, nsf), 0.0), 1.0)
             scale *= 1.0 - C[cr, C_SPECULAR] * fresnel_dielectric(cos_o, C[cr, C_IOR])

@@ -24,6 +24,9 @@ metallic, transmission, roughness, specular, ior.  Derived columns
 ``C_HAS_DELTA``    1 if some lobe is a delta (paths / photons continue specularly)
 ``C_EMISSIVE``     1 if some emission channel is > 0
 ``C_PROGRAM``      first instruction of the material's node program; -1 = constant
+``C_NS``           the hit's smooth shading normal (3 columns) when ``C_BUMPED``: a Normal
+                   input replaced it (``kernels.svm``); the BSDF's bump shadowing term reads it
+``C_BUMPED``       1 where a Normal input replaced the shading normal, else 0
 =================  =============================================================
 
 The last row (index M, where hit material -1 lands) is an inert black closure.
@@ -37,7 +40,7 @@ from ..numba_probe import njit
 __all__ = ["N_CLOSURE", "pack_materials", "finish_closure", "closure_row"] + [
     "C_BASE", "C_EMIT", "C_METALLIC", "C_TRANSMISSION", "C_ROUGHNESS", "C_SPECULAR", "C_IOR", "C_ALPHA",
     "C_W_BASE", "C_W_METAL", "C_W_GLASS", "C_ROUGH_LOBE", "C_NONDELTA", "C_COAT", "C_HAS_DELTA",
-    "C_EMISSIVE", "C_PROGRAM"]
+    "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED"]
 
 C_BASE = 0            # 3 columns: base colour RGB
 C_EMIT = 3            # 3 columns: emitted radiance RGB
@@ -56,7 +59,9 @@ C_COAT = 17
 C_HAS_DELTA = 18
 C_EMISSIVE = 19
 C_PROGRAM = 20
-N_CLOSURE = 21
+C_NS = 21             # 3 columns: the smooth shading normal before a Normal input replaced it
+C_BUMPED = 24         # 1 where a Normal input (normal map, bump) replaced the hit's shading normal
+N_CLOSURE = 25
 
 
 @njit(cache=True, nogil=True)

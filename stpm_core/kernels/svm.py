@@ -29,8 +29,8 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .closure import (C_BASE, C_EMIT, C_IOR, C_METALLIC, C_PROGRAM, C_ROUGHNESS, C_SPECULAR, C_TRANSMISSION,
-                      closure_row, finish_closure)
+from .closure import (C_BASE, C_BUMPED, C_EMIT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
+                      C_TRANSMISSION, closure_row, finish_closure)
 from .sampling import JIT
 
 from .procedural import (brick_color, brick_texture, magic_texture, noise_texture, voronoi_texture, wave_texture,
@@ -1266,20 +1266,23 @@ def run_program(prog, start, st, rows, C, G, A, X, seed):
                 elif op != _EMISSION:
                     ns = int(prog[q + (op - _BSDF_DIFFUSE) + 2])      # DIFFUSE +2, GLOSSY +3, GLASS +4
                 if ns >= 0:
-                    _set_normal(G, r, st[ns, k], st[ns + 1, k], st[ns + 2, k])
+                    _set_normal(G, C, r, st[ns, k], st[ns + 1, k], st[ns + 2, k])
             break
 
 
 @njit(**JIT)
-def _set_normal(G, r, x, y, z):
+def _set_normal(G, C, r, x, y, z):
     """Hit r's shading normal := the shader's Normal input (world, facing the viewer as Cycles' N),
-    stored on the geometric normal's side as the hit arrays keep it."""
+    stored on the geometric normal's side as the hit arrays keep it; the smooth normal it replaces
+    goes to the closure's C_NS columns (C_BUMPED = 1) for the BSDF's bump shadowing term."""
     NG, NS, D = G[1], G[2], G[3]
     x, y, z = _unit(x, y, z)
     if x == 0.0 and y == 0.0 and z == 0.0:
         return
     if D[r, 0] * NG[r, 0] + D[r, 1] * NG[r, 1] + D[r, 2] * NG[r, 2] > 0.0:
         x, y, z = -x, -y, -z
+    C[r, C_NS], C[r, C_NS + 1], C[r, C_NS + 2] = NS[r, 0], NS[r, 1], NS[r, 2]
+    C[r, C_BUMPED] = 1.0
     NS[r, 0], NS[r, 1], NS[r, 2] = x, y, z
 
 
