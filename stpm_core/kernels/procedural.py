@@ -46,7 +46,7 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .sampling import JIT
+from .sampling import JIT, JIT_INLINE
 
 __all__ = ["NOISE_TYPES", "VORONOI_FEATURES", "VORONOI_METRICS", "WAVE_TYPES", "WAVE_BANDS_DIRECTIONS",
            "WAVE_RINGS_DIRECTIONS", "WAVE_PROFILES", "DIMENSIONS",
@@ -117,7 +117,7 @@ def _u2f(n):
 # ----------------------------------------------------------------------------
 # Jenkins lookup3 (final / mix) on 32-bit words held in int64
 # ----------------------------------------------------------------------------
-@njit(**JIT)
+@njit(**JIT_INLINE)            # called with literal shifts: one compile per literal otherwise
 def _rot(x, k):
     return ((x << k) | (x >> (32 - k))) & 0xFFFFFFFF
 
@@ -225,7 +225,7 @@ def hash_pcg2d(x, y):
     return x & 0x7FFFFFFF, y & 0x7FFFFFFF
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)            # called with a literal 0 too
 def hash_pcg3d(x, y, z):
     """Cycles' ``hash_pcg3d_i``."""
     x = _s32(x * 1664525 + 1013904223)
@@ -547,7 +547,7 @@ def _vor_color_12(ia, ib, dims):
     return _i2f(hx), _i2f(hy), _i2f(hz)
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)            # called with a literal bound too
 def _vor_dist(da, db, dc, dd, dims, metric, exponent, bound):
     """Distance of the difference vector under ``metric`` (1D: |da|); bound: the cheaper monotone
     stand-in Cycles compares in F1 (squared Euclidean, Minkowski without the root)."""

@@ -31,7 +31,7 @@ import numpy as np
 from ..numba_probe import njit
 from .closure import (C_BASE, C_BUMPED, C_EMIT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
                       C_TRANSMISSION, closure_row, finish_closure)
-from .sampling import JIT
+from .sampling import JIT, JIT_INLINE
 
 from .procedural import (brick_color, brick_texture, magic_texture, noise_texture, voronoi_texture, wave_texture,
                          white_noise_texture)
@@ -809,7 +809,7 @@ def gradient(typ, x, y, z):
 # ----------------------------------------------------------------------------
 # Geometry
 # ----------------------------------------------------------------------------
-@njit(**JIT)
+@njit(**JIT_INLINE)            # called with literal modes: one compile per literal otherwise
 def _displacement(mode, r, G, A):
     """The hit moved along one of its surface differentials (mode 1: x, 2: y; Bump's offsets):
     (dbu, dbv, dPo (3), dPw (3)) -- barycentric steps, object- and world-space displacements.
@@ -821,8 +821,9 @@ def _displacement(mode, r, G, A):
     inst, prim, NM = G[4], G[5], G[8]
     inst_mesh, mesh_tri0, co = A[0], A[1], A[4]
     t = mesh_tri0[inst_mesh[inst[r]]] + prim[r]
-    e10, e11, e12 = co[t, 1, 0] - co[t, 0, 0], co[t, 1, 1] - co[t, 0, 1], co[t, 1, 2] - co[t, 0, 2]
-    e20, e21, e22 = co[t, 2, 0] - co[t, 0, 0], co[t, 2, 1] - co[t, 0, 1], co[t, 2, 2] - co[t, 0, 2]
+    x0_, y0_, z0_ = float(co[t, 0, 0]), float(co[t, 0, 1]), float(co[t, 0, 2])
+    e10, e11, e12 = float(co[t, 1, 0]) - x0_, float(co[t, 1, 1]) - y0_, float(co[t, 1, 2]) - z0_
+    e20, e21, e22 = float(co[t, 2, 0]) - x0_, float(co[t, 2, 1]) - y0_, float(co[t, 2, 2]) - z0_
     L = math.sqrt(e10 * e10 + e11 * e11 + e12 * e12)
     if L == 0.0:
         return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
