@@ -985,7 +985,7 @@ def _bump(prog, pc, st, n, rows, G, A):
         _put3(st, k, out, o0, o1, o2)
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)            # tiny; called with float32 corner data in some paths: inlined, one copy
 def _unit(x, y, z):
     L = math.sqrt(x * x + y * y + z * z)
     return (x / L, y / L, z / L) if L > 0.0 else (0.0, 0.0, 0.0)
