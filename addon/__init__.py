@@ -10,6 +10,7 @@ source checkout (``import addon; addon.register()`` with the repository root on
 * ``export/``       -- one converter per kind of Blender data
 * ``batch.py``      -- .blend loading and frame rendering without the UI
 * ``compare_op.py`` -- "Compare with Accumulation Buffer" (the stpm compare report)
+* ``bake_op.py``    -- "Bake Unsupported Inputs" (Cycles bakes of what the node interpreter cannot evaluate)
 """
 from __future__ import annotations
 
@@ -21,10 +22,11 @@ def register() -> None:
     global _registered
     if _registered:
         return
-    from . import compare_op, engine, properties, ui
+    from . import bake_op, compare_op, engine, properties, ui
     properties.register()
     engine.register()
     compare_op.register()
+    bake_op.register()
     ui.register()
     _registered = True
 
@@ -34,8 +36,9 @@ def unregister() -> None:
     global _registered
     if not _registered:
         return
-    from . import compare_op, engine, properties, ui
+    from . import bake_op, compare_op, engine, properties, ui
     ui.unregister()
+    bake_op.unregister()
     compare_op.unregister()
     engine.unregister()
     properties.unregister()

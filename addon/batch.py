@@ -88,13 +88,15 @@ def parse_frames(spec) -> list[int]:
     return sorted(frames)
 
 
-def load_blend(path, frame=None) -> tuple:
+def load_blend(path, frame=None, bake: bool = False) -> tuple:
     """Open ``path`` and export one frame.
 
     Parameters
     ----------
     path : .blend file.
     frame : frame number (int or float; None = the file's current frame).
+    bake : first bake, in one child process, the inputs the node interpreter cannot evaluate
+        that have no cached bake yet (``stpm render`` does; :mod:`.export.bake`).
 
     Returns (Scene, settings dict) -- the dict holds the file's ``scene.stpm``
     values under RenderSettings' names (the CLI overlays its options on it).
@@ -102,7 +104,7 @@ def load_blend(path, frame=None) -> tuple:
     ``metadata['frame_range']`` holds the file's [frame_start, frame_end].
     """
     scene = _open(path)
-    stpm_scene, settings = export_current(scene, frame)
+    stpm_scene, settings = export_current(scene, frame, bake=bake)
     stpm_scene.metadata["source"] = str(path)
     stpm_scene.metadata["frame_range"] = [int(scene.frame_start), int(scene.frame_end)]   # for the CLI's check
     return stpm_scene, settings
@@ -175,15 +177,26 @@ def render_visibility(view_layer):
                 pass
 
 
-def export_current(scene, frame=None) -> tuple:
+def export_current(scene, frame=None, bake: bool = False) -> tuple:
     """Export the open Blender ``scene`` at ``frame`` (None = its current frame).
 
     Outside a RenderEngine, time moves with ``scene.frame_set``; the current
     frame is restored afterwards.  Objects, collections and modifiers are
     exported with their *render* visibility (:func:`render_visibility`), so the
-    same objects as an F12 render.  Returns (Scene, settings dict) as
-    :func:`load_blend` does.
+    same objects as an F12 render.  ``bake``: run the missing bakes first
+    (:func:`bake_current`).  Returns (Scene, settings dict) as :func:`load_blend` does.
     """
+    with _at_frame(scene, frame):
+        bakes = "default"
+        if bake:
+            bakes, _report = _bake_here(scene)
+        return _export_at(scene, bakes)
+
+
+@contextlib.contextmanager
+def _at_frame(scene, frame=None):
+    """The open ``scene`` at ``frame`` (None = its current frame) with render visibility
+    (:func:`render_visibility`); the frame is restored afterwards."""
     frame_before, subframe_before = scene.frame_current, scene.frame_subframe
     f = float(scene.frame_current if frame is None else frame)
     fi = int(f // 1)
@@ -191,19 +204,43 @@ def export_current(scene, frame=None) -> tuple:
     with render_visibility(view_layer):
         scene.frame_set(fi, subframe=f - fi)
         try:
-            return _export_at(scene)
+            yield
         finally:
             scene.frame_set(frame_before, subframe=subframe_before)
 
 
-def _export_at(scene) -> tuple:
+def _bake_here(scene, log=None) -> tuple:
+    """Bake what is missing at the frame and visibility already set: (resolver, report)."""
+    from .export import bake as bake_mod
+    return bake_mod.bake_scene(scene, bpy.context.evaluated_depsgraph_get(), log=log)
+
+
+def bake_current(scene, frame=None, log=None) -> dict:
+    """Bake the missing inputs of the open ``scene`` at ``frame`` (None = its current frame),
+    with render visibility, in one child process (:mod:`.export.bake`); the frame is restored.
+    Returns the report of :func:`.export.bake.run_jobs` plus ``statuses``: {state: count} of
+    every input to bake after the run."""
+    with _at_frame(scene, frame):
+        resolver, report = _bake_here(scene, log)
+        from .export import rendered_meshes
+        counts: dict = {}
+        for obj, is_instance, mats in rendered_meshes(bpy.context.evaluated_depsgraph_get()):
+            for m in mats:
+                if m is not None:
+                    for s in resolver.status(m, obj, is_instance):
+                        counts[s.state] = counts.get(s.state, 0) + 1
+        report["statuses"] = counts
+        return report
+
+
+def _export_at(scene, bakes="default") -> tuple:
     """The body of :func:`export_current`: export at the frame already set."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
 
     def frame_set(frame_int: int, subframe: float) -> None:
         scene.frame_set(frame_int, subframe=subframe)
 
-    stpm_scene, warnings = export_scene(depsgraph, frame_set, motion_steps=scene.stpm.motion_steps)
+    stpm_scene, warnings = export_scene(depsgraph, frame_set, motion_steps=scene.stpm.motion_steps, bakes=bakes)
     stpm_scene.metadata["warnings"] = list(warnings)
     return stpm_scene, settings_dict(scene.stpm)
 

@@ -81,6 +81,12 @@ class STPM_SceneSettings(bpy.types.PropertyGroup):
         description="Times across the shutter at which moving objects, lights and the camera are sampled "
                     "(an object's own Cycles motion steps win when larger)")
 
+    # Baking what the node interpreter cannot evaluate (addon/export/bake.py)
+    bake_resolution: IntProperty(
+        name="Bake Resolution", default=512, min=16, soft_max=4096, max=16384, subtype="PIXEL",
+        description="Width and height of the texture each unsupported shader input is baked to "
+                    "(Bake Unsupported Inputs, stpm render)")
+
     @classmethod
     def register(cls) -> None:
         bpy.types.Scene.stpm = PointerProperty(type=cls, name="STPM", description="STPM render settings")

@@ -181,6 +181,18 @@ class STPM_RENDER_PT_effects(_STPMPanel, bpy.types.Panel):
             col.label(text=reason)
 
 
+class STPM_RENDER_PT_bake(_STPMPanel, bpy.types.Panel):
+    """Cycles bakes of the shader inputs the node interpreter cannot evaluate (addon/export/bake.py)."""
+
+    bl_label = "Baking"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        col = self._column()
+        col.prop(context.scene.stpm, "bake_resolution")
+        self.layout.operator("stpm.bake_inputs", icon="RENDER_STILL")
+
+
 classes = (
     STPM_OT_apply_preset,
     STPM_OT_compute_plan,
@@ -190,6 +202,7 @@ classes = (
     STPM_RENDER_PT_method,
     STPM_RENDER_PT_motion_blur,
     STPM_RENDER_PT_effects,
+    STPM_RENDER_PT_bake,
 )
 
 

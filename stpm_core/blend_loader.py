@@ -10,7 +10,7 @@ first call, so importing ``stpm_core`` never loads Blender.
 
 What it calls:
 
-* :func:`load_blend` -> ``addon.batch.load_blend(path, frame)``, which opens the
+* :func:`load_blend` -> ``addon.batch.load_blend(path, frame[, bake])``, which opens the
   file with bpy and exports one frame: (Scene, the file's ``scene.stpm`` settings
   as a dict).
 * :func:`blend_frame_range` imports nothing: it reads the ``frame_range`` the
@@ -31,8 +31,11 @@ class BlendSupportMissing(StpmError):
     """.blend input is not available here: Blender's bpy module or ``addon.batch`` cannot be imported."""
 
 
-def load_blend(path, frame: int | float | None = None) -> tuple:
+def load_blend(path, frame: int | float | None = None, bake: bool = False) -> tuple:
     """(Scene, settings dict) of frame ``frame`` (None: the file's current frame) of the .blend ``path``.
+
+    ``bake``: first bake the shader inputs the node interpreter cannot evaluate and that have no
+    cached bake (one Cycles child process; ``addon/export/bake.py``), as ``stpm render`` does.
 
     Raises :class:`BlendSupportMissing` (one line, naming the file and the fix)
     when bpy or the add-on cannot be imported, and the add-on's StpmError when
@@ -47,7 +50,7 @@ def load_blend(path, frame: int | float | None = None) -> tuple:
         raise BlendSupportMissing(f"cannot load {path.name}: .blend files need Blender's bpy module and "
                                   f"addon.batch ({e}); install the 'test' extra or export a .stpm scene") from None
     try:
-        return batch.load_blend(str(path), frame)
+        return batch.load_blend(str(path), frame, bake=True) if bake else batch.load_blend(str(path), frame)
     except StpmError as e:  # "cannot open x.blend: Error: File format ...": say "Error" once
         raise type(e)(str(e).replace(": Error: ", ": ")) from None
 

@@ -4,7 +4,7 @@
                 [--estimator standard|temporal|kd4d] [--accumulation-steps N]
                 [--samples S] [--photons-global N] [--photons-caustic N] [--k K]
                 [--temporal-alpha A] [--time-scale S] [--seed S] [--resolution WxH]
-                [--stats STATS.json] [--quiet]
+                [--stats STATS.json] [--quiet] [--no-bake]
     stpm plan SCENE [--frame F] [--json]
     stpm compare SCENE [--frame F] [--output REPORT_DIR] [--reference REF.exr] [--time-budget S]
                  [the settings options of render]
@@ -78,6 +78,9 @@ def _build_parser() -> CommandParser:
     add_setting_options(r)
     r.add_argument("--stats", metavar="STATS.json", help="write timings, counts and settings as JSON")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar, timing line or Blender log")
+    r.add_argument("--no-bake", dest="no_bake", action="store_true",
+                   help="a .blend: do not bake the shader inputs the node interpreter cannot evaluate "
+                        "(cached bakes are still used; the others use their defaults, named)")
 
     pl = sub.add_parser("plan", help="print which effects the scene calls for, and why")
     pl.add_argument("scene")
@@ -253,7 +256,8 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
         check_cancel(cancel)
 
         # -- Scene and settings: file values, then command-line overrides -------------
-        scene, settings, export_s = load_any_scene(scene_path, frame, quiet=args.quiet)
+        scene, settings, export_s = load_any_scene(scene_path, frame, quiet=args.quiet,
+                                                   bake=not getattr(args, "no_bake", False))
         check_cancel(cancel)  # a Ctrl-C while Blender loaded: stop before rendering
         f_out = frame if frame is not None else (int(scene.frame) if float(scene.frame).is_integer() else None)
         out_exr = exr_for(f_out)

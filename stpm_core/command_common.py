@@ -254,13 +254,14 @@ class _BlenderOutput:
         return False
 
 
-def load_any_scene(path, frame: int | None, *, quiet: bool = False):
+def load_any_scene(path, frame: int | None, *, quiet: bool = False, bake: bool = False):
     """(Scene, RenderSettings, export seconds) from a core scene file or a .blend.
 
     A core file holds one frame: asking for another is an error.  A .blend is
     loaded through :func:`stpm_core.blend_loader.load_blend` (the add-on, bpy);
     Blender's own console output is handled by :class:`_BlenderOutput`
-    (``quiet`` drops its "Read blend:" line).
+    (``quiet`` drops its "Read blend:" line).  ``bake``: a .blend's unsupported shader inputs
+    are baked first where no bake is cached (``stpm render``; core files: ignored).
     """
     path = Path(path)
     if not path.exists():
@@ -280,7 +281,7 @@ def load_any_scene(path, frame: int | None, *, quiet: bool = False):
     else:
         from .blend_loader import load_blend
         with _BlenderOutput(quiet=quiet):  # Blender's log: to stderr, or dropped when it failed
-            scene, d = load_blend(path, frame)
+            scene, d = load_blend(path, frame, bake=True) if bake else load_blend(path, frame)
         settings = settings_from_dict(d, path.name)
     return scene, settings, time.perf_counter() - t0
 

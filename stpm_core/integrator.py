@@ -49,6 +49,7 @@ from .parallel import ordered_map, worker_count
 from .raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from .sampling import rng_for, skip_uniforms
 from .shading import hit_geometry, shading_data
+from .transparency import pass_through, shadow_transmittance
 
 __all__ = ["TraceStats", "trace_image", "shade_paths"]
 
@@ -176,6 +177,7 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.nda
     so, sd = _scratch("so", (k, 3)), _scratch("sd", (k, 3))
     stmax, live = _scratch("stmax", (k,)), _scratch("live", (k,), np.int64)
     contrib = _scratch("contrib", (k, 3))
+    S = _scratch("light_samples", (k, 7))
     E, E_avg = ctx.ggx
     for li in range(len(lights)):
         if lights.power[li] <= 0.0:
@@ -184,12 +186,27 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.nda
         u = _light_uniforms(light, k, rng, _scratch("u_light", (k, 2)))
         prm, mesh = ctx.light_data[li]
         poses = light_poses(lights, li, t_s)
-        m = _K.nee_light(sh, P, NG, NS, d, C, E, E_avg, prm, poses, *mesh, t_s, u, EPS, contrib, so, sd, stmax, live)
+        m = _K.nee_light(sh, P, NG, NS, d, C, E, E_avg, prm, poses, *mesh, t_s, u, EPS, contrib, so, sd, stmax, live,
+                         S)
         if m == 0:
             continue
+        if getattr(light, "textured", False):
+            # a textured emitter: the kernels weighed its samples with radiance 1; each live
+            # sample now gets what its own light point emits
+            lv = live[:m]
+            wi, dist = S[lv, 0:3], S[lv, 3:4]
+            Le = light.point_emission(u[lv], P[sh[lv]] + dist * wi, wi, t_s[lv])
+            contrib[lv] *= Le
         lv = live[:m]
-        blocked = ctx.caster.occluded(so[:m], sd[:m], np.take(t_s, lv, out=_scratch("t_live", (m,))), stmax[:m],
-                                      guard=GUARD_FRACTION * EPS[sh[lv]])
+        t_live = np.take(t_s, lv, out=_scratch("t_live", (m,)))
+        if ctx.shading.transparent:
+            # shadow rays pass transparent surfaces, tinted by them
+            T = shadow_transmittance(ctx.caster, ctx.shading, ctx.inst_offset, so[:m], sd[:m], t_live, stmax[:m],
+                                     GUARD_FRACTION * EPS[sh[lv]], rng)
+            contrib[lv] *= T
+            blocked = ~np.any(T > 0.0, axis=1)
+        else:
+            blocked = ctx.caster.occluded(so[:m], sd[:m], t_live, stmax[:m], guard=GUARD_FRACTION * EPS[sh[lv]])
         stats.shadow_rays += m
         cast_any = True
         _K.nee_accumulate(dst, sh, idx_k, use_idx, beta_k, use_beta, contrib, lv,
@@ -298,14 +315,17 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
             stats.camera_rays += m
         else:
             stats.bounce_rays += m
-        use_idx, use_beta = idx is not None, beta is not None
-        idx_k = idx if use_idx else _NO_IDX
-        beta_k = beta if use_beta else _NO_ROWS3
         # -- Closures of the hits: constant rows, or the material's node program per hit ------------
         C = _scratch("closure", (m, N_CLOSURE))
         sd = ctx.shading
         shade(sd, hits.material, hit_geometry(hits, d, sd=sd, times=t) if sd.uses_programs else None,
               int(rng.integers(1 << 62)) if sd.uses_mix else 0, C)
+        if sd.transparent:
+            # transparent hits (cut-outs, Transparent BSDF): the rays go on to what lies behind
+            beta = pass_through(ctx.caster, sd, ctx.inst_offset, hits, d, t, C, beta, rng, tmax=tmax)
+        use_idx, use_beta = idx is not None, beta is not None
+        idx_k = idx if use_idx else _NO_IDX
+        beta_k = beta if use_beta else _NO_ROWS3
         # -- Misses, emission, first-hit passes; rows to shade and to continue ---------------------
         sh, spec = _scratch("sh", (m,), np.int64), _scratch("spec", (m,), np.int64)
         n_hit, n_sh, n_spec, n_emit = _K.classify_hits(

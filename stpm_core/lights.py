@@ -16,9 +16,10 @@ code name is in docs/lights-and-materials.md):
 * SUN of strength S: irradiance ``color * S`` W/m^2 on a facing surface;
   ``angle`` > 0 spreads it uniformly over a cone of that angular diameter.
 * MESH (:class:`MeshLight`, one per instance with emissive triangles, after
-  the scene's lights in :attr:`LightSet.lights`): ``Material.emission`` is
-  radiance emitted from both sides, flux ``2 pi Le A``; triangles sampled by
-  power, points uniform, at each sample's time.
+  the scene's lights in :attr:`LightSet.lights`): ``Material.emission`` (or,
+  for a node material, what its program emits at each point: a textured
+  emitter) is radiance emitted from both sides, flux ``2 pi Le A``; triangles
+  sampled by power, points uniform, at each sample's time.
 
 Queries (all vectorised, each sample at its own shutter time; a light's pose
 is ``light.transform.at(times)``), all computed by compiled kernels from the
@@ -46,6 +47,8 @@ from .kernels import emission as _emission
 from .kernels import kernel_array
 from .kernels.light_params import kernel_light, light_poses
 from .kernels.lights import sample_direct_batch
+from .kernels.sampling import mesh_choices
+from .shading import shading_data, surface_emission
 
 __all__ = ["LightSet", "MeshLight", "area_light_normal", "mesh_lights", "spot_attenuation"]
 
@@ -155,21 +158,26 @@ class MeshLight:
     (:class:`_CentroidMotion`), ``radius = 0``, ``name``):
     instance : index into ``scene.instances``.
     prims : (F_e,) triangle indices (within the mesh) that emit.
-    Le : (F_e, 3) radiance of each.
+    Le : (F_e, 3) radiance of each (a textured emitter: its mean over the triangle).
+    textured : the emission varies over the triangles (a node program computes it, see
+        :meth:`point_emission`); the kernels then weigh samples with ``kernel_Le`` = 1 and the
+        caller multiplies each sample by the radiance of its point.
+    kernel_Le : (F_e, 3) the radiance the kernels weigh samples with (Le, or ones when textured).
     """
 
     type = "MESH"
     radius = 0.0
     use_soft_falloff = False
 
-    def __init__(self, scene, instance: int, prims: np.ndarray, Le: np.ndarray):
+    def __init__(self, scene, instance: int, prims: np.ndarray, Le: np.ndarray | None, shading=None):
         inst = scene.instances[instance]
         mesh = scene.meshes[inst.mesh]
         self.instance = int(instance)
         self.name = f"{inst.name} (emission)"
         self.prims = np.asarray(prims, np.int64)
-        self.Le = np.asarray(Le, float)
         self.color = np.ones(3)
+        self._shading = shading
+        self._mat = np.asarray(mesh.material_ids, np.int64)[self.prims].astype(np.int32)
         self._inst_transform = inst.transform
         tri = np.asarray(mesh.triangles, np.int64)[self.prims]
         V = np.asarray(mesh.vertices, np.float64)
@@ -185,17 +193,59 @@ class MeshLight:
         if self.is_static:
             M = inst.transform.matrices[0]
             self._world_static = self._corners @ M[:3, :3].T + M[:3, 3]
+        self.textured = False
+        if Le is None:
+            Le, self.textured = self._mean_emission()
+        self.Le = np.asarray(Le, float)
+        self.kernel_Le = np.ones_like(self.Le) if self.textured else self.Le
         # Triangle choice: q_j ~ mean(Le_j) * area averaged over three shutter times
         A = np.mean([self._areas_at(t) for t in (0.0, 0.5, 1.0)], axis=0)
         w = np.mean(self.Le, axis=1) * A
         if not np.any(w > 0):
             w = np.ones_like(w)
-        w = np.maximum(w, 1e-12 * w.max())      # every triangle keeps a chance
+        # every triangle keeps a chance; a textured one whose stratified mean missed what it
+        # emits a fair one (its samples then carry a bounded weight)
+        w = np.maximum(w, (1e-3 * w.mean()) if self.textured else (1e-12 * w.max()))
         self.q = w / w.sum()
         self.cdf = np.cumsum(self.q)
         self.cdf[-1] = 1.0
         self.transform = _CentroidMotion(self)
         self.power = float(np.mean(self.flux_at(0.5)))
+
+    # -- emission of node materials ----------------------------------------------------
+    def _mean_emission(self) -> tuple:
+        """(Le (F_e, 3), textured) of triangles whose node programs may emit: each triangle's mean
+        over ``n`` stratified points (Hammersley, uniform by area; n = 4 .. 256, about 2^16 in all)
+        at mid-shutter; textured = the samples are not all the same (else Le is that constant)."""
+        F = self.prims.shape[0]
+        n = int(np.clip(65536 // max(F, 1), 4, 256))
+        k = np.arange(n)
+        u0 = (k + 0.5) / n
+        u1 = np.array([int(f"{i:b}"[::-1], 2) / 2.0 ** len(f"{i:b}") if i else 0.0 for i in k]) + 0.5 / n
+        s = np.sqrt(u0)
+        b1, b2 = np.tile(s * (1.0 - u1), F), np.tile(s * u1, F)
+        tri = np.repeat(np.arange(F), n)
+        C = self._all_corners_at(0.5)[tri]                          # (F n, 3, 3)
+        P = C[:, 0] + b1[:, None] * (C[:, 1] - C[:, 0]) + b2[:, None] * (C[:, 2] - C[:, 0])
+        Ng = np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0])
+        Ng /= np.maximum(np.linalg.norm(Ng, axis=1, keepdims=True), 1e-300)
+        E = surface_emission(self._shading, self._mat[tri], np.full(tri.size, self.instance, np.int32),
+                             self.prims[tri], b1, b2, P, Ng, -Ng, np.full(tri.size, 0.5), seed=0x5EED)
+        E = np.maximum(E, 0.0)
+        textured = bool(np.ptp(E, axis=0).max() > 1e-9 * max(float(E.max()), 1e-300)) if E.size else False
+        return E.reshape(F, n, 3).mean(axis=1), textured
+
+    def point_emission(self, U: np.ndarray, points: np.ndarray, dirs: np.ndarray, times: np.ndarray) -> np.ndarray:
+        """Radiance (n, 3) W m^-2 sr^-1 the node programs emit at the light points that the
+        kernels made of uniforms U (n, 2) (``kernels.sampling.mesh_choice``: triangle and
+        barycentrics), points (n, 3) world (the same points), dirs (n, 3) unit directions of rays
+        arriving at them, times (n,) (or (1,)).  The nodes read -dirs as the normal."""
+        n = U.shape[0]
+        J, B = np.empty(n, np.int64), np.empty((n, 2))
+        mesh_choices(self.q, self.cdf, np.ascontiguousarray(U, np.float64), J, B)
+        times = np.broadcast_to(np.asarray(times, np.float64).reshape(-1), (n,))
+        return surface_emission(self._shading, self._mat[J], np.full(n, self.instance, np.int32), self.prims[J],
+                                B[:, 0], B[:, 1], points, -dirs, dirs, times, seed=0x5EED)
 
     # -- geometry at times ------------------------------------------------------------
     def _all_corners_at(self, t: float) -> np.ndarray:
@@ -231,16 +281,32 @@ class MeshLight:
 
 
 def mesh_lights(scene) -> list[MeshLight]:
-    """One :class:`MeshLight` per instance with emissive triangles (instance order)."""
+    """One :class:`MeshLight` per instance with emissive triangles (instance order).
+
+    A material without a node program emits its constant ``Material.emission``; one with a
+    program emits what the program computes (``shading.ShadingData.emitting``: programs whose
+    emission is not a constant zero): all its triangles are light triangles, sampled by their
+    mean emission (:meth:`MeshLight._mean_emission`), each sample weighted by its own point's."""
     E = np.array([np.asarray(m.emission, float) for m in scene.materials]).reshape(-1, 3)
+    has_graph = np.array([getattr(m, "graph", None) is not None for m in scene.materials], bool)
+    sd = shading_data(scene) if has_graph.any() else None
+    programs = np.zeros(len(scene.materials), bool)
+    if sd is not None:
+        programs[list(sd.emitting)] = True
     out = []
     for i, inst in enumerate(scene.instances):
         mid = np.asarray(scene.meshes[inst.mesh].material_ids, np.int64)
         if mid.size == 0 or E.shape[0] == 0:
             continue
-        Le = E[np.clip(mid, 0, E.shape[0] - 1)]
-        prims = np.nonzero(np.any(Le > 0, axis=1))[0]
-        if prims.size:
+        mid = np.clip(mid, 0, E.shape[0] - 1)
+        Le = np.where(has_graph[mid, None], 0.0, E[mid])
+        node_emit = programs[mid]
+        prims = np.nonzero(np.any(Le > 0, axis=1) | node_emit)[0]
+        if not prims.size:
+            continue
+        if node_emit[prims].any():
+            out.append(MeshLight(scene, i, prims, None, shading=sd))
+        else:
             out.append(MeshLight(scene, i, prims, Le[prims]))
     return out
 
@@ -411,7 +477,8 @@ class LightSet:
         weight : (n, 3) W/(m^2 sr) incident-radiance estimator L_e * G / pdf,
             so reflected radiance = f * |cos(ns, wi)| * weight * visible; 0
             where the light gives nothing (behind an area light, outside a
-            spot, a light with no emitting direction).
+            spot, a light with no emitting direction).  A textured MESH light's
+            weight includes the radiance its node program emits at the sample.
         """
         prm, poses, steps, corners, q, cdf, Le = kernel_light(self, li)
         p = kernel_array(np.asarray(p, np.float64).reshape(-1, 3))
@@ -426,6 +493,9 @@ class LightSet:
         wi, dist, weight = np.empty((n, 3)), np.empty(n), np.empty((n, 3))
         sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, p, times, u, normals, use_normals,
                             wi, dist, weight)
+        light = self.lights[li]
+        if getattr(light, "textured", False):        # each sample weighed by its own point's radiance
+            weight *= light.point_emission(u, p + dist[:, None] * wi, wi, times)
         return wi, dist, weight
 
     # -----------------------------------------------------------------------

@@ -147,8 +147,7 @@ def _render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     plan = make_plan(scene, settings, caster=caster, lights=lights)
     psettings = apply_plan(settings, plan)      # what the plan rules out gets no photons; STANDARD when static
     plan_s = _time.perf_counter() - t_plan
-    if not scene.lights and not any(np.any(np.asarray(m.emission) > 0) for m in scene.materials) \
-            and not scene.world.shines:
+    if not scene.lights and not any(l.type == "MESH" for l in lights.lights) and not scene.world.shines:
         warnings.append("the scene has no lights, emissive surfaces or world light: the image is black")
     if plan["caustics"] and psettings.photons_caustic == 0 and settings.effects == "AUTO":
         warnings.append("the scene calls for caustics but photons_caustic is 0: the Caustic pass stays empty")

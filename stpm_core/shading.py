@@ -15,11 +15,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .kernels.closure import C_PROGRAM, pack_materials
+from .kernels.closure import C_EMIT, C_PROGRAM, N_CLOSURE, pack_materials
+from .kernels.svm import shade
 from .nodes.compile import compile_graph
 from .textures import pack_textures
 
-__all__ = ["ShadingData", "shading_data", "constant_shading", "scene_attributes", "hit_geometry", "normal_matrices"]
+__all__ = ["ShadingData", "shading_data", "constant_shading", "scene_attributes", "hit_geometry", "normal_matrices",
+           "surface_emission"]
 
 _I64_0 = np.zeros(0, np.int64)
 
@@ -43,6 +45,15 @@ class ShadingData:
     uv_layers: list = field(default_factory=list)
     texture_bytes: int = 0
     instances: list = field(default_factory=list)     # the scene's instances (normal matrices)
+    emitting: frozenset = frozenset()  # materials whose node program may emit (not constant black)
+    transparent: frozenset = frozenset()   # materials whose node program may let rays through
+
+    @property
+    def transparent_mask(self) -> np.ndarray:
+        """(M + 1,) bool: may hits on material i (index -1: a miss) be transparent?"""
+        mask = np.zeros(self.closures.shape[0], bool)
+        mask[list(self.transparent)] = True
+        return mask
 
 
 def _empty_attributes(n_inst: int) -> tuple:
@@ -133,12 +144,14 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
            id(getattr(scene, "textures", [])), len(getattr(scene, "textures", [])), len(scene.instances),
            tuple(id(m.graph) for m in scene.materials))
     cached = scene.__dict__.get("_shading_data")
-    if cached is not None and cached[0] == key and (closures is None or cached[1].closures is closures):
+    base = pack_materials(scene.materials) if closures is None else closures
+    if cached is not None and cached[0] == key and (cached[2] is base or np.array_equal(cached[2], base)):
         return cached[1]
-    rows = (pack_materials(scene.materials) if closures is None else closures).copy()
+    rows = base.copy()
     textures = list(getattr(scene, "textures", []) or [])
     uv_layers: list = [""]
     words, unsupported, uses_mix, uses_normals, uses_frames = [], [], False, False, False
+    emitting, transparent = set(), set()
     at = 0
     for i, m in enumerate(scene.materials):
         g = getattr(m, "graph", None)
@@ -152,6 +165,10 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
         uses_mix |= prog.uses_mix
         uses_normals |= prog.uses_normals
         uses_frames |= prog.uses_frames
+        if prog.may_emit:
+            emitting.add(i)
+        if prog.may_pass:
+            transparent.add(i)
         unsupported += [f"material {m.name!r}: {u}" for u in prog.unsupported]
     prog_all = np.concatenate(words) if words else np.zeros(1)
     starts = [int(r) for r in rows[:-1, C_PROGRAM] if r >= 0]
@@ -165,8 +182,9 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
     sd = ShadingData(closures=rows, prog=prog_all, n_slots=n_slots, A=A, X=pack.arrays()[:5],
                      uses_programs=bool(words), uses_mix=uses_mix, uses_normals=uses_normals, uses_frames=uses_frames,
                      unsupported=unsupported, uv_layers=uv_layers,
-                     texture_bytes=pack.nbytes if words else 0, instances=list(scene.instances))
-    scene.__dict__["_shading_data"] = (key, sd)
+                     texture_bytes=pack.nbytes if words else 0, instances=list(scene.instances),
+                     emitting=frozenset(emitting), transparent=frozenset(transparent))
+    scene.__dict__["_shading_data"] = (key, sd, base)
     return sd
 
 
@@ -201,3 +219,26 @@ def hit_geometry(hits, d: np.ndarray, rows: np.ndarray | None = None, *, sd=None
     frames = sd is not None and sd.uses_frames
     NM = normal_matrices(sd.instances, G[4], times) if frames else _NM_IDENTITY
     return G + (NM,)
+
+
+def surface_emission(sd: ShadingData, mat: np.ndarray, inst: np.ndarray, prim: np.ndarray, bu: np.ndarray,
+                     bv: np.ndarray, P: np.ndarray, N: np.ndarray, D: np.ndarray, times: np.ndarray,
+                     seed: int = 0) -> np.ndarray:
+    """Emitted radiance (n, 3) W m^-2 sr^-1 of n surface points, as a camera ray would see them.
+
+    mat, inst, prim (n,) int32: material, instance, triangle (within its mesh); bu, bv (n,)
+    barycentrics (the ray caster's u, v); P (n, 3) world positions; N (n, 3) the normal the nodes
+    read (as geometric and shading normal); D (n, 3) unit directions of the rays arriving there;
+    times (n,) normalised shutter times (normal matrices); seed: Mix Shader choices
+    (``kernels.svm.hash_uniform(seed, row)``, as on camera paths).  The node programs run exactly
+    as at a camera hit (``kernels.svm.shade``): what a textured emitter emits is what it shows.
+    """
+    n = mat.shape[0]
+    C = np.empty((n, N_CLOSURE))
+    f8 = lambda a: np.ascontiguousarray(a, np.float64)   # noqa: E731
+    i4 = lambda a: np.ascontiguousarray(a, np.int32)     # noqa: E731
+    inst = i4(inst)
+    NM = normal_matrices(sd.instances, inst, times) if sd.uses_frames else _NM_IDENTITY
+    G = (f8(P), f8(N), f8(N).copy(), f8(D), inst, i4(prim), f8(bu), f8(bv), NM)
+    shade(sd, i4(mat), G if sd.uses_programs else None, int(seed), C)
+    return C[:, C_EMIT:C_EMIT + 3].copy()

@@ -457,7 +457,9 @@ def test_constant_trees_keep_the_constant_path():
 def test_unsupported_nodes_warn_once_and_need_no_graph_alone():
     """A node the interpreter does not support renders its consumer's own value on both paths:
     alone it exports no graph (the constant path warns); in a graph the compiler's message names
-    it, and the node keeps its own settings as props."""
+    it, and the node keeps its own settings as props.  With baking (the default export), the one
+    message is the bake report's instead: to be baked (world-unit Wireframe) or why it cannot be
+    (pixel-unit Wireframe: view-dependent); tests/test_bake.py covers baking itself."""
     from stpm_core.nodes import SUPPORTED_NODES
     kind = "ShaderNodeWireframe"                               # a ray-traced node: not interpreted
     assert kind not in SUPPORTED_NODES
@@ -472,15 +474,25 @@ def test_unsupported_nodes_warn_once_and_need_no_graph_alone():
     tree2.links.new(tree2.nodes.new("ShaderNodeTexChecker").outputs["Color"], bsdf2.inputs["Base Color"])
     add_mesh("cube", "B", location=(3, 0, 0), material=mat2)
     add_camera()
-    scene, warnings = export_now()
-    assert graph_of(scene, "Wired") is None
-    hits = [w for w in warnings if w.startswith("material 'Wired': ")]
-    assert hits == [f"material 'Wired': Principled BSDF.Roughness driven by {kind} is not supported, "
-                    "using its value"], warnings
-    g = graph_of(scene, "WiredChecker")
-    assert g.nodes["Wireframe"].type == kind and g.nodes["Wireframe"].props == {"use_pixel_size": True}
-    hits = [w for w in warnings if w.startswith("material 'WiredChecker': ")]
-    assert len(hits) == 1 and f"'Wireframe' ({kind})" in hits[0] and "not supported" in hits[0], hits
+    from addon.export import export_scene
+    scene = bpy.context.scene
+    for bakes in (None, "default"):
+        out, warnings = export_scene(bpy.context.evaluated_depsgraph_get(),
+                                     lambda f, sub: scene.frame_set(f, subframe=sub), bakes=bakes)
+        assert graph_of(out, "Wired") is None
+        hits = [w for w in warnings if w.startswith("material 'Wired': ")]
+        if bakes is None:
+            assert hits == [f"material 'Wired': Principled BSDF.Roughness driven by {kind} is not supported, "
+                            "using its value"], warnings
+        else:
+            assert len(hits) == 1 and "Roughness of 'Principled BSDF' on object 'A' needs a bake" in hits[0] \
+                and f"'Wireframe' ({kind}) is not supported" in hits[0] and "default values" in hits[0], hits
+        g = graph_of(out, "WiredChecker")
+        assert g.nodes["Wireframe"].type == kind and g.nodes["Wireframe"].props == {"use_pixel_size": True}
+        hits = [w for w in warnings if w.startswith("material 'WiredChecker': ")]
+        assert len(hits) == 1 and f"'Wireframe' ({kind})" in hits[0] and "not supported" in hits[0], hits
+        if bakes is not None:
+            assert "cannot be baked" in hits[0] and "width in pixels" in hits[0], hits
 
 
 def test_normal_map_exports_a_graph_and_tangents():

@@ -256,3 +256,155 @@ def test_noise_voronoi_and_bump_match_cycles(tmp_path):
     add_mesh("plane", "Floor", material=mat, size=2.0)
     r, *_ = _compare(tmp_path, "noise + voronoi + bump")
     _assert_matches(r, "procedural + bump")
+
+
+# ----------------------------------------------------------------------------
+# Textured emitters: the light they cast follows their texture
+# ----------------------------------------------------------------------------
+def _screen_scene(png):
+    """A white floor (2 x 2 m) lit only by a "screen": a 2 x 1 m plane standing at its back edge,
+    facing the floor, emitting an image (left half red, right half blue) at strength 4; black world,
+    perspective camera in front.  The floor's light is red on one side, blue on the other."""
+    scene = fresh()
+    scene.render.resolution_x, scene.render.resolution_y = W, H
+    add_camera(location=(0, -3.2, 2.2), rotation=(math.radians(58), 0, 0), lens=30)
+    set_world((0, 0, 0), 0.0)
+    floor_mat, t, out = _empty_material("Floor")
+    d = t.nodes.new("ShaderNodeBsdfDiffuse")
+    d.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1)
+    t.links.new(d.outputs[0], out.inputs["Surface"])
+    add_mesh("plane", "Floor", material=floor_mat, size=2.0)
+    mat, t, out = _empty_material("Screen")
+    em = t.nodes.new("ShaderNodeEmission")
+    em.inputs["Strength"].default_value = 4.0
+    tex = t.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.load(str(png))
+    tex.interpolation = "Closest"
+    t.links.new(tex.outputs["Color"], em.inputs["Color"])
+    t.links.new(em.outputs[0], out.inputs["Surface"])
+    screen = add_mesh("plane", "Screen", location=(0, 1.0, 0.5), material=mat, size=1.0,
+                      rotation=(math.radians(90), 0, 0))
+    screen.scale = (2.0, 1.0, 1.0)
+    return scene
+
+
+def test_textured_emitter_casts_its_texture_like_cycles(tmp_path):
+    png = tmp_path / "screen.png"
+    img = np.zeros((1, 2, 3))
+    img[0, 0] = (1.0, 0.15, 0.1)       # left: red
+    img[0, 1] = (0.1, 0.2, 1.0)        # right: blue
+    _write_png(png, img)
+    _screen_scene(png)
+    r, stpm, cyc = _compare(tmp_path, "textured emitter", spp=64)
+    _assert_matches(r, "textured emitter")
+    # The floor in front of the screen's left half is lit red, the right half blue (not one mean colour)
+    floor = stpm.mean(axis=0)[int(0.55 * H):int(0.68 * H)]       # the floor just in front of the screen
+    left, right = floor[:, int(0.25 * W):int(0.45 * W)].mean(axis=(0, 1)), floor[:, int(0.55 * W):int(0.75 * W)].mean(axis=(0, 1))
+    assert left[0] > 1.3 * left[2] and right[2] > 1.3 * right[0], (left, right)
+
+
+def test_textured_emitter_photons_and_light_samples_carry_its_texture(tmp_path):
+    """Photon emission and next-event samples of a textured emitter: the flux is 2 pi A times the
+    mean emitted radiance (the image's two halves, sRGB decoded), and each photon's colour is its
+    own point's (red left of the screen's centre, blue right)."""
+    from addon.export import export_scene
+    from stpm_core.lights import LightSet
+    png = tmp_path / "screen.png"
+    img = np.zeros((1, 2, 3))
+    img[0, 0] = (1.0, 0.15, 0.1)
+    img[0, 1] = (0.1, 0.2, 1.0)
+    _write_png(png, img)
+    _screen_scene(png)
+    bl = bpy.context.scene
+    core = export_scene(bpy.context.evaluated_depsgraph_get(), lambda f, sub: bl.frame_set(f, subframe=sub))[0]
+    lights = LightSet(core)
+    li = [i for i, l in enumerate(lights.lights) if l.type == "MESH"]
+    assert len(li) == 1 and lights.lights[li[0]].textured
+    li = li[0]
+
+    def srgb(c):
+        c = np.round(np.asarray(c) * 255) / 255
+        return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    Le_mean = 4.0 * 0.5 * (srgb(img[0, 0]) + srgb(img[0, 1]))
+    flux = 2.0 * np.pi * 2.0 * Le_mean                              # both sides, A = 2 m^2
+    np.testing.assert_allclose(lights.flux(li), flux, rtol=0.02)
+    o, d, P = lights.emit(li, 40000, np.full(1, 0.5), np.random.default_rng(1))
+    np.testing.assert_allclose(P.sum(axis=0), flux, rtol=0.02)
+    left, right = o[:, 0] < -0.05, o[:, 0] > 0.05
+    np.testing.assert_allclose(P[left].mean(axis=0) / P[left].mean(axis=0).sum(),
+                               srgb(img[0, 0]) / srgb(img[0, 0]).sum(), atol=1e-6)
+    np.testing.assert_allclose(P[right].mean(axis=0) / P[right].mean(axis=0).sum(),
+                               srgb(img[0, 1]) / srgb(img[0, 1]).sum(), atol=1e-6)
+    # Next-event samples from a floor point: E[weight * cos] = irradiance; its colour follows the halves
+    p = np.tile([[-0.8, 0.6, 0.0]], (20000, 1))
+    wi, dist, w = lights.sample_direct(li, p, np.full(20000, 0.5), np.random.default_rng(2).random((20000, 2)))
+    hit_left = (p + dist[:, None] * wi)[:, 0] < 0.0
+    assert w[hit_left, 0].mean() > 3 * w[hit_left, 2].mean()
+    assert w[~hit_left, 2].mean() > 3 * w[~hit_left, 0].mean()
+
+
+# ----------------------------------------------------------------------------
+# Transparency: alpha cut-outs, Transparent BSDF, Add Shader
+# ----------------------------------------------------------------------------
+def _cutout_scene():
+    """The top-down view of a checker floor (2 x 2 m) under a slanted sun, with a 1.2 m square
+    "leaf" 0.5 m above it: what the leaf lets through shows the floor and lets the sun reach it."""
+    scene = _slanted_sun_scene()
+    add_mesh("plane", "Floor", material=_procedural_material("Floor"), size=2.0)
+    return scene
+
+
+def _cutout_image(path, n: int = 6, seed: int = 4) -> None:
+    """An n x n RGBA PNG: random green-ish texels, alpha 0 on about half of them (holes)."""
+    rng = np.random.default_rng(seed)
+    px = np.empty((n, n, 4))
+    px[..., 0] = rng.uniform(0.1, 0.4, (n, n))
+    px[..., 1] = rng.uniform(0.5, 0.9, (n, n))
+    px[..., 2] = rng.uniform(0.1, 0.3, (n, n))
+    px[..., 3] = (rng.random((n, n)) < 0.5).astype(float)
+    _write_png(path, px)
+
+
+def test_alpha_cutout_and_its_shadow_match_cycles(tmp_path):
+    png = tmp_path / "leaf.png"
+    _cutout_image(png)
+    _cutout_scene()
+    mat, t, out = _empty_material("Leaf")
+    p = t.nodes.new("ShaderNodeBsdfPrincipled")
+    tex = t.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.load(str(png))
+    tex.interpolation = "Closest"
+    t.links.new(tex.outputs["Color"], p.inputs["Base Color"])
+    t.links.new(tex.outputs["Alpha"], p.inputs["Alpha"])
+    t.links.new(p.outputs[0], out.inputs["Surface"])
+    add_mesh("plane", "Leaf", location=(0.1, -0.1, 0.5), material=mat, size=1.2)
+    r, stpm, cyc = _compare(tmp_path, "alpha cut-out", spp=64)
+    _assert_matches(r, "alpha cut-out")
+
+
+def test_transparent_mix_and_add_shader_match_cycles(tmp_path):
+    """A tinted Transparent BSDF mixed 50/50 with a diffuse (what lies behind shows through, tinted,
+    and its shadow is tinted), beside an Add Shader of an emission and a diffuse."""
+    _cutout_scene()
+    mat, t, out = _empty_material("Veil")
+    tr, d = t.nodes.new("ShaderNodeBsdfTransparent"), t.nodes.new("ShaderNodeBsdfDiffuse")
+    tr.inputs["Color"].default_value = (1.0, 0.5, 0.2, 1)
+    d.inputs["Color"].default_value = (0.2, 0.3, 0.9, 1)
+    mix = t.nodes.new("ShaderNodeMixShader")
+    mix.inputs["Fac"].default_value = 0.5
+    t.links.new(tr.outputs[0], mix.inputs[1])
+    t.links.new(d.outputs[0], mix.inputs[2])
+    t.links.new(mix.outputs[0], out.inputs["Surface"])
+    add_mesh("plane", "Veil", location=(-0.45, 0.0, 0.5), material=mat, size=0.8)
+    mat2, t2, out2 = _empty_material("Glow")
+    em, d2 = t2.nodes.new("ShaderNodeEmission"), t2.nodes.new("ShaderNodeBsdfDiffuse")
+    em.inputs["Color"].default_value = (0.9, 0.4, 0.1, 1)
+    em.inputs["Strength"].default_value = 0.5
+    d2.inputs["Color"].default_value = (0.3, 0.8, 0.3, 1)
+    add = t2.nodes.new("ShaderNodeAddShader")
+    t2.links.new(em.outputs[0], add.inputs[0])
+    t2.links.new(d2.outputs[0], add.inputs[1])
+    t2.links.new(add.outputs[0], out2.inputs["Surface"])
+    add_mesh("plane", "Glow", location=(0.5, 0.3, 0.3), material=mat2, size=0.6)
+    r, stpm, cyc = _compare(tmp_path, "transparent mix + add", spp=64)
+    _assert_matches(r, "transparent mix + add")

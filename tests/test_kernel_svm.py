@@ -36,8 +36,8 @@ import pytest
 from oracles import svm_numpy as O
 from oracles import texture_numpy as TO
 from stpm_core.kernels import svm
-from stpm_core.kernels.closure import (C_BASE, C_EMIT, C_IOR, C_METALLIC, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
-                                       C_TRANSMISSION, N_CLOSURE, pack_materials)
+from stpm_core.kernels.closure import (C_BASE, C_EMIT, C_IOR, C_METALLIC, C_PASS, C_PROGRAM, C_ROUGHNESS,
+                                       C_SPECULAR, C_TRANSMISSION, C_TRANSPARENT, N_CLOSURE, pack_materials)
 from stpm_core.nodes.compile import colorband, compile_graph
 from stpm_core.nodes.graph import Link, Node, ShaderGraph
 from stpm_core.nodes.ops import BLEND_MODES, GRADIENT_TYPES, MATH_OPS, VMATH_OPS
@@ -51,7 +51,7 @@ SRGB_ATOL = 2e-7      # sRGB image textures: the kernel's EOTF table is within 6
 
 SHADER_OUT = {"ShaderNodeBsdfPrincipled": "BSDF", "ShaderNodeBsdfDiffuse": "BSDF", "ShaderNodeBsdfGlossy": "BSDF",
               "ShaderNodeBsdfAnisotropic": "BSDF", "ShaderNodeBsdfGlass": "BSDF", "ShaderNodeEmission": "Emission",
-              "ShaderNodeMixShader": "Shader"}
+              "ShaderNodeMixShader": "Shader", "ShaderNodeBsdfTransparent": "BSDF", "ShaderNodeAddShader": "Shader"}
 
 
 def _seed(*parts) -> int:
@@ -148,11 +148,16 @@ def oracle_hit(scene: Scene, hits: dict, r: int) -> O.Hit:
                             hits["D"][r])
 
 
-def oracle_rows(scene, hits, mat, **kw) -> list:
-    """Oracle closure rows (dict) per hit (Mix Shader: the weighted mean; tests of single closures)."""
+def oracle_rows(scene, hits, mat, C=None, **kw) -> list:
+    """Oracle closure rows (dict) per hit (tests of single closures).  A Principled BSDF with
+    Alpha < 1 has two leaves (the BSDF and a Transparent BSDF): with the kernel's closures C, the
+    leaf its walk chose (``C_PASS``) is the row compared."""
     rows = []
     for r, mi in enumerate(mat):
         leaves = O.evaluate(scene.materials[mi].graph, oracle_hit(scene, hits, r), scene.textures, **kw)
+        if len(leaves) > 1 and C is not None:
+            chosen = C[r, C_PASS] > 0
+            leaves = [lf for lf in leaves if (lf[1].kind == "transparent") == chosen]
         assert len(leaves) == 1
         rows.append(O.closure_row(leaves[0][1]))
     return rows
@@ -856,7 +861,7 @@ def test_image_texture_alpha_linked_unassociates(interp):
     scene = make_scene(graphs, texs)
     C, sd = run_kernel(scene, hits, mat)
     assert not sd.unsupported, sd.unsupported
-    rows = oracle_rows(scene, hits, mat)
+    rows = oracle_rows(scene, hits, mat, C)          # Principled rows: the leaf the walk chose by Alpha
     kind = mat % 4
     emit = kind != 1
     _compare_rows(C[emit], [r for r, e in zip(rows, emit) if e], cols=("emission",), atol=SRGB_ATOL)
@@ -866,7 +871,10 @@ def test_image_texture_alpha_linked_unassociates(interp):
     for img in (0, 3):
         rows_b = slice((4 * img + 1) * per, (4 * img + 2) * per)
         rows_p = slice((4 * img + 3) * per, (4 * img + 4) * per)
-        assert np.max(np.abs(C[rows_b, C_BASE:C_BASE + 3] - np.clip(C[rows_p, C_EMIT:C_EMIT + 3], 0, 1))) > 1e-3
+        opaque = C[rows_b, C_PASS] == 0                              # the BSDF, not its Alpha's transparency
+        assert opaque.any()
+        assert np.max(np.abs(C[rows_b, C_BASE:C_BASE + 3][opaque]
+                             - np.clip(C[rows_p, C_EMIT:C_EMIT + 3], 0, 1)[opaque])) > 1e-3
 
 
 def test_image_texture_alpha_linked_channel_packed():
@@ -878,7 +886,7 @@ def test_image_texture_alpha_linked_channel_packed():
     hits = make_hits(len(mat), rng)
     scene = make_scene(graphs, texs)
     C, _ = run_kernel(scene, hits, mat)
-    rows = oracle_rows(scene, hits, mat)
+    rows = oracle_rows(scene, hits, mat, C)
     _compare_rows(C[mat == 0], [r for r, m in zip(rows, mat) if m == 0], cols=("emission",), atol=SRGB_ATOL)
 
 
@@ -891,7 +899,7 @@ def test_image_texture_alpha_linked_data_image():
     hits = make_hits(len(mat), rng)
     scene = make_scene(graphs, texs)
     C, _ = run_kernel(scene, hits, mat)
-    rows = oracle_rows(scene, hits, mat)
+    rows = oracle_rows(scene, hits, mat, C)
     _compare_rows(C[mat == 0], [r for r, m in zip(rows, mat) if m == 0], cols=("emission",), atol=SRGB_ATOL)
 
 
@@ -975,6 +983,7 @@ def _check_derived(C):
         ref = pack_materials([m])[0]
         keep = np.ones(N_CLOSURE, bool)
         keep[C_PROGRAM] = False
+        keep[C_TRANSPARENT:C_PASS + 1] = False      # per-hit choices (test_transparent_add_and_alpha_closures)
         np.testing.assert_allclose(C[r, keep], ref[keep], rtol=0, atol=1e-12, err_msg=f"row {r}")
 
 
@@ -996,7 +1005,7 @@ def _shader_graphs(rng):
                                                              "Strength": float(rng.uniform(-1, 20))})}, "S"))
     # Blender's defaults (no inputs given)
     for t in SHADER_OUT:
-        if t != "ShaderNodeMixShader":
+        if t not in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
             graphs.append(surface({"S": N(t)}, "S"))
     return graphs
 
@@ -1009,7 +1018,7 @@ def test_shaders_closure_rows():
     scene = make_scene(graphs)
     C, sd = run_kernel(scene, hits, mat)
     assert not sd.unsupported
-    _compare_rows(C, oracle_rows(scene, hits, mat))
+    _compare_rows(C, oracle_rows(scene, hits, mat, C))
     _check_derived(C)
 
 
@@ -1202,3 +1211,38 @@ def test_unsupported_nodes_use_socket_defaults():
     for name in ("noise", "shader", "cycle"):
         row = O.closure_row(O.evaluate(cases[name], oracle_hit(scene, hits, 0))[0][1])
         np.testing.assert_allclose(got[name][C_BASE:C_BASE + 3], row["base"])
+
+
+def test_transparent_add_and_alpha_closures():
+    """Transparent BSDF: an empty closure with C_PASS = 1 and its tint.  Principled Alpha a: the
+    walk picks the BSDF with probability a, else a white transparent closure.  Add Shader: one
+    input per hit with probability 1/2, at weight 2 (emission, tint and colour doubled)."""
+    tint = (0.9, 0.5, 0.2)
+    graphs = [
+        surface({"T": N("ShaderNodeBsdfTransparent", {"Color": tint})}, "T"),
+        surface({"P": N("ShaderNodeBsdfPrincipled", {"Base Color": (0.3, 0.6, 0.9), "Alpha": 0.3})}, "P"),
+        surface({"E": N("ShaderNodeEmission", {"Color": (1.0, 0.5, 0.25), "Strength": 2.0}),
+                 "T": N("ShaderNodeBsdfTransparent", {"Color": tint}),
+                 "A": N("ShaderNodeAddShader", {"Shader": L("E", "Emission"), "Shader_001": L("T", "BSDF")})}, "A"),
+    ]
+    per = 4000
+    mat = np.repeat(np.arange(len(graphs)), per)
+    rng = np.random.default_rng(5)
+    hits = make_hits(len(mat), rng)
+    scene = make_scene(graphs)
+    C, sd = run_kernel(scene, hits, mat)
+    assert not sd.unsupported, sd.unsupported
+    assert sd.transparent == frozenset({0, 1, 2})
+    t, p, a = (slice(i * per, (i + 1) * per) for i in range(3))
+    assert np.all(C[t, C_PASS] == 1) and np.allclose(C[t, C_TRANSPARENT:C_TRANSPARENT + 3], tint)
+    assert np.all(C[t, C_BASE:C_BASE + 3] == 0) and np.all(C[t, C_EMIT:C_EMIT + 3] == 0)
+    # Alpha 0.3: 70 % pass (binomial sd 0.7 %), white; the others are the BSDF
+    passed = C[p, C_PASS] == 1
+    assert abs(passed.mean() - 0.7) < 0.03
+    assert np.allclose(C[p, C_TRANSPARENT:C_TRANSPARENT + 3][passed], 1.0)
+    assert np.allclose(C[p, C_BASE:C_BASE + 3][~passed], (0.3, 0.6, 0.9))
+    # Add: half emission x 2, half transparency x 2; the means are the sums Cycles renders
+    em = C[a, C_PASS] == 0
+    assert abs(em.mean() - 0.5) < 0.03
+    np.testing.assert_allclose(C[a, C_EMIT:C_EMIT + 3][em], np.tile([4.0, 2.0, 1.0], (em.sum(), 1)))
+    np.testing.assert_allclose(C[a, C_TRANSPARENT:C_TRANSPARENT + 3][~em], np.tile(2 * np.asarray(tint), ((~em).sum(), 1)))

@@ -16,7 +16,8 @@ Steps
 Materials that need it carry their node graph (:mod:`.nodes`); the images those graphs read
 become ``Scene.textures`` and every mesh carries its UV maps, and the tangents its materials'
 tangent-space Normal Maps read (taken at the current frame: a deforming mesh's UVs and
-tangents do not change across the shutter).
+tangents do not change across the shutter).  Shader inputs the interpreter cannot evaluate read
+their cached bakes (:mod:`.bake`; :func:`rendered_meshes` lists what a bake plan covers).
 """
 from __future__ import annotations
 
@@ -68,7 +69,33 @@ class _Record:
         self.mesh, self.use_motion, self.use_deform, self.is_instance = mesh, use_motion, use_deform, is_instance
 
 
-def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
+def _slot_materials(obj) -> list:
+    """The materials of an object's slots (its data's when it has no slots)."""
+    return [s.material for s in obj.material_slots] if len(obj.material_slots) else \
+        list(getattr(obj.data, "materials", []) or [])
+
+
+def rendered_meshes(depsgraph):
+    """(evaluated object, is_instance, slot materials) of every depsgraph entry whose triangles
+    the export renders (the same rule as :func:`export_scene`; used to plan bakes)."""
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        if obj.type not in mesh_export.GEOMETRY_TYPES or _hidden_instancer_child(inst):
+            continue
+        if not inst.is_instance and not inst.show_self:
+            continue
+        if not mesh_export.has_mesh(obj):
+            continue
+        yield obj, bool(inst.is_instance), _slot_materials(obj)
+
+
+def default_bakes(depsgraph):
+    """The BakeResolver an export uses by default: cached bakes of the open file (:mod:`.bake`)."""
+    from . import bake
+    return bake.BakeResolver(depsgraph)
+
+
+def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default") -> tuple:
     """Export the depsgraph's scene at its current frame.
 
     Parameters
@@ -77,6 +104,9 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
     frame_set : callable(frame: int, subframe: float) moving the depsgraph in time.
     motion_steps : K, shutter times sampled for moving things (objects' own
         Cycles motion steps raise it).
+    bakes : a :class:`.bake.BakeResolver` (inputs the interpreter cannot evaluate read their
+        cached bakes; missing ones are named), "default" (one for the open file's cache), or
+        None (no baking: such inputs use their defaults, named by the node compiler).
 
     Returns (Scene, warnings: list[str]).  Raises StpmError when there is no camera.
     """
@@ -95,7 +125,13 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
     cam_name = cam_obj.name_full
 
     # 1. Everything at the current frame
-    mats = material_export.MaterialExporter(warnings)
+    if isinstance(bakes, str):
+        try:
+            bakes = default_bakes(depsgraph)
+        except Exception as e:  # noqa: BLE001 -- never fail an export on the bake cache
+            warnings.append(f"baked inputs are not used: the bake cache could not be opened ({type(e).__name__}: {e})")
+            bakes = None
+    mats = material_export.MaterialExporter(warnings, bakes=bakes)
     meshes: list = []
     mesh_cache: dict = {}
     records: dict = {}
@@ -131,9 +167,9 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3) -> tuple:
                 _warn_once(warnings, f"object {obj.name!r}: {obj.type} geometry is not supported, skipped")
             continue
         # Geometry: one Mesh per distinct evaluated data + material mapping
-        slot_mats = [s.material for s in obj.material_slots] if len(obj.material_slots) else \
-            list(getattr(obj.data, "materials", []) or [])
-        mat_ids = np.array([mats.index_of(m) for m in slot_mats] or [mats.index_of(None)], dtype=np.int32)
+        slot_mats = _slot_materials(obj)
+        mat_ids = np.array([mats.index_of(m, obj, inst.is_instance) for m in slot_mats] or [mats.index_of(None)],
+                           dtype=np.int32)
         data_key = (obj.data.as_pointer() if inst.is_instance and obj.data is not None else obj.name_full,
                     tuple(mat_ids.tolist()))
         if data_key not in mesh_cache:

@@ -24,6 +24,12 @@ the scene's textures (:attr:`MaterialExporter.textures`).  For such materials th
 path's warnings about what the graph renders (mean colours, linked inputs, Mix Shader
 blending, bump / normal inputs, unsupported shaders) are dropped and the node compiler's own
 messages name what the graph cannot render (a Noise texture, Coat, a Box projection, ...).
+
+Inputs the interpreter cannot evaluate are baked (:mod:`.bake`): with a ``BakeResolver``,
+:meth:`MaterialExporter.index_of` looks them up per object, a material with cached bakes is
+exported once per distinct set of bake keys with those inputs read from the baked textures, and
+every such input gets one message (baked, needs a bake, or why it cannot be baked) in place of
+the constant path's and the compiler's messages about its nodes.
 """
 from __future__ import annotations
 
@@ -51,6 +57,21 @@ def _uses_nodes(idblock) -> bool:
     if bpy.app.version >= (5, 0, 0):
         return idblock.node_tree is not None
     return bool(idblock.use_nodes)
+
+
+uses_nodes = _uses_nodes
+
+
+def find_output(tree) -> tuple:
+    """(Material Output node STPM renders or None, EEVEE-only: bool): the active one of those for
+    All / Cycles, else the first such; with only EEVEE outputs, an EEVEE one (flag True)."""
+    every = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+    for outs in ([n for n in every if getattr(n, "target", "ALL") in ("ALL", "CYCLES")], every):
+        active = [n for n in outs if getattr(n, "is_active_output", False)]
+        node = (active or outs or [None])[0]
+        if node is not None:
+            return node, getattr(node, "target", "ALL") not in ("ALL", "CYCLES")
+    return None, False
 
 
 def _image_key(image) -> tuple | None:
@@ -117,6 +138,16 @@ def image_mean(image) -> np.ndarray:
     return mean.copy()
 
 
+def sub_bake():
+    """:mod:`.bake` (imported on first use)."""
+    from . import bake
+    return bake
+
+
+def bake_hint() -> str:
+    return sub_bake().OPERATOR_HINT
+
+
 def default_material(name: str = "STPM default") -> "scene_model.Material":
     """Blender's default grey diffuse."""
     return scene_model.Material.diffuse((0.8, 0.8, 0.8), name=name)
@@ -133,12 +164,20 @@ def _params(**kw) -> dict:
 class MaterialExporter:
     """Converts and caches materials; ``warnings`` collects what was approximated."""
 
-    def __init__(self, warnings: list):
+    def __init__(self, warnings: list, bakes=None):
         self.warnings = warnings
         self.materials: list = []
         self._index: dict = {}
         self.textures = node_export.TextureTable()   # .textures: the scene's Texture list
         self._graph_mode = False   # the material being converted carries its node graph
+        # Baking (:mod:`.bake`): a BakeResolver, or None (inputs the interpreter cannot evaluate
+        # fall back to defaults, as before).  While a material is converted: the (node, socket)
+        # inputs and the node names whose messages the bake report gives instead
+        self.bakes = bakes
+        self._covered_sockets: set = set()
+        self._covered_nodes: set = set()
+        self._unread: set = set()          # bake keys whose EXR could not be read
+        self._cover = False                # the material being converted gets a bake report
 
     # Public entry
     def tangent_maps(self, indices) -> list:
@@ -154,17 +193,94 @@ class MaterialExporter:
                         names.append(name)
         return names
 
-    def index_of(self, mat) -> int:
-        """Index into ``self.materials`` of a Blender material (None -> the grey default)."""
+    def index_of(self, mat, obj=None, is_instance: bool = False) -> int:
+        """Index into ``self.materials`` of a Blender material (None -> the grey default) on the
+        evaluated object ``obj`` (None: no baking).
+
+        With baking (``self.bakes``), the material's inputs that the interpreter cannot evaluate
+        are looked up per object: a material with cached bakes is exported once per distinct set
+        of bake keys (objects with other UVs or meshes get their own copy, linked duplicates
+        share one), and every such input is named in the warnings (baked, not yet baked, or why
+        it cannot be)."""
+        statuses = []
+        if mat is not None and obj is not None and self.bakes is not None:
+            try:
+                statuses = self.bakes.status(mat, obj, is_instance)
+            except Exception as e:  # noqa: BLE001 -- never fail an export on the bake look-up
+                text = f"material {mat.name!r}: the bake look-up failed ({type(e).__name__}: {e}); inputs are not baked"
+                if text not in self.warnings:
+                    self.warnings.append(text)
+        baked = [s for s in statuses if s.state == "baked"]
         key = mat.name_full if mat is not None else None
+        if baked:
+            key = (key, tuple(sorted(s.key for s in baked)))
         if key not in self._index:
             self._index[key] = len(self.materials)
-            self.materials.append(self.convert(mat) if mat is not None else default_material())
+            self._cover = bool(statuses)
+            try:
+                self.materials.append(self.convert(mat, baked) if mat is not None else default_material())
+            finally:
+                self._cover = False
+        if statuses:
+            self._report_bakes(mat, obj, statuses)
         return self._index[key]
 
-    def convert(self, mat) -> "scene_model.Material":
-        """One Blender material -> Material (never raises for unsupported setups)."""
+    def _report_bakes(self, mat, obj, statuses) -> None:
+        """One message per input to bake (module :mod:`.bake`)."""
         self._where = f"material {mat.name!r}"
+        on = f" on object {obj.name!r}"
+        for s in statuses:
+            c = s.cand
+            state = "unread" if s.state == "baked" and s.key in self._unread else s.state
+            if state == "baked":
+                r = self.bakes.resolution
+                self._warn(f"{c.label}{on} baked to a {r}x{r} texture ({c.cause()})")
+                continue
+            fallback = ", ".join(repr(n) for n, _t, _w in c.unsupported[:3])
+            fallback = (f"the sockets fed by {fallback}{' ...' if len(c.unsupported) > 3 else ''} "
+                        f"use their own default values")
+            if state == "missing":
+                self._warn(f"{c.label}{on} needs a bake ({c.cause()}) and none is cached: {fallback} until it is "
+                           f"baked ({bake_hint()})")
+            elif state == "unread":
+                self._warn(f"{c.label}{on}: its baked texture could not be read; {fallback}")
+            elif state == "failed":
+                self._warn(f"{c.label}{on} could not be baked ({c.cause()}): {'; '.join(s.reasons)}; {fallback}")
+            else:   # blocked: by the subtree (said once per material) or by this object
+                where = "" if c.blockers else on
+                self._warn(f"{c.label}{where} cannot be baked ({c.cause()}): {'; '.join(s.reasons)}; {fallback}")
+
+    def _apply_bakes(self, mat, graph, builder, baked) -> None:
+        """Note what the bake report covers; replace the baked inputs by their textures."""
+        self._covered_sockets, self._covered_nodes = set(), set()
+        if self.bakes is None or not self._cover:
+            return
+        bake_mod = sub_bake()
+        for c in self.bakes.inputs(mat).candidates:
+            self._covered_sockets.add((c.consumer, c.socket))
+            self._covered_nodes.update(n for n, _t, _w in c.unsupported)
+        if graph is None or not baked:
+            return
+        applied = 0
+        for s in baked:
+            if s.cand.consumer not in graph.nodes:
+                continue
+            idx = self.textures.index_of_file(s.path, f"{mat.name}: {s.cand.label} (baked)", self._warn)
+            if idx < 0:
+                self._unread.add(s.key)
+                continue
+            bake_mod.substitute(graph, s.cand, idx, s.uv_map)
+            applied += 1
+        if applied:
+            for name in bake_mod.prune(graph):
+                builder.images.pop(name, None)
+                builder.grouped.discard(name)
+
+    def convert(self, mat, baked=()) -> "scene_model.Material":
+        """One Blender material -> Material (never raises for unsupported setups); ``baked``: the
+        :class:`.bake.Status` of its inputs with a cached bake on the object being exported."""
+        self._where = f"material {mat.name!r}"
+        self._covered_sockets, self._covered_nodes = set(), set()
         tree = mat.node_tree if _uses_nodes(mat) else None
         graph = None
         if tree is None:
@@ -183,6 +299,10 @@ class MaterialExporter:
             except RecursionError:
                 self._warn("the node tree is too deep to export as a graph; rendered with constant parameters")
                 graph = None
+            try:
+                self._apply_bakes(mat, graph, builder, baked)
+            except Exception as e:  # noqa: BLE001 -- never fail an export on a bake
+                self._warn(f"the baked textures could not be applied ({type(e).__name__}: {e})")
             if graph is None or not node_export.graph_needed(graph, builder):
                 graph = None
             self._graph_mode = graph is not None
@@ -231,9 +351,12 @@ class MaterialExporter:
                        f"rendered with constant parameters")
             return None
         for msg in prog.unsupported:
-            node = next((n for k, n in graph.nodes.items() if msg.startswith(f"node {k!r} (")), None)
+            name = next((k for k in graph.nodes if msg.startswith(f"node {k!r} (")), None)
+            node = graph.nodes.get(name) if name is not None else None
             if node is not None and node.type == "ShaderNodeTexImage" and "has no image" in msg:
                 continue  # warned above, with the image's name and path
+            if name is not None and name in self._covered_nodes:
+                continue  # the bake report names it (baked, to be baked, or why not)
             self._warn(msg)
         return graph
 
@@ -250,16 +373,11 @@ class MaterialExporter:
     def _output_node(self, tree):
         """The Material Output STPM renders: the active one of those for All / Cycles, else the first such;
         with only EEVEE outputs, an EEVEE one (warned: Cycles would not use it)."""
-        every = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
-        for outs in ([n for n in every if getattr(n, "target", "ALL") in ("ALL", "CYCLES")], every):
-            active = [n for n in outs if getattr(n, "is_active_output", False)]
-            node = (active or outs or [None])[0]
-            if node is not None:
-                if getattr(node, "target", "ALL") not in ("ALL", "CYCLES"):
-                    self._warn(f"the only Material Output ({node.name!r}) has target {node.target} (EEVEE only); "
-                               f"STPM renders it anyway (Cycles would ignore it): set its target to All")
-                return node
-        return None
+        node, eevee = find_output(tree)
+        if eevee:
+            self._warn(f"the only Material Output ({node.name!r}) has target {node.target} (EEVEE only); "
+                       f"STPM renders it anyway (Cycles would ignore it): set its target to All")
+        return node
 
     @staticmethod
     def _follow(link):
@@ -291,8 +409,9 @@ class MaterialExporter:
             src = self._follow(sock.links[0])
             if src.bl_idname == "ShaderNodeValue":
                 return float(src.outputs[0].default_value)
-            self._warn(f"{node.name}.{name} driven by {src.bl_idname} is not supported, using its value",
-                       graph_carries=True)
+            if (node.name, sock.identifier) not in self._covered_sockets:   # else the bake report names it
+                self._warn(f"{node.name}.{name} driven by {src.bl_idname} is not supported, using its value",
+                           graph_carries=True)
         return float(sock.default_value)
 
     def _color(self, node, name: str, default=(0.8, 0.8, 0.8)) -> np.ndarray:
@@ -311,7 +430,7 @@ class MaterialExporter:
                     return mean
             elif src.bl_idname == "ShaderNodeRGB":
                 return np.array(src.outputs[0].default_value[:3], dtype=np.float64)
-            else:
+            elif (node.name, sock.identifier) not in self._covered_sockets:   # else the bake report names it
                 self._warn(f"{node.name}.{name} driven by {src.bl_idname} is not supported, using its colour",
                            graph_carries=True)
         return np.array(sock.default_value[:3], dtype=np.float64)
@@ -369,7 +488,7 @@ class MaterialExporter:
             alpha_linked = alpha is not None and alpha.is_linked and \
                 self._follow(alpha.links[0]).bl_idname != "ShaderNodeValue"
             if self._value(node, "Alpha", 1.0) < 1.0 or (alpha_linked and self._graph_mode):
-                self._warn("Principled Alpha is ignored (opaque)")
+                self._warn("Principled Alpha is ignored (opaque)", graph_carries=True)   # the graph renders it
             emission = self._color(node, "Emission Color", (0, 0, 0)) * self._value(node, "Emission Strength", 0.0)
             return _params(base_color=self._color(node, "Base Color"),
                            metallic=self._value(node, "Metallic", 0.0),

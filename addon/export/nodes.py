@@ -21,7 +21,8 @@ or a muted node is converted to the input's type as Blender converts it (colour 
 luminance, vector -> float: the average, float -> colour / vector: the value in each channel).
 
 :class:`TextureTable` turns each distinct ``bpy.types.Image`` into one Texture, read through
-``Image.pixels`` (files on disk, packed and generated images alike) and stored natively.
+``Image.pixels`` (files on disk, packed and generated images alike) and stored natively; baked
+inputs (:mod:`.bake`) are float EXR files it reads with OpenImageIO (``index_of_file``).
 """
 from __future__ import annotations
 
@@ -34,7 +35,8 @@ _compile = sub("nodes.compile")
 _textures = sub("textures")
 Link, Node, ShaderGraph = _graph.Link, _graph.Node, _graph.ShaderGraph
 
-__all__ = ["GraphBuilder", "TextureTable", "image_texture", "graph_needed", "CONSTANT_NODES", "curve_table"]
+__all__ = ["GraphBuilder", "TextureTable", "image_texture", "float_texture", "read_float_image", "graph_needed",
+           "CONSTANT_NODES", "curve_table"]
 
 # Value nodes the constant path (materials.py) reads directly
 CONSTANT_NODES = ("ShaderNodeValue", "ShaderNodeRGB")
@@ -354,12 +356,16 @@ def reached_nodes(graph: ShaderGraph, supported=None) -> list:
     return order
 
 
+_GRAPH_ONLY_SHADERS = ("ShaderNodeBsdfTransparent", "ShaderNodeAddShader")   # no constant closure for them
+
+
 def graph_needed(graph: ShaderGraph, builder: GraphBuilder) -> bool:
     """Does the surface read something the constant path cannot represent?
 
     True when a value node the interpreter evaluates, other than Value / RGB, feeds the surface
     (a texture, a Math node, a Normal Map, ...), or the surface's nodes or values pass through
-    a node group or a muted node.  Plain shader trees (Principled, Diffuse, Glossy, Glass,
+    a node group or a muted node, or the tree has a Transparent BSDF, an Add Shader or a
+    Principled BSDF with Alpha < 1 (chosen per hit).  Plain shader trees (Principled, Diffuse, Glossy, Glass,
     Emission, Mix Shader with constant or Value / RGB inputs) keep the constant path, and so do
     trees whose only links come from nodes the interpreter does not support either (a Noise
     texture, a Bump node: both paths use the input's own value; the constant path warns).
@@ -372,6 +378,11 @@ def graph_needed(graph: ShaderGraph, builder: GraphBuilder) -> bool:
         node = graph.nodes[name]
         if name in builder.grouped:
             return True
+        if node.type in _GRAPH_ONLY_SHADERS:
+            return True
+        alpha = node.inputs.get("Alpha", 1.0) if node.type == "ShaderNodeBsdfPrincipled" else 1.0
+        if isinstance(alpha, Link) or (isinstance(alpha, (int, float)) and alpha < 1.0):
+            return True            # transparency: the closure is chosen per hit
         if not _is_shader_node(node) and node.type not in CONSTANT_NODES:
             return True
         if any((name, ident) in builder.special for ident in node.inputs):
@@ -461,6 +472,14 @@ def image_texture(image, warn) -> "_textures.Texture | None":
         np.clip(px, 0.0, 255.0, out=px)
         np.rint(px, out=px)
         return _texture(px.astype(np.uint8), cs, name, alpha_mode)
+    return float_texture(px, name, warn, alpha_mode)
+
+
+def float_texture(px: np.ndarray, name: str, warn, alpha_mode: str = "STRAIGHT") -> "_textures.Texture":
+    """Scene-linear float32 texels (H, W, C), row 0 at the bottom -> a "Linear" Texture stored as
+    uint16 when every value is k / 65535, float16 when every value is a half, else float32, with
+    the fewest channels that keep every value; NaN / inf texels become 0 (warned).  ``px`` may be
+    modified in place."""
     if not _rows_all(px, lambda ch: np.isfinite(ch).all()):
         warn(f"image {name!r}: NaN or infinite pixels are rendered as 0")
         np.nan_to_num(px, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
@@ -475,6 +494,24 @@ def image_texture(image, warn) -> "_textures.Texture | None":
     return _texture(data, "Linear", name, alpha_mode)
 
 
+def read_float_image(path) -> np.ndarray:
+    """A float image file (a baked EXR) -> (H, W, C) float32 texels, row 0 at the bottom (as
+    ``Image.pixels``), through OpenImageIO."""
+    import OpenImageIO as oiio
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise OSError(f"cannot read {path}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        px = inp.read_image(0, 0, 0, spec.nchannels, "float")
+    finally:
+        inp.close()
+    if px is None:
+        raise OSError(f"cannot read {path}: {oiio.geterror()}")
+    px = np.asarray(px, np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    return np.ascontiguousarray(px[::-1])
+
+
 class TextureTable:
     """The textures of one export: each distinct image once (``textures[i]`` = texture id i)."""
 
@@ -484,12 +521,30 @@ class TextureTable:
 
     def index_of(self, image, warn) -> int:
         """Texture index of ``image`` (read on first use); -1 when it has no pixels."""
-        key = image.as_pointer()
+        return self._cached(image.as_pointer(), lambda: image_texture(image, warn))
+
+    def _cached(self, key, make) -> int:
+        """Index of the texture cached under ``key``, made by ``make()`` on first use (None: -1)."""
         if key not in self._index:
-            tex = image_texture(image, warn)
+            tex = make()
             if tex is None:
                 self._index[key] = -1
             else:
                 self._index[key] = len(self.textures)
                 self.textures.append(tex)
         return self._index[key]
+
+    def index_of_file(self, path, name: str, warn) -> int:
+        """Texture index of the float image file ``path`` (a baked EXR, read on first use with
+        OpenImageIO: no ``bpy.data.images`` entry is made); -1 when it cannot be read (warned)."""
+        def make():
+            try:
+                px = read_float_image(path)
+                c = px.shape[2]
+                if c == 2 or c > 4:
+                    px = np.ascontiguousarray(px[:, :, :1] if c == 2 else px[:, :, :4])
+                return float_texture(px, name, warn, "NONE" if px.shape[2] == 4 else "STRAIGHT")
+            except (OSError, ValueError, ImportError) as e:
+                warn(f"baked image {str(path)!r} could not be read ({e})")
+                return None
+        return self._cached(("file", str(path)), make)

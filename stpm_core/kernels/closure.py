@@ -27,6 +27,10 @@ metallic, transmission, roughness, specular, ior.  Derived columns
 ``C_NS``           the hit's smooth shading normal (3 columns) when ``C_BUMPED``: a Normal
                    input replaced it (``kernels.svm``); the BSDF's bump shadowing term reads it
 ``C_BUMPED``       1 where a Normal input replaced the shading normal, else 0
+``C_TRANSPARENT``  the tint (3 columns) of a transparent closure (Transparent BSDF, Principled
+                   Alpha < 1, chosen per hit by ``kernels.svm``), else 0
+``C_PASS``         1 where the closure is transparent: rays go on straight through the surface,
+                   tinted by C_TRANSPARENT (``stpm_core.transparency``); its other lobes are empty
 =================  =============================================================
 
 The last row (index M, where hit material -1 lands) is an inert black closure.
@@ -40,7 +44,7 @@ from ..numba_probe import njit
 __all__ = ["N_CLOSURE", "pack_materials", "finish_closure", "closure_row"] + [
     "C_BASE", "C_EMIT", "C_METALLIC", "C_TRANSMISSION", "C_ROUGHNESS", "C_SPECULAR", "C_IOR", "C_ALPHA",
     "C_W_BASE", "C_W_METAL", "C_W_GLASS", "C_ROUGH_LOBE", "C_NONDELTA", "C_COAT", "C_HAS_DELTA",
-    "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED"]
+    "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED", "C_TRANSPARENT", "C_PASS"]
 
 C_BASE = 0            # 3 columns: base colour RGB
 C_EMIT = 3            # 3 columns: emitted radiance RGB
@@ -61,7 +65,9 @@ C_EMISSIVE = 19
 C_PROGRAM = 20
 C_NS = 21             # 3 columns: the smooth shading normal before a Normal input replaced it
 C_BUMPED = 24         # 1 where a Normal input (normal map, bump) replaced the hit's shading normal
-N_CLOSURE = 25
+C_TRANSPARENT = 25    # 3 columns: the tint of a transparent closure (C_PASS = 1), else 0
+C_PASS = 28           # 1 where the hit's closure is transparent: the ray passes on, tinted
+N_CLOSURE = 29
 
 
 @njit(cache=True, nogil=True)

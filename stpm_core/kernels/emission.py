@@ -337,6 +337,13 @@ def _prepare(lights, li: int, n: int, times, rng: np.random.Generator, side: boo
     return (u1, u_side, u2), (row, poses, steps, corners, q, cdf, Le, times)
 
 
+def _textured(light, U, o, d, times, P) -> None:
+    """A textured MESH light (``MeshLight.textured``; the kernels weighed its photons with radiance
+    1): P (n, 3) *= what each photon's emission point emits, U the uniforms that chose it."""
+    if getattr(light, "textured", False):
+        P *= light.point_emission(U, o, -d, times)
+
+
 def emit(lights, li: int, n: int, times: np.ndarray, rng: np.random.Generator):
     """n photons of light li of the LightSet ``lights`` over its whole emission (``LightSet.emit``).
 
@@ -349,6 +356,7 @@ def emit(lights, li: int, n: int, times: np.ndarray, rng: np.random.Generator):
     if n > 0:
         (u1, u_side, u2), inputs = _prepare(lights, li, n, times, rng, side=True)
         emit_photons(*inputs, u1, u2, u_side, o, d, P)
+        _textured(lights.lights[li], u1, o, d, inputs[-1], P)
     return o, d, P
 
 
@@ -367,4 +375,5 @@ def emit_toward(lights, li: int, n: int, times: np.ndarray, rng: np.random.Gener
         centers = kernel_array(centers.reshape(1, 3) if centers.ndim == 1 else np.broadcast_to(centers, (n, 3)))
         (u1, _, u2), inputs = _prepare(lights, li, n, times, rng, side=False)
         emit_toward_photons(*inputs, centers, float(radius), u1, u2, o, d, P)
+        _textured(lights.lights[li], u2, o, d, inputs[-1], P)
     return o, d, P

@@ -103,7 +103,8 @@ def kernel_light(lights, li: int):
 
     prm (N_LIGHT_PARAMS,); static_poses (1, 4, 4) C-contiguous when the light (for MESH: its
     instance) does not move, else None (:func:`light_poses` per call); steps (K,), corners
-    (K, F, 3, 3), q, cdf (F,), Le (F, 3): a MESH light's triangles, K = 1 for a mesh that does
+    (K, F, 3, 3), q, cdf (F,), Le (F, 3): a MESH light's triangles (Le: ``MeshLight.kernel_Le``,
+    ones for a textured emitter, whose callers weigh each sample by its point), K = 1 for a mesh that does
     not deform (steps = [0]; world space with an identity pose for a static mesh, object space
     otherwise), else the mesh's vertex times, corners linear in time between them; triangle j
     is picked with probability q[j] (cdf its running sum, last entry 1).  Other lights: empty
@@ -129,7 +130,8 @@ def kernel_light(lights, li: int):
                 steps, corners = np.zeros(1), l._corners[None]
             else:
                 steps, corners = l._steps, l._corners
-            mesh = tuple(np.ascontiguousarray(a, np.float64) for a in (steps, corners, l.q, l.cdf, l.Le))
+            mesh = tuple(np.ascontiguousarray(a, np.float64) for a in (steps, corners, l.q, l.cdf,
+                                                                        getattr(l, "kernel_Le", l.Le)))
         k = cache[li] = (_pack_row(lights, li), poses) + mesh
     return k
 

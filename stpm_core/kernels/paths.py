@@ -230,7 +230,7 @@ def scatter_add(dst, rows, idx, use_idx, beta, use_beta, val):
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
 def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cdf, Le, T, U, EPS,
-              contrib, so, sd, stmax, live):
+              contrib, so, sd, stmax, live, S):
     """Next-event estimation of one light at the hit rows ``rows`` (n,); returns the shadow-ray count.
 
     P, NG, NS, D (m, 3): hit points, geometric / shading normals and ray
@@ -247,7 +247,8 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
     weight.  Where it is positive, a shadow ray from p offset by EPS[r] along
     ng to wi's side, aimed at the light point, stopping a margin short of it
     (emissive triangles are geometry the shadow ray must not reach): so, sd
-    (n, 3), stmax (n,), and live (n,) the row k it belongs to.
+    (n, 3), stmax (n,), and live (n,) the row k it belongs to.  S (>= n, 7): the light samples
+    (``sample_light_rows``; a textured MESH light's caller reads the light points from it).
 
     Three loops, each with only the code its rows need (a loop that contains a call it never
     takes still runs about twice slower per row; docs/rendering.md "NEE cost"): the light
@@ -255,7 +256,6 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
     rough lobe, then the smooth BSDF, contribution and shadow ray of every row.
     """
     n = rows.shape[0]
-    S = np.empty((n, 7))
     sample_light_rows(prm, poses, steps, corners, q, cdf, Le, rows, P, NG, D, T, U, S)
     # -- The BSDF of rows with a rough lobe: the compiled mixture (bsdf_eval_pdf) -------------
     F = np.empty((n, 3))

@@ -51,7 +51,7 @@ __all__ = ["JIT", "JIT_INLINE", "TWO_PI", "INV_4PI", "dot", "edot", "cross", "no
            "vec3", "sub", "add", "neg", "scale", "madd", "plane_point", "clip", "sign", "basis", "to_world",
            "concentric_disk", "cosine_hemisphere", "uniform_sphere", "uniform_cone", "axis_or_z",
            "one_minus_cos_from_sin2", "light_axis", "intensity", "spot_attenuation", "area_shape", "area_point",
-           "search_right", "mesh_point"]
+           "search_right", "mesh_point", "mesh_choice", "mesh_choices"]
 
 JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 # Only for tiny indexing helpers called with constant indices or ids of several integer types:
@@ -347,11 +347,7 @@ def mesh_point(M, steps, corners, q, cdf, t, u0, u1):
     then M; a uniform point of it, barycentrics (1 - s, s (1 - u1), s u1), s = sqrt(u0'); the
     unit geometric normal e1 x e2 / |e1 x e2| and the triangle's world area A.
     """
-    F = q.shape[0]
-    j = min(search_right(cdf, u0), F - 1)
-    qj = q[j]
-    lo = cdf[j] - qj
-    uu = clip((u0 - lo) / qj, 0.0, 1.0 - 1e-12)
+    j, qj, b1, b2 = mesh_choice(q, cdf, u0, u1)
     K = steps.shape[0]
     i = 0
     a = 0.0
@@ -362,8 +358,34 @@ def mesh_point(M, steps, corners, q, cdf, t, u0, u1):
     e1 = sub(_mesh_corner(M, corners, i, j, 1, a), C0)
     e2 = sub(_mesh_corner(M, corners, i, j, 2, a), C0)
     nrm, two_A = normalize(cross(e1, e2))
+    return plane_point(C0, b1, e1, b2, e2), nrm, 0.5 * two_A, j, qj
+
+
+@njit(**JIT)
+def mesh_choice(q, cdf, u0, u1):
+    """The triangle and barycentrics :func:`mesh_point` makes of (u0, u1): (j, q_j, b1, b2).
+
+    j with probability q[j] (u0 picks it by the cdf, then is rescaled to u0' in [0, 1) inside its
+    interval); the point C0 + b1 e1 + b2 e2 with b1 = s (1 - u1), b2 = s u1, s = sqrt(u0') (uniform
+    on the triangle; (b1, b2) are the ray caster's hit barycentrics (u, v) of that point).
+    """
+    F = q.shape[0]
+    j = min(search_right(cdf, u0), F - 1)
+    qj = q[j]
+    lo = cdf[j] - qj
+    uu = clip((u0 - lo) / qj, 0.0, 1.0 - 1e-12)
     s = math.sqrt(uu)
-    return plane_point(C0, s * (1.0 - u1), e1, s * u1, e2), nrm, 0.5 * two_A, j, qj
+    return j, qj, s * (1.0 - u1), s * u1
+
+
+@njit(**JIT)
+def mesh_choices(q, cdf, U, J, B):
+    """:func:`mesh_choice` of each row of U (n, 2): J (n,) int64 triangle indices, B (n, 2) (b1, b2)."""
+    for k in range(U.shape[0]):
+        j, _, b1, b2 = mesh_choice(q, cdf, U[k, 0], U[k, 1])
+        J[k] = j
+        B[k, 0] = b1
+        B[k, 1] = b2
 
 
 # ----------------------------------------------------------------------------

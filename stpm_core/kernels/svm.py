@@ -29,7 +29,7 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .closure import (C_BASE, C_BUMPED, C_EMIT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
+from .closure import (C_BASE, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
                       C_TRANSMISSION, closure_row, finish_closure)
 from .sampling import JIT, JIT_INLINE
 
@@ -73,6 +73,8 @@ _BSDF_GLOSSY = OP["BSDF_GLOSSY"]
 _BSDF_GLASS = OP["BSDF_GLASS"]
 _EMISSION = OP["EMISSION"]
 _MIX_SHADER = OP["MIX_SHADER"]
+_TRANSPARENT = OP["TRANSPARENT"]
+_ADD_SHADER = OP["ADD_SHADER"]
 _NORMAL_MAP = OP["NORMAL_MAP"]
 _BUMP = OP["BUMP"]
 _TEX_NOISE = OP["TEX_NOISE"]
@@ -1151,9 +1153,12 @@ def _procedural_node(op, prog, pc, st, n):
 # Closures
 # ----------------------------------------------------------------------------
 @njit(**JIT)
-def _closure(op, prog, pc, st, k, C, r):
+def _closure(op, prog, pc, st, k, C, r, w):
     """Write the primary columns of closure row C[r] from a closure instruction at batch row k,
-    then its derived columns (``closure.finish_closure``)."""
+    then its derived columns (``closure.finish_closure``).  w: the weight of the closure (2^d
+    under d Add Shaders) on its colour and emission; a TRANSPARENT closure (or a Principled BSDF
+    reached with op = _TRANSPARENT by its Alpha: white) writes an empty closure with C_PASS = 1
+    and its tint."""
     metallic = transmission = specular = 0.0
     rough = 0.5
     ior = 1.5
@@ -1165,9 +1170,9 @@ def _closure(op, prog, pc, st, k, C, r):
         ior = st[int(prog[pc + 4]), k]
         transmission = st[int(prog[pc + 6]), k]
         specular = min(1.0, 2.0 * st[int(prog[pc + 7]), k])
-        w = st[int(prog[pc + 9]), k]
+        s = st[int(prog[pc + 9]), k]
         e0, e1, e2 = _v3(st, int(prog[pc + 8]), k)
-        e0, e1, e2 = e0 * w, e1 * w, e2 * w
+        e0, e1, e2 = e0 * s, e1 * s, e2 * s
     elif op == _BSDF_DIFFUSE:
         b0, b1, b2 = _v3(st, int(prog[pc + 1]), k)
         rough = 1.0
@@ -1180,18 +1185,32 @@ def _closure(op, prog, pc, st, k, C, r):
         transmission = 1.0
         rough = st[int(prog[pc + 2]), k]
         ior = st[int(prog[pc + 3]), k]
-    else:                              # EMISSION
+    elif op == _EMISSION:
         b0 = b1 = b2 = 0.0
         rough = 1.0
-        w = st[int(prog[pc + 2]), k]
+        s = st[int(prog[pc + 2]), k]
         e0, e1, e2 = _v3(st, int(prog[pc + 1]), k)
-        e0, e1, e2 = e0 * w, e1 * w, e2 * w
-    C[r, C_BASE] = _clamp01(b0)
-    C[r, C_BASE + 1] = _clamp01(b1)
-    C[r, C_BASE + 2] = _clamp01(b2)
-    C[r, C_EMIT] = max(e0, 0.0)
-    C[r, C_EMIT + 1] = max(e1, 0.0)
-    C[r, C_EMIT + 2] = max(e2, 0.0)
+        e0, e1, e2 = e0 * s, e1 * s, e2 * s
+    else:                              # TRANSPARENT: nothing scatters here, the ray passes
+        b0 = b1 = b2 = 0.0
+        rough = 1.0
+    C[r, C_BASE] = w * _clamp01(b0)
+    C[r, C_BASE + 1] = w * _clamp01(b1)
+    C[r, C_BASE + 2] = w * _clamp01(b2)
+    C[r, C_EMIT] = w * max(e0, 0.0)
+    C[r, C_EMIT + 1] = w * max(e1, 0.0)
+    C[r, C_EMIT + 2] = w * max(e2, 0.0)
+    if op == _TRANSPARENT:
+        t0 = t1 = t2 = 1.0
+        if int(prog[pc]) == _TRANSPARENT:              # a Transparent BSDF (else a Principled's Alpha)
+            t0, t1, t2 = _v3(st, int(prog[pc + 1]), k)
+        C[r, C_TRANSPARENT] = w * max(t0, 0.0)
+        C[r, C_TRANSPARENT + 1] = w * max(t1, 0.0)
+        C[r, C_TRANSPARENT + 2] = w * max(t2, 0.0)
+        C[r, C_PASS] = 1.0
+    else:
+        C[r, C_TRANSPARENT] = C[r, C_TRANSPARENT + 1] = C[r, C_TRANSPARENT + 2] = 0.0
+        C[r, C_PASS] = 0.0
     C[r, C_METALLIC] = _clamp01(metallic)
     C[r, C_TRANSMISSION] = _clamp01(transmission)
     C[r, C_ROUGHNESS] = _clamp01(rough)
@@ -1248,6 +1267,7 @@ def run_program(prog, start, st, rows, C, G, A, X, seed):
         r = rows[k]
         u = hash_uniform(seed, r)
         q = closure_at
+        w = 1.0
         while True:
             op = int(prog[q])
             if op == _MIX_SHADER:
@@ -1259,8 +1279,28 @@ def run_program(prog, start, st, rows, C, G, A, X, seed):
                     u = (u - f) / (1.0 - f)
                     q += 3
                 continue
+            if op == _ADD_SHADER:
+                w *= 2.0
+                if u < 0.5:
+                    u = 2.0 * u
+                    q += 2
+                else:
+                    u = 2.0 * u - 1.0
+                    q = start + int(prog[q + 1])
+                continue
+            if op == _TRANSPARENT:
+                _closure(op, prog, q, st, k, C, r, w)
+                break
+            if op == _BSDF_PRINCIPLED:
+                a = _clamp01(st[int(prog[q + 5]), k])
+                if a < 1.0:
+                    # Alpha: Cycles' mix of a Transparent BSDF (1 - alpha) and the BSDF (alpha)
+                    if u >= a:
+                        _closure(_TRANSPARENT, prog, q, st, k, C, r, w)
+                        break
+                    u = u / a
             if op >= _BSDF_PRINCIPLED and op <= _EMISSION:
-                _closure(op, prog, q, st, k, C, r)
+                _closure(op, prog, q, st, k, C, r, w)
                 ns = -1
                 if op == _BSDF_PRINCIPLED:
                     ns = int(prog[q + 10])

@@ -30,9 +30,11 @@ CURVE_TABLE = 256      # RGB Curves: samples of each channel's curve on [0, 1]
 VEC, FLT = "vec", "float"
 _KIND = {"VALUE": FLT, "INT": FLT, "BOOLEAN": FLT, "RGBA": VEC, "VECTOR": VEC}
 
-CLOSURE_OPS = ("MIX_SHADER", "BSDF_PRINCIPLED", "BSDF_DIFFUSE", "BSDF_GLOSSY", "BSDF_GLASS", "EMISSION")
+CLOSURE_OPS = ("MIX_SHADER", "BSDF_PRINCIPLED", "BSDF_DIFFUSE", "BSDF_GLOSSY", "BSDF_GLASS", "EMISSION",
+               "TRANSPARENT", "ADD_SHADER")
 SHADERS = ("ShaderNodeBsdfPrincipled", "ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy",
-           "ShaderNodeBsdfAnisotropic", "ShaderNodeBsdfGlass", "ShaderNodeEmission", "ShaderNodeMixShader")
+           "ShaderNodeBsdfAnisotropic", "ShaderNodeBsdfGlass", "ShaderNodeEmission", "ShaderNodeMixShader",
+           "ShaderNodeBsdfTransparent", "ShaderNodeAddShader")
 
 
 @dataclass
@@ -46,6 +48,8 @@ class Program:
     uses_mix: bool = False
     uses_normals: bool = False                         # rewrites the shading normal per hit
     uses_frames: bool = False                          # reads each hit's object-to-world normal matrix
+    may_emit: bool = False                             # some closure's emission is not constant black
+    may_pass: bool = False                             # some closure lets rays through (transparency)
 
 
 class _Compiler:
@@ -67,6 +71,9 @@ class _Compiler:
         self._reached = None           # names of the nodes that reach the surface (used())
         self.uses_normals = False      # a shader's Normal input is linked: NS is rewritten per hit
         self.uses_frames = False       # a node needs the object-to-world normal matrix of each hit
+        self.may_emit = False          # an emission whose colour and strength are not constant zero
+        self.may_pass = False          # a Transparent BSDF, or a Principled Alpha that is not a constant 1
+        self.add_depth = 0             # Add Shaders above the shader being compiled
 
     # -- slots ---------------------------------------------------------------------------
     # Output slots are numbered from 0 while compiling and shifted past the constants at the end:
@@ -217,9 +224,31 @@ class _Compiler:
             second = node.inputs.get("Shader_001")
             self.shader(second if isinstance(second, Link) else None, depth + 1)
             return
+        if t == "ShaderNodeAddShader":
+            at = self.emit("ADD_SHADER", 0.0)
+            self.add_depth += 1
+            first = node.inputs.get("Shader")
+            self.shader(first if isinstance(first, Link) else None, depth + 1)
+            self.closure_code[at + 1] = float(len(self.closure_code))   # index of branch B: fixed in finish()
+            self.jumps.append(at + 1)
+            second = node.inputs.get("Shader_001")
+            self.shader(second if isinstance(second, Link) else None, depth + 1)
+            self.add_depth -= 1
+            return
         n = link.node
+        if t == "ShaderNodeBsdfTransparent":
+            self.may_pass = True
+            self.emit("TRANSPARENT", self.input(n, node, "Color", VEC, (1.0, 1.0, 1.0)))
+            return
+        if self.add_depth and t in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic", "ShaderNodeBsdfGlass",
+                                    "ShaderNodeBsdfPrincipled"):
+            self.warn(n, node, "under an Add Shader: its specular lobes are weighted approximately "
+                               "(the sum is estimated by picking one input at weight 2)")
         normal = self.normal_input(n, node)
         if t == "ShaderNodeBsdfPrincipled":
+            a = node.inputs.get("Alpha", 1.0)
+            if isinstance(a, Link) or (isinstance(a, (int, float)) and a < 1.0):
+                self.may_pass = True
             for ident in ("Coat Weight", "Sheen Weight", "Subsurface Weight"):
                 v = node.inputs.get(ident, 0.0)
                 if isinstance(v, Link) or (isinstance(v, (int, float)) and v > 0):
@@ -230,8 +259,7 @@ class _Compiler:
                       self.input(n, node, "IOR", FLT, 1.5), self.input(n, node, "Alpha", FLT, 1.0),
                       self.input(n, node, "Transmission Weight", FLT, 0.0),
                       self.input(n, node, "Specular IOR Level", FLT, 0.5),
-                      self.input(n, node, "Emission Color", VEC, (1.0, 1.0, 1.0)),
-                      self.input(n, node, "Emission Strength", FLT, 0.0), normal)
+                      *self.emission(n, node, "Emission Color", "Emission Strength", 0.0), normal)
         elif t == "ShaderNodeBsdfDiffuse":
             self.emit("BSDF_DIFFUSE", self.input(n, node, "Color", VEC, (0.8, 0.8, 0.8)), normal)
         elif t in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
@@ -241,14 +269,24 @@ class _Compiler:
             self.emit("BSDF_GLASS", self.input(n, node, "Color", VEC, (1.0, 1.0, 1.0)),
                       self.input(n, node, "Roughness", FLT, 0.0), self.input(n, node, "IOR", FLT, 1.5), normal)
         elif t == "ShaderNodeEmission":
-            self.emit("EMISSION", self.input(n, node, "Color", VEC, (1.0, 1.0, 1.0)),
-                      self.input(n, node, "Strength", FLT, 1.0))
+            self.emit("EMISSION", *self.emission(n, node, "Color", "Strength", 1.0))
         else:
             self.warn(n, node, "is not a supported shader; rendered as grey diffuse")
             self.emit("BSDF_DIFFUSE", self.const((0.8, 0.8, 0.8)), -1.0)
         for ident, v in node.inputs.items():
             if ident.endswith("Normal") and ident != "Normal" and isinstance(v, Link):
                 self.warn(n, node, f"{ident} input is not evaluated (the surface normal is used)")
+
+    def emission(self, name: str, node, color: str, strength: str, strength_default: float) -> tuple:
+        """Slots of an emission's colour and strength inputs; sets ``may_emit`` unless one of
+        them is a constant zero (a constant is a ("c", k) slot)."""
+        c = self.input(name, node, color, VEC, (1.0, 1.0, 1.0))
+        s = self.input(name, node, strength, FLT, strength_default)
+        zero_c = c[0] == "c" and not any(self.consts[c[1] + i] != 0.0 for i in range(3))
+        zero_s = s[0] == "c" and self.consts[s[1]] == 0.0
+        if not (zero_c or zero_s):
+            self.may_emit = True
+        return c, s
 
     def normal_input(self, name: str, node):
         """Slot of a shader's linked Normal input (a world-space unit normal), or -1: the surface's."""
@@ -750,4 +788,5 @@ def compile_graph(graph: ShaderGraph, n_textures: int = 0, uv_layers: list | Non
     c = _Compiler(graph, n_textures, layers)
     c.shader(graph.surface)         # value nodes go to the value section as they are first read
     return Program(words=c.finish(), unsupported=c.unsupported, uv_layers=layers, uses_mix=c.uses_mix,
-                   uses_normals=c.uses_normals, uses_frames=c.uses_frames)
+                   uses_normals=c.uses_normals, uses_frames=c.uses_frames, may_emit=c.may_emit,
+                   may_pass=c.may_pass)

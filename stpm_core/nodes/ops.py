@@ -12,8 +12,10 @@ slots.  An instruction is its opcode followed by the operands listed in :data:`L
 indices unless named otherwise; -1 = output not used).  The value code (every instruction but the
 closure ones) runs for a batch of hits at once, instruction by instruction; the closure code,
 from word ``closure_at`` (relative to the program's first word) on, is walked per hit: a closure
-instruction (``BSDF_*``, ``EMISSION``) ends it, ``MIX_SHADER`` picks one of its two branches with
-probability Fac (an unbiased estimate of Blender's linear blend of the two closures).
+instruction (``BSDF_*``, ``EMISSION``, ``TRANSPARENT``) ends it, ``MIX_SHADER`` picks one of its two
+branches with probability Fac (an unbiased estimate of Blender's linear blend of the two closures),
+``ADD_SHADER`` one of its two with probability 1/2 and doubles the closure's weight (an unbiased
+estimate of their sum for emission, transparency and diffuse colour).
 """
 from __future__ import annotations
 
@@ -70,6 +72,8 @@ LAYOUT = {
     "BSDF_GLASS": ("*color", "roughness", "ior", "*normal"),
     "EMISSION": ("*color", "strength"),
     "MIX_SHADER": ("fac", "#jump"),                                  # jump: word index of the second branch
+    "TRANSPARENT": ("*color",),                                      # the ray passes, tinted by color
+    "ADD_SHADER": ("#jump",),                                        # one branch, each with 1/2, weight 2
 }
 OP = {name: i for i, name in enumerate(LAYOUT)}
 

@@ -36,6 +36,7 @@ from ..parallel import ordered_map, worker_count
 from ..raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from ..sampling import rng_for, stratified_1d
 from ..shading import constant_shading, hit_geometry, shading_data
+from ..transparency import pass_through
 from .record import make_records, photon_origin, PHOTON_DTYPE
 
 __all__ = ["specular_targets", "split_counts", "trace_photon_paths", "trace_caustic_map", "trace_global_map"]
@@ -173,6 +174,9 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
                 hits.ns[idx] = G[2]                      # Normal inputs (normal maps) set the shading normals
         else:
             shade(sd, np.ascontiguousarray(hits.material[idx]), None, 0, C)
+        if sd.transparent:
+            # transparent hits: the photon goes on behind, its power tinted (not a bounce)
+            Phi = pass_through(caster, sd, inst_offset, hits, d, t, C, Phi, rng, at=idx)
         last = depth == max_depth
         # -- Random numbers of the bounce: BSDF lobe and direction, then the roulette ----------
         U = rng.random((k, 3)) if not last else _NO_U3

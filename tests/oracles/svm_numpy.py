@@ -695,6 +695,7 @@ class Closure:
     specular: float = 0.0
     ior: float = 1.5
     kind: str = "diffuse"
+    transparent: np.ndarray = field(default_factory=lambda: np.zeros(3))   # kind "transparent": the tint
 
 
 def closure_row(c: Closure) -> dict:
@@ -703,7 +704,8 @@ def closure_row(c: Closure) -> dict:
     return {"base": np.clip(c.base, 0.0, 1.0), "emission": np.maximum(c.emission, 0.0),
             "metallic": _saturate(c.metallic), "transmission": _saturate(c.transmission),
             "roughness": _saturate(c.roughness), "specular": _saturate(c.specular),
-            "ior": min(max(c.ior, 1.0), 10.0)}
+            "ior": min(max(c.ior, 1.0), 10.0), "transparent": np.maximum(c.transparent, 0.0),
+            "pass": 1.0 if c.kind == "transparent" else 0.0}
 
 
 # ----------------------------------------------------------------------------
@@ -811,12 +813,22 @@ class _Eval:
             fac = _saturate(f("Fac", "f"))
             return (self.shader(node.inputs.get("Shader"), weight * (1.0 - fac), depth + 1)
                     + self.shader(node.inputs.get("Shader_001"), weight * fac, depth + 1))
+        if t == "ShaderNodeAddShader":          # Cycles sums the closures of both inputs
+            return (self.shader(node.inputs.get("Shader"), weight, depth + 1)
+                    + self.shader(node.inputs.get("Shader_001"), weight, depth + 1))
+        if t == "ShaderNodeBsdfTransparent":
+            return [(weight, Closure(base=np.zeros(3), roughness=1.0, kind="transparent",
+                                     transparent=f("Color", "v")))]
         if t == "ShaderNodeBsdfPrincipled":
-            c = Closure(base=f("Base Color", "v"), metallic=f("Metallic", "f"), roughness=f("Roughness", "f"),
-                        transmission=f("Transmission Weight", "f"), ior=f("IOR", "f"),
-                        specular=min(1.0, 2.0 * f("Specular IOR Level", "f")),
-                        emission=f("Emission Color", "v") * f("Emission Strength", "f"), kind="principled")
-        elif t == "ShaderNodeBsdfDiffuse":
+            alpha = _saturate(f("Alpha", "f"))
+            if alpha < 1.0:                  # Cycles: a Transparent BSDF (white) mixed in by 1 - Alpha
+                clear = [(weight * (1.0 - alpha), Closure(base=np.zeros(3), roughness=1.0, kind="transparent",
+                                                          transparent=np.ones(3)))]
+                if alpha <= 0.0:
+                    return clear
+                return self._principled(node, weight * alpha) + clear
+            return self._principled(node, weight)
+        if t == "ShaderNodeBsdfDiffuse":
             c = Closure(base=f("Color", "v"), roughness=1.0, kind="diffuse")
         elif t in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
             c = Closure(base=f("Color", "v"), metallic=1.0, roughness=f("Roughness", "f"), kind="glossy")
@@ -830,6 +842,14 @@ class _Eval:
             self.unsupported.append(link.node)
             c = Closure(base=np.full(3, 0.8), roughness=1.0, kind="fallback")
         return [(weight, c)]
+
+    def _principled(self, node, weight: float) -> list:
+        f = lambda ident, kind: self.inp(node, ident, kind)   # noqa: E731
+        return [(weight, Closure(base=f("Base Color", "v"), metallic=f("Metallic", "f"),
+                                 roughness=f("Roughness", "f"), transmission=f("Transmission Weight", "f"),
+                                 ior=f("IOR", "f"), specular=min(1.0, 2.0 * f("Specular IOR Level", "f")),
+                                 emission=f("Emission Color", "v") * f("Emission Strength", "f"),
+                                 kind="principled"))]
 
 
 # -- value-node handlers: (evaluator, node) -> {output identifier: float | (3,) array} -------------

@@ -1,0 +1,91 @@
+"""Transparent surfaces (stpm_core/transparency.py): analytic answers on small core scenes.
+
+A white diffuse floor (rho = 0.8) at z = 0 under a sun from straight above (S W/m^2), seen by an
+orthographic camera from above, with sheets of a Transparent BSDF (tint c) above it.  Each sheet
+the camera ray crosses multiplies what it sees by c, and each sheet the shadow ray crosses
+multiplies the sun's light by c: L = rho / pi * S * c^(2 k) for k sheets.  More sheets than
+``TRANSPARENT_MAX_BOUNCES`` absorb the ray (black).  Photons pass the same way: the global map's
+irradiance on the floor below a sheet is c times the unshadowed one.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from stpm_core.nodes import Link, Node, ShaderGraph
+from stpm_core.render import render
+from stpm_core.scene import Material, Light
+from stpm_core.motion import MotionTransform
+from stpm_core.settings import RenderSettings
+from stpm_core.transparency import TRANSPARENT_MAX_BOUNCES
+
+from scenes import make_scene, ortho_camera_down, plane_mesh, translate
+
+S = 3.0
+RHO = 0.8
+TINT = (0.9, 0.6, 0.3)
+
+
+def _sheet_material(tint=TINT, mix=None) -> Material:
+    nodes = {"T": Node("ShaderNodeBsdfTransparent", inputs={"Color": tuple(tint)}, outputs={"BSDF": "SHADER"})}
+    surface = Link("T", "BSDF")
+    if mix is not None:      # Mix(Transparent, Diffuse black, fac = mix): a fraction mix is opaque black
+        nodes["D"] = Node("ShaderNodeBsdfDiffuse", inputs={"Color": (0.0, 0.0, 0.0)}, outputs={"BSDF": "SHADER"})
+        nodes["M"] = Node("ShaderNodeMixShader", inputs={"Fac": mix, "Shader": Link("T", "BSDF"),
+                                                         "Shader_001": Link("D", "BSDF")},
+                          outputs={"Shader": "SHADER"})
+        surface = Link("M", "Shader")
+    return Material(name="Sheet", graph=ShaderGraph(nodes=nodes, surface=surface))
+
+
+def _scene(n_sheets: int, mix=None, res=(8, 8)):
+    floor = plane_mesh(4.0, z=0.0, material=0)
+    objs = [floor] + [(plane_mesh(4.0, z=0.0, material=1, name=f"sheet{i}"), translate(0, 0, 0.2 + 0.1 * i))
+                      for i in range(n_sheets)]
+    mats = [Material(name="Floor", base_color=np.full(3, RHO)), _sheet_material(mix=mix)]
+    sun = Light(type="SUN", power=S, transform=MotionTransform.static(np.eye(4)))
+    return make_scene(objs, mats, ortho_camera_down(5.0, 1.0), [sun], resolution=res)
+
+
+@pytest.mark.parametrize("k", [0, 1, 3])
+def test_each_sheet_tints_the_view_and_the_shadow(k):
+    res = render(_scene(k), RenderSettings(samples=2, photons_global=0, photons_caustic=0))
+    expect = RHO / math.pi * S * np.asarray(TINT) ** (2 * k)
+    np.testing.assert_allclose(res.passes["Combined"][..., :3], np.broadcast_to(expect, (8, 8, 3)), rtol=1e-6)   # float32 passes
+
+
+def test_more_sheets_than_the_limit_absorb_the_ray():
+    res = render(_scene(TRANSPARENT_MAX_BOUNCES + 1), RenderSettings(samples=1, photons_global=0, photons_caustic=0))
+    assert np.all(res.passes["Combined"][..., :3] == 0.0)
+
+
+def test_a_mix_with_an_opaque_shader_passes_in_proportion():
+    """Mix(Transparent, black Diffuse, 0.25): 75 % of camera rays and 75 % of shadow rays pass, so
+    the floor's mean is rho / pi S (0.75 c)^2, each sample 0 or c^2 / 0.75^0 scaled (unbiased)."""
+    res = render(_scene(1, mix=0.25, res=(16, 16)), RenderSettings(samples=64, photons_global=0, photons_caustic=0,
+                                                                   seed=3))
+    got = res.passes["Combined"][..., :3].mean(axis=(0, 1))
+    expect = RHO / math.pi * S * (0.75 * np.asarray(TINT)) ** 2
+    np.testing.assert_allclose(got, expect, rtol=0.03)
+
+
+def test_photons_pass_transparent_sheets_tinted():
+    """Global-map photons (stored from the first diffuse hit on, min_nondelta = 0) land on the
+    floor through the sheet, each with the sun's power times the tint: over the middle 3 x 3 m of
+    the floor they sum to S c W/m^2 (the sun's irradiance through the sheet)."""
+    from stpm_core.bsdf import MaterialTable
+    from stpm_core.lights import LightSet
+    from stpm_core.photons.trace import trace_global_map
+    from stpm_core.raycast import make_caster
+    sc = _scene(1)
+    caster, lights = make_caster(sc), LightSet(sc)
+    recs, _ = trace_global_map(sc, RenderSettings(photons_global=20000, max_depth=1), caster, lights,
+                               MaterialTable(sc.materials), min_nondelta=0)
+    from stpm_core.photons.record import photon_origin
+    pos, power = recs["position"] + photon_origin(sc), recs["power"]     # records are relative to it
+    assert np.all(np.abs(pos[:, 2]) < 1e-3)                     # nothing stored on the sheet
+    inside = (np.abs(pos[:, 0]) < 1.5) & (np.abs(pos[:, 1]) < 1.5)
+    E = power[inside].sum(axis=0) / 9.0
+    np.testing.assert_allclose(E, S * np.asarray(TINT), rtol=0.05)
