@@ -73,6 +73,11 @@ class Mesh:
     tangents : per UV map name, (F, 3, 4) float32 per-corner object-space tangent
         (x, y, z) and bitangent sign (Blender's ``Mesh.calc_tangents``: MikkTSpace),
         what a tangent-space Normal Map node reads; {} = none.
+    color_layers : colour attributes by name, each (F, 3, 4) float32 per-corner linear RGBA
+        (Blender's colour attributes, point or corner domain, at the loop-triangle corners),
+        what Color Attribute and Attribute nodes read; {} = none.
+    color_render : name of the render-active colour attribute (a Color Attribute node with no
+        name reads it), or None.
     """
 
     vertices: np.ndarray
@@ -84,6 +89,8 @@ class Mesh:
     uv_layers: dict = field(default_factory=dict)
     uv_render: str | None = None
     tangents: dict = field(default_factory=dict)
+    color_layers: dict = field(default_factory=dict)
+    color_render: str | None = None
 
     @property
     def is_deforming(self) -> bool:
@@ -502,7 +509,7 @@ def validate_scene(scene: Scene) -> None:
             n = _check_finite(f"{p}.normals", m.normals)
             if n.shape != (tri.shape[0], 3, 3):
                 raise SceneError(f"{p}.normals must have shape ({tri.shape[0]}, 3, 3), got {n.shape}")
-        for attr, width in (("uv_layers", 2), ("tangents", 4)):
+        for attr, width in (("uv_layers", 2), ("tangents", 4), ("color_layers", 4)):
             layers = getattr(m, attr, None) or {}
             if not isinstance(layers, dict):
                 raise SceneError(f"{p}.{attr} must be a dict of name -> (F, 3, {width}) arrays")

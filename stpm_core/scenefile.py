@@ -24,8 +24,10 @@ uint16 bit patterns with ``half`` true) plus ``name`` / ``colorspace`` / ``half`
 the header (and ``alpha_mode``); a mesh's UV maps are ``meshes/<i>/uv/<j>`` (F, 3, 2)
 float32 with the names in meshes[i].uv_layers and the render-active name in
 meshes[i].uv_render, its tangents ``meshes/<i>/tangents/<j>`` (F, 3, 4) float32 with
-their UV map names in meshes[i].tangents.  These keys are optional: a file without
-them loads with no graphs, textures, UVs or tangents.
+their UV map names in meshes[i].tangents, its colour attributes ``meshes/<i>/colors/<j>``
+(F, 3, 4) float32 linear RGBA with the names in meshes[i].color_layers and the render-active
+name in meshes[i].color_render.  These keys are optional: a file without them loads with no
+graphs, textures, UVs, tangents or colour attributes.
 
 Loading
 -------
@@ -148,6 +150,10 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
         tan_names = _put_tangents(arrays, p, m, f"meshes[{i}] ({m.name!r})", uv_names)
         if tan_names:
             entry["tangents"] = tan_names
+        col_names = _put_colors(arrays, p, m, f"meshes[{i}] ({m.name!r})")
+        if col_names:
+            entry["color_layers"] = col_names
+            entry["color_render"] = None if m.color_render is None else str(m.color_render)
         meshes.append(entry)
 
     # Materials (with their node graphs) and textures
@@ -202,23 +208,33 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
     return header, arrays
 
 
-def _put_uv_layers(arrays: dict, p: str, m: Mesh, where: str) -> list:
-    """Store mesh m's UV maps as ``p/uv/<j>`` (F, 3, 2) float32 -> their names (checked)."""
-    layers = getattr(m, "uv_layers", None) or {}
+def _put_corner_layers(arrays: dict, p: str, m: Mesh, where: str, attr: str, sub: str, width: int,
+                       allowed: list | None = None) -> list:
+    """Store mesh m's per-corner layers ``m.<attr>`` ({name: (F, 3, width)}) as ``p/<sub>/<j>``
+    float32 -> their names (checked: strings, shape, finite; in ``allowed`` when given)."""
+    layers = getattr(m, attr, None) or {}
     if not isinstance(layers, dict):
-        raise SceneError(f"{where}.uv_layers must be a dict of name -> (F, 3, 2) array")
+        raise SceneError(f"{where}.{attr} must be a dict of name -> (F, 3, {width}) array")
     F = int(np.asarray(m.triangles).shape[0])
     names = []
-    for j, (name, uv) in enumerate(layers.items()):
+    for j, (name, value) in enumerate(layers.items()):
         if not isinstance(name, str):
-            raise SceneError(f"{where}.uv_layers names must be strings, got {name!r}")
-        a = np.asarray(uv, dtype=np.float32)
-        if a.shape != (F, 3, 2):
-            raise SceneError(f"{where}.uv_layers[{name!r}] must have shape ({F}, 3, 2), got {a.shape}")
+            raise SceneError(f"{where}.{attr} names must be strings, got {name!r}")
+        if allowed is not None and name not in allowed:
+            raise SceneError(f"{where}.{attr}[{name!r}] names no UV map of the mesh {allowed}")
+        a = np.asarray(value, dtype=np.float32)
+        if a.shape != (F, 3, width):
+            raise SceneError(f"{where}.{attr}[{name!r}] must have shape ({F}, 3, {width}), got {a.shape}")
         if not np.all(np.isfinite(a)):
-            raise SceneError(f"{where}.uv_layers[{name!r}] contains NaN or inf")
-        arrays[f"{p}/uv/{j}"] = a
+            raise SceneError(f"{where}.{attr}[{name!r}] contains NaN or inf")
+        arrays[f"{p}/{sub}/{j}"] = a
         names.append(name)
+    return names
+
+
+def _put_uv_layers(arrays: dict, p: str, m: Mesh, where: str) -> list:
+    """Store mesh m's UV maps as ``p/uv/<j>`` (F, 3, 2) float32 -> their names (checked)."""
+    names = _put_corner_layers(arrays, p, m, where, "uv_layers", "uv", 2)
     if m.uv_render is not None and (not isinstance(m.uv_render, str) or m.uv_render not in names):
         raise SceneError(f"{where}.uv_render {m.uv_render!r} is not one of its UV maps {names}")
     return names
@@ -226,21 +242,15 @@ def _put_uv_layers(arrays: dict, p: str, m: Mesh, where: str) -> list:
 
 def _put_tangents(arrays: dict, p: str, m: Mesh, where: str, uv_names: list) -> list:
     """Store mesh m's tangents as ``p/tangents/<j>`` (F, 3, 4) float32 -> their UV map names."""
-    tangents = getattr(m, "tangents", None) or {}
-    if not isinstance(tangents, dict):
-        raise SceneError(f"{where}.tangents must be a dict of UV map name -> (F, 3, 4) array")
-    F = int(np.asarray(m.triangles).shape[0])
-    names = []
-    for j, (name, tan) in enumerate(tangents.items()):
-        if name not in uv_names:
-            raise SceneError(f"{where}.tangents[{name!r}] names no UV map of the mesh {uv_names}")
-        a = np.asarray(tan, dtype=np.float32)
-        if a.shape != (F, 3, 4):
-            raise SceneError(f"{where}.tangents[{name!r}] must have shape ({F}, 3, 4), got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise SceneError(f"{where}.tangents[{name!r}] contains NaN or inf")
-        arrays[f"{p}/tangents/{j}"] = a
-        names.append(name)
+    return _put_corner_layers(arrays, p, m, where, "tangents", "tangents", 4, allowed=uv_names)
+
+
+def _put_colors(arrays: dict, p: str, m: Mesh, where: str) -> list:
+    """Store mesh m's colour attributes as ``p/colors/<j>`` (F, 3, 4) float32 -> their names."""
+    names = _put_corner_layers(arrays, p, m, where, "color_layers", "colors", 4)
+    render = getattr(m, "color_render", None)
+    if render is not None and (not isinstance(render, str) or render not in names):
+        raise SceneError(f"{where}.color_render {render!r} is not one of its colour attributes {names}")
     return names
 
 
@@ -663,11 +673,13 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
             raise SceneError(f"{a}.material_ids index out of range [0, {len(materials)})")
         uv_layers, uv_render = _read_uv_layers(f, arr, p, a, tri.shape[0])
         tangents = _read_tangents(f, arr, p, a, tri.shape[0], uv_layers)
+        color_layers, color_render = _read_colors(f, arr, p, a, tri.shape[0])
         meshes.append(Mesh(vertices=V.astype(np.float32), triangles=tri.astype(np.int32),
                            material_ids=mid.astype(np.int32),
                            vertex_times=None if vt is None else vt.astype(np.float64),
                            normals=None if N is None else N.astype(np.float32), name=name,
-                           uv_layers=uv_layers, uv_render=uv_render, tangents=tangents))
+                           uv_layers=uv_layers, uv_render=uv_render, tangents=tangents,
+                           color_layers=color_layers, color_render=color_render))
 
     # Instances
     instances = []
@@ -715,44 +727,48 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
     return scene
 
 
-def _read_tangents(f: _Fields, arr: _Arrays, p: str, a: str, n_tri: int, uv_layers: dict) -> dict:
-    """A mesh's tangents ({UV map name: (F, 3, 4) float32}); optional."""
-    if "tangents" not in f.d:
+def _read_corner_layers(f: _Fields, arr: _Arrays, p: str, a: str, n_tri: int, key: str, sub: str,
+                        width: int, allowed=None) -> dict:
+    """A mesh's per-corner layers listed under header key ``key`` ({name: (F, 3, width) float32},
+    arrays ``p/<sub>/<j>``); optional ({} when the key is absent)."""
+    if key not in f.d:
         return {}
-    names = f.list("tangents")
+    names = f.list(key)
     if not all(isinstance(n, str) for n in names) or len(set(names)) != len(names):
-        raise SceneError(f"{a}.tangents must be a list of distinct strings, got {names!r:.80}")
+        raise SceneError(f"{a}.{key} must be a list of distinct strings, got {names!r:.80}")
     out = {}
     for j, name in enumerate(names):
-        if name not in uv_layers:
-            raise SceneError(f"{a}.tangents[{name!r}] names no UV map of the mesh")
-        tan = arr.get(f"{p}/tangents/{j}", f"{a}.tangents[{name!r}]", kind="f", ndim=3, tail=(3, 4))
-        if tan.shape[0] != n_tri:
-            raise SceneError(f"{a}.tangents[{name!r}] must have shape ({n_tri}, 3, 4), got {tan.shape}")
-        if np.abs(tan).max(initial=0.0) > 1e15:
-            raise SceneError(f"{a}.tangents[{name!r}] has values beyond 1e15")
-        out[name] = tan.astype(np.float32)
+        if allowed is not None and name not in allowed:
+            raise SceneError(f"{a}.{key}[{name!r}] names no UV map of the mesh")
+        v = arr.get(f"{p}/{sub}/{j}", f"{a}.{key}[{name!r}]", kind="f", ndim=3, tail=(3, width))
+        if v.shape[0] != n_tri:
+            raise SceneError(f"{a}.{key}[{name!r}] must have shape ({n_tri}, 3, {width}), got {v.shape}")
+        if np.abs(v).max(initial=0.0) > 1e15:
+            raise SceneError(f"{a}.{key}[{name!r}] has values beyond 1e15")
+        out[name] = v.astype(np.float32)
     return out
+
+
+def _read_tangents(f: _Fields, arr: _Arrays, p: str, a: str, n_tri: int, uv_layers: dict) -> dict:
+    """A mesh's tangents ({UV map name: (F, 3, 4) float32}); optional."""
+    return _read_corner_layers(f, arr, p, a, n_tri, "tangents", "tangents", 4, allowed=uv_layers)
 
 
 def _read_uv_layers(f: _Fields, arr: _Arrays, p: str, a: str, n_tri: int) -> tuple:
     """A mesh's UV maps ({name: (F, 3, 2) float32}, render-active name or None); optional."""
-    if "uv_layers" not in f.d:
-        return {}, None
-    names = f.list("uv_layers")
-    if not all(isinstance(n, str) for n in names) or len(set(names)) != len(names):
-        raise SceneError(f"{a}.uv_layers must be a list of distinct strings, got {names!r:.80}")
-    layers = {}
-    for j, name in enumerate(names):
-        uv = arr.get(f"{p}/uv/{j}", f"{a}.uv_layers[{name!r}]", kind="f", ndim=3, tail=(3, 2))
-        if uv.shape[0] != n_tri:
-            raise SceneError(f"{a}.uv_layers[{name!r}] must have shape ({n_tri}, 3, 2), got {uv.shape}")
-        if np.abs(uv).max(initial=0.0) > 1e15:
-            raise SceneError(f"{a}.uv_layers[{name!r}] has coordinates beyond 1e15")
-        layers[name] = uv.astype(np.float32)
+    layers = _read_corner_layers(f, arr, p, a, n_tri, "uv_layers", "uv", 2)
     render = f.d.get("uv_render")
     if render is not None and (not isinstance(render, str) or render not in layers):
-        raise SceneError(f"{a}.uv_render must be null or one of {names!r:.80}, got {render!r:.60}")
+        raise SceneError(f"{a}.uv_render must be null or one of {list(layers)!r:.80}, got {render!r:.60}")
+    return layers, render
+
+
+def _read_colors(f: _Fields, arr: _Arrays, p: str, a: str, n_tri: int) -> tuple:
+    """A mesh's colour attributes ({name: (F, 3, 4) float32}, render-active name or None); optional."""
+    layers = _read_corner_layers(f, arr, p, a, n_tri, "color_layers", "colors", 4)
+    render = f.d.get("color_render")
+    if render is not None and (not isinstance(render, str) or render not in layers):
+        raise SceneError(f"{a}.color_render must be null or one of {list(layers)!r:.80}, got {render!r:.60}")
     return layers, render
 
 

@@ -59,7 +59,8 @@ class ShadingData:
 def _empty_attributes(n_inst: int) -> tuple:
     return (np.zeros(max(n_inst, 1), np.int64), np.zeros(1, np.int64), np.full((1, 1), -1, np.int64),
             np.zeros((1, 3, 2), np.float32), np.zeros((1, 3, 3), np.float32), np.zeros((1, 3)), np.ones((1, 3)),
-            np.zeros((1, 3, 3), np.float32), np.full((1, 1), -1, np.int64), np.zeros((1, 3, 4), np.float32))
+            np.zeros((1, 3, 3), np.float32), np.full((1, 1), -1, np.int64), np.zeros((1, 3, 4), np.float32),
+            np.full((1, 1), -1, np.int64), np.zeros((1, 3, 4), np.float32))
 
 
 _NM_IDENTITY = np.eye(3)[None].copy()          # (1, 3, 3): every hit's normal matrix is the identity
@@ -71,7 +72,7 @@ def constant_shading(closures: np.ndarray) -> ShadingData:
                        X=pack_textures([]).arrays()[:5])
 
 
-def scene_attributes(scene, uv_layers: list) -> tuple:
+def scene_attributes(scene, uv_layers: list, color_layers: list | None = None) -> tuple:
     """The attribute tuple A of ``kernels.svm`` for scene's meshes and the UV layer names
     (index 0 of a name list: "" = each mesh's render-active map).
 
@@ -82,7 +83,11 @@ def scene_attributes(scene, uv_layers: list) -> tuple:
     space (the bounding box; an axis of zero extent gets half-size 1, as Blender sets it);
     corner_nrm (T, 3, 3) float32 object-space corner normals (``Mesh.normals``; flat meshes: the
     face normal at each corner); tan_off (M, L) int64 and corner_tan (N', 3, 4) float32 the
-    per-corner tangents and signs of each (mesh, layer) (``Mesh.tangents``), -1 = none.
+    per-corner tangents and signs of each (mesh, layer) (``Mesh.tangents``), -1 = none;
+    col_off (M, Lc) int64 and corner_col (N'', 3, 4) float32 the per-corner RGBA of each colour
+    layer name of ``color_layers`` ("" = the mesh's render-active colour attribute): the mesh's
+    colour attribute of that name (``Mesh.color_layers``), else its UV map of that name as
+    (u, v, 0, 1) (an Attribute node may name either), else -1 (none: the node reads 0).
     """
     meshes = scene.meshes
     M = len(meshes)
@@ -133,8 +138,36 @@ def scene_attributes(scene, uv_layers: list) -> tuple:
     corner_uv = np.concatenate(uvs).astype(np.float32) if n_uv else np.zeros((1, 3, 2), np.float32)
     corner_nrm = np.concatenate(nrms).astype(np.float32) if n_tri else np.zeros((1, 3, 3), np.float32)
     corner_tan = np.concatenate(tans).astype(np.float32) if n_tan else np.zeros((1, 3, 4), np.float32)
+    col_off, corner_col = _color_attributes(meshes, list(color_layers or []))
     return (inst_mesh, mesh_tri0, uv_off, np.ascontiguousarray(corner_uv), np.ascontiguousarray(corner_obj),
-            gen_lo, gen_inv, np.ascontiguousarray(corner_nrm), tan_off, np.ascontiguousarray(corner_tan))
+            gen_lo, gen_inv, np.ascontiguousarray(corner_nrm), tan_off, np.ascontiguousarray(corner_tan),
+            col_off, corner_col)
+
+
+def _color_attributes(meshes, names: list) -> tuple:
+    """(col_off (M, Lc) int64, corner_col (N, 3, 4) float32) of :func:`scene_attributes`."""
+    M = max(len(meshes), 1)
+    col_off = np.full((M, max(len(names), 1)), -1, np.int64)
+    parts, n = [], 0
+    for i, m in enumerate(meshes):
+        F = int(np.asarray(m.triangles).shape[0])
+        colors = getattr(m, "color_layers", None) or {}
+        uvs = getattr(m, "uv_layers", None) or {}
+        for j, name in enumerate(names):
+            key = name if name else getattr(m, "color_render", None)
+            if key in colors:
+                a = np.asarray(colors[key], np.float32).reshape(F, 3, 4)
+            elif name and name in uvs:
+                a = np.zeros((F, 3, 4), np.float32)
+                a[:, :, :2] = np.asarray(uvs[name], np.float32).reshape(F, 3, 2)
+                a[:, :, 3] = 1.0
+            else:
+                continue
+            col_off[i, j] = n
+            parts.append(a)
+            n += F
+    corner_col = np.concatenate(parts) if n else np.zeros((1, 3, 4), np.float32)
+    return col_off, np.ascontiguousarray(corner_col, np.float32)
 
 
 def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
@@ -150,6 +183,7 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
     rows = base.copy()
     textures = list(getattr(scene, "textures", []) or [])
     uv_layers: list = [""]
+    color_layers: list = []
     words, unsupported, uses_mix, uses_normals, uses_frames = [], [], False, False, False
     emitting, transparent = set(), set()
     at = 0
@@ -157,7 +191,7 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
         g = getattr(m, "graph", None)
         if g is None:
             continue
-        prog = compile_graph(g, n_textures=len(textures), uv_layers=uv_layers)
+        prog = compile_graph(g, n_textures=len(textures), uv_layers=uv_layers, color_layers=color_layers)
         w = prog.words                 # jumps are relative to the program's start: no relocation
         words.append(w)
         rows[i, C_PROGRAM] = float(at)
@@ -174,7 +208,7 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
     starts = [int(r) for r in rows[:-1, C_PROGRAM] if r >= 0]
     n_slots = max([int(prog_all[s]) for s in starts] + [1])
     if words:
-        A = scene_attributes(scene, uv_layers)
+        A = scene_attributes(scene, uv_layers, color_layers)
         pack = pack_textures(textures)
     else:
         A = _empty_attributes(len(scene.instances))

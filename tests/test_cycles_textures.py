@@ -408,3 +408,42 @@ def test_transparent_mix_and_add_shader_match_cycles(tmp_path):
     add_mesh("plane", "Glow", location=(0.5, 0.3, 0.3), material=mat2, size=0.6)
     r, stpm, cyc = _compare(tmp_path, "transparent mix + add", spp=64)
     _assert_matches(r, "transparent mix + add")
+
+
+# ----------------------------------------------------------------------------
+# Colour attributes
+# ----------------------------------------------------------------------------
+@pytest.mark.parametrize("domain, dtype", [("CORNER", "BYTE_COLOR"), ("POINT", "FLOAT_COLOR")])
+def test_color_attribute_matches_cycles(tmp_path, domain, dtype):
+    """A subdivided plane with a random colour attribute (painted per corner or per vertex, byte or
+    float) read by a Color Attribute node (the render-active one) into a Diffuse, and by name
+    through an Attribute node's Fac into a Mix."""
+    _top_down_scene()
+    mat, t, out = _empty_material("Painted")
+    vc = t.nodes.new("ShaderNodeVertexColor")
+    attr = t.nodes.new("ShaderNodeAttribute")
+    attr.attribute_name = "Wear"
+    mix = t.nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    mix.inputs["B"].default_value = (0.9, 0.9, 0.2, 1.0)
+    d = t.nodes.new("ShaderNodeBsdfDiffuse")
+    t.links.new(attr.outputs["Fac"], mix.inputs["Factor"])
+    t.links.new(vc.outputs["Color"], mix.inputs["A"])
+    t.links.new(mix.outputs["Result"], d.inputs["Color"])
+    t.links.new(d.outputs[0], out.inputs["Surface"])
+    obj = add_mesh("plane", "Floor", material=mat, size=2.0)
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.subdivide(number_cuts=3)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    me = obj.data
+    rng = np.random.default_rng(7)
+    for name in ("Paint", "Wear"):
+        a = me.color_attributes.new(name, dtype, domain)
+        vals = rng.uniform(0.0, 1.0, (len(a.data), 4))
+        vals[:, 3] = 1.0
+        a.data.foreach_set("color", vals.astype(np.float32).ravel())
+    me.color_attributes.render_color_index = me.color_attributes.find("Paint")
+    me.color_attributes.active_color = me.color_attributes["Paint"]
+    r, stpm, cyc = _compare(tmp_path, f"colour attribute {domain} {dtype}")
+    _assert_matches(r, "colour attribute")
+    assert np.std(r.stpm) > 0.5 * np.std(r.cycles) > 0.0

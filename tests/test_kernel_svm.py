@@ -1246,3 +1246,39 @@ def test_transparent_add_and_alpha_closures():
     assert abs(em.mean() - 0.5) < 0.03
     np.testing.assert_allclose(C[a, C_EMIT:C_EMIT + 3][em], np.tile([4.0, 2.0, 1.0], (em.sum(), 1)))
     np.testing.assert_allclose(C[a, C_TRANSPARENT:C_TRANSPARENT + 3][~em], np.tile(2 * np.asarray(tint), ((~em).sum(), 1)))
+
+
+def test_color_attributes_and_attribute_node():
+    """Color Attribute ("" = render-active, or by name) and Attribute (Geometry: a colour attribute,
+    or a UV map by name as (u, v, 0)): corner values interpolated with the hit's barycentrics;
+    a missing attribute reads 0; Object attributes are named and read 0."""
+    rng = np.random.default_rng(41)
+    cols = {"Col": rng.uniform(0, 1, (1, 3, 4)).astype(np.float32),
+            "Wear": rng.uniform(0, 1, (1, 3, 4)).astype(np.float32)}
+    cases = [
+        ({"A": N("ShaderNodeVertexColor", props={"layer_name": ""})}, L("A", "Color")),
+        ({"A": N("ShaderNodeVertexColor", props={"layer_name": "Wear"})}, L("A", "Color")),
+        ({"A": N("ShaderNodeVertexColor", props={"layer_name": "Wear"})}, L("A", "Alpha")),
+        ({"A": N("ShaderNodeAttribute", props={"attribute_type": "GEOMETRY", "attribute_name": "Col"})}, L("A", "Fac")),
+        ({"A": N("ShaderNodeAttribute", props={"attribute_type": "GEOMETRY", "attribute_name": "Second"})},
+         L("A", "Vector")),
+        ({"A": N("ShaderNodeAttribute", props={"attribute_type": "GEOMETRY", "attribute_name": "Missing"})},
+         L("A", "Color")),
+    ]
+    graphs = [emit_graph(nodes, out, 1.0) for nodes, out in cases]
+    mat = np.repeat(np.arange(len(graphs)), 6)
+    hits = make_hits(len(mat), rng)
+    scene = make_scene(graphs)
+    scene.meshes[0].color_layers = cols
+    scene.meshes[0].color_render = "Col"
+    C, sd = run_kernel(scene, hits, mat)
+    assert not sd.unsupported, sd.unsupported
+    exp = np.array([row["emission"] for row in oracle_rows(scene, hits, mat)])
+    np.testing.assert_allclose(C[:, C_EMIT:C_EMIT + 3], exp, rtol=RTOL, atol=1e-6)
+    assert np.ptp(exp[mat == 0], axis=0).max() > 0.01            # varies over the triangle
+    assert np.all(exp[mat == 5] == 0.0)
+    # An Object attribute: named, reads 0
+    g = emit_graph({"A": N("ShaderNodeAttribute", props={"attribute_type": "OBJECT", "attribute_name": "x"})},
+                   L("A", "Color"), 1.0)
+    prog = compile_graph(g)
+    assert any("Object attributes are not supported" in u for u in prog.unsupported)

@@ -46,7 +46,10 @@ def rich_scene() -> Scene:
                             "Second/map": rng.normal(size=(3, 3, 2)).astype(np.float32)},
                  uv_render="Second/map",
                  tangents={"UVMap": np.concatenate([rng.normal(size=(3, 3, 3)), np.sign(rng.normal(size=(3, 3, 1)))],
-                                                   axis=2).astype(np.float32)})
+                                                   axis=2).astype(np.float32)},
+                 color_layers={"Col": rng.random((3, 3, 4)).astype(np.float32),
+                               "Wear": rng.random((3, 3, 4)).astype(np.float32)},
+                 color_render="Wear")
     deform = Mesh(vertices=rng.normal(size=(3, 5, 3)).astype(np.float32), triangles=tri.copy(),
                   material_ids=np.array([3, 0, 1], np.int32),
                   vertex_times=np.array([0.0, 0.4, 1.0]), name="deforming")
@@ -179,6 +182,10 @@ def test_round_trip_keeps_graphs_textures_and_uvs(tmp_path):
     assert list(m.tangents) == ["UVMap"] and m.tangents["UVMap"].shape == (3, 3, 4)
     assert loaded.meshes[1].uv_layers == {} and loaded.meshes[1].uv_render is None
     assert loaded.meshes[1].tangents == {}
+    assert list(m.color_layers) == ["Col", "Wear"] and m.color_render == "Wear"
+    for name in ("Col", "Wear"):
+        np.testing.assert_array_equal(m.color_layers[name], scene.meshes[0].color_layers[name])
+    assert loaded.meshes[1].color_layers == {} and loaded.meshes[1].color_render is None
 
 
 def test_files_without_the_node_fields_still_load(tmp_path):
@@ -237,6 +244,14 @@ def _bad_tangent_name(sc):
     sc.meshes[0].tangents["Other"] = sc.meshes[0].tangents["UVMap"]
 
 
+def _bad_color_render(sc):
+    sc.meshes[0].color_render = "nope"
+
+
+def _bad_color_shape(sc):
+    sc.meshes[0].color_layers["Col"] = np.zeros((3, 3, 3), np.float32)
+
+
 def _bad_alpha_mode(sc):
     sc.textures[1].alpha_mode = "MULTIPLY"
 
@@ -253,6 +268,8 @@ BAD_SCENES = [
     ("unknown render UV map", _bad_uv_render, "uv_render"),
     ("tangents of no UV map", _bad_tangent_name, "tangents['Other']"),
     ("unknown alpha mode", _bad_alpha_mode, "textures[1] ('half').alpha_mode"),
+    ("unknown render colour attribute", _bad_color_render, "color_render"),
+    ("colour attribute shape", _bad_color_shape, "color_layers['Col']"),
 ]
 
 

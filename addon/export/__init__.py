@@ -177,7 +177,8 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
             if me is None:
                 continue
             arr = mesh_export.mesh_arrays(me, tangent_maps=mats.tangent_maps(mat_ids.tolist()),
-                                          warn=lambda text: _warn_once(warnings, text))
+                                          warn=lambda text: _warn_once(warnings, text),
+                                          color_maps=mats.color_maps(mat_ids.tolist()))
             cleanup()
             if arr["triangles"].shape[0] == 0:
                 mesh_cache[data_key] = -1
@@ -186,7 +187,9 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                 meshes.append(scene_model.Mesh(vertices=arr["vertices"], triangles=arr["triangles"],
                                                material_ids=mat_ids[slot], normals=arr["normals"],
                                                name=obj.name, uv_layers=arr["uv_layers"],
-                                               uv_render=arr["uv_render"], tangents=arr["tangents"]))
+                                               uv_render=arr["uv_render"], tangents=arr["tangents"],
+                                               color_layers=arr["color_layers"],
+                                               color_render=arr["color_render"]))
                 mesh_cache[data_key] = len(meshes) - 1
         if mesh_cache[data_key] < 0:
             continue

@@ -193,6 +193,26 @@ class MaterialExporter:
                         names.append(name)
         return names
 
+    def color_maps(self, indices) -> list:
+        """Colour-attribute names ("" = render-active) the materials ``indices`` read: their
+        graphs' Color Attribute nodes and Geometry-type Attribute nodes (an Attribute may also
+        name a UV map: the mesh's UV maps are exported anyway)."""
+        names = []
+        for i in indices:
+            graph = getattr(self.materials[i], "graph", None)
+            for node in (graph.nodes.values() if graph is not None else ()):
+                if node.type == "ShaderNodeVertexColor":
+                    name = str(node.props.get("layer_name", "") or "")
+                elif node.type == "ShaderNodeAttribute" and node.props.get("attribute_type", "GEOMETRY") == "GEOMETRY":
+                    name = str(node.props.get("attribute_name", "") or "")
+                    if not name:
+                        continue
+                else:
+                    continue
+                if name not in names:
+                    names.append(name)
+        return names
+
     def index_of(self, mat, obj=None, is_instance: bool = False) -> int:
         """Index into ``self.materials`` of a Blender material (None -> the grey default) on the
         evaluated object ``obj`` (None: no baking).

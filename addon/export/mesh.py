@@ -41,11 +41,13 @@ def vertex_positions(me) -> np.ndarray:
     return co.reshape(-1, 3)
 
 
-def mesh_arrays(me, tangent_maps=(), warn=None) -> dict:
+def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
     """Triangulated arrays of a mesh.
 
     tangent_maps : UV map names ("" = the render-active one) whose MikkTSpace tangents the
         mesh's materials read (tangent-space Normal Maps); warn(text) reports what failed.
+    color_maps : colour-attribute names ("" = the render-active one) the materials read
+        (Color Attribute / Attribute nodes).
 
     Returns a dict with
     vertices : (V, 3) float32 object space;
@@ -56,7 +58,9 @@ def mesh_arrays(me, tangent_maps=(), warn=None) -> dict:
         corner order of ``triangles`` (see :func:`uv_arrays`);
     uv_render : the render-active UV map's name, or None without UV maps;
     tangents : {name: (F, 3, 4) float32} per-corner object-space tangent and bitangent sign of
-        each requested UV map that exists (see :func:`tangent_arrays`).
+        each requested UV map that exists (see :func:`tangent_arrays`);
+    color_layers : {name: (F, 3, 4) float32} linear RGBA of each requested colour attribute that
+        exists (see :func:`color_arrays`); color_render: the render-active one's name or None.
     """
     me.calc_loop_triangles()
     tris = me.loop_triangles
@@ -86,9 +90,45 @@ def mesh_arrays(me, tangent_maps=(), warn=None) -> dict:
     names = [uv_render if n == "" else n for n in tangent_maps]
     names = [n for n in dict.fromkeys(names) if n in uv_layers]
     tangents = tangent_arrays(me, loops, names, tri.reshape(F, 3), uv_layers, normals, warn) if names and F else {}
+    color_layers, color_render = color_arrays(me, loops, color_maps) if color_maps else ({}, None)
     return {"vertices": vertex_positions(me), "triangles": tri.reshape(F, 3),
             "slots": slots, "normals": normals, "uv_layers": uv_layers, "uv_render": uv_render,
-            "tangents": tangents}
+            "tangents": tangents, "color_layers": color_layers, "color_render": color_render}
+
+
+def color_arrays(me, loops: np.ndarray, names) -> tuple:
+    """({name: (F, 3, 4) float32}, render-active name or None) of the colour attributes ``names``
+    ("" = the render-active one) at the loop-triangle corners ``loops`` (F * 3,).
+
+    ``color`` is Blender's linear (scene-linear) RGBA for byte and float colours alike; a point
+    domain attribute is read per vertex and taken at each corner's vertex."""
+    attrs = getattr(me, "color_attributes", None)
+    if attrs is None or not len(attrs):
+        return {}, None
+    render = None
+    idx = getattr(attrs, "render_color_index", -1)
+    if 0 <= idx < len(attrs):
+        render = attrs[idx].name
+    out = {}
+    corner_vertex = None
+    for name in dict.fromkeys(render if n == "" else n for n in names):
+        if name is None or name in out:
+            continue
+        a = attrs.get(name)
+        if a is None or a.domain not in ("POINT", "CORNER"):
+            continue
+        buf = np.empty(len(a.data) * 4, dtype=np.float32)
+        a.data.foreach_get("color", buf)
+        buf = buf.reshape(-1, 4)
+        if a.domain == "POINT":
+            if corner_vertex is None:
+                corner_vertex = np.empty(len(me.loops), dtype=np.int32)
+                me.loops.foreach_get("vertex_index", corner_vertex)
+            per_corner = buf[corner_vertex[loops]]
+        else:
+            per_corner = buf[loops]
+        out[name] = np.ascontiguousarray(per_corner.reshape(-1, 3, 4), np.float32)
+    return out, (render if render in out else None)
 
 
 def tangent_arrays(me, loops: np.ndarray, names: list, tri: np.ndarray, uv_layers: dict, normals, warn=None) -> dict:

@@ -16,7 +16,8 @@ NS of its hits.  Scene attributes (A, :func:`stpm_core.shading.scene_attributes`
 mesh_tri0 (M,), uv_off (M, L), corner_uv (N, 3, 2) float32, corner_obj (T, 3, 3) float32 (object
 space, the mesh's first shape), gen_lo, gen_inv (M, 3) (Generated = (p_obj - gen_lo) gen_inv),
 corner_nrm (T, 3, 3) float32 object-space corner normals (flat faces: the face normal), tan_off
-(M, L) and corner_tan (N, 3, 4) float32 per-corner tangents and bitangent signs of UV map l.  Textures (X):
+(M, L) and corner_tan (N, 3, 4) float32 per-corner tangents and bitangent signs of UV map l, col_off
+(M, Lc) and corner_col (N', 3, 4) float32 per-corner RGBA of colour layer c (-1: none).  Textures (X):
 :class:`stpm_core.textures.TexturePack` arrays.
 
 Mix Shader picks one branch per hit with probability Fac, from a hash of (seed, row): the
@@ -75,6 +76,7 @@ _EMISSION = OP["EMISSION"]
 _MIX_SHADER = OP["MIX_SHADER"]
 _TRANSPARENT = OP["TRANSPARENT"]
 _ADD_SHADER = OP["ADD_SHADER"]
+_ATTRIBUTE = OP["ATTRIBUTE"]
 _NORMAL_MAP = OP["NORMAL_MAP"]
 _BUMP = OP["BUMP"]
 _TEX_NOISE = OP["TEX_NOISE"]
@@ -871,7 +873,10 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
     """TEXCOORD, UVMAP, GEOMETRY (at the hit, or displaced for Bump: ``#offset``), NORMAL_MAP,
     BUMP for the batch's hits rows (n,)."""
     P, NG, NS, D, inst, prim, bu, bv, NM = G
-    inst_mesh, mesh_tri0, uv_off, corner_uv, co, gen_lo, gen_inv, cn, tan_off, corner_tan = A
+    inst_mesh, mesh_tri0, uv_off, corner_uv, co, gen_lo, gen_inv, cn, tan_off, corner_tan, col_off, corner_col = A
+    if op == _ATTRIBUTE:
+        _attribute(prog, pc, st, n, rows, G, A)
+        return
     if op == _NORMAL_MAP:
         _normal_map(prog, pc, st, n, rows, G, A)
         return
@@ -951,6 +956,40 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
 
 
 @njit(**JIT)
+def _attribute(prog, pc, st, n, rows, G, A):
+    """ATTRIBUTE: the per-corner RGBA of colour layer ``#layer`` (``shading.scene_attributes``:
+    a colour attribute, or a UV map of that name as (u, v, 0, 1)) interpolated with the hit's
+    barycentrics (displaced for Bump: ``#offset``); Color, Fac = the RGB average, Alpha.  A mesh
+    without that layer reads 0 everywhere (as Cycles reads a missing attribute)."""
+    inst, prim, bu, bv = G[4], G[5], G[6], G[7]
+    inst_mesh, col_off, corner_col = A[0], A[10], A[11]
+    layer, mode = int(prog[pc + 1]), int(prog[pc + 2])
+    cs, fs, als = int(prog[pc + 3]), int(prog[pc + 4]), int(prog[pc + 5])
+    for k in range(n):
+        r = rows[k]
+        mesh = inst_mesh[inst[r]]
+        off = col_off[mesh, layer] if layer < col_off.shape[1] else -1
+        c0 = c1 = c2 = a = 0.0
+        if off >= 0:
+            t = off + prim[r]
+            w1, w2 = bu[r], bv[r]
+            if mode != 0:
+                dbu, dbv, _, _, _, _, _, _ = _displacement(mode, r, G, A)
+                w1, w2 = w1 + dbu, w2 + dbv
+            w0 = 1.0 - w1 - w2
+            c0 = w0 * corner_col[t, 0, 0] + w1 * corner_col[t, 1, 0] + w2 * corner_col[t, 2, 0]
+            c1 = w0 * corner_col[t, 0, 1] + w1 * corner_col[t, 1, 1] + w2 * corner_col[t, 2, 1]
+            c2 = w0 * corner_col[t, 0, 2] + w1 * corner_col[t, 1, 2] + w2 * corner_col[t, 2, 2]
+            a = w0 * corner_col[t, 0, 3] + w1 * corner_col[t, 1, 3] + w2 * corner_col[t, 2, 3]
+        if cs >= 0:
+            _put3(st, k, cs, c0, c1, c2)
+        if fs >= 0:
+            _put1(st, k, fs, (c0 + c1 + c2) * (1.0 / 3.0))
+        if als >= 0:
+            _put1(st, k, als, a)
+
+
+@njit(**JIT)
 def _bump(prog, pc, st, n, rows, G, A):
     """BUMP #invert, strength, distance, hc, hx, hy, *normal, *out (Cycles' ``svm_node_set_bump``):
     with dPx, dPy the world displacements of the height samples hx, hy (``_displacement``) and N
@@ -1005,7 +1044,7 @@ def _normal_map(prog, pc, st, n, rows, G, A):
     facing shading normal Nf: normalize(Nf + (N - Nf) max(s, 0)); zero -> Nf.  Without tangents
     (no such UV map) TANGENT gives Nf."""
     P, NG, NS, D, inst, prim, bu, bv, NM = G
-    inst_mesh, mesh_tri0, uv_off, corner_uv, co, gen_lo, gen_inv, cn, tan_off, corner_tan = A
+    inst_mesh, mesh_tri0, uv_off, corner_uv, co, gen_lo, gen_inv, cn, tan_off, corner_tan, col_off, corner_col = A
     space, layer, cs, ss, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), \
         int(prog[pc + 5])
     for k in range(n):
@@ -1248,7 +1287,8 @@ def run_program(prog, start, st, rows, C, G, A, X, seed):
             _vector_math(prog, pc, st, n)
         elif op >= _INVERT and op <= _COMBINE_COLOR:
             _color_node(op, prog, pc, st, n)
-        elif op == _TEXCOORD or op == _UVMAP or op == _GEOMETRY or op == _NORMAL_MAP or op == _BUMP:
+        elif op == _TEXCOORD or op == _UVMAP or op == _GEOMETRY or op == _NORMAL_MAP or op == _BUMP \
+                or op == _ATTRIBUTE:
             _geometry_node(op, prog, pc, st, n, rows, G, A)
         elif op == _MAPPING:
             _mapping(prog, pc, st, n)

@@ -45,6 +45,7 @@ class Program:
     words: np.ndarray
     unsupported: list = field(default_factory=list)
     uv_layers: list = field(default_factory=list)     # UV map names the program reads ("" = render-active)
+    color_layers: list = field(default_factory=list)  # colour-attribute names it reads ("" = render-active)
     uses_mix: bool = False
     uses_normals: bool = False                         # rewrites the shading normal per hit
     uses_frames: bool = False                          # reads each hit's object-to-world normal matrix
@@ -53,8 +54,9 @@ class Program:
 
 
 class _Compiler:
-    def __init__(self, graph: ShaderGraph, n_textures: int, uv_layers: list):
+    def __init__(self, graph: ShaderGraph, n_textures: int, uv_layers: list, color_layers: list | None = None):
         self.g = graph
+        self.color_layers = color_layers if color_layers is not None else []
         self.n_textures = n_textures
         self.consts: list[float] = []
         self.const_index: dict = {}
@@ -355,6 +357,33 @@ def _geometry(c, name, node):
            outs["Incoming"][0],
            outs["Backfacing"][0])
     return outs
+
+
+def _attribute(c, name, node):
+    """Color Attribute (``layer_name``, "" = the render-active one) and Attribute (Geometry type,
+    ``attribute_name``: a colour attribute or a UV map of the mesh): the per-corner value at the
+    hit (``ATTRIBUTE``).  Object / Instancer / View Layer attributes are named and read 0."""
+    zeros = {"Color": (c.const((0.0, 0.0, 0.0)), VEC), "Vector": (c.const((0.0, 0.0, 0.0)), VEC),
+             "Fac": (c.const((0.0,)), FLT), "Alpha": (c.const((0.0,)), FLT)}
+    if node.type == "ShaderNodeVertexColor":
+        layer = str(node.props.get("layer_name", "") or "")
+    else:
+        typ = str(node.props.get("attribute_type", "GEOMETRY"))
+        layer = str(node.props.get("attribute_name", "") or "")
+        if typ != "GEOMETRY":
+            c.warn(name, node, f"{typ.replace('_', ' ').title()} attributes are not supported; its outputs read 0")
+            return zeros
+        if not layer:
+            c.warn(name, node, "names no attribute; its outputs read 0")
+            return zeros
+    if layer not in c.color_layers:
+        c.color_layers.append(layer)
+    col, fac, alpha = c.alloc(VEC), c.alloc(FLT), c.alloc(FLT)
+    c.emit("ATTRIBUTE", float(c.color_layers.index(layer)), float(c.offset), col, fac, alpha)
+    out = {"Color": (col, VEC), "Fac": (fac, FLT), "Alpha": (alpha, FLT)}
+    if node.type == "ShaderNodeAttribute":
+        out["Vector"] = (col, VEC)
+    return out
 
 
 def _mapping(c, name, node):
@@ -741,6 +770,8 @@ _HANDLERS = {
     "ShaderNodeUVMap": _uvmap,
     "ShaderNodeNewGeometry": _geometry,
     "ShaderNodeMapping": _mapping,
+    "ShaderNodeAttribute": _attribute,
+    "ShaderNodeVertexColor": _attribute,
     "ShaderNodeMath": _math,
     "ShaderNodeVectorMath": _vector_math,
     "ShaderNodeMix": _mix,
@@ -778,15 +809,19 @@ _HANDLERS = {
 SUPPORTED_NODES = tuple(sorted(set(_HANDLERS) | set(SHADERS)))
 
 
-def compile_graph(graph: ShaderGraph, n_textures: int = 0, uv_layers: list | None = None) -> Program:
+def compile_graph(graph: ShaderGraph, n_textures: int = 0, uv_layers: list | None = None,
+                  color_layers: list | None = None) -> Program:
     """Compile ``graph`` (textures referenced by index < n_textures).
 
     uv_layers: the scene-wide list of UV-map names (extended in place with the names this program
     reads; "" = each mesh's render-active map); the program's UVMAP operands index it.
+    color_layers: likewise the colour-attribute names (ATTRIBUTE operands; "" = each mesh's
+    render-active colour attribute).
     """
     layers = uv_layers if uv_layers is not None else []
-    c = _Compiler(graph, n_textures, layers)
+    c = _Compiler(graph, n_textures, layers, color_layers)
     c.shader(graph.surface)         # value nodes go to the value section as they are first read
-    return Program(words=c.finish(), unsupported=c.unsupported, uv_layers=layers, uses_mix=c.uses_mix,
+    return Program(words=c.finish(), unsupported=c.unsupported, uv_layers=layers, color_layers=c.color_layers,
+                   uses_mix=c.uses_mix,
                    uses_normals=c.uses_normals, uses_frames=c.uses_frames, may_emit=c.may_emit,
                    may_pass=c.may_pass)

@@ -74,6 +74,8 @@ LAYOUT = {
     "MIX_SHADER": ("fac", "#jump"),                                  # jump: word index of the second branch
     "TRANSPARENT": ("*color",),                                      # the ray passes, tinted by color
     "ADD_SHADER": ("#jump",),                                        # one branch, each with 1/2, weight 2
+    # a colour attribute (or a UV map read by name: (u, v, 0), alpha 1) per corner; fac = average
+    "ATTRIBUTE": ("#layer", "#offset", "*color", "fac", "alpha"),
 }
 OP = {name: i for i, name in enumerate(LAYOUT)}
 

@@ -61,6 +61,8 @@ SOCKET_TYPES = {
     "ShaderNodeTexCoord": {k: "VECTOR" for k in ("Generated", "Normal", "UV", "Object", "Camera", "Window",
                                                  "Reflection")},
     "ShaderNodeUVMap": {"UV": "VECTOR"},
+    "ShaderNodeAttribute": {"Color": "RGBA", "Vector": "VECTOR", "Fac": "VALUE", "Alpha": "VALUE"},
+    "ShaderNodeVertexColor": {"Color": "RGBA", "Alpha": "VALUE"},
     "ShaderNodeNewGeometry": {"Position": "VECTOR", "Normal": "VECTOR", "Tangent": "VECTOR", "True Normal": "VECTOR",
                               "Incoming": "VECTOR", "Parametric": "VECTOR", "Backfacing": "VALUE",
                               "Pointiness": "VALUE", "Random Per Island": "VALUE"},
@@ -130,9 +132,9 @@ DEFAULTS = {
 
 # Node types whose value the project's interpreter does not evaluate (the consumer reads its default)
 UNSUPPORTED = ("ShaderNodeTexNoise", "ShaderNodeTexVoronoi", "ShaderNodeTexWave", "ShaderNodeTexMagic",
-               "ShaderNodeTexBrick", "ShaderNodeBump", "ShaderNodeNormalMap", "ShaderNodeAttribute",
+               "ShaderNodeTexBrick", "ShaderNodeBump", "ShaderNodeNormalMap",
                "ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeLightPath", "ShaderNodeBlackbody",
-               "ShaderNodeWavelength", "ShaderNodeVertexColor", "ShaderNodeObjectInfo")
+               "ShaderNodeWavelength", "ShaderNodeObjectInfo")
 
 
 # ----------------------------------------------------------------------------
@@ -152,6 +154,7 @@ class Hit:
     uv: dict = field(default_factory=dict)
     p_obj: np.ndarray = field(default_factory=lambda: np.zeros(3))
     generated: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    colors: dict = field(default_factory=dict)     # colour attribute name -> (4,) RGBA ("" = render-active)
 
     @property
     def backfacing(self) -> bool:
@@ -195,7 +198,12 @@ def hit_from_scene(scene, inst: int, prim: int, bu: float, bv: float, P, NG, NS,
     active = mesh.uv_render if mesh.uv_render in layers else next(iter(layers), None)
     if active is not None:
         uv[""] = uv[active]
-    return Hit(P=P, N=NS, Ng=NG, D=D, uv=uv, p_obj=p_obj, generated=generated)
+    colors = {}
+    for name, arr in (getattr(mesh, "color_layers", None) or {}).items():
+        colors[name] = w @ np.asarray(arr, np.float32).reshape(-1, 3, 4)[prim].astype(np.float64)
+    if getattr(mesh, "color_render", None) in colors:
+        colors[""] = colors[mesh.color_render]
+    return Hit(P=P, N=NS, Ng=NG, D=D, uv=uv, p_obj=p_obj, generated=generated, colors=colors)
 
 
 # ----------------------------------------------------------------------------
@@ -869,6 +877,25 @@ def _h_uvmap(e, node):
     return {"UV": _uv3(e.hit, str(node.props.get("uv_map", "") or ""))}
 
 
+def _h_attribute(e, node):
+    """Color Attribute / Attribute (Geometry): svm_node_attr -- a colour attribute, else a UV map of
+    that name as (u, v, 0) with alpha 1, else 0; Fac = average(color)."""
+    h = e.hit
+    if node.type == "ShaderNodeVertexColor":
+        name = str(node.props.get("layer_name", "") or "")
+    else:
+        name = str(node.props.get("attribute_name", "") or "")
+        if node.props.get("attribute_type", "GEOMETRY") != "GEOMETRY" or not name:
+            name = None
+    if name is not None and name in h.colors:
+        c = np.asarray(h.colors[name], np.float64)
+    elif name and name in h.uv:
+        c = np.array([h.uv[name][0], h.uv[name][1], 0.0, 1.0])
+    else:
+        c = np.zeros(4)
+    return {"Color": c[:3].copy(), "Vector": c[:3].copy(), "Fac": float(np.mean(c[:3])), "Alpha": float(c[3])}
+
+
 def _h_geometry(e, node):
     h = e.hit
     return {"Position": h.P.copy(), "Normal": h.N.copy(), "True Normal": h.Ng.copy(), "Incoming": -h.D,
@@ -1096,6 +1123,7 @@ def _h_reroute(e, node):
 _HANDLERS = {
     "ShaderNodeTexCoord": _h_texcoord, "ShaderNodeUVMap": _h_uvmap, "ShaderNodeNewGeometry": _h_geometry,
     "ShaderNodeMapping": _h_mapping, "ShaderNodeMath": _h_math, "ShaderNodeVectorMath": _h_vector_math,
+    "ShaderNodeAttribute": _h_attribute, "ShaderNodeVertexColor": _h_attribute,
     "ShaderNodeMix": _h_mix, "ShaderNodeMixRGB": _h_mix_rgb, "ShaderNodeInvert": _h_invert,
     "ShaderNodeHueSaturation": _h_hsv, "ShaderNodeBrightContrast": _h_bright_contrast,
     "ShaderNodeGamma": _h_gamma, "ShaderNodeSeparateColor": _h_separate_color,
