@@ -92,11 +92,22 @@ def test_tangent_space_follows_the_object(spin):
         np.testing.assert_allclose(normal[..., 0], -math.sin(a), atol=1e-6)
 
 
-def test_strength_blends_toward_the_surface_normal():
+@pytest.mark.parametrize("s", [0.5, 3.0])
+def test_strength_scales_the_tangent_space_normal(s):
+    """Cycles applies a tangent-space map's Strength to the decoded colour c = (sin a, 0, cos a):
+    (s c_x, s c_y, 1 + (c_z - 1) sat(s)), then normalises (no displacement: svm_node_normal_map)."""
     a = 1.0
-    img, _ = _render(_graph(_tilted(a), strength=0.5))
-    # normalize(z + 0.5 (n - z)) with n = (sin a, 0, cos a)
-    m = np.array([0.5 * math.sin(a), 0.0, 1.0 + 0.5 * (math.cos(a) - 1.0)])
+    img, _ = _render(_graph(_tilted(a), strength=s))
+    m = np.array([s * math.sin(a), 0.0, 1.0 + (math.cos(a) - 1.0) * min(s, 1.0)])
+    np.testing.assert_allclose(img, RHO / math.pi * S * m[2] / np.linalg.norm(m), rtol=1e-6)
+
+
+def test_strength_blends_object_space_normals_from_the_surface_normal():
+    a, s = 0.5, 1.5                      # the blended normal stays above the surface
+    n = (math.sin(a), 0.0, math.cos(a))
+    img, _ = _render(_graph(tuple(0.5 * v + 0.5 for v in n), space="WORLD", strength=s))
+    # normalize(z + s (n - z))
+    m = np.array([s * math.sin(a), 0.0, 1.0 + s * (math.cos(a) - 1.0)])
     np.testing.assert_allclose(img, RHO / math.pi * S * m[2] / np.linalg.norm(m), rtol=1e-6)
 
 

@@ -1040,9 +1040,10 @@ def _normal_map(prog, pc, st, n, rows, G, A):
     and the object-space normal N0 (interpolated corner normals; flat faces: the face normal),
     N = normalize(c_x T + c_y sign (N0 x T) + c_z N0), then to world space by the hit's normal
     matrix (NM, (m, 3, 3)).  OBJECT: N = NM c (BLENDER_OBJECT negates c_y, c_z first); WORLD:
-    N = c.  Then normalised, negated on back faces, and with strength s != 1 blended from the
-    facing shading normal Nf: normalize(Nf + (N - Nf) max(s, 0)); zero -> Nf.  Without tangents
-    (no such UV map) TANGENT gives Nf."""
+    N = c.  Strength s: TANGENT scales c in tangent space first, c_x s, c_y s, 1 + (c_z - 1)
+    sat(s) (Cycles, for meshes without displacement); the other spaces blend the result from the
+    facing shading normal Nf: normalize(Nf + (N - Nf) max(s, 0)).  Then normalised, negated on
+    back faces; zero -> Nf.  Without tangents (no such UV map) TANGENT gives Nf."""
     P, NG, NS, D, inst, prim, bu, bv, NM = G
     inst_mesh, mesh_tri0, uv_off, corner_uv, co, gen_lo, gen_inv, cn, tan_off, corner_tan, col_off, corner_col = A
     space, layer, cs, ss, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), \
@@ -1075,6 +1076,10 @@ def _normal_map(prog, pc, st, n, rows, G, A):
                 a1 = w0 * cn[q, 0, 1] + w1 * cn[q, 1, 1] + w2 * cn[q, 2, 1]
                 a2 = w0 * cn[q, 0, 2] + w1 * cn[q, 1, 2] + w2 * cn[q, 2, 2]
                 b0, b1, b2 = sg * (a1 * tz - a2 * ty), sg * (a2 * tx - a0 * tz), sg * (a0 * ty - a1 * tx)
+                # strength in tangent space, as Cycles (meshes without displacement)
+                sv = st[ss, k]
+                c0, c1 = c0 * sv, c1 * sv
+                c2 = 1.0 + (c2 - 1.0) * _clamp01(sv)
                 x0, y0, z0 = _unit(c0 * tx + c1 * b0 + c2 * a0, c0 * ty + c1 * b1 + c2 * a1, c0 * tz + c1 * b2 + c2 * a2)
                 x = NM[j, 0, 0] * x0 + NM[j, 0, 1] * y0 + NM[j, 0, 2] * z0
                 y = NM[j, 1, 0] * x0 + NM[j, 1, 1] * y0 + NM[j, 1, 2] * z0
@@ -1095,7 +1100,7 @@ def _normal_map(prog, pc, st, n, rows, G, A):
         if back:
             x, y, z = -x, -y, -z
         sv = st[ss, k]
-        if sv != 1.0:
+        if sv != 1.0 and space != 0:
             sv = max(sv, 0.0)
             x, y, z = _unit(nf0 + (x - nf0) * sv, nf1 + (y - nf1) * sv, nf2 + (z - nf2) * sv)
         if x == 0.0 and y == 0.0 and z == 0.0:
