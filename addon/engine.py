@@ -179,6 +179,7 @@ class STPMRenderEngine(bpy.types.RenderEngine):
                 depsgraph, lambda f, sub: self.frame_set(f, subframe=sub),
                 motion_steps=scene.stpm.motion_steps)
             export_s = time.perf_counter() - t0
+            stpm_scene.metadata["warnings"] = list(warnings)     # the core does not repeat these
             missing = unsupported_passes(depsgraph.view_layer)
             if missing:
                 warnings.append(f"view layer {depsgraph.view_layer.name!r}: passes STPM does not produce stay empty: "

@@ -160,7 +160,8 @@ def bsdf_sample(table: MaterialTable, mat, wo, ns, ng, u):
 
 
 def diffuse_albedo(table: MaterialTable, mat, wo, ns) -> np.ndarray:
-    """Diffuse reflectance (n, 3) after the coat: w_base * (1 - specular F(wo)) * base_color.
+    """Diffuse reflectance (n, 3) after the coat: w_base * (1 - F_coat(wo)) * base_color, F_coat the
+    coat's albedo at wo (smooth: specular F_diel; rough: the tabulated rough-coat albedo).
 
     Photon-map radiance = diffuse_albedo / pi * irradiance.  ``ns`` may face
     either way (the cosine is taken as |wo . ns|).
@@ -168,7 +169,8 @@ def diffuse_albedo(table: MaterialTable, mat, wo, ns) -> np.ndarray:
     mat = _ids(mat)
     n = mat.shape[0]
     out = np.empty((n, 3))
-    _k.albedo_batch(table.closures, mat, _vec(wo, n), _vec(ns, n), out)
+    E, _ = _k.ggx_albedo_tables()
+    _k.albedo_batch(table.closures, E, mat, _vec(wo, n), _vec(ns, n), out)
     return out
 
 

@@ -245,7 +245,7 @@ def _photon_terms(ctx, sh, hits, d, C, t_s, stats: TraceStats, dsts, idx_k, use_
     rho = _scratch("rho", (k, 3))
     p_q, n_q, t_q = _scratch("p_q", (k, 3)), _scratch("n_q", (k, 3)), _scratch("t_q", (k,))
     live = _scratch("live_q", (k,), np.int64)
-    n_q_rows = _K.photon_albedo(sh, hits.position, hits.ns, d, C, t_s, rho, p_q, n_q, t_q, live)
+    n_q_rows = _K.photon_albedo(sh, hits.position, hits.ns, d, C, ctx.ggx[0], t_s, rho, p_q, n_q, t_q, live)
     if n_q_rows == 0:
         return
     for kind, name in (("caustic", "Caustic"), ("global", "Indirect")):

@@ -142,7 +142,9 @@ def _render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     lights = LightSet(scene)
     table = MaterialTable(scene.materials)
     shading = shading_data(scene, table.closures)      # node programs compiled, textures packed
-    warnings.extend(shading.unsupported)               # node inputs the interpreter could not evaluate
+    # node inputs the interpreter could not evaluate (once: the exporter may have said so already)
+    said = set(scene.metadata.get("warnings", []) if isinstance(getattr(scene, "metadata", None), dict) else [])
+    warnings.extend(w for w in shading.unsupported if w not in said)
     t_plan = _time.perf_counter()
     plan = make_plan(scene, settings, caster=caster, lights=lights)
     psettings = apply_plan(settings, plan)      # what the plan rules out gets no photons; STANDARD when static

@@ -101,3 +101,35 @@ def block_ztest(a: np.ndarray, b: np.ndarray, block: int = 8, floor: float = 0.0
     va, vb = A.var(axis=0, ddof=1), B.var(axis=0, ddof=1)
     se = np.sqrt(va / A.shape[0] + vb / B.shape[0] + (floor * 0.5 * (ma + mb)) ** 2 + 1e-12)
     return ZResult(z=(ma - mb) / se, stpm=ma, cycles=mb, mean_ratio=float(a.mean() / max(b.mean(), 1e-300)))
+
+
+def render_cycles_paths(scene, tmp_path, samples: int = 64, seeds=(0, 1, 2, 3), *, diffuse_bounces: int = 1,
+                        glossy_bounces: int = 8, transmission_bounces: int = 8, caustics: bool = True,
+                        blur_glossy: float = 0.0) -> np.ndarray:
+    """(K, H, W, 3) linear RGB of Cycles with a bounce limit per kind (``render_cycles`` gives every kind
+    the same count): e.g. one diffuse bounce with long glass chains for caustics.  ``max_bounces`` is
+    the sum of the three, so only the per-kind limits bind.  ``blur_glossy`` is Cycles' Filter Glossy
+    (default 1.0 there, which blurs caustics: 0 here).  CPU, no denoising, no adaptive sampling, no
+    clamping, as ``render_cycles``."""
+    import bpy
+    scene.render.engine = "CYCLES"
+    cy = scene.cycles
+    cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", samples, False, False
+    cy.diffuse_bounces, cy.glossy_bounces = diffuse_bounces, glossy_bounces
+    cy.transmission_bounces = transmission_bounces
+    cy.max_bounces = diffuse_bounces + glossy_bounces + transmission_bounces
+    cy.caustics_reflective = cy.caustics_refractive = bool(caustics)
+    cy.blur_glossy = float(blur_glossy)
+    cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0
+    if hasattr(scene.render.image_settings, "media_type"):
+        scene.render.image_settings.media_type = "IMAGE"
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.image_settings.color_depth = "32"
+    out = []
+    for s in seeds:
+        cy.seed = int(s)
+        path = tmp_path / f"cycles_paths_{s}.exr"
+        scene.render.filepath = str(path)
+        bpy.ops.render.render(write_still=True)
+        out.append(_read_exr_rgb(path))
+    return np.stack(out)

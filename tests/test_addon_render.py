@@ -143,6 +143,31 @@ def test_unsupported_node_warns_and_still_renders(tmp_path):
     assert p["Combined"][..., :3].max() > 0  # the grey fallback is lit
 
 
+def test_node_graph_messages_are_reported_once(tmp_path):
+    """A graph with an unsupported shader: the exporter's compile message and the core's (the same
+    text from shading_data) reach the render report once, not twice."""
+    scene = fresh()
+    scene.render.engine = "STPM"
+    _tiny(scene, photons=0)
+    add_camera(location=(0, -4, 1), rotation=(math.radians(80), 0, 0))
+    mat = bpy.data.materials.new("ToonChecker")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    t = mat.node_tree
+    out = next(n for n in t.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    toon, mix = t.nodes.new("ShaderNodeBsdfToon"), t.nodes.new("ShaderNodeMixShader")
+    chk = t.nodes.new("ShaderNodeTexChecker")
+    t.links.new(chk.outputs["Fac"], mix.inputs["Fac"])
+    t.links.new(toon.outputs[0], mix.inputs[1])
+    t.links.new(t.nodes["Principled BSDF"].outputs[0], mix.inputs[2])
+    t.links.new(mix.outputs[0], out.inputs["Surface"])
+    add_mesh("cube", "Odd", material=mat)
+    add_light("POINT", energy=200.0, location=(0, -2, 3))
+    _render_to_exr(scene, tmp_path / "toon.exr")
+    hits = [w for w in LAST_RENDER["warnings"] if "ShaderNodeBsdfToon" in w]
+    assert len(hits) == 1, LAST_RENDER["warnings"]
+
+
 def test_bad_setting_is_reported_not_raised_from_the_engine():
     scene = fresh()
     scene.render.engine = "STPM"

@@ -449,3 +449,22 @@ def test_color_attribute_matches_cycles(tmp_path, domain, dtype):
     r, stpm, cyc = _compare(tmp_path, f"colour attribute {domain} {dtype}")
     _assert_matches(r, "colour attribute")
     assert np.std(r.stpm) > 0.5 * np.std(r.cycles) > 0.0
+
+
+# ----------------------------------------------------------------------------
+# The Principled BSDF's rough dielectric layer (kernels/bsdf.py: COAT energy and layering)
+# ----------------------------------------------------------------------------
+@pytest.mark.parametrize("roughness, base", [(1.0, 0.8), (0.5, 0.8), (1.0, 0.0)])
+def test_rough_principled_matches_cycles(tmp_path, roughness, base):
+    """A uniform Principled plane under the slanted sun: Cycles' energy-preserving dielectric layer
+    and its layering weight 1 - albedo (before: 2.8 % dark at roughness 1, 8 % on the specular
+    alone)."""
+    _slanted_sun_scene()
+    mat, t, out = _empty_material("Rough")
+    p = t.nodes.new("ShaderNodeBsdfPrincipled")
+    p.inputs["Roughness"].default_value = roughness
+    p.inputs["Base Color"].default_value = (base, base, base, 1.0)
+    t.links.new(p.outputs[0], out.inputs["Surface"])
+    add_mesh("plane", "Floor", material=mat, size=2.0)
+    r, *_ = _compare(tmp_path, f"principled roughness {roughness} base {base}")
+    _assert_matches(r, "principled")

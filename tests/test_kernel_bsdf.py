@@ -171,11 +171,44 @@ def test_scalar_fresnel_and_albedo_lookups_match_the_oracle():
 
 def test_ggx_albedo_tables_are_the_numpy_construction():
     E, E_avg = kb.ggx_albedo_tables()
-    assert E.shape == (32, 32) and E_avg.shape == (32,)
+    assert E.shape == (33, 32, 32) and E_avg.shape == (32,)
     assert E.dtype == E_avg.dtype == np.float64 and E.flags.c_contiguous and E_avg.flags.c_contiguous
     E_o, E_avg_o = oracle._ggx_albedo_table_numpy()
-    assert np.array_equal(E, E_o) and np.array_equal(E_avg, E_avg_o)
+    assert np.array_equal(E[0], E_o) and np.array_equal(E_avg, E_avg_o)
     assert kb.ggx_albedo_tables()[0] is E                                           # built once
+
+
+def test_shipped_coat_table_is_its_construction():
+    """kernels/coat_albedo.npy (loaded by ggx_albedo_tables) = build_coat_table, on three slices."""
+    E, E_avg = kb.ggx_albedo_tables()
+    ks = [0, 7, 31]
+    np.testing.assert_allclose(E[1 + np.array(ks)], kb.build_coat_table(E[0], E_avg, ks), rtol=0, atol=1e-12)
+    assert np.all(E[1] < 1e-20)                                  # ior 1: no reflection at all
+
+
+@pytest.mark.parametrize("mu, roughness, ior", [(0.95, 1.0, 1.5), (0.5, 0.7, 1.45), (0.2, 0.5, 2.0),
+                                                (0.8, 0.3, 1.33), (0.6, 0.02, 1.5)])
+def test_coat_albedo_table_is_the_integral_of_the_coat(mu, roughness, ior):
+    """The rough-coat albedo slices E[1:] = the integral of the (energy-compensated) coat lobe's
+    f cos over the hemisphere, by quadrature of the numpy oracle's eval (black base, specular 1);
+    roughness -> 0: the smooth Fresnel F_diel(mu)."""
+    E, _ = kb.ggx_albedo_tables()
+    table = MaterialTable([Material(base_color=np.zeros(3), specular=1.0, roughness=roughness, ior=ior)])
+    nt, nph = 400, 400
+    th = (np.arange(nt) + 0.5) / nt * (np.pi / 2)
+    ph = (np.arange(nph) + 0.5) / nph * (2 * np.pi)
+    T, Pp = np.meshgrid(th, ph, indexing="ij")
+    wi = np.stack([np.sin(T) * np.cos(Pp), np.sin(T) * np.sin(Pp), np.cos(T)], -1).reshape(-1, 3)
+    dw = (np.pi / 2 / nt) * (2 * np.pi / nph) * np.sin(T).ravel()
+    wo = np.tile([np.sqrt(1 - mu * mu), 0.0, mu], (wi.shape[0], 1))
+    N = np.tile([0.0, 0.0, 1.0], (wi.shape[0], 1))
+    f = oracle.bsdf_eval(table, np.zeros(wi.shape[0], np.int64), wo, wi, N, N)[:, 0]
+    integral = float(np.sum(f * wi[:, 2] * dw))
+    got = kb.coat_albedo(E, mu, max(roughness * roughness, 1e-4), ior)
+    if roughness < 0.05:        # a near-delta lobe: the quadrature cannot resolve it; the smooth limit
+        assert abs(got - kb.fresnel_dielectric(mu, ior)) < 0.02 * got
+    else:
+        assert abs(got - integral) < 0.03 * integral + 2e-4, (got, integral)   # table interpolation
 
 
 # ----------------------------------------------------------------------------

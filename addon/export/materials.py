@@ -537,6 +537,8 @@ class MaterialExporter:
                              else _params(base_color=np.zeros(3)))
             return {k: (1 - fac) * np.asarray(sides[0][k], float) + fac * np.asarray(sides[1][k], float)
                     for k in FIELDS}
+        # with a graph, the node compiler names the shader (the graph renders the same grey; a
+        # group's shaders it inlines)
         self._warn(f"shader node {node.bl_idname} ({node.name!r}) is not supported, using grey diffuse",
-                   graph_carries=kind == "ShaderNodeGroup")  # a group's shaders: the graph inlines them
+                   graph_carries=True)
         return _params()

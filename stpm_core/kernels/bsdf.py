@@ -12,7 +12,8 @@ w_metal = metallic, w_glass = (1 - metallic) transmission:
 
 =========  =======================================================================
 DIFFUSE    w_base (1 - F_coat(wo)) base_color / pi, F_coat = specular F_diel(cos_o, ior)
-COAT       w_base specular F_diel(ior): delta mirror (roughness 0) or GGX
+COAT       w_base specular F_diel(ior): delta mirror (roughness 0) or GGX with Cycles' energy
+           compensation (1 + F_ms (1 - E(mu_o)) / E(mu_o))
 METAL      w_metal Schlick(base_color): delta mirror or GGX
 GLASS_R    w_glass F_diel(eta): delta mirror or GGX
 GLASS_T    w_glass (1 - F_diel(cos_o, eta)) base_color: always a delta refraction
@@ -57,6 +58,7 @@ from __future__ import annotations
 
 import math
 import threading
+from pathlib import Path
 
 import numpy as np
 
@@ -67,6 +69,7 @@ from .closure import (C_ALPHA, C_BASE, C_BUMPED, C_COAT, C_IOR, C_NS, C_ROUGH_LO
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS",
            "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_sample", "diffuse_albedo", "fresnel_dielectric",
+           "fresnel_dielectric_fss", "coat_albedo",
            "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch"]
 
 DIFFUSE, COAT, METAL, GLASS_R, GLASS_T, METAL_MS = range(6)
@@ -129,6 +132,15 @@ def fresnel_dielectric(cos_i, eta):
     r_s = (cos_i - eta * cos_t) / max(cos_i + eta * cos_t, 1e-300)
     r_p = (eta * cos_i - cos_t) / max(eta * cos_i + cos_t, 1e-300)
     return 0.5 * (r_s * r_s + r_p * r_p)
+
+
+@njit(**_JIT)
+def fresnel_dielectric_fss(eta):
+    """Hemispherical average of the dielectric Fresnel reflectance, Cycles' polynomial fit
+    (``fresnel_dielectric_Fss``)."""
+    if eta < 1.0:
+        return 0.997118 + eta * (0.1014 - eta * (0.965241 + eta * 0.130607))
+    return (eta - 1.0) / (4.08567 + 1.00071 * eta)
 
 
 @njit(**_JIT)
@@ -216,40 +228,137 @@ def _albedo_table_weights(mu, al, g, w):
                     w[a, b, i * K + j] = (1.0 + lam_o) / (1.0 + lam_o + lam_i) if wi_z > 0 else 0.0
 
 
-def ggx_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
-    """(E (32, 32), E_avg (32,)) float64 C-contiguous, built on first use and cached.
+_N_Z = 32                       # coat-albedo slices: r = (ior - 1) / (ior + 1) = k / 31 * R_MAX
+_R_MAX = 9.0 / 11.0             # ior 10, the closure's largest
 
-    E[i, j] = single-scattering GGX albedo (F = 1) at mu = (i + 0.5) / 32 and
+
+@njit(**_JIT)
+def _coat_table_weights(mu, al, g, zs, w):
+    """w (n_z, n_mu, n_alpha): the mean over the stratified visible-normal samples (g[i], g[j]) of
+    G2 / G1(wo) F_diel(wo . h, ior) for wo = (sqrt(1 - mu^2), 0, mu), ior = (1 + r) / (1 - r) for the
+    slices' r values zs."""
+    K = g.shape[0]
+    for c in range(zs.shape[0]):
+        ior = (1.0 + zs[c]) / (1.0 - zs[c])
+        for a in range(mu.shape[0]):
+            m = mu[a]
+            wx = math.sqrt(1.0 - m * m)
+            for b in range(al.shape[0]):
+                alpha = al[b]
+                lam_o = _ggx_lambda(m, alpha)
+                acc = 0.0
+                for i in range(K):
+                    for j in range(K):
+                        h = _ggx_sample_vndf(wx, 0.0, m, alpha, g[i], g[j])
+                        wo_h = wx * h[0] + m * h[2]
+                        wi_z = 2.0 * wo_h * h[2] - m
+                        if wi_z > 0:
+                            lam_i = _ggx_lambda(wi_z, alpha)
+                            acc += (1.0 + lam_o) / (1.0 + lam_o + lam_i) * fresnel_dielectric(
+                                min(max(wo_h, 0.0), 1.0), ior)
+                w[c, a, b] = acc / (K * K)
+
+
+def ggx_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
+    """(E (33, 32, 32), E_avg (32,)) float64 C-contiguous, built on first use and cached.
+
+    E[0, i, j] = single-scattering GGX albedo (F = 1) at mu = (i + 0.5) / 32 and
     alpha = j / 31 (at least 1e-4): the mean of the visible-normal sample weight
     G2 / G1(wo) over a 24 x 24 stratified grid, samples leaving the hemisphere
     counting 0; E_avg[j] = 2 int E(mu) mu dmu (midpoint rule).
+    E[1 + k, i, j] = the albedo of a rough dielectric coat (specular 1) of ior (1 + r_k) / (1 - r_k),
+    r_k = k / 31 * 9 / 11 (ior 1 .. 10; F0 = r^2): the same samples weighted by
+    F_diel(wo . h, ior), times the coat's
+    energy compensation ``_coat_compensation`` -- what the diffuse base under it loses
+    (:func:`coat_albedo`).
     """
     global _TABLES
     with _TABLES_LOCK:
         if _TABLES is None:
             K = 24
             g = (np.arange(K) + 0.5) / K
+            al = np.maximum(_ALPHA, 1e-4)
             w = np.empty((_MU.size, _ALPHA.size, K * K))
-            _albedo_table_weights(_MU, np.maximum(_ALPHA, 1e-4), g, w)
-            E = np.ascontiguousarray(np.clip(w.mean(-1), 0.0, 1.0))
-            E_avg = np.ascontiguousarray(2.0 * np.mean(E * _MU[:, None], axis=0))
+            _albedo_table_weights(_MU, al, g, w)
+            E0 = np.clip(w.mean(-1), 0.0, 1.0)
+            E_avg = np.ascontiguousarray(2.0 * np.mean(E0 * _MU[:, None], axis=0))
+            EF = _load_coat_table()
+            if EF is None:                      # (no shipped table: build it, about 5 s)
+                EF = build_coat_table(E0, E_avg)
+            E = np.ascontiguousarray(np.concatenate([E0[None], EF]))
             E.flags.writeable = False
             E_avg.flags.writeable = False
             _TABLES = (E, E_avg)
         return _TABLES
 
 
+COAT_TABLE_FILE = Path(__file__).with_name("coat_albedo.npy")
+
+
+def build_coat_table(E0: np.ndarray, E_avg: np.ndarray, slices=None) -> np.ndarray:
+    """The rough-coat albedo slices (n_z, 32, 32) of :func:`ggx_albedo_tables` from E0 = E[0] and
+    E_avg (slices: the k to build, default all 32; ~0.15 s each).  Written to COAT_TABLE_FILE by
+    ``python -m stpm_core.kernels.bsdf``; tests check the file against this construction."""
+    K = 24
+    g = (np.arange(K) + 0.5) / K
+    al = np.maximum(_ALPHA, 1e-4)
+    ks = np.arange(_N_Z) if slices is None else np.asarray(slices, np.int64)
+    zs = ks / (_N_Z - 1) * _R_MAX
+    EF = np.empty((zs.size, _MU.size, _ALPHA.size))
+    _coat_table_weights(_MU, al, g, zs, EF)
+    for c, r in enumerate(zs):
+        ior = (1.0 + r) / (1.0 - r)
+        for b in range(_ALPHA.size):
+            for a in range(_MU.size):
+                EF[c, a, b] *= _coat_compensation(E0[a, b], E_avg[b], fresnel_dielectric_fss(ior))
+    return np.clip(EF, 0.0, 1.0)
+
+
+def _load_coat_table():
+    try:
+        EF = np.load(COAT_TABLE_FILE)
+    except (OSError, ValueError):
+        return None
+    return EF if EF.shape == (_N_Z, _N_MU, _N_ALPHA) and EF.dtype == np.float64 else None
+
+
 @njit(**_JIT)
-def ggx_albedo(E, mu, alpha):
-    """E(mu, alpha): bilinear look-up in the table E (32, 32), clamped at the edges."""
+def _coat_compensation(e_o, e_avg, f_ss):
+    """Cycles' energy compensation of a rough dielectric layer (microfacet_ggx_preserve_energy):
+    1 + F_ms (1 - E(mu_o)) / E(mu_o), F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg))."""
+    e_o = max(e_o, 1e-3)
+    f_ms = f_ss * e_avg / (1.0 - f_ss * (1.0 - e_avg))
+    return 1.0 + f_ms * (1.0 - e_o) / e_o
+
+
+@njit(**JIT_INLINE)                  # called with a literal slice: one copy per caller, not per literal
+def _bilinear(E, s, mu, alpha):
+    """Slice s of E (n, 32, 32) at (mu, alpha): bilinear, clamped at the edges."""
     x = min(max(mu * 32 - 0.5, 0.0), 31 - 1e-9)
     y = min(max(alpha * 31, 0.0), 31 - 1e-9)
     i = min(int(x), 30)
     j = min(int(y), 30)
     fx = x - i
     fy = y - j
-    return ((1 - fx) * (1 - fy) * E[i, j] + fx * (1 - fy) * E[i + 1, j]
-            + (1 - fx) * fy * E[i, j + 1] + fx * fy * E[i + 1, j + 1])
+    return ((1 - fx) * (1 - fy) * E[s, i, j] + fx * (1 - fy) * E[s, i + 1, j]
+            + (1 - fx) * fy * E[s, i, j + 1] + fx * fy * E[s, i + 1, j + 1])
+
+
+@njit(**_JIT)
+def ggx_albedo(E, mu, alpha):
+    """E(mu, alpha): bilinear look-up in the table E[0] (32, 32), clamped at the edges."""
+    return _bilinear(E, 0, mu, alpha)
+
+
+@njit(**_JIT)
+def coat_albedo(E, mu, alpha, ior):
+    """Albedo at mu of a rough dielectric coat (specular 1, energy-compensated) of this ior: the
+    slices E[1:] (:func:`ggx_albedo_tables`), bilinear in (mu, alpha), linear in r = (ior - 1) / (ior + 1)."""
+    z = max(ior - 1.0, 0.0) / (ior + 1.0) / _R_MAX * (_N_Z - 1)
+    z = min(max(z, 0.0), _N_Z - 1 - 1e-9)
+    k = min(int(z), _N_Z - 2)
+    fz = z - k
+    return (1.0 - fz) * _bilinear(E, 1 + k, mu, alpha) + fz * _bilinear(E, 2 + k, mu, alpha)
 
 
 @njit(**_JIT)
@@ -285,7 +394,8 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
     """Everything about closure row C[cr] at wo that does not depend on wi.
 
     Returns (ns', ng', cos_o = wo . ns' (not clamped), eta_glass, alpha, F_coat, F_glass,
-    F_metal (RGB), ms_scale (RGB) = F_ms / (pi (1 - E_avg)), ms_Eo = E(mu_o), p_lobe (6 lobes)).
+    F_metal (RGB), ms_scale (RGB) = F_ms / (pi (1 - E_avg)), ms_Eo = E(mu_o), k_coat (the rough
+    coat's energy compensation, 1 otherwise), p_lobe (6 lobes)).
     """
     nsf, ngf, entering = _oriented(wo, ns, ng)
     alpha = max(C[cr, C_ALPHA], 1e-4)
@@ -297,7 +407,11 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
     cos_o = dot(wo, nsf)
     cos_oc = min(max(cos_o, 0.0), 1.0)
     # Fresnel at wo for each lobe the closure has
-    F_coat = spec * fresnel_dielectric(cos_oc, ior) if (w_base > 0 and spec > 0) else 0.0
+    # the coat's albedo at wo: what the diffuse base under it loses (smooth: the Fresnel at wo;
+    # rough: the tabulated rough-coat albedo, as Cycles' layering weight 1 - albedo)
+    F_coat = 0.0
+    if w_base > 0 and spec > 0:
+        F_coat = spec * (coat_albedo(E, cos_oc, alpha, ior) if rough else fresnel_dielectric(cos_oc, ior))
     F_glass = fresnel_dielectric(cos_oc, eta_glass) if w_glass > 0 else 0.0
     F_metal = _fresnel_schlick(C, cr, cos_oc) if w_metal > 0 else (0.0, 0.0, 0.0)
     # METAL_MS (rough metal): f_ms = ms_scale (1 - E(mu_o)) (1 - E(mu_i))
@@ -318,10 +432,17 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
             k = _PI * max(1.0 - e_avg, 1e-4)
             ms_scale = (F_ms0 / k, F_ms1 / k, F_ms2 / k)
             ms_albedo = (1.0 - ms_Eo) * ((F_ms0 + F_ms1 + F_ms2) / 3.0)
+    # Rough COAT: the energy single scattering loses, returned as Cycles does for its dielectric
+    # layer (microfacet_ggx_preserve_energy): f_ss (1 + F_ms (1 - E(mu_o)) / E(mu_o)),
+    # F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg)), F_ss = specular Fss_diel(ior)
+    k_coat = 1.0
+    if F_coat > 0 and rough:
+        k_coat = _coat_compensation(ggx_albedo(E, cos_oc, alpha), ggx_albedo_avg(E_avg, alpha),
+                                    spec * fresnel_dielectric_fss(ior))
     # Lobe selection probabilities proportional to an albedo estimate
     mean_base = (C[cr, C_BASE] + C[cr, C_BASE + 1] + C[cr, C_BASE + 2]) / 3.0
     e0 = w_base * (1.0 - F_coat) * mean_base                          # DIFFUSE
-    e1 = w_base * F_coat                                              # COAT
+    e1 = w_base * F_coat                                              # COAT (F_coat: its albedo)
     e2 = w_metal * ((F_metal[0] + F_metal[1] + F_metal[2]) / 3.0)     # METAL
     e3 = w_glass * F_glass                                            # GLASS_R
     e4 = w_glass * (1.0 - F_glass) * mean_base                        # GLASS_T
@@ -332,7 +453,7 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
         p_lobe = (e0 / t, e1 / t, e2 / t, e3 / t, e4 / t, e5 / t)
     else:
         p_lobe = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    return nsf, ngf, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, p_lobe
+    return nsf, ngf, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe
 
 
 # ----------------------------------------------------------------------------
@@ -367,7 +488,7 @@ def bump_shadowing(C, cr, wi, nsf, ngf):
 @njit(**_JIT)
 def _eval_pdf_hit(C, cr, E, hit, wo, wi):
     """(f0, f1, f2, pdf) of the non-delta lobes at wi for the hit of :func:`_hit`."""
-    ns, ng, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, p_lobe = hit
+    ns, ng, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
     w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
     b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
     cos_i = dot(wi, ns)
@@ -400,7 +521,7 @@ def _eval_pdf_hit(C, cr, E, hit, wo, wi):
     F_c = C[cr, C_SPECULAR] * fresnel_dielectric(wo_h, C[cr, C_IOR])
     F_m = _fresnel_schlick(C, cr, wo_h)
     F_g = fresnel_dielectric(wo_h, eta_glass)
-    s = (w_base * F_c + w_glass * F_g) * spec
+    s = (w_base * F_c * k_coat + w_glass * F_g) * spec
     sm = w_metal * spec
     f0 = f0 + (s + sm * F_m[0])
     f1 = f1 + (s + sm * F_m[1])
@@ -463,7 +584,7 @@ def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
     chosen lobe has probability 0.
     """
     hit = _hit(C, cr, E, E_avg, wo, ns, ng)
-    nsf, ngf, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, p_lobe = hit
+    nsf, ngf, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
     rough = C[cr, C_ROUGHNESS] > 0.0
     # -- Choose a lobe by the CDF of p_lobe
     lobe = 0                                            # number of CDF entries <= u0
@@ -531,10 +652,16 @@ def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
 # Other queries
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def diffuse_albedo(C, cr, wo, ns):
-    """(r, g, b) = w_base (1 - specular F_diel(|wo . ns|, ior)) base_color: the diffuse reflectance
-    after the coat (photon radiance = diffuse_albedo / pi * irradiance); ns may face either way."""
-    F = C[cr, C_SPECULAR] * fresnel_dielectric(abs(dot(wo, ns)), C[cr, C_IOR])
+def diffuse_albedo(C, cr, E, wo, ns):
+    """(r, g, b) = w_base (1 - F_coat(|wo . ns|)) base_color: the diffuse reflectance after the coat
+    (photon radiance = diffuse_albedo / pi * irradiance), F_coat = specular F_diel(mu, ior) for a
+    smooth coat, specular ``coat_albedo``(E, mu, alpha, ior) for a rough one; ns may face either way."""
+    mu = min(abs(dot(wo, ns)), 1.0)
+    spec = C[cr, C_SPECULAR]
+    if C[cr, C_ROUGHNESS] > 0.0:
+        F = spec * coat_albedo(E, mu, max(C[cr, C_ALPHA], 1e-4), C[cr, C_IOR]) if spec > 0 else 0.0
+    else:
+        F = spec * fresnel_dielectric(mu, C[cr, C_IOR])
     k = C[cr, C_W_BASE] * (1.0 - F)
     return k * C[cr, C_BASE], k * C[cr, C_BASE + 1], k * C[cr, C_BASE + 2]
 
@@ -577,9 +704,15 @@ def sample_batch(closures, E, E_avg, mat, wo, ns, ng, u, wi_out, weight_out, del
 
 
 @njit(**_JIT)
-def albedo_batch(closures, mat, wo, ns, out):
+def albedo_batch(closures, E, mat, wo, ns, out):
     """:func:`diffuse_albedo` per row into out (n, 3)."""
     for i in range(mat.shape[0]):
         cr = closure_row(closures, mat[i])
-        r, g, b = diffuse_albedo(closures, cr, (wo[i, 0], wo[i, 1], wo[i, 2]), (ns[i, 0], ns[i, 1], ns[i, 2]))
+        r, g, b = diffuse_albedo(closures, cr, E, (wo[i, 0], wo[i, 1], wo[i, 2]), (ns[i, 0], ns[i, 1], ns[i, 2]))
         out[i, 0], out[i, 1], out[i, 2] = r, g, b
+
+
+if __name__ == "__main__":            # python -m stpm_core.kernels.bsdf: (re)write the coat table
+    _E0 = ggx_albedo_tables()[0][0]
+    np.save(COAT_TABLE_FILE, build_coat_table(_E0, ggx_albedo_tables()[1]))
+    print(f"wrote {COAT_TABLE_FILE}")

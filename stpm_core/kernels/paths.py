@@ -340,10 +340,10 @@ def seen_lights_add(prm, poses, O, D, t_scene, camera_ray, L):
 # Photon-map look-ups at shaded vertices
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def photon_albedo(rows, P, NS, D, C, T, rho, p_q, n_q, t_q, live):
+def photon_albedo(rows, P, NS, D, C, E, T, rho, p_q, n_q, t_q, live):
     """Diffuse albedo rho (n, 3) of the shaded rows ``rows`` (n,) and the query rows of a look-up.
 
-    rho[k] = ``diffuse_albedo``(C[r], wo, ns_f) with ns_f the shading normal
+    rho[k] = ``diffuse_albedo``(C[r], E, wo, ns_f) (E: the GGX tables) with ns_f the shading normal
     turned toward wo = -D[r].  Rows with some rho > 0 are queried: their
     point, ns_f and time go to p_q, n_q (n, 3) and t_q (n,), their k to live;
     returns how many.
@@ -355,7 +355,7 @@ def photon_albedo(rows, P, NS, D, C, T, rho, p_q, n_q, t_q, live):
         s0, s1, s2 = NS[r, 0], NS[r, 1], NS[r, 2]
         if s0 * wo[0] + s1 * wo[1] + s2 * wo[2] < 0.0:
             s0, s1, s2 = -s0, -s1, -s2
-        a0, a1, a2 = diffuse_albedo(C, r, wo, (s0, s1, s2))
+        a0, a1, a2 = diffuse_albedo(C, r, E, wo, (s0, s1, s2))
         rho[k, 0], rho[k, 1], rho[k, 2] = a0, a1, a2
         if a0 > 0.0 or a1 > 0.0 or a2 > 0.0:
             p_q[n_live, 0], p_q[n_live, 1], p_q[n_live, 2] = P[r, 0], P[r, 1], P[r, 2]

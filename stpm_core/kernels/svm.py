@@ -1198,11 +1198,9 @@ def _procedural_node(op, prog, pc, st, n):
 # ----------------------------------------------------------------------------
 @njit(**JIT)
 def _closure(op, prog, pc, st, k, C, r, w):
-    """Write the primary columns of closure row C[r] from a closure instruction at batch row k,
-    then its derived columns (``closure.finish_closure``).  w: the weight of the closure (2^d
-    under d Add Shaders) on its colour and emission; a TRANSPARENT closure (or a Principled BSDF
-    reached with op = _TRANSPARENT by its Alpha: white) writes an empty closure with C_PASS = 1
-    and its tint."""
+    """Write the primary columns of closure row C[r] from a closure instruction (BSDF_*, EMISSION)
+    at batch row k, then its derived columns (``closure.finish_closure``).  w: the weight of the
+    closure (2^d under d Add Shaders) on its colour and emission."""
     metallic = transmission = specular = 0.0
     rough = 0.5
     ior = 1.5
@@ -1229,32 +1227,39 @@ def _closure(op, prog, pc, st, k, C, r, w):
         transmission = 1.0
         rough = st[int(prog[pc + 2]), k]
         ior = st[int(prog[pc + 3]), k]
-    elif op == _EMISSION:
+    else:                              # EMISSION
         b0 = b1 = b2 = 0.0
         rough = 1.0
         s = st[int(prog[pc + 2]), k]
         e0, e1, e2 = _v3(st, int(prog[pc + 1]), k)
         e0, e1, e2 = e0 * s, e1 * s, e2 * s
-    else:                              # TRANSPARENT: nothing scatters here, the ray passes
-        b0 = b1 = b2 = 0.0
-        rough = 1.0
-    C[r, C_BASE] = w * _clamp01(b0)
-    C[r, C_BASE + 1] = w * _clamp01(b1)
-    C[r, C_BASE + 2] = w * _clamp01(b2)
-    C[r, C_EMIT] = w * max(e0, 0.0)
-    C[r, C_EMIT + 1] = w * max(e1, 0.0)
-    C[r, C_EMIT + 2] = w * max(e2, 0.0)
-    if op == _TRANSPARENT:
-        t0 = t1 = t2 = 1.0
-        if int(prog[pc]) == _TRANSPARENT:              # a Transparent BSDF (else a Principled's Alpha)
-            t0, t1, t2 = _v3(st, int(prog[pc + 1]), k)
-        C[r, C_TRANSPARENT] = w * max(t0, 0.0)
-        C[r, C_TRANSPARENT + 1] = w * max(t1, 0.0)
-        C[r, C_TRANSPARENT + 2] = w * max(t2, 0.0)
-        C[r, C_PASS] = 1.0
-    else:
-        C[r, C_TRANSPARENT] = C[r, C_TRANSPARENT + 1] = C[r, C_TRANSPARENT + 2] = 0.0
-        C[r, C_PASS] = 0.0
+    _primary(C, r, w * _clamp01(b0), w * _clamp01(b1), w * _clamp01(b2), w * max(e0, 0.0), w * max(e1, 0.0),
+             w * max(e2, 0.0), metallic, transmission, rough, specular, ior)
+    C[r, C_TRANSPARENT] = C[r, C_TRANSPARENT + 1] = C[r, C_TRANSPARENT + 2] = 0.0
+    C[r, C_PASS] = 0.0
+
+
+@njit(**JIT)
+def _transparent(C, r, t0, t1, t2):
+    """Closure row C[r] := a transparent closure of tint (t0, t1, t2) (a Transparent BSDF, or the
+    white one a Principled BSDF's Alpha mixes in): nothing scatters, C_PASS = 1."""
+    _primary(C, r, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.5)
+    C[r, C_TRANSPARENT] = max(t0, 0.0)
+    C[r, C_TRANSPARENT + 1] = max(t1, 0.0)
+    C[r, C_TRANSPARENT + 2] = max(t2, 0.0)
+    C[r, C_PASS] = 1.0
+
+
+@njit(**JIT)
+def _primary(C, r, b0, b1, b2, e0, e1, e2, metallic, transmission, rough, specular, ior):
+    """Closure row C[r]'s primary columns (colour, emission >= 0, the rest clamped to their ranges)
+    and its derived columns."""
+    C[r, C_BASE] = b0
+    C[r, C_BASE + 1] = b1
+    C[r, C_BASE + 2] = b2
+    C[r, C_EMIT] = e0
+    C[r, C_EMIT + 1] = e1
+    C[r, C_EMIT + 2] = e2
     C[r, C_METALLIC] = _clamp01(metallic)
     C[r, C_TRANSMISSION] = _clamp01(transmission)
     C[r, C_ROUGHNESS] = _clamp01(rough)
@@ -1334,14 +1339,15 @@ def run_program(prog, start, st, rows, C, G, A, X, seed):
                     q = start + int(prog[q + 1])
                 continue
             if op == _TRANSPARENT:
-                _closure(op, prog, q, st, k, C, r, w)
+                t0, t1, t2 = _v3(st, int(prog[q + 1]), k)
+                _transparent(C, r, w * t0, w * t1, w * t2)
                 break
             if op == _BSDF_PRINCIPLED:
                 a = _clamp01(st[int(prog[q + 5]), k])
                 if a < 1.0:
                     # Alpha: Cycles' mix of a Transparent BSDF (1 - alpha) and the BSDF (alpha)
                     if u >= a:
-                        _closure(_TRANSPARENT, prog, q, st, k, C, r, w)
+                        _transparent(C, r, w, w, w)
                         break
                     u = u / a
             if op >= _BSDF_PRINCIPLED and op <= _EMISSION:

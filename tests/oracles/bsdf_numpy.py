@@ -110,15 +110,29 @@ def _ggx_albedo_table_numpy() -> tuple[np.ndarray, np.ndarray]:
     return E, E_avg
 
 
-def _ggx_albedo(mu: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """Bilinear look-up of E(mu, alpha) (n,) in the table (clamped at the edges)."""
+def _table_bilinear(s, mu: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Bilinear look-up (n,) of slice(s) s of the kernel's tables E at (mu, alpha) (clamped)."""
     E, _ = ggx_albedo_tables()
     x = np.clip(mu * 32 - 0.5, 0, 31 - 1e-9)
     y = np.clip(alpha * 31, 0, 31 - 1e-9)
     i, j = np.minimum(x.astype(int), 30), np.minimum(y.astype(int), 30)
     fx, fy = x - i, y - j
-    return ((1 - fx) * (1 - fy) * E[i, j] + fx * (1 - fy) * E[i + 1, j]
-            + (1 - fx) * fy * E[i, j + 1] + fx * fy * E[i + 1, j + 1])
+    return ((1 - fx) * (1 - fy) * E[s, i, j] + fx * (1 - fy) * E[s, i + 1, j]
+            + (1 - fx) * fy * E[s, i, j + 1] + fx * fy * E[s, i + 1, j + 1])
+
+
+def _ggx_albedo(mu: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Bilinear look-up of E(mu, alpha) (n,) in the table (clamped at the edges)."""
+    return _table_bilinear(0, mu, alpha)
+
+
+def _coat_albedo(mu: np.ndarray, alpha: np.ndarray, ior: np.ndarray) -> np.ndarray:
+    """Rough-coat albedo (specular 1) (n,): slices 1.. of the table, bilinear in (mu, alpha), linear
+    in r = (ior - 1) / (ior + 1) on 32 steps to 9 / 11."""
+    z = np.clip(np.maximum(ior - 1.0, 0.0) / (ior + 1.0) / (9.0 / 11.0) * 31, 0, 31 - 1e-9)
+    k = np.minimum(z.astype(int), 30)
+    fz = z - k
+    return (1 - fz) * _table_bilinear(1 + k, mu, alpha) + fz * _table_bilinear(2 + k, mu, alpha)
 
 
 def _ggx_albedo_avg(alpha: np.ndarray) -> np.ndarray:
@@ -171,10 +185,11 @@ class _Hit:
         cos_o = np.clip(self.cos_o, 0.0, 1.0)
         # Fresnel at wo for each lobe (computed only on the rows that have the lobe)
         n = self.m.shape[0]
-        self.F_coat = np.zeros(n)
+        self.F_coat = np.zeros(n)                # the coat's albedo at wo (smooth: its Fresnel)
         i = np.nonzero((self.w_base > 0) & (self.spec > 0))[0]
         if i.size:
-            self.F_coat[i] = self.spec[i] * fresnel_dielectric(cos_o[i], ior[i])
+            self.F_coat[i] = self.spec[i] * np.where(self.rough[i], _coat_albedo(cos_o[i], self.alpha[i], ior[i]),
+                                                     fresnel_dielectric(cos_o[i], ior[i]))
         self.F_glass = np.zeros(n)
         i = np.nonzero(self.w_glass > 0)[0]
         if i.size:
@@ -198,6 +213,18 @@ class _Hit:
             self.ms_scale[i] = np.where(live[:, None], F_ms / (np.pi * np.maximum(1.0 - E_avg, 1e-4))[:, None], 0.0)
             self.ms_Eo[i] = _ggx_albedo(cos_o[i], a)
             ms_albedo[i] = np.where(live, (1.0 - self.ms_Eo[i]) * F_ms.mean(axis=1), 0.0)
+        # Rough coat: Cycles' energy compensation of its dielectric layer, 1 + F_ms (1 - E_o) / E_o
+        self.k_coat = np.ones(n)
+        i = np.nonzero((self.F_coat > 0) & self.rough)[0]
+        if i.size:
+            a = self.alpha[i]
+            e_o = np.maximum(_ggx_albedo(cos_o[i], a), 1e-3)
+            e_av = _ggx_albedo_avg(a)
+            eta = ior[i]
+            fss = self.spec[i] * np.where(eta < 1.0, 0.997118 + eta * (0.1014 - eta * (0.965241 + eta * 0.130607)),
+                                          (eta - 1.0) / (4.08567 + 1.00071 * eta))
+            f_ms = fss * e_av / (1.0 - fss * (1.0 - e_av))
+            self.k_coat[i] = 1.0 + f_ms * (1.0 - e_o) / e_o
         # Lobe selection probabilities proportional to an albedo estimate
         mean_base = self.base.mean(axis=1)
         est = np.stack([
@@ -267,7 +294,7 @@ def _eval_pdf(h: _Hit, wi: np.ndarray):
         F_m = fresnel_schlick(hr.base, wo_h)
         # GLASS_R (rough): exact dielectric at wo.h
         F_g = fresnel_dielectric(wo_h, hr.eta_glass)
-        f[r] += ((hr.w_base * F_c + hr.w_glass * F_g) * spec)[:, None] + (hr.w_metal * spec)[:, None] * F_m
+        f[r] += ((hr.w_base * F_c * hr.k_coat + hr.w_glass * F_g) * spec)[:, None] + (hr.w_metal * spec)[:, None] * F_m
         pdf[r] += p_ggx * (hr.p_lobe[:, COAT] + hr.p_lobe[:, METAL] + hr.p_lobe[:, GLASS_R])
         # METAL_MS: energy lost by single scattering, returned as a broad lobe (cosine-sampled)
         m = np.nonzero((hr.w_metal > 0) & valid)[0]
@@ -406,15 +433,18 @@ def bsdf_sample(table: MaterialTable, mat, wo, ns, ng, u):
 
 
 def diffuse_albedo(table: MaterialTable, mat, wo, ns) -> np.ndarray:
-    """Diffuse reflectance (n, 3) after the coat: w_base * (1 - specular F(wo)) * base_color.
+    """Diffuse reflectance (n, 3) after the coat: w_base * (1 - F_coat(wo)) * base_color (smooth coat:
+    specular F_diel; rough: specular times the tabulated rough-coat albedo).
 
     Photon-map radiance = diffuse_albedo / pi * irradiance.  ``ns`` may face
     either way (the cosine is taken as |wo . ns|).
     """
     mat = np.asarray(mat, dtype=np.int64)
     m = np.where(mat < 0, table.size, mat)
-    cos_o = np.abs(_dot(np.asarray(wo, float), np.asarray(ns, float)))
-    F = table.specular[m] * fresnel_dielectric(cos_o, table.ior[m])
+    cos_o = np.minimum(np.abs(_dot(np.asarray(wo, float), np.asarray(ns, float))), 1.0)
+    rough = table.roughness[m] > 0.0
+    F = table.specular[m] * np.where(rough, _coat_albedo(cos_o, np.maximum(table.alpha[m], 1e-4), table.ior[m]),
+                                     fresnel_dielectric(cos_o, table.ior[m]))
     return (table.w_base[m] * (1.0 - F))[:, None] * table.base_color[m]
 
 
