@@ -118,6 +118,35 @@ def _oriented(wo, ns, ng):
     return (ns[0] * t, ns[1] * t, ns[2] * t), ngf, entering
 
 
+@njit(**_JIT)
+def _valid_specular(ng, wi, n):
+    """Cycles' ``ensure_valid_specular_reflection``: n (unit, facing) raised toward ng (facing wi,
+    the direction toward the viewer) just enough that the mirror reflection of wi about it leaves
+    at least min(0.9 wi.ng, 0.01) above the surface; n itself when it already does."""
+    d = 2.0 * dot(n, wi)
+    r = (d * n[0] - wi[0], d * n[1] - wi[1], d * n[2] - wi[2])
+    iz = dot(wi, ng)
+    threshold = min(0.9 * iz, 0.01)
+    if dot(ng, r) >= threshold:
+        return n
+    c = dot(n, ng)
+    x = (n[0] - c * ng[0], n[1] - c * ng[1], n[2] - c * ng[2])
+    lx = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+    if lx > 0.0:
+        x = (x[0] / lx, x[1] / lx, x[2] / lx)
+    else:
+        x = n
+    ix = dot(wi, x)
+    a = ix * ix + iz * iz
+    b = 2.0 * (a + iz * threshold)
+    cc = (threshold + iz) * (threshold + iz)
+    disc = math.sqrt(max(b * b - 4.0 * a * cc, 0.0))
+    nz2 = 0.25 * (b + disc) / a if ix < 0 else 0.25 * (b - disc) / a
+    nx = math.sqrt(max(1.0 - nz2, 0.0))
+    nz = math.sqrt(max(nz2, 0.0))
+    return (nx * x[0] + nz * ng[0], nx * x[1] + nz * ng[1], nx * x[2] + nz * ng[2])
+
+
 # ----------------------------------------------------------------------------
 # Fresnel
 # ----------------------------------------------------------------------------
@@ -393,18 +422,22 @@ def ggx_albedo_avg(E_avg, alpha):
 def _hit(C, cr, E, E_avg, wo, ns, ng):
     """Everything about closure row C[cr] at wo that does not depend on wi.
 
-    Returns (ns', ng', cos_o = wo . ns' (not clamped), eta_glass, alpha, F_coat, F_glass,
+    Returns (ns', ng', nss, cos_o = wo . nss (not clamped), eta_glass, alpha, F_coat, F_glass,
     F_metal (RGB), ms_scale (RGB) = F_ms / (pi (1 - E_avg)), ms_Eo = E(mu_o), k_coat (the rough
-    coat's energy compensation, 1 otherwise), p_lobe (6 lobes)).
+    coat's energy compensation, 1 otherwise), p_lobe (6 lobes)).  nss: the normal of the specular
+    lobes (coat, metal, glass): ns' itself, or where a Normal input replaced the smooth normal
+    (``C_BUMPED``) ns' raised so its mirror reflection stays above the surface, as Cycles does
+    (``_valid_specular``); the diffuse lobes keep ns'.
     """
     nsf, ngf, entering = _oriented(wo, ns, ng)
+    nss = _valid_specular(ngf, wo, nsf) if C[cr, C_BUMPED] > 0 else nsf
     alpha = max(C[cr, C_ALPHA], 1e-4)
     rough = C[cr, C_ROUGHNESS] > 0.0
     spec = C[cr, C_SPECULAR]
     w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
     ior = C[cr, C_IOR]
     eta_glass = ior if entering else 1.0 / ior          # n_t / n_i for glass
-    cos_o = dot(wo, nsf)
+    cos_o = dot(wo, nss)
     cos_oc = min(max(cos_o, 0.0), 1.0)
     # Fresnel at wo for each lobe the closure has
     # the coat's albedo at wo: what the diffuse base under it loses (smooth: the Fresnel at wo;
@@ -453,7 +486,7 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
         p_lobe = (e0 / t, e1 / t, e2 / t, e3 / t, e4 / t, e5 / t)
     else:
         p_lobe = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    return nsf, ngf, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe
+    return nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe
 
 
 # ----------------------------------------------------------------------------
@@ -488,7 +521,7 @@ def bump_shadowing(C, cr, wi, nsf, ngf):
 @njit(**_JIT)
 def _eval_pdf_hit(C, cr, E, hit, wo, wi):
     """(f0, f1, f2, pdf) of the non-delta lobes at wi for the hit of :func:`_hit`."""
-    ns, ng, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
+    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
     w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
     b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
     cos_i = dot(wi, ns)
@@ -503,20 +536,28 @@ def _eval_pdf_hit(C, cr, E, hit, wo, wi):
         pdf = p_lobe[DIFFUSE] * cos_i / _PI
     if not C[cr, C_ROUGH_LOBE] > 0:
         return f0, f1, f2, pdf
-    # -- GGX reflection terms (rough COAT / METAL / GLASS_R)
-    if not (cos_i > 0 and cos_o > 0 and above_ng):
+    # -- GGX reflection terms (rough COAT / METAL / GLASS_R), about the specular normal nss; f is
+    # divided by the |ns . wi| the integrator multiplies (so f |ns . wi| = D G2 F / (4 cos_o))
+    cos_is = dot(wi, nss)
+    if not (cos_is > 0 and cos_o > 0 and above_ng):
         return f0, f1, f2, pdf
     hv = _normalized((wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]), 1e-300)
-    cos_h = dot(hv, ns)
+    cos_h = dot(hv, nss)
     wo_h = min(max(dot(wo, hv), 0.0), 1.0)
     D = _ggx_D(cos_h, alpha)
     lam_o = _ggx_lambda(cos_o, alpha)
-    lam_i = _ggx_lambda(cos_i, alpha)
+    lam_i = _ggx_lambda(cos_is, alpha)
     G2 = 1.0 / (1.0 + lam_o + lam_i)
     G1o = 1.0 / (1.0 + lam_o)
     cos_oe = max(cos_o, _EPS)
     p_ggx = G1o * D / (4.0 * cos_oe)                     # VNDF pdf of wi (solid angle)
-    spec = D * G2 / max(4.0 * cos_oe * max(cos_i, _EPS), 1e-300)
+    spec = D * G2 / max(4.0 * cos_oe * max(abs(cos_i), _EPS), 1e-300)
+    if C[cr, C_BUMPED] > 0:
+        # Cycles' bump_shadowing_term for every closure: wi on the other side of the smooth
+        # normal Ns than the bumped one says: no reflection
+        Ns = (C[cr, C_NS], C[cr, C_NS + 1], C[cr, C_NS + 2])
+        if dot(Ns, wi) * dot(Ns, nss) * cos_is < 0.0:
+            spec = 0.0
     # COAT: specular F_diel(wo.h, ior); METAL: Schlick(base, wo.h); GLASS_R: F_diel(wo.h, eta)
     F_c = C[cr, C_SPECULAR] * fresnel_dielectric(wo_h, C[cr, C_IOR])
     F_m = _fresnel_schlick(C, cr, wo_h)
@@ -527,8 +568,8 @@ def _eval_pdf_hit(C, cr, E, hit, wo, wi):
     f1 = f1 + (s + sm * F_m[1])
     f2 = f2 + (s + sm * F_m[2])
     pdf = pdf + p_ggx * (p_lobe[COAT] + p_lobe[METAL] + p_lobe[GLASS_R])
-    # -- METAL_MS: the energy single scattering loses, a broad cosine-sampled lobe
-    if w_metal > 0:
+    # -- METAL_MS: the energy single scattering loses, a broad cosine-sampled lobe (about ns)
+    if w_metal > 0 and cos_i > 0:
         E_i = ggx_albedo(E, min(max(cos_i, 0.0), 1.0), alpha)
         k = w_metal * (1.0 - ms_Eo) * (1.0 - E_i)
         f0 = f0 + k * ms_scale[0]
@@ -584,7 +625,7 @@ def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
     chosen lobe has probability 0.
     """
     hit = _hit(C, cr, E, E_avg, wo, ns, ng)
-    nsf, ngf, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
+    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
     rough = C[cr, C_ROUGHNESS] > 0.0
     # -- Choose a lobe by the CDF of p_lobe
     lobe = 0                                            # number of CDF entries <= u0
@@ -605,21 +646,21 @@ def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
         t, b = basis(nsf)
         wi = _to_frame(cosine_hemisphere(u1, u2), t, b, nsf)
     elif is_refl and rough:
-        # GGX visible normal, then mirror about it
-        t, b = basis(nsf)
+        # GGX visible normal about the specular normal, then mirror about it
+        t, b = basis(nss)
         lx, ly, lz = _normalized((dot(wo, t), dot(wo, b), max(cos_o, 1e-6)), 0.0)
-        hw = _to_frame(_ggx_sample_vndf(lx, ly, lz, alpha, u1, u2), t, b, nsf)
+        hw = _to_frame(_ggx_sample_vndf(lx, ly, lz, alpha, u1, u2), t, b, nss)
         wi = _reflect(wo, hw)
     elif is_refl:
-        # Smooth reflection: mirror about ns
-        wi = _reflect(wo, nsf)
+        # Smooth reflection: mirror about the specular normal
+        wi = _reflect(wo, nss)
     else:
         # GLASS_T: refraction through ns (entering: eta = ior; leaving: 1 / ior)
         eta = eta_glass
         co = min(max(cos_o, 0.0), 1.0)
         cos_t = math.sqrt(max(0.0, 1.0 - (1.0 - co * co) / (eta * eta)))
         k = co / eta - cos_t
-        wi = (-wo[0] / eta + k * nsf[0], -wo[1] / eta + k * nsf[1], -wo[2] / eta + k * nsf[2])
+        wi = (-wo[0] / eta + k * nss[0], -wo[1] / eta + k * nss[1], -wo[2] / eta + k * nss[2])
     wi = _normalized(wi, 1e-300)
     wi0, wi1, wi2 = wi
     # -- Delta lobes: Fresnel / colour throughput over the selection probability
