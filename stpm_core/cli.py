@@ -35,7 +35,7 @@ from pathlib import Path
 from .command_common import (EXIT_CANCELLED, EXIT_ERROR, EXIT_INTERNAL, EXIT_OK, EXIT_USAGE, FRAME_MAX,
                              FRAME_MIN, CancelFlag, CommandParser, UsageError, add_setting_options,
                              check_cancel, check_memory, checked_overrides, load_any_scene, option_message,
-                             scene_kind)
+                             safe_text, scene_kind)
 from .errors import RenderCancelled, SceneError, SettingsError, StpmError
 
 __all__ = ["main", "parse_frames", "load_any_scene"]
@@ -132,15 +132,21 @@ def _check_output_path(path: Path, what: str, probed: set | None = None) -> None
 
     ``path`` must not be a directory, and its folder must exist and take a new
     file (probed by creating and removing a hidden file: this also catches
-    read-only file systems, which ``os.access`` misses for root).  ``probed``:
-    folders already probed (a frame range writes many files to one folder).
+    read-only file systems, which ``os.access`` misses for root).  The folder is
+    looked up on disk as given (``p/missing/../x.exr`` needs ``p/missing``, as the
+    kernel does), never normalised by its text.  ``probed``: folders already
+    probed (a frame range writes many files to one folder).
     """
     if path.is_dir():
         raise StpmError(f"cannot write {what} {path}: it is a directory")
-    parent = path.resolve().parent
-    if not parent.is_dir():
-        state = "is not a directory" if parent.exists() else "does not exist"
-        raise StpmError(f"cannot write {what} {path}: directory {parent} {state}")
+    given = path.absolute().parent           # not normalised: '..' after a missing folder stays
+    if not os.path.isdir(given):
+        state = "is not a directory" if os.path.lexists(given) else "does not exist"
+        missing = _first_missing(given)
+        where = f" ({missing} {'is not a directory' if os.path.lexists(missing) else 'does not exist'})" \
+            if missing is not None and missing != given else ""
+        raise StpmError(f"cannot write {what} {path}: directory {given} {state}{where}")
+    parent = Path(os.path.realpath(given))
     if probed is not None and parent in probed:
         return
     try:
@@ -152,6 +158,24 @@ def _check_output_path(path: Path, what: str, probed: set | None = None) -> None
                         f"({e.strerror or e})") from None
     if probed is not None:
         probed.add(parent)
+
+
+def _first_missing(folder: Path) -> Path | None:
+    """The first component of ``folder`` (absolute) that is not a directory on disk, or None."""
+    cur = Path(folder.anchor)
+    for part in folder.parts[1:]:
+        cur = cur / part
+        if not os.path.isdir(cur):
+            return cur
+    return None
+
+
+def real_target(path: Path) -> Path:
+    """``path`` with its folder resolved on disk (symlinks and '..' as the kernel follows them);
+    the file name is kept, so a symlinked output is replaced as before.  Temporary files are
+    created next to this, in the folder the file really lands in.  A folder missing on disk
+    raises OSError (``os.path.realpath`` would otherwise drop ``missing/..`` by its text)."""
+    return Path(os.path.realpath(Path(path).absolute().parent, strict=True)) / Path(path).name
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -223,7 +247,7 @@ def _cmd_render(args) -> int:
 
 
 def _warn(line: str) -> None:
-    print(f"stpm: warning: {line}", file=sys.stderr, flush=True)
+    print(f"stpm: warning: {safe_text(line)}", file=sys.stderr, flush=True)
 
 
 def _warn_frames_outside(scene, frames) -> None:
@@ -270,15 +294,16 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
             raise SettingsError(option_message(str(e), overrides)) from None
         if args.resolution is not None:
             scene.resolution = args.resolution
-        check_memory(scene.resolution, settings.method)
+        check_memory(scene.resolution, settings.method, settings)
         if index == 0:
             if scene_path.suffix.lower() == ".blend" or scene_kind(scene_path) == "blend":
                 _warn_frames_outside(scene, frames)
             if settings.method == "ACCUMULATION" and args.estimator not in (None, "STANDARD"):
                 _warn(f"--estimator {args.estimator.lower()} has no effect with --method accumulation: "
                       "each still is read with STANDARD")
-        for w in scene.metadata.get("warnings", []) if isinstance(scene.metadata, dict) else []:
-            _warn(w)
+        meta_warnings = scene.metadata.get("warnings", []) if isinstance(scene.metadata, dict) else []
+        for w in meta_warnings if isinstance(meta_warnings, list) else []:
+            _warn(str(w))
 
         # -- Render, with a progress bar and Ctrl-C cancelling ---------------------------
         bar = ProgressBar(quiet=args.quiet)
@@ -297,12 +322,13 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
                 "stpm:scene": str(scene_path), "stpm:frame": str(scene.frame if frame is None else frame)}
         staged: list[tuple[Path, Path]] = []
         try:
-            with atomic_output(out_exr, commit=False) as tmp:
+            real_exr, real_png = real_target(out_exr), real_target(out_png)   # temp files beside the real target
+            with atomic_output(real_exr, commit=False) as tmp:
                 write_exr(tmp, result, {**meta, "stpm:stats": stats}, atomic=False)
-            staged.append((tmp, out_exr))
-            with atomic_output(out_png, commit=False) as tmp:
+            staged.append((tmp, real_exr))
+            with atomic_output(real_png, commit=False) as tmp:
                 write_png(tmp, result.passes["Combined"][:, :, :3], atomic=False)
-            staged.append((tmp, out_png))
+            staged.append((tmp, real_png))
             stats.update({
                 "render_wall_s": float(result.stats.get("wall_s", 0.0)),
                 "write_s": time.perf_counter() - t_write,
@@ -313,9 +339,10 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
                 "warnings": list(getattr(result, "warnings", []) or []),
             })
             if stats_path is not None:
-                with atomic_output(stats_path, commit=False) as tmp:
+                real_stats = real_target(stats_path)
+                with atomic_output(real_stats, commit=False) as tmp:
                     write_json(tmp, stats, atomic=False)
-                staged.append((tmp, stats_path))
+                staged.append((tmp, real_stats))
             check_cancel(cancel)  # a Ctrl-C while writing: none of this frame's outputs
             while staged:
                 commit_temp(*staged[0])
@@ -325,10 +352,10 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
                 discard_temp(tmp)
         for w in stats["warnings"]:
             _warn(w)
-        print(f"wrote {out_exr}")
-        print(f"wrote {out_png}")
+        print(f"wrote {safe_text(out_exr)}")
+        print(f"wrote {safe_text(out_png)}")
         if stats_path is not None:
-            print(f"wrote {stats_path}")
+            print(f"wrote {safe_text(stats_path)}")
         sys.stdout.flush()
         if not args.quiet:
             print(f"{label}{stats['wall_s']:.2f} s (render {stats.get('render_s', 0.0):.2f} s, "
@@ -349,7 +376,7 @@ def _cmd_plan(args) -> int:
     if args.json:
         print(json.dumps(plan, indent=2))
     else:
-        print(format_plan(plan))
+        print(safe_text(format_plan(plan), keep_newlines=True))
     return EXIT_OK
 
 
@@ -392,7 +419,7 @@ def _main(argv: list[str], cancel: CancelFlag) -> int:
             return EXIT_USAGE
         return {"render": _cmd_render, "plan": _cmd_plan, "compare": _cmd_compare}[args.command](args)
     except UsageError as e:
-        print(f"stpm: error: {e} (see stpm {command} --help)".replace("  ", " "), file=sys.stderr)
+        print(safe_text(f"stpm: error: {e} (see stpm {command} --help)".replace("  ", " ")), file=sys.stderr)
         return EXIT_USAGE
     except RenderCancelled:
         print("stpm: render cancelled" if command in ("render", "compare") else "stpm: cancelled",
@@ -402,10 +429,10 @@ def _main(argv: list[str], cancel: CancelFlag) -> int:
         print("stpm: aborted", file=sys.stderr)
         return EXIT_CANCELLED
     except (StpmError, SceneError) as e:
-        print(f"stpm: error: {str(e).splitlines()[0] if str(e) else type(e).__name__}", file=sys.stderr)
+        print(f"stpm: error: {safe_text(str(e).splitlines()[0] if str(e) else type(e).__name__)}", file=sys.stderr)
         return EXIT_ERROR
     except OSError as e:
-        print(f"stpm: error: {_os_error_line(e)}", file=sys.stderr)
+        print(f"stpm: error: {safe_text(_os_error_line(e))}", file=sys.stderr)
         return EXIT_ERROR
     except SystemExit as e:  # --help / --version inside argparse
         return int(e.code or 0) if isinstance(e.code, int) else EXIT_OK
@@ -413,7 +440,7 @@ def _main(argv: list[str], cancel: CancelFlag) -> int:
         if os.environ.get("STPM_DEBUG"):
             raise
         line = str(e).splitlines()[0] if str(e) else ""
-        print(f"stpm: internal error: {type(e).__name__}: {line} (please report this bug; "
+        print(f"stpm: internal error: {type(e).__name__}: {safe_text(line)} (please report this bug; "
               "STPM_DEBUG=1 shows the traceback)", file=sys.stderr)
         return EXIT_INTERNAL
 

@@ -21,12 +21,14 @@ so ``stpm --help`` stays quick.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import signal
 import sys
 import tempfile
 import time
+import unicodedata
 from dataclasses import fields
 from pathlib import Path
 
@@ -35,7 +37,8 @@ from .errors import RenderCancelled, SettingsError, StpmError
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_INTERNAL", "EXIT_CANCELLED", "FRAME_MIN", "FRAME_MAX",
            "UsageError", "CommandParser", "add_setting_options", "checked_overrides", "option_message",
            "scene_kind", "settings_from_dict", "stdout_to_stderr", "load_any_scene",
-           "BYTES_PER_PIXEL", "available_memory", "image_memory", "check_memory", "CancelFlag", "check_cancel"]
+           "BYTES_PER_PIXEL", "available_memory", "image_memory", "check_memory", "CancelFlag", "check_cancel",
+           "finite_float", "safe_text", "BYTES_PER_PHOTON_ESTIMATE", "photon_memory"]
 
 # Exit statuses of every command (docs/cli.md): 0 success; 1 a user error; 2 bad
 # command-line syntax; 3 an internal error (a bug); 130 cancelled (128 + the signal).
@@ -47,6 +50,40 @@ FRAME_MIN, FRAME_MAX = -1_048_574, 1_048_574
 
 class UsageError(StpmError):
     """Bad command-line syntax (exit status 2)."""
+
+
+def safe_text(text, keep_newlines: bool = False) -> str:
+    r"""``text`` with control, format (bidi overrides, zero-width) and line-separator characters escaped.
+
+    For untrusted text the commands print (warnings and names from a scene file, paths): a
+    file can then neither move the cursor, retitle or clear the terminal, nor reorder what
+    a line shows.  ``\x1b`` prints as ``\x1b``, U+202E as ``\u202e``; ``keep_newlines``
+    leaves ``\n`` for multi-line output.
+    """
+    out = []
+    for ch in str(text):
+        if ch == "\n" and keep_newlines:
+            out.append(ch)
+        elif unicodedata.category(ch) in ("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp"):
+            o = ord(ch)
+            out.append(f"\\x{o:02x}" if o < 0x100 else f"\\u{o:04x}" if o < 0x10000 else f"\\U{o:08x}")
+        else:
+            out.append(ch)
+    return "".join(out)
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a float that is neither NaN nor infinite (``--time-budget nan`` is exit status 2)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return v
+
+
+finite_float.__name__ = "number"
 
 
 class CommandParser(argparse.ArgumentParser):
@@ -98,9 +135,9 @@ def add_setting_options(parser, skip: tuple[str, ...] = ()) -> None:
     opt("--photons-caustic", type=int, dest="photons_caustic", metavar="N",
         help="photons emitted for the caustic map, integer in [0, 2^31]")
     opt("--k", type=int, dest="k_nearest", metavar="K", help="photons per estimate, integer in [1, 100000]")
-    opt("--temporal-alpha", type=float, dest="temporal_alpha", metavar="A",
+    opt("--temporal-alpha", type=finite_float, dest="temporal_alpha", metavar="A",
         help="TEMPORAL candidates as a multiple of k: 0 (automatic) or a number in [1, 1e6]")
-    opt("--time-scale", type=float, dest="time_scale", metavar="S",
+    opt("--time-scale", type=finite_float, dest="time_scale", metavar="S",
         help="KD4D's scene units per shutter, >= 0 (0: automatic)")
     opt("--seed", type=int, dest="seed", metavar="S", help="random seed, integer in [0, 2^63 - 1]")
     opt("--resolution", type=_resolution, dest="resolution", metavar="WxH",
@@ -317,14 +354,36 @@ def image_memory(resolution, method: str = "PHOTON") -> int:
     return w * h * BYTES_PER_PIXEL.get(str(method).upper(), BYTES_PER_PIXEL["ACCUMULATION"])
 
 
-def check_memory(resolution, method: str) -> None:
-    """Refuse (StpmError), before rendering, an image whose buffers cannot fit in the memory available."""
+# Peak bytes per photon of the photon maps, counting one stored photon per emitted one: the 32-byte
+# record, the map's decoded working arrays (float64 positions and times, a packed float32 row: 64
+# bytes), the kd-tree's indices and the tracer's batch copies.  Rounded up (docs/cli.md, "Memory").
+BYTES_PER_PHOTON_ESTIMATE = 128
+
+
+def photon_memory(settings) -> int:
+    """Estimated peak bytes of the photon maps of one render: the photons asked for x
+    :data:`BYTES_PER_PHOTON_ESTIMATE` (a global photon can be stored at several bounces: more)."""
+    n = int(getattr(settings, "photons_global", 0) or 0) + int(getattr(settings, "photons_caustic", 0) or 0)
+    return n * BYTES_PER_PHOTON_ESTIMATE
+
+
+def check_memory(resolution, method: str, settings=None) -> None:
+    """Refuse (StpmError), before rendering, an image whose buffers cannot fit in the memory available;
+    with ``settings``, also photon counts whose maps (with the image) cannot fit."""
     need = image_memory(resolution, method)
     avail = available_memory()
     if avail is not None and need > avail:
         w, h = int(resolution[0]), int(resolution[1])
         raise StpmError(f"{w}x{h} needs about {need / 2**30:.1f} GiB of memory for the image buffers, "
                         f"more than the {avail / 2**30:.1f} GiB available: lower --resolution")
+    if settings is not None and avail is not None:
+        photons = photon_memory(settings)
+        if need + photons > avail:
+            raise StpmError(f"photons_global {settings.photons_global} + photons_caustic {settings.photons_caustic} "
+                            f"need about {photons / 2**30:.1f} GiB of memory for the photon maps "
+                            f"({BYTES_PER_PHOTON_ESTIMATE} bytes per photon), more than the "
+                            f"{max(avail - need, 0) / 2**30:.1f} GiB available beside the image: lower "
+                            "--photons-global / --photons-caustic")
 
 
 # ----------------------------------------------------------------------------

@@ -226,11 +226,17 @@ def read_exr(path, view_layer: str = VIEW_LAYER) -> dict:
     try:
         spec = inp.spec()
         pixels = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+        err = inp.geterror() if pixels is None else ""
         names = list(spec.channelnames)
         meta = {a.name: a.value for a in spec.extra_attribs}
     finally:
         inp.close()
-    pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    shape = (spec.height, spec.width, spec.nchannels)
+    pixels = None if pixels is None else np.asarray(pixels, dtype=np.float32)
+    if pixels is None or pixels.size != shape[0] * shape[1] * shape[2]:
+        why = (err or oiio.geterror() or "no pixels").strip().splitlines()
+        raise StpmError(f"cannot read EXR {path}: truncated or corrupt ({why[0] if why else 'no pixels'})")
+    pixels = pixels.reshape(shape)
     groups: dict[str, list[int]] = {}
     for i, n in enumerate(names):
         parts = n.split(".")

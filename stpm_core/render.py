@@ -143,7 +143,8 @@ def _render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     table = MaterialTable(scene.materials)
     shading = shading_data(scene, table.closures)      # node programs compiled, textures packed
     # node inputs the interpreter could not evaluate (once: the exporter may have said so already)
-    said = set(scene.metadata.get("warnings", []) if isinstance(getattr(scene, "metadata", None), dict) else [])
+    said = scene.metadata.get("warnings", []) if isinstance(getattr(scene, "metadata", None), dict) else []
+    said = {w for w in said if isinstance(w, str)} if isinstance(said, list) else set()
     warnings.extend(w for w in shading.unsupported if w not in said)
     t_plan = _time.perf_counter()
     plan = make_plan(scene, settings, caster=caster, lights=lights)

@@ -45,6 +45,9 @@ SCENE_FORMAT_VERSION = 2          # 2 (2026-12-01): material graphs, textures, U
 #: estimates over gather radii >= 1e-4 m).
 MAX_EMISSION = 1e30
 
+#: Largest light ``size`` / ``size_y`` (scene units): the loader's limit on coordinates (1e15).
+MAX_LIGHT_SIZE = 1e15
+
 #: A transform axis shorter than this (scene units per local unit) counts as
 #: zero scale: the direction it should give is undefined.
 _ZERO_SCALE = 1e-150
@@ -566,11 +569,12 @@ def validate_scene(scene: Scene) -> None:
         _check_range(f"{p}.spot_size", l.spot_size, 0.0, np.pi)
         _check_range(f"{p}.spot_blend", l.spot_blend, 0.0, 1.0)
         _check_range(f"{p}.angle", l.angle, 0.0, np.pi)
+        # size / size_y shape only AREA lights, but a negative or absurd one is refused on every type
+        _check_range(f"{p}.size", l.size, 0.0, MAX_LIGHT_SIZE)
+        _check_range(f"{p}.size_y", l.size_y, 0.0, MAX_LIGHT_SIZE)
         if l.type == "AREA":
             if l.shape not in ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE"):
                 raise SceneError(f"{p}.shape must be SQUARE, RECTANGLE, DISK or ELLIPSE, got {l.shape!r}")
-            _check_range(f"{p}.size", l.size, 0.0)
-            _check_range(f"{p}.size_y", l.size_y, 0.0)
     for mi, m in enumerate(scene.materials):
         p = f"materials[{mi}] ({m.name!r})"
         _check_vec3(f"{p}.base_color", m.base_color, nonneg=True)

@@ -569,8 +569,54 @@ def _graph_from_json(d, where: str, n_textures: int) -> ShaderGraph:
     return graph
 
 
+# Loading limits (docs/scene-format.md, "Limits"): an array is read only up to the size its own
+# .npy header declares, that size must fit in its zip member, and all arrays together may take at
+# most LOAD_MEMORY_FRACTION of the memory available (a small file that inflates to gigabytes, or
+# a header declaring 10^12 vertices, is refused before anything is allocated or inflated).
+LOAD_MEMORY_FRACTION = 0.5
+_MAX_NPY_HEADER = 65536
+
+
+def _load_cap() -> int | None:
+    """Bytes all the arrays of one scene file may take when read (None: memory unknown, no cap)."""
+    from .command_common import available_memory
+    avail = available_memory()
+    return None if avail is None else int(avail * LOAD_MEMORY_FRACTION)
+
+
+def _fmt_bytes(n: int) -> str:
+    for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if n >= size:
+            return f"{n / size:.1f} {unit}"
+    return f"{n} B"
+
+
+def _npy_header(stream, key: str) -> tuple:
+    """(shape, dtype, fortran_order, header bytes) of one .npy member, read from its first bytes."""
+    from numpy.lib import format as npf
+    try:
+        version = npf.read_magic(stream)
+        if version not in ((1, 0), (2, 0), (3, 0)):
+            raise ValueError(f"unknown .npy version {version}")
+        shape, fortran, dtype = npf._read_array_header(stream, version, max_header_size=_MAX_NPY_HEADER)
+    except (ValueError, SyntaxError, tokenize.TokenError, TypeError, KeyError, EOFError, UnicodeError,
+            zipfile.BadZipFile, zlib.error, OverflowError, RecursionError, MemoryError) as e:
+        raise SceneError(f"array {key!r} has a corrupt .npy header ({type(e).__name__}: {e})"
+                         .splitlines()[0]) from None
+    if dtype.hasobject:
+        raise SceneError(f"array {key!r} holds Python objects (dtype {dtype}): not allowed in a scene file")
+    if not isinstance(shape, tuple) or any(isinstance(n, bool) or not isinstance(n, int) or n < 0 for n in shape):
+        raise SceneError(f"array {key!r} has an invalid shape {shape!r:.60}")
+    return shape, dtype, fortran, stream.tell()
+
+
 def _read_container(path: Path) -> dict[str, np.ndarray]:
-    """All arrays of the .npz at ``path``, read eagerly; SceneError if it is not one."""
+    """All arrays of the .npz at ``path``, read eagerly; SceneError if it is not one.
+
+    Every member's .npy header is read first: its declared size must fit in the
+    member (no more inflated bytes than that are ever read), and the arrays
+    together must fit in :data:`LOAD_MEMORY_FRACTION` of the memory available.
+    """
     if not path.exists():
         raise SceneError(f"scene file not found: {path}")
     if path.is_dir():
@@ -578,12 +624,52 @@ def _read_container(path: Path) -> dict[str, np.ndarray]:
     if not zipfile.is_zipfile(path):
         raise SceneError("not an STPM scene file (not a zip/npz archive; truncated or another format)")
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            return {k: np.array(npz[k]) for k in npz.files}
+        with zipfile.ZipFile(path) as zf:
+            # 1. Headers only: declared shapes against the members and the memory available
+            plan = []
+            total = 0
+            for info in zf.infolist():
+                if info.is_dir():
+                    continue
+                key = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+                with zf.open(info) as stream:
+                    shape, dtype, fortran, head = _npy_header(stream, key)
+                count = math.prod(shape)
+                nbytes = count * dtype.itemsize
+                shape_text = "x".join(map(str, shape)) or "scalar"
+                if head + nbytes > info.file_size:
+                    raise SceneError(f"array {key!r} declares {shape_text} {dtype} ({_fmt_bytes(nbytes)}) but its "
+                                     f"member holds {_fmt_bytes(max(info.file_size - head, 0))} "
+                                     "(corrupt or truncated)")
+                if head + nbytes < info.file_size:
+                    raise SceneError(f"array {key!r} declares {shape_text} {dtype} ({_fmt_bytes(nbytes)}) but its "
+                                     f"member inflates to {_fmt_bytes(info.file_size - head)} (corrupt, or a zip bomb)")
+                total += nbytes
+                plan.append((info, key, shape, dtype, fortran, head, nbytes))
+            cap = _load_cap()
+            if cap is not None and total > cap:
+                biggest = max(plan, key=lambda r: r[6])
+                raise SceneError(f"its arrays take {_fmt_bytes(total)} once inflated (the largest, {biggest[1]!r}, "
+                                 f"{_fmt_bytes(biggest[6])}), more than the {_fmt_bytes(cap)} a scene may take "
+                                 f"here ({LOAD_MEMORY_FRACTION:.0%} of the memory available)")
+            # 2. The data: exactly the declared bytes of each member, no more
+            out = {}
+            for info, key, shape, dtype, fortran, head, nbytes in plan:
+                with zf.open(info) as stream:
+                    stream.read(head)
+                    buf = stream.read(nbytes)
+                if len(buf) != nbytes:
+                    raise SceneError(f"array {key!r} is truncated ({len(buf)} of {nbytes} bytes)")
+                a = np.frombuffer(buf, dtype=dtype)
+                a = a.reshape(shape[::-1]).transpose() if fortran else a.reshape(shape)
+                out[key] = np.array(a)            # writeable, owning its memory
+            return out
+    except SceneError:
+        raise
     except (zipfile.BadZipFile, zlib.error, ValueError, EOFError, KeyError, NotImplementedError,
-            RuntimeError, UnicodeError, OSError, SyntaxError, tokenize.TokenError, MemoryError) as e:
-        # OSError also covers a file that vanished; SyntaxError / TokenError come from numpy
-        # parsing a corrupted .npy header (its dict literal); it is still one line.
+            RuntimeError, UnicodeError, OSError, SyntaxError, tokenize.TokenError, MemoryError,
+            OverflowError) as e:
+        # OSError also covers a file that vanished; a CRC mismatch is a BadZipFile; it is still one line.
         raise SceneError(f"corrupt or truncated scene file ({type(e).__name__}: {e})".splitlines()[0]) from None
 
 
@@ -709,7 +795,7 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
         shutter = Shutter(open=s_open, close=s_close,
                           curve=None if curve is None else curve.astype(np.float64))
     except SceneError as e:
-        raise SceneError(f"shutter: {e}") from None
+        raise SceneError(str(e) if str(e).startswith("shutter") else f"shutter: {e}") from None
 
     # Scene-wide fields
     res = h.list("resolution")
@@ -718,6 +804,10 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
     metadata = h.raw("metadata")
     if not isinstance(metadata, dict):
         raise SceneError(f"metadata must be a JSON object, got {type(metadata).__name__}")
+    if "warnings" in metadata:   # printed by the CLI and the add-on, one line each
+        mw = metadata["warnings"]
+        if not isinstance(mw, list) or not all(isinstance(w, str) for w in mw):
+            raise SceneError(f"metadata.warnings must be a list of strings, got {mw!r:.60}")
 
     scene = Scene(meshes=meshes, instances=instances, camera=cam, lights=lights,
                   materials=materials, world=world, shutter=shutter,

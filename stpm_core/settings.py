@@ -4,7 +4,10 @@ See ``shared/interface.md``; names here are fixed (add, never rename).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, fields
+
+import numpy as np
 
 from .errors import SettingsError
 
@@ -74,23 +77,42 @@ class RenderSettings:
 
         def integer(name, lo, hi=2**62):
             v = getattr(self, name)
+            if isinstance(v, np.integer) and not isinstance(v, np.bool_):
+                v = int(v)                                   # a numpy integer (bpy, numpy): exact
+                setattr(self, name, v)
             if isinstance(v, bool) or not isinstance(v, int) or not (lo <= v <= hi):
-                raise SettingsError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
+                raise SettingsError(f"{name} must be an integer in [{lo}, {hi}], got {v!r:.60}")
 
         def real(name, lo, hi=float("inf")):
             v = getattr(self, name)
+            # Numbers only: a string ("0.5"), a boolean or None is refused, not coerced
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise SettingsError(f"{name} must be a number, got {v!r:.60}")
             try:
                 v = float(v)
-            except (TypeError, ValueError):
-                raise SettingsError(f"{name} must be a number, got {v!r}") from None
+            except OverflowError:                            # an integer too large for a float
+                raise SettingsError(f"{name} must be in [{lo}, {hi}], got {v!r:.40}") from None
+            if not math.isfinite(v):
+                raise SettingsError(f"{name} must be a finite number in [{lo}, {hi}], got {v}")
             if not (lo <= v <= hi):
                 raise SettingsError(f"{name} must be in [{lo}, {hi}], got {v}")
             setattr(self, name, v)
+
+        def boolean(name):
+            # true / false only; the integers 0 and 1 (and numpy booleans) are unambiguous and coerced.
+            # A string ("false") is refused: read as a truth value it would mean the opposite.
+            v = getattr(self, name)
+            if isinstance(v, (bool, np.bool_)) or (isinstance(v, (int, np.integer)) and v in (0, 1)):
+                setattr(self, name, bool(v))
+                return
+            raise SettingsError(f"{name} must be true or false, got {v!r:.60}")
 
         enum("method", METHODS)
         enum("estimator", ESTIMATORS)
         enum("effects", EFFECTS)
         enum("kernel", KERNELS)
+        boolean("caustics")
+        boolean("indirect")
         integer("accumulation_steps", 1, 4096)
         integer("samples", 1, 1 << 16)
         integer("photons_global", 0, 1 << 31)

@@ -20,7 +20,10 @@ import numpy as np
 
 from .errors import SceneError
 
-__all__ = ["Shutter"]
+__all__ = ["Shutter", "SHUTTER_FRAME_LIMIT"]
+
+#: Largest |open| / |close| in frames: Blender's frame limit (1048574) with room for a long shutter.
+SHUTTER_FRAME_LIMIT = 2 ** 21
 
 _GL2 = 1.0 / np.sqrt(3.0)      # 2-point Gauss-Legendre nodes at mid -+ half * _GL2, weights 1 (exact for cubics)
 
@@ -54,6 +57,11 @@ class Shutter:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.open) and np.isfinite(self.close)):
             raise SceneError("shutter.open/close must be finite")
+        for name in ("open", "close"):
+            v = float(getattr(self, name))
+            if not -SHUTTER_FRAME_LIMIT <= v <= SHUTTER_FRAME_LIMIT:
+                raise SceneError(f"shutter.{name} must be a frame number in [{-SHUTTER_FRAME_LIMIT}, "
+                                 f"{SHUTTER_FRAME_LIMIT}], got {v:g}")
         if self.close < self.open:
             raise SceneError(f"shutter closes ({self.close}) before it opens ({self.open})")
         if self.curve is None:

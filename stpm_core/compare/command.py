@@ -23,13 +23,18 @@ import sys
 from pathlib import Path
 
 from ..command_common import (EXIT_OK, FRAME_MAX, FRAME_MIN, CancelFlag, CommandParser, UsageError,
-                              add_setting_options, check_cancel, check_memory, checked_overrides, load_any_scene)
+                              add_setting_options, check_cancel, check_memory, checked_overrides, finite_float,
+                              load_any_scene, safe_text)
 from ..errors import StpmError
 from .reference import REFERENCE_FACTORS, REFERENCE_METHOD, REFERENCE_METHODS, REFERENCE_STEPS
 from .run import run_compare
 from .sweep import DEFAULT_ACCUMULATION_STEPS, DEFAULT_PHOTON_BUDGETS, PHOTON_ESTIMATORS, parse_budget
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "K_EXPONENT_MAX"]
+
+# --k-exponent's range: k = f x k_file x B^E; E = 1 already keeps the look-up radius fixed as
+# photons grow (docs/compare.md, "k with the budget"), so E above 2 only makes k explode.
+K_EXPONENT_MAX = 2.0
 
 
 def _number_list(kind):
@@ -80,13 +85,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="report directory (default: <scene stem>_compare next to the scene)")
     p.add_argument("--reference", metavar="REF.exr",
                    help="reference image (its Combined pass); default: computed and cached")
-    p.add_argument("--time-budget", type=float, dest="time_budget", metavar="SECONDS",
+    p.add_argument("--time-budget", type=finite_float, dest="time_budget", metavar="SECONDS",
                    help="stop starting runs once the sweep has taken this long (the report notes what was skipped)")
     p.add_argument("--photon-budgets", type=_budgets, dest="photon_budgets", metavar="B[:S[:K]],...",
                    default=list(DEFAULT_PHOTON_BUDGETS),
                    help="budgets of the photon-estimator runs: photons x B (and samples x S, k x K) of the file's "
                         f"(default {','.join(f'{b:g}:{s:g}' if s != 1 else f'{b:g}' for b, s in DEFAULT_PHOTON_BUDGETS)})")
-    p.add_argument("--k-exponent", type=float, dest="k_exponent", default=0.0, metavar="E",
+    p.add_argument("--k-exponent", type=finite_float, dest="k_exponent", default=0.0, metavar="E",
                    help="photon runs use k x B^E (B = their photon multiple; default 0: the file's k)")
     p.add_argument("--accumulation-steps", type=_number_list(int), dest="accumulation_steps", metavar="N,N,...",
                    default=list(DEFAULT_ACCUMULATION_STEPS),
@@ -100,10 +105,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="computed reference's recipe (default accumulation: 64 instants x 4x photons)")
     p.add_argument("--reference-steps", type=int, dest="reference_steps", metavar="N", default=REFERENCE_STEPS,
                    help=f"instants of an accumulation reference (default {REFERENCE_STEPS})")
-    p.add_argument("--reference-photons", type=float, dest="reference_photons", metavar="F",
+    p.add_argument("--reference-photons", type=finite_float, dest="reference_photons", metavar="F",
                    help="computed reference: photons x F (per instant for accumulation; default "
                         + ", ".join(f"{m.lower()} {f[0]:g}" for m, f in REFERENCE_FACTORS.items()) + ")")
-    p.add_argument("--reference-samples", type=float, dest="reference_samples", metavar="F",
+    p.add_argument("--reference-samples", type=finite_float, dest="reference_samples", metavar="F",
                    help="computed reference: samples x F (per instant for accumulation; default "
                         + ", ".join(f"{m.lower()} {f[1]:g}" for m, f in REFERENCE_FACTORS.items()) + ")")
     p.add_argument("--cache-dir", dest="cache_dir", metavar="DIR",
@@ -152,6 +157,9 @@ def _check_reference(path: str) -> None:
         what = f"a {kind} image" if kind else "not an OpenEXR file"
         raise StpmError(f"--reference {path} is {what}: give a linear OpenEXR with a Combined pass "
                         "(e.g. the .exr of stpm render)")
+    # Read it all now, before any loading or rendering: a truncated or corrupt EXR is one line
+    from .reference import load_reference_exr
+    load_reference_exr(p)
 
 
 EXR_MAGIC = b"\x76\x2f\x31\x01"
@@ -164,8 +172,8 @@ def main(argv: list[str] | None = None) -> int:
     from ..progress import ProgressBar
 
     args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
-    if not args.k_exponent >= 0:
-        raise StpmError("--k-exponent must be >= 0")
+    if not 0 <= args.k_exponent <= K_EXPONENT_MAX:
+        raise StpmError(f"--k-exponent must be in [0, {K_EXPONENT_MAX:g}], got {args.k_exponent:g}")
     if args.time_budget is not None and args.time_budget < 0:
         raise StpmError("--time-budget must be >= 0 seconds")
     if any(v is not None and v < 1 for v in (args.reference_photons, args.reference_samples, args.reference_steps)):
@@ -190,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
         out_dir = Path(args.output) if args.output else scene_path.with_name(scene_path.stem + "_compare")
         if out_dir.exists() and not out_dir.is_dir():
             raise StpmError(f"report folder {out_dir} is a file, not a directory: choose another --output")
-        check_memory(scene.resolution, "ACCUMULATION")   # the sweep renders accumulation too
+        check_memory(scene.resolution, "ACCUMULATION", settings)   # the sweep renders accumulation too
 
         bar = ProgressBar(quiet=args.quiet)
         try:
@@ -205,8 +213,8 @@ def main(argv: list[str] | None = None) -> int:
                                  scene_name=scene_path.name, scene_path=scene_path)
         finally:
             bar.close()
-    print(f"report: {report['files']['html']}")
-    print(f"numbers: {report['files']['json']}")
+    print(f"report: {safe_text(report['files']['html'])}")
+    print(f"numbers: {safe_text(report['files']['json'])}")
     for line in _headline(report):
-        print(line)
+        print(safe_text(line))
     return EXIT_OK

@@ -153,6 +153,9 @@ def parse_budget(item) -> tuple[float, float, float]:
     return b, s, f
 
 
+K_MAX = 100_000        # RenderSettings.k_nearest's upper limit
+
+
 def budget_k(k_file: int, photon_factor: float, k_factor: float = 1.0, k_exponent: float = 0.0) -> int:
     """k of a photon run: max(1, round(k_factor x k_file x photon_factor ** k_exponent)).
 
@@ -164,7 +167,14 @@ def budget_k(k_file: int, photon_factor: float, k_factor: float = 1.0, k_exponen
     """
     if not (k_exponent >= 0 and math.isfinite(k_exponent)):
         raise StpmError(f"k exponent must be >= 0, got {k_exponent!r}")
-    return max(1, int(round(float(k_factor) * int(k_file) * float(photon_factor) ** float(k_exponent))))
+    try:
+        k = float(k_factor) * int(k_file) * float(photon_factor) ** float(k_exponent)
+    except OverflowError:
+        k = math.inf
+    if not k <= K_MAX:
+        raise StpmError(f"k of the budget x{float(photon_factor):g} with k exponent {float(k_exponent):g} would be "
+                        f"{k:.3g}, beyond k's limit {K_MAX}: lower --k-exponent or the budget")
+    return max(1, int(round(k)))
 
 
 def plan_runs(settings, *, photon_budgets=DEFAULT_PHOTON_BUDGETS,
