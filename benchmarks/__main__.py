@@ -5,6 +5,11 @@ Discovers ``benchmarks/bench_*.py``, calls each module's ``run() -> dict``
 ``python -m benchmarks rays``), prints one table per module and writes all
 results with machine information to ``bench_out/results.json`` (merged with
 the results of benchmarks not run this time).
+
+``bench_room`` (issue 13's room: STPM's FINAL preset against Cycles at 1024 spp) needs bpy and
+flip-evaluator (both installed by ``build.py``); its first run renders the Cycles reference
+(about 10 min on 2 cores) and caches it in ``bench_out/cache/room/``, later runs take about
+4 min.  ``python -m benchmarks room`` runs it alone.
 """
 from __future__ import annotations
 

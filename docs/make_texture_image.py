@@ -26,8 +26,9 @@ W, H = 200, 150
 
 
 def _standard(x: np.ndarray) -> np.ndarray:
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+    """Blender's Standard view transform without the sRGB curve: clipped linear values
+    (``write_png`` applies the curve; applying it here too washed the picture out)."""
+    return np.clip(x, 0.0, 1.0)
 
 
 def main() -> int:
