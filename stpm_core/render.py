@@ -15,6 +15,8 @@ STANDARD estimate (time plays no role inside one still).
 """
 from __future__ import annotations
 
+import re
+
 import time as _time
 from dataclasses import dataclass, field
 
@@ -108,6 +110,18 @@ def render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
         raise
 
 
+_NODE_MESSAGE = re.compile(r"^(material '.*?': )node ('.*?' \(\w+\))")
+
+
+def _already_said(message: str, said: list) -> bool:
+    """Did the exporter already report this node-interpreter message (the same text, or a message
+    of the same material naming the same node, e.g. the bake report's)?"""
+    if message in said:
+        return True
+    m = _NODE_MESSAGE.match(message)
+    return m is not None and any(w.startswith(m.group(1)) and m.group(2) in w for w in said)
+
+
 def _render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     """Render ``scene`` with ``settings`` (RenderSettings).
 
@@ -144,8 +158,8 @@ def _render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     shading = shading_data(scene, table.closures)      # node programs compiled, textures packed
     # node inputs the interpreter could not evaluate (once: the exporter may have said so already)
     said = scene.metadata.get("warnings", []) if isinstance(getattr(scene, "metadata", None), dict) else []
-    said = {w for w in said if isinstance(w, str)} if isinstance(said, list) else set()
-    warnings.extend(w for w in shading.unsupported if w not in said)
+    said = [w for w in said if isinstance(w, str)] if isinstance(said, list) else []
+    warnings.extend(w for w in shading.unsupported if not _already_said(w, said))
     t_plan = _time.perf_counter()
     plan = make_plan(scene, settings, caster=caster, lights=lights)
     psettings = apply_plan(settings, plan)      # what the plan rules out gets no photons; STANDARD when static

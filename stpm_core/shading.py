@@ -47,13 +47,20 @@ class ShadingData:
     instances: list = field(default_factory=list)     # the scene's instances (normal matrices)
     emitting: frozenset = frozenset()  # materials whose node program may emit (not constant black)
     transparent: frozenset = frozenset()   # materials whose node program may let rays through
+    # materials whose program picks its closure per hit (Mix / Add Shader, Alpha) and may pick a
+    # scattering one: photons are stored there whatever the pick (``photons.trace``)
+    store_any: frozenset = frozenset()
+
+    def material_mask(self, which: frozenset) -> np.ndarray:
+        """(M + 1,) bool over material ids (index -1: a miss, False) of the set ``which``."""
+        mask = np.zeros(self.closures.shape[0], bool)
+        mask[list(which)] = True
+        return mask
 
     @property
     def transparent_mask(self) -> np.ndarray:
         """(M + 1,) bool: may hits on material i (index -1: a miss) be transparent?"""
-        mask = np.zeros(self.closures.shape[0], bool)
-        mask[list(self.transparent)] = True
-        return mask
+        return self.material_mask(self.transparent)
 
 
 def _empty_attributes(n_inst: int) -> tuple:
@@ -185,7 +192,7 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
     uv_layers: list = [""]
     color_layers: list = []
     words, unsupported, uses_mix, uses_normals, uses_frames = [], [], False, False, False
-    emitting, transparent = set(), set()
+    emitting, transparent, store_any = set(), set(), set()
     at = 0
     for i, m in enumerate(scene.materials):
         g = getattr(m, "graph", None)
@@ -203,6 +210,8 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
             emitting.add(i)
         if prog.may_pass:
             transparent.add(i)
+        if prog.uses_mix and prog.may_scatter:
+            store_any.add(i)
         unsupported += [f"material {m.name!r}: {u}" for u in prog.unsupported]
     prog_all = np.concatenate(words) if words else np.zeros(1)
     starts = [int(r) for r in rows[:-1, C_PROGRAM] if r >= 0]
@@ -217,7 +226,8 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
                      uses_programs=bool(words), uses_mix=uses_mix, uses_normals=uses_normals, uses_frames=uses_frames,
                      unsupported=unsupported, uv_layers=uv_layers,
                      texture_bytes=pack.nbytes if words else 0, instances=list(scene.instances),
-                     emitting=frozenset(emitting), transparent=frozenset(transparent))
+                     emitting=frozenset(emitting), transparent=frozenset(transparent),
+                     store_any=frozenset(store_any))
     scene.__dict__["_shading_data"] = (key, sd, base)
     return sd
 

@@ -168,6 +168,29 @@ def test_node_graph_messages_are_reported_once(tmp_path):
     assert len(hits) == 1, LAST_RENDER["warnings"]
 
 
+def test_unbaked_node_is_named_once(tmp_path, monkeypatch):
+    """An input that needs a bake (a Gabor texture, no bake cached): the exporter's bake report names
+    it; the core's compiler message about the same node is not repeated (an artist's review saw
+    both)."""
+    monkeypatch.setenv("STPM_BAKE_CACHE", str(tmp_path / "bakes"))
+    scene = fresh()
+    scene.render.engine = "STPM"
+    _tiny(scene, photons=0)
+    add_camera(location=(0, -4, 1), rotation=(math.radians(80), 0, 0))
+    mat = bpy.data.materials.new("GaborM")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    t = mat.node_tree
+    gab, ramp = t.nodes.new("ShaderNodeTexGabor"), t.nodes.new("ShaderNodeValToRGB")
+    t.links.new(gab.outputs[0], ramp.inputs["Fac"])           # the ramp makes it a node graph
+    t.links.new(ramp.outputs["Color"], t.nodes["Principled BSDF"].inputs["Base Color"])
+    add_mesh("cube", "G", material=mat)
+    add_light("POINT", energy=200.0, location=(0, -2, 3))
+    _render_to_exr(scene, tmp_path / "gabor.exr")
+    hits = [w for w in LAST_RENDER["warnings"] if "Gabor" in w]
+    assert len(hits) == 1, LAST_RENDER["warnings"]
+
+
 def test_bad_setting_is_reported_not_raised_from_the_engine():
     scene = fresh()
     scene.render.engine = "STPM"

@@ -89,3 +89,50 @@ def test_photons_pass_transparent_sheets_tinted():
     inside = (np.abs(pos[:, 0]) < 1.5) & (np.abs(pos[:, 1]) < 1.5)
     E = power[inside].sum(axis=0) / 9.0
     np.testing.assert_allclose(E, S * np.asarray(TINT), rtol=0.05)
+
+
+def _stochastic_floor(kind: str) -> Material:
+    """A white floor whose closure is picked per hit: Mix(Transparent, Diffuse) by 0.5, or
+    Add(Emission ~0, Diffuse), or a Principled BSDF of Alpha 0.5."""
+    d = Node("ShaderNodeBsdfDiffuse", inputs={"Color": (RHO, RHO, RHO)}, outputs={"BSDF": "SHADER"})
+    if kind == "mix":
+        nodes = {"T": Node("ShaderNodeBsdfTransparent", inputs={"Color": (1.0, 1.0, 1.0)}, outputs={"BSDF": "SHADER"}),
+                 "D": d, "M": Node("ShaderNodeMixShader", inputs={"Fac": 0.5, "Shader": Link("T", "BSDF"),
+                                                                  "Shader_001": Link("D", "BSDF")},
+                                   outputs={"Shader": "SHADER"})}
+        out = Link("M", "Shader")
+    elif kind == "add":
+        nodes = {"E": Node("ShaderNodeEmission", inputs={"Color": (1.0, 1.0, 1.0), "Strength": 1e-6},
+                           outputs={"Emission": "SHADER"}),
+                 "D": d, "A": Node("ShaderNodeAddShader", inputs={"Shader": Link("E", "Emission"),
+                                                                  "Shader_001": Link("D", "BSDF")},
+                                   outputs={"Shader": "SHADER"})}
+        out = Link("A", "Shader")
+    else:
+        nodes = {"P": Node("ShaderNodeBsdfPrincipled", inputs={"Base Color": (RHO, RHO, RHO), "Alpha": 0.5,
+                                                               "Specular IOR Level": 0.0},
+                           outputs={"BSDF": "SHADER"})}
+        out = Link("P", "BSDF")
+    return Material(name=kind, graph=ShaderGraph(nodes=nodes, surface=out))
+
+
+@pytest.mark.parametrize("kind", ["mix", "add", "alpha"])
+def test_photons_are_stored_on_surfaces_that_pick_their_closure(kind):
+    """The photon map estimates the irradiance on a surface whatever closure a photon picks there:
+    on a floor of Mix(Transparent, Diffuse), Add(Emission, Diffuse) or Principled Alpha 0.5 the
+    stored photons still sum to the sun's S W/m^2 (before: half, as only the diffuse picks were
+    stored, and camera paths weigh by their own pick again: Indirect came out x0.5)."""
+    from stpm_core.bsdf import MaterialTable
+    from stpm_core.lights import LightSet
+    from stpm_core.photons.record import photon_origin
+    from stpm_core.photons.trace import trace_global_map
+    from stpm_core.raycast import make_caster
+    floor = plane_mesh(4.0, z=0.0, material=0)
+    sun = Light(type="SUN", power=S, transform=MotionTransform.static(np.eye(4)))
+    sc = make_scene([floor], [_stochastic_floor(kind)], ortho_camera_down(5.0, 1.0), [sun], resolution=(8, 8))
+    recs, _ = trace_global_map(sc, RenderSettings(photons_global=20000, max_depth=1), make_caster(sc),
+                               LightSet(sc), MaterialTable(sc.materials), min_nondelta=0)
+    pos = recs["position"] + photon_origin(sc)
+    inside = (np.abs(pos[:, 0]) < 1.5) & (np.abs(pos[:, 1]) < 1.5) & (np.abs(pos[:, 2]) < 1e-3)
+    E = recs["power"][inside].sum(axis=0) / 9.0
+    np.testing.assert_allclose(E, S, rtol=0.05)

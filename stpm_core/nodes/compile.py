@@ -51,6 +51,7 @@ class Program:
     uses_frames: bool = False                          # reads each hit's object-to-world normal matrix
     may_emit: bool = False                             # some closure's emission is not constant black
     may_pass: bool = False                             # some closure lets rays through (transparency)
+    may_scatter: bool = False                          # some closure has a diffuse or glossy BSDF
 
 
 class _Compiler:
@@ -76,6 +77,7 @@ class _Compiler:
         self.may_emit = False          # an emission whose colour and strength are not constant zero
         self.may_pass = False          # a Transparent BSDF, or a Principled Alpha that is not a constant 1
         self.add_depth = 0             # Add Shaders above the shader being compiled
+        self.may_scatter = False       # a Principled / Diffuse / Glossy closure (a non-delta lobe, likely)
 
     # -- slots ---------------------------------------------------------------------------
     # Output slots are numbered from 0 while compiling and shifted past the constants at the end:
@@ -227,6 +229,7 @@ class _Compiler:
             self.shader(second if isinstance(second, Link) else None, depth + 1)
             return
         if t == "ShaderNodeAddShader":
+            self.uses_mix = True          # a choice per hit: a fresh seed per bounce
             at = self.emit("ADD_SHADER", 0.0)
             self.add_depth += 1
             first = node.inputs.get("Shader")
@@ -247,10 +250,14 @@ class _Compiler:
             self.warn(n, node, "under an Add Shader: its specular lobes are weighted approximately "
                                "(the sum is estimated by picking one input at weight 2)")
         normal = self.normal_input(n, node)
+        if t in ("ShaderNodeBsdfPrincipled", "ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy",
+                 "ShaderNodeBsdfAnisotropic"):
+            self.may_scatter = True
         if t == "ShaderNodeBsdfPrincipled":
             a = node.inputs.get("Alpha", 1.0)
             if isinstance(a, Link) or (isinstance(a, (int, float)) and a < 1.0):
                 self.may_pass = True
+                self.uses_mix = True      # Alpha picks the BSDF or transparency per hit
             for ident in ("Coat Weight", "Sheen Weight", "Subsurface Weight"):
                 v = node.inputs.get(ident, 0.0)
                 if isinstance(v, Link) or (isinstance(v, (int, float)) and v > 0):
@@ -824,4 +831,4 @@ def compile_graph(graph: ShaderGraph, n_textures: int = 0, uv_layers: list | Non
     return Program(words=c.finish(), unsupported=c.unsupported, uv_layers=layers, color_layers=c.color_layers,
                    uses_mix=c.uses_mix,
                    uses_normals=c.uses_normals, uses_frames=c.uses_frames, may_emit=c.may_emit,
-                   may_pass=c.may_pass)
+                   may_pass=c.may_pass, may_scatter=c.may_scatter)

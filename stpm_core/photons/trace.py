@@ -29,7 +29,7 @@ import numpy as np
 
 from .. import kernels as _kernels
 from ..kernels.bsdf import ggx_albedo_tables
-from ..kernels.closure import C_HAS_DELTA, N_CLOSURE, pack_materials
+from ..kernels.closure import C_HAS_DELTA, C_NONDELTA, N_CLOSURE, pack_materials
 from ..kernels.svm import shade
 from ..kernels.photon_paths import photon_bounce
 from ..parallel import ordered_map, worker_count
@@ -174,6 +174,16 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
                 hits.ns[idx] = G[2]                      # Normal inputs (normal maps) set the shading normals
         else:
             shade(sd, np.ascontiguousarray(hits.material[idx]), None, 0, C)
+        if sd.store_any:
+            # A surface that picks its closure per hit (Mix / Add Shader, Alpha): the map estimates
+            # the irradiance there whatever this photon's pick (camera paths weigh by their own
+            # pick), so a photon whose pick scatters nothing here (transparency, emission, a delta
+            # lobe) is stored as well, by the map's path rule
+            rule = (n_delta >= 1) if caustic else (n_nondelta >= min_nondelta)
+            extra = np.flatnonzero(sd.material_mask(sd.store_any)[hits.material[idx]]
+                                   & (C[:, C_NONDELTA] <= 0.0) & rule)
+            if extra.size:
+                stored.append(make_records(hits.position[idx[extra]], -d[extra], Phi[extra], t[extra], origin))
         if sd.transparent:
             # transparent hits: the photon goes on behind, its power tinted (not a bounce)
             Phi = pass_through(caster, sd, inst_offset, hits, d, t, C, Phi, rng, at=idx)
