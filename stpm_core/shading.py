@@ -12,6 +12,7 @@ material's constant closure row (the same numbers as before node programs existe
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -51,16 +52,21 @@ class ShadingData:
     # scattering one: photons are stored there whatever the pick (``photons.trace``)
     store_any: frozenset = frozenset()
 
-    def material_mask(self, which: frozenset) -> np.ndarray:
+    def _mask(self, which: frozenset) -> np.ndarray:
         """(M + 1,) bool over material ids (index -1: a miss, False) of the set ``which``."""
         mask = np.zeros(self.closures.shape[0], bool)
         mask[list(which)] = True
         return mask
 
-    @property
+    @cached_property
     def transparent_mask(self) -> np.ndarray:
-        """(M + 1,) bool: may hits on material i (index -1: a miss) be transparent?"""
-        return self.material_mask(self.transparent)
+        """(M + 1,) bool: may hits on material i (index -1: a miss) be transparent?  (Built once.)"""
+        return self._mask(self.transparent)
+
+    @cached_property
+    def store_mask(self) -> np.ndarray:
+        """(M + 1,) bool of ``store_any`` (built once)."""
+        return self._mask(self.store_any)
 
 
 def _empty_attributes(n_inst: int) -> tuple:

@@ -34,21 +34,34 @@ def _read_exr_rgb(path) -> np.ndarray:
 
 def render_cycles(scene, tmp_path, samples: int = 64, seeds=(0, 1, 2, 3), max_bounces: int = 0) -> np.ndarray:
     """(K, H, W, 3) linear RGB of Cycles (CPU, no denoising, no adaptive sampling), one image per seed."""
-    import bpy
-    scene.render.engine = "CYCLES"
-    cy = scene.cycles
-    cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", samples, False, False
+    cy = _cycles_setup(scene, samples)
     cy.max_bounces = max_bounces
     cy.diffuse_bounces = cy.glossy_bounces = cy.transmission_bounces = min(max_bounces, 12)
     cy.caustics_reflective = cy.caustics_refractive = max_bounces > 0
+    return _cycles_seeds(scene, tmp_path, seeds, "cycles")
+
+
+def _cycles_setup(scene, samples: int):
+    """Cycles on the CPU at ``samples``, no denoising, adaptive sampling or clamping, EXR output;
+    returns scene.cycles for the caller's bounce settings."""
+    scene.render.engine = "CYCLES"
+    cy = scene.cycles
+    cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", samples, False, False
     cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0
-    scene.render.image_settings.media_type = "IMAGE" if hasattr(scene.render.image_settings, "media_type") else None
+    if hasattr(scene.render.image_settings, "media_type"):
+        scene.render.image_settings.media_type = "IMAGE"
     scene.render.image_settings.file_format = "OPEN_EXR"
     scene.render.image_settings.color_depth = "32"
+    return cy
+
+
+def _cycles_seeds(scene, tmp_path, seeds, prefix: str) -> np.ndarray:
+    """(K, H, W, 3): one render per seed, read back from ``tmp_path/<prefix>_<seed>.exr``."""
+    import bpy
     out = []
     for s in seeds:
-        cy.seed = int(s)
-        path = tmp_path / f"cycles_{s}.exr"
+        scene.cycles.seed = int(s)
+        path = tmp_path / f"{prefix}_{s}.exr"
         scene.render.filepath = str(path)
         bpy.ops.render.render(write_still=True)
         out.append(_read_exr_rgb(path))
@@ -111,25 +124,10 @@ def render_cycles_paths(scene, tmp_path, samples: int = 64, seeds=(0, 1, 2, 3), 
     the sum of the three, so only the per-kind limits bind.  ``blur_glossy`` is Cycles' Filter Glossy
     (default 1.0 there, which blurs caustics: 0 here).  CPU, no denoising, no adaptive sampling, no
     clamping, as ``render_cycles``."""
-    import bpy
-    scene.render.engine = "CYCLES"
-    cy = scene.cycles
-    cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", samples, False, False
+    cy = _cycles_setup(scene, samples)
     cy.diffuse_bounces, cy.glossy_bounces = diffuse_bounces, glossy_bounces
     cy.transmission_bounces = transmission_bounces
     cy.max_bounces = diffuse_bounces + glossy_bounces + transmission_bounces
     cy.caustics_reflective = cy.caustics_refractive = bool(caustics)
     cy.blur_glossy = float(blur_glossy)
-    cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0
-    if hasattr(scene.render.image_settings, "media_type"):
-        scene.render.image_settings.media_type = "IMAGE"
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.image_settings.color_depth = "32"
-    out = []
-    for s in seeds:
-        cy.seed = int(s)
-        path = tmp_path / f"cycles_paths_{s}.exr"
-        scene.render.filepath = str(path)
-        bpy.ops.render.render(write_still=True)
-        out.append(_read_exr_rgb(path))
-    return np.stack(out)
+    return _cycles_seeds(scene, tmp_path, seeds, "cycles_paths")

@@ -180,7 +180,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
             # pick), so a photon whose pick scatters nothing here (transparency, emission, a delta
             # lobe) is stored as well, by the map's path rule
             rule = (n_delta >= 1) if caustic else (n_nondelta >= min_nondelta)
-            extra = np.flatnonzero(sd.material_mask(sd.store_any)[hits.material[idx]]
+            extra = np.flatnonzero(sd.store_mask[hits.material[idx]]
                                    & (C[:, C_NONDELTA] <= 0.0) & rule)
             if extra.size:
                 stored.append(make_records(hits.position[idx[extra]], -d[extra], Phi[extra], t[extra], origin))
