@@ -10,6 +10,11 @@ the results of benchmarks not run this time).
 flip-evaluator (both installed by ``build.py``); its first run renders the Cycles reference
 (about 10 min on 2 cores) and caches it in ``bench_out/cache/room/``, later runs take about
 4 min.  ``python -m benchmarks room`` runs it alone.
+
+``bench_product`` (issue 14's HDRI product shot, ``blend_scenes/hdri_product.blend``: STPM's FINAL preset
+against Cycles at 1024 spp, inside and outside the glass caustics) needs the same; its first run renders two
+Cycles references (about 7 min on 2 cores) into ``bench_out/cache/product/``, later runs take about 5 min.
+``python -m benchmarks product`` runs it alone.
 """
 from __future__ import annotations
 

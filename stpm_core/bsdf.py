@@ -22,10 +22,14 @@ Refraction does not scale radiance by eta^2 (the same BSDF serves camera paths
 and photons; over a closed object the factors cancel).
 
 Conventions: wo and wi point AWAY from the surface.  ``ng`` / ``ns`` may face
-either way; each call flips both toward wo (``ns`` is also flipped onto ng's
-side).  A reflection lobe gives 0 unless wi is above both ng and ns (no light
-leaks through the shading normal), a transmission lobe unless wi is below ng.
-For GLASS, wo on the ng side = entering (eta = ior), else leaving (1 / ior).
+either way; each call turns both by the sign that puts ng toward wo (as Cycles'
+back-face flip: a shading normal on the other side of its face stays there).  The
+specular lobes use ns raised where it differs from ng so the mirror reflection of wo
+stays above the surface (Cycles' ensure_valid_specular_reflection), and give nothing
+where wo is below that normal.  A reflection lobe gives 0 unless wi is above both ng
+and its normal (no light leaks through the shading normal), a transmission lobe unless
+wi is below ng.  For GLASS, wo on the ng side = entering (eta = ior), else leaving
+(1 / ior): a mesh with flipped normals is glass seen from inside, as in Cycles.
 
 The shading itself is compiled: the public functions below hand the material
 closures (``MaterialTable.closures``, :func:`stpm_core.kernels.closure.pack_materials`)

@@ -44,6 +44,7 @@ from .kernels import paths as _K
 from .kernels.bsdf import ggx_albedo_tables
 from .kernels.closure import N_CLOSURE, pack_materials
 from .kernels.light_params import light_params, light_poses, mesh_arrays
+from .world_light import constant_environment
 from .kernels.svm import shade
 from .parallel import ordered_map, worker_count
 from .raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
@@ -125,6 +126,7 @@ for _name, _nc, _ in PASSES:
 _NO_IDX = np.zeros(0, np.int64)
 _NO_U = np.zeros(0)
 _NO_ROWS3 = np.zeros((0, 3))
+_NO_FLAGS = np.zeros(0, np.uint8)
 
 
 def _compact_layout(ctx) -> dict[str, tuple[int, int]]:
@@ -150,6 +152,16 @@ def _compact_layout(ctx) -> dict[str, tuple[int, int]]:
     return out
 
 
+_IDENTITY_POSE = np.eye(4)[None].copy()
+
+
+def _world_poses(ctx, t: np.ndarray) -> np.ndarray:
+    """The world mapping's map-to-world matrices (k, 4, 4) at the rows' times t (k = 1: static)."""
+    if ctx.world_li < 0:
+        return _IDENTITY_POSE
+    return light_poses(ctx.lights, ctx.world_li, t)
+
+
 def _first_pose(a: np.ndarray) -> np.ndarray:
     """(k, 3) contiguous: one row when every row of a (n, 3) is the same view (stride 0)."""
     a = np.asarray(a, np.float64)
@@ -159,10 +171,11 @@ def _first_pose(a: np.ndarray) -> np.ndarray:
 
 
 def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.ndarray, rng, stats: TraceStats,
-            dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool) -> bool:
+            dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool, mis: bool = False) -> bool:
     """Next-event estimation at the hit rows sh (k,) of ``hits`` (rays d, closures C), added straight
     into dst (n, 3) (the Direct pass: dst[idx[row]] += beta[row] * contribution, light by light);
-    returns whether any shadow ray was cast.
+    returns whether any shadow ray was cast.  mis: the paths go on through their rough lobes
+    after this (the world's samples are then weighed against them, ``kernels.paths.nee_light``).
 
     Per light with power: its (k, 2) uniforms (``_light_uniforms``), ``kernels.paths.nee_light``
     (light sample + BSDF + shadow-ray set-up), the shadow rays at the rows' times, then
@@ -177,7 +190,7 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.nda
     so, sd = _scratch("so", (k, 3)), _scratch("sd", (k, 3))
     stmax, live = _scratch("stmax", (k,)), _scratch("live", (k,), np.int64)
     contrib = _scratch("contrib", (k, 3))
-    S = _scratch("light_samples", (k, 7))
+    S = _scratch("light_samples", (k, 8))
     E, E_avg = ctx.ggx
     for li in range(len(lights)):
         if lights.power[li] <= 0.0:
@@ -186,8 +199,8 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.nda
         u = _light_uniforms(light, k, rng, _scratch("u_light", (k, 2)))
         prm, mesh = ctx.light_data[li]
         poses = light_poses(lights, li, t_s)
-        m = _K.nee_light(sh, P, NG, NS, d, C, E, E_avg, prm, poses, *mesh, t_s, u, EPS, contrib, so, sd, stmax, live,
-                         S)
+        m = _K.nee_light(sh, P, NG, NS, d, C, E, E_avg, prm, poses, *mesh, t_s, u, EPS, mis, ctx.stop_coat, contrib,
+                         so, sd, stmax, live, S)
         if m == 0:
             continue
         if getattr(light, "textured", False):
@@ -296,12 +309,13 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     dsts = {name: V[:, slice(*cols[name])] for name in ("Indirect", "Caustic") if name in cols}
     covered = np.empty(n) if full else _scratch("covered", (n,))
     cam_pos, cam_axis = _first_pose(cam_pos), _first_pose(cam_axis)
-    world_L = np.asarray(ctx.world_radiance, np.float64)
-    world_on = bool(np.any(world_L > 0))
+    world_on = bool(np.any(np.asarray(ctx.world_radiance) > 0))
     E, E_avg = ctx.ggx
     touched = set() if touched is None else touched
     idx = None                               # live row -> sample (None: every sample, in order)
     beta = None                              # path throughput (None: 1)
+    glossy = None                            # 1 where the ray left a rough lobe (None: none did)
+    world_w = None                           # the world's weight where the ray escapes (with glossy)
     tmax = tmax0                             # camera clipping for the first segment
     guard = None                             # camera rays: the caster's own guard
     for bounce in range(ctx.max_depth + 1):
@@ -323,18 +337,23 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         if sd.transparent:
             # transparent hits (cut-outs, Transparent BSDF): the rays go on to what lies behind
             beta = pass_through(ctx.caster, sd, ctx.inst_offset, hits, d, t, C, beta, rng, tmax=tmax)
-        use_idx, use_beta = idx is not None, beta is not None
+        use_idx, use_beta, use_glossy = idx is not None, beta is not None, glossy is not None
         idx_k = idx if use_idx else _NO_IDX
         beta_k = beta if use_beta else _NO_ROWS3
+        glossy_k = glossy if use_glossy else _NO_FLAGS
+        world_w_k = world_w if use_glossy else _NO_U
         # -- Misses, emission, first-hit passes; rows to shade and to continue ---------------------
         sh, spec = _scratch("sh", (m,), np.int64), _scratch("spec", (m,), np.int64)
         n_hit, n_sh, n_spec, n_emit = _K.classify_hits(
-            hits.t, C, world_L, world_on and not (bounce == 0 and ctx.film_transparent), idx_k, use_idx, beta_k,
-            use_beta, V, cols["Emit"][0], bounce == 0, cols["Depth"][0], cols["Normal"][0], DEPTH_BACKGROUND,
+            hits.t, C, ctx.env_camera if bounce == 0 else ctx.env, _world_poses(ctx, t), d,
+            world_on and not (bounce == 0 and ctx.film_transparent),
+            idx_k, use_idx, beta_k, use_beta, glossy_k, world_w_k, use_glossy, V, cols["Emit"][0], bounce == 0, cols["Depth"][0], cols["Normal"][0], DEPTH_BACKGROUND,
             hits.position, hits.ns, cam_pos, cam_axis, covered, sh, spec)
         # -- Lights seen along the rays (before the next surface) -----------------------------------
         if ctx.shaped_lights:
             val = _seen_lights(ctx, o, d, t, hits.t, bounce == 0)
+            if val is not None and use_glossy:
+                val[glossy != 0] = 0.0           # after a rough lobe: next-event estimation counted them
             if val is not None:
                 _K.scatter_add(L_emit, np.arange(m), idx_k, use_idx, beta_k, use_beta, val)
                 touched.add("Emit")
@@ -347,22 +366,28 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         if n_sh:
             t_s = np.take(t, sh, out=_scratch("t_s", (n_sh,)))
             if len(ctx.lights) and _direct(ctx, sh, hits, d, C, t_s, rng, stats, L_direct, idx_k, use_idx,
-                                           beta_k, use_beta):
+                                           beta_k, use_beta, mis=bounce < ctx.max_depth):
                 touched.add("Direct")
             if ctx.maps is not None:
                 _photon_terms(ctx, sh, hits, d, C, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched)
         if bounce == ctx.max_depth or n_spec == 0:
             break
-        # -- Continue through delta lobes only (materials without one end here) ---------------------
+        # -- Continue through delta and rough non-diffuse lobes (the diffuse lobe ends here) ---------
         u = rng.random((n_spec, 3))
         rr = bounce + 1 >= RR_START
         u_rr = rng.random(n_spec) if rr else _NO_U
         EPS = offset_lengths(ctx.inst_offset, hits.instance[spec], hits.position[spec])
         idx_n = np.empty(n_spec, np.int64)
         beta_n, o_n, d_n, guard_n = np.empty((n_spec, 3)), np.empty((n_spec, 3)), np.empty((n_spec, 3)), np.empty(n_spec)
+        glossy_n, world_w_n = np.empty(n_spec, np.uint8), np.empty(n_spec)
+        t_spec = t[spec] if ctx.world_li >= 0 and not ctx.lights.lights[ctx.world_li].transform.is_static else t[:1]
         n_go = _K.specular_step(spec, idx_k, use_idx, beta_k, use_beta, hits.position, hits.ng, hits.ns, d, C, E,
-                                E_avg, u, rr, u_rr, EPS, GUARD_FRACTION, idx_n, beta_n, o_n, d_n, guard_n)
+                                E_avg, u, rr, u_rr, EPS, GUARD_FRACTION, ctx.stop_coat, ctx.env,
+                                _world_poses(ctx, t_spec), ctx.world_li >= 0, idx_n, beta_n, o_n, d_n, guard_n,
+                                glossy_n, world_w_n)
         idx, beta, o, d, guard = idx_n[:n_go], beta_n[:n_go], o_n[:n_go], d_n[:n_go], guard_n[:n_go]
+        glossy = glossy_n[:n_go] if glossy_n[:n_go].any() else None
+        world_w = world_w_n[:n_go] if glossy is not None else None
         tmax = None
 
     if full:
@@ -388,8 +413,12 @@ class _Context:
     map_kinds: dict
     max_depth: int
     inst_offset: np.ndarray                  # (n_instances,) object part of the ray offsets (offset_lengths)
-    world_radiance: np.ndarray
+    world_radiance: np.ndarray               # (3,) constant, or an image world's mean radiance
     film_transparent: bool
+    env: tuple = None                        # the world's environment arrays (kernels.environment)
+    env_camera: tuple = None                 # what camera rays see of it (World.camera_image, else env)
+    world_li: int = -1                       # the world's light index, -1 when it does not shine
+    stop_coat: bool = False                  # camera paths end on a rough coat too (kernels.bsdf.bsdf_sample_path)
     closures: np.ndarray = None              # (M + 1, N_CLOSURE) material closure rows (kernels.closure)
     shading: object = None                   # shading.ShadingData: node programs, textures, mesh attributes
     ggx: tuple = None                        # (E (32, 32), E_avg (32,)) GGX albedo tables (kernels.bsdf)
@@ -518,6 +547,10 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                    closures=closures, ggx=ggx_albedo_tables())
     ctx.shading = shading_data(scene, closures)
     ctx.light_data = [(light_params(lights, li), mesh_arrays(lights, li)) for li in range(len(lights))]
+    ctx.world_li = next((li for li, l in enumerate(lights.lights) if l.type == "WORLD"), -1)
+    ctx.env = (lights.lights[ctx.world_li].env if ctx.world_li >= 0
+               else constant_environment(np.asarray(scene.world.radiance, float)))
+    ctx.env_camera = lights.lights[ctx.world_li].env_camera if ctx.world_li >= 0 else ctx.env
     ctx.shaped_lights = tuple(li for li, l in enumerate(lights.lights)
                               if _has_shape(l) and l.power > 0 and np.any(np.asarray(l.color, float) > 0))
     ctx.light_visible_camera = [bool(v) for v in (scene.metadata.get("light_visible_camera") or [])]

@@ -340,7 +340,8 @@ class LightSet:
         # The world, when it shines: a light entry like the others (stpm_core/world_light.py)
         if scene.world.shines:
             from .world_light import WorldLight
-            self.lights.append(WorldLight(scene.world.radiance, self._scene_center, self._scene_radius))
+            self.lights.append(WorldLight(scene.world.radiance, self._scene_center, self._scene_radius,
+                                              world=scene.world))
         # SPOT / SUN / AREA lights with no emitting direction at any key (zero Z scale,
         # zero area): they emit nothing, so flux 0 and no photon budget
         self._dead = [self._no_direction(i) for i in range(len(self.lights))]
@@ -448,7 +449,7 @@ class LightSet:
 
     def kernel_light(self, li: int):
         """Light li as kernel data, packed once per LightSet: (prm, static_poses, steps, corners,
-        q, cdf, Le) (:func:`stpm_core.kernels.light_params.kernel_light`, which next-event
+        q, cdf, Le, env) (:func:`stpm_core.kernels.light_params.kernel_light`, which next-event
         estimation, photon emission and the integrator share).  Packed on first use: the light's
         attributes are read then (change a light before that, or make a new LightSet).
         """
@@ -480,7 +481,7 @@ class LightSet:
             spot, a light with no emitting direction).  A textured MESH light's
             weight includes the radiance its node program emits at the sample.
         """
-        prm, poses, steps, corners, q, cdf, Le = kernel_light(self, li)
+        prm, poses, steps, corners, q, cdf, Le, env = kernel_light(self, li)
         p = kernel_array(np.asarray(p, np.float64).reshape(-1, 3))
         n = p.shape[0]
         times = np.atleast_1d(np.asarray(times, np.float64))
@@ -491,7 +492,7 @@ class LightSet:
         use_normals = normals is not None
         normals = kernel_array(np.asarray(normals, np.float64).reshape(n, 3)) if use_normals else _NO_NORMALS
         wi, dist, weight = np.empty((n, 3)), np.empty(n), np.empty((n, 3))
-        sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, p, times, u, normals, use_normals,
+        sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, env, p, times, u, normals, use_normals,
                             wi, dist, weight)
         light = self.lights[li]
         if getattr(light, "textured", False):        # each sample weighed by its own point's radiance

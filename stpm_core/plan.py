@@ -80,8 +80,8 @@ def mesh_fact(fn, mesh):
 def _material_kinds(scene) -> tuple[np.ndarray, np.ndarray]:
     """(M,) bool arrays: material has a delta lobe / reflects diffusely.
 
-    Delta lobes are the ones the caustic tracer follows (``photons.trace.has_delta``):
-    any glass, a smooth (roughness 0) metal, a smooth coat over a base.
+    Delta and glossy lobes are the ones the caustic tracer follows (``photons.trace.has_delta``):
+    any glass, any metal (smooth: a mirror; rough: glossy caustics), a smooth coat over a base.
     Diffuse = a Lambertian base with a non-black colour (where photon
     irradiance becomes radiance).
     """
@@ -91,7 +91,7 @@ def _material_kinds(scene) -> tuple[np.ndarray, np.ndarray]:
         w_glass = (1.0 - w_metal) * float(m.transmission)
         w_base = (1.0 - w_metal) * (1.0 - float(m.transmission))
         smooth = float(m.roughness) == 0.0
-        delta.append(w_glass > 0 or (smooth and (w_metal > 0 or (w_base > 0 and m.specular > 0))))
+        delta.append(w_glass > 0 or w_metal > 0 or (smooth and w_base > 0 and m.specular > 0))
         diffuse.append(w_base > 0 and bool(np.any(np.asarray(m.base_color, float) > 0)))
     return np.array(delta, bool), np.array(diffuse, bool)
 
@@ -187,7 +187,7 @@ def _light_faces(light, c: np.ndarray, r: float) -> bool:
 def world_light(scene):
     """The world as a light entry (:class:`~stpm_core.world_light.WorldLight`) around the scene's sphere."""
     from .world_light import WorldLight
-    return WorldLight(scene.world.radiance, *scene.bounding_sphere())
+    return WorldLight(scene.world.radiance, *scene.bounding_sphere(), world=scene.world)
 
 
 def _lightset_index(lights, n_scene: int) -> list[int]:

@@ -296,19 +296,60 @@ class Material:
 
 @dataclass
 class World:
-    """Background radiance seen by rays that leave the scene: ``color * strength``."""
+    """Background radiance seen by rays that leave the scene, in W/(m^2 sr).
+
+    Constant (``image`` None): ``L = color * strength`` from every direction.
+
+    An environment image (Blender's Environment Texture, equirectangular): the radiance seen
+    along a unit direction d (pointing away from the scene) is
+    ``L(d) = color * strength * image(u, v)`` with m = mapping^-1 d the direction in the image's
+    frame and Cycles' equirectangular coordinates ``u = (pi - atan2(m_y, m_x)) / (2 pi)``,
+    ``v = 1 - acos(m_z) / pi`` (v = 1 straight up; docs/lights-and-materials.md, "World").
+
+    image : (H, W, 3) float32 linear RGB, row 0 at the bottom (Blender's pixel order), >= 0.
+    mapping : map-to-world rotation over the shutter (the inverse of the Mapping node's
+        rotation; a MotionTransform whose matrices are rotations).
+    interpolation : 'LINEAR' (bilinear, Repeat) or 'CLOSEST', as the node's.
+    camera_image : None (camera rays see ``image`` like every other ray), or (H', W', 3) float32
+        (same rules as ``image``, which it needs): what **camera rays** see instead of ``image``
+        (Blender's Light Path "Is Camera Ray" = 1 in the world tree; ``image`` holds the world
+        with it = 0).  Looked up exactly as ``image``: same direction -> (u, v) rule, ``mapping``,
+        ``interpolation`` and ``color * strength`` factor.  A camera ray is a ray from the camera
+        that reaches the background directly or only through transparent surfaces (Transparent
+        BSDF, alpha cut-outs: they keep Cycles' camera-ray flag); rays after a reflection,
+        refraction or diffuse bounce, shadow / next-event rays, the world's light sampling and
+        its photons all use ``image``.  The exporter bakes both from Cycles (addon/export/world.py).
+    """
 
     color: np.ndarray = field(default_factory=lambda: np.zeros(3))
     strength: float = 1.0
+    image: np.ndarray | None = None
+    mapping: MotionTransform = field(default_factory=MotionTransform.static)
+    interpolation: str = "LINEAR"
+    camera_image: np.ndarray | None = None
 
     @property
     def radiance(self) -> np.ndarray:
-        return np.asarray(self.color, float) * float(self.strength)
+        """(3,) the constant radiance, or an image world's mean radiance over the sphere of directions."""
+        L = np.asarray(self.color, float) * float(self.strength)
+        if self.image is None:
+            return L
+        return L * sphere_mean(self.image)
 
     @property
     def shines(self) -> bool:
-        """Does the world light the scene (some channel of color * strength > 0)?"""
+        """Does the world light the scene (some channel of its mean radiance > 0)?"""
         return bool(np.any(self.radiance > 0))
+
+
+def sphere_mean(image: np.ndarray) -> np.ndarray:
+    """(3,) mean over the sphere of directions of an equirectangular image (H, W, 3): row y
+    covers polar angles theta in [pi (H - 1 - y) / H, pi (H - y) / H], solid angle proportional to
+    cos(theta_0) - cos(theta_1)."""
+    H = image.shape[0]
+    edges = np.cos(np.pi * (H - np.arange(H + 1)) / H)          # cos(theta) at the row edges, bottom up
+    w = edges[1:] - edges[:-1]                                   # (H,) >= 0, sums to 2
+    return (w[:, None] * image.astype(np.float64).mean(axis=1)).sum(axis=0) / w.sum()
 
 
 @dataclass
@@ -431,6 +472,55 @@ def _check_camera_transform(c: Camera) -> None:
         raise SceneError(f"camera.transform cannot form rays: its X, Y, Z axes have lengths "
                          f"{', '.join(f'{v:.3g}' for v in ln[k])} and |det| {det[k]:.3g} of the normalised axes "
                          f"(zero scale or collapsed axes; any non-zero scale works, the camera ignores it)")
+
+
+def _check_world_image(world: World) -> None:
+    """An environment image: (H, W, 3) finite, >= 0, not too bright; its mapping a rotation over the shutter."""
+    if world.interpolation not in ("LINEAR", "CLOSEST"):
+        raise SceneError(f"world.interpolation must be LINEAR or CLOSEST, got {world.interpolation!r}")
+    if not isinstance(world.mapping, MotionTransform):
+        raise SceneError("world.mapping must be a MotionTransform")
+    M = _transform_samples(world.mapping)
+    R = M[:, :3, :3]
+    err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max()
+    if not err < 1e-5 or not np.all(np.linalg.det(R) > 0):
+        raise SceneError(f"world.mapping must be a rotation at every key (R R^T = I within 1e-5, got {err:.3g} off)")
+    img = world.image
+    if img is None:
+        _check_world_camera_image(world)
+        return
+    if not isinstance(img, np.ndarray) or img.ndim != 3 or img.shape[2] != 3 or min(img.shape[:2]) < 1:
+        raise SceneError(f"world.image must be an (H, W, 3) array, got "
+                         f"{getattr(img, 'shape', type(img).__name__)}")
+    if img.dtype != np.float32:
+        raise SceneError(f"world.image must be float32, got {img.dtype}")
+    if img.shape[0] * img.shape[1] > 16384 * 8192:
+        raise SceneError(f"world.image is {img.shape[1]} x {img.shape[0]}: at most 16384 x 8192 pixels")
+    if not np.all(np.isfinite(img)) or float(img.min()) < 0.0:
+        raise SceneError("world.image must be finite and >= 0 (linear radiance)")
+    _check_emission("world.image * color * strength",
+                    float(img.max()) * float(np.max(world.color)) * float(world.strength), "W/(m^2 sr)")
+    _check_world_camera_image(world)
+
+
+def _check_world_camera_image(world: World) -> None:
+    """What camera rays see (optional): the rules of ``world.image``, which it needs."""
+    img = world.camera_image
+    if img is None:
+        return
+    if world.image is None:
+        raise SceneError("world.camera_image needs world.image (the world every other ray sees)")
+    if not isinstance(img, np.ndarray) or img.ndim != 3 or img.shape[2] != 3 or min(img.shape[:2]) < 1:
+        raise SceneError(f"world.camera_image must be an (H, W, 3) array, got "
+                         f"{getattr(img, 'shape', type(img).__name__)}")
+    if img.dtype != np.float32:
+        raise SceneError(f"world.camera_image must be float32, got {img.dtype}")
+    if img.shape[0] * img.shape[1] > 16384 * 8192:
+        raise SceneError(f"world.camera_image is {img.shape[1]} x {img.shape[0]}: at most 16384 x 8192 pixels")
+    if not np.all(np.isfinite(img)) or float(img.min()) < 0.0:
+        raise SceneError("world.camera_image must be finite and >= 0 (linear radiance)")
+    _check_emission("world.camera_image * color * strength",
+                    float(img.max()) * float(np.max(world.color)) * float(world.strength), "W/(m^2 sr)")
 
 
 def scene_warnings(scene: Scene) -> list[str]:
@@ -590,6 +680,7 @@ def validate_scene(scene: Scene) -> None:
     _check_emission("world.strength", float(scene.world.strength), "W/(m^2 sr)")
     _check_emission("world.color * strength", float(np.max(scene.world.color)) * float(scene.world.strength),
                     "W/(m^2 sr)")
+    _check_world_image(scene.world)
     w, h = scene.resolution
     if int(w) != w or int(h) != h or not (1 <= w <= 65536 and 1 <= h <= 65536):
         raise SceneError(f"resolution must be two integers in [1, 65536], got {scene.resolution}")

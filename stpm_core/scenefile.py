@@ -194,7 +194,7 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
         "shutter": {"open": float(scene.shutter.open), "close": float(scene.shutter.close),
                     "has_curve": scene.shutter.curve is not None},
         "camera": _fields_to_json(scene.camera, _CAMERA_FIELDS),
-        "world": _fields_to_json(scene.world, _WORLD_FIELDS),
+        "world": _world_to_json(arrays, scene.world),
         "materials": materials,
         "lights": lights,
         "meshes": meshes,
@@ -252,6 +252,37 @@ def _put_colors(arrays: dict, p: str, m: Mesh, where: str) -> list:
     if render is not None and (not isinstance(render, str) or render not in names):
         raise SceneError(f"{where}.color_render {render!r} is not one of its colour attributes {names}")
     return names
+
+
+def _world_to_json(arrays: dict, world) -> dict:
+    """The world's header entry; an environment image goes to ``world/image`` (H, W, 3) float32 and
+    its mapping to ``world/mapping/times`` and ``world/mapping/matrices``."""
+    d = _fields_to_json(world, _WORLD_FIELDS)
+    if world.image is not None:
+        d["has_image"] = True
+        d["interpolation"] = str(world.interpolation)
+        arrays["world/image"] = np.ascontiguousarray(world.image, dtype=np.float32)
+        _put_transform(arrays, "world/mapping", world.mapping)
+    if getattr(world, "camera_image", None) is not None:
+        d["has_camera_image"] = True
+        arrays["world/camera_image"] = np.ascontiguousarray(world.camera_image, dtype=np.float32)
+    return d
+
+
+def _world_from_json(f: "_Fields", arr: "_Arrays") -> World:
+    """World from its header entry (``has_image``, ``interpolation``, ``has_camera_image`` optional:
+    older files have none of them)."""
+    fields = f.read(_WORLD_FIELDS)
+    cam = None
+    if "has_camera_image" in f.d and f.bool("has_camera_image"):
+        cam = np.ascontiguousarray(arr.get("world/camera_image", "world.camera_image", kind="f", ndim=3, tail=(3,)),
+                                   dtype=np.float32)
+    if "has_image" not in f.d or not f.bool("has_image"):
+        return World(**fields, camera_image=cam)
+    img = arr.get("world/image", "world.image", kind="f", ndim=3, tail=(3,))
+    return World(**fields, image=np.ascontiguousarray(img, dtype=np.float32),
+                 mapping=arr.transform("world/mapping", "world.mapping"),
+                 interpolation=f.enum("interpolation", ("LINEAR", "CLOSEST")), camera_image=cam)
 
 
 def _put_texture(arrays: dict, i: int, tx) -> dict:
@@ -785,7 +816,7 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
         f = _Fields(d, f"lights[{i}]")
         lights.append(Light(**f.read(_LIGHT_FIELDS),
                             transform=arr.transform(f"lights/{i}/transform", f"lights[{i}].transform")))
-    world = World(**h.sub("world").read(_WORLD_FIELDS))
+    world = _world_from_json(h.sub("world"), arr)
 
     # Shutter
     s = h.sub("shutter")

@@ -469,10 +469,11 @@ def _env_world(image):
     return world
 
 
-def test_environment_texture_lights_with_its_mean_over_the_sphere():
-    """An equirectangular sky bright above the horizon only: its mean over directions is half its value
-    (rows weighted by cos(latitude)); a plain pixel mean would say the same here, so the image is also
-    bright in a polar cap only, where the two differ."""
+def test_environment_texture_exports_its_image_and_its_mean_over_the_sphere():
+    """An equirectangular sky bright above the horizon only: the image itself is exported (row 0 at
+    the bottom), the Background strength kept, and the world's mean radiance over directions is
+    half its value (rows weighted by solid angle); a plain pixel mean would say the same here, so
+    the image is also bright in a polar cap only, where the two differ."""
     fresh()
     add_camera()
     add_mesh("plane", "Floor")
@@ -483,16 +484,16 @@ def test_environment_texture_lights_with_its_mean_over_the_sphere():
     img.pixels.foreach_set(px.ravel())
     _env_world(img)
     scene, warnings = export_now()
-    np.testing.assert_allclose(scene.world.color, (0.5, 0.25, 0.125), rtol=1e-3)
+    assert scene.world.image is not None and scene.world.image.shape == (32, 64, 3)
+    np.testing.assert_allclose(scene.world.image, px[..., :3], rtol=1e-6)
+    np.testing.assert_allclose(scene.world.radiance, (1.0, 0.5, 0.25), rtol=1e-3)   # strength 2 x mean 1/2
     assert scene.world.strength == 2.0
-    assert any("environment texture 'sky'" in w and "mean radiance" in w for w in warnings), warnings
+    assert not any("mean radiance" in w for w in warnings), warnings
     # A cap: only the top 4 rows (latitude above 67.5 deg) bright: solid-angle share 1 - sin(67.5 deg)
     px[..., :3] = 0.0
     px[28:, :, :3] = 1.0
     img.pixels.foreach_set(px.ravel())
     img.update()
     scene, _ = export_now()
-    lat = -0.5 * np.pi + np.pi * (np.arange(32) + 0.5) / 32
-    want = np.cos(lat)[28:].sum() / np.cos(lat).sum()        # 0.0385, the plain pixel mean is 0.125
-    np.testing.assert_allclose(scene.world.color, want, rtol=1e-6)
-    assert abs(want - 0.5 * (1 - np.sin(np.radians(67.5)))) < 0.005
+    want = 0.5 * (1 - np.sin(np.radians(67.5)))             # 0.0381, the plain pixel mean is 0.125
+    np.testing.assert_allclose(scene.world.radiance, 2.0 * want, rtol=1e-6)

@@ -139,7 +139,7 @@ def test_sample_matches_the_oracle(case):
     wi, w, delta = bsdf.bsdf_sample(table, mat, wo, ns, ng, u)
     assert wi.shape == w.shape == (len(mat), 3) and delta.dtype == bool and delta.shape == (len(mat),)
     wi_o, w_o, delta_o = oracle.bsdf_sample(table, mat, wo, ns, ng, u)
-    assert 0.1 < delta_o.mean() < 0.9 and (w_o > 0).any(axis=1).mean() > 0.5
+    assert 0.1 < delta_o.mean() < 0.9 and (w_o > 0).any(axis=1).mean() > 0.4
     assert np.array_equal(delta, delta_o)
     _assert_close(wi, wi_o, RTOL, "wi")
     _assert_close(w, w_o, rtol, "weight")

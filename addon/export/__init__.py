@@ -206,15 +206,20 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
 
     # 2. Motion steps across the shutter
     times = np.array([0.5])
+    world_keys: list = []            # the world's Mapping rotation per step, when animated
     samples = {k: [r.matrix] for k, r in records.items()}
     shapes: dict = {}
     if not shutter.is_instant:
         times = motion.step_times(steps)
         samples = {k: [] for k in records}
         shapes = {k: [] for k, r in records.items() if r.kind == "MESH" and r.use_deform}
+        world_mapping = world_export.background_nodes(scene.world) if world_export.mapping_is_animated(scene.world) \
+            else None
         try:
             for u in times:
                 frame_set(*motion.split_frame(float(shutter.to_frame(u))))
+                if world_mapping is not None and world_mapping[2] is not None:
+                    world_keys.append(world_export.mapping_rotation(world_mapping[2]))
                 seen = set()
                 for inst in depsgraph.object_instances:
                     key = _instance_key(inst)
@@ -265,7 +270,8 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
     out = scene_model.Scene(
         meshes=meshes, instances=instances, camera=cam, lights=lights, materials=mats.materials,
         textures=mats.textures.textures,
-        world=world_export.export_world(scene.world, warnings), shutter=shutter,
+        world=world_export.export_world(scene.world, warnings, times, world_keys or None, bakes=bakes),
+        shutter=shutter,
         resolution=camera_export.render_resolution(render), frame=float(frame),
         metadata={"exporter": "stpm-blender", "blender_scene": scene.name, "motion_steps": int(len(times)),
                   "warnings": list(warnings),

@@ -50,6 +50,10 @@ the saved .blend, then the user cache (``$XDG_CACHE_HOME/stpm/bake``, ``~/.cache
 which is the only one for an unsaved file.  Look-ups search every folder; bakes are written to
 the first writable one.  Files: ``<key>.exr`` and ``<key>.json`` (what was baked, for people).
 
+Worlds the exporter cannot read directly (a Sky Texture, Light Path tricks, ...) are baked by the
+same child into equirectangular images (:mod:`.world`: :func:`.world.plan_world_jobs` adds their
+jobs in :func:`bake_scene`; the child runs :mod:`.world_bake_child` for them).
+
 A material used by several objects is exported once per distinct set of bakes (one material per
 (material, bake keys) pair): objects with different UVs or meshes get their own textures, linked
 duplicates share one.
@@ -967,12 +971,22 @@ def bake_scene(scene=None, depsgraph=None, *, resolution: int | None = None, log
 
     The caller sets the frame and render visibility (``addon.batch.export_current`` and the
     operator do).  Returns (BakeResolver knowing the failures, run_jobs' report).
+
+    The scene's world is baked too when the exporter cannot read it directly
+    (:func:`.world.plan_world_jobs`: one more job per view, in the same child).
     """
     import bpy
+    from . import world as world_export
     scene = scene or bpy.context.scene
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     resolver = BakeResolver(depsgraph, resolution=resolution)
     jobs = plan_jobs(depsgraph, resolver)
-    report = run_jobs(jobs, scene, getattr(depsgraph, "view_layer", None), samples=resolver.samples,
+    try:
+        world_jobs = world_export.plan_world_jobs(scene.world, resolver.dirs)
+    except Exception as e:  # noqa: BLE001 -- the material bakes go on; the export names the world's state
+        print(f"STPM bake: the world's bake could not be planned ({type(e).__name__}: {e})", file=sys.stderr)
+        world_jobs = []
+    report = run_jobs(jobs + world_jobs, scene, getattr(depsgraph, "view_layer", None), samples=resolver.samples,
                       dirs=resolver.dirs, log=log)
+    world_export.note_bake_results(world_jobs, report)
     return BakeResolver(depsgraph, resolution=resolver.resolution, dirs=resolver.dirs, failed=report["failed"]), report

@@ -17,6 +17,9 @@ colour management overridden to Linear Rec.709 (``Image.save`` applies the displ
 as ``<key>.exr`` (renamed into place), with a ``<key>.json`` note beside it.  Render visibility
 is applied first (viewport flags := render flags, as ``addon.batch.render_visibility`` does for
 the export), so the bake sees the objects and modifiers F12 renders.  Results: ``[{"key", "ok", "seconds", "error"}]``.
+
+A job with ``"type": "world"`` (:class:`addon.export.world.WorldJob`) renders a world alone into an
+equirectangular EXR instead (:mod:`world_bake_child`, beside this script).
 """
 from __future__ import annotations
 
@@ -161,6 +164,19 @@ def _bake(bpy, scene, view_layer, job: dict, samples: int, scratch) -> None:
     bpy.data.images.remove(image)
 
 
+def _world_child():
+    """The world job (``world_bake_child.py`` beside this script; a job with ``"type": "world"``)."""
+    import importlib.util
+    here = os.path.dirname(os.path.abspath(globals().get("__file__") or sys.argv[0]))
+    name = "stpm_world_bake_child"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, os.path.join(here, "world_bake_child.py"))
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        sys.modules[name] = mod
+    return sys.modules[name]
+
+
 def main() -> int:
     with open(_spec_path(), encoding="utf-8") as f:
         spec = json.load(f)
@@ -192,10 +208,16 @@ def main() -> int:
     for job in spec["jobs"]:
         t0 = time.perf_counter()
         try:
-            _bake(bpy, scene, view_layer, job, int(spec["samples"]), scratch)
-            results.append({"key": job["key"], "ok": True, "seconds": time.perf_counter() - t0})
-            print(f"baked {job['label']} of {job['material']!r} on {job['object']!r} in "
-                  f"{time.perf_counter() - t0:.2f} s", flush=True)
+            if job.get("type") == "world":
+                note = _world_child().bake_world(bpy, job, frame, _linear_exr)
+                results.append({"key": job["key"], "ok": True, "seconds": time.perf_counter() - t0})
+                print(f"baked {job['label']} in {time.perf_counter() - t0:.2f} s "
+                      f"(refined {len(note['refined'])} crop(s))", flush=True)
+            else:
+                _bake(bpy, scene, view_layer, job, int(spec["samples"]), scratch)
+                results.append({"key": job["key"], "ok": True, "seconds": time.perf_counter() - t0})
+                print(f"baked {job['label']} of {job['material']!r} on {job['object']!r} in "
+                      f"{time.perf_counter() - t0:.2f} s", flush=True)
         except Exception as e:  # noqa: BLE001 -- one failed job must not stop the others
             traceback.print_exc()
             first = (str(e).strip().splitlines() or [""])[0]

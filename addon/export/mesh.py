@@ -53,7 +53,8 @@ def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
     vertices : (V, 3) float32 object space;
     triangles : (F, 3) int32 vertex indices;
     slots : (F,) int32 material slot index of each triangle;
-    normals : (F, 3, 3) float32 corner normals when any face is smooth, else None;
+    normals : (F, 3, 3) float32 corner normals when any face is smooth or the mesh has custom
+        normals (Blender 4.1+ applies those to flat faces too, and so does Cycles), else None;
     uv_layers : {name: (F, 3, 2) float32} every UV map's (u, v) at each triangle corner, in the
         corner order of ``triangles`` (see :func:`uv_arrays`);
     uv_render : the render-active UV map's name, or None without UV maps;
@@ -73,11 +74,13 @@ def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
     smooth = np.zeros(F, dtype=bool)
     if F:
         tris.foreach_get("use_smooth", smooth)
-    # Corner normals: Blender already gives flat faces their face normal here
+    # Corner normals: Blender already gives flat faces their face normal here, or their custom
+    # normals: those count on flat faces too (the corner domain; Cycles renders them), so a mesh
+    # with custom normals exports them even where no face is smooth
     normals = None
     loops = np.empty(F * 3, dtype=np.int32)
     tris.foreach_get("loops", loops)
-    if smooth.any():
+    if smooth.any() or getattr(me, "normals_domain", "") == "CORNER":
         cn = np.empty(len(me.loops) * 3, dtype=np.float32)
         if hasattr(me, "corner_normals"):
             me.corner_normals.foreach_get("vector", cn)

@@ -14,18 +14,23 @@ w_metal = metallic, w_glass = (1 - metallic) transmission:
 DIFFUSE    w_base (1 - F_coat(wo)) base_color / pi, F_coat = specular F_diel(cos_o, ior)
 COAT       w_base specular F_diel(ior): delta mirror (roughness 0) or GGX with Cycles' energy
            compensation (1 + F_ms (1 - E(mu_o)) / E(mu_o))
-METAL      w_metal Schlick(base_color): delta mirror or GGX
+METAL      w_metal Schlick(base_color): delta mirror or GGX (rough: times k_metal)
 GLASS_R    w_glass F_diel(eta): delta mirror or GGX
 GLASS_T    w_glass (1 - F_diel(cos_o, eta)) base_color: always a delta refraction
-METAL_MS   w_metal F_ms (1 - E(mu_o))(1 - E(mu_i)) / (pi (1 - E_avg)), rough metal only
+METAL_MS   no longer a lobe (probability 0): a rough METAL lobe is scaled by Cycles' energy
+           compensation k_metal = 1 + F_ms (1 - E(mu_o)) / E(mu_o) per channel instead
 =========  =======================================================================
 
 GGX lobes: D G2 / (4 cos_o cos_i) times their Fresnel at wo.h (alpha =
 roughness^2, at least 1e-4), height-correlated Smith G2, visible-normal
-sampling with pdf G1(wo) D / (4 cos_o).  Glass: wo on ng's side is entering
-(eta = ior), else leaving (eta = 1 / ior).  Each call flips ng toward wo and
-ns onto ng's side; a reflection lobe is 0 unless wi is above both, a
-refraction unless wi is below ng.
+sampling with pdf G1(wo) D / (4 cos_o).  Normals as they come, as Cycles: each call turns ng
+toward wo and ns by the same sign (the back-face flip of Cycles' ``sd->N``, ``sd->Ng``; a shading
+normal that disagrees with its face keeps disagreeing), and wo on ng's side is entering (eta =
+ior), else leaving (eta = 1 / ior): a mesh with flipped normals is glass seen from inside.  The
+specular lobes (coat, metal, glass) use ``nss``, ns raised toward ng wherever it differs from ng
+(smooth or custom normals, Normal inputs: ``ensure_valid_specular_reflection``) and are 0 when
+wo is below it (Cycles' microfacet closures: no lobe for wo under N).  A reflection lobe is 0
+unless wi is above both ng and its normal, a refraction unless wi is below ng.
 
 Per-hit functions (compiled once; the kernels call them):
 
@@ -39,6 +44,9 @@ Per-hit functions (compiled once; the kernels call them):
   proportional to an albedo estimate at wo) and the direction u1, u2 pick;
   weight = f_nd |cos| / pdf_nd for a non-delta lobe, throughput / p_j for a
   delta lobe, 0 for a failed sample;
+* :func:`bsdf_sample_path` -- the same choice for a path whose DIFFUSE lobe the photon
+  maps carry: stop on DIFFUSE, else continue (delta, or rough with the weight of the
+  non-diffuse lobes alone);
 * :func:`diffuse_albedo` -- w_base (1 - F_coat(|wo . ns|)) base_color, what
   multiplies photon irradiance;
 * :func:`fresnel_dielectric` -- F_diel(cos_i, eta), exact unpolarised, 1 under TIR;
@@ -67,8 +75,8 @@ from .sampling import JIT_INLINE, basis, cosine_hemisphere, dot
 from .closure import (C_ALPHA, C_BASE, C_BUMPED, C_COAT, C_IOR, C_NS, C_ROUGH_LOBE, C_ROUGHNESS, C_SPECULAR,
                       C_W_BASE, C_W_GLASS, C_W_METAL, closure_row)
 
-__all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS",
-           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_sample", "diffuse_albedo", "fresnel_dielectric",
+__all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
+           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
            "fresnel_dielectric_fss", "coat_albedo",
            "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch"]
 
@@ -110,12 +118,15 @@ def _to_frame(loc, t, b, n):
 
 @njit(**_JIT)
 def _oriented(wo, ns, ng):
-    """Normals flipped toward wo: (ns', ng', entering = wo on ng's side)."""
+    """Cycles' back-face flip: (s ns, s ng, entering = wo on ng's side), s = +1 when entering, else -1.
+
+    Both normals turn by the same sign, as Cycles' ``sd->N`` and ``sd->Ng`` (geom/shader_data.h):
+    the face (ng, the winding) alone decides front and back; a shading normal on the other side
+    of its face (inward custom normals, smooth normals of a mesh with inconsistent winding) stays
+    there, and the lobes below it give nothing, as in Cycles."""
     entering = dot(wo, ng) >= 0.0
     s = 1.0 if entering else -1.0
-    ngf = (ng[0] * s, ng[1] * s, ng[2] * s)
-    t = 1.0 if dot(ns, ngf) >= 0.0 else -1.0
-    return (ns[0] * t, ns[1] * t, ns[2] * t), ngf, entering
+    return (ns[0] * s, ns[1] * s, ns[2] * s), (ng[0] * s, ng[1] * s, ng[2] * s), entering
 
 
 @njit(**_JIT)
@@ -423,14 +434,21 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
     """Everything about closure row C[cr] at wo that does not depend on wi.
 
     Returns (ns', ng', nss, cos_o = wo . nss (not clamped), eta_glass, alpha, F_coat, F_glass,
-    F_metal (RGB), ms_scale (RGB) = F_ms / (pi (1 - E_avg)), ms_Eo = E(mu_o), k_coat (the rough
+    F_metal (RGB), ms_scale (RGB) = k_metal, the rough metal's energy compensation per channel
+    (1 when smooth), ms_Eo = E(mu_o), k_coat (the rough
     coat's energy compensation, 1 otherwise), p_lobe (6 lobes)).  nss: the normal of the specular
-    lobes (coat, metal, glass): ns' itself, or where a Normal input replaced the smooth normal
-    (``C_BUMPED``) ns' raised so its mirror reflection stays above the surface, as Cycles does
-    (``_valid_specular``); the diffuse lobes keep ns'.
+    lobes (coat, metal, glass): ns' raised so the mirror reflection of wo stays above the surface
+    wherever it differs from ng' (smooth and custom normals; a Normal input, ``C_BUMPED``), as
+    Cycles' ``maybe_ensure_valid_specular_reflection`` (``_valid_specular``; flat faces keep ns' =
+    ng'); the diffuse lobes keep ns'.  Where wo is below nss (a shading normal facing away from
+    the viewer, which raising does not fix: inward custom normals) the specular lobes get
+    probability 0, as Cycles' microfacet closures sample and evaluate nothing for wo under N.
     """
     nsf, ngf, entering = _oriented(wo, ns, ng)
-    nss = _valid_specular(ngf, wo, nsf) if C[cr, C_BUMPED] > 0 else nsf
+    if C[cr, C_BUMPED] > 0 or nsf[0] != ngf[0] or nsf[1] != ngf[1] or nsf[2] != ngf[2]:
+        nss = _valid_specular(ngf, wo, nsf)
+    else:
+        nss = nsf
     alpha = max(C[cr, C_ALPHA], 1e-4)
     rough = C[cr, C_ROUGHNESS] > 0.0
     spec = C[cr, C_SPECULAR]
@@ -447,24 +465,19 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
         F_coat = spec * (coat_albedo(E, cos_oc, alpha, ior) if rough else fresnel_dielectric(cos_oc, ior))
     F_glass = fresnel_dielectric(cos_oc, eta_glass) if w_glass > 0 else 0.0
     F_metal = _fresnel_schlick(C, cr, cos_oc) if w_metal > 0 else (0.0, 0.0, 0.0)
-    # METAL_MS (rough metal): f_ms = ms_scale (1 - E(mu_o)) (1 - E(mu_i))
-    ms_scale = (0.0, 0.0, 0.0)
+    # Rough METAL: the energy single scattering loses, returned as Cycles does for Multiscatter
+    # GGX (microfacet_ggx_preserve_energy): the GGX lobe times 1 + F_ms (1 - E(mu_o)) / E(mu_o) per
+    # channel, F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg)), F_ss = F0 + (1 - F0) / 21 (Schlick's
+    # hemispherical average)
+    ms_scale = (1.0, 1.0, 1.0)                          # k_metal, per channel
     ms_Eo = 1.0
-    ms_albedo = 0.0                                     # (1 - E(mu_o)) mean(F_ms): the lobe's albedo
     if w_metal > 0 and rough:
         e_avg = ggx_albedo_avg(E_avg, alpha)
-        b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
-        a0 = b0 + (1.0 - b0) / 21.0
-        a1 = b1 + (1.0 - b1) / 21.0
-        a2 = b2 + (1.0 - b2) / 21.0
-        F_ms0 = a0 * a0 * e_avg / (1.0 - a0 * (1.0 - e_avg))
-        F_ms1 = a1 * a1 * e_avg / (1.0 - a1 * (1.0 - e_avg))
-        F_ms2 = a2 * a2 * e_avg / (1.0 - a2 * (1.0 - e_avg))
         ms_Eo = ggx_albedo(E, cos_oc, alpha)
-        if (1.0 - e_avg) > 1e-4:
-            k = _PI * max(1.0 - e_avg, 1e-4)
-            ms_scale = (F_ms0 / k, F_ms1 / k, F_ms2 / k)
-            ms_albedo = (1.0 - ms_Eo) * ((F_ms0 + F_ms1 + F_ms2) / 3.0)
+        b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
+        ms_scale = (_coat_compensation(ms_Eo, e_avg, b0 + (1.0 - b0) / 21.0),
+                    _coat_compensation(ms_Eo, e_avg, b1 + (1.0 - b1) / 21.0),
+                    _coat_compensation(ms_Eo, e_avg, b2 + (1.0 - b2) / 21.0))
     # Rough COAT: the energy single scattering loses, returned as Cycles does for its dielectric
     # layer (microfacet_ggx_preserve_energy): f_ss (1 + F_ms (1 - E(mu_o)) / E(mu_o)),
     # F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg)), F_ss = specular Fss_diel(ior)
@@ -476,10 +489,14 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
     mean_base = (C[cr, C_BASE] + C[cr, C_BASE + 1] + C[cr, C_BASE + 2]) / 3.0
     e0 = w_base * (1.0 - F_coat) * mean_base                          # DIFFUSE
     e1 = w_base * F_coat                                              # COAT (F_coat: its albedo)
-    e2 = w_metal * ((F_metal[0] + F_metal[1] + F_metal[2]) / 3.0)     # METAL
+    e2 = w_metal * ((F_metal[0] * ms_scale[0] + F_metal[1] * ms_scale[1] + F_metal[2] * ms_scale[2]) / 3.0)  # METAL
     e3 = w_glass * F_glass                                            # GLASS_R
     e4 = w_glass * (1.0 - F_glass) * mean_base                        # GLASS_T
-    e5 = w_metal * ms_albedo                                          # METAL_MS
+    e5 = 0.0                                                          # METAL_MS (no longer a lobe)
+    if not cos_o > 0.0:
+        # wo below the specular normal: Cycles' microfacet closures give nothing (bsdf_microfacet_
+        # sample / eval return at cos_NI <= 0); only the diffuse lobe is left
+        e1 = e2 = e3 = e4 = 0.0
     total = e0 + e1 + e2 + e3 + e4 + e5
     if total > 0:
         t = max(total, 1e-300)
@@ -534,8 +551,19 @@ def _eval_pdf_hit(C, cr, E, hit, wo, wi):
         f1 = d * b1 / _PI
         f2 = d * b2 / _PI
         pdf = p_lobe[DIFFUSE] * cos_i / _PI
+    return _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, 1.0)
+
+
+@njit(**_JIT)
+def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
+    """(f0, f1, f2, pdf) plus f and the mixture pdf of the non-delta lobes other than DIFFUSE (rough
+    COAT times coat_w (1 or 0), METAL and GLASS_R) at wi, for the hit of :func:`_hit`."""
+    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
     if not C[cr, C_ROUGH_LOBE] > 0:
         return f0, f1, f2, pdf
+    w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
+    cos_i = dot(wi, ns)
+    above_ng = dot(wi, ng) > 0
     # -- GGX reflection terms (rough COAT / METAL / GLASS_R), about the specular normal nss; f is
     # divided by the |ns . wi| the integrator multiplies (so f |ns . wi| = D G2 F / (4 cos_o))
     cos_is = dot(wi, nss)
@@ -552,30 +580,25 @@ def _eval_pdf_hit(C, cr, E, hit, wo, wi):
     cos_oe = max(cos_o, _EPS)
     p_ggx = G1o * D / (4.0 * cos_oe)                     # VNDF pdf of wi (solid angle)
     spec = D * G2 / max(4.0 * cos_oe * max(abs(cos_i), _EPS), 1e-300)
+    # Cycles' bump_shadowing_term for every closure whose normal is not the smooth one Ns (the
+    # shading normal before a Normal input replaced it, else ns itself, off which nss may have
+    # been raised): wi on the other side of Ns than nss says: no reflection (never for nss = Ns)
     if C[cr, C_BUMPED] > 0:
-        # Cycles' bump_shadowing_term for every closure: wi on the other side of the smooth
-        # normal Ns than the bumped one says: no reflection
         Ns = (C[cr, C_NS], C[cr, C_NS + 1], C[cr, C_NS + 2])
-        if dot(Ns, wi) * dot(Ns, nss) * cos_is < 0.0:
-            spec = 0.0
+    else:
+        Ns = ns
+    if dot(Ns, wi) * dot(Ns, nss) * cos_is < 0.0:
+        spec = 0.0
     # COAT: specular F_diel(wo.h, ior); METAL: Schlick(base, wo.h); GLASS_R: F_diel(wo.h, eta)
     F_c = C[cr, C_SPECULAR] * fresnel_dielectric(wo_h, C[cr, C_IOR])
     F_m = _fresnel_schlick(C, cr, wo_h)
     F_g = fresnel_dielectric(wo_h, eta_glass)
-    s = (w_base * F_c * k_coat + w_glass * F_g) * spec
+    s = (w_base * F_c * k_coat * coat_w + w_glass * F_g) * spec
     sm = w_metal * spec
-    f0 = f0 + (s + sm * F_m[0])
-    f1 = f1 + (s + sm * F_m[1])
-    f2 = f2 + (s + sm * F_m[2])
-    pdf = pdf + p_ggx * (p_lobe[COAT] + p_lobe[METAL] + p_lobe[GLASS_R])
-    # -- METAL_MS: the energy single scattering loses, a broad cosine-sampled lobe (about ns)
-    if w_metal > 0 and cos_i > 0:
-        E_i = ggx_albedo(E, min(max(cos_i, 0.0), 1.0), alpha)
-        k = w_metal * (1.0 - ms_Eo) * (1.0 - E_i)
-        f0 = f0 + k * ms_scale[0]
-        f1 = f1 + k * ms_scale[1]
-        f2 = f2 + k * ms_scale[2]
-        pdf = pdf + p_lobe[METAL_MS] * cos_i / _PI
+    f0 = f0 + (s + sm * F_m[0] * ms_scale[0])
+    f1 = f1 + (s + sm * F_m[1] * ms_scale[1])
+    f2 = f2 + (s + sm * F_m[2] * ms_scale[2])
+    pdf = pdf + p_ggx * (p_lobe[COAT] * coat_w + p_lobe[METAL] + p_lobe[GLASS_R])
     return f0, f1, f2, pdf
 
 
@@ -600,13 +623,18 @@ def bsdf_eval(C, cr, E, E_avg, wo, wi, ns, ng):
 def bsdf_eval_smooth(C, cr, wo, wi, ns, ng):
     """(f0, f1, f2) of a closure without a rough lobe (``C[cr, C_ROUGH_LOBE] == 0``): the diffuse
     lobe w_base (1 - F_coat(wo)) base_color / pi directly (no hit set-up, no call: loops that
-    call it per row stay free of the compiled rough-lobe code, see ``paths.nee_light``)."""
+    call it per row stay free of the compiled rough-lobe code, see ``paths.nee_light``).  The
+    coat's Fresnel is taken at its own normal, as :func:`_hit` does (ns raised where it differs
+    from ng)."""
     nsf, ngf, _ = _oriented(wo, ns, ng)
     scale = 0.0
     if dot(wi, nsf) > 0 and dot(wi, ngf) > 0:
         scale = C[cr, C_W_BASE] * bump_shadowing(C, cr, wi, nsf, ngf)
         if C[cr, C_COAT] > 0:
-            cos_o = min(max(dot(wo, nsf), 0.0), 1.0)
+            nc = nsf
+            if C[cr, C_BUMPED] > 0 or nsf[0] != ngf[0] or nsf[1] != ngf[1] or nsf[2] != ngf[2]:
+                nc = _valid_specular(ngf, wo, nsf)
+            cos_o = min(max(dot(wo, nc), 0.0), 1.0)
             scale *= 1.0 - C[cr, C_SPECULAR] * fresnel_dielectric(cos_o, C[cr, C_IOR])
     return (scale * C[cr, C_BASE] * _INV_PI, scale * C[cr, C_BASE + 1] * _INV_PI, scale * C[cr, C_BASE + 2] * _INV_PI)
 
@@ -615,16 +643,9 @@ def bsdf_eval_smooth(C, cr, wo, wi, ns, ng):
 # Sampling
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
-    """(wi0, wi1, wi2, w0, w1, w2, is_delta): wi from closure row C[cr] at wo.
-
-    u0 picks the lobe by the CDF of p_lobe (and so reflect / refract for
-    glass), u1, u2 the direction.  Weight: throughput / p_lobe for a delta
-    lobe (0 if a reflection lands below ng or a refraction above it), else
-    f_nd |cos| / pdf_nd over all non-delta lobes; wi = 0 and weight 0 when the
-    chosen lobe has probability 0.
-    """
-    hit = _hit(C, cr, E, E_avg, wo, ns, ng)
+def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
+    """(lobe, p_chosen, is_delta, wi) for the hit of :func:`_hit`: u0 picks the lobe by the CDF of
+    p_lobe, u1, u2 the direction (unit wi); p_chosen = 0 when the lobe has probability 0 (wi = 0)."""
     nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
     rough = C[cr, C_ROUGHNESS] > 0.0
     # -- Choose a lobe by the CDF of p_lobe
@@ -637,7 +658,7 @@ def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
     lobe = min(lobe, METAL_MS)
     p_chosen = p_lobe[lobe]
     if not p_chosen > 0:
-        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
+        return lobe, 0.0, False, (0.0, 0.0, 0.0)
     is_refl = lobe == COAT or lobe == METAL or lobe == GLASS_R
     is_delta = lobe == GLASS_T or (is_refl and not rough)
     # -- Direction
@@ -661,32 +682,110 @@ def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
         cos_t = math.sqrt(max(0.0, 1.0 - (1.0 - co * co) / (eta * eta)))
         k = co / eta - cos_t
         wi = (-wo[0] / eta + k * nss[0], -wo[1] / eta + k * nss[1], -wo[2] / eta + k * nss[2])
-    wi = _normalized(wi, 1e-300)
+    return lobe, p_chosen, is_delta, _normalized(wi, 1e-300)
+
+
+@njit(**_JIT)
+def _delta_weight(C, cr, hit, lobe, p_chosen, wi):
+    """Throughput / p_chosen (3-tuple) of delta lobe ``lobe`` toward wi; 0 if a reflection lands
+    below ng or a refraction above it (a leak through the shading normal)."""
+    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
+    side = dot(wi, ngf)
+    if not (side < 0 if lobe == GLASS_T else side > 0):
+        return 0.0, 0.0, 0.0
+    if lobe == COAT:
+        thr = C[cr, C_W_BASE] * F_coat
+        t0 = t1 = t2 = thr
+    elif lobe == METAL:
+        w_metal = C[cr, C_W_METAL]
+        t0, t1, t2 = w_metal * F_metal[0], w_metal * F_metal[1], w_metal * F_metal[2]
+    elif lobe == GLASS_R:
+        thr = C[cr, C_W_GLASS] * F_glass
+        t0 = t1 = t2 = thr
+    else:
+        thr = C[cr, C_W_GLASS] * (1.0 - F_glass)
+        t0, t1, t2 = thr * C[cr, C_BASE], thr * C[cr, C_BASE + 1], thr * C[cr, C_BASE + 2]
+    return t0 / p_chosen, t1 / p_chosen, t2 / p_chosen
+
+
+@njit(**_JIT)
+def bsdf_sample_lobe(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
+    """(wi0, wi1, wi2, w0, w1, w2, lobe): :func:`bsdf_sample` with the lobe chosen (-1: none)."""
+    hit = _hit(C, cr, E, E_avg, wo, ns, ng)
+    lobe, p_chosen, is_delta, wi = _sample_lobe(C, cr, hit, wo, u0, u1, u2)
+    if not p_chosen > 0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1
     wi0, wi1, wi2 = wi
-    # -- Delta lobes: Fresnel / colour throughput over the selection probability
     if is_delta:
-        side = dot(wi, ngf)
-        if not (side < 0 if lobe == GLASS_T else side > 0):
-            return wi0, wi1, wi2, 0.0, 0.0, 0.0, True     # a leak through the shading normal
-        if lobe == COAT:
-            thr = C[cr, C_W_BASE] * F_coat
-            t0 = t1 = t2 = thr
-        elif lobe == METAL:
-            w_metal = C[cr, C_W_METAL]
-            t0, t1, t2 = w_metal * F_metal[0], w_metal * F_metal[1], w_metal * F_metal[2]
-        elif lobe == GLASS_R:
-            thr = C[cr, C_W_GLASS] * F_glass
-            t0 = t1 = t2 = thr
-        else:
-            thr = C[cr, C_W_GLASS] * (1.0 - F_glass)
-            t0, t1, t2 = thr * C[cr, C_BASE], thr * C[cr, C_BASE + 1], thr * C[cr, C_BASE + 2]
-        return wi0, wi1, wi2, t0 / p_chosen, t1 / p_chosen, t2 / p_chosen, True
+        t0, t1, t2 = _delta_weight(C, cr, hit, lobe, p_chosen, wi)
+        return wi0, wi1, wi2, t0, t1, t2, lobe
     # -- Non-delta lobes: mixture f cos / pdf over every non-delta lobe
     f0, f1, f2, pdf = _eval_pdf_hit(C, cr, E, hit, wo, wi)
     if not pdf > 0:
-        return wi0, wi1, wi2, 0.0, 0.0, 0.0, False
-    r = abs(dot(wi, nsf)) / max(pdf, 1e-300)
-    return wi0, wi1, wi2, f0 * r, f1 * r, f2 * r, False
+        return wi0, wi1, wi2, 0.0, 0.0, 0.0, lobe
+    r = abs(dot(wi, hit[0])) / max(pdf, 1e-300)
+    return wi0, wi1, wi2, f0 * r, f1 * r, f2 * r, lobe
+
+
+@njit(**_JIT)
+def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
+    """(wi0, wi1, wi2, w0, w1, w2, is_delta): wi from closure row C[cr] at wo.
+
+    u0 picks the lobe by the CDF of p_lobe (and so reflect / refract for
+    glass), u1, u2 the direction.  Weight: throughput / p_lobe for a delta
+    lobe (0 if a reflection lands below ng or a refraction above it), else
+    f_nd |cos| / pdf_nd over all non-delta lobes; wi = 0 and weight 0 when the
+    chosen lobe has probability 0.
+    """
+    wi0, wi1, wi2, w0, w1, w2, lobe = bsdf_sample_lobe(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2)
+    rough = C[cr, C_ROUGHNESS] > 0.0
+    is_delta = lobe == GLASS_T or ((lobe == COAT or lobe == METAL or lobe == GLASS_R) and not rough)
+    return wi0, wi1, wi2, w0, w1, w2, is_delta
+
+
+#: what :func:`bsdf_sample_path` chose: nothing / the DIFFUSE lobe (the path stops), a delta lobe,
+#: a rough lobe other than DIFFUSE
+PATH_STOP, PATH_DELTA, PATH_GLOSSY = 0, 1, 2
+
+
+@njit(**_JIT)
+def bsdf_sample_path(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2, stop_coat):
+    """(wi0, wi1, wi2, w0, w1, w2, kind, pdf): how a path continues from closure row C[cr] at wo
+    when the photon maps carry the light its DIFFUSE lobe reflects (docs/rendering.md, "Path
+    partition").
+
+    The lobe and direction as :func:`bsdf_sample` (the same u0, u1, u2 give the same wi).  kind
+    ``PATH_STOP``: the DIFFUSE lobe was chosen (with stop_coat also a rough COAT), or nothing
+    (weight 0, pdf 0); ``PATH_DELTA``: a delta lobe, weight throughput / p_lobe as
+    :func:`bsdf_sample` (pdf inf); ``PATH_GLOSSY``: another rough lobe, weight f_g |cos| / pdf_g,
+    f_g and pdf_g = sum_j p_j pdf_j(wi) over the rough lobes that do not stop
+    (:func:`bsdf_eval_cont`), so that E[weight L] over the non-stopping choices is the integral
+    of f_g L cos: with what the stopping lobes' estimators carry, nothing is counted twice.
+    """
+    hit = _hit(C, cr, E, E_avg, wo, ns, ng)
+    lobe, p_chosen, is_delta, wi = _sample_lobe(C, cr, hit, wo, u0, u1, u2)
+    wi0, wi1, wi2 = wi
+    if not p_chosen > 0 or lobe == DIFFUSE:
+        return wi0, wi1, wi2, 0.0, 0.0, 0.0, PATH_STOP, 0.0
+    if is_delta:
+        t0, t1, t2 = _delta_weight(C, cr, hit, lobe, p_chosen, wi)
+        return wi0, wi1, wi2, t0, t1, t2, PATH_DELTA, np.inf
+    if stop_coat and lobe == COAT:
+        return wi0, wi1, wi2, 0.0, 0.0, 0.0, PATH_STOP, 0.0
+    f0, f1, f2, pdf = _glossy_add(C, cr, E, hit, wo, wi, 0.0, 0.0, 0.0, 0.0, 0.0 if stop_coat else 1.0)
+    if not pdf > 0:
+        return wi0, wi1, wi2, 0.0, 0.0, 0.0, PATH_GLOSSY, 0.0
+    r = abs(dot(wi, hit[0])) / max(pdf, 1e-300)
+    return wi0, wi1, wi2, f0 * r, f1 * r, f2 * r, PATH_GLOSSY, pdf
+
+
+@njit(**_JIT)
+def bsdf_eval_cont(C, cr, E, E_avg, wo, wi, ns, ng, stop_coat):
+    """(f0, f1, f2, pdf): f (1/sr) of the rough lobes through which :func:`bsdf_sample_path` goes
+    on (every non-delta lobe but DIFFUSE; without a rough COAT when stop_coat) and the density
+    pdf_g with which it returns wi through them (0 outside; for multiple importance sampling)."""
+    return _glossy_add(C, cr, E, _hit(C, cr, E, E_avg, wo, ns, ng), wo, wi, 0.0, 0.0, 0.0, 0.0,
+                       0.0 if stop_coat else 1.0)
 
 
 # ----------------------------------------------------------------------------

@@ -18,7 +18,8 @@ mesh-light points, spot mask, ...) are :mod:`.sampling`.
 Inputs every kernel takes: ``row`` (N_LIGHT_PARAMS,); ``poses`` (k, 4, 4) object-to-world
 matrices, k = 1 (static: every photon reads matrix 0) or n (one per photon); the mesh arrays
 ``steps`` (K,), ``corners`` (K, F, 3, 3) (in the space the poses map from), ``q``, ``cdf`` (F,),
-``Le`` (F, 3) (empty for other lights); ``times`` (1,) or (n,) normalised shutter times.
+``Le`` (F, 3) (empty for other lights); ``env`` the world's environment (``kernels.environment``;
+black for other lights); ``times`` (1,) or (n,) normalised shutter times.
 Outputs, written in place: ``o``, ``d``, ``P`` (n, 3): origins (scene units), unit directions,
 power per photon (W).
 
@@ -47,7 +48,7 @@ Emission over the whole light (:func:`emit_photons`)
   ``P_SCENE_R``); direction -Z (angle 0) or uniform in the cone of half-angle angle / 2 about -Z;
   power ``color * S * pi R^2 * cos_t / n`` (S = strength W/m^2, cos_t the cosine to -Z):
   :func:`_sun_photon`.
-* WORLD: direction d uniform on the sphere, origin uniform on the disc of radius R_s
+* WORLD (constant; an environment image: :func:`_world_photon`): direction d uniform on the sphere, origin uniform on the disc of radius R_s
   perpendicular to d through the scene centre, moved 2 R_s back along d; power
   ``4 pi * pi R_s^2 * L / n`` (L = ``P_COLOR`` W m^-2 sr^-1): :func:`_world_photon`.
 
@@ -83,6 +84,7 @@ import numpy as np
 
 from ..numba_probe import njit
 from . import kernel_array
+from .environment import E_PHOTON_UNIFORM, E_TEXTURED, env_pdf, env_radiance, env_sample
 from .light_params import (P_ANGLE, P_COLOR, P_COS_HALF, P_FLUX, P_POWER, P_RADIUS, P_SCENE_C, P_SCENE_R, P_SOFT,
                            P_SUN_R, P_TYPE, T_AREA, T_MESH, T_POINT, T_SPOT, T_SUN, T_WORLD, kernel_light,
                            light_poses)
@@ -143,15 +145,36 @@ def _sun_photon(row, cos_half, Z, ce, R, back, n, u1, u2, i):
 
 
 @njit(**JIT)
-def _world_photon(row, ce, R, n, u1, u2, i):
-    """World photon i: uniform direction d (u1[i]), origin on the disc of radius R about ce perpendicular to d
-    (u2[i]) moved 2R back along d; power 4 pi * pi R^2 * L / n.  Returns origin, direction, power (3-tuples)."""
-    d = uniform_sphere(u1[i, 0], u1[i, 1])
+def _world_photon(row, env, M, ce, R, n, u1, u2, i):
+    """World photon i through the disc of radius R about ce perpendicular to its direction d (point
+    u2[i]), moved 2R back along d.  Returns origin, direction, power (3-tuples).
+
+    A constant world: d uniform (u1[i]), power 4 pi * pi R^2 * L / n.  An environment image
+    (``kernels.environment``, M its map-to-world rotation): the direction omega the light comes
+    from is drawn from q = a / (4 pi) + (1 - a) p_img (a = ``E_PHOTON_UNIFORM``, u1[i, 0] choosing
+    the technique and reused inside it), d = -omega, power L(omega) pi R^2 / (q n)."""
+    par = env[4]
+    if par[E_TEXTURED] == 0.0:
+        d = uniform_sphere(u1[i, 0], u1[i, 1])
+        g = 4.0 * np.pi * np.pi * R * R
+        P = (g * row[P_COLOR] / n, g * row[P_COLOR + 1] / n, g * row[P_COLOR + 2] / n)
+    else:
+        a = par[E_PHOTON_UNIFORM]
+        u0 = u1[i, 0]
+        if u0 < a:
+            w = uniform_sphere(u0 / a, u1[i, 1])
+        else:
+            w0, w1, w2, _ = env_sample(env, M, (u0 - a) / (1.0 - a), u1[i, 1])
+            w = (w0, w1, w2)
+        q = a * 0.25 / np.pi + (1.0 - a) * env_pdf(env, M, w)
+        L = env_radiance(env, M, w)
+        g = np.pi * R * R / (q * n) if q > 0.0 else 0.0
+        d = neg(w)
+        P = (g * L[0], g * L[1], g * L[2])
     t, b = basis(d)
     x, y = concentric_disk(u2[i, 0], u2[i, 1])
     o = sub(plane_point(ce, x * R, t, y * R, b), scale(d, 2.0 * R))
-    g = 4.0 * np.pi * np.pi * R * R
-    return o, d, (g * row[P_COLOR] / n, g * row[P_COLOR + 1] / n, g * row[P_COLOR + 2] / n)
+    return o, d, P
 
 
 @njit(**JIT)
@@ -166,7 +189,7 @@ def _store(o_out, d_out, P_out, i, o, d, P):
 # Emission over the whole light
 # ----------------------------------------------------------------------------
 @njit(**JIT)
-def emit_photons(row, poses, steps, corners, q, cdf, Le, times, u1, u2, u_side, o, d, P):
+def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_side, o, d, P):
     """n = o.shape[0] photons of one light over its whole emission, as ``LightSet.emit``.
 
     row, poses, steps, corners, q, cdf, Le, times: see the module docstring.  The uniforms, in
@@ -229,7 +252,7 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, times, u1, u2, u_side, 
                                      n, u1, u2, i)
         # ---- WORLD: every direction, through the scene's bounding sphere ----
         else:
-            oi, di, Pi = _world_photon(row, scene_c, row[P_SCENE_R], n, u1, u2, i)
+            oi, di, Pi = _world_photon(row, env, M, scene_c, row[P_SCENE_R], n, u1, u2, i)
         _store(o, d, P, i, oi, di, Pi)
 
 
@@ -237,7 +260,7 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, times, u1, u2, u_side, 
 # Emission toward a sphere
 # ----------------------------------------------------------------------------
 @njit(**JIT)
-def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, times, centers, radius, u1, u2, o, d, P):
+def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, env, times, centers, radius, u1, u2, o, d, P):
     """n = o.shape[0] photons of one light aimed at spheres (centers (1 or n, 3), radius), as ``LightSet.emit_toward``.
 
     row, poses, steps, corners, q, cdf, Le, times: see the module docstring.  Uniforms in the
@@ -268,7 +291,7 @@ def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, times, centers, 
             back = math.sqrt(dot(v, v)) + scene_r + radius
             if typ == T_WORLD:
                 # every direction through the target; shifted with its own centre
-                oi, di, Pi = _world_photon(row, first, radius, n, u1, u2, i)
+                oi, di, Pi = _world_photon(row, env, M, first, radius, n, u1, u2, i)
                 oi = sub(add(oi, sub(x, first)), scale(di, max(back - 2.0 * radius, 0.0)))
             else:
                 # a disc covering the target sphere
@@ -330,11 +353,12 @@ def _prepare(lights, li: int, n: int, times, rng: np.random.Generator, side: boo
     u1 = rng.random((n, 2))
     u_side = rng.random(n) if (side and l.type == "MESH") else _EMPTY1
     u2 = _EMPTY2 if (l.type in ("POINT", "SPOT") and float(l.radius) <= 0.0) else rng.random((n, 2))
-    row, poses, steps, corners, q, cdf, Le = kernel_light(lights, li)
-    times = np.ascontiguousarray(np.atleast_1d(np.asarray(0.0 if l.type == "WORLD" else times, np.float64)))
+    row, poses, steps, corners, q, cdf, Le, env = kernel_light(lights, li)
+    still = l.type == "WORLD" and l.transform.is_static          # (the world's time matters only to its mapping)
+    times = np.ascontiguousarray(np.atleast_1d(np.asarray(0.0 if still else times, np.float64)))
     if poses is None:
         poses = light_poses(lights, li, times)
-    return (u1, u_side, u2), (row, poses, steps, corners, q, cdf, Le, times)
+    return (u1, u_side, u2), (row, poses, steps, corners, q, cdf, Le, env, times)
 
 
 def _textured(light, U, o, d, times, P) -> None:

@@ -9,9 +9,10 @@ that one packing, through it or through the three functions below.
 :func:`light_params`: the row of ``N_LIGHT_PARAMS`` numbers (columns ``P_*``; type codes ``T_*``;
 AREA shapes ``S_*``).  :func:`light_poses`: the object-to-world matrices (k, 4, 4) a kernel reads
 per row (k = 1 for a static light: every row reads matrix 0); for a MESH light they are its
-instance's matrices, for the WORLD the identity.  :func:`mesh_arrays`: a mesh light's triangles
-at each vertex step (empty arrays of the same ranks for other lights), so one kernel signature
-serves every kind.  A mesh light that neither moves nor deforms is packed with its world corners
+instance's matrices, for the WORLD its mapping (the identity for a constant world).
+:func:`mesh_arrays`: a mesh light's triangles at each vertex step (empty arrays of the same ranks
+for other lights) and the world's environment arrays (black for other lights), so one kernel
+signature serves every kind.  A mesh light that neither moves nor deforms is packed with its world corners
 (``MeshLight._world_static``, what the numpy code sampled) and the identity as its pose: the
 kernels' M x + T is then exact, so its points are those of numpy's matrix product (which BLAS
 may round differently, e.g. with FMA).
@@ -91,15 +92,20 @@ _NO_LE = np.zeros((0, 3))
 
 
 def _pose_transform(l):
-    """The transform that poses light entry l (MESH: its instance's), or None for the WORLD."""
-    if l.type == "WORLD":
-        return None
+    """The transform that poses light entry l (MESH: its instance's; WORLD: its mapping, the identity
+    for a constant world)."""
     return l._inst_transform if l.type == "MESH" else l.transform
+
+
+def _no_env():
+    """The ``env`` tuple of lights other than the world (a black constant world)."""
+    from ..world_light import constant_environment
+    return constant_environment(np.zeros(3))
 
 
 def kernel_light(lights, li: int):
     """Light li of the LightSet ``lights`` as kernel data, packed once: (prm, static_poses, steps,
-    corners, q, cdf, Le).
+    corners, q, cdf, Le, env).
 
     prm (N_LIGHT_PARAMS,); static_poses (1, 4, 4) C-contiguous when the light (for MESH: its
     instance) does not move, else None (:func:`light_poses` per call); steps (K,), corners
@@ -108,7 +114,8 @@ def kernel_light(lights, li: int):
     not deform (steps = [0]; world space with an identity pose for a static mesh, object space
     otherwise), else the mesh's vertex times, corners linear in time between them; triangle j
     is picked with probability q[j] (cdf its running sum, last entry 1).  Other lights: empty
-    arrays (F = 0).
+    arrays (F = 0).  env: the WORLD's environment tuple (``world_light.environment_arrays``;
+    ``kernels.environment``), a black constant one for every other light.
     """
     cache = lights.__dict__.setdefault("_kernel_lights", {})
     k = cache.get(li)
@@ -117,7 +124,7 @@ def kernel_light(lights, li: int):
         tr = _pose_transform(l)
         world_mesh = l.type == "MESH" and getattr(l, "_world_static", None) is not None
         poses = None
-        if tr is None or world_mesh:
+        if world_mesh:
             poses = np.eye(4)[None].copy()
         elif tr.is_static:
             poses = np.ascontiguousarray(tr.at(np.zeros(1)), np.float64)
@@ -132,7 +139,8 @@ def kernel_light(lights, li: int):
                 steps, corners = l._steps, l._corners
             mesh = tuple(np.ascontiguousarray(a, np.float64) for a in (steps, corners, l.q, l.cdf,
                                                                         getattr(l, "kernel_Le", l.Le)))
-        k = cache[li] = (_pack_row(lights, li), poses) + mesh
+        env = l.env if l.type == "WORLD" else _no_env()
+        k = cache[li] = (_pack_row(lights, li), poses) + mesh + (env,)
     return k
 
 
@@ -154,5 +162,7 @@ def light_poses(lights, li: int, times: np.ndarray) -> np.ndarray:
 
 def mesh_arrays(lights, li: int):
     """A MESH light's (steps (K,), corners (K, F, 3, 3), q (F,), cdf (F,), Le (F, 3)) as packed by
-    :func:`kernel_light` (in the space :func:`light_poses` maps from); other lights: empty arrays (F = 0)."""
+    :func:`kernel_light` (in the space :func:`light_poses` maps from; other lights: empty arrays,
+    F = 0), then the light's ``env`` (the WORLD's environment; black for the others): the arrays
+    every light kernel takes after the poses."""
     return kernel_light(lights, li)[2:]

@@ -38,12 +38,13 @@ import numpy as np
 from ..numba_probe import njit
 from .light_params import P_ANGLE, P_COLOR, P_DEAD, P_POWER, P_RADIUS, P_SOFT, P_TYPE, T_AREA, T_MESH, T_POINT, \
     T_SPOT, T_SUN, T_WORLD
+from .environment import E_NEE_COS, E_TEXTURED, env_pdf, env_radiance, env_sample
 from .sampling import (JIT, TWO_PI, area_point, area_shape, axis_or_z, clip, column, concentric_disk,
                        cosine_hemisphere, cross, dot, edot, intensity, light_axis, madd, mesh_point, neg, normalize,
                        one_minus_cos_from_sin2, scale, sign, spot_attenuation, sub, to_world, uniform_cone,
                        uniform_sphere, unit, vec3)
 
-__all__ = ["sample_light_rows", "seen_light", "sample_direct_batch", "seen_batch", "spherical_rect_sample",
+__all__ = ["sample_light_rows", "world_nee_pdf", "seen_light", "sample_direct_batch", "seen_batch", "spherical_rect_sample",
            "spherical_rect_batch"]
 
 
@@ -234,6 +235,49 @@ def _sample_world(prm, n, u0, u1):
     return wi[0], wi[1], wi[2], np.inf, c * L[0], c * L[1], c * L[2]
 
 
+@njit(**JIT)
+def _sample_env(env, M, n, u0, u1):
+    """WORLD with an environment image (``kernels.environment``, map-to-world rotation M): wi from
+    the mixture p = c p_cos + (1 - c) p_img (c = env's ``E_NEE_COS``; p_cos cosine about n, or
+    uniform on the sphere for a zero n), u0 choosing the technique and reused inside it; weight
+    L(wi) / p.  Distance inf."""
+    c = env[4][E_NEE_COS]
+    no_n = n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0
+    if u0 < c:
+        u0 = u0 / c
+        if no_n:
+            wi = uniform_sphere(u0, u1)
+        else:
+            wi = to_world(cosine_hemisphere(u0, u1), n)
+    else:
+        d0, d1, d2, _ = env_sample(env, M, (u0 - c) / (1.0 - c), u1)
+        wi = (d0, d1, d2)
+    if no_n:
+        p_a = 0.25 / np.pi
+    else:
+        p_a = max(wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2], 0.0) / np.pi
+    pdf = c * p_a + (1.0 - c) * env_pdf(env, M, wi)
+    if not pdf > 0.0:
+        return wi[0], wi[1], wi[2], np.inf, 0.0, 0.0, 0.0
+    L = env_radiance(env, M, wi)
+    return wi[0], wi[1], wi[2], np.inf, L[0] / pdf, L[1] / pdf, L[2] / pdf
+
+
+@njit(**JIT)
+def world_nee_pdf(env, M, n, wi):
+    """Solid-angle density (1/sr) with which next-event estimation draws wi toward the WORLD from
+    a point whose geometric normal turned toward the viewer is n (zero: no normal): cos / pi
+    about n (uniform 1 / (4 pi) without one) for a constant world, the mixture of
+    :func:`_sample_env` for an environment image (M its map-to-world rotation)."""
+    no_n = n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0
+    p_a = 0.25 / np.pi if no_n else max(wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2], 0.0) / np.pi
+    par = env[4]
+    if par[E_TEXTURED] == 0.0:
+        return p_a
+    c = par[E_NEE_COS]
+    return c * p_a + (1.0 - c) * env_pdf(env, M, wi)
+
+
 # ----------------------------------------------------------------------------
 # Light samples for many shading points
 # ----------------------------------------------------------------------------
@@ -253,20 +297,22 @@ def _toward(NG, D, r):
 
 
 @njit(**JIT)
-def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, rows, P, NG, D, T, U, S):
+def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, D, T, U, S):
     """One sample of light ``prm`` for each shading row k, the point p = P[rows[k]] (world) at
     normalised time T[k] with uniforms U[k] (2,); writes S[k] = (wi0, wi1, wi2, dist, w0, w1, w2).
 
     prm (N_LIGHT_PARAMS,): the light's parameter row; poses (K, 4, 4): its object-to-world
     matrices, row k reads poses[0] when K = 1 else poses[k] (MESH: its instance's, identity for a
     static one; WORLD: identity); steps (K,), corners (K, F, 3, 3), q, cdf (F,), Le (F, 3): a MESH
-    light's triangles (``light_params.mesh_arrays``; empty for other lights).  NG, D (m, 3): the
-    rows' geometric normals and ray directions, read by WORLD only (cosine sampling about ng turned
-    toward wo = -d; a zero ng: uniform sphere).  rows (n,) into P, NG, D; T (n,), U (n, 2), S (n, 7).
+    light's triangles (``light_params.mesh_arrays``; empty for other lights); env: the WORLD's
+    environment (``kernels.environment``; an image world samples it, :func:`_sample_env`, with
+    poses its mapping).  NG, D (m, 3): the rows' geometric normals and ray directions, read by
+    WORLD only (cosine sampling about ng turned toward wo = -d; a zero ng: uniform sphere).  rows (n,) into P, NG, D; T (n,), U (n, 2), S (n, 8).
 
     wi: unit direction from p toward the light sample; dist: its distance (inf for SUN / WORLD;
     shadow rays test [eps, dist)); w: the weight W m^-2 sr^-1, 0 where the light gives nothing
-    (behind an area light, outside a spot, a dead light).  The light type is chosen once, outside
+    (behind an area light, outside a spot, a dead light).  S[k, 7]: the WORLD's sampling density
+    of wi (:func:`world_nee_pdf`, for multiple importance sampling), inf for other lights.  The light type is chosen once, outside
     the loops: each loop body is one sampler, with no branch or call it does not need.
     """
     typ = int(prm[P_TYPE])
@@ -285,12 +331,24 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, rows, P, NG, D, T,
         for k in range(n):
             _put(S, k, _sample_mesh(poses[0 if one else k], steps, corners, q, cdf, Le, T[k], vec3(P[rows[k]], 0),
                                     U[k, 0], U[k, 1]))
+    elif typ == T_WORLD and env[4][E_TEXTURED] != 0.0:
+        for k in range(n):
+            _put(S, k, _sample_env(env, poses[0 if one else k], _toward(NG, D, rows[k]), U[k, 0], U[k, 1]))
     elif typ == T_WORLD:
         for k in range(n):
             _put(S, k, _sample_world(prm, _toward(NG, D, rows[k]), U[k, 0], U[k, 1]))
     else:
         for k in range(n):
             _put(S, k, (0.0, 0.0, 1.0, np.inf, 0.0, 0.0, 0.0))     # (no other type codes)
+    # Column 7: the density the world's samples were drawn with (multiple importance sampling
+    # against camera paths that go on through rough lobes); inf for every other light, which
+    # next-event estimation handles alone
+    if typ == T_WORLD:
+        for k in range(n):
+            S[k, 7] = world_nee_pdf(env, poses[0 if one else k], _toward(NG, D, rows[k]), (S[k, 0], S[k, 1], S[k, 2]))
+    else:
+        for k in range(n):
+            S[k, 7] = np.inf
     if prm[P_DEAD] != 0.0:
         # no emitting direction at any key (zero Z scale, zero area): nothing
         for k in range(n):
@@ -357,7 +415,7 @@ def seen_light(prm, M, o, d, t_scene, camera_ray):
 # Batch kernels (LightSet.sample_direct, tests)
 # ----------------------------------------------------------------------------
 @njit(**JIT)
-def sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, p, times, u, normals, use_normals,
+def sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, env, p, times, u, normals, use_normals,
                         wi_out, dist_out, weight_out):
     """:func:`sample_light_rows` for every row i of p (n, 3) at times (n,) with uniforms u (n, 2).
 
@@ -367,8 +425,8 @@ def sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, p, times, u, nor
     """
     n = p.shape[0]
     ng = normals if use_normals else np.zeros((n, 3))
-    S = np.empty((n, 7))
-    sample_light_rows(prm, poses, steps, corners, q, cdf, Le, np.arange(n), p, ng, -ng, times, u, S)
+    S = np.empty((n, 8))
+    sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, np.arange(n), p, ng, -ng, times, u, S)
     for i in range(n):
         wi_out[i, 0], wi_out[i, 1], wi_out[i, 2] = S[i, 0], S[i, 1], S[i, 2]
         dist_out[i] = S[i, 3]

@@ -24,8 +24,8 @@ equations with these names):
   rays and delta chains;
 * :func:`photon_albedo` / :func:`photon_add` -- the diffuse albedo and the
   query rows of the photon-map look-ups, and rho / pi E added into a pass;
-* :func:`specular_step` -- continue through delta lobes: BSDF sample,
-  throughput, Russian roulette, offset origins of the next rays;
+* :func:`specular_step` -- continue through delta and rough non-diffuse lobes: BSDF sample
+  (``bsdf_sample_path``), throughput, Russian roulette, offset origins of the next rays;
 * :func:`scatter_add`, :func:`active_channels`, :func:`pixel_sums`,
   :func:`tile_finish` -- per-sample passes and per-pixel sums of one tile.
 
@@ -42,10 +42,12 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .bsdf import bsdf_eval_pdf, bsdf_eval_smooth, bsdf_sample, diffuse_albedo
+from .bsdf import PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_eval_smooth, bsdf_sample_path, diffuse_albedo
+from .environment import env_radiance
 from .closure import (C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, closure_row)
-from .lights import sample_light_rows, seen_light
-from .sampling import offset_origin
+from .light_params import P_TYPE, T_WORLD
+from .lights import sample_light_rows, seen_light, world_nee_pdf
+from .sampling import dot, offset_origin
 
 __all__ = ["camera_tile", "camera_rays", "classify_hits", "nee_light", "nee_accumulate",
            "seen_lights_add", "photon_albedo", "photon_add", "specular_step", "scatter_add", "active_channels",
@@ -154,8 +156,8 @@ def camera_rays(px, py, W, H, half_w, half_h, cx, cy, R, pos, ortho, clip_start,
 # One bounce's bookkeeping
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def classify_hits(t, C, world, add_world, idx, use_idx, beta, use_beta, V, c_emit, first, c_depth, c_normal,
-                  depth_bg, P, NS, cam_pos, cam_axis, covered, sh, spec):
+def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta, glossy, world_w, use_glossy, V,
+                  c_emit, first, c_depth, c_normal, depth_bg, P, NS, cam_pos, cam_axis, covered, sh, spec):
     """Bookkeeping of m rays' hits; returns (n_hit, n_sh, n_spec, n_emit) (n_emit: rows added to Emit).
 
     t (m,) hit distances (inf: miss), C (m, N_CLOSURE) the hits' closures
@@ -165,9 +167,13 @@ def classify_hits(t, C, world, add_world, idx, use_idx, beta, use_beta, V, c_emi
     first bounce (every sample once, in order) starts each sample's row of V:
     0, Depth (column c_depth) = depth_bg, then for a hit Depth = (P - cam_pos)
     . cam_axis, Normal (c_normal ..) = NS and covered = 1 (cam_pos, cam_axis
-    (k, 3), k = 1 or n).  Adds world (3,) radiance of misses (if add_world)
-    and emission of emissive hits into Emit.  Writes the hit rows with a
-    non-delta lobe into sh and those with a delta lobe into spec, in row order.
+    (k, 3), k = 1 or n).  Adds the world's radiance along the direction D[r] (m, 3)
+    of misses (if add_world; ``kernels.environment.env_radiance`` of env with wposes (k, 4, 4)
+    its mapping, k = 1 or m; times world_w[r] when use_glossy, :func:`specular_step`) and
+    emission of emissive hits into Emit, except on rows that left a rough lobe (``glossy[r]`` 1,
+    when use_glossy: next-event estimation there counted the lights).
+    Writes the hit rows with a non-delta lobe into sh and those with a delta or a rough lobe
+    (where the path may go on, :func:`specular_step`) into spec, in row order.
     """
     m = t.shape[0]
     K = V.shape[1]
@@ -176,6 +182,7 @@ def classify_hits(t, C, world, add_world, idx, use_idx, beta, use_beta, V, c_emi
     n_spec = 0
     n_emit = 0
     one = cam_pos.shape[0] == 1
+    one_w = wposes.shape[0] == 1
     for r in range(m):
         i = idx[r] if use_idx else r
         if first:
@@ -183,11 +190,14 @@ def classify_hits(t, C, world, add_world, idx, use_idx, beta, use_beta, V, c_emi
                 V[i, c] = 0.0
             V[i, c_depth] = depth_bg
             covered[i] = 0.0
+        emits = not (use_glossy and glossy[r] != 0)
         if not np.isfinite(t[r]):
-            if add_world:
+            ww = world_w[r] if use_glossy else 1.0
+            if add_world and ww > 0.0:
                 n_emit += 1
+                world = env_radiance(env, wposes[0 if one_w else r], (D[r, 0], D[r, 1], D[r, 2]))
                 for c in range(3):
-                    V[i, c_emit + c] += (beta[r, c] * world[c]) if use_beta else world[c]
+                    V[i, c_emit + c] += ((beta[r, c] * world[c]) if use_beta else world[c]) * ww
             continue
         n_hit += 1
         if first:
@@ -197,14 +207,14 @@ def classify_hits(t, C, world, add_world, idx, use_idx, beta, use_beta, V, c_emi
             for c in range(3):
                 V[i, c_normal + c] = NS[r, c]
             covered[i] = 1.0
-        if C[r, C_EMISSIVE] > 0.0:
+        if C[r, C_EMISSIVE] > 0.0 and emits:
             n_emit += 1
             for c in range(3):
                 V[i, c_emit + c] += (beta[r, c] * C[r, C_EMIT + c]) if use_beta else C[r, C_EMIT + c]
         if C[r, C_NONDELTA] > 0.0:
             sh[n_sh] = r
             n_sh += 1
-        if C[r, C_HAS_DELTA] > 0.0:
+        if C[r, C_HAS_DELTA] > 0.0 or C[r, C_ROUGH_LOBE] > 0.0:
             spec[n_spec] = r
             n_spec += 1
     return n_hit, n_sh, n_spec, n_emit
@@ -229,15 +239,15 @@ def scatter_add(dst, rows, idx, use_idx, beta, use_beta, val):
 # Next-event estimation
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cdf, Le, T, U, EPS,
-              contrib, so, sd, stmax, live, S):
+def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cdf, Le, env, T, U, EPS, mis,
+              stop_coat, contrib, so, sd, stmax, live, S):
     """Next-event estimation of one light at the hit rows ``rows`` (n,); returns the shadow-ray count.
 
     P, NG, NS, D (m, 3): hit points, geometric / shading normals and ray
     directions of the bounce; C (m, N_CLOSURE) the hits' closures; E, E_avg
     the GGX albedo tables (``kernels.bsdf.ggx_albedo_tables``).  The light:
     its parameter row prm, poses (k, 4, 4) (k = 1 static, else one per row of
-    ``rows``) and mesh arrays (``kernels.light_params``).  T (n,) the rows'
+    ``rows``), mesh arrays and environment (``kernels.light_params``).  T (n,) the rows'
     times, U (n, 2) the light's uniforms, EPS (m,) each hit's shadow-ray
     origin offset (scene units).
 
@@ -247,8 +257,14 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
     weight.  Where it is positive, a shadow ray from p offset by EPS[r] along
     ng to wi's side, aimed at the light point, stopping a margin short of it
     (emissive triangles are geometry the shadow ray must not reach): so, sd
-    (n, 3), stmax (n,), and live (n,) the row k it belongs to.  S (>= n, 7): the light samples
+    (n, 3), stmax (n,), and live (n,) the row k it belongs to.  S (>= n, 8): the light samples
     (``sample_light_rows``; a textured MESH light's caller reads the light points from it).
+
+    The WORLD with ``mis`` (camera paths go on from these rows through their rough lobes,
+    :func:`specular_step`, and pick up the world where they escape): the part f_c of f those
+    lobes sample with density p_c (``bsdf_eval_cont``, stop_coat as the continuation) is weighed
+    by the balance heuristic p_l / (p_l + p_c), p_l = S[k, 7] the world's own density, and the
+    escaping paths by p_c / (p_l + p_c) (docs/rendering.md, "Path partition").
 
     Three loops, each with only the code its rows need (a loop that contains a call it never
     takes still runs about twice slower per row; docs/rendering.md "NEE cost"): the light
@@ -256,14 +272,23 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
     rough lobe, then the smooth BSDF, contribution and shadow ray of every row.
     """
     n = rows.shape[0]
-    sample_light_rows(prm, poses, steps, corners, q, cdf, Le, rows, P, NG, D, T, U, S)
+    sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, D, T, U, S)
+    world_mis = mis and int(prm[P_TYPE]) == T_WORLD
     # -- The BSDF of rows with a rough lobe: the compiled mixture (bsdf_eval_pdf) -------------
     F = np.empty((n, 3))
     for k in range(n):
         r = rows[k]
         if C[r, C_ROUGH_LOBE] > 0:
-            f0, f1, f2, _ = bsdf_eval_pdf(C, r, E, E_avg, (-D[r, 0], -D[r, 1], -D[r, 2]), (S[k, 0], S[k, 1], S[k, 2]),
-                                          (NS[r, 0], NS[r, 1], NS[r, 2]), (NG[r, 0], NG[r, 1], NG[r, 2]))
+            wo = (-D[r, 0], -D[r, 1], -D[r, 2])
+            wi = (S[k, 0], S[k, 1], S[k, 2])
+            ns = (NS[r, 0], NS[r, 1], NS[r, 2])
+            g = (NG[r, 0], NG[r, 1], NG[r, 2])
+            f0, f1, f2, _ = bsdf_eval_pdf(C, r, E, E_avg, wo, wi, ns, g)
+            if world_mis:
+                c0, c1, c2, p_c = bsdf_eval_cont(C, r, E, E_avg, wo, wi, ns, g, stop_coat)
+                if p_c > 0.0:
+                    x = p_c / (S[k, 7] + p_c)
+                    f0, f1, f2 = f0 - c0 * x, f1 - c1 * x, f2 - c2 * x
             F[k, 0], F[k, 1], F[k, 2] = f0, f1, f2
     n_live = 0
     for k in range(n):
@@ -384,30 +409,39 @@ def photon_add(dst, rows, live, rho, E, idx, use_idx, beta, use_beta):
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
 def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg, U, rr, U_rr, EPS, guard_fraction,
-                  idx_out, beta_out, o_out, d_out, guard_out):
-    """Continue the hit rows spec (k,) through their delta lobes; returns how many paths go on.
+                  stop_coat, env, wposes, world_mis, idx_out, beta_out, o_out, d_out, guard_out, glossy_out,
+                  world_w_out):
+    """Continue the hit rows spec (k,) through their delta and rough non-diffuse lobes; returns how
+    many paths go on.
 
-    Per row j (hit r = spec[j]): (wi, weight, is_delta) = ``bsdf_sample``(C[r],
-    wo = -D[r], U[j]); beta' = beta[r] * weight (weight alone when not
-    use_beta).  The path goes on if a delta lobe was chosen and some beta' > 0,
-    and, when rr (Russian roulette from ``integrator.RR_START`` bounces on), if
-    U_rr[j] < q = clip(max beta', 0.05, 1), then beta' /= q.  For those:
-    idx_out = the sample (idx[r], or r), beta_out = beta', the next ray from p
-    offset by EPS[j] along ng to wi's side (o_out, d_out = wi) and its
-    self-intersection guard guard_out = guard_fraction * EPS[j].
+    Per row j (hit r = spec[j]): (wi, weight, kind) = ``bsdf_sample_path``(C[r],
+    wo = -D[r], U[j], stop_coat): the DIFFUSE lobe (which the photon maps carry) stops the path,
+    a delta lobe or a rough one continues it (docs/rendering.md, "Path partition"); beta' = beta[r] *
+    weight (weight alone when not use_beta).  The path goes on if some beta' > 0, and, when rr
+    (Russian roulette from ``integrator.RR_START`` bounces on), if U_rr[j] < q =
+    clip(max beta', 0.05, 1), then beta' /= q.  For those: idx_out = the sample (idx[r], or r),
+    beta_out = beta', the next ray from p offset by EPS[j] along ng to wi's side (o_out, d_out =
+    wi), its self-intersection guard guard_out = guard_fraction * EPS[j], and glossy_out = 1 after
+    a rough lobe (the next vertex then adds no emission: next-event estimation at this vertex
+    counted the lights through that lobe), 0 after a delta lobe.  world_w_out: the weight of the
+    world's radiance if the ray escapes: 1 after a delta lobe; after a rough lobe, with
+    world_mis (the world is a light of next-event estimation, :func:`nee_light`), the balance
+    heuristic p_c / (p_c + p_l) of the continuation's density p_c against the world's own p_l
+    (``lights.world_nee_pdf``; env and wposes (1 or k, 4, 4) its mapping), else 0.
     """
+    one_w = wposes.shape[0] == 1
     n_go = 0
     for j in range(spec.shape[0]):
         r = spec[j]
         wo = (-D[r, 0], -D[r, 1], -D[r, 2])
         g = (NG[r, 0], NG[r, 1], NG[r, 2])
-        wi0, wi1, wi2, w0, w1, w2, is_delta = bsdf_sample(C, r, E, E_avg, wo, (NS[r, 0], NS[r, 1], NS[r, 2]), g,
-                                                          U[j, 0], U[j, 1], U[j, 2])
+        wi0, wi1, wi2, w0, w1, w2, kind, p_c = bsdf_sample_path(C, r, E, E_avg, wo, (NS[r, 0], NS[r, 1], NS[r, 2]),
+                                                                g, U[j, 0], U[j, 1], U[j, 2], stop_coat)
         if use_beta:
             b0, b1, b2 = beta[r, 0] * w0, beta[r, 1] * w1, beta[r, 2] * w2
         else:
             b0, b1, b2 = w0, w1, w2
-        go = is_delta and (b0 > 0.0 or b1 > 0.0 or b2 > 0.0)
+        go = kind != PATH_STOP and (b0 > 0.0 or b1 > 0.0 or b2 > 0.0)
         if rr:
             q = min(max(max(b0, max(b1, b2)), 0.05), 1.0)
             go = go and U_rr[j] < q
@@ -421,6 +455,15 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg,
                                                                        (wi0, wi1, wi2))
         d_out[n_go, 0], d_out[n_go, 1], d_out[n_go, 2] = wi0, wi1, wi2
         guard_out[n_go] = guard_fraction * e
+        glossy_out[n_go] = 1 if kind == PATH_GLOSSY else 0
+        w_world = 1.0
+        if kind == PATH_GLOSSY:
+            w_world = 0.0
+            if world_mis:
+                g_f = g if dot(g, wo) >= 0.0 else (-g[0], -g[1], -g[2])
+                p_l = world_nee_pdf(env, wposes[0 if one_w else j], g_f, (wi0, wi1, wi2))
+                w_world = p_c / (p_c + p_l)
+        world_w_out[n_go] = w_world
         n_go += 1
     return n_go
 

@@ -6,21 +6,27 @@ records); :func:`photon_bounce` does the per-photon work of a bounce,
 docs/photon-mapping.md ("Tracing") has the equations:
 
 * **deposit**: a photon is stored at a hit with a non-delta lobe when its
-  path qualifies: the caustic map after >= 1 delta bounce (L S+ D), the
-  global map after >= ``min_nondelta`` non-delta bounces;
-* **scatter**: (wi, weight, is_delta) = ``bsdf_sample`` at the hit, with
-  weight = f |cos| / pdf (n, 3) or a delta lobe's throughput;
+  path qualifies: the caustic map after >= 1 specular or glossy bounce
+  (L (S|G)+ D), the global map after >= ``min_nondelta`` diffuse bounces
+  (docs/rendering.md, "Path partition"); ``n_delta`` counts the bounces through a
+  delta or a glossy lobe, ``n_nondelta`` those through the DIFFUSE lobe or a rough coat
+  (the dim, broad reflection of a plastic's dielectric layer: the global map carries it, so
+  the caustic photons need not be aimed at every Principled surface);
+* **scatter**: global photons: (wi, weight, lobe) = ``bsdf_sample_lobe`` at the hit, with
+  weight = f |cos| / pdf (n, 3) or a delta lobe's throughput; caustic photons:
+  ``bsdf_sample_path`` (they stop where the DIFFUSE lobe is chosen, and a rough lobe's
+  weight counts the non-diffuse lobes alone);
 * **Russian roulette by albedo**: the photon survives with
   q = min(1, max_c weight_c) and its power becomes Phi weight / q, so stored
-  powers stay even; caustic paths go on only through delta lobes;
+  powers stay even; caustic paths go on only through delta and glossy lobes;
 * **spawn**: the next ray starts at p offset by EPS along ng to wi's side,
   with its own self-intersection guard ``guard_fraction`` x EPS.
 """
 from __future__ import annotations
 
 from ..numba_probe import njit
-from .bsdf import bsdf_sample
-from .closure import C_NONDELTA
+from .bsdf import COAT, DIFFUSE, PATH_STOP, bsdf_sample_lobe, bsdf_sample_path
+from .closure import C_NONDELTA, C_ROUGHNESS
 from .sampling import offset_origin
 
 __all__ = ["photon_bounce"]
@@ -58,13 +64,23 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
             continue
         # -- Sample the next direction from the BSDF ---------------------------------------
         g = (NG[r, 0], NG[r, 1], NG[r, 2])
-        wi0, wi1, wi2, w0, w1, w2, is_delta = bsdf_sample(C, j, E, E_avg, (-D[j, 0], -D[j, 1], -D[j, 2]),
-                                                          (NS[r, 0], NS[r, 1], NS[r, 2]), g, U[j, 0], U[j, 1], U[j, 2])
+        wo = (-D[j, 0], -D[j, 1], -D[j, 2])
+        ns = (NS[r, 0], NS[r, 1], NS[r, 2])
+        if caustic:
+            # L (S|G)+ D: on through delta and rough non-diffuse lobes, stopping on the diffuse one
+            wi0, wi1, wi2, w0, w1, w2, kind, _ = bsdf_sample_path(C, j, E, E_avg, wo, ns, g, U[j, 0], U[j, 1],
+                                                                  U[j, 2], caustic)
+            spec_bounce = kind != PATH_STOP
+            diffuse_bounce = False
+        else:
+            wi0, wi1, wi2, w0, w1, w2, lobe = bsdf_sample_lobe(C, j, E, E_avg, wo, ns, g, U[j, 0], U[j, 1], U[j, 2])
+            diffuse_bounce = lobe == DIFFUSE or (lobe == COAT and C[j, C_ROUGHNESS] > 0.0)
+            spec_bounce = not diffuse_bounce
         # -- Possibly terminate the path with Russian roulette (by albedo) -------------------
         q = min(max(max(w0, max(w1, w2)), 0.0), 1.0)
         alive = U_rr[j] < q
         if caustic:
-            alive = alive and is_delta
+            alive = alive and spec_bounce
         if not alive:
             continue
         qq = q if q > 0.0 else 1.0
@@ -77,8 +93,8 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
         Phi_next[n_next, 1] = Phi[j, 1] * w1 / qq
         Phi_next[n_next, 2] = Phi[j, 2] * w2 / qq
         T_next[n_next] = T[j]
-        nd_next[n_next] = n_delta[j] + (1 if is_delta else 0)
-        nn_next[n_next] = n_nondelta[j] + (0 if is_delta else 1)
+        nd_next[n_next] = n_delta[j] + (1 if spec_bounce else 0)
+        nn_next[n_next] = n_nondelta[j] + (1 if diffuse_bounce else 0)
         guard_next[n_next] = guard_fraction * e
         n_next += 1
     return n_store, n_next

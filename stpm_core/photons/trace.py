@@ -29,7 +29,7 @@ import numpy as np
 
 from .. import kernels as _kernels
 from ..kernels.bsdf import ggx_albedo_tables
-from ..kernels.closure import C_HAS_DELTA, C_NONDELTA, N_CLOSURE, pack_materials
+from ..kernels.closure import C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, C_W_GLASS, C_W_METAL, N_CLOSURE, pack_materials
 from ..kernels.svm import shade
 from ..kernels.photon_paths import photon_bounce
 from ..parallel import ordered_map, worker_count
@@ -49,15 +49,17 @@ _NO_U = np.zeros(0)
 
 
 def has_delta(table, mat) -> np.ndarray:
-    """(n,) bool: the material has a delta lobe (clear glass, mirror metal, smooth coat): the closure's
-    ``C_HAS_DELTA`` flag (``kernels.closure``), read for material ids mat (-1: none)."""
+    """(n,) bool: the material casts caustics: a delta lobe (clear glass, mirror metal, smooth coat:
+    the closure's ``C_HAS_DELTA`` flag, ``kernels.closure``) or a rough metal or glass lobe (glossy
+    caustics: the caustic map carries L (S|G)+ D), read for material ids mat (-1: none)."""
     mat = np.asarray(mat, dtype=np.int64)
-    closures = table.closures
-    return closures[np.where(mat < 0, closures.shape[0] - 1, mat), C_HAS_DELTA] > 0.0
+    rows = table.closures[np.where(mat < 0, table.closures.shape[0] - 1, mat)]
+    glossy = (rows[:, C_ROUGH_LOBE] > 0.0) & ((rows[:, C_W_METAL] > 0.0) | (rows[:, C_W_GLASS] > 0.0))
+    return (rows[:, C_HAS_DELTA] > 0.0) | glossy
 
 
 def specular_targets(scene, table) -> list[tuple[int, np.ndarray, float]]:
-    """Instances with a delta lobe and the sphere bounding them over the whole shutter.
+    """Instances that cast caustics (:func:`has_delta`) and the sphere bounding them over the whole shutter.
 
     (At its one instant u = 0.5 when the shutter is closed: motion outside it is unused.)
 
@@ -113,10 +115,10 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     caster : ray caster (``intersect(o, d, times)``).
     table : bsdf.MaterialTable (its ``closures`` rows are what the kernels read).
     o, d : (n, 3) origins and unit directions; Phi : (n, 3) W; t : (n,) path times.
-    mode : 'caustic' (store after >= 1 delta bounce, continue only through
-        delta lobes, first hit must be ``target_instance``) or 'global' (store
-        after >= ``min_nondelta`` non-delta bounces; 0 also stores first hits,
-        which only tests use).
+    mode : 'caustic' (store after >= 1 delta or glossy bounce, continue only through
+        delta and glossy lobes, first hit must be ``target_instance``) or 'global' (store
+        after >= ``min_nondelta`` diffuse bounces, a rough coat's counting as one; 0 also
+        stores first hits, which only tests use).
     max_depth : bounces followed.
     inst_offset : (n_instances,) per-object part of the ray-origin offset along the geometric
         normal (scene units; ``raycast.geometry.instance_offsets``, applied by ``offset_lengths``).

@@ -8,6 +8,11 @@ Material data comes from :class:`stpm_core.bsdf.MaterialTable`, the GGX albedo
 tables from :func:`stpm_core.kernels.bsdf.ggx_albedo_tables`;
 :func:`_ggx_albedo_table_numpy` is the original table construction, kept so a
 test can check the kernels module builds the same numbers.
+
+One change since: normals as they come, as Cycles and the kernels (issue 14, item 5): ``ns``
+turns with ``ng`` (the back-face flip) instead of onto ``ng``'s side, and the specular lobes use
+``nss``, ``ns`` raised by ``ensure_valid_specular_reflection`` where it differs from ``ng``, and
+vanish where ``wo`` is below it.
 """
 from __future__ import annotations
 
@@ -154,14 +159,38 @@ def _reflect(w: np.ndarray, n: np.ndarray) -> np.ndarray:
 
 
 def _oriented(wo, ns, ng):
-    """Normals flipped toward wo: (ns', ng', entering (n,) bool = wo on ng's side)."""
+    """Cycles' back-face flip: (s ns, s ng, entering (n,) bool = wo on ng's side), s = +-1 turning ng
+    toward wo; ns keeps its side of ng (a shading normal facing away from its face stays so)."""
     ng = np.asarray(ng, float)
     ns = np.asarray(ns, float)
     entering = _dot(wo, ng) >= 0.0
     s = np.where(entering, 1.0, -1.0)[:, None]
-    ngf = ng * s
-    nsf = ns * np.where(_dot(ns, ngf) >= 0.0, 1.0, -1.0)[:, None]
-    return nsf, ngf, entering
+    return ns * s, ng * s, entering
+
+
+def _valid_specular(ng, wi, n):
+    """Cycles' ``ensure_valid_specular_reflection`` per row: n (n, 3) raised toward ng (facing wi)
+    just enough that the mirror reflection of wi about it leaves at least min(0.9 wi.ng, 0.01)
+    above the surface; n itself where it already does.  Dot products summed x + y + z as the
+    kernel does: near grazing the root is ill-conditioned, and einsum's order moved f by 5e-9."""
+    def dot3(a, b):
+        return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+    r = 2.0 * dot3(n, wi)[:, None] * n - wi
+    iz = dot3(wi, ng)
+    threshold = np.minimum(0.9 * iz, 0.01)
+    ok = dot3(ng, r) >= threshold
+    x = n - dot3(n, ng)[:, None] * ng
+    lx = np.sqrt(dot3(x, x))
+    x = np.where((lx > 0)[:, None], x / np.where(lx > 0, lx, 1.0)[:, None], n)
+    ix = dot3(wi, x)
+    a = ix * ix + iz * iz
+    b = 2.0 * (a + iz * threshold)
+    c = (threshold + iz) * (threshold + iz)
+    disc = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nz2 = np.where(ix < 0, 0.25 * (b + disc) / a, 0.25 * (b - disc) / a)
+    raised = np.sqrt(np.maximum(1.0 - nz2, 0.0))[:, None] * x + np.sqrt(np.maximum(nz2, 0.0))[:, None] * ng
+    return np.where(ok[:, None], n, raised)
 
 
 class _Hit:
@@ -173,6 +202,11 @@ class _Hit:
         m = self.m
         self.wo = np.asarray(wo, float)
         self.ns, self.ng, self.entering = _oriented(self.wo, ns, ng)
+        # The specular lobes' normal: ns raised where it differs from ng (smooth / custom normals)
+        self.nss = self.ns.copy()
+        d = np.nonzero(np.any(self.ns != self.ng, axis=1))[0]
+        if d.size:
+            self.nss[d] = _valid_specular(self.ng[d], self.wo[d], self.ns[d])
         self.base = table.base_color[m]
         self.alpha = np.maximum(table.alpha[m], 1e-4)
         self.rough = table.roughness[m] > 0.0
@@ -181,7 +215,7 @@ class _Hit:
         ior = table.ior[m]
         self.eta_glass = np.where(self.entering, ior, 1.0 / ior)   # n_t / n_i for glass
         self.ior = ior
-        self.cos_o = _dot(self.wo, self.ns)
+        self.cos_o = _dot(self.wo, self.nss)
         cos_o = np.clip(self.cos_o, 0.0, 1.0)
         # Fresnel at wo for each lobe (computed only on the rows that have the lobe)
         n = self.m.shape[0]
@@ -198,21 +232,17 @@ class _Hit:
         i = np.nonzero(self.w_metal > 0)[0]
         if i.size:
             self.F_metal[i] = fresnel_schlick(self.base[i], cos_o[i])
-        # Rough metal: multiple-scattering compensation f_ms = ms_scale (1 - E(mu_o)) (1 - E(mu_i))
-        self.ms_scale = np.zeros((n, 3))         # F_ms / (pi (1 - E_avg))
-        self.ms_Eo = np.ones(n)                  # E(mu_o, alpha)
-        ms_albedo = np.zeros(n)                  # (1 - E(mu_o)) mean(F_ms): the lobe's albedo
+        # Rough metal: Cycles' energy compensation of Multiscatter GGX, per channel
+        # k_metal = 1 + F_ms (1 - E_o) / E_o, F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg)), F_ss = F0 + (1 - F0) / 21
+        self.ms_scale = np.ones((n, 3))          # k_metal
         i = np.nonzero((self.w_metal > 0) & self.rough)[0]
         if i.size:
             a = self.alpha[i]
-            E_avg = _ggx_albedo_avg(a)
-            F0 = self.base[i]
-            F_avg = F0 + (1.0 - F0) / 21.0
-            F_ms = F_avg * F_avg * E_avg[:, None] / (1.0 - F_avg * (1.0 - E_avg[:, None]))
-            live = (1.0 - E_avg) > 1e-4
-            self.ms_scale[i] = np.where(live[:, None], F_ms / (np.pi * np.maximum(1.0 - E_avg, 1e-4))[:, None], 0.0)
-            self.ms_Eo[i] = _ggx_albedo(cos_o[i], a)
-            ms_albedo[i] = np.where(live, (1.0 - self.ms_Eo[i]) * F_ms.mean(axis=1), 0.0)
+            E_avg = _ggx_albedo_avg(a)[:, None]
+            F_ss = self.base[i] + (1.0 - self.base[i]) / 21.0
+            F_ms = F_ss * E_avg / (1.0 - F_ss * (1.0 - E_avg))
+            e_o = np.maximum(_ggx_albedo(cos_o[i], a), 1e-3)[:, None]
+            self.ms_scale[i] = 1.0 + F_ms * (1.0 - e_o) / e_o
         # Rough coat: Cycles' energy compensation of its dielectric layer, 1 + F_ms (1 - E_o) / E_o
         self.k_coat = np.ones(n)
         i = np.nonzero((self.F_coat > 0) & self.rough)[0]
@@ -230,11 +260,12 @@ class _Hit:
         est = np.stack([
             self.w_base * (1.0 - self.F_coat) * mean_base,
             self.w_base * self.F_coat,
-            self.w_metal * self.F_metal.mean(axis=1),
+            self.w_metal * (self.F_metal * self.ms_scale).mean(axis=1),
             self.w_glass * self.F_glass,
             self.w_glass * (1.0 - self.F_glass) * mean_base,
-            self.w_metal * ms_albedo,
+            np.zeros(n),                                     # METAL_MS: no longer a lobe
         ], axis=-1)
+        est[~(self.cos_o > 0), 1:] = 0.0          # wo below the specular normal: only the diffuse lobe
         total = est.sum(axis=1, keepdims=True)
         self.p_lobe = np.where(total > 0, est / np.maximum(total, 1e-300), 0.0)
         # Lobes that are deltas at this hit
@@ -254,33 +285,39 @@ class _Hit:
 def _microfacet(h: _Hit, wi: np.ndarray):
     """GGX reflection terms for wi (n, 3) -> valid (n,) bool, D G2 / (4 cos_o cos_i) (n,),
     visible-normal pdf of wi (n,) per sr, and wo . h (n,)."""
+    cos_is = _dot(wi, h.nss)
     cos_i = _dot(wi, h.ns)
-    valid = (cos_i > 0) & (h.cos_o > 0) & (_dot(wi, h.ng) > 0)
+    valid = (cos_is > 0) & (h.cos_o > 0) & (_dot(wi, h.ng) > 0)
     hv = h.wo + wi
     hv /= np.maximum(np.linalg.norm(hv, axis=-1, keepdims=True), 1e-300)
-    cos_h = _dot(hv, h.ns)
+    cos_h = _dot(hv, h.nss)
     wo_h = np.clip(_dot(h.wo, hv), 0.0, 1.0)
     D = _ggx_D(cos_h, h.alpha)
     lam_o = _ggx_lambda(h.cos_o, h.alpha)
-    lam_i = _ggx_lambda(cos_i, h.alpha)
+    lam_i = _ggx_lambda(cos_is, h.alpha)
     G2 = 1.0 / (1.0 + lam_o + lam_i)
     G1o = 1.0 / (1.0 + lam_o)
     cos_o = np.maximum(h.cos_o, _EPS)
     pdf = G1o * D / (4.0 * cos_o)                 # VNDF pdf of wi (solid angle)
-    spec = D * G2 / np.maximum(4.0 * cos_o * np.maximum(cos_i, _EPS), 1e-300)
+    # f is divided by the |ns . wi| the integrator multiplies
+    spec = D * G2 / np.maximum(4.0 * cos_o * np.maximum(np.abs(cos_i), _EPS), 1e-300)
+    # Cycles' bump_shadowing_term: wi on the other side of ns than the raised nss says: no reflection
+    spec = np.where(_dot(h.ns, wi) * _dot(h.ns, h.nss) * cos_is < 0.0, 0.0, spec)
     return valid, spec, pdf, wo_h
 
 
-def _eval_pdf(h: _Hit, wi: np.ndarray):
-    """Non-delta f (n, 3) and mixture pdf (n,) of the non-delta lobes for directions wi."""
+def _eval_pdf(h: _Hit, wi: np.ndarray, diffuse: bool = True, coat: float = 1.0):
+    """Non-delta f (n, 3) and mixture pdf (n,) of the non-delta lobes for directions wi (without
+    the DIFFUSE lobe when not ``diffuse``; the rough COAT times ``coat``)."""
     n = wi.shape[0]
     f = np.zeros((n, 3))
     pdf = np.zeros(n)
     cos_i = _dot(wi, h.ns)
     above = (cos_i > 0) & (_dot(wi, h.ng) > 0)
     # DIFFUSE: base / pi under the coat's Fresnel at wo
-    f += np.where(above, h.w_base * (1.0 - h.F_coat), 0.0)[:, None] * h.base / np.pi
-    pdf += np.where(above, h.p_lobe[:, DIFFUSE] * cos_i / np.pi, 0.0)
+    if diffuse:
+        f += np.where(above, h.w_base * (1.0 - h.F_coat), 0.0)[:, None] * h.base / np.pi
+        pdf += np.where(above, h.p_lobe[:, DIFFUSE] * cos_i / np.pi, 0.0)
     # Rough lobes (GGX), on the rows that have one
     r = np.nonzero(h.rough & ((h.w_metal > 0) | (h.w_glass > 0) | ((h.w_base > 0) & (h.spec > 0))))[0]
     if r.size:
@@ -294,15 +331,9 @@ def _eval_pdf(h: _Hit, wi: np.ndarray):
         F_m = fresnel_schlick(hr.base, wo_h)
         # GLASS_R (rough): exact dielectric at wo.h
         F_g = fresnel_dielectric(wo_h, hr.eta_glass)
-        f[r] += ((hr.w_base * F_c * hr.k_coat + hr.w_glass * F_g) * spec)[:, None] + (hr.w_metal * spec)[:, None] * F_m
-        pdf[r] += p_ggx * (hr.p_lobe[:, COAT] + hr.p_lobe[:, METAL] + hr.p_lobe[:, GLASS_R])
-        # METAL_MS: energy lost by single scattering, returned as a broad lobe (cosine-sampled)
-        m = np.nonzero((hr.w_metal > 0) & valid)[0]
-        if m.size:
-            cos_i = _dot(wi[r[m]], hr.ns[m])
-            E_i = _ggx_albedo(np.clip(cos_i, 0.0, 1.0), hr.alpha[m])
-            f[r[m]] += (hr.w_metal[m] * (1.0 - hr.ms_Eo[m]) * (1.0 - E_i))[:, None] * hr.ms_scale[m]
-            pdf[r[m]] += hr.p_lobe[m, METAL_MS] * cos_i / np.pi
+        f[r] += ((hr.w_base * F_c * hr.k_coat * coat + hr.w_glass * F_g) * spec)[:, None] + \
+            (hr.w_metal * spec)[:, None] * F_m * hr.ms_scale
+        pdf[r] += p_ggx * (hr.p_lobe[:, COAT] * coat + hr.p_lobe[:, METAL] + hr.p_lobe[:, GLASS_R])
     return f, pdf
 
 
@@ -329,7 +360,12 @@ def bsdf_eval(table: MaterialTable, mat, wo, wi, ns, ng) -> np.ndarray:
     c = np.nonzero(table.coat[m] & above)[0]
     if c.size:
         mc = m[c]
-        cos_o = np.clip(_dot(wo[c], ns_f[c]), 0.0, 1.0)
+        nc = ns_f[c]
+        d = np.nonzero(np.any(nc != ng_f[c], axis=1))[0]       # the coat's normal, as _Hit's nss
+        if d.size:
+            nc = nc.copy()
+            nc[d] = _valid_specular(ng_f[c][d], wo[c][d], nc[d])
+        cos_o = np.clip(_dot(wo[c], nc), 0.0, 1.0)
         scale[c] *= 1.0 - table.specular[mc] * fresnel_dielectric(cos_o, table.ior[mc])
     f = scale[:, None] * table.base_color[m] * (1.0 / np.pi)
     # Rows with a rough lobe: the full evaluation
@@ -364,6 +400,40 @@ def bsdf_sample(table: MaterialTable, mat, wo, ns, ng, u):
         colour throughput / selection probability); 0 for failed samples.
     is_delta : (n,) bool, True when a delta lobe was chosen.
     """
+    wi, weight, is_delta, _lobe = bsdf_sample_lobe(table, mat, wo, ns, ng, u)
+    return wi, weight, is_delta
+
+
+def bsdf_sample_path(table: MaterialTable, mat, wo, ns, ng, u, stop_coat: bool = False):
+    """How a camera path (or a caustic photon) goes on: (wi, weight, kind, pdf) with kind 0 = stop
+    (the DIFFUSE lobe, with stop_coat a rough COAT too, or nothing), 1 = a delta lobe (weight as
+    :func:`bsdf_sample`), 2 = another rough lobe, weight f_g |cos| / pdf_g over the rough lobes
+    that do not stop, pdf = pdf_g on those rows (the kernel: ``kernels.bsdf.bsdf_sample_path``)."""
+    wi, weight, is_delta, lobe = bsdf_sample_lobe(table, mat, wo, ns, ng, u)
+    rough_coat = (lobe == COAT) & ~is_delta
+    stop = (lobe < 0) | (lobe == DIFFUSE) | (rough_coat & stop_coat)
+    kind = np.where(stop, 0, np.where(is_delta, 1, 2))
+    g = np.nonzero(kind == 2)[0]
+    weight = np.where(stop[:, None], 0.0, weight)
+    pdf_out = np.where(kind == 1, np.inf, 0.0)
+    if g.size:
+        h = _Hit(table, np.asarray(mat)[g], np.asarray(wo, float)[g], np.asarray(ns, float)[g], np.asarray(ng, float)[g])
+        f, pdf = _eval_pdf(h, wi[g], diffuse=False, coat=0.0 if stop_coat else 1.0)
+        cos_i = np.abs(_dot(wi[g], h.ns))
+        weight[g] = np.where((pdf > 0)[:, None], f * (cos_i / np.maximum(pdf, 1e-300))[:, None], 0.0)
+        pdf_out[g] = pdf
+    return wi, weight, kind, pdf_out
+
+
+def bsdf_eval_cont(table: MaterialTable, mat, wo, wi, ns, ng, stop_coat: bool = False):
+    """(f (n, 3), pdf (n,)) of the rough lobes :func:`bsdf_sample_path` goes on through (every
+    non-delta lobe but DIFFUSE; the rough COAT unless stop_coat)."""
+    h = _Hit(table, mat, np.asarray(wo, float), np.asarray(ns, float), np.asarray(ng, float))
+    return _eval_pdf(h, np.asarray(wi, float), diffuse=False, coat=0.0 if stop_coat else 1.0)
+
+
+def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
+    """:func:`bsdf_sample` and the lobe chosen (n,) (-1 where the lobe had probability 0)."""
     h = _Hit(table, mat, wo, ns, ng)
     u = np.asarray(u, float)
     n = u.shape[0]
@@ -388,24 +458,24 @@ def bsdf_sample(table: MaterialTable, mat, wo, ns, ng, u):
     # Rough reflection: GGX visible normal, then mirror about it
     i = np.nonzero(ok & is_refl & h.rough)[0]
     if i.size:
-        t_f, b_f = orthonormal_basis(h.ns[i])
+        t_f, b_f = orthonormal_basis(h.nss[i])
         wo_i = h.wo[i]
         wo_loc = np.stack([_dot(wo_i, t_f), _dot(wo_i, b_f), np.maximum(h.cos_o[i], 1e-6)], axis=-1)
         wo_loc /= np.linalg.norm(wo_loc, axis=-1, keepdims=True)
         hl = _ggx_sample_vndf(wo_loc, h.alpha[i], u[i, 1:3])
-        hw = hl[:, 0:1] * t_f + hl[:, 1:2] * b_f + hl[:, 2:3] * h.ns[i]
+        hw = hl[:, 0:1] * t_f + hl[:, 1:2] * b_f + hl[:, 2:3] * h.nss[i]
         wi[i] = _reflect(wo_i, hw)
-    # Smooth reflection: mirror about ns
+    # Smooth reflection: mirror about the specular normal nss
     i = np.nonzero(ok & is_refl & ~h.rough)[0]
     if i.size:
-        wi[i] = _reflect(h.wo[i], h.ns[i])
-    # Refraction through ns (entering: eta = ior; leaving: 1 / ior)
+        wi[i] = _reflect(h.wo[i], h.nss[i])
+    # Refraction through nss (entering: eta = ior; leaving: 1 / ior)
     i = np.nonzero(ok & (lobe == GLASS_T))[0]
     if i.size:
         eta = h.eta_glass[i]
         cos_o = np.clip(h.cos_o[i], 0.0, 1.0)
         cos_t = np.sqrt(np.maximum(0.0, 1.0 - (1.0 - cos_o ** 2) / (eta * eta)))
-        wi[i] = -h.wo[i] / eta[:, None] + (cos_o / eta - cos_t)[:, None] * h.ns[i]
+        wi[i] = -h.wo[i] / eta[:, None] + (cos_o / eta - cos_t)[:, None] * h.nss[i]
     wi /= np.maximum(np.linalg.norm(wi, axis=-1, keepdims=True), 1e-300)
 
     # -- Delta lobes: Fresnel / colour throughput over the selection probability
@@ -429,7 +499,7 @@ def bsdf_sample(table: MaterialTable, mat, wo, ns, ng, u):
         f, pdf = _eval_pdf(hs, wi[i])
         cos_i = np.abs(_dot(wi[i], hs.ns))
         weight[i] = np.where((pdf > 0)[:, None], f * (cos_i / np.maximum(pdf, 1e-300))[:, None], 0.0)
-    return wi, weight, is_delta
+    return wi, weight, is_delta, np.where(ok, lobe, -1)
 
 
 def diffuse_albedo(table: MaterialTable, mat, wo, ns) -> np.ndarray:

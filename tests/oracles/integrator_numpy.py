@@ -16,7 +16,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from oracles import lights_numpy
-from oracles.bsdf_numpy import bsdf_eval, bsdf_sample, diffuse_albedo, emission, has_nondelta
+from oracles.bsdf_numpy import bsdf_eval, bsdf_eval_cont, bsdf_sample_path, diffuse_albedo, emission, has_nondelta
 from stpm_core.bsdf import MaterialTable
 from stpm_core.camera import camera_to_world, image_plane
 from stpm_core.film import DEPTH_BACKGROUND, PASSES, Film, filter_offsets
@@ -171,10 +171,12 @@ def _fill(a: np.ndarray, value: float) -> np.ndarray:
     return a
 
 
-def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats) -> np.ndarray:
+def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis: bool = False) -> np.ndarray:
     """Next-event estimate (n, 3): sum over lights of f(wo, wi) |cos(ns, wi)| L_i / p * V.
 
-    eps (n,): each point's shadow-ray origin offset (``_eps_rows``).
+    eps (n,): each point's shadow-ray origin offset (``_eps_rows``).  mis: the paths go on through
+    their rough lobes after this; the world's samples then weigh the part f_c of f those lobes
+    sample (density p_c) by p_l / (p_l + p_c), p_l = cos(ng_f, wi) / pi its own density.
 
     Lights of zero power are skipped; shadow rays are cast only for samples
     whose unshadowed contribution is positive (light in front, BSDF > 0).
@@ -190,6 +192,10 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats) -> np.n
                                                       _light_uniforms(lights.lights[li], n, rng),
                                                       normals=_world_normals(lights.lights[li], ng, wo))
         f = bsdf_eval(ctx.table, mat, wo, wi, ns, ng)
+        if mis and lights.lights[li].type == "WORLD":
+            f_c, p_c = bsdf_eval_cont(ctx.table, mat, wo, wi, ns, ng)
+            p_l = np.maximum(np.einsum("ij,ij->i", wi, _face_forward(ng, wo)), 0.0) / np.pi
+            f = f - f_c * np.where(p_c > 0, p_c / np.maximum(p_l + p_c, 1e-300), 0.0)[:, None]
         contrib = f * (np.abs(np.einsum("ij,ij->i", ns, wi)))[:, None]
         contrib *= weight
         live = np.nonzero(np.any(contrib > 0.0, axis=1))[0]
@@ -253,24 +259,36 @@ def _cast_bounce(ctx, o, d, times, idx, tmax, m: int, bounce: int, stats: TraceS
 
 
 def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int):
-    """Continue the rows spec (k,) through their delta lobes: (idx, beta, wi, go) of those rows.
+    """Continue the rows spec (k,) through their delta and rough non-diffuse lobes: (idx, beta,
+    wi, go, glossy) of those rows.
 
     mat (k,), wo, ns, ng (k, 3) the hits at those rows; idx / beta (None: every sample / unit
-    throughput) are narrowed to them and beta takes the lobe's weight; go (k,) keeps the rows
-    that sampled a delta lobe with some throughput left and (from RR_START on) survived Russian
-    roulette, beta / q.  Random numbers: (k, 3) for the lobes, then (k,) for the roulette.
+    throughput) are narrowed to them and beta takes the lobe's weight (``bsdf_sample_path``: the
+    DIFFUSE lobe stops the path, the photon maps carry it); go (k,) keeps the rows that went on
+    with some throughput left and (from RR_START on) survived Russian roulette, beta / q; glossy
+    (k,) marks those that left a rough lobe.  Random numbers: (k, 3) for the lobes, then (k,) for
+    the roulette.
     """
     u = rng.random((spec.size, 3))
     idx = spec if idx is None else idx[spec]
     beta = None if beta is None else beta[spec]
-    wi, weight, is_delta = bsdf_sample(ctx.table, mat, wo, ns, ng, u)
+    wi, weight, kind, p_c = bsdf_sample_path(ctx.table, mat, wo, ns, ng, u)
     beta = weight if beta is None else beta * weight
-    go = is_delta & np.any(beta > 0.0, axis=1)
+    go = (kind != 0) & np.any(beta > 0.0, axis=1)
     if bounce + 1 >= RR_START:
         q = np.clip(np.max(beta, axis=1), 0.05, 1.0)
         go &= rng.random(idx.size) < q
         beta = beta / q[:, None]
-    return idx, beta, wi, go
+    # the world's weight where the ray escapes: 1 after a delta lobe, the balance heuristic after a
+    # rough one when the world is a light (0 when it is not: it sends nothing then)
+    world_w = np.ones(idx.size)
+    g = kind == 2
+    if np.any(g):
+        p_l = np.maximum(np.einsum("ij,ij->i", wi, _face_forward(ng, wo)), 0.0) / np.pi
+        p_g = np.where(g, p_c, 0.0)                      # (delta rows: inf, unused)
+        w = np.where(p_g > 0, p_g / np.maximum(p_g + p_l, 1e-300), 0.0) if ctx.world_light else 0.0
+        world_w = np.where(g, w, 1.0)
+    return idx, beta, wi, go, g, world_w
 
 
 def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.ndarray,
@@ -293,6 +311,8 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
     # Path state: idx maps live rows to samples (None = all), beta their throughput (None = 1)
     idx = None
     beta = None
+    glossy = None                            # (live rows,) bool: the ray left a rough lobe
+    world_w = None                           # (live rows,) the world's weight where the ray escapes
     tmax = tmax0                             # camera clipping for the first segment
     guard = None                             # camera rays: the caster's own guard
     # Per-sample outputs
@@ -305,8 +325,11 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
     covered = np.zeros(n)
     world_L = ctx.world_radiance
 
-    def add(dst: np.ndarray, rows, value: np.ndarray, w=None) -> None:
-        """dst[idx[rows]] += w * value (rows None = all live rows; w None = beta)."""
+    def add(dst: np.ndarray, rows, value: np.ndarray, w=None, emitted: bool = False) -> None:
+        """dst[idx[rows]] += w * value (rows None = all live rows; w None = beta); emitted light
+        is not added on rows that left a rough lobe (next-event estimation counted it there)."""
+        if emitted and glossy is not None:
+            value = np.where((glossy if rows is None else glossy[rows])[:, None], 0.0, value)
         w = beta if w is None else w
         if w is not None:
             value = (w if rows is None else w[rows]) * value
@@ -329,13 +352,14 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         # visible to glossy / transmission rays, i.e. in mirrors and through glass.
         if ctx.visible_lights:
             add(L_emit, None, _seen_lights(ctx.lights, o, d, t, hits.t, camera_ray=(bounce == 0),
-                                           visible_camera=ctx.light_visible_camera))
+                                           visible_camera=ctx.light_visible_camera), emitted=True)
 
         # -- Escaped rays see the world ------------------------------------------------
         if not all_hit and np.any(world_L > 0):
             if not (bounce == 0 and ctx.film_transparent):
                 miss = np.nonzero(~hit)[0]
-                add(L_emit, miss, np.broadcast_to(world_L, (miss.size, 3)))
+                ww = 1.0 if world_w is None else world_w[miss][:, None]
+                add(L_emit, miss, np.broadcast_to(world_L, (miss.size, 3)) * ww)
 
         # -- First hit: Depth, Normal, coverage -------------------------------------------
         if bounce == 0:
@@ -353,6 +377,8 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
                 break
             idx = keep if idx is None else idx[keep]
             beta = None if beta is None else beta[keep]
+            glossy = None if glossy is None else glossy[keep]
+            world_w = None if world_w is None else world_w[keep]
             t = t[keep]
             p, ng, ns, mat = hits.position[keep], hits.ng[keep], hits.ns[keep], hits.material[keep]
             eps = _eps_rows(ctx, hits.instance[keep], p)
@@ -366,7 +392,7 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         if ctx.any_emission:
             e_rows = np.nonzero(ctx.emissive[mat])[0]
             if e_rows.size:
-                add(L_emit, e_rows, emission(ctx.table, mat[e_rows]))
+                add(L_emit, e_rows, emission(ctx.table, mat[e_rows]), emitted=True)
 
         # -- Shade non-delta vertices: Direct, Caustic, Indirect -----------------------------
         nd = has_nondelta(ctx.table, mat)
@@ -375,7 +401,8 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
             p_s, ng_s, ns_s, wo_s = _rows(p, sh), _rows(ng, sh), _rows(ns, sh), _rows(wo, sh)
             mat_s, t_s = _rows(mat, sh), _rows(t, sh)
             if len(ctx.lights):
-                add(L_direct, sh, _direct(ctx, p_s, ng_s, ns_s, wo_s, mat_s, t_s, _rows(eps, sh), rng, stats))
+                add(L_direct, sh, _direct(ctx, p_s, ng_s, ns_s, wo_s, mat_s, t_s, _rows(eps, sh), rng, stats,
+                                          mis=bounce < ctx.max_depth))
             if ctx.maps is not None:
                 ns_f = _face_forward(ns_s, wo_s)
                 for kind, dst in (("caustic", L_caustic), ("global", L_indirect)):
@@ -385,13 +412,15 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
 
         if bounce == ctx.max_depth:
             break
-        # -- Continue through delta lobes only (materials without one end here) -------------
+        # -- Continue through delta and rough non-diffuse lobes (the diffuse lobe ends here) ------
         spec = np.nonzero(ctx.has_delta[mat])[0]
         if spec.size == 0:
             break
         p, ng, eps = p[spec], ng[spec], eps[spec]
-        idx, beta, wi, go = _specular_step(ctx, rng, spec, idx, beta, mat[spec], wo[spec], ns[spec], ng, bounce)
-        idx, beta = idx[go], beta[go]
+        idx, beta, wi, go, gl, ww = _specular_step(ctx, rng, spec, idx, beta, mat[spec], wo[spec], ns[spec], ng, bounce)
+        idx, beta, glossy, world_w = idx[go], beta[go], gl[go], ww[go]
+        if not glossy.any():
+            glossy = world_w = None
         o = _offset(p[go], ng[go], wi[go], eps[go])
         guard = GUARD_FRACTION * eps[go]
         d = wi[go]
@@ -408,12 +437,12 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
 # The image
 # ----------------------------------------------------------------------------
 def _has_delta_lobe(materials) -> np.ndarray:
-    """(M + 1,) bool: can bsdf_sample pick a delta lobe (mirror, clear glass, smooth coat)?"""
+    """(M + 1,) bool: can a camera path go on from the material: a delta lobe (mirror, clear glass,
+    smooth coat) or a rough one (metal, glass reflection, coat)?"""
     out = np.zeros(len(materials) + 1, bool)
     for i, m in enumerate(materials):
         base = (1 - m.metallic) * (1 - m.transmission)
-        smooth = m.roughness == 0
-        out[i] = ((1 - m.metallic) * m.transmission > 0) or (smooth and (m.metallic > 0 or (base > 0 and m.specular > 0)))
+        out[i] = ((1 - m.metallic) * m.transmission > 0) or m.metallic > 0 or (base > 0 and m.specular > 0)
     return out
 
 
@@ -445,6 +474,7 @@ def trace_image_numpy(scene, settings, caster, lights, maps=None, *, time_overri
                           inst_offset=instance_offsets(scene), world_radiance=np.asarray(scene.world.radiance, float),
                           film_transparent=bool(scene.metadata.get("film_transparent", False)))
     ctx.has_delta = _has_delta_lobe(scene.materials)
+    ctx.world_light = any(l.type == "WORLD" for l in lights.lights)
     ctx.any_emission = any(np.any(np.asarray(m.emission) > 0) for m in scene.materials)
     ctx.emissive = np.any(table.emission > 0, axis=1)
     ctx.light_visible_camera = [bool(v) for v in (scene.metadata.get("light_visible_camera") or [])]

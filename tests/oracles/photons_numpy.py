@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from oracles.bsdf_numpy import bsdf_sample, has_nondelta
+from oracles.bsdf_numpy import COAT, DIFFUSE, bsdf_sample_lobe, bsdf_sample_path, has_nondelta
 from stpm_core.photons.record import PHOTON_DTYPE, make_records
 from stpm_core.raycast.geometry import GUARD_FRACTION, offset_lengths
 
@@ -26,10 +26,10 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     caster : ray caster (``intersect(o, d, times)``).
     table : bsdf.MaterialTable.
     o, d : (n, 3) origins and unit directions; Phi : (n, 3) W; t : (n,) path times.
-    mode : 'caustic' (store after >= 1 delta bounce, continue only through
-        delta lobes, first hit must be ``target_instance``) or 'global' (store
-        after >= ``min_nondelta`` non-delta bounces; 0 also stores first hits,
-        which only tests use).
+    mode : 'caustic' (store after >= 1 delta or glossy bounce, continue only through
+        them, first hit must be ``target_instance``) or 'global' (store after >=
+        ``min_nondelta`` diffuse bounces, a rough coat's counting as one; 0 also stores
+        first hits, which only tests use).
     max_depth : bounces followed.
     inst_offset : (n_instances,) per-object part of the ray-origin offset along the geometric
         normal (scene units; ``raycast.geometry.instance_offsets``, applied by ``offset_lengths``).
@@ -76,15 +76,23 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         if depth == max_depth:
             break
         # -- Sample the next direction from the BSDF --------------------------------------
-        wi, weight, is_delta = bsdf_sample(table, mat, wo, ns, ng, rng.random((idx.size, 3)))
+        u = rng.random((idx.size, 3))
+        if mode == "caustic":
+            # L (S|G)+ D: on through delta and glossy lobes; the DIFFUSE lobe and a rough coat stop
+            wi, weight, kind, _ = bsdf_sample_path(table, mat, wo, ns, ng, u, stop_coat=True)
+            spec_b = kind != 0
+        else:
+            wi, weight, is_delta, lobe = bsdf_sample_lobe(table, mat, wo, ns, ng, u)
+            rough = table.roughness[np.where(mat < 0, table.size, mat)] > 0
+            spec_b = ~((lobe == DIFFUSE) | ((lobe == COAT) & rough))
         # -- Possibly terminate the path with Russian roulette (by albedo) -------------------
         q = np.clip(weight.max(axis=1), 0.0, 1.0)
         alive = rng.random(idx.size) < q
         if mode == "caustic":
-            alive &= is_delta                            # L S+ D: only specular chains go on
+            alive &= spec_b
         Phi = Phi * weight / np.where(q > 0, q, 1.0)[:, None]
-        n_delta = n_delta + is_delta
-        n_nondelta = n_nondelta + ~is_delta
+        n_delta = n_delta + spec_b                       # delta or glossy bounces
+        n_nondelta = n_nondelta + ~spec_b                # diffuse (or rough coat) bounces
         # -- Spawn the continuation rays, offset off the surface ------------------------------
         side = np.where(np.sum(wi * ng, axis=1) >= 0.0, 1.0, -1.0)
         e = offset_lengths(inst_offset, hits.instance[idx], p)

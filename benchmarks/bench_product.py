@@ -1,0 +1,238 @@
+"""The HDRI product shot against Cycles: STPM's FINAL preset vs Cycles at 1024 spp (issue 14's scene).
+
+Scene: ``blend_scenes/hdri_product.blend`` (``make_hdri_product.py``: a wood table with a plank
+image and normal map, rough copper, a white sphere, clear and frosted glass, a glass sphere
+sliding during the 0.5-frame shutter, one small area light, lit by the procedural HDRI
+``textures/studio_sun.exr`` through a Mapping node), frame 1 at the file's 320 x 240.
+
+The renders are :mod:`benchmarks.bench_room`'s, with its helpers pointed at this scene (they
+read the scene, output and cache folders from that module's globals; :func:`_this_scene`
+swaps them for the duration of a call):
+
+* **reference**: Cycles, CPU, 1024 spp, no denoising / adaptive sampling / clamping, 12 bounces,
+  caustics on (``bench_room.CYCLES``; the file itself sets Filter Glossy 0, so the caustics
+  stay sharp), with a 1-sample object-index render; cached in
+  ``bench_out/cache/product/<key>/`` (``bench_room._cache_key``);
+* **Cycles without refractive caustics**: the same settings with ``caustics_refractive`` off,
+  ``NOCAUSTIC_SPP`` samples, cached next to the reference: it defines the caustic region;
+* **STPM FINAL** (``bench_room.stpm_final``: export + render, after a warm-up);
+* **Cycles at equal time** (``bench_room.cycles_equal_time``).
+
+Caustic region (derived, not hand-set): the light that reaches the table through the glass
+objects is the reference minus the no-refractive-caustics render.  Both luminances are box
+filtered over 5 x 5 px; a table pixel (object index, eroded 2 px) is in the region where that
+difference is above ``CAUSTIC_REL`` x the filtered no-caustics luminance and above
+``CAUSTIC_ABS``; the region is then opened (3 x 3) against single noisy pixels and dilated
+2 px.  ``bench_out/product/caustic_mask.png`` shows it.
+
+Measured against the reference after the Standard view transform (``bench_room.flip_ldr``):
+
+* outside the caustic region: mean LDR-FLIP, mean ratio (linear, all channels), 8 x 8-block
+  luminance correlation; the same over the whole image;
+* inside it: mean luminance ratio, and the correlation of the 8 x 8-block luminance means of
+  the blocks at least half covered by the region (``*_caustic_blocks`` counts them), mean FLIP;
+* per surface (``bench_room.regions`` / ``region_stats``), printed and in ``regions.json``;
+* wall seconds of every render.
+
+Pictures in ``bench_out/product/``: ``stpm_final_vs_cycles1024.png`` (side by side),
+``cycles_1024.png``, ``cycles_nocaustic.png``, ``cycles_equal_time.png``, ``stpm_final.png``,
+``caustic_mask.png``, FLIP maps and signed errors.
+
+    python -m benchmarks product   # first run ~10 min on 2 cores (the two Cycles references)
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks import bench_room as room
+
+ROOT = Path(__file__).resolve().parent.parent
+BLEND = ROOT / "blend_scenes" / "hdri_product.blend"
+OUT = ROOT / "bench_out" / "product"
+CACHE = ROOT / "bench_out" / "cache" / "product"
+RESOLUTION = None                 # None = the file's (320 x 240)
+NOCAUSTIC_SPP = 256
+CAUSTIC_REL, CAUSTIC_ABS = 0.25, 0.02
+LUMA = room.LUMA
+
+
+@contextlib.contextmanager
+def _this_scene(**cycles_overrides):
+    """bench_room's helpers on this scene: its BLEND / OUT / CACHE / RESOLUTION (and CYCLES
+    with ``cycles_overrides``) globals swapped for the duration."""
+    names = ("BLEND", "OUT", "CACHE", "RESOLUTION", "CYCLES")
+    saved = {n: getattr(room, n) for n in names}
+    room.BLEND, room.OUT, room.CACHE, room.RESOLUTION = BLEND, OUT, CACHE, RESOLUTION
+    room.CYCLES = dict(saved["CYCLES"], **cycles_overrides)
+    try:
+        yield
+    finally:
+        for n, v in saved.items():
+            setattr(room, n, v)
+
+
+def reference():
+    with _this_scene():
+        return room.reference()
+
+
+def no_refractive_caustics() -> tuple[np.ndarray, float, bool]:
+    """(Cycles RGB with refractive caustics off, seconds, was it cached), cached beside the reference."""
+    with _this_scene():
+        d = CACHE / room._cache_key()
+    if (d / "nocaustic.npy").exists() and (d / "nocaustic.json").exists():
+        return np.load(d / "nocaustic.npy"), float(json.loads((d / "nocaustic.json").read_text())["seconds"]), True
+    d.mkdir(parents=True, exist_ok=True)
+    print(f"bench_product: rendering Cycles without refractive caustics ({NOCAUSTIC_SPP} spp) into {d}", flush=True)
+    with _this_scene(caustics_refractive=False):
+        rgb, seconds = room._cycles(room._open(), NOCAUSTIC_SPP, d / "nocaustic.exr")
+    np.save(d / "nocaustic.npy", rgb.astype(np.float32))
+    (d / "nocaustic.json").write_text(json.dumps({"seconds": seconds, "spp": NOCAUSTIC_SPP}))
+    (d / "nocaustic.exr").unlink(missing_ok=True)
+    return rgb.astype(np.float32), seconds, False
+
+
+def _box(y: np.ndarray, r: int = 2) -> np.ndarray:
+    from scipy.ndimage import uniform_filter
+    return uniform_filter(y, size=2 * r + 1, mode="nearest")
+
+
+def caustic_mask(ref: np.ndarray, nocaustic: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """Table pixels lit noticeably through the glass (see the module docstring)."""
+    from scipy.ndimage import binary_dilation, binary_opening
+    y_ref, y_nc = _box(ref @ LUMA), _box(nocaustic @ LUMA)
+    diff = y_ref - y_nc
+    m = room._erode(table, 2) & (diff > CAUSTIC_REL * y_nc) & (diff > CAUSTIC_ABS)
+    m = binary_opening(m, structure=np.ones((3, 3), bool))
+    return binary_dilation(m, iterations=2) & table
+
+
+def masked_block_corr(test: np.ndarray, ref: np.ndarray, mask: np.ndarray, b: int = room.BLOCK) -> tuple[float, int]:
+    """(correlation of the b x b-block luminance means over the blocks >= half inside ``mask``, blocks)."""
+    cover = room._blocks(mask.astype(np.float64), b) >= 0.5
+    a, r = room._blocks(test @ LUMA, b)[cover], room._blocks(ref @ LUMA, b)[cover]
+    if cover.sum() < 3 or np.std(a) == 0 or np.std(r) == 0:
+        return float("nan"), int(cover.sum())
+    return float(np.corrcoef(a, r)[0, 1]), int(cover.sum())
+
+
+def run() -> dict:
+    try:
+        import bpy  # noqa: F401
+    except ImportError:
+        return {"skipped": "bpy not importable: pip install bpy==5.0.1 (build.py installs it)"}
+    try:
+        import flip_evaluator  # noqa: F401
+    except ImportError:
+        return {"skipped": "flip_evaluator not importable: pip install flip-evaluator==1.7"}
+    if not BLEND.exists():
+        return {"skipped": f"{BLEND.name} missing: .venv/bin/python blend_scenes/make_hdri_product.py"}
+    from stpm_core.compare.metrics import diverging_colors, signed_relative_error
+    from stpm_core.imageio import write_png
+    OUT.mkdir(parents=True, exist_ok=True)
+    digest = room.sources_digest()
+
+    ref, index, ref_s, cached = reference()
+    ref = np.asarray(ref, np.float64)
+    nc, nc_s, nc_cached = no_refractive_caustics()
+    nc = np.asarray(nc, np.float64)
+    with _this_scene():
+        stpm, passes, tim = room.stpm_final()
+        names = room.object_names()
+        stpm_s = tim["export_s"] + tim["render_s"]
+        cyc, eq_spp, eq_s = room.cycles_equal_time(stpm_s, ref_s)
+    H, W = ref.shape[:2]
+    table = index == names.index("Table") + 1
+    caustic = caustic_mask(ref, nc, table)
+    outside = ~caustic
+
+    out: dict = {"resolution": f"{W}x{H}", "frame": 1,
+                 "reference": f"Cycles {room.REF_SPP} spp, no denoise/adaptive/clamp, 12 bounces, caustics on, "
+                              f"filter glossy 0" + (" (cached)" if cached else ""),
+                 "reference_s": ref_s, "reference_cached": cached,
+                 "nocaustic_spp": NOCAUSTIC_SPP, "nocaustic_s": nc_s, "nocaustic_cached": nc_cached,
+                 "caustic_px": int(caustic.sum()), "caustic_frac": float(caustic.mean()),
+                 "caustic_region": "derived: (Cycles ref - Cycles without refractive caustics) on the table",
+                 "stpm_preset": "FINAL", "stpm_s": stpm_s, "stpm_export_s": tim["export_s"],
+                 "stpm_render_s": tim["render_s"], "stpm_photon_trace_s": tim["photon_trace_s"],
+                 "stpm_warmup_s": tim["warmup_s"], "stpm_estimator": tim["estimator"],
+                 "cycles_equal_time_spp": eq_spp, "cycles_equal_time_s": eq_s,
+                 "equal_time_ratio": eq_s / stpm_s, "stpm_over_ref_time": stpm_s / ref_s}
+    maps = {}
+    y_ref = ref @ LUMA
+    for tag, img in (("stpm", stpm), ("cycles_eq", cyc)):
+        f, fmap = room.flip_ldr(img, ref)
+        maps[tag] = fmap
+        out[f"{tag}_flip_ldr_outside"] = float(fmap[outside].mean())
+        out[f"{tag}_mean_ratio_outside"] = float(img[outside].mean() / ref[outside].mean())
+        out[f"{tag}_block8_corr_outside"] = masked_block_corr(img, ref, outside)[0]
+        out[f"{tag}_flip_ldr"] = f
+        out[f"{tag}_mean_ratio"] = float(img.mean() / ref.mean())
+        out[f"{tag}_block8_corr"] = room.block_corr(img, ref)
+        y = img @ LUMA
+        if caustic.any():
+            out[f"{tag}_caustic_mean_ratio"] = float(y[caustic].mean() / max(y_ref[caustic].mean(), 1e-12))
+            out[f"{tag}_caustic_block8_corr"], out[f"{tag}_caustic_blocks"] = masked_block_corr(img, ref, caustic)
+            out[f"{tag}_caustic_flip_ldr"] = float(fmap[caustic].mean())
+        out[f"{tag}_mean_rgb"] = [round(float(v), 5) for v in img.mean(axis=(0, 1))]
+    out["ref_mean_rgb"] = [round(float(v), 5) for v in ref.mean(axis=(0, 1))]
+    if caustic.any():
+        out["ref_caustic_share"] = float(1.0 - (nc @ LUMA)[caustic].mean() / max(y_ref[caustic].mean(), 1e-12))
+    out["stpm_warnings"] = len(tim["warnings"])
+    out["stpm_env_warning"] = any("environment" in w.lower() or "world" in w.lower() for w in tim["warnings"])
+    out["sources_sha"] = digest
+    if room.sources_digest() != digest:
+        out["sources_changed_during_run"] = True
+
+    # Per surface, plus the caustic region
+    table_stats = {}
+    regs = room.regions(index, names, ref)
+    if caustic.any():
+        regs["caustic region"] = caustic
+    for name, mask in regs.items():
+        s = room.region_stats(stpm, ref, maps["stpm"], mask)
+        c = room.region_stats(cyc, ref, maps["cycles_eq"], mask)
+        table_stats[name] = {"px": int(mask.sum()), "ref_lum": float(y_ref[mask].mean()), "stpm": s, "cycles_eq": c}
+    print(f"\nbench_product per surface (eroded masks; ratio = region mean / Cycles {room.REF_SPP}; rest = RMS "
+          f"error after the region's bias, / region mean):")
+    print(f"  {'surface':<15}{'px':>6}{'ref Y':>9} | {'STPM ratio':>10}{'rest':>7}{'FLIP':>7} | "
+          f"{'Cyc-eq ratio':>12}{'rest':>7}{'FLIP':>7}")
+    for name, r in sorted(table_stats.items(), key=lambda kv: -kv[1]["px"]):
+        s, c = r["stpm"], r["cycles_eq"]
+        print(f"  {name:<15}{r['px']:>6}{r['ref_lum']:>9.4f} | {s['ratio']:>10.3f}{s['rest']:>7.3f}{s['flip']:>7.3f} | "
+              f"{c['ratio']:>12.3f}{c['rest']:>7.3f}{c['flip']:>7.3f}")
+    (OUT / "regions.json").write_text(json.dumps(table_stats, indent=1))
+
+    # Pictures
+    gap = np.ones((H, 4, 3))
+    write_png(OUT / "stpm_final_vs_cycles1024.png", np.concatenate([stpm, gap, ref], axis=1).astype(np.float32))
+    write_png(OUT / "stpm_final.png", stpm.astype(np.float32))
+    write_png(OUT / "cycles_1024.png", ref.astype(np.float32))
+    write_png(OUT / "cycles_nocaustic.png", nc.astype(np.float32))
+    write_png(OUT / "cycles_equal_time.png", cyc.astype(np.float32))
+    shown = room.standard_view(ref)
+    shown[caustic] = 0.5 * shown[caustic] + 0.5 * np.array([1.0, 0.0, 1.0])
+    room._write_display(OUT / "caustic_mask.png", shown)
+    for tag in ("stpm", "cycles_eq"):
+        room._write_display(OUT / f"flip_{tag}.png", np.repeat(maps[tag][..., None], 3, axis=-1))
+        img = stpm if tag == "stpm" else cyc
+        room._write_display(OUT / f"signed_error_{tag}.png", diverging_colors(signed_relative_error(img, ref)))
+    np.savez_compressed(OUT / "stpm_passes.npz", **passes)
+    np.save(OUT / "cycles_equal_time.npy", cyc.astype(np.float32))
+    np.save(OUT / "caustic_mask.npy", caustic)
+    np.save(OUT / "index.npy", index)
+    (OUT / "objects.json").write_text(json.dumps(names))
+    (OUT / "warnings.txt").write_text("\n".join(tim["warnings"]) + "\n")
+    out["pictures"] = str(OUT.relative_to(ROOT))
+    out["when_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    return out
+
+
+if __name__ == "__main__":
+    for k, v in run().items():
+        print(f"{k:32s} {v}")

@@ -1,0 +1,185 @@
+"""The world's radiance along a direction, and its importance sampling (numba).
+
+Blender's Environment Texture (equirectangular) as Cycles evaluates it, and a 2D
+piecewise-constant distribution over the image for next-event estimation and for world photons
+(docs/lights-and-materials.md, "World", has the equations with these names).
+
+The world reaches the kernels as one tuple ``env = (img, func, marg, cond, par)``
+(:func:`stpm_core.world_light.environment_arrays` packs it):
+
+* img (H, W, 3) float32: the radiance image (already times colour and strength), row 0 at
+  the bottom; (1, 1, 3) for a constant world;
+* func (Hd, Wd) float64: the sampling weight of each cell of the distribution grid (the mean
+  of the channels' mean over the cell's texels, times sin(theta) at the cell centre), row 0 at
+  the bottom; marg (Hd + 1,): the running sum of the rows' totals, normalised (0 .. 1);
+  cond (Hd, Wd + 1): per row, the running sum of its cells, normalised;
+* par (N_ENV,) float64: ``E_TEXTURED`` (0: a constant world of radiance ``E_L``), ``E_INTERP``
+  (0 Closest, 1 Linear), ``E_MEAN`` (the mean of func over its cells), ``E_NEE_COS`` (the
+  fraction of next-event samples drawn about the normal rather than from the image),
+  ``E_PHOTON_UNIFORM`` (the fraction of photon directions drawn uniformly), ``E_L`` (3).
+
+The image's frame is turned by the world's mapping: M (4, 4) is the map-to-world rotation at
+the row's time (``WorldLight.transform``), so a world direction d looks up m = M^T d.  With
+Cycles' equirectangular coordinates ``u = (pi - atan2(m_y, m_x)) / (2 pi)``,
+``v = 1 - acos(m_z) / pi``, a direction's solid-angle density under the image distribution is
+``pdf(d) = func[j, i] / (E_MEAN * 2 pi^2 sin(theta))`` (cell j = floor(v Hd), i = floor(u Wd)),
+theta = pi (1 - v) the polar angle.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..numba_probe import njit
+from .sampling import JIT, JIT_INLINE, search_right
+
+__all__ = ["N_ENV", "E_TEXTURED", "E_INTERP", "E_MEAN", "E_NEE_COS", "E_PHOTON_UNIFORM", "E_L",
+           "env_radiance", "env_pdf", "env_sample", "env_lookup_batch", "env_pdf_batch", "env_sample_batch"]
+
+E_TEXTURED = 0
+E_INTERP = 1
+E_MEAN = 2
+E_NEE_COS = 3
+E_PHOTON_UNIFORM = 4
+E_L = 5
+N_ENV = 8
+
+_INV_2PI = 1.0 / (2.0 * np.pi)
+
+
+@njit(**JIT_INLINE)
+def _to_map(M, d):
+    """m = M^T d: the image-frame direction of world direction d (M's rotation part)."""
+    return (M[0, 0] * d[0] + M[1, 0] * d[1] + M[2, 0] * d[2],
+            M[0, 1] * d[0] + M[1, 1] * d[1] + M[2, 1] * d[2],
+            M[0, 2] * d[0] + M[1, 2] * d[1] + M[2, 2] * d[2])
+
+
+@njit(**JIT_INLINE)
+def _uv(m):
+    """Cycles' equirectangular (u, v) of an image-frame direction m (any length > 0): u in [0, 1), v in [0, 1]."""
+    s = math.sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2])
+    if s == 0.0:
+        return 0.0, 0.0
+    u = (np.pi - math.atan2(m[1], m[0])) * _INV_2PI
+    if u >= 1.0:
+        u -= 1.0
+    z = min(max(m[2] / s, -1.0), 1.0)
+    return u, 1.0 - math.acos(z) / np.pi
+
+
+@njit(**JIT_INLINE)
+def _texel(img, ix, iy):
+    """Texel (ix, iy): columns wrap (Repeat), rows clamp at the poles."""
+    H, W = img.shape[0], img.shape[1]
+    ix = ix % W
+    if ix < 0:
+        ix += W
+    iy = min(max(iy, 0), H - 1)
+    return float(img[iy, ix, 0]), float(img[iy, ix, 1]), float(img[iy, ix, 2])
+
+
+@njit(**JIT)
+def _image(img, interp, u, v):
+    """The image at (u, v): Closest (the texel under it) or Linear (bilinear between texel centres)."""
+    H, W = img.shape[0], img.shape[1]
+    x, y = u * W, v * H
+    if interp == 0:
+        return _texel(img, int(math.floor(x)), int(math.floor(y)))
+    x -= 0.5
+    y -= 0.5
+    x0, y0 = math.floor(x), math.floor(y)
+    fx, fy = x - x0, y - y0
+    ix, iy = int(x0), int(y0)
+    a = _texel(img, ix, iy)
+    b = _texel(img, ix + 1, iy)
+    c = _texel(img, ix, iy + 1)
+    e = _texel(img, ix + 1, iy + 1)
+    w00, w10, w01, w11 = (1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy
+    return (w00 * a[0] + w10 * b[0] + w01 * c[0] + w11 * e[0],
+            w00 * a[1] + w10 * b[1] + w01 * c[1] + w11 * e[1],
+            w00 * a[2] + w10 * b[2] + w01 * c[2] + w11 * e[2])
+
+
+@njit(**JIT)
+def env_radiance(env, M, d):
+    """Radiance (3-tuple, W m^-2 sr^-1) the world sends back along world direction d (toward -d)."""
+    img, par = env[0], env[4]
+    if par[E_TEXTURED] == 0.0:
+        return par[E_L], par[E_L + 1], par[E_L + 2]
+    u, v = _uv(_to_map(M, d))
+    return _image(img, int(par[E_INTERP]), u, v)
+
+
+@njit(**JIT)
+def env_pdf(env, M, d):
+    """Solid-angle density (1/sr) with which :func:`env_sample` draws world direction d."""
+    func, par = env[1], env[4]
+    Hd, Wd = func.shape[0], func.shape[1]
+    u, v = _uv(_to_map(M, d))
+    sin_t = math.sin(np.pi * v)
+    if sin_t <= 0.0 or par[E_MEAN] <= 0.0:
+        return 0.0
+    j = min(int(v * Hd), Hd - 1)
+    i = min(int(u * Wd), Wd - 1)
+    return func[j, i] / (par[E_MEAN] * 2.0 * np.pi * np.pi * sin_t)
+
+
+@njit(**JIT)
+def env_sample(env, M, u0, u1):
+    """A world direction drawn from the image distribution with uniforms u0 (row), u1 (column);
+    returns (d0, d1, d2, pdf) with pdf the solid-angle density (0: a pole, nothing drawn)."""
+    func, marg, cond, par = env[1], env[2], env[3], env[4]
+    Hd, Wd = func.shape[0], func.shape[1]
+    j = min(max(search_right(marg, u0) - 1, 0), Hd - 1)
+    w = marg[j + 1] - marg[j]
+    dv = (u0 - marg[j]) / w if w > 0.0 else 0.5
+    v = (j + min(max(dv, 0.0), 1.0)) / Hd
+    i = min(max(search_right(cond[j], u1) - 1, 0), Wd - 1)
+    w = cond[j, i + 1] - cond[j, i]
+    du = (u1 - cond[j, i]) / w if w > 0.0 else 0.5
+    u = (i + min(max(du, 0.0), 1.0)) / Wd
+    theta = np.pi * (1.0 - v)
+    phi = np.pi - 2.0 * np.pi * u
+    st = math.sin(theta)
+    m = (st * math.cos(phi), st * math.sin(phi), math.cos(theta))
+    d = (M[0, 0] * m[0] + M[0, 1] * m[1] + M[0, 2] * m[2],
+         M[1, 0] * m[0] + M[1, 1] * m[1] + M[1, 2] * m[2],
+         M[2, 0] * m[0] + M[2, 1] * m[1] + M[2, 2] * m[2])
+    if st <= 0.0 or par[E_MEAN] <= 0.0:
+        return d[0], d[1], d[2], 0.0
+    return d[0], d[1], d[2], func[j, i] / (par[E_MEAN] * 2.0 * np.pi * np.pi * st)
+
+
+# ----------------------------------------------------------------------------
+# Batch kernels (the integrator's misses, tests)
+# ----------------------------------------------------------------------------
+@njit(**JIT)
+def env_lookup_batch(env, poses, d, out):
+    """out[i] = :func:`env_radiance` along d[i] (n, 3); poses (k, 4, 4), k = 1 or one per row."""
+    one = poses.shape[0] == 1
+    for i in range(d.shape[0]):
+        L = env_radiance(env, poses[0 if one else i], (d[i, 0], d[i, 1], d[i, 2]))
+        out[i, 0], out[i, 1], out[i, 2] = L[0], L[1], L[2]
+
+
+@njit(**JIT)
+def env_pdf_batch(env, poses, d, out):
+    """out[i] = :func:`env_pdf` of direction d[i] (n, 3); poses (k, 4, 4), k = 1 or one per row (tests)."""
+    one = poses.shape[0] == 1
+    for i in range(d.shape[0]):
+        out[i] = env_pdf(env, poses[0 if one else i], (d[i, 0], d[i, 1], d[i, 2]))
+
+
+@njit(**JIT)
+def env_sample_batch(env, poses, u, d_out, pdf_out, pdf_again):
+    """:func:`env_sample` per row of u (n, 2) into d_out (n, 3), pdf_out (n,); pdf_again (n,) is
+    :func:`env_pdf` of the drawn direction (tests: the two must agree)."""
+    one = poses.shape[0] == 1
+    for i in range(u.shape[0]):
+        M = poses[0 if one else i]
+        d0, d1, d2, p = env_sample(env, M, u[i, 0], u[i, 1])
+        d_out[i, 0], d_out[i, 1], d_out[i, 2] = d0, d1, d2
+        pdf_out[i] = p
+        pdf_again[i] = env_pdf(env, M, (d0, d1, d2))
