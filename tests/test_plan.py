@@ -101,9 +101,12 @@ def test_no_specular_no_caustics():
     assert plan["indirect"]                          # floor + box light each other
 
 
-def test_rough_metal_is_not_a_caustic_source():
-    plan = make_plan(_scene([plane_mesh(6.0), (sphere_mesh(0.5, 8, 16, material=ROUGH_METAL), translate(0, 0, 1))]))
-    assert not plan["caustics"] and plan["details"]["specular_objects"] == []
+def test_rough_metal_casts_glossy_caustics():
+    """Caustic photons go on through glossy lobes (L (S|G)+ D, docs/rendering.md "Path partition"):
+    a rough metal sphere over a floor is a caustic source."""
+    plan = make_plan(_scene([plane_mesh(6.0), (sphere_mesh(0.5, 8, 16, material=ROUGH_METAL, name="ball"),
+                                               translate(0, 0, 1))]))
+    assert plan["caustics"] and plan["details"]["specular_objects"] == ["ball"]
 
 
 def test_mirror_caustic_and_zero_power_light():

@@ -24,6 +24,7 @@ EXPECTED = {
     "fast_spinner": (True, True, False, True),
     "static_scene": (False, True, True, False),
     "textured_room": (True, True, True, False),
+    "hdri_product": (True, True, True, True),
 }
 KEYS = ("motion_blur", "caustics", "indirect", "time_dependent")
 
