@@ -59,15 +59,18 @@ RESOLUTION = None                 # None = the file's (320 x 240)
 NOCAUSTIC_SPP = 256
 CAUSTIC_REL, CAUSTIC_ABS = 0.25, 0.02
 LUMA = room.LUMA
+#: the image files this scene reads (its reference's cache key; bench_room.TEXTURE_FILES)
+TEXTURE_FILES = ("planks.png", "planks_normal.png", "studio_sun.exr", "tiles16.png")
 
 
 @contextlib.contextmanager
 def _this_scene(**cycles_overrides):
     """bench_room's helpers on this scene: its BLEND / OUT / CACHE / RESOLUTION (and CYCLES
     with ``cycles_overrides``) globals swapped for the duration."""
-    names = ("BLEND", "OUT", "CACHE", "RESOLUTION", "CYCLES")
+    names = ("BLEND", "OUT", "CACHE", "RESOLUTION", "CYCLES", "TEXTURE_FILES")
     saved = {n: getattr(room, n) for n in names}
     room.BLEND, room.OUT, room.CACHE, room.RESOLUTION = BLEND, OUT, CACHE, RESOLUTION
+    room.TEXTURE_FILES = TEXTURE_FILES
     room.CYCLES = dict(saved["CYCLES"], **cycles_overrides)
     try:
         yield

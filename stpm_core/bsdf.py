@@ -10,13 +10,13 @@ COAT       w_base                                      specular * F_diel(ior); m
 METAL      w_metal = metallic                          Schlick(F0 = base_color); mirror or GGX
 GLASS_R    w_glass = (1-metallic) transmission         F_diel(eta); mirror or GGX
 GLASS_T    w_glass                                     (1 - F_diel) base_color; always a delta
-METAL_MS   w_metal (rough only)                        multiple-scattering energy (Kulla-Conty)
+METAL_MS   (probability 0: rough metal's multiple scattering scales METAL, Cycles' way)
 =========  ==========================================  ==========================
 
 Roughness 0 makes COAT / METAL / GLASS_R delta lobes; above 0 they are GGX
 (alpha = roughness^2, height-correlated Smith G2, visible-normal sampling);
-rough metal also gets METAL_MS, the energy single scattering loses, so a white
-rough metal reflects all light like Cycles' default Multiscatter GGX.
+rough metal is scaled by Cycles' energy compensation (the energy single scattering loses), so a
+white rough metal reflects all light like Cycles' default Multiscatter GGX.
 Rough glass is rough reflection + smooth refraction (documented choice).
 Refraction does not scale radiance by eta^2 (the same BSDF serves camera paths
 and photons; over a closed object the factors cancel).

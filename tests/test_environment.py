@@ -229,3 +229,45 @@ def test_camera_rays_see_the_camera_image_and_light_comes_from_the_image():
     near = floor & (np.arange(32) >= rows.max() - 3)[:, None]  # the front of the floor: the mirror hides little sky
     assert near.sum() > 30
     assert direct[near].mean() == pytest.approx(0.5, rel=0.03)
+
+
+def test_an_hdri_sun_makes_the_caustic_of_the_equivalent_sun_lamp():
+    """A black HDRI with one small bright patch and a SUN lamp of the same irradiance, direction
+    and angular size: a glass sphere over a floor gets the same caustic power from both (world
+    photons are drawn from the image and aimed at the sphere like the sun's)."""
+    from scenes import look_at, sphere_mesh
+    from stpm_core.lights import LightSet
+    from stpm_core.photons.maps import build_photon_maps
+    from stpm_core.scene import Light, Material
+    H, W = 128, 256
+    img = np.zeros((H, W, 3), np.float32)
+    j, i = 95, 64                                          # v = 0.744: 44 degrees up; u = 0.25: phi = pi/2 (+y)
+    img[j:j + 2, i:i + 2] = 1.0e4
+    floor = plane_mesh(6.0, material=0)
+    ball = sphere_mesh(0.5, 32, 64, material=1)
+    ball.vertices = (np.asarray(ball.vertices) + np.float32([0, 0, 1.0])).astype(np.float32)
+    mats = [Material.diffuse((0.5, 0.5, 0.5)), Material.glass(1.5)]
+    world_scene = _image_scene(img, [floor, ball], ortho_camera_down(3.0, 3.0), interpolation="CLOSEST",
+                               materials=mats)
+    # the patch as a sun: direction its centre, strength its irradiance across the beam
+    k = 8
+    U, V = np.meshgrid((i + (np.arange(2 * k) + 0.5) / k) / W, (j + (np.arange(2 * k) + 0.5) / k) / H)
+    d = _direction(U, V).reshape(-1, 3)
+    dOmega = (2 * np.pi / (W * k)) * (np.pi / (H * k)) * np.sin(np.pi * V.reshape(-1))
+    axis = (d * dOmega[:, None]).sum(0)
+    axis /= np.linalg.norm(axis)
+    strength = float((1.0e4 * dOmega * (d @ axis)).sum())
+    angle = 2.0 * np.sqrt(dOmega.sum() / np.pi)            # the disc of the same solid angle
+    sun_scene = make_scene([floor, ball], mats, ortho_camera_down(3.0, 3.0),
+                           [Light(type="SUN", power=strength, angle=angle,
+                                  transform=MotionTransform.static(look_at(axis * 10, (0, 0, 0))))])
+    s = RenderSettings(photons_caustic=300_000, photons_global=0, seed=1)
+    power = []
+    for sc in (world_scene, sun_scene):
+        maps = build_photon_maps(sc, s, make_caster(sc), LightSet(sc))
+        rec = maps.maps["caustic"]
+        on_floor = np.abs(rec.position[:, 2] + rec.origin[2]) < 1e-3            # positions are relative to origin
+        power.append(float(rec.power.astype(float)[on_floor].sum()))
+    print(f"caustic power on the floor: HDRI sun {power[0]:.4g} W, sun lamp {power[1]:.4g} W")
+    assert power[1] > 0
+    assert power[0] == pytest.approx(power[1], rel=0.03), power
