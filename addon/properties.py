@@ -15,6 +15,7 @@ SETTING_NAMES = (
     "method", "estimator", "accumulation_steps", "samples", "photons_global",
     "photons_caustic", "k_nearest", "temporal_alpha", "time_scale", "seed",
     "effects", "caustics", "indirect", "kernel", "max_depth", "filter_width", "threads",
+    "clamp_direct", "clamp_indirect",
 )
 
 
@@ -56,6 +57,13 @@ class STPM_SceneSettings(bpy.types.PropertyGroup):
                                 description="Blackman-Harris pixel filter width (Blender's default 1.5 px)")
     threads: IntProperty(name="Threads", default=0, min=0, max=1024,
                          description="Worker threads for ray casting and look-ups (0 = all cores)")
+    clamp_direct: FloatProperty(
+        name="Clamp Direct", default=0.0, min=0.0, soft_max=100.0, max=1e30,
+        description="As Cycles: the largest channel of one contribution at the camera's first hit is "
+                    "scaled down to this value (0 = off; clamping removes fireflies and energy)")
+    clamp_indirect: FloatProperty(
+        name="Clamp Indirect", default=0.0, min=0.0, soft_max=100.0, max=1e30,
+        description="As Cycles: the same after a bounce and for photon-map light (0 = off)")
 
     # Photons
     photons_global: IntProperty(

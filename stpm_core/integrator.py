@@ -171,11 +171,13 @@ def _first_pose(a: np.ndarray) -> np.ndarray:
 
 
 def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.ndarray, rng, stats: TraceStats,
-            dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool, mis: bool = False) -> bool:
+            dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool, mis: bool = False,
+            clamp: float = 0.0) -> bool:
     """Next-event estimation at the hit rows sh (k,) of ``hits`` (rays d, closures C), added straight
     into dst (n, 3) (the Direct pass: dst[idx[row]] += beta[row] * contribution, light by light);
     returns whether any shadow ray was cast.  mis: the paths go on through their rough lobes
-    after this (the world's samples are then weighed against them, ``kernels.paths.nee_light``).
+    after this (the world's samples are then weighed against them, ``kernels.paths.nee_light``);
+    clamp: each light sample's contribution at most this (0: off; Cycles' Clamp Direct / Indirect).
 
     Per light with power: its (k, 2) uniforms (``_light_uniforms``), ``kernels.paths.nee_light``
     (light sample + BSDF + shadow-ray set-up), the shadow rays at the rows' times, then
@@ -223,7 +225,7 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.nda
         stats.shadow_rays += m
         cast_any = True
         _K.nee_accumulate(dst, sh, idx_k, use_idx, beta_k, use_beta, contrib, lv,
-                          np.ascontiguousarray(blocked, np.bool_))
+                          np.ascontiguousarray(blocked, np.bool_), float(clamp))
     return cast_any
 
 
@@ -266,7 +268,7 @@ def _photon_terms(ctx, sh, hits, d, C, t_s, stats: TraceStats, dsts, idx_k, use_
             continue
         E = np.ascontiguousarray(ctx.maps.estimate(kind, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows]), np.float64)
         stats.photon_lookups += n_q_rows
-        _K.photon_add(dsts[name], sh, live[:n_q_rows], rho, E, idx_k, use_idx, beta_k, use_beta)
+        _K.photon_add(dsts[name], sh, live[:n_q_rows], rho, E, idx_k, use_idx, beta_k, use_beta, ctx.clamp_indirect)
         touched.add(name)
 
 
@@ -344,18 +346,19 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         world_w_k = world_w if use_glossy else _NO_U
         # -- Misses, emission, first-hit passes; rows to shade and to continue ---------------------
         sh, spec = _scratch("sh", (m,), np.int64), _scratch("spec", (m,), np.int64)
+        clamp = ctx.clamp_direct if bounce == 0 else ctx.clamp_indirect      # Cycles' Clamp Direct / Indirect
         n_hit, n_sh, n_spec, n_emit = _K.classify_hits(
             hits.t, C, ctx.env_camera if bounce == 0 else ctx.env, _world_poses(ctx, t), d,
             world_on and not (bounce == 0 and ctx.film_transparent),
             idx_k, use_idx, beta_k, use_beta, glossy_k, world_w_k, use_glossy, V, cols["Emit"][0], bounce == 0, cols["Depth"][0], cols["Normal"][0], DEPTH_BACKGROUND,
-            hits.position, hits.ns, cam_pos, cam_axis, covered, sh, spec)
+            hits.position, hits.ns, cam_pos, cam_axis, covered, sh, spec, clamp)
         # -- Lights seen along the rays (before the next surface) -----------------------------------
         if ctx.shaped_lights:
             val = _seen_lights(ctx, o, d, t, hits.t, bounce == 0)
             if val is not None and use_glossy:
                 val[glossy != 0] = 0.0           # after a rough lobe: next-event estimation counted them
             if val is not None:
-                _K.scatter_add(L_emit, np.arange(m), idx_k, use_idx, beta_k, use_beta, val)
+                _K.scatter_add(L_emit, np.arange(m), idx_k, use_idx, beta_k, use_beta, val, clamp)
                 touched.add("Emit")
         if n_emit:
             touched.add("Emit")
@@ -366,7 +369,7 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         if n_sh:
             t_s = np.take(t, sh, out=_scratch("t_s", (n_sh,)))
             if len(ctx.lights) and _direct(ctx, sh, hits, d, C, t_s, rng, stats, L_direct, idx_k, use_idx,
-                                           beta_k, use_beta, mis=bounce < ctx.max_depth):
+                                           beta_k, use_beta, mis=bounce < ctx.max_depth, clamp=clamp):
                 touched.add("Direct")
             if ctx.maps is not None:
                 _photon_terms(ctx, sh, hits, d, C, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched)
@@ -419,6 +422,8 @@ class _Context:
     env_camera: tuple = None                 # what camera rays see of it (World.camera_image, else env)
     world_li: int = -1                       # the world's light index, -1 when it does not shine
     stop_coat: bool = False                  # camera paths end on a rough coat too (kernels.bsdf.bsdf_sample_path)
+    clamp_direct: float = 0.0                # RenderSettings.clamp_direct / clamp_indirect (0: off)
+    clamp_indirect: float = 0.0
     closures: np.ndarray = None              # (M + 1, N_CLOSURE) material closure rows (kernels.closure)
     shading: object = None                   # shading.ShadingData: node programs, textures, mesh attributes
     ggx: tuple = None                        # (E (32, 32), E_avg (32,)) GGX albedo tables (kernels.bsdf)
@@ -544,7 +549,8 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                    inst_offset=instance_offsets(scene),
                    world_radiance=np.asarray(scene.world.radiance, float),
                    film_transparent=bool(scene.metadata.get("film_transparent", False)),
-                   closures=closures, ggx=ggx_albedo_tables())
+                   closures=closures, ggx=ggx_albedo_tables(),
+                   clamp_direct=float(settings.clamp_direct), clamp_indirect=float(settings.clamp_indirect))
     ctx.shading = shading_data(scene, closures)
     ctx.light_data = [(light_params(lights, li), mesh_arrays(lights, li)) for li in range(len(lights))]
     ctx.world_li = next((li for li, l in enumerate(lights.lights) if l.type == "WORLD"), -1)

@@ -42,6 +42,10 @@ class RenderSettings:
     max_depth : longest specular chain followed from the camera / photon bounces.
     filter_width : Blackman-Harris pixel filter width in pixels (Blender default 1.5).
     threads : worker threads for ray casting / look-ups (0 = all cores).
+    clamp_direct, clamp_indirect : Cycles' Clamp Direct / Indirect: the largest channel of one
+        contribution to a sample -- at the camera's first hit (direct: its emission and
+        next-event estimate) or after a bounce and from the photon maps (indirect) -- is scaled
+        down to this value; 0 = off (the default: clamping loses energy).
     """
 
     method: str = "PHOTON"
@@ -61,6 +65,8 @@ class RenderSettings:
     max_depth: int = 8
     filter_width: float = 1.5
     threads: int = 0
+    clamp_direct: float = 0.0
+    clamp_indirect: float = 0.0
 
     def __post_init__(self) -> None:
         self.validate()
@@ -126,6 +132,8 @@ class RenderSettings:
             raise SettingsError(f"temporal_alpha must be 0 (automatic) or >= 1, got {self.temporal_alpha}")
         real("time_scale", 0.0, 1e30)
         real("filter_width", 0.0, 64.0)
+        real("clamp_direct", 0.0, 1e30)
+        real("clamp_indirect", 0.0, 1e30)
         return self
 
     def to_dict(self) -> dict:

@@ -157,7 +157,7 @@ def camera_rays(px, py, W, H, half_w, half_h, cx, cy, R, pos, ortho, clip_start,
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
 def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta, glossy, world_w, use_glossy, V,
-                  c_emit, first, c_depth, c_normal, depth_bg, P, NS, cam_pos, cam_axis, covered, sh, spec):
+                  c_emit, first, c_depth, c_normal, depth_bg, P, NS, cam_pos, cam_axis, covered, sh, spec, clamp):
     """Bookkeeping of m rays' hits; returns (n_hit, n_sh, n_spec, n_emit) (n_emit: rows added to Emit).
 
     t (m,) hit distances (inf: miss), C (m, N_CLOSURE) the hits' closures
@@ -173,7 +173,8 @@ def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta,
     emission of emissive hits into Emit, except on rows that left a rough lobe (``glossy[r]`` 1,
     when use_glossy: next-event estimation there counted the lights).
     Writes the hit rows with a non-delta lobe into sh and those with a delta or a rough lobe
-    (where the path may go on, :func:`specular_step`) into spec, in row order.
+    (where the path may go on, :func:`specular_step`) into spec, in row order.  Each emission /
+    world contribution is clamped to ``clamp`` (0: off).
     """
     m = t.shape[0]
     K = V.shape[1]
@@ -196,8 +197,14 @@ def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta,
             if add_world and ww > 0.0:
                 n_emit += 1
                 world = env_radiance(env, wposes[0 if one_w else r], (D[r, 0], D[r, 1], D[r, 2]))
-                for c in range(3):
-                    V[i, c_emit + c] += ((beta[r, c] * world[c]) if use_beta else world[c]) * ww
+                if use_beta:
+                    e0, e1, e2 = beta[r, 0] * world[0] * ww, beta[r, 1] * world[1] * ww, beta[r, 2] * world[2] * ww
+                else:
+                    e0, e1, e2 = world[0] * ww, world[1] * ww, world[2] * ww
+                f = _clamp_scale(e0, e1, e2, clamp)
+                V[i, c_emit] += e0 * f
+                V[i, c_emit + 1] += e1 * f
+                V[i, c_emit + 2] += e2 * f
             continue
         n_hit += 1
         if first:
@@ -209,8 +216,14 @@ def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta,
             covered[i] = 1.0
         if C[r, C_EMISSIVE] > 0.0 and emits:
             n_emit += 1
-            for c in range(3):
-                V[i, c_emit + c] += (beta[r, c] * C[r, C_EMIT + c]) if use_beta else C[r, C_EMIT + c]
+            if use_beta:
+                e0, e1, e2 = beta[r, 0] * C[r, C_EMIT], beta[r, 1] * C[r, C_EMIT + 1], beta[r, 2] * C[r, C_EMIT + 2]
+            else:
+                e0, e1, e2 = C[r, C_EMIT], C[r, C_EMIT + 1], C[r, C_EMIT + 2]
+            f = _clamp_scale(e0, e1, e2, clamp)
+            V[i, c_emit] += e0 * f
+            V[i, c_emit + 1] += e1 * f
+            V[i, c_emit + 2] += e2 * f
         if C[r, C_NONDELTA] > 0.0:
             sh[n_sh] = r
             n_sh += 1
@@ -221,18 +234,39 @@ def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta,
 
 
 @njit(**_JIT)
-def _add_row(dst, r, idx, use_idx, beta, use_beta, val, k):
-    """dst[idx[r]] += beta[r] * val[k] (3 channels; idx / beta optional)."""
-    i = idx[r] if use_idx else r
-    for c in range(3):
-        dst[i, c] += (beta[r, c] * val[k, c]) if use_beta else val[k, c]
+def _clamp_scale(c0, c1, c2, clamp):
+    """The factor that brings a contribution's largest channel down to ``clamp`` (Cycles'
+    Clamp Direct / Indirect, ``film_clamp_light``): 1 when clamp <= 0 (off) or under it."""
+    if clamp > 0.0:
+        m = max(c0, max(c1, c2))
+        if m > clamp:
+            return clamp / m
+    return 1.0
 
 
 @njit(**_JIT)
-def scatter_add(dst, rows, idx, use_idx, beta, use_beta, val):
-    """dst[idx[rows[k]]] += beta[rows[k]] * val[k] for every k (idx / beta optional), val (k, 3)."""
+def _add_row(dst, r, idx, use_idx, beta, use_beta, val, k, clamp):
+    """dst[idx[r]] += beta[r] * val[k] (3 channels; idx / beta optional), clamped to ``clamp``
+    (0: off) as one contribution."""
+    i = idx[r] if use_idx else r
+    if use_beta:
+        c0, c1, c2 = beta[r, 0] * val[k, 0], beta[r, 1] * val[k, 1], beta[r, 2] * val[k, 2]
+    else:
+        c0, c1, c2 = val[k, 0], val[k, 1], val[k, 2]
+    if clamp > 0.0:
+        f = _clamp_scale(c0, c1, c2, clamp)
+        c0, c1, c2 = c0 * f, c1 * f, c2 * f
+    dst[i, 0] += c0
+    dst[i, 1] += c1
+    dst[i, 2] += c2
+
+
+@njit(**_JIT)
+def scatter_add(dst, rows, idx, use_idx, beta, use_beta, val, clamp):
+    """dst[idx[rows[k]]] += beta[rows[k]] * val[k] for every k (idx / beta optional), val (k, 3), each
+    contribution clamped to ``clamp`` (0: off)."""
     for k in range(rows.shape[0]):
-        _add_row(dst, rows[k], idx, use_idx, beta, use_beta, val, k)
+        _add_row(dst, rows[k], idx, use_idx, beta, use_beta, val, k, clamp)
 
 
 # ----------------------------------------------------------------------------
@@ -329,16 +363,17 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
 
 
 @njit(**_JIT)
-def nee_accumulate(dst, rows, idx, use_idx, beta, use_beta, contrib, live, blocked):
+def nee_accumulate(dst, rows, idx, use_idx, beta, use_beta, contrib, live, blocked, clamp):
     """dst[idx[rows[k]]] += beta[rows[k]] * contrib[k], k = live[j], for every shadow ray j not blocked.
 
     dst (n, 3) the Direct pass of the samples; rows (K,) the hit rows shaded;
-    idx / beta optional as in :func:`scatter_add`.
+    idx / beta optional as in :func:`scatter_add`; each light sample's contribution clamped to
+    ``clamp`` (0: off).
     """
     for j in range(live.shape[0]):
         if not blocked[j]:
             k = live[j]
-            _add_row(dst, rows[k], idx, use_idx, beta, use_beta, contrib, k)
+            _add_row(dst, rows[k], idx, use_idx, beta, use_beta, contrib, k, clamp)
 
 
 # ----------------------------------------------------------------------------
@@ -392,16 +427,25 @@ def photon_albedo(rows, P, NS, D, C, E, T, rho, p_q, n_q, t_q, live):
 
 
 @njit(**_JIT)
-def photon_add(dst, rows, live, rho, E, idx, use_idx, beta, use_beta):
+def photon_add(dst, rows, live, rho, E, idx, use_idx, beta, use_beta, clamp):
     """dst[idx[rows[k]]] += beta[rows[k]] * rho[k] / pi * E[j], k = live[j]: a photon pass (n, 3) gets
-    the radiance of the irradiance estimates E (j, 3) W/m^2 at the queried rows."""
+    the radiance of the irradiance estimates E (j, 3) W/m^2 at the queried rows, each clamped to
+    ``clamp`` (0: off)."""
     for j in range(live.shape[0]):
         k = live[j]
         r = rows[k]
         i = idx[r] if use_idx else r
-        for c in range(3):
-            v = rho[k, c] / np.pi * E[j, c]
-            dst[i, c] += (beta[r, c] * v) if use_beta else v
+        v0 = rho[k, 0] / np.pi * E[j, 0]
+        v1 = rho[k, 1] / np.pi * E[j, 1]
+        v2 = rho[k, 2] / np.pi * E[j, 2]
+        if use_beta:
+            v0, v1, v2 = beta[r, 0] * v0, beta[r, 1] * v1, beta[r, 2] * v2
+        if clamp > 0.0:
+            f = _clamp_scale(v0, v1, v2, clamp)
+            v0, v1, v2 = v0 * f, v1 * f, v2 * f
+        dst[i, 0] += v0
+        dst[i, 1] += v1
+        dst[i, 2] += v2
 
 
 # ----------------------------------------------------------------------------
