@@ -15,7 +15,7 @@ SETTING_NAMES = (
     "method", "estimator", "accumulation_steps", "samples", "photons_global",
     "photons_caustic", "k_nearest", "temporal_alpha", "time_scale", "seed",
     "effects", "caustics", "indirect", "kernel", "max_depth", "filter_width", "threads",
-    "clamp_direct", "clamp_indirect",
+    "clamp_direct", "clamp_indirect", "glossy_bounces", "transmission_bounces",
 )
 
 
@@ -57,6 +57,12 @@ class STPM_SceneSettings(bpy.types.PropertyGroup):
                                 description="Blackman-Harris pixel filter width (Blender's default 1.5 px)")
     threads: IntProperty(name="Threads", default=0, min=0, max=1024,
                          description="Worker threads for ray casting and look-ups (0 = all cores)")
+    glossy_bounces: IntProperty(
+        name="Glossy Bounces", default=4, min=0, max=1024,
+        description="As Cycles: reflections (mirror or rough) a camera path goes on through, within Max Depth")
+    transmission_bounces: IntProperty(
+        name="Transmission Bounces", default=12, min=0, max=1024,
+        description="As Cycles: refractions a camera path goes on through, within Max Depth")
     clamp_direct: FloatProperty(
         name="Clamp Direct", default=0.0, min=0.0, soft_max=100.0, max=1e30,
         description="As Cycles: the largest channel of one contribution at the camera's first hit is "

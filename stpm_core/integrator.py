@@ -155,6 +155,27 @@ def _compact_layout(ctx) -> dict[str, tuple[int, int]]:
 _IDENTITY_POSE = np.eye(4)[None].copy()
 
 
+def _no_mis(k: int) -> np.ndarray:
+    out = _scratch("no_mis", (k,), np.uint8)
+    out[:] = 0
+    return out
+
+
+def mis_rows(ctx, bounce: int, counts, sh: np.ndarray) -> np.ndarray:
+    """(k,) uint8: 1 where the shaded row sh[i]'s path may go on through a rough lobe (bounces and
+    both bounce budgets left, ``kernels.paths.specular_step``): next-event estimation of the world
+    is then weighed against that continuation."""
+    out = _scratch("mis", (sh.size,), np.uint8)
+    if bounce >= ctx.max_depth:
+        out[:] = 0
+    elif counts is None:
+        out[:] = 1 if (ctx.glossy_bounces > 0 and ctx.transmission_bounces > 0) else 0
+    else:
+        c = counts[sh]
+        out[:] = (c[:, 0] < ctx.glossy_bounces) & (c[:, 1] < ctx.transmission_bounces)
+    return out
+
+
 def _world_poses(ctx, t: np.ndarray) -> np.ndarray:
     """The world mapping's map-to-world matrices (k, 4, 4) at the rows' times t (k = 1: static)."""
     if ctx.world_li < 0:
@@ -171,12 +192,13 @@ def _first_pose(a: np.ndarray) -> np.ndarray:
 
 
 def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.ndarray, rng, stats: TraceStats,
-            dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool, mis: bool = False,
+            dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool, mis: np.ndarray = None,
             clamp: float = 0.0) -> bool:
     """Next-event estimation at the hit rows sh (k,) of ``hits`` (rays d, closures C), added straight
     into dst (n, 3) (the Direct pass: dst[idx[row]] += beta[row] * contribution, light by light);
-    returns whether any shadow ray was cast.  mis: the paths go on through their rough lobes
-    after this (the world's samples are then weighed against them, ``kernels.paths.nee_light``);
+    returns whether any shadow ray was cast.  mis (k,) uint8: the paths of these rows may go on
+    through their rough lobes (the world's samples are then weighed against them,
+    ``kernels.paths.nee_light``; :func:`mis_rows`; None: none may);
     clamp: each light sample's contribution at most this (0: off; Cycles' Clamp Direct / Indirect).
 
     Per light with power: its (k, 2) uniforms (``_light_uniforms``), ``kernels.paths.nee_light``
@@ -201,8 +223,8 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.nda
         u = _light_uniforms(light, k, rng, _scratch("u_light", (k, 2)))
         prm, mesh = ctx.light_data[li]
         poses = light_poses(lights, li, t_s)
-        m = _K.nee_light(sh, P, NG, NS, d, C, E, E_avg, prm, poses, *mesh, t_s, u, EPS, mis, ctx.stop_coat, contrib,
-                         so, sd, stmax, live, S)
+        m = _K.nee_light(sh, P, NG, NS, d, C, E, E_avg, prm, poses, *mesh, t_s, u, EPS,
+                         _no_mis(k) if mis is None else mis, ctx.stop_coat, contrib, so, sd, stmax, live, S)
         if m == 0:
             continue
         if getattr(light, "textured", False):
@@ -317,6 +339,7 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     idx = None                               # live row -> sample (None: every sample, in order)
     beta = None                              # path throughput (None: 1)
     glossy = None                            # 1 where the ray left a rough lobe (None: none did)
+    counts = None                            # (live rows, 2) int32 reflections, transmissions so far (None: 0)
     world_w = None                           # the world's weight where the ray escapes (with glossy)
     tmax = tmax0                             # camera clipping for the first segment
     guard = None                             # camera rays: the caster's own guard
@@ -369,7 +392,7 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         if n_sh:
             t_s = np.take(t, sh, out=_scratch("t_s", (n_sh,)))
             if len(ctx.lights) and _direct(ctx, sh, hits, d, C, t_s, rng, stats, L_direct, idx_k, use_idx,
-                                           beta_k, use_beta, mis=bounce < ctx.max_depth, clamp=clamp):
+                                           beta_k, use_beta, mis=mis_rows(ctx, bounce, counts, sh), clamp=clamp):
                 touched.add("Direct")
             if ctx.maps is not None:
                 _photon_terms(ctx, sh, hits, d, C, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched)
@@ -383,14 +406,18 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         idx_n = np.empty(n_spec, np.int64)
         beta_n, o_n, d_n, guard_n = np.empty((n_spec, 3)), np.empty((n_spec, 3)), np.empty((n_spec, 3)), np.empty(n_spec)
         glossy_n, world_w_n = np.empty(n_spec, np.uint8), np.empty(n_spec)
+        counts_n = np.empty((n_spec, 2), np.int32)
+        counts_s = np.zeros((n_spec, 2), np.int32) if counts is None else np.ascontiguousarray(counts[spec])
         t_spec = t[spec] if ctx.world_li >= 0 and not ctx.lights.lights[ctx.world_li].transform.is_static else t[:1]
         n_go = _K.specular_step(spec, idx_k, use_idx, beta_k, use_beta, hits.position, hits.ng, hits.ns, d, C, E,
                                 E_avg, u, rr, u_rr, EPS, GUARD_FRACTION, ctx.stop_coat, ctx.env,
-                                _world_poses(ctx, t_spec), ctx.world_li >= 0, idx_n, beta_n, o_n, d_n, guard_n,
-                                glossy_n, world_w_n)
+                                _world_poses(ctx, t_spec), ctx.world_li >= 0, counts_s, ctx.glossy_bounces,
+                                ctx.transmission_bounces, idx_n, beta_n, o_n, d_n, guard_n, glossy_n, world_w_n,
+                                counts_n)
         idx, beta, o, d, guard = idx_n[:n_go], beta_n[:n_go], o_n[:n_go], d_n[:n_go], guard_n[:n_go]
         glossy = glossy_n[:n_go] if glossy_n[:n_go].any() else None
         world_w = world_w_n[:n_go] if glossy is not None else None
+        counts = counts_n[:n_go]
         tmax = None
 
     if full:
@@ -422,6 +449,8 @@ class _Context:
     env_camera: tuple = None                 # what camera rays see of it (World.camera_image, else env)
     world_li: int = -1                       # the world's light index, -1 when it does not shine
     stop_coat: bool = False                  # camera paths end on a rough coat too (kernels.bsdf.bsdf_sample_path)
+    glossy_bounces: int = 4                  # RenderSettings.glossy_bounces / transmission_bounces
+    transmission_bounces: int = 12
     clamp_direct: float = 0.0                # RenderSettings.clamp_direct / clamp_indirect (0: off)
     clamp_indirect: float = 0.0
     closures: np.ndarray = None              # (M + 1, N_CLOSURE) material closure rows (kernels.closure)
@@ -550,7 +579,9 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                    world_radiance=np.asarray(scene.world.radiance, float),
                    film_transparent=bool(scene.metadata.get("film_transparent", False)),
                    closures=closures, ggx=ggx_albedo_tables(),
-                   clamp_direct=float(settings.clamp_direct), clamp_indirect=float(settings.clamp_indirect))
+                   clamp_direct=float(settings.clamp_direct), clamp_indirect=float(settings.clamp_indirect),
+                   glossy_bounces=int(settings.glossy_bounces),
+                   transmission_bounces=int(settings.transmission_bounces))
     ctx.shading = shading_data(scene, closures)
     ctx.light_data = [(light_params(lights, li), mesh_arrays(lights, li)) for li in range(len(lights))]
     ctx.world_li = next((li for li, l in enumerate(lights.lights) if l.type == "WORLD"), -1)

@@ -40,6 +40,9 @@ class RenderSettings:
     caustics, indirect : with effects='MANUAL', whether to build each map.
     kernel : 'BOX' or 'CONE' density-estimation kernel.
     max_depth : longest specular chain followed from the camera / photon bounces.
+    glossy_bounces, transmission_bounces : as Cycles' Glossy / Transmission bounces (defaults 4,
+        12): a camera path goes on through at most this many reflections (delta or rough) /
+        refractions, within max_depth in all.  Photon paths follow max_depth only.
     filter_width : Blackman-Harris pixel filter width in pixels (Blender default 1.5).
     threads : worker threads for ray casting / look-ups (0 = all cores).
     clamp_direct, clamp_indirect : Cycles' Clamp Direct / Indirect: the largest channel of one
@@ -63,6 +66,8 @@ class RenderSettings:
     indirect: bool = True
     kernel: str = "BOX"
     max_depth: int = 8
+    glossy_bounces: int = 4
+    transmission_bounces: int = 12
     filter_width: float = 1.5
     threads: int = 0
     clamp_direct: float = 0.0
@@ -126,6 +131,8 @@ class RenderSettings:
         integer("k_nearest", 1, 100_000)
         integer("seed", 0, 2**63 - 1)
         integer("max_depth", 1, 1024)
+        integer("glossy_bounces", 0, 1024)
+        integer("transmission_bounces", 0, 1024)
         integer("threads", 0, 1024)
         real("temporal_alpha", 0.0, 1e6)
         if 0.0 < self.temporal_alpha < 1.0:

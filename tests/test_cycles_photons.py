@@ -296,7 +296,8 @@ def test_coloured_caustic_through_textured_glass_matches_cycles(tmp_path):
     _caustic_scene(png=png)
     cyc = render_cycles_paths(bpy.context.scene, tmp_path, samples=256, seeds=(0, 1), diffuse_bounces=1,
                               glossy_bounces=8, transmission_bounces=8).mean(axis=0)
-    passes, res = _stpm_passes((0, 1), ["Combined", "Caustic"], photons_caustic=CAUSTIC_PHOTONS, photons_global=0)
+    passes, res = _stpm_passes((0, 1), ["Combined", "Caustic"], photons_caustic=CAUSTIC_PHOTONS, photons_global=0,
+                               glossy_bounces=8, transmission_bounces=8)
     assert res.plan["caustics"], res.plan["reasons"]
     stpm, caustic = passes["Combined"].mean(axis=0), passes["Caustic"].mean(axis=0)
     for name, rc in (("blue half", HALF_BLUE), ("red half", HALF_RED)):

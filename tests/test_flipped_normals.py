@@ -148,7 +148,8 @@ def test_glass_normals_match_cycles(tmp_path, case):
     scene = bpy.context.scene
     cyc = render_cycles_paths(scene, tmp_path, samples=SPP, seeds=SEEDS, diffuse_bounces=0, glossy_bounces=DEPTH,
                               transmission_bounces=DEPTH, caustics=False)
-    stpm, _res = render_stpm(scene, samples=SPP, seeds=SEEDS, max_depth=DEPTH)
+    stpm, _res = render_stpm(scene, samples=SPP, seeds=SEEDS, max_depth=DEPTH, glossy_bounces=DEPTH,
+                             transmission_bounces=DEPTH)
     r = block_ztest(stpm, cyc)
     print(f"{case}: {r.summary()}")
     assert r.z_abs_max < Z_MAX, (case, r.summary(), np.round(r.z, 1))

@@ -294,7 +294,7 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
     (n, 3), stmax (n,), and live (n,) the row k it belongs to.  S (>= n, 8): the light samples
     (``sample_light_rows``; a textured MESH light's caller reads the light points from it).
 
-    The WORLD with ``mis`` (camera paths go on from these rows through their rough lobes,
+    The WORLD on rows k with ``mis[k]`` (uint8: camera paths go on from them through their rough lobes,
     :func:`specular_step`, and pick up the world where they escape): the part f_c of f those
     lobes sample with density p_c (``bsdf_eval_cont``, stop_coat as the continuation) is weighed
     by the balance heuristic p_l / (p_l + p_c), p_l = S[k, 7] the world's own density, and the
@@ -307,7 +307,7 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
     """
     n = rows.shape[0]
     sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, D, T, U, S)
-    world_mis = mis and int(prm[P_TYPE]) == T_WORLD
+    is_world = int(prm[P_TYPE]) == T_WORLD
     # -- The BSDF of rows with a rough lobe: the compiled mixture (bsdf_eval_pdf) -------------
     F = np.empty((n, 3))
     for k in range(n):
@@ -318,7 +318,7 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
             ns = (NS[r, 0], NS[r, 1], NS[r, 2])
             g = (NG[r, 0], NG[r, 1], NG[r, 2])
             f0, f1, f2, _ = bsdf_eval_pdf(C, r, E, E_avg, wo, wi, ns, g)
-            if world_mis:
+            if is_world and mis[k] != 0:
                 c0, c1, c2, p_c = bsdf_eval_cont(C, r, E, E_avg, wo, wi, ns, g, stop_coat)
                 if p_c > 0.0:
                     x = p_c / (S[k, 7] + p_c)
@@ -453,8 +453,8 @@ def photon_add(dst, rows, live, rho, E, idx, use_idx, beta, use_beta, clamp):
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
 def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg, U, rr, U_rr, EPS, guard_fraction,
-                  stop_coat, env, wposes, world_mis, idx_out, beta_out, o_out, d_out, guard_out, glossy_out,
-                  world_w_out):
+                  stop_coat, env, wposes, world_mis, counts, max_glossy, max_transmission, idx_out, beta_out, o_out,
+                  d_out, guard_out, glossy_out, world_w_out, counts_out):
     """Continue the hit rows spec (k,) through their delta and rough non-diffuse lobes; returns how
     many paths go on.
 
@@ -472,6 +472,13 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg,
     world_mis (the world is a light of next-event estimation, :func:`nee_light`), the balance
     heuristic p_c / (p_c + p_l) of the continuation's density p_c against the world's own p_l
     (``lights.world_nee_pdf``; env and wposes (1 or k, 4, 4) its mapping), else 0.
+
+    Bounce budgets, as Cycles' Glossy / Transmission bounces: counts (k, 2) int32 the row's
+    reflections and transmissions so far (counts_out the next rays' after this one).  A delta
+    lobe goes on while its own kind's count is below max_glossy (a reflection) or
+    max_transmission (wi below the face, a refraction); a rough lobe while both are (the same
+    condition that gives next-event estimation at the row its multiple-importance weight,
+    ``integrator.mis_rows``).
     """
     one_w = wposes.shape[0] == 1
     n_go = 0
@@ -486,6 +493,15 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg,
         else:
             b0, b1, b2 = w0, w1, w2
         go = kind != PATH_STOP and (b0 > 0.0 or b1 > 0.0 or b2 > 0.0)
+        n_gl, n_tr = counts[j, 0], counts[j, 1]
+        g_f = g if dot(g, wo) >= 0.0 else (-g[0], -g[1], -g[2])
+        trans = g_f[0] * wi0 + g_f[1] * wi1 + g_f[2] * wi2 < 0.0
+        if kind == PATH_GLOSSY:
+            go = go and n_gl < max_glossy and n_tr < max_transmission
+        elif trans:
+            go = go and n_tr < max_transmission
+        else:
+            go = go and n_gl < max_glossy
         if rr:
             q = min(max(max(b0, max(b1, b2)), 0.05), 1.0)
             go = go and U_rr[j] < q
@@ -504,10 +520,11 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg,
         if kind == PATH_GLOSSY:
             w_world = 0.0
             if world_mis:
-                g_f = g if dot(g, wo) >= 0.0 else (-g[0], -g[1], -g[2])
                 p_l = world_nee_pdf(env, wposes[0 if one_w else j], g_f, (wi0, wi1, wi2))
                 w_world = p_c / (p_c + p_l)
         world_w_out[n_go] = w_world
+        counts_out[n_go, 0] = n_gl + (0 if trans else 1)
+        counts_out[n_go, 1] = n_tr + (1 if trans else 0)
         n_go += 1
     return n_go
 

@@ -171,11 +171,11 @@ def _fill(a: np.ndarray, value: float) -> np.ndarray:
     return a
 
 
-def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis: bool = False) -> np.ndarray:
+def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=False) -> np.ndarray:
     """Next-event estimate (n, 3): sum over lights of f(wo, wi) |cos(ns, wi)| L_i / p * V.
 
-    eps (n,): each point's shadow-ray origin offset (``_eps_rows``).  mis: the paths go on through
-    their rough lobes after this; the world's samples then weigh the part f_c of f those lobes
+    eps (n,): each point's shadow-ray origin offset (``_eps_rows``).  mis (n,) bool: the paths may
+    go on through their rough lobes after this; the world's samples then weigh the part f_c of f those lobes
     sample (density p_c) by p_l / (p_l + p_c), p_l = cos(ng_f, wi) / pi its own density.
 
     Lights of zero power are skipped; shadow rays are cast only for samples
@@ -192,10 +192,11 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis: bo
                                                       _light_uniforms(lights.lights[li], n, rng),
                                                       normals=_world_normals(lights.lights[li], ng, wo))
         f = bsdf_eval(ctx.table, mat, wo, wi, ns, ng)
-        if mis and lights.lights[li].type == "WORLD":
+        if np.any(mis) and lights.lights[li].type == "WORLD":
             f_c, p_c = bsdf_eval_cont(ctx.table, mat, wo, wi, ns, ng)
             p_l = np.maximum(np.einsum("ij,ij->i", wi, _face_forward(ng, wo)), 0.0) / np.pi
-            f = f - f_c * np.where(p_c > 0, p_c / np.maximum(p_l + p_c, 1e-300), 0.0)[:, None]
+            x = np.where((p_c > 0) & mis, p_c / np.maximum(p_l + p_c, 1e-300), 0.0)
+            f = f - f_c * x[:, None]
         contrib = f * (np.abs(np.einsum("ij,ij->i", ns, wi)))[:, None]
         contrib *= weight
         live = np.nonzero(np.any(contrib > 0.0, axis=1))[0]
@@ -258,7 +259,7 @@ def _cast_bounce(ctx, o, d, times, idx, tmax, m: int, bounce: int, stats: TraceS
     return t, hits
 
 
-def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int):
+def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, counts):
     """Continue the rows spec (k,) through their delta and rough non-diffuse lobes: (idx, beta,
     wi, go, glossy) of those rows.
 
@@ -275,6 +276,12 @@ def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int):
     wi, weight, kind, p_c = bsdf_sample_path(ctx.table, mat, wo, ns, ng, u)
     beta = weight if beta is None else beta * weight
     go = (kind != 0) & np.any(beta > 0.0, axis=1)
+    # bounce budgets (Cycles' Glossy / Transmission bounces): a delta lobe within its own kind's, a
+    # rough lobe within both
+    trans = np.einsum("ij,ij->i", wi, _face_forward(ng, wo)) < 0.0
+    gl_ok, tr_ok = counts[:, 0] < ctx.glossy_bounces, counts[:, 1] < ctx.transmission_bounces
+    go &= np.where(kind == 2, gl_ok & tr_ok, np.where(trans, tr_ok, gl_ok))
+    counts = counts + np.stack([~trans, trans], axis=1).astype(np.int32)
     if bounce + 1 >= RR_START:
         q = np.clip(np.max(beta, axis=1), 0.05, 1.0)
         go &= rng.random(idx.size) < q
@@ -288,7 +295,7 @@ def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int):
         p_g = np.where(g, p_c, 0.0)                      # (delta rows: inf, unused)
         w = np.where(p_g > 0, p_g / np.maximum(p_g + p_l, 1e-300), 0.0) if ctx.world_light else 0.0
         world_w = np.where(g, w, 1.0)
-    return idx, beta, wi, go, g, world_w
+    return idx, beta, wi, go, g, world_w, counts
 
 
 def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.ndarray,
@@ -313,6 +320,7 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
     beta = None
     glossy = None                            # (live rows,) bool: the ray left a rough lobe
     world_w = None                           # (live rows,) the world's weight where the ray escapes
+    counts = None                            # (live rows, 2) reflections, transmissions so far
     tmax = tmax0                             # camera clipping for the first segment
     guard = None                             # camera rays: the caster's own guard
     # Per-sample outputs
@@ -379,6 +387,7 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
             beta = None if beta is None else beta[keep]
             glossy = None if glossy is None else glossy[keep]
             world_w = None if world_w is None else world_w[keep]
+            counts = None if counts is None else counts[keep]
             t = t[keep]
             p, ng, ns, mat = hits.position[keep], hits.ng[keep], hits.ns[keep], hits.material[keep]
             eps = _eps_rows(ctx, hits.instance[keep], p)
@@ -401,8 +410,11 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
             p_s, ng_s, ns_s, wo_s = _rows(p, sh), _rows(ng, sh), _rows(ns, sh), _rows(wo, sh)
             mat_s, t_s = _rows(mat, sh), _rows(t, sh)
             if len(ctx.lights):
+                c = np.zeros((p.shape[0], 2), np.int32) if counts is None else counts
+                mis = (bounce < ctx.max_depth) & (_rows(c[:, 0], sh) < ctx.glossy_bounces) & \
+                    (_rows(c[:, 1], sh) < ctx.transmission_bounces)
                 add(L_direct, sh, _direct(ctx, p_s, ng_s, ns_s, wo_s, mat_s, t_s, _rows(eps, sh), rng, stats,
-                                          mis=bounce < ctx.max_depth))
+                                          mis=mis))
             if ctx.maps is not None:
                 ns_f = _face_forward(ns_s, wo_s)
                 for kind, dst in (("caustic", L_caustic), ("global", L_indirect)):
@@ -417,8 +429,10 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         if spec.size == 0:
             break
         p, ng, eps = p[spec], ng[spec], eps[spec]
-        idx, beta, wi, go, gl, ww = _specular_step(ctx, rng, spec, idx, beta, mat[spec], wo[spec], ns[spec], ng, bounce)
-        idx, beta, glossy, world_w = idx[go], beta[go], gl[go], ww[go]
+        counts = np.zeros((spec.size, 2), np.int32) if counts is None else counts[spec]
+        idx, beta, wi, go, gl, ww, counts = _specular_step(ctx, rng, spec, idx, beta, mat[spec], wo[spec], ns[spec],
+                                                           ng, bounce, counts)
+        idx, beta, glossy, world_w, counts = idx[go], beta[go], gl[go], ww[go], counts[go]
         if not glossy.any():
             glossy = world_w = None
         o = _offset(p[go], ng[go], wi[go], eps[go])
@@ -475,6 +489,7 @@ def trace_image_numpy(scene, settings, caster, lights, maps=None, *, time_overri
                           film_transparent=bool(scene.metadata.get("film_transparent", False)))
     ctx.has_delta = _has_delta_lobe(scene.materials)
     ctx.world_light = any(l.type == "WORLD" for l in lights.lights)
+    ctx.glossy_bounces, ctx.transmission_bounces = int(settings.glossy_bounces), int(settings.transmission_bounces)
     ctx.any_emission = any(np.any(np.asarray(m.emission) > 0) for m in scene.materials)
     ctx.emissive = np.any(table.emission > 0, axis=1)
     ctx.light_visible_camera = [bool(v) for v in (scene.metadata.get("light_visible_camera") or [])]
