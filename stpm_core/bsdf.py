@@ -9,15 +9,16 @@ DIFFUSE    w_base = (1-metallic)(1-transmission)       base_color / pi * (1 - F_
 COAT       w_base                                      specular * F_diel(ior); mirror or GGX
 METAL      w_metal = metallic                          Schlick(F0 = base_color); mirror or GGX
 GLASS_R    w_glass = (1-metallic) transmission         F_diel(eta); mirror or GGX
-GLASS_T    w_glass                                     (1 - F_diel) base_color; always a delta
+GLASS_T    w_glass                                     (1 - F_diel) base_color; refraction or GGX BTDF
 METAL_MS   (probability 0: rough metal's multiple scattering scales METAL, Cycles' way)
 =========  ==========================================  ==========================
 
-Roughness 0 makes COAT / METAL / GLASS_R delta lobes; above 0 they are GGX
+Roughness 0 makes COAT / METAL / GLASS_R / GLASS_T delta lobes; above 0 they are GGX
 (alpha = roughness^2, height-correlated Smith G2, visible-normal sampling);
 rough metal is scaled by Cycles' energy compensation (the energy single scattering loses), so a
 white rough metal reflects all light like Cycles' default Multiscatter GGX.
-Rough glass is rough reflection + smooth refraction (documented choice).
+Rough glass is GGX reflection + GGX refraction (Walter et al. 2007, frosted glass) with
+Cycles' glass energy compensation (a tabulated glass albedo).
 Refraction does not scale radiance by eta^2 (the same BSDF serves camera paths
 and photons; over a closed object the factors cancel).
 

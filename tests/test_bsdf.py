@@ -120,12 +120,12 @@ def test_eval_reciprocity(mat):
     N = np.tile(Z, (n, 1))
     f_ab = bsdf_eval(table, np.zeros(n, int), a, b, N, N)
     f_ba = bsdf_eval(table, np.zeros(n, int), b, a, N, N)
-    if mat.metallic > 0 and mat.roughness > 0:
-        # Cycles' Multiscatter GGX energy compensation k_metal(mu_o) scales the reciprocal single
-        # scattering by a function of wo alone: f(a, b) / k(a) = f(b, a) / k(b)
+    if (mat.metallic > 0 or mat.transmission > 0) and mat.roughness > 0:
+        # Cycles' Multiscatter GGX energy compensation k_metal(mu_o) (k_glass(mu_o)) scales the
+        # reciprocal single scattering by a function of wo alone: f(a, b) / k(a) = f(b, a) / k(b)
         from oracles.bsdf_numpy import _Hit
-        k_a = _Hit(table, np.zeros(n, int), a, N, N).ms_scale
-        k_b = _Hit(table, np.zeros(n, int), b, N, N).ms_scale
+        h_a, h_b = _Hit(table, np.zeros(n, int), a, N, N), _Hit(table, np.zeros(n, int), b, N, N)
+        k_a, k_b = h_a.ms_scale * h_a.k_glass, h_b.ms_scale * h_b.k_glass
         f_ab, f_ba = f_ab / k_a, f_ba / k_b
     assert np.allclose(f_ab, f_ba, rtol=1e-9, atol=1e-12)
     assert f_ab.max() > 0

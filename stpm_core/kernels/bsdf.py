@@ -15,8 +15,11 @@ DIFFUSE    w_base (1 - F_coat(wo)) base_color / pi, F_coat = specular F_diel(cos
 COAT       w_base specular F_diel(ior): delta mirror (roughness 0) or GGX with Cycles' energy
            compensation (1 + F_ms (1 - E(mu_o)) / E(mu_o))
 METAL      w_metal Schlick(base_color): delta mirror or GGX (rough: times k_metal)
-GLASS_R    w_glass F_diel(eta): delta mirror or GGX
-GLASS_T    w_glass (1 - F_diel(cos_o, eta)) base_color: always a delta refraction
+GLASS_R    w_glass F_diel(eta): delta mirror or GGX (rough: times k_glass)
+GLASS_T    w_glass (1 - F_diel(eta)) base_color: delta refraction, or (roughness > 0, ior != 1)
+           Walter et al.'s GGX BTDF (1 - F(wo.h)) base D G2 |wo.h||wi.h| eta^2 / (cos_o cos_i
+           (wo.h + eta wi.h)^2) times k_glass, Cycles' glass energy compensation
+           1 + F_ms (1 - E_g(mu_o)) / E_g(mu_o) (E_g: the tabulated GGX glass albedo)
 METAL_MS   no longer a lobe (probability 0): a rough METAL lobe is scaled by Cycles' energy
            compensation k_metal = 1 + F_ms (1 - E(mu_o)) / E(mu_o) per channel instead
 =========  =======================================================================
@@ -30,7 +33,10 @@ ior), else leaving (eta = 1 / ior): a mesh with flipped normals is glass seen fr
 specular lobes (coat, metal, glass) use ``nss``, ns raised toward ng wherever it differs from ng
 (smooth or custom normals, Normal inputs: ``ensure_valid_specular_reflection``) and are 0 when
 wo is below it (Cycles' microfacet closures: no lobe for wo under N).  A reflection lobe is 0
-unless wi is above both ng and its normal, a refraction unless wi is below ng.
+unless wi is above both ng and its normal, a refraction unless wi is below ng (and, rough, below
+nss); a sampled reflection below ng or refraction above it has weight 0.  Rough glass samples one
+visible normal h and reflects or refracts through it, the choice per microfacet as Cycles
+(F(wo.h) against (1 - F) mean(tint)) inside the glass lobes' joint probability.
 
 Per-hit functions (compiled once; the kernels call them):
 
@@ -52,7 +58,9 @@ Per-hit functions (compiled once; the kernels call them):
 * :func:`fresnel_dielectric` -- F_diel(cos_i, eta), exact unpolarised, 1 under TIR;
 * :func:`ggx_albedo`, :func:`ggx_albedo_avg` -- look-ups of the single-scattering
   GGX albedo E(mu, alpha) (bilinear) and E_avg(alpha) (linear) in the tables
-  of :func:`ggx_albedo_tables` (a plain function, built once per process).
+  of :func:`ggx_albedo_tables` (a plain function, built once per process);
+  :func:`glass_albedo`, :func:`glass_albedo_avg` the same for rough glass (the shipped
+  ``glass_albedo.npy``, :func:`build_glass_table`).
 
 Batch kernels (loops over hits, used by ``stpm_core.bsdf`` and the tests):
 :func:`eval_batch`, :func:`sample_batch`, :func:`albedo_batch`.
@@ -77,13 +85,14 @@ from .closure import (C_ALPHA, C_BASE, C_BUMPED, C_COAT, C_IOR, C_NS, C_ROUGH_LO
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
            "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
-           "fresnel_dielectric_fss", "coat_albedo",
+           "fresnel_dielectric_fss", "coat_albedo", "glass_albedo", "glass_albedo_avg", "build_glass_table",
            "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch"]
 
 DIFFUSE, COAT, METAL, GLASS_R, GLASS_T, METAL_MS = range(6)
 
 _JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 _EPS = 1e-9
+_ETA1 = 1e-4                    # |ior - 1| below this: refraction is a delta even when rough (Cycles' rule)
 _PI = math.pi
 _INV_PI = 1.0 / math.pi
 _N_MU = 32                      # table rows: cos(theta_o) midpoints (k + 0.5) / 32
@@ -299,8 +308,54 @@ def _coat_table_weights(mu, al, g, zs, w):
                 w[c, a, b] = acc / (K * K)
 
 
+_N_GZ = 16                      # glass-albedo slices: z = sqrt((ior - 1) / (ior + 1)) = k / 15 * Z_MAX
+_GZ_MAX = math.sqrt(_R_MAX)     # ior 10
+_GLASS_E = 1 + _N_Z             # first glass slice of E: (side, k) at _GLASS_E + side * 16 + k
+_GLASS_EAVG = _N_ALPHA          # first glass entry of E_avg: (side, k, j) at _GLASS_EAVG + (side * 16 + k) * 32 + j
+
+
+@njit(**_JIT)
+def _glass_table_weights(mu, rs, g, zs, w):
+    """w (2, n_z, n_mu, n_rough): the single-scattering albedo of rough GGX glass (reflection plus
+    refraction through the visible-normal samples (g[i], g[j]), each weighed by its Fresnel share:
+    F G2 / G1(wo) reflected when it leaves above, (1 - F) G2 / G1(wo) refracted when it goes below)
+    for wo = (sqrt(1 - mu^2), 0, mu), alpha = max(rough^2, 1e-4), eta = ior (side 0, entering) or
+    1 / ior (side 1, leaving), ior = (1 + z^2) / (1 - z^2) for the slices' z values zs.  z = 0 (ior 1)
+    is 1, as Cycles' table (a refraction of eta 1 is singular there)."""
+    K = g.shape[0]
+    for side in range(2):
+        for c in range(zs.shape[0]):
+            r2 = zs[c] * zs[c]
+            ior = (1.0 + r2) / (1.0 - r2)
+            eta = ior if side == 0 else 1.0 / ior
+            for a in range(mu.shape[0]):
+                m = mu[a]
+                wx = math.sqrt(1.0 - m * m)
+                for b in range(rs.shape[0]):
+                    if not zs[c] > 0.0:
+                        w[side, c, a, b] = 1.0
+                        continue
+                    alpha = max(rs[b] * rs[b], 1e-4)
+                    lam_o = _ggx_lambda(m, alpha)
+                    acc = 0.0
+                    for i in range(K):
+                        for j in range(K):
+                            h = _ggx_sample_vndf(wx, 0.0, m, alpha, g[i], g[j])
+                            wo_h = wx * h[0] + m * h[2]
+                            F = fresnel_dielectric(min(max(wo_h, 0.0), 1.0), eta)
+                            wr_z = 2.0 * wo_h * h[2] - m
+                            if wr_z > 0:
+                                acc += F * (1.0 + lam_o) / (1.0 + lam_o + _ggx_lambda(wr_z, alpha))
+                            if F < 1.0:
+                                cos_t = math.sqrt(max(0.0, 1.0 - (1.0 - wo_h * wo_h) / (eta * eta)))
+                                wt_z = -m / eta + (wo_h / eta - cos_t) * h[2]
+                                if wt_z < 0:
+                                    acc += (1.0 - F) * (1.0 + lam_o) / (1.0 + lam_o + _ggx_lambda(wt_z, alpha))
+                    w[side, c, a, b] = acc / (K * K)
+
+
 def ggx_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
-    """(E (33, 32, 32), E_avg (32,)) float64 C-contiguous, built on first use and cached.
+    """(E (65, 32, 32), E_avg (32 + 1024,)) float64 C-contiguous, built on first use and cached.
 
     E[0, i, j] = single-scattering GGX albedo (F = 1) at mu = (i + 0.5) / 32 and
     alpha = j / 31 (at least 1e-4): the mean of the visible-normal sample weight
@@ -311,6 +366,11 @@ def ggx_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
     F_diel(wo . h, ior), times the coat's
     energy compensation ``_coat_compensation`` -- what the diffuse base under it loses
     (:func:`coat_albedo`).
+    E[33 + 16 s + k, i, j] = the single-scattering albedo of rough GGX glass (reflection plus
+    refraction, :func:`build_glass_table`) at mu_i, roughness j / 31 (not alpha: sqrt(alpha), as
+    Cycles' ``ggx_glass_E``), z_k = k / 15 sqrt(9 / 11) = sqrt((ior - 1) / (ior + 1)), entering
+    (s = 0, eta = ior) or leaving (s = 1, eta = 1 / ior); E_avg[32 + (16 s + k) 32 + j] its
+    2 int E mu dmu (:func:`glass_albedo`, :func:`glass_albedo_avg`).
     """
     global _TABLES
     with _TABLES_LOCK:
@@ -325,7 +385,12 @@ def ggx_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
             EF = _load_coat_table()
             if EF is None:                      # (no shipped table: build it, about 5 s)
                 EF = build_coat_table(E0, E_avg)
-            E = np.ascontiguousarray(np.concatenate([E0[None], EF]))
+            EG = _load_glass_table()
+            if EG is None:                      # (no shipped table: build it, a few s)
+                EG = build_glass_table()
+            E = np.ascontiguousarray(np.concatenate([E0[None], EF, EG.reshape(2 * _N_GZ, _N_MU, _N_ALPHA)]))
+            EG_avg = 2.0 * np.mean(EG * _MU[None, None, :, None], axis=2)      # (2, n_z, n_rough)
+            E_avg = np.ascontiguousarray(np.concatenate([E_avg, EG_avg.ravel()]))
             E.flags.writeable = False
             E_avg.flags.writeable = False
             _TABLES = (E, E_avg)
@@ -360,6 +425,32 @@ def _load_coat_table():
     except (OSError, ValueError):
         return None
     return EF if EF.shape == (_N_Z, _N_MU, _N_ALPHA) and EF.dtype == np.float64 else None
+
+
+GLASS_TABLE_FILE = Path(__file__).with_name("glass_albedo.npy")
+
+
+def build_glass_table(K: int = 128, slices=None) -> np.ndarray:
+    """The rough-glass albedo (2, 16, 32, 32) of :func:`ggx_albedo_tables` (entering / leaving,
+    z, mu, roughness): a K x K stratified grid of visible-normal samples per cell
+    (``_glass_table_weights``), clipped to [0, 1] (slices: the z indices k to build, default all
+    16; about 4 s each: the total internal reflection edge of the refraction needs K = 128 for
+    1e-3).  Written to GLASS_TABLE_FILE by ``python -m stpm_core.kernels.bsdf``; tests check the
+    file against this construction."""
+    g = (np.arange(K) + 0.5) / K
+    ks = np.arange(_N_GZ) if slices is None else np.asarray(slices, np.int64)
+    zs = ks / (_N_GZ - 1) * _GZ_MAX
+    w = np.empty((2, zs.size, _MU.size, _ALPHA.size))
+    _glass_table_weights(_MU, _ALPHA, g, zs, w)
+    return np.clip(w, 0.0, 1.0)
+
+
+def _load_glass_table():
+    try:
+        EG = np.load(GLASS_TABLE_FILE)
+    except (OSError, ValueError):
+        return None
+    return EG if EG.shape == (2, _N_GZ, _N_MU, _N_ALPHA) and EG.dtype == np.float64 else None
 
 
 @njit(**_JIT)
@@ -399,6 +490,40 @@ def coat_albedo(E, mu, alpha, ior):
     k = min(int(z), _N_Z - 2)
     fz = z - k
     return (1.0 - fz) * _bilinear(E, 1 + k, mu, alpha) + fz * _bilinear(E, 2 + k, mu, alpha)
+
+
+@njit(**_JIT)
+def _glass_z(eta):
+    """(side, k, fz): the glass table's side (0: eta >= 1, 1: leaving) and slice position of eta."""
+    side = 0 if eta >= 1.0 else 1
+    ior = eta if eta >= 1.0 else 1.0 / eta
+    z = math.sqrt(max(ior - 1.0, 0.0) / (ior + 1.0)) / _GZ_MAX * (_N_GZ - 1)
+    z = min(max(z, 0.0), _N_GZ - 1 - 1e-9)
+    k = min(int(z), _N_GZ - 2)
+    return side, k, z - k
+
+
+@njit(**_JIT)
+def glass_albedo(E, mu, rough, eta):
+    """Single-scattering albedo at mu of rough GGX glass (reflection + refraction, Fresnel of eta =
+    n_t / n_i, roughness rough = sqrt(alpha)): the glass slices of E, bilinear in (mu, rough),
+    linear in z = sqrt((ior - 1) / (ior + 1)), the leaving side's slices for eta < 1."""
+    side, k, fz = _glass_z(eta)
+    s = _GLASS_E + side * _N_GZ + k
+    return (1.0 - fz) * _bilinear(E, s, mu, rough) + fz * _bilinear(E, s + 1, mu, rough)
+
+
+@njit(**_JIT)
+def glass_albedo_avg(E_avg, rough, eta):
+    """2 int glass_albedo(mu) mu dmu at (rough, eta): linear in rough (grid k / 31) and in z."""
+    side, k, fz = _glass_z(eta)
+    y = min(max(rough * 31.0, 0.0), 31 - 1e-9)
+    j = min(int(y), 30)
+    fy = y - j
+    o0 = _GLASS_EAVG + (side * _N_GZ + k) * _N_ALPHA + j
+    o1 = o0 + _N_ALPHA
+    return ((1.0 - fz) * ((1.0 - fy) * E_avg[o0] + fy * E_avg[o0 + 1])
+            + fz * ((1.0 - fy) * E_avg[o1] + fy * E_avg[o1 + 1]))
 
 
 @njit(**_JIT)
@@ -485,6 +610,18 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
     if F_coat > 0 and rough:
         k_coat = _coat_compensation(ggx_albedo(E, cos_oc, alpha), ggx_albedo_avg(E_avg, alpha),
                                     spec * fresnel_dielectric_fss(ior))
+    # Rough glass: the energy single scattering loses, returned as Cycles does for its Multiscatter
+    # GGX glass (microfacet_ggx_preserve_energy, the glass table): reflection and refraction times
+    # 1 + F_ms (1 - E(mu_o)) / E(mu_o) per channel, E the glass albedo of this eta (side), F_ms
+    # from F_ss = the transmission tint (1 / E(mu_o) for a white one)
+    k_glass = (1.0, 1.0, 1.0)
+    if w_glass > 0 and rough:
+        rg = C[cr, C_ROUGHNESS]
+        g_eo = glass_albedo(E, cos_oc, rg, eta_glass)
+        g_avg = glass_albedo_avg(E_avg, rg, eta_glass)
+        k_glass = (_coat_compensation(g_eo, g_avg, C[cr, C_BASE]),
+                   _coat_compensation(g_eo, g_avg, C[cr, C_BASE + 1]),
+                   _coat_compensation(g_eo, g_avg, C[cr, C_BASE + 2]))
     # Lobe selection probabilities proportional to an albedo estimate
     mean_base = (C[cr, C_BASE] + C[cr, C_BASE + 1] + C[cr, C_BASE + 2]) / 3.0
     e0 = w_base * (1.0 - F_coat) * mean_base                          # DIFFUSE
@@ -503,7 +640,7 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
         p_lobe = (e0 / t, e1 / t, e2 / t, e3 / t, e4 / t, e5 / t)
     else:
         p_lobe = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    return nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe
+    return nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe
 
 
 # ----------------------------------------------------------------------------
@@ -538,7 +675,7 @@ def bump_shadowing(C, cr, wi, nsf, ngf):
 @njit(**_JIT)
 def _eval_pdf_hit(C, cr, E, hit, wo, wi):
     """(f0, f1, f2, pdf) of the non-delta lobes at wi for the hit of :func:`_hit`."""
-    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
+    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
     w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
     b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
     cos_i = dot(wi, ns)
@@ -557,48 +694,85 @@ def _eval_pdf_hit(C, cr, E, hit, wo, wi):
 @njit(**_JIT)
 def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
     """(f0, f1, f2, pdf) plus f and the mixture pdf of the non-delta lobes other than DIFFUSE (rough
-    COAT times coat_w (1 or 0), METAL and GLASS_R) at wi, for the hit of :func:`_hit`."""
-    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
+    COAT times coat_w (1 or 0), METAL, GLASS_R and GLASS_T) at wi, for the hit of :func:`_hit`.
+
+    Reflection (wi above ng and nss): the GGX lobes about nss.  Refraction (wi below ng and nss):
+    rough GLASS_T, Walter et al.'s BTDF as Cycles evaluates it (no 1 / eta^2 radiance scaling),
+    h = -(wo + eta wi) turned toward nss.  The glass lobes pick reflection or refraction per
+    microfacet h as Cycles: refraction with probability (1 - F) t / (F + (1 - F) t), F = F_diel(wo.h,
+    eta), t = mean(tint), inside their joint probability p_lobe[GLASS_R] + p_lobe[GLASS_T]."""
+    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
     if not C[cr, C_ROUGH_LOBE] > 0:
+        return f0, f1, f2, pdf
+    if not cos_o > 0:
         return f0, f1, f2, pdf
     w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
     cos_i = dot(wi, ns)
-    above_ng = dot(wi, ng) > 0
-    # -- GGX reflection terms (rough COAT / METAL / GLASS_R), about the specular normal nss; f is
-    # divided by the |ns . wi| the integrator multiplies (so f |ns . wi| = D G2 F / (4 cos_o))
+    side = dot(wi, ng)
     cos_is = dot(wi, nss)
-    if not (cos_is > 0 and cos_o > 0 and above_ng):
-        return f0, f1, f2, pdf
-    hv = _normalized((wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]), 1e-300)
-    cos_h = dot(hv, nss)
-    wo_h = min(max(dot(wo, hv), 0.0), 1.0)
-    D = _ggx_D(cos_h, alpha)
-    lam_o = _ggx_lambda(cos_o, alpha)
-    lam_i = _ggx_lambda(cos_is, alpha)
-    G2 = 1.0 / (1.0 + lam_o + lam_i)
-    G1o = 1.0 / (1.0 + lam_o)
-    cos_oe = max(cos_o, _EPS)
-    p_ggx = G1o * D / (4.0 * cos_oe)                     # VNDF pdf of wi (solid angle)
-    spec = D * G2 / max(4.0 * cos_oe * max(abs(cos_i), _EPS), 1e-300)
     # Cycles' bump_shadowing_term for every closure whose normal is not the smooth one Ns (the
     # shading normal before a Normal input replaced it, else ns itself, off which nss may have
-    # been raised): wi on the other side of Ns than nss says: no reflection (never for nss = Ns)
+    # been raised): wi on the other side of Ns than nss says: no reflection, no refraction
     if C[cr, C_BUMPED] > 0:
         Ns = (C[cr, C_NS], C[cr, C_NS + 1], C[cr, C_NS + 2])
     else:
         Ns = ns
-    if dot(Ns, wi) * dot(Ns, nss) * cos_is < 0.0:
-        spec = 0.0
-    # COAT: specular F_diel(wo.h, ior); METAL: Schlick(base, wo.h); GLASS_R: F_diel(wo.h, eta)
-    F_c = C[cr, C_SPECULAR] * fresnel_dielectric(wo_h, C[cr, C_IOR])
-    F_m = _fresnel_schlick(C, cr, wo_h)
-    F_g = fresnel_dielectric(wo_h, eta_glass)
-    s = (w_base * F_c * k_coat * coat_w + w_glass * F_g) * spec
-    sm = w_metal * spec
-    f0 = f0 + (s + sm * F_m[0] * ms_scale[0])
-    f1 = f1 + (s + sm * F_m[1] * ms_scale[1])
-    f2 = f2 + (s + sm * F_m[2] * ms_scale[2])
-    pdf = pdf + p_ggx * (p_lobe[COAT] * coat_w + p_lobe[METAL] + p_lobe[GLASS_R])
+    bump_ok = not (dot(Ns, wi) * dot(Ns, nss) * cos_is < 0.0)
+    cos_oe = max(cos_o, _EPS)
+    lam_o = _ggx_lambda(cos_o, alpha)
+    G1o = 1.0 / (1.0 + lam_o)
+    p_glass = p_lobe[GLASS_R] + p_lobe[GLASS_T]
+    t_mean = (C[cr, C_BASE] + C[cr, C_BASE + 1] + C[cr, C_BASE + 2]) / 3.0
+    if cos_is > 0 and side > 0:
+        # -- GGX reflection terms (rough COAT / METAL / GLASS_R), about the specular normal nss; f
+        # is divided by the |ns . wi| the integrator multiplies (so f |ns . wi| = D G2 F / (4 cos_o))
+        hv = _normalized((wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]), 1e-300)
+        cos_h = dot(hv, nss)
+        wo_h = min(max(dot(wo, hv), 0.0), 1.0)
+        D = _ggx_D(cos_h, alpha)
+        lam_i = _ggx_lambda(cos_is, alpha)
+        G2 = 1.0 / (1.0 + lam_o + lam_i)
+        p_ggx = G1o * D / (4.0 * cos_oe)                 # VNDF pdf of wi (solid angle)
+        spec = D * G2 / max(4.0 * cos_oe * max(abs(cos_i), _EPS), 1e-300)
+        if not bump_ok:
+            spec = 0.0
+        # COAT: specular F_diel(wo.h, ior); METAL: Schlick(base, wo.h); GLASS_R: F_diel(wo.h, eta)
+        F_c = C[cr, C_SPECULAR] * fresnel_dielectric(wo_h, C[cr, C_IOR])
+        F_m = _fresnel_schlick(C, cr, wo_h)
+        F_g = fresnel_dielectric(wo_h, eta_glass)
+        s = w_base * F_c * k_coat * coat_w * spec
+        sg = w_glass * F_g * spec
+        sm = w_metal * spec
+        f0 = f0 + (s + sg * k_glass[0] + sm * F_m[0] * ms_scale[0])
+        f1 = f1 + (s + sg * k_glass[1] + sm * F_m[1] * ms_scale[1])
+        f2 = f2 + (s + sg * k_glass[2] + sm * F_m[2] * ms_scale[2])
+        rt = F_g + (1.0 - F_g) * t_mean
+        split_r = F_g / rt if rt > 0 else 0.0
+        pdf = pdf + p_ggx * (p_lobe[COAT] * coat_w + p_lobe[METAL] + p_glass * split_r)
+    elif cos_is < 0 and side < 0 and w_glass > 0 and abs(C[cr, C_IOR] - 1.0) >= _ETA1:
+        # -- Rough GLASS_T: f |ns . wi| = (1 - F) tint D G2 |wo.h| |wi.h| eta^2 / (cos_o (wo.h + eta wi.h)^2)
+        eta = eta_glass
+        ht = _normalized((-(wo[0] + eta * wi[0]), -(wo[1] + eta * wi[1]), -(wo[2] + eta * wi[2])), 1e-300)
+        if dot(ht, nss) < 0.0:
+            ht = (-ht[0], -ht[1], -ht[2])
+        wo_h = dot(wo, ht)
+        wi_h = dot(wi, ht)
+        if not (wo_h > 0 and wi_h < 0 and bump_ok):
+            return f0, f1, f2, pdf
+        D = _ggx_D(dot(ht, nss), alpha)
+        lam_i = _ggx_lambda(cos_is, alpha)
+        G2 = 1.0 / (1.0 + lam_o + lam_i)
+        F_g = fresnel_dielectric(min(wo_h, 1.0), eta)
+        den = wo_h + eta * wi_h
+        jac = eta * eta * (-wi_h) / max(den * den, 1e-300)      # d omega_h / d omega_i
+        common = D * wo_h * jac / cos_oe                       # VNDF pdf of wi / G1(wo)
+        st = w_glass * (1.0 - F_g) * G2 * common / max(abs(cos_i), _EPS)
+        f0 = f0 + st * C[cr, C_BASE] * k_glass[0]
+        f1 = f1 + st * C[cr, C_BASE + 1] * k_glass[1]
+        f2 = f2 + st * C[cr, C_BASE + 2] * k_glass[2]
+        rt = F_g + (1.0 - F_g) * t_mean
+        split_t = (1.0 - F_g) * t_mean / rt if rt > 0 else 0.0
+        pdf = pdf + p_glass * split_t * G1o * common
     return f0, f1, f2, pdf
 
 
@@ -646,7 +820,7 @@ def bsdf_eval_smooth(C, cr, wo, wi, ns, ng):
 def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
     """(lobe, p_chosen, is_delta, wi) for the hit of :func:`_hit`: u0 picks the lobe by the CDF of
     p_lobe, u1, u2 the direction (unit wi); p_chosen = 0 when the lobe has probability 0 (wi = 0)."""
-    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
+    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
     rough = C[cr, C_ROUGHNESS] > 0.0
     # -- Choose a lobe by the CDF of p_lobe
     lobe = 0                                            # number of CDF entries <= u0
@@ -660,8 +834,34 @@ def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
     if not p_chosen > 0:
         return lobe, 0.0, False, (0.0, 0.0, 0.0)
     is_refl = lobe == COAT or lobe == METAL or lobe == GLASS_R
-    is_delta = lobe == GLASS_T or (is_refl and not rough)
+    grough = rough and abs(C[cr, C_IOR] - 1.0) >= _ETA1   # rough refraction (ior 1: a delta, as Cycles)
+    is_delta = (lobe == GLASS_T and not grough) or (is_refl and not rough)
     # -- Direction
+    if (lobe == GLASS_R or lobe == GLASS_T) and grough:
+        # Rough glass: a GGX visible normal about nss, then reflect or refract through it, the
+        # choice per microfacet as Cycles (F = F_diel(wo.h, eta) against (1 - F) mean(tint)), by
+        # where u0 fell inside the two glass lobes' joint probability
+        p_glass = p_lobe[GLASS_R] + p_lobe[GLASS_T]
+        t, b = basis(nss)
+        lx, ly, lz = _normalized((dot(wo, t), dot(wo, b), max(cos_o, 1e-6)), 0.0)
+        hw = _to_frame(_ggx_sample_vndf(lx, ly, lz, alpha, u1, u2), t, b, nss)
+        wo_h = min(max(dot(wo, hw), 0.0), 1.0)
+        F_g = fresnel_dielectric(wo_h, eta_glass)
+        t_mean = (C[cr, C_BASE] + C[cr, C_BASE + 1] + C[cr, C_BASE + 2]) / 3.0
+        rt = F_g + (1.0 - F_g) * t_mean
+        if not rt > 0:
+            return lobe, 0.0, False, (0.0, 0.0, 0.0)
+        us = min(max((u0 - (p_lobe[DIFFUSE] + p_lobe[COAT] + p_lobe[METAL])) / p_glass, 0.0), 1.0)
+        if us < F_g / rt:
+            lobe = GLASS_R
+            wi = _reflect(wo, hw)
+        else:
+            lobe = GLASS_T
+            eta = eta_glass
+            cos_t = math.sqrt(max(0.0, 1.0 - (1.0 - wo_h * wo_h) / (eta * eta)))
+            k = wo_h / eta - cos_t
+            wi = (-wo[0] / eta + k * hw[0], -wo[1] / eta + k * hw[1], -wo[2] / eta + k * hw[2])
+        return lobe, p_glass, False, _normalized(wi, 1e-300)
     if lobe == DIFFUSE or lobe == METAL_MS:
         # Cosine hemisphere about ns
         t, b = basis(nsf)
@@ -686,10 +886,16 @@ def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
 
 
 @njit(**_JIT)
+def _on_lobe_side(lobe, side):
+    """True when side = wi . ng' is where lobe sends light: below ng' for GLASS_T, above otherwise."""
+    return side < 0.0 if lobe == GLASS_T else side > 0.0
+
+
+@njit(**_JIT)
 def _delta_weight(C, cr, hit, lobe, p_chosen, wi):
     """Throughput / p_chosen (3-tuple) of delta lobe ``lobe`` toward wi; 0 if a reflection lands
     below ng or a refraction above it (a leak through the shading normal)."""
-    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, p_lobe = hit
+    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
     side = dot(wi, ngf)
     if not (side < 0 if lobe == GLASS_T else side > 0):
         return 0.0, 0.0, 0.0
@@ -719,7 +925,11 @@ def bsdf_sample_lobe(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
     if is_delta:
         t0, t1, t2 = _delta_weight(C, cr, hit, lobe, p_chosen, wi)
         return wi0, wi1, wi2, t0, t1, t2, lobe
-    # -- Non-delta lobes: mixture f cos / pdf over every non-delta lobe
+    # -- Non-delta lobes: mixture f cos / pdf over every non-delta lobe; a sample of a reflection
+    # lobe below ng or a refraction above it is 0 (as Cycles' sampling: the mixture pdf on each
+    # side counts only the lobes meant for it)
+    if not _on_lobe_side(lobe, dot(wi, hit[1])):
+        return wi0, wi1, wi2, 0.0, 0.0, 0.0, lobe
     f0, f1, f2, pdf = _eval_pdf_hit(C, cr, E, hit, wo, wi)
     if not pdf > 0:
         return wi0, wi1, wi2, 0.0, 0.0, 0.0, lobe
@@ -739,7 +949,8 @@ def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
     """
     wi0, wi1, wi2, w0, w1, w2, lobe = bsdf_sample_lobe(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2)
     rough = C[cr, C_ROUGHNESS] > 0.0
-    is_delta = lobe == GLASS_T or ((lobe == COAT or lobe == METAL or lobe == GLASS_R) and not rough)
+    grough = rough and abs(C[cr, C_IOR] - 1.0) >= _ETA1
+    is_delta = (lobe == GLASS_T and not grough) or ((lobe == COAT or lobe == METAL or lobe == GLASS_R) and not rough)
     return wi0, wi1, wi2, w0, w1, w2, is_delta
 
 
@@ -772,6 +983,8 @@ def bsdf_sample_path(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2, stop_coat):
         return wi0, wi1, wi2, t0, t1, t2, PATH_DELTA, np.inf
     if stop_coat and lobe == COAT:
         return wi0, wi1, wi2, 0.0, 0.0, 0.0, PATH_STOP, 0.0
+    if not _on_lobe_side(lobe, dot(wi, hit[1])):
+        return wi0, wi1, wi2, 0.0, 0.0, 0.0, PATH_GLOSSY, 0.0
     f0, f1, f2, pdf = _glossy_add(C, cr, E, hit, wo, wi, 0.0, 0.0, 0.0, 0.0, 0.0 if stop_coat else 1.0)
     if not pdf > 0:
         return wi0, wi1, wi2, 0.0, 0.0, 0.0, PATH_GLOSSY, 0.0
@@ -852,7 +1065,9 @@ def albedo_batch(closures, E, mat, wo, ns, out):
         out[i, 0], out[i, 1], out[i, 2] = r, g, b
 
 
-if __name__ == "__main__":            # python -m stpm_core.kernels.bsdf: (re)write the coat table
+if __name__ == "__main__":            # python -m stpm_core.kernels.bsdf: (re)write the coat and glass tables
     _E0 = ggx_albedo_tables()[0][0]
-    np.save(COAT_TABLE_FILE, build_coat_table(_E0, ggx_albedo_tables()[1]))
+    np.save(COAT_TABLE_FILE, build_coat_table(_E0, ggx_albedo_tables()[1][:_N_ALPHA]))
     print(f"wrote {COAT_TABLE_FILE}")
+    np.save(GLASS_TABLE_FILE, build_glass_table())
+    print(f"wrote {GLASS_TABLE_FILE}")

@@ -21,7 +21,8 @@ metallic, transmission, roughness, specular, ior.  Derived columns
 ``C_ROUGH_LOBE``   1 if some GGX lobe (roughness > 0 and a metal, glass or coat lobe)
 ``C_NONDELTA``     1 if some lobe is not a delta (shade / store photons here)
 ``C_COAT``         1 if the diffuse base has a coat (w_base > 0 and specular > 0)
-``C_HAS_DELTA``    1 if some lobe is a delta (paths / photons continue specularly)
+``C_HAS_DELTA``    1 if some lobe is a delta (roughness 0 and a glass, metal or coat lobe:
+                   paths / photons continue specularly); rough glass is a GGX lobe, not a delta
 ``C_EMISSIVE``     1 if some emission channel is > 0
 ``C_PROGRAM``      first instruction of the material's node program; -1 = constant
 ``C_NS``           the hit's smooth shading normal (3 columns) when ``C_BUMPED``: a Normal
@@ -88,7 +89,9 @@ def finish_closure(c):
     c[C_NONDELTA] = 1.0 if ((w_base > 0.0 and base_max > 0.0) or rough_lobe) else 0.0
     c[C_COAT] = 1.0 if coat else 0.0
     smooth = rough == 0.0
-    c[C_HAS_DELTA] = 1.0 if (c[C_W_GLASS] > 0.0 or (smooth and (metallic > 0.0 or coat))) else 0.0
+    index_matched = abs(c[C_IOR] - 1.0) < 1e-4         # rough glass of ior 1 refracts as a delta (Cycles)
+    c[C_HAS_DELTA] = 1.0 if ((smooth and (c[C_W_GLASS] > 0.0 or metallic > 0.0 or coat))
+                             or (c[C_W_GLASS] > 0.0 and index_matched)) else 0.0
     c[C_EMISSIVE] = 1.0 if (c[C_EMIT] > 0.0 or c[C_EMIT + 1] > 0.0 or c[C_EMIT + 2] > 0.0) else 0.0
 
 

@@ -143,7 +143,39 @@ def _coat_albedo(mu: np.ndarray, alpha: np.ndarray, ior: np.ndarray) -> np.ndarr
 def _ggx_albedo_avg(alpha: np.ndarray) -> np.ndarray:
     """E_avg(alpha) (n,) by linear interpolation."""
     _, E_avg = ggx_albedo_tables()
-    return np.interp(alpha, _ALPHA, E_avg)
+    return np.interp(alpha, _ALPHA, E_avg[:32])
+
+
+_GZ_MAX = np.sqrt(9.0 / 11.0)                   # the glass slices' z = sqrt((ior - 1) / (ior + 1)) = k / 15 * this
+
+
+def _glass_z(eta: np.ndarray):
+    """(side, k, fz) (n,): slices of the glass albedo (side 1 for eta < 1, at 1 / eta) and position in z."""
+    side = (eta < 1.0).astype(int)
+    ior = np.where(eta >= 1.0, eta, 1.0 / eta)
+    z = np.clip(np.sqrt(np.maximum(ior - 1.0, 0.0) / (ior + 1.0)) / _GZ_MAX * 15, 0, 15 - 1e-9)
+    k = np.minimum(z.astype(int), 14)
+    return side, k, z - k
+
+
+def _glass_albedo(mu: np.ndarray, rough: np.ndarray, eta: np.ndarray) -> np.ndarray:
+    """Single-scattering rough-glass albedo (n,): slices 33 + 16 side + k of the table, bilinear in
+    (mu, roughness), linear in z."""
+    side, k, fz = _glass_z(eta)
+    s = 33 + side * 16 + k
+    return (1 - fz) * _table_bilinear(s, mu, rough) + fz * _table_bilinear(s + 1, mu, rough)
+
+
+def _glass_albedo_avg(rough: np.ndarray, eta: np.ndarray) -> np.ndarray:
+    """Its 2 int E mu dmu (n,): E_avg[32 + (16 side + k) 32 + j], linear in roughness and z."""
+    _, E_avg = ggx_albedo_tables()
+    side, k, fz = _glass_z(eta)
+    y = np.clip(rough * 31.0, 0.0, 31 - 1e-9)
+    j = np.minimum(y.astype(int), 30)
+    fy = y - j
+    o0 = 32 + (side * 16 + k) * 32 + j
+    o1 = o0 + 32
+    return (1 - fz) * ((1 - fy) * E_avg[o0] + fy * E_avg[o0 + 1]) + fz * ((1 - fy) * E_avg[o1] + fy * E_avg[o1 + 1])
 
 
 # ---------------------------------------------------------------------------
@@ -255,6 +287,18 @@ class _Hit:
                                           (eta - 1.0) / (4.08567 + 1.00071 * eta))
             f_ms = fss * e_av / (1.0 - fss * (1.0 - e_av))
             self.k_coat[i] = 1.0 + f_ms * (1.0 - e_o) / e_o
+        # Rough glass: Cycles' energy compensation of its Multiscatter GGX glass, per channel
+        # k_glass = 1 + F_ms (1 - E_o) / E_o with the glass albedo E, F_ss = the transmission tint
+        self.grough = self.rough & (np.abs(ior - 1.0) >= 1e-4)      # rough refraction (ior 1: a delta)
+        self.k_glass = np.ones((n, 3))
+        i = np.nonzero((self.w_glass > 0) & self.rough)[0]
+        if i.size:
+            rg = table.roughness[m][i]
+            e_o = np.maximum(_glass_albedo(cos_o[i], rg, self.eta_glass[i]), 1e-3)[:, None]
+            e_av = _glass_albedo_avg(rg, self.eta_glass[i])[:, None]
+            fss = self.base[i]
+            f_ms = fss * e_av / (1.0 - fss * (1.0 - e_av))
+            self.k_glass[i] = 1.0 + f_ms * (1.0 - e_o) / e_o
         # Lobe selection probabilities proportional to an albedo estimate
         mean_base = self.base.mean(axis=1)
         est = np.stack([
@@ -270,7 +314,7 @@ class _Hit:
         self.p_lobe = np.where(total > 0, est / np.maximum(total, 1e-300), 0.0)
         # Lobes that are deltas at this hit
         self.delta = np.stack([np.zeros_like(self.rough), ~self.rough, ~self.rough, ~self.rough,
-                               np.ones_like(self.rough), np.zeros_like(self.rough)], axis=-1)
+                               ~self.grough, np.zeros_like(self.rough)], axis=-1)
 
     def take(self, idx: np.ndarray) -> "_Hit":
         """The same gathers for rows idx only."""
@@ -329,11 +373,53 @@ def _eval_pdf(h: _Hit, wi: np.ndarray, diffuse: bool = True, coat: float = 1.0):
         F_c = hr.spec * fresnel_dielectric(wo_h, hr.ior)
         # METAL (rough): Schlick(base, wo.h)
         F_m = fresnel_schlick(hr.base, wo_h)
-        # GLASS_R (rough): exact dielectric at wo.h
+        # GLASS_R (rough): exact dielectric at wo.h, energy-compensated; reflection or refraction
+        # chosen per microfacet (F against (1 - F) mean(tint)) inside p_lobe[GLASS_R] + p_lobe[GLASS_T]
         F_g = fresnel_dielectric(wo_h, hr.eta_glass)
-        f[r] += ((hr.w_base * F_c * hr.k_coat * coat + hr.w_glass * F_g) * spec)[:, None] + \
-            (hr.w_metal * spec)[:, None] * F_m * hr.ms_scale
-        pdf[r] += p_ggx * (hr.p_lobe[:, COAT] * coat + hr.p_lobe[:, METAL] + hr.p_lobe[:, GLASS_R])
+        f[r] += (hr.w_base * F_c * hr.k_coat * coat * spec)[:, None] + (hr.w_glass * F_g * spec)[:, None] * hr.k_glass \
+            + (hr.w_metal * spec)[:, None] * F_m * hr.ms_scale
+        t_mean = hr.base.mean(axis=1)
+        rt = F_g + (1.0 - F_g) * t_mean
+        split_r = np.where(rt > 0, F_g / np.where(rt > 0, rt, 1.0), 0.0)
+        p_glass = hr.p_lobe[:, GLASS_R] + hr.p_lobe[:, GLASS_T]
+        pdf[r] += p_ggx * (hr.p_lobe[:, COAT] * coat + hr.p_lobe[:, METAL] + p_glass * split_r)
+        # GLASS_T (rough): Walter et al.'s BTDF as Cycles, wi below ng and nss
+        ft, pt = _refraction(hr, wi[r])
+        f[r] += ft
+        pdf[r] += pt
+    return f, pdf
+
+
+def _refraction(h: _Hit, wi: np.ndarray):
+    """Rough GLASS_T f (n, 3) and pdf (n,) at wi: f |ns.wi| = w_glass (1 - F(wo.h)) tint k_glass
+    D G2 |wo.h| |wi.h| eta^2 / (cos_o (wo.h + eta wi.h)^2), h = -(wo + eta wi) toward nss; pdf =
+    (p_R + p_T) (1 - F) t / (F + (1 - F) t) G1(wo) D |wo.h| / cos_o eta^2 |wi.h| / (wo.h + eta wi.h)^2."""
+    n = wi.shape[0]
+    cos_is = _dot(wi, h.nss)
+    cos_i = _dot(wi, h.ns)
+    valid = (h.cos_o > 0) & (cos_is < 0) & (_dot(wi, h.ng) < 0) & (h.w_glass > 0) & h.grough
+    valid &= ~(_dot(h.ns, wi) * _dot(h.ns, h.nss) * cos_is < 0.0)          # bump_shadowing_term
+    eta = h.eta_glass
+    ht = -(h.wo + eta[:, None] * wi)
+    ht /= np.maximum(np.linalg.norm(ht, axis=-1, keepdims=True), 1e-300)
+    ht = np.where((_dot(ht, h.nss) < 0)[:, None], -ht, ht)
+    wo_h, wi_h = _dot(h.wo, ht), _dot(wi, ht)
+    valid &= (wo_h > 0) & (wi_h < 0)
+    D = _ggx_D(_dot(ht, h.nss), h.alpha)
+    lam_o, lam_i = _ggx_lambda(h.cos_o, h.alpha), _ggx_lambda(cos_is, h.alpha)
+    G2 = 1.0 / (1.0 + lam_o + lam_i)
+    G1o = 1.0 / (1.0 + lam_o)
+    F = fresnel_dielectric(np.minimum(wo_h, 1.0), eta)
+    den = wo_h + eta * wi_h
+    jac = eta * eta * (-wi_h) / np.maximum(den * den, 1e-300)
+    common = D * wo_h * jac / np.maximum(h.cos_o, _EPS)
+    st = h.w_glass * (1.0 - F) * G2 * common / np.maximum(np.abs(cos_i), _EPS)
+    f = np.where(valid[:, None], st[:, None] * h.base * h.k_glass, 0.0)
+    t_mean = h.base.mean(axis=1)
+    rt = F + (1.0 - F) * t_mean
+    split_t = np.where(rt > 0, (1.0 - F) * t_mean / np.where(rt > 0, rt, 1.0), 0.0)
+    p_glass = h.p_lobe[:, GLASS_R] + h.p_lobe[:, GLASS_T]
+    pdf = np.where(valid, p_glass * split_t * G1o * common, 0.0)
     return f, pdf
 
 
@@ -419,6 +505,7 @@ def bsdf_sample_path(table: MaterialTable, mat, wo, ns, ng, u, stop_coat: bool =
     if g.size:
         h = _Hit(table, np.asarray(mat)[g], np.asarray(wo, float)[g], np.asarray(ns, float)[g], np.asarray(ng, float)[g])
         f, pdf = _eval_pdf(h, wi[g], diffuse=False, coat=0.0 if stop_coat else 1.0)
+        pdf = np.where(_on_lobe_side(lobe[g], _dot(wi[g], h.ng)), pdf, 0.0)
         cos_i = np.abs(_dot(wi[g], h.ns))
         weight[g] = np.where((pdf > 0)[:, None], f * (cos_i / np.maximum(pdf, 1e-300))[:, None], 0.0)
         pdf_out[g] = pdf
@@ -443,10 +530,33 @@ def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
     lobe = np.minimum(np.sum(u[:, 0:1] >= cdf, axis=1), METAL_MS)
     p_chosen = h.p_lobe[rows, lobe]
     ok = p_chosen > 0
-    is_delta = h.delta[rows, lobe] & ok
-    is_refl = (lobe == COAT) | (lobe == METAL) | (lobe == GLASS_R)
     wi = np.zeros((n, 3))
     weight = np.zeros((n, 3))
+    # Rough glass: a visible normal, then reflect or refract through it, chosen per microfacet by
+    # where u0 fell inside p_lobe[GLASS_R] + p_lobe[GLASS_T] (F against (1 - F) mean(tint))
+    rg = ok & ((lobe == GLASS_R) | (lobe == GLASS_T)) & h.grough
+    i = np.nonzero(rg)[0]
+    if i.size:
+        t_f, b_f = orthonormal_basis(h.nss[i])
+        wo_i = h.wo[i]
+        wo_loc = np.stack([_dot(wo_i, t_f), _dot(wo_i, b_f), np.maximum(h.cos_o[i], 1e-6)], axis=-1)
+        wo_loc /= np.linalg.norm(wo_loc, axis=-1, keepdims=True)
+        hl = _ggx_sample_vndf(wo_loc, h.alpha[i], u[i, 1:3])
+        hw = hl[:, 0:1] * t_f + hl[:, 1:2] * b_f + hl[:, 2:3] * h.nss[i]
+        wo_h = np.clip(_dot(wo_i, hw), 0.0, 1.0)
+        eta = h.eta_glass[i]
+        F = fresnel_dielectric(wo_h, eta)
+        rt = F + (1.0 - F) * h.base[i].mean(axis=1)
+        pl = h.p_lobe[i]
+        us = np.clip((u[i, 0] - (pl[:, DIFFUSE] + pl[:, COAT] + pl[:, METAL])) / (pl[:, GLASS_R] + pl[:, GLASS_T]), 0, 1)
+        refl = us < F / np.where(rt > 0, rt, 1.0)
+        cos_t = np.sqrt(np.maximum(0.0, 1.0 - (1.0 - wo_h * wo_h) / (eta * eta)))
+        refr = -wo_i / eta[:, None] + (wo_h / eta - cos_t)[:, None] * hw
+        wi[i] = np.where(refl[:, None], _reflect(wo_i, hw), refr)
+        lobe[i] = np.where(refl, GLASS_R, GLASS_T)
+        ok[i] = rt > 0
+    is_delta = h.delta[rows, lobe] & ok
+    is_refl = ((lobe == COAT) | (lobe == METAL) | (lobe == GLASS_R)) & ~rg
 
     # -- Directions, each lobe kind on its own rows ---------------------------
     # Diffuse and the metal's multiple-scattering lobe: cosine hemisphere about ns
@@ -469,8 +579,8 @@ def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
     i = np.nonzero(ok & is_refl & ~h.rough)[0]
     if i.size:
         wi[i] = _reflect(h.wo[i], h.nss[i])
-    # Refraction through nss (entering: eta = ior; leaving: 1 / ior)
-    i = np.nonzero(ok & (lobe == GLASS_T))[0]
+    # Smooth refraction through nss (entering: eta = ior; leaving: 1 / ior)
+    i = np.nonzero(ok & (lobe == GLASS_T) & ~rg)[0]
     if i.size:
         eta = h.eta_glass[i]
         cos_o = np.clip(h.cos_o[i], 0.0, 1.0)
@@ -492,14 +602,21 @@ def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
         good = np.where(li == GLASS_T, side < 0, side > 0)
         weight[i] = np.where(good[:, None], thr / p_chosen[i][:, None], 0.0)
 
-    # -- Non-delta lobes: mixture f * cos / pdf over every non-delta lobe -----
+    # -- Non-delta lobes: mixture f * cos / pdf over every non-delta lobe; a reflection lobe's
+    # sample below ng or a refraction's above it is 0
     i = np.nonzero(ok & ~is_delta)[0]
     if i.size:
         hs = h.take(i)
         f, pdf = _eval_pdf(hs, wi[i])
         cos_i = np.abs(_dot(wi[i], hs.ns))
-        weight[i] = np.where((pdf > 0)[:, None], f * (cos_i / np.maximum(pdf, 1e-300))[:, None], 0.0)
+        keep = (pdf > 0) & _on_lobe_side(lobe[i], _dot(wi[i], hs.ng))
+        weight[i] = np.where(keep[:, None], f * (cos_i / np.maximum(pdf, 1e-300))[:, None], 0.0)
     return wi, weight, is_delta, np.where(ok, lobe, -1)
+
+
+def _on_lobe_side(lobe: np.ndarray, side: np.ndarray) -> np.ndarray:
+    """(n,) bool: wi . ng (side) is where the lobe sends light: below for GLASS_T, above otherwise."""
+    return np.where(lobe == GLASS_T, side < 0.0, side > 0.0)
 
 
 def diffuse_albedo(table: MaterialTable, mat, wo, ns) -> np.ndarray:
