@@ -91,3 +91,35 @@ def test_hdri_world_lights_and_shows_like_cycles(tmp_path, interpolation):
     assert not any("mean radiance" in w for w in res.warnings), res.warnings
     assert r.z_abs_max < Z_MAX, (r.summary(), np.round(r.z, 1))
     assert abs(r.mean_ratio - 1.0) < MEAN_TOL, r.summary()
+
+
+def test_animated_mapping_rotation_is_sampled_across_the_shutter(tmp_path):
+    """A keyframed Mapping Z rotation (0 at frame 1, 90 degrees at frame 2, linear) with a one-frame
+    shutter centred on frame 1.5: the world's map-to-world rotation moves across the shutter, each
+    key the inverse of the node's rotation at that instant."""
+    from test_addon_scenes import export_now, linear_keys
+    scene = fresh()
+    write_hdri(tmp_path / "sky.exr")
+    world = hdri_world(tmp_path / "sky.exr", rotation_z=0.0)
+    mp = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeMapping")
+    rot = mp.inputs["Rotation"]
+    rot.default_value = (0.0, 0.0, 0.0)
+    rot.keyframe_insert("default_value", frame=1)
+    rot.default_value = (0.0, 0.0, math.radians(90.0))
+    rot.keyframe_insert("default_value", frame=2)
+    linear_keys(world.node_tree)
+    add_mesh("plane", "Floor")
+    add_camera()
+    scene.render.use_motion_blur = True
+    scene.render.motion_blur_shutter = 1.0
+    scene.frame_set(1)
+    scene.frame_current = 1
+    core, warnings = export_now(motion_steps=3)
+    tf = core.world.mapping
+    assert not tf.is_static, warnings
+    for u in (0.0, 0.5, 1.0):
+        M = tf.at(np.array([u]))[0][:3, :3]
+        frame = 1.0 + (u - 0.5) if scene.render.motion_blur_position == "CENTER" else 1.0 + u
+        a = math.radians(90.0) * np.clip(frame - 1.0, 0.0, 1.0)
+        Rz = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+        np.testing.assert_allclose(M, Rz.T, atol=1e-5)

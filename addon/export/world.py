@@ -163,8 +163,8 @@ def mapping_is_animated(world) -> bool:
     ad = getattr(tree, "animation_data", None) if tree is not None else None
     if ad is None:
         return False
-    paths = [fc.data_path for fc in (getattr(ad.action, "fcurves", None) or [])] if ad.action else []
-    paths += [d.data_path for d in ad.drivers]
+    from .bake import _fcurves                     # layered actions (Blender 4.4+), legacy ones, drivers
+    paths = [fc.data_path for fc in _fcurves(ad)]
     names = [n.name for n in tree.nodes if n.bl_idname == "ShaderNodeMapping"]
     return any(f'nodes["{nm}"]' in p for p in paths for nm in names)
 
