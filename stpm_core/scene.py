@@ -485,41 +485,26 @@ def _check_world_image(world: World) -> None:
     err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max()
     if not err < 1e-5 or not np.all(np.linalg.det(R) > 0):
         raise SceneError(f"world.mapping must be a rotation at every key (R R^T = I within 1e-5, got {err:.3g} off)")
-    img = world.image
-    if img is None:
-        _check_world_camera_image(world)
-        return
-    if not isinstance(img, np.ndarray) or img.ndim != 3 or img.shape[2] != 3 or min(img.shape[:2]) < 1:
-        raise SceneError(f"world.image must be an (H, W, 3) array, got "
-                         f"{getattr(img, 'shape', type(img).__name__)}")
-    if img.dtype != np.float32:
-        raise SceneError(f"world.image must be float32, got {img.dtype}")
-    if img.shape[0] * img.shape[1] > 16384 * 8192:
-        raise SceneError(f"world.image is {img.shape[1]} x {img.shape[0]}: at most 16384 x 8192 pixels")
-    if not np.all(np.isfinite(img)) or float(img.min()) < 0.0:
-        raise SceneError("world.image must be finite and >= 0 (linear radiance)")
-    _check_emission("world.image * color * strength",
-                    float(img.max()) * float(np.max(world.color)) * float(world.strength), "W/(m^2 sr)")
-    _check_world_camera_image(world)
+    if world.image is not None:
+        _check_radiance_image("world.image", world.image, world)
+    if world.camera_image is not None:
+        if world.image is None:
+            raise SceneError("world.camera_image needs world.image (the world every other ray sees)")
+        _check_radiance_image("world.camera_image", world.camera_image, world)
 
 
-def _check_world_camera_image(world: World) -> None:
-    """What camera rays see (optional): the rules of ``world.image``, which it needs."""
-    img = world.camera_image
-    if img is None:
-        return
-    if world.image is None:
-        raise SceneError("world.camera_image needs world.image (the world every other ray sees)")
+def _check_radiance_image(name: str, img, world: World) -> None:
+    """An equirectangular radiance image: (H, W, 3) float32, at most 16384 x 8192, finite, >= 0, and
+    not brighter than the emission limit once times the world's colour and strength."""
     if not isinstance(img, np.ndarray) or img.ndim != 3 or img.shape[2] != 3 or min(img.shape[:2]) < 1:
-        raise SceneError(f"world.camera_image must be an (H, W, 3) array, got "
-                         f"{getattr(img, 'shape', type(img).__name__)}")
+        raise SceneError(f"{name} must be an (H, W, 3) array, got {getattr(img, 'shape', type(img).__name__)}")
     if img.dtype != np.float32:
-        raise SceneError(f"world.camera_image must be float32, got {img.dtype}")
+        raise SceneError(f"{name} must be float32, got {img.dtype}")
     if img.shape[0] * img.shape[1] > 16384 * 8192:
-        raise SceneError(f"world.camera_image is {img.shape[1]} x {img.shape[0]}: at most 16384 x 8192 pixels")
+        raise SceneError(f"{name} is {img.shape[1]} x {img.shape[0]}: at most 16384 x 8192 pixels")
     if not np.all(np.isfinite(img)) or float(img.min()) < 0.0:
-        raise SceneError("world.camera_image must be finite and >= 0 (linear radiance)")
-    _check_emission("world.camera_image * color * strength",
+        raise SceneError(f"{name} must be finite and >= 0 (linear radiance)")
+    _check_emission(f"{name} * color * strength",
                     float(img.max()) * float(np.max(world.color)) * float(world.strength), "W/(m^2 sr)")
 
 

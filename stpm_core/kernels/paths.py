@@ -253,6 +253,12 @@ def _add_row(dst, r, idx, use_idx, beta, use_beta, val, k, clamp):
         c0, c1, c2 = beta[r, 0] * val[k, 0], beta[r, 1] * val[k, 1], beta[r, 2] * val[k, 2]
     else:
         c0, c1, c2 = val[k, 0], val[k, 1], val[k, 2]
+    _add_clamped(dst, i, c0, c1, c2, clamp)
+
+
+@njit(**_JIT)
+def _add_clamped(dst, i, c0, c1, c2, clamp):
+    """dst[i] += (c0, c1, c2), scaled by :func:`_clamp_scale` when clamp > 0."""
     if clamp > 0.0:
         f = _clamp_scale(c0, c1, c2, clamp)
         c0, c1, c2 = c0 * f, c1 * f, c2 * f
@@ -440,12 +446,7 @@ def photon_add(dst, rows, live, rho, E, idx, use_idx, beta, use_beta, clamp):
         v2 = rho[k, 2] / np.pi * E[j, 2]
         if use_beta:
             v0, v1, v2 = beta[r, 0] * v0, beta[r, 1] * v1, beta[r, 2] * v2
-        if clamp > 0.0:
-            f = _clamp_scale(v0, v1, v2, clamp)
-            v0, v1, v2 = v0 * f, v1 * f, v2 * f
-        dst[i, 0] += v0
-        dst[i, 1] += v1
-        dst[i, 2] += v2
+        _add_clamped(dst, i, v0, v1, v2, clamp)
 
 
 # ----------------------------------------------------------------------------
