@@ -9,7 +9,7 @@ DIFFUSE    w_base = (1-metallic)(1-transmission)       base_color / pi * (1 - F_
 COAT       w_base                                      specular * F_diel(ior); mirror or GGX
 METAL      w_metal = metallic                          Schlick(F0 = base_color); mirror or GGX
 GLASS_R    w_glass = (1-metallic) transmission         F_diel(eta); mirror or GGX
-GLASS_T    w_glass                                     (1 - F_diel) base_color; refraction or GGX BTDF
+GLASS_T    w_glass                                     (1 - F_diel) tint_t; refraction or GGX BTDF
 METAL_MS   (probability 0: rough metal's multiple scattering scales METAL, Cycles' way)
 =========  ==========================================  ==========================
 
@@ -52,7 +52,7 @@ __all__ = ["MaterialTable", "bsdf_eval", "bsdf_pdf", "bsdf_sample", "diffuse_alb
 class MaterialTable:
     """Per-material arrays (M,) / (M, 3) gathered once, indexed by hit material ids.
 
-    Attributes: base_color (M, 3), metallic, transmission, roughness, specular,
+    Attributes: base_color (M, 3), tint_t (M, 3) (the glass transmission tint), metallic, transmission, roughness, specular,
     ior (M,), emission (M, 3), alpha = roughness^2 (M,), and the lobe weights
     w_base, w_metal, w_glass (M,).  Index -1 (a miss) reads as black, no lobes.
     ``closures`` (M + 1, N_CLOSURE): the same numbers as closure rows, what the BSDF kernels read.
@@ -63,6 +63,7 @@ class MaterialTable:
         M = len(mats)
         # One extra row at the end: index -1 lands on an inert black material
         self.base_color = np.zeros((M + 1, 3))
+        self.tint_t = np.zeros((M + 1, 3))       # GLASS_T's transmission tint (None: base_color)
         self.emission = np.zeros((M + 1, 3))
         self.metallic = np.zeros(M + 1)
         self.transmission = np.zeros(M + 1)
@@ -71,6 +72,8 @@ class MaterialTable:
         self.ior = np.ones(M + 1)
         for i, m in enumerate(mats):
             self.base_color[i] = np.asarray(m.base_color, float)
+            tint = getattr(m, "transmission_tint", None)
+            self.tint_t[i] = np.asarray(m.base_color if tint is None else tint, float)
             self.emission[i] = np.asarray(m.emission, float)
             self.metallic[i] = m.metallic
             self.transmission[i] = m.transmission

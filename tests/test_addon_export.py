@@ -209,6 +209,9 @@ def test_materials_from_node_trees():
     np.testing.assert_allclose(p.base_color, (0.2, 0.4, 0.6), atol=1e-6)
     assert (p.metallic, p.roughness, p.transmission, p.ior, p.specular) == pytest.approx((0.3, 0.25, 0.5, 1.33, 0.5))
     np.testing.assert_allclose(p.emission, (2.0, 1.0, 0.0), atol=1e-6)
+    # Cycles tints a Principled BSDF's refraction by sqrt(base colour), a Glass BSDF's by its colour
+    np.testing.assert_allclose(p.transmission_tint, np.sqrt((0.2, 0.4, 0.6)), atol=1e-6)
+    assert M["Glass"].transmission_tint is None and M["Diffuse"].transmission_tint is None
     assert (M["Diffuse"].metallic, M["Diffuse"].specular, M["Diffuse"].transmission) == (0, 0, 0)
     assert M["Glossy"].metallic == 1.0 and M["Glossy"].roughness == pytest.approx(0.1)
     assert M["Glass"].transmission == 1.0 and M["Glass"].ior == pytest.approx(1.7)

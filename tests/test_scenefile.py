@@ -753,3 +753,48 @@ def test_scene_bounds_follow_the_vertices_and_motion():
     lo, hi = sc.bounds()
     assert 2 * v.min(0)[0] - 0.5 < lo[0] <= 2 * v.min(0)[0]
     assert 2 * v.max(0)[0] + 5 <= hi[0] < 2 * v.max(0)[0] + 5.5
+
+
+# ----------------------------------------------------------------------------
+# Material.transmission_tint (a Principled glass's sqrt(base_color), Cycles' transmission tint)
+# ----------------------------------------------------------------------------
+def test_transmission_tint_round_trip(tmp_path):
+    """A set tint survives bit-exact; None (the default: base_color) is not written and loads as None."""
+    scene = rich_scene()
+    scene.materials[2].base_color = np.array([0.8, 0.3, 0.2])
+    scene.materials[2].transmission_tint = np.sqrt(np.array([0.8, 0.3, 0.2]))
+    header, _arrays = scene_to_arrays(scene, RenderSettings())
+    assert header["materials"][2]["transmission_tint"] == [float(x) for x in np.sqrt([0.8, 0.3, 0.2])]
+    assert all("transmission_tint" not in d for i, d in enumerate(header["materials"]) if i != 2)
+    loaded = load_scene(save_scene(scene, tmp_path / "t.stpm"))
+    _assert_same(scene, loaded)
+    assert loaded.materials[0].transmission_tint is None
+    assert loaded.materials[2].transmission_tint.dtype == np.float64
+
+
+@pytest.mark.parametrize("tint, match", [
+    (np.array([0.5, 0.5]), r"materials\[2\] \('g'\)\.transmission_tint must have shape \(3,\)"),
+    (np.array([0.5, -0.1, 0.5]), r"materials\[2\] \('g'\)\.transmission_tint must be non-negative"),
+    (np.array([0.5, 1.5, 0.5]), r"materials\[2\] \('g'\)\.transmission_tint must be <= 1"),
+    (np.array([0.5, np.nan, 0.5]), r"materials\[2\] \('g'\)\.transmission_tint contains NaN"),
+])
+def test_bad_transmission_tint_is_never_written(tmp_path, tint, match):
+    scene = rich_scene()
+    scene.materials[2].transmission_tint = tint
+    with pytest.raises(SceneError, match=match):
+        save_scene(scene, tmp_path / "bad.stpm")
+    assert not (tmp_path / "bad.stpm").exists()
+
+
+@pytest.mark.parametrize("value, words", [
+    ([0.5, 0.5], "must be a list of 3 numbers"),
+    ([0.5, -0.5, 0.5], "must be non-negative"),
+    ([0.5, 2.0, 0.5], "must be <= 1"),
+    ("red", "must be a list of 3 numbers"),
+])
+def test_malformed_transmission_tint_in_a_file(tmp_path, value, words):
+    header, arrays = _parts()
+    header["materials"][2]["transmission_tint"] = value
+    _write_raw(tmp_path / "bad.stpm", header, arrays)
+    msg = _load_error(tmp_path / "bad.stpm")
+    assert "materials[2]" in msg and "transmission_tint" in msg and words in msg, msg

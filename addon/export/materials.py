@@ -5,10 +5,11 @@ Walks from the active Material Output's Surface link.  Understood nodes:
 =================  ==============================================================
 Principled BSDF    Base Color, Metallic, Roughness, Transmission Weight, IOR,
                    Specular IOR Level (0.5 = Blender's default -> specular 1),
-                   Emission Color * Emission Strength
+                   Emission Color * Emission Strength; refraction tinted by
+                   sqrt(Base Color) as Cycles (``Material.transmission_tint``)
 Diffuse BSDF       Color (Lambertian, no coat)
 Glossy BSDF        Color, Roughness (metallic 1)
-Glass BSDF         Color, Roughness, IOR (transmission 1)
+Glass BSDF         Color (also its refraction tint), Roughness, IOR (transmission 1)
 Emission           Color * Strength (radiance, W m^-2 sr^-1, as in Cycles)
 Mix Shader         every parameter blended by Fac (approximate: warned)
 Image Texture      on a colour input: the image's mean linear colour
@@ -156,9 +157,15 @@ def default_material(name: str = "STPM default") -> "scene_model.Material":
 def _params(**kw) -> dict:
     """A full parameter dict (base_color (3,), emission (3,) float64, scalars float)."""
     p = {"base_color": np.full(3, 0.8), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
-         "specular": 0.0, "ior": 1.5, "emission": np.zeros(3)}
+         "specular": 0.0, "ior": 1.5, "emission": np.zeros(3), "transmission_tint": None}
     p.update(kw)
     return p
+
+
+def _tint(p: dict) -> np.ndarray:
+    """The transmission tint (3,) of parameters p: theirs, else the base colour (a Glass BSDF's)."""
+    t = p.get("transmission_tint")
+    return np.clip(np.asarray(p["base_color"] if t is None else t, dtype=np.float64), 0.0, 1.0)
 
 
 class MaterialExporter:
@@ -413,8 +420,13 @@ class MaterialExporter:
             self._warn("base colour above 1 clipped (energy conservation)")
         if np.any(np.asarray(p["emission"], float) < 0.0):
             self._warn("negative emission is not supported, clamped to 0")
+        tint = None
+        if p.get("transmission_tint") is not None:
+            tint = _tint(p)
+            if np.array_equal(tint, np.clip(base, 0.0, 1.0)):
+                tint = None                     # the default: the base colour
         return scene_model.Material(
-            base_color=np.clip(base, 0.0, 1.0),
+            base_color=np.clip(base, 0.0, 1.0), transmission_tint=tint,
             metallic=float(np.clip(p["metallic"], 0, 1)), transmission=float(np.clip(p["transmission"], 0, 1)),
             roughness=float(np.clip(p["roughness"], 0, 1)), specular=float(np.clip(p["specular"], 0, 1)),
             ior=float(np.clip(p["ior"], 1.0, 10.0)), emission=np.maximum(np.asarray(p["emission"], float), 0.0),
@@ -510,7 +522,9 @@ class MaterialExporter:
             if self._value(node, "Alpha", 1.0) < 1.0 or (alpha_linked and self._graph_mode):
                 self._warn("Principled Alpha is ignored (opaque)", graph_carries=True)   # the graph renders it
             emission = self._color(node, "Emission Color", (0, 0, 0)) * self._value(node, "Emission Strength", 0.0)
-            return _params(base_color=self._color(node, "Base Color"),
+            base = self._color(node, "Base Color")
+            # Cycles tints the Principled BSDF's refraction by sqrt(base colour) (svm/closure.h)
+            return _params(base_color=base, transmission_tint=np.sqrt(np.clip(base, 0.0, 1.0)),
                            metallic=self._value(node, "Metallic", 0.0),
                            roughness=self._value(node, "Roughness", 0.5),
                            transmission=self._value(node, "Transmission Weight", 0.0),
@@ -535,8 +549,11 @@ class MaterialExporter:
             for sock in (node.inputs[1], node.inputs[2]):
                 sides.append(self._shader(self._follow(sock.links[0]), depth + 1) if sock.is_linked
                              else _params(base_color=np.zeros(3)))
-            return {k: (1 - fac) * np.asarray(sides[0][k], float) + fac * np.asarray(sides[1][k], float)
-                    for k in FIELDS}
+            mixed = {k: (1 - fac) * np.asarray(sides[0][k], float) + fac * np.asarray(sides[1][k], float)
+                     for k in FIELDS}
+            if any(sd.get("transmission_tint") is not None for sd in sides):
+                mixed["transmission_tint"] = (1 - fac) * _tint(sides[0]) + fac * _tint(sides[1])
+            return mixed
         # with a graph, the node compiler names the shader (the graph renders the same grey; a
         # group's shaders it inlines)
         self._warn(f"shader node {node.bl_idname} ({node.name!r}) is not supported, using grey diffuse",

@@ -16,10 +16,12 @@ COAT       w_base specular F_diel(ior): delta mirror (roughness 0) or GGX with C
            compensation (1 + F_ms (1 - E(mu_o)) / E(mu_o))
 METAL      w_metal Schlick(base_color): delta mirror or GGX (rough: times k_metal)
 GLASS_R    w_glass F_diel(eta): delta mirror or GGX (rough: times k_glass)
-GLASS_T    w_glass (1 - F_diel(eta)) base_color: delta refraction, or (roughness > 0, ior != 1)
-           Walter et al.'s GGX BTDF (1 - F(wo.h)) base D G2 |wo.h||wi.h| eta^2 / (cos_o cos_i
+GLASS_T    w_glass (1 - F_diel(eta)) tint_t: delta refraction, or (roughness > 0, ior != 1)
+           Walter et al.'s GGX BTDF (1 - F(wo.h)) tint_t D G2 |wo.h||wi.h| eta^2 / (cos_o cos_i
            (wo.h + eta wi.h)^2) times k_glass, Cycles' glass energy compensation
-           1 + F_ms (1 - E_g(mu_o)) / E_g(mu_o) (E_g: the tabulated GGX glass albedo)
+           1 + F_ms (1 - E_g(mu_o)) / E_g(mu_o) (E_g: the tabulated GGX glass albedo, F_ss = tint_t).
+           tint_t = the closure's C_TINT_T, Cycles' transmission tint: sqrt(base_color) for a
+           Principled BSDF, the colour for a Glass BSDF
 METAL_MS   no longer a lobe (probability 0): a rough METAL lobe is scaled by Cycles' energy
            compensation k_metal = 1 + F_ms (1 - E(mu_o)) / E(mu_o) per channel instead
 =========  =======================================================================
@@ -80,7 +82,7 @@ import numpy as np
 
 from ..numba_probe import njit
 from .sampling import JIT_INLINE, basis, cosine_hemisphere, dot
-from .closure import (C_ALPHA, C_BASE, C_BUMPED, C_COAT, C_IOR, C_NS, C_ROUGH_LOBE, C_ROUGHNESS, C_SPECULAR,
+from .closure import (C_ALPHA, C_BASE, C_TINT_T, C_BUMPED, C_COAT, C_IOR, C_NS, C_ROUGH_LOBE, C_ROUGHNESS, C_SPECULAR,
                       C_W_BASE, C_W_GLASS, C_W_METAL, closure_row)
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
@@ -619,16 +621,17 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
         rg = C[cr, C_ROUGHNESS]
         g_eo = glass_albedo(E, cos_oc, rg, eta_glass)
         g_avg = glass_albedo_avg(E_avg, rg, eta_glass)
-        k_glass = (_coat_compensation(g_eo, g_avg, C[cr, C_BASE]),
-                   _coat_compensation(g_eo, g_avg, C[cr, C_BASE + 1]),
-                   _coat_compensation(g_eo, g_avg, C[cr, C_BASE + 2]))
+        k_glass = (_coat_compensation(g_eo, g_avg, C[cr, C_TINT_T]),
+                   _coat_compensation(g_eo, g_avg, C[cr, C_TINT_T + 1]),
+                   _coat_compensation(g_eo, g_avg, C[cr, C_TINT_T + 2]))
     # Lobe selection probabilities proportional to an albedo estimate
     mean_base = (C[cr, C_BASE] + C[cr, C_BASE + 1] + C[cr, C_BASE + 2]) / 3.0
     e0 = w_base * (1.0 - F_coat) * mean_base                          # DIFFUSE
     e1 = w_base * F_coat                                              # COAT (F_coat: its albedo)
     e2 = w_metal * ((F_metal[0] * ms_scale[0] + F_metal[1] * ms_scale[1] + F_metal[2] * ms_scale[2]) / 3.0)  # METAL
     e3 = w_glass * F_glass                                            # GLASS_R
-    e4 = w_glass * (1.0 - F_glass) * mean_base                        # GLASS_T
+    mean_tint = (C[cr, C_TINT_T] + C[cr, C_TINT_T + 1] + C[cr, C_TINT_T + 2]) / 3.0
+    e4 = w_glass * (1.0 - F_glass) * mean_tint                        # GLASS_T
     e5 = 0.0                                                          # METAL_MS (no longer a lobe)
     if not cos_o > 0.0:
         # wo below the specular normal: Cycles' microfacet closures give nothing (bsdf_microfacet_
@@ -722,7 +725,7 @@ def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
     lam_o = _ggx_lambda(cos_o, alpha)
     G1o = 1.0 / (1.0 + lam_o)
     p_glass = p_lobe[GLASS_R] + p_lobe[GLASS_T]
-    t_mean = (C[cr, C_BASE] + C[cr, C_BASE + 1] + C[cr, C_BASE + 2]) / 3.0
+    t_mean = (C[cr, C_TINT_T] + C[cr, C_TINT_T + 1] + C[cr, C_TINT_T + 2]) / 3.0
     if cos_is > 0 and side > 0:
         # -- GGX reflection terms (rough COAT / METAL / GLASS_R), about the specular normal nss; f
         # is divided by the |ns . wi| the integrator multiplies (so f |ns . wi| = D G2 F / (4 cos_o))
@@ -767,9 +770,9 @@ def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
         jac = eta * eta * (-wi_h) / max(den * den, 1e-300)      # d omega_h / d omega_i
         common = D * wo_h * jac / cos_oe                       # VNDF pdf of wi / G1(wo)
         st = w_glass * (1.0 - F_g) * G2 * common / max(abs(cos_i), _EPS)
-        f0 = f0 + st * C[cr, C_BASE] * k_glass[0]
-        f1 = f1 + st * C[cr, C_BASE + 1] * k_glass[1]
-        f2 = f2 + st * C[cr, C_BASE + 2] * k_glass[2]
+        f0 = f0 + st * C[cr, C_TINT_T] * k_glass[0]
+        f1 = f1 + st * C[cr, C_TINT_T + 1] * k_glass[1]
+        f2 = f2 + st * C[cr, C_TINT_T + 2] * k_glass[2]
         rt = F_g + (1.0 - F_g) * t_mean
         split_t = (1.0 - F_g) * t_mean / rt if rt > 0 else 0.0
         pdf = pdf + p_glass * split_t * G1o * common
@@ -847,7 +850,7 @@ def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
         hw = _to_frame(_ggx_sample_vndf(lx, ly, lz, alpha, u1, u2), t, b, nss)
         wo_h = min(max(dot(wo, hw), 0.0), 1.0)
         F_g = fresnel_dielectric(wo_h, eta_glass)
-        t_mean = (C[cr, C_BASE] + C[cr, C_BASE + 1] + C[cr, C_BASE + 2]) / 3.0
+        t_mean = (C[cr, C_TINT_T] + C[cr, C_TINT_T + 1] + C[cr, C_TINT_T + 2]) / 3.0
         rt = F_g + (1.0 - F_g) * t_mean
         if not rt > 0:
             return lobe, 0.0, False, (0.0, 0.0, 0.0)
@@ -910,7 +913,7 @@ def _delta_weight(C, cr, hit, lobe, p_chosen, wi):
         t0 = t1 = t2 = thr
     else:
         thr = C[cr, C_W_GLASS] * (1.0 - F_glass)
-        t0, t1, t2 = thr * C[cr, C_BASE], thr * C[cr, C_BASE + 1], thr * C[cr, C_BASE + 2]
+        t0, t1, t2 = thr * C[cr, C_TINT_T], thr * C[cr, C_TINT_T + 1], thr * C[cr, C_TINT_T + 2]
     return t0 / p_chosen, t1 / p_chosen, t2 / p_chosen
 
 

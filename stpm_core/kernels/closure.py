@@ -32,6 +32,9 @@ metallic, transmission, roughness, specular, ior.  Derived columns
                    Alpha < 1, chosen per hit by ``kernels.svm``), else 0
 ``C_PASS``         1 where the closure is transparent: rays go on straight through the surface,
                    tinted by C_TRANSPARENT (``stpm_core.transparency``); its other lobes are empty
+``C_TINT_T``       the transmission tint (3 columns) of the GLASS_T lobe (and the F_ss of rough
+                   glass' energy compensation), as Cycles: sqrt(base colour) for a Principled BSDF,
+                   the colour itself for a Glass BSDF (``Material.transmission_tint``; None = base)
 =================  =============================================================
 
 The last row (index M, where hit material -1 lands) is an inert black closure.
@@ -45,7 +48,7 @@ from ..numba_probe import njit
 __all__ = ["N_CLOSURE", "pack_materials", "finish_closure", "closure_row"] + [
     "C_BASE", "C_EMIT", "C_METALLIC", "C_TRANSMISSION", "C_ROUGHNESS", "C_SPECULAR", "C_IOR", "C_ALPHA",
     "C_W_BASE", "C_W_METAL", "C_W_GLASS", "C_ROUGH_LOBE", "C_NONDELTA", "C_COAT", "C_HAS_DELTA",
-    "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED", "C_TRANSPARENT", "C_PASS"]
+    "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED", "C_TRANSPARENT", "C_PASS", "C_TINT_T"]
 
 C_BASE = 0            # 3 columns: base colour RGB
 C_EMIT = 3            # 3 columns: emitted radiance RGB
@@ -68,7 +71,8 @@ C_NS = 21             # 3 columns: the smooth shading normal before a Normal inp
 C_BUMPED = 24         # 1 where a Normal input (normal map, bump) replaced the hit's shading normal
 C_TRANSPARENT = 25    # 3 columns: the tint of a transparent closure (C_PASS = 1), else 0
 C_PASS = 28           # 1 where the hit's closure is transparent: the ray passes on, tinted
-N_CLOSURE = 29
+C_TINT_T = 29         # 3 columns: the GLASS_T transmission tint (Principled: sqrt(base); Glass BSDF: its colour)
+N_CLOSURE = 32
 
 
 @njit(cache=True, nogil=True)
@@ -112,6 +116,8 @@ def pack_materials(materials) -> np.ndarray:
     rows = np.zeros((M + 1, N_CLOSURE))
     for i, m in enumerate(mats):
         rows[i, C_BASE:C_BASE + 3] = np.asarray(m.base_color, float)
+        tint = getattr(m, "transmission_tint", None)
+        rows[i, C_TINT_T:C_TINT_T + 3] = np.asarray(m.base_color if tint is None else tint, float)
         rows[i, C_EMIT:C_EMIT + 3] = np.asarray(m.emission, float)
         rows[i, C_METALLIC] = m.metallic
         rows[i, C_TRANSMISSION] = m.transmission

@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .closure import (C_BASE, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
+from .closure import (C_BASE, C_TINT_T, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
                       C_TRANSMISSION, closure_row, finish_closure)
 from .sampling import JIT, JIT_INLINE
 
@@ -1233,8 +1233,16 @@ def _closure(op, prog, pc, st, k, C, r, w):
         s = st[int(prog[pc + 2]), k]
         e0, e1, e2 = _v3(st, int(prog[pc + 1]), k)
         e0, e1, e2 = e0 * s, e1 * s, e2 * s
-    _primary(C, r, w * _clamp01(b0), w * _clamp01(b1), w * _clamp01(b2), w * max(e0, 0.0), w * max(e1, 0.0),
+    b0, b1, b2 = _clamp01(b0), _clamp01(b1), _clamp01(b2)
+    _primary(C, r, w * b0, w * b1, w * b2, w * max(e0, 0.0), w * max(e1, 0.0),
              w * max(e2, 0.0), metallic, transmission, rough, specular, ior)
+    if op == _BSDF_PRINCIPLED:
+        # Cycles' Principled BSDF tints its refraction by sqrt(base colour) (svm/closure.h), the
+        # Glass BSDF by its colour
+        b0, b1, b2 = math.sqrt(b0), math.sqrt(b1), math.sqrt(b2)
+    C[r, C_TINT_T] = w * b0
+    C[r, C_TINT_T + 1] = w * b1
+    C[r, C_TINT_T + 2] = w * b2
     C[r, C_TRANSPARENT] = C[r, C_TRANSPARENT + 1] = C[r, C_TRANSPARENT + 2] = 0.0
     C[r, C_PASS] = 0.0
 
@@ -1244,6 +1252,7 @@ def _transparent(C, r, t0, t1, t2):
     """Closure row C[r] := a transparent closure of tint (t0, t1, t2) (a Transparent BSDF, or the
     white one a Principled BSDF's Alpha mixes in): nothing scatters, C_PASS = 1."""
     _primary(C, r, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.5)
+    C[r, C_TINT_T] = C[r, C_TINT_T + 1] = C[r, C_TINT_T + 2] = 0.0
     C[r, C_TRANSPARENT] = max(t0, 0.0)
     C[r, C_TRANSPARENT + 1] = max(t1, 0.0)
     C[r, C_TRANSPARENT + 2] = max(t2, 0.0)

@@ -9,7 +9,8 @@ tables from :func:`stpm_core.kernels.bsdf.ggx_albedo_tables`;
 :func:`_ggx_albedo_table_numpy` is the original table construction, kept so a
 test can check the kernels module builds the same numbers.
 
-One change since: normals as they come, as Cycles and the kernels (issue 14, item 5): ``ns``
+Changes since: GLASS_T is tinted by ``MaterialTable.tint_t`` (the material's transmission tint,
+Cycles' sqrt(base) for a Principled BSDF) instead of base_color.  Normals as they come, as Cycles and the kernels (issue 14, item 5): ``ns``
 turns with ``ng`` (the back-face flip) instead of onto ``ng``'s side, and the specular lobes use
 ``nss``, ``ns`` raised by ``ensure_valid_specular_reflection`` where it differs from ``ng``, and
 vanish where ``wo`` is below it.
@@ -240,6 +241,7 @@ class _Hit:
         if d.size:
             self.nss[d] = _valid_specular(self.ng[d], self.wo[d], self.ns[d])
         self.base = table.base_color[m]
+        self.tint = table.tint_t[m]              # GLASS_T's transmission tint (Principled: sqrt(base))
         self.alpha = np.maximum(table.alpha[m], 1e-4)
         self.rough = table.roughness[m] > 0.0
         self.spec = table.specular[m]
@@ -296,17 +298,18 @@ class _Hit:
             rg = table.roughness[m][i]
             e_o = np.maximum(_glass_albedo(cos_o[i], rg, self.eta_glass[i]), 1e-3)[:, None]
             e_av = _glass_albedo_avg(rg, self.eta_glass[i])[:, None]
-            fss = self.base[i]
+            fss = self.tint[i]
             f_ms = fss * e_av / (1.0 - fss * (1.0 - e_av))
             self.k_glass[i] = 1.0 + f_ms * (1.0 - e_o) / e_o
         # Lobe selection probabilities proportional to an albedo estimate
         mean_base = self.base.mean(axis=1)
+        mean_tint = self.tint.mean(axis=1)
         est = np.stack([
             self.w_base * (1.0 - self.F_coat) * mean_base,
             self.w_base * self.F_coat,
             self.w_metal * (self.F_metal * self.ms_scale).mean(axis=1),
             self.w_glass * self.F_glass,
-            self.w_glass * (1.0 - self.F_glass) * mean_base,
+            self.w_glass * (1.0 - self.F_glass) * mean_tint,
             np.zeros(n),                                     # METAL_MS: no longer a lobe
         ], axis=-1)
         est[~(self.cos_o > 0), 1:] = 0.0          # wo below the specular normal: only the diffuse lobe
@@ -378,7 +381,7 @@ def _eval_pdf(h: _Hit, wi: np.ndarray, diffuse: bool = True, coat: float = 1.0):
         F_g = fresnel_dielectric(wo_h, hr.eta_glass)
         f[r] += (hr.w_base * F_c * hr.k_coat * coat * spec)[:, None] + (hr.w_glass * F_g * spec)[:, None] * hr.k_glass \
             + (hr.w_metal * spec)[:, None] * F_m * hr.ms_scale
-        t_mean = hr.base.mean(axis=1)
+        t_mean = hr.tint.mean(axis=1)
         rt = F_g + (1.0 - F_g) * t_mean
         split_r = np.where(rt > 0, F_g / np.where(rt > 0, rt, 1.0), 0.0)
         p_glass = hr.p_lobe[:, GLASS_R] + hr.p_lobe[:, GLASS_T]
@@ -414,8 +417,8 @@ def _refraction(h: _Hit, wi: np.ndarray):
     jac = eta * eta * (-wi_h) / np.maximum(den * den, 1e-300)
     common = D * wo_h * jac / np.maximum(h.cos_o, _EPS)
     st = h.w_glass * (1.0 - F) * G2 * common / np.maximum(np.abs(cos_i), _EPS)
-    f = np.where(valid[:, None], st[:, None] * h.base * h.k_glass, 0.0)
-    t_mean = h.base.mean(axis=1)
+    f = np.where(valid[:, None], st[:, None] * h.tint * h.k_glass, 0.0)
+    t_mean = h.tint.mean(axis=1)
     rt = F + (1.0 - F) * t_mean
     split_t = np.where(rt > 0, (1.0 - F) * t_mean / np.where(rt > 0, rt, 1.0), 0.0)
     p_glass = h.p_lobe[:, GLASS_R] + h.p_lobe[:, GLASS_T]
@@ -546,7 +549,7 @@ def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
         wo_h = np.clip(_dot(wo_i, hw), 0.0, 1.0)
         eta = h.eta_glass[i]
         F = fresnel_dielectric(wo_h, eta)
-        rt = F + (1.0 - F) * h.base[i].mean(axis=1)
+        rt = F + (1.0 - F) * h.tint[i].mean(axis=1)
         pl = h.p_lobe[i]
         us = np.clip((u[i, 0] - (pl[:, DIFFUSE] + pl[:, COAT] + pl[:, METAL])) / (pl[:, GLASS_R] + pl[:, GLASS_T]), 0, 1)
         refl = us < F / np.where(rt > 0, rt, 1.0)
@@ -596,7 +599,7 @@ def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
         thr += np.where(li == COAT, h.w_base[i] * h.F_coat[i], 0.0)[:, None]
         thr += np.where(li == METAL, h.w_metal[i], 0.0)[:, None] * h.F_metal[i]
         thr += np.where(li == GLASS_R, h.w_glass[i] * h.F_glass[i], 0.0)[:, None]
-        thr += np.where(li == GLASS_T, h.w_glass[i] * (1.0 - h.F_glass[i]), 0.0)[:, None] * h.base[i]
+        thr += np.where(li == GLASS_T, h.w_glass[i] * (1.0 - h.F_glass[i]), 0.0)[:, None] * h.tint[i]
         # Reflections must stay above ng, refractions cross it (no leaks)
         side = _dot(wi[i], h.ng[i])
         good = np.where(li == GLASS_T, side < 0, side > 0)
