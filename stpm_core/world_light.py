@@ -60,6 +60,8 @@ through it, and the packed environment.
 """
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 
 from .motion import MotionTransform
@@ -199,15 +201,25 @@ class WorldLight:
         self.center = np.asarray(center, np.float64).reshape(3)
         self.scene_radius = float(radius)
         image_world = world is not None and world.image is not None
+        self._world = world if image_world else None
         self.transform = world.mapping if image_world else MotionTransform.static()
-        self.env = environment_arrays(world) if image_world else constant_environment(self.color)
-        self.env_camera = camera_environment(world, self.env)
         self.power = float(np.mean(self.flux()))
 
     @property
     def is_image(self) -> bool:
         """Is the radiance an image (direction-dependent)?"""
-        return bool(self.env[4][0] != 0.0)
+        return self._world is not None
+
+    @cached_property
+    def env(self) -> tuple:
+        """The kernels' environment arrays, packed on first use (the effects plan's world light never
+        asks: it needs the flux only)."""
+        return environment_arrays(self._world) if self._world is not None else constant_environment(self.color)
+
+    @cached_property
+    def env_camera(self) -> tuple:
+        """What camera rays look up (:func:`camera_environment`)."""
+        return camera_environment(self._world, self.env)
 
     def flux(self) -> np.ndarray:
         """(3,) W through the scene's bounding sphere: 4 pi * pi R^2 * L (L the mean radiance)."""

@@ -42,7 +42,10 @@ def _frosted(name, roughness):
     return mat
 
 
-def _scene(tmp_path, roughness):
+def slab_scene(tmp_path, make_material):
+    """A thin box of the material ``make_material()`` makes (called after the scene is reset) in front
+    of a textured wall lit by a sun from the camera's side (also the coloured-glass tests' scene,
+    tests/test_cycles_glass_tint.py)."""
     png = tmp_path / "pattern.png"
     _write_png(png, _pattern())
     scene = fresh()
@@ -51,7 +54,7 @@ def _scene(tmp_path, roughness):
     wall_mat, _ = _image_material("Wall", png)
     wall = add_mesh("plane", "Wall", location=(0, 1.5, 1.0), material=wall_mat, size=6.0)
     wall.rotation_euler = (math.radians(90), 0, 0)
-    slab = add_mesh("cube", "Slab", location=(0.2, 0.2, 1.1), material=_frosted("Frosted", roughness))
+    slab = add_mesh("cube", "Slab", location=(0.2, 0.2, 1.1), material=make_material())
     slab.scale = (0.9, 0.04, 0.6)
     slab.rotation_euler = (0, 0, math.radians(12))
     add_light("SUN", energy=3.0, location=(0, -3, 5), angle=0.0).rotation_euler = (math.radians(60), 0, math.radians(-15))
@@ -64,19 +67,27 @@ def _srgb(x):
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
 
 
-@pytest.mark.parametrize("roughness", [0.3, 0.6])
-def test_frosted_glass_slab_in_front_of_a_lit_textured_wall_like_cycles(tmp_path, roughness):
-    _scene(tmp_path, roughness)
+def compare_slab(tmp_path, label: str, png_name: str):
+    """The current scene with Cycles (no diffuse bounce, 8 glossy + 8 transmission, caustics off) and
+    STPM (no photons, the same bounce budgets), 4 seeds each: the block Z-test's result; with
+    STPM_TEST_PNG_DIR set, the two mean images side by side as ``png_name``."""
     cyc = render_cycles_paths(bpy.context.scene, tmp_path, samples=SPP, seeds=(0, 1, 2, 3), diffuse_bounces=0,
                               glossy_bounces=8, transmission_bounces=8, caustics=False)
     stpm, _res = render_stpm(bpy.context.scene, samples=SPP, seeds=(0, 1, 2, 3), max_depth=8, glossy_bounces=8,
                              transmission_bounces=8)
     r = block_ztest(stpm, cyc)
-    print(f"frosted glass roughness {roughness}: {r.summary()}")
-    # (measured: roughness 0.3 |z| max 1.92, mean ratio 0.993; 0.6 |z| max 3.19, mean ratio 0.991)
+    print(f"{label}: {r.summary()}")
     out = os.environ.get("STPM_TEST_PNG_DIR")
     if out:
         side = np.concatenate([stpm.mean(axis=0), np.zeros((H, 2, 3)), cyc.mean(axis=0)], axis=1)
-        _write_png(Path(out) / f"frosted_{roughness}.png", _srgb(side))
+        _write_png(Path(out) / png_name, _srgb(side))
+    return r
+
+
+@pytest.mark.parametrize("roughness", [0.3, 0.6])
+def test_frosted_glass_slab_in_front_of_a_lit_textured_wall_like_cycles(tmp_path, roughness):
+    slab_scene(tmp_path, lambda: _frosted("Frosted", roughness))
+    r = compare_slab(tmp_path, f"frosted glass roughness {roughness}", f"frosted_{roughness}.png")
+    # (measured: roughness 0.3 |z| max 1.92, mean ratio 0.993; 0.6 |z| max 3.19, mean ratio 0.991)
     assert r.z_abs_max < Z_MAX, (r.summary(), np.round(r.z, 1))
     assert abs(r.mean_ratio - 1.0) < MEAN_TOL, r.summary()

@@ -33,6 +33,7 @@ pytest.importorskip("OpenImageIO")
 
 from test_addon_scenes import add_camera, add_light, add_mesh, fresh, set_world  # noqa: E402
 from cycles_ref import block_ztest, render_cycles_paths, render_stpm  # noqa: E402
+from test_cycles_textures import _empty_material  # noqa: E402
 
 W, H = 64, 48
 SPP = 32
@@ -43,15 +44,6 @@ MEAN_TOL = 0.015
 # the grey total-internal-reflection ring of the cylinder 0.15 % darker in STPM's 8 delta bounces,
 # 16 made it 0.4 % brighter); at 24 / 24 + 24 the cut no longer shows
 DEPTH = 24
-
-
-def _empty_material(name: str):
-    mat = bpy.data.materials.new(name)
-    tree = mat.node_tree
-    for n in list(tree.nodes):
-        if n.bl_idname != "ShaderNodeOutputMaterial":
-            tree.nodes.remove(n)
-    return mat, tree, next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
 
 
 def _checker():

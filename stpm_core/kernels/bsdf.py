@@ -421,12 +421,17 @@ def build_coat_table(E0: np.ndarray, E_avg: np.ndarray, slices=None) -> np.ndarr
     return np.clip(EF, 0.0, 1.0)
 
 
-def _load_coat_table():
+def _load_table(path, shape: tuple):
+    """A shipped float64 table of this shape, or None (missing, unreadable or another shape)."""
     try:
-        EF = np.load(COAT_TABLE_FILE)
+        T = np.load(path)
     except (OSError, ValueError):
         return None
-    return EF if EF.shape == (_N_Z, _N_MU, _N_ALPHA) and EF.dtype == np.float64 else None
+    return T if T.shape == shape and T.dtype == np.float64 else None
+
+
+def _load_coat_table():
+    return _load_table(COAT_TABLE_FILE, (_N_Z, _N_MU, _N_ALPHA))
 
 
 GLASS_TABLE_FILE = Path(__file__).with_name("glass_albedo.npy")
@@ -448,11 +453,7 @@ def build_glass_table(K: int = 128, slices=None) -> np.ndarray:
 
 
 def _load_glass_table():
-    try:
-        EG = np.load(GLASS_TABLE_FILE)
-    except (OSError, ValueError):
-        return None
-    return EG if EG.shape == (2, _N_GZ, _N_MU, _N_ALPHA) and EG.dtype == np.float64 else None
+    return _load_table(GLASS_TABLE_FILE, (2, _N_GZ, _N_MU, _N_ALPHA))
 
 
 @njit(**_JIT)
