@@ -123,8 +123,10 @@ def add_setting_options(parser, skip: tuple[str, ...] = ()) -> None:
     def opt(*names, **kw):
         if kw.get("dest", names[0].lstrip("-")) not in skip:
             add(*names, **kw)
-    opt("--method", dest="method", type=_lower_choice("photon", "accumulation"), metavar="{photon,accumulation}",
-        help="photon: time-stamped photon maps; accumulation: the average of N stills (the baseline)")
+    opt("--method", dest="method", type=_lower_choice("photon", "accumulation", "progressive"),
+        metavar="{photon,accumulation,progressive}",
+        help="photon: time-stamped photon maps; accumulation: the average of N stills (the baseline); "
+             "progressive: passes whose space-time kernel shrinks (converges; see --passes, --time-limit)")
     opt("--estimator", dest="estimator", type=_lower_choice("standard", "temporal", "kd4d"),
         metavar="{standard,temporal,kd4d}", help="photon density estimate (method photon only)")
     opt("--accumulation-steps", type=int, dest="accumulation_steps", metavar="N",
@@ -139,6 +141,16 @@ def add_setting_options(parser, skip: tuple[str, ...] = ()) -> None:
         help="TEMPORAL candidates as a multiple of k: 0 (automatic) or a number in [1, 1e6]")
     opt("--time-scale", type=finite_float, dest="time_scale", metavar="S",
         help="KD4D's scene units per shutter, >= 0 (0: automatic)")
+    opt("--passes", type=int, dest="passes", metavar="N",
+        help="progressive: stop after N passes (0: no pass limit), integer in [0, 2^24]")
+    opt("--time-limit", type=finite_float, dest="time_limit", metavar="S",
+        help="progressive: stop after S seconds of rendering, >= 0 (0: none)")
+    opt("--noise-threshold", type=finite_float, dest="noise_threshold", metavar="T",
+        help="progressive: stop when the estimated per-pixel relative error is below T, >= 0 (0: none)")
+    opt("--shrink-alpha", type=finite_float, dest="shrink_alpha", metavar="A",
+        help="progressive: the kernel's shrink parameter, 0 (automatic) or in (0, 1)")
+    opt("--pass-offset", type=int, dest="pass_offset", metavar="A",
+        help="progressive: index of the first pass (split a frame between machines; join with stpm merge)")
     opt("--seed", type=int, dest="seed", metavar="S", help="random seed, integer in [0, 2^63 - 1]")
     opt("--resolution", type=_resolution, dest="resolution", metavar="WxH",
         help="image size, W and H integers in [1, 65536] (default: the scene's)")
@@ -146,7 +158,8 @@ def add_setting_options(parser, skip: tuple[str, ...] = ()) -> None:
 
 # Command-line option -> RenderSettings field (only the ones the user gave override).
 _SETTING_OPTIONS = ("method", "estimator", "accumulation_steps", "samples", "photons_global",
-                    "photons_caustic", "k_nearest", "temporal_alpha", "time_scale", "seed")
+                    "photons_caustic", "k_nearest", "temporal_alpha", "time_scale", "seed", "passes",
+                    "time_limit", "noise_threshold", "shrink_alpha", "pass_offset")
 _OPTION_FLAGS = {"k_nearest": "--k"}
 
 

@@ -13,7 +13,7 @@ from .errors import SettingsError
 
 __all__ = ["RenderSettings", "METHODS", "ESTIMATORS", "EFFECTS", "KERNELS"]
 
-METHODS = ("PHOTON", "ACCUMULATION")
+METHODS = ("PHOTON", "ACCUMULATION", "PROGRESSIVE")
 ESTIMATORS = ("STANDARD", "TEMPORAL", "KD4D")
 EFFECTS = ("AUTO", "MANUAL")
 KERNELS = ("BOX", "CONE")
@@ -25,8 +25,10 @@ class RenderSettings:
 
     Attributes
     ----------
-    method : 'PHOTON' (time-stamped photon maps) or 'ACCUMULATION' (average of
-        ``accumulation_steps`` complete stills, the baseline).
+    method : 'PHOTON' (time-stamped photon maps), 'ACCUMULATION' (average of
+        ``accumulation_steps`` complete stills, the baseline) or 'PROGRESSIVE' (passes of
+        ``samples`` camera samples per pixel and ``photons_*`` photons each, read with a
+        space-time kernel that shrinks pass by pass: converges; docs/photon-mapping.md).
     estimator : 'STANDARD' | 'TEMPORAL' | 'KD4D' radiance estimate.
     accumulation_steps : instants averaged by ACCUMULATION (>= 1).
     samples : camera samples per pixel, each at its own shutter time.
@@ -45,6 +47,14 @@ class RenderSettings:
         refractions, within max_depth in all.  Photon paths follow max_depth only.
     filter_width : Blackman-Harris pixel filter width in pixels (Blender default 1.5).
     threads : worker threads for ray casting / look-ups (0 = all cores).
+    passes : PROGRESSIVE: stop after this many passes (0 = no pass limit).
+    time_limit : PROGRESSIVE: stop after this many seconds of rendering (0 = none; as Cycles).
+    noise_threshold : PROGRESSIVE: stop when the estimated per-pixel relative error (95th
+        percentile over 8x8 blocks, from the odd and even passes) is below it (0 = none).
+    shrink_alpha : PROGRESSIVE: the kernel's shrink parameter a of V_{i+1} = V_i (i + a) / (i + 1);
+        0 = automatic (4 / (d + 4) for a d-dimensional kernel: 2/3 on surfaces, 4/7 in space x time).
+    pass_offset : PROGRESSIVE: index of the first pass rendered (a farm splits passes between
+        machines; ``stpm merge`` joins them).
     clamp_direct, clamp_indirect : Cycles' Clamp Direct / Indirect: the largest channel of one
         contribution to a sample -- at the camera's first hit (direct: its emission and
         next-event estimate) or after a bounce and from the photon maps (indirect) -- is scaled
@@ -72,6 +82,11 @@ class RenderSettings:
     threads: int = 0
     clamp_direct: float = 0.0
     clamp_indirect: float = 0.0
+    passes: int = 16
+    time_limit: float = 0.0
+    noise_threshold: float = 0.0
+    shrink_alpha: float = 0.0
+    pass_offset: int = 0
 
     def __post_init__(self) -> None:
         self.validate()
@@ -141,6 +156,16 @@ class RenderSettings:
         real("filter_width", 0.0, 64.0)
         real("clamp_direct", 0.0, 1e30)
         real("clamp_indirect", 0.0, 1e30)
+        integer("passes", 0, 1 << 24)
+        integer("pass_offset", 0, 1 << 24)
+        real("time_limit", 0.0, 1e9)
+        real("noise_threshold", 0.0, 1e6)
+        real("shrink_alpha", 0.0, 1.0)
+        if self.shrink_alpha >= 1.0:
+            raise SettingsError(f"shrink_alpha must be 0 (automatic) or in (0, 1), got {self.shrink_alpha}")
+        if self.method == "PROGRESSIVE" and self.passes == 0 and self.time_limit == 0.0 \
+                and self.noise_threshold == 0.0:
+            raise SettingsError("method PROGRESSIVE would never stop: set passes, time_limit or noise_threshold")
         return self
 
     def to_dict(self) -> dict:
