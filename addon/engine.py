@@ -193,7 +193,19 @@ class STPMRenderEngine(bpy.types.RenderEngine):
             # Blender's "Persistent Data" (Render > Performance): keep the baked static geometry
             # between frames while it does not change; off frees it
             _core.sub("raycast").set_persistent_static(bool(scene.render.use_persistent_data))
-            result = render(stpm_scene, settings, progress=self._progress, cancel=self.cancel_requested)
+            width, height = stpm_scene.resolution
+            region = border_region(scene.render, width, height)
+            views = result_views(scene.render)
+
+            def show_pass(passes, info):
+                # Progressive: the image so far into the render result after each pass (Blender redraws it)
+                write_passes(self, passes, width, height, depsgraph.view_layer.name, region=region, views=views)
+                noise = info.get("noise_p95")
+                self.update_stats("STPM", f"Pass {info['pass']}, {info['elapsed_s']:.1f} s"
+                                  + (f", noise {noise:.3f}" if noise is not None and noise < 1e30 else ""))
+
+            result = render(stpm_scene, settings, progress=self._progress, cancel=self.cancel_requested,
+                            on_pass=show_pass if settings.method == "PROGRESSIVE" else None)
         except _core.RenderCancelled:
             self.update_stats("STPM", "Cancelled")
             return
@@ -214,15 +226,16 @@ class STPMRenderEngine(bpy.types.RenderEngine):
             self.report({"INFO"}, f"STPM plan: {summary}")
             meta = {"STPM Plan": json.dumps(plan), "STPM Plan Summary": summary}
             store_plan(scene, plan)
-        w, h = stpm_scene.resolution
-        views = result_views(scene.render)
+        prog = (getattr(result, "stats", {}) or {}).get("progressive")
+        if prog:
+            self.report({"INFO"}, "STPM progressive: " + _core.sub("progressive").summary(prog))
         if len(views) > 1:
             text = (f"stereoscopy / multiview is not supported: every view ({', '.join(views)}) gets the same "
                     f"mono image from the scene camera")
             self.report({"WARNING"}, text)
             warnings = list(warnings) + [text]
-        written = write_passes(self, result.passes, w, h, depsgraph.view_layer.name,
-                               region=border_region(scene.render, w, h), views=views)
+        written = write_passes(self, result.passes, width, height, depsgraph.view_layer.name,
+                               region=region, views=views)
         add_metadata(self, meta)
         stats = dict(getattr(result, "stats", {}) or {})
         stats["export_s"] = export_s

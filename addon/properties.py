@@ -16,6 +16,7 @@ SETTING_NAMES = (
     "photons_caustic", "k_nearest", "temporal_alpha", "time_scale", "seed",
     "effects", "caustics", "indirect", "kernel", "max_depth", "filter_width", "threads",
     "clamp_direct", "clamp_indirect", "glossy_bounces", "transmission_bounces",
+    "passes", "time_limit", "noise_threshold", "shrink_alpha", "pass_offset",
 )
 
 
@@ -26,7 +27,9 @@ class STPM_SceneSettings(bpy.types.PropertyGroup):
     method: EnumProperty(
         name="Method", default="PHOTON",
         items=(("PHOTON", "Time-Dependent Photons", "Time-stamped photon maps: one photon pass for the whole shutter"),
-               ("ACCUMULATION", "Accumulation Buffer", "Average of complete stills at instants across the shutter (baseline)")))
+               ("ACCUMULATION", "Accumulation Buffer", "Average of complete stills at instants across the shutter (baseline)"),
+               ("PROGRESSIVE", "Progressive", "Passes whose space-time kernel shrinks: the image improves pass by pass "
+                "and converges; stop at a pass count, a time limit or a noise threshold")))
     estimator: EnumProperty(
         name="Estimator", default="TEMPORAL",
         items=(("STANDARD", "Standard", "k nearest photons in space, time ignored (wrong on moving receivers)"),
@@ -41,6 +44,25 @@ class STPM_SceneSettings(bpy.types.PropertyGroup):
     time_scale: FloatProperty(
         name="Time Scale", default=0.0, min=0.0, soft_max=100.0,
         description="KD4D's s in scene units per shutter; 0 = automatic from the scene's motion")
+    # Progressive: when to stop, how fast the kernel shrinks
+    passes: IntProperty(
+        name="Passes", default=16, min=0, soft_max=1024, max=1 << 24,
+        description="Progressive: stop after this many passes (0 = no pass limit); each pass traces the photon "
+                    "counts and the samples per pixel set here")
+    time_limit: FloatProperty(
+        name="Time Limit", default=0.0, min=0.0, soft_max=3600.0, max=1e9, subtype="TIME_ABSOLUTE",
+        description="Progressive: stop after this many seconds of rendering (0 = none), as Cycles")
+    noise_threshold: FloatProperty(
+        name="Noise Threshold", default=0.0, min=0.0, soft_max=0.2, max=1e6, precision=4,
+        description="Progressive: stop when the estimated relative error per pixel (95th percentile over 8x8 "
+                    "blocks, from the odd and even passes) is below it (0 = none), as Cycles")
+    shrink_alpha: FloatProperty(
+        name="Shrink Alpha", default=0.0, min=0.0, max=0.999, precision=3,
+        description="Progressive: the kernel's measure shrinks by (i + a) / (i + 1) per pass; smaller shrinks "
+                    "faster (0 = automatic)")
+    pass_offset: IntProperty(
+        name="Pass Offset", default=0, min=0, max=1 << 24,
+        description="Progressive: index of the first pass (a farm splits one frame's passes between machines)")
     kernel: EnumProperty(
         name="Kernel", default="BOX",
         items=(("BOX", "Box", "Constant density-estimation kernel"),

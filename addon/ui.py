@@ -120,6 +120,13 @@ class STPM_RENDER_PT_method(_STPMPanel, bpy.types.Panel):
         col.prop(props, "method")
         if props.method == "ACCUMULATION":
             col.prop(props, "accumulation_steps")
+        if props.method == "PROGRESSIVE":
+            sub = col.column(align=True)
+            sub.prop(props, "passes")
+            sub.prop(props, "time_limit")
+            sub.prop(props, "noise_threshold")
+            col.prop(props, "shrink_alpha")
+            col.prop(props, "pass_offset")
         col.prop(props, "estimator")
         sub = col.column()
         sub.active = props.estimator == "TEMPORAL"

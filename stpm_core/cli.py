@@ -5,6 +5,9 @@
                 [--samples S] [--photons-global N] [--photons-caustic N] [--k K]
                 [--temporal-alpha A] [--time-scale S] [--seed S] [--resolution WxH]
                 [--stats STATS.json] [--quiet] [--no-bake]
+                [--method progressive [--passes N] [--time-limit S] [--noise-threshold T]
+                 [--shrink-alpha A] [--pass-offset A]]
+    stpm merge PART.exr... [--output OUT.exr] [--stats STATS.json] [--quiet]
     stpm plan SCENE [--frame F] [--json]
     stpm compare SCENE [--frame F] [--output REPORT_DIR] [--reference REF.exr] [--time-budget S]
                  [the settings options of render]
@@ -66,7 +69,7 @@ def parse_frames(text: str) -> list[int]:
 def _build_parser() -> CommandParser:
     p = CommandParser(prog="stpm", description="STPM: time-dependent photon mapping renderer.")
     p.add_argument("--version", action="version", version=f"stpm {_version()}")
-    sub = p.add_subparsers(dest="command", metavar="{render,plan,compare}", parser_class=CommandParser)
+    sub = p.add_subparsers(dest="command", metavar="{render,merge,plan,compare}", parser_class=CommandParser)
 
     r = sub.add_parser("render", help="render a scene to a multilayer EXR and a PNG preview")
     r.add_argument("scene", help="scene file: .stpm / .npz (core) or .blend")
@@ -81,6 +84,13 @@ def _build_parser() -> CommandParser:
     r.add_argument("--no-bake", dest="no_bake", action="store_true",
                    help="a .blend: do not bake the shader inputs the node interpreter cannot evaluate "
                         "(cached bakes are still used; the others use their defaults, named)")
+
+    mg = sub.add_parser("merge", help="join partial results of a progressive render (--pass-offset) into one image")
+    mg.add_argument("parts", nargs="+", metavar="PART.exr", help="partial results (stpm render --pass-offset ...)")
+    mg.add_argument("--output", "-o", metavar="OUT.exr", required=True, help="the merged multilayer EXR (a PNG "
+                    "preview is written beside it)")
+    mg.add_argument("--stats", metavar="STATS.json", help="write the merged passes' noise and ranges as JSON")
+    mg.add_argument("--quiet", "-q", action="store_true", help="print only the files written")
 
     pl = sub.add_parser("plan", help="print which effects the scene calls for, and why")
     pl.add_argument("scene")
@@ -294,6 +304,10 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
             raise SettingsError(option_message(str(e), overrides)) from None
         if args.resolution is not None:
             scene.resolution = args.resolution
+        partial = getattr(args, "pass_offset", None) is not None    # --pass-offset: write a partial result
+        if partial and settings.method != "PROGRESSIVE":
+            raise StpmError(f"--pass-offset renders part of a progressive render: it needs --method progressive "
+                            f"(the settings say {settings.method.lower()})")
         check_memory(scene.resolution, settings.method, settings)
         if index == 0:
             if scene_path.suffix.lower() == ".blend" or scene_kind(scene_path) == "blend":
@@ -308,8 +322,14 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
         # -- Render, with a progress bar and Ctrl-C cancelling ---------------------------
         bar = ProgressBar(quiet=args.quiet)
         label = f"frame {frame}: " if frame is not None else ""
+
+        def on_pass(_passes, info):
+            noise = info.get("noise_p95")
+            bar.note(f"{label}pass {info['pass']}: {info['elapsed_s']:.1f} s"
+                     + (f", noise {noise:.4f}" if noise is not None and noise < 1e30 else ""))
         try:
-            result = render(scene, settings, progress=lambda f, m: bar(f, label + m), cancel=cancel)
+            result = render(scene, settings, progress=lambda f, m: bar(f, label + m), cancel=cancel,
+                            on_pass=on_pass if settings.method == "PROGRESSIVE" else None)
         finally:
             bar.close()
 
@@ -324,7 +344,13 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
         try:
             real_exr, real_png = real_target(out_exr), real_target(out_png)   # temp files beside the real target
             with atomic_output(real_exr, commit=False) as tmp:
-                write_exr(tmp, result, {**meta, "stpm:stats": stats}, atomic=False)
+                if partial:
+                    from .partial import scene_hash, settings_hash, write_partial
+                    write_partial(tmp, result.sums, seed=settings.seed, scene_digest=scene_hash(scene),
+                                  settings_digest=settings_hash(settings), metadata={**meta, "stpm:stats": stats},
+                                  atomic=False)
+                else:
+                    write_exr(tmp, result, {**meta, "stpm:stats": stats}, atomic=False)
             staged.append((tmp, real_exr))
             with atomic_output(real_png, commit=False) as tmp:
                 write_png(tmp, result.passes["Combined"][:, :, :3], atomic=False)
@@ -352,7 +378,10 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
                 discard_temp(tmp)
         for w in stats["warnings"]:
             _warn(w)
-        print(f"wrote {safe_text(out_exr)}")
+        if stats.get("progressive") and not args.quiet:
+            from .progressive import summary
+            print(f"{label}progressive: {summary(stats['progressive'])}", file=sys.stderr)
+        print(f"wrote {safe_text(out_exr)}" + (" (partial result: join with stpm merge)" if partial else ""))
         print(f"wrote {safe_text(out_png)}")
         if stats_path is not None:
             print(f"wrote {safe_text(stats_path)}")
@@ -361,6 +390,62 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
             print(f"{label}{stats['wall_s']:.2f} s (render {stats.get('render_s', 0.0):.2f} s, "
                   f"photons {stats.get('photon_trace_s', 0.0) + stats.get('photon_map_build_s', 0.0):.2f} s)",
                   file=sys.stderr)
+    return EXIT_OK
+
+
+def _cmd_merge(args) -> int:
+    """``stpm merge``: partial results of one progressive render -> the image one process would have made."""
+    from .imageio import atomic_output, commit_temp, discard_temp, write_exr, write_json, write_png
+    from .partial import merge
+    from .progressive import flip_visible_fraction, noise_estimate, summary
+    if not args.output.lower().endswith(".exr"):
+        raise UsageError(f"--output must end in .exr, got {args.output!r}")
+    out_exr = Path(args.output)
+    out_png = out_exr.with_suffix(".png")
+    stats_path = Path(args.stats) if args.stats else None
+    for p in args.parts:
+        if not Path(p).exists():
+            raise StpmError(f"partial result not found: {p}")
+    for p, what in ((out_exr, "output"), (out_png, "PNG preview")) + (((stats_path, "stats file"),) if stats_path else ()):
+        _check_output_path(p, what)
+        for part in args.parts:
+            if _same_file(p, Path(part)):
+                raise StpmError(f"the {what} {p} is the partial result {part} itself: choose another --output")
+    check_cancel(CancelFlag.active)
+    sums, head = merge(args.parts)
+    noise = noise_estimate(sums)
+    info = {"passes": sums.count, "pass_first": sums.first, "pass_end": sums.end, "stopped_by": "merge",
+            "noise_p95": noise["noise_p95"] if noise["noise_p95"] < 1e300 else None,
+            "noise_mean": noise["noise_mean"] if noise["noise_mean"] < 1e300 else None,
+            "noise_flip_visible": flip_visible_fraction(sums), "parts": [str(p) for p in args.parts],
+            "seed": head["seed"], "scene_hash": head["scene_hash"], "settings_hash": head["settings_hash"]}
+    passes = sums.image()
+    staged = []
+    try:
+        with atomic_output(real_target(out_exr), commit=False) as tmp:
+            write_exr(tmp, passes, {"stpm:progressive": info}, atomic=False)
+        staged.append((tmp, real_target(out_exr)))
+        with atomic_output(real_target(out_png), commit=False) as tmp:
+            write_png(tmp, passes["Combined"][:, :, :3], atomic=False)
+        staged.append((tmp, real_target(out_png)))
+        if stats_path is not None:
+            with atomic_output(real_target(stats_path), commit=False) as tmp:
+                write_json(tmp, {"progressive": info}, atomic=False)
+            staged.append((tmp, real_target(stats_path)))
+        check_cancel(CancelFlag.active)
+        while staged:
+            commit_temp(*staged[0])
+            staged.pop(0)
+    finally:
+        for tmp, _ in staged:
+            discard_temp(tmp)
+    if not args.quiet:
+        print(f"merged {len(args.parts)} partial results: {summary({**info, 'kernel_radius_scale': None})}",
+              file=sys.stderr)
+    print(f"wrote {safe_text(out_exr)}")
+    print(f"wrote {safe_text(out_png)}")
+    if stats_path is not None:
+        print(f"wrote {safe_text(stats_path)}")
     return EXIT_OK
 
 
@@ -406,7 +491,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str], cancel: CancelFlag) -> int:
-    command = argv[0] if argv and argv[0] in ("render", "plan", "compare") else ""
+    command = argv[0] if argv and argv[0] in ("render", "merge", "plan", "compare") else ""
     try:
         parser = _build_parser()
         if argv[:1] == ["compare"]:
@@ -417,7 +502,8 @@ def _main(argv: list[str], cancel: CancelFlag) -> int:
         if args.command is None:
             parser.print_help()
             return EXIT_USAGE
-        return {"render": _cmd_render, "plan": _cmd_plan, "compare": _cmd_compare}[args.command](args)
+        return {"render": _cmd_render, "merge": _cmd_merge, "plan": _cmd_plan,
+                "compare": _cmd_compare}[args.command](args)
     except UsageError as e:
         print(safe_text(f"stpm: error: {e} (see stpm {command} --help)".replace("  ", " ")), file=sys.stderr)
         return EXIT_USAGE

@@ -212,25 +212,53 @@ def _json_default(o):
     return str(o)
 
 
+@contextmanager
+def _native_stderr_captured():
+    """Hold what native code writes to file descriptor 2 (OpenEXR's own error printer writes there,
+    past Python's sys.stderr) in a temporary file; yields a list that receives the text at the end.
+    An unreadable file then gives one line of ours, not the library's lines besides."""
+    import sys
+    import tempfile
+    got: list = []
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):      # no real descriptor 2 (embedded): nothing to hold
+        yield got
+        return
+    with tempfile.TemporaryFile() as hold:
+        os.dup2(hold.fileno(), 2)
+        try:
+            yield got
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            hold.seek(0)
+            got.append(hold.read(4096).decode("utf-8", "replace"))
+
+
 def read_exr(path, view_layer: str = VIEW_LAYER) -> dict:
     """Read a multilayer EXR written by :func:`write_exr` (or Blender).
 
     Returns a dict pass name -> (H, W, C) float32, plus ``"_channels"``: the
     channel names in file order and ``"_metadata"``: string attributes.
+    A file that cannot be read raises StpmError (one line); the OpenEXR library's
+    own messages are not printed.
     """
     import OpenImageIO as oiio
 
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise StpmError(f"cannot read EXR {path}: {oiio.geterror()}")
-    try:
-        spec = inp.spec()
-        pixels = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
-        err = inp.geterror() if pixels is None else ""
-        names = list(spec.channelnames)
-        meta = {a.name: a.value for a in spec.extra_attribs}
-    finally:
-        inp.close()
+    with _native_stderr_captured():
+        inp = oiio.ImageInput.open(str(path))
+        if inp is None:
+            raise StpmError(f"cannot read EXR {path}: {oiio.geterror()}".splitlines()[0])
+        try:
+            spec = inp.spec()
+            pixels = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+            err = inp.geterror() if pixels is None else ""
+            names = list(spec.channelnames)
+            meta = {a.name: a.value for a in spec.extra_attribs}
+        finally:
+            inp.close()
     shape = (spec.height, spec.width, spec.nchannels)
     pixels = None if pixels is None else np.asarray(pixels, dtype=np.float32)
     if pixels is None or pixels.size != shape[0] * shape[1] * shape[2]:

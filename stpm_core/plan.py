@@ -472,7 +472,7 @@ def apply_plan(settings, plan: dict):
         changes["photons_caustic"] = 0
     if not plan["indirect"]:
         changes["photons_global"] = 0
-    if not plan["time_dependent"] and settings.method == "PHOTON":
+    if not plan["time_dependent"] and settings.method in ("PHOTON", "PROGRESSIVE"):
         changes["estimator"] = "STANDARD"
     return settings.replace(**changes) if changes else settings
 

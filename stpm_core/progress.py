@@ -18,11 +18,12 @@ import time
 
 __all__ = ["ProgressBar", "phase_of"]
 
-_COUNTER = re.compile(r"\s*\d+\s*/\s*\d+")
+_COUNTER = re.compile(r"\s*\d+\s*/\s*\d+|(?<=pass)\s+\d+")
 
 
 def phase_of(message: str) -> str:
-    """The phase a progress message belongs to: the message with its ``N/M`` counters removed."""
+    """The phase a progress message belongs to: the message with its ``N/M`` counters and the pass
+    number of ``pass N: ...`` removed."""
     return _COUNTER.sub("", message or "").strip()
 
 
@@ -64,6 +65,17 @@ class ProgressBar:
             self._last_decile = decile
         self.stream.flush()
         self._last_draw, self._last_msg = now, phase
+
+    def note(self, text: str) -> None:
+        """Print ``text`` as a line of its own (above the bar on a terminal: the bar redraws below it)."""
+        if self.quiet:
+            return
+        if self.tty and self._drawn:
+            self.stream.write("\r" + " " * 80 + "\r")
+        self.stream.write(text + "\n")
+        self.stream.flush()
+        self._drawn = False
+        self._last_draw = -1e9
 
     def close(self) -> None:
         """End the bar's line (call once the render finished or failed)."""

@@ -52,12 +52,15 @@ class RenderResult:
     stats : timings (s), counts and the settings that matter (see ``render``).
     warnings : human-readable lines for the user.
     plan : the effects plan (:func:`stpm_core.plan.make_plan`).
+    sums : method PROGRESSIVE only: :class:`stpm_core.progressive.PassSums` (what a partial
+        result file holds, ``stpm_core.partial``); None otherwise.
     """
 
     passes: dict
     stats: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     plan: dict = field(default_factory=dict)
+    sums: object = None          # method PROGRESSIVE: the float64 pass sums (progressive.PassSums)
 
 
 def _build_maps(scene, settings, caster, lights, *, time_override=None, progress=None, cancel=None):
@@ -98,12 +101,16 @@ def _map_stats(maps) -> dict:
 _FIRST_RENDER = True     # this process has not rendered yet (the compiled kernels may still need loading)
 
 
-def render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
+def render(scene, settings, *, progress=None, cancel=None, on_pass=None) -> RenderResult:
     """Render ``scene`` with ``settings``: :func:`_render`, with numba's own errors (a kernel that could
-    not be compiled or loaded on this machine) turned into one :class:`KernelsUnavailable` line."""
+    not be compiled or loaded on this machine) turned into one :class:`KernelsUnavailable` line.
+
+    on_pass(passes, info): method PROGRESSIVE calls it after each pass with the image so far
+    (name -> (H, W, C) float32) and info (pass, passes, elapsed_s, noise_p95), so a viewer can show it.
+    """
     kernels.require()
     try:
-        return _render(scene, settings, progress=progress, cancel=cancel)
+        return _render(scene, settings, progress=progress, cancel=cancel, on_pass=on_pass)
     except Exception as exc:
         if kernels.is_numba_error(exc):
             raise kernels.KernelsUnavailable(f"a compiled kernel failed on this machine: {kernels.compile_error(exc)}") from exc
@@ -122,7 +129,7 @@ def _already_said(message: str, said: list) -> bool:
     return m is not None and any(w.startswith(m.group(1)) and m.group(2) in w for w in said)
 
 
-def _render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
+def _render(scene, settings, *, progress=None, cancel=None, on_pass=None) -> RenderResult:
     """Render ``scene`` with ``settings`` (RenderSettings).
 
     progress(fraction in [0, 1], message) is called at least once per tile;
@@ -176,7 +183,19 @@ def _render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
     photon_s = 0.0
     map_stats: list[dict] = []
     trace_stats = []
-    if settings.method == "PHOTON":
+    progressive = sums = None
+    if settings.method == "PROGRESSIVE":
+        # -- Passes with a shrinking space-time kernel (stpm_core/progressive.py) ------------------
+        from .progressive import render_passes
+        t0 = _time.perf_counter()
+        sums, progressive, trace_stats, map_stats = render_passes(
+            scene, settings, psettings, caster, lights, table, progress=progress, cancel=cancel,
+            on_pass=None if on_pass is None else (lambda sm, info: on_pass(sm.image(), info)))
+        passes = sums.image()
+        photon_s = sum(float(m.get("photon_trace_s", 0.0)) for m in map_stats)
+        if progressive["stopped_by"] == "cancelled":
+            warnings.append(f"cancelled after {progressive['passes']} pass(es): the image holds the passes so far")
+    elif settings.method == "PHOTON":
         # -- Photon maps over the whole shutter ----------------------------------------
         t0 = _time.perf_counter()
         maps = _build_maps(scene, psettings, caster, lights, progress=_span(progress, 0.0, 0.3), cancel=cancel)
@@ -239,7 +258,8 @@ def _render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
         "photon_lookups": int(sum(ts.photon_lookups for ts in trace_stats)),
         "photons_caustic": int(total("caustic_photons") or total("photons_caustic")),
         "photons_global": int(total("global_photons") or total("photons_global")),
-        "photon_stats": map_stats[0] if len(map_stats) == 1 else map_stats,
+        "photon_stats": (map_stats[-1] if map_stats else {}) if progressive is not None
+        else map_stats[0] if len(map_stats) == 1 else map_stats,
         "estimator": "STANDARD" if settings.method == "ACCUMULATION" else psettings.estimator,
         "method": settings.method,
         "samples": int(settings.samples),
@@ -248,7 +268,9 @@ def _render(scene, settings, *, progress=None, cancel=None) -> RenderResult:
         "seed": int(settings.seed),
         "caster": dict(getattr(caster, "stats", {}) or {}),
     }
+    if progressive is not None:
+        stats["progressive"] = progressive
     stats = _plain(stats)
     if progress is not None:
         progress(1.0, "done")
-    return RenderResult(passes=passes, stats=stats, warnings=warnings, plan=plan)
+    return RenderResult(passes=passes, stats=stats, warnings=warnings, plan=plan, sums=sums)

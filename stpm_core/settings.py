@@ -52,7 +52,7 @@ class RenderSettings:
     noise_threshold : PROGRESSIVE: stop when the estimated per-pixel relative error (95th
         percentile over 8x8 blocks, from the odd and even passes) is below it (0 = none).
     shrink_alpha : PROGRESSIVE: the kernel's shrink parameter a of V_{i+1} = V_i (i + a) / (i + 1);
-        0 = automatic (4 / (d + 4) for a d-dimensional kernel: 2/3 on surfaces, 4/7 in space x time).
+        0 = automatic (2 / (d + 2) for a d-dimensional kernel: 0.5 on surfaces, 0.4 in space x time).
     pass_offset : PROGRESSIVE: index of the first pass rendered (a farm splits passes between
         machines; ``stpm merge`` joins them).
     clamp_direct, clamp_indirect : Cycles' Clamp Direct / Indirect: the largest channel of one

@@ -285,3 +285,36 @@ def test_lights_are_hidden_from_the_camera_like_in_cycles(tmp_path):
     bpy.data.objects["Light"].visible_camera = True
     p = _render_to_exr(scene, tmp_path / "shown.exr")
     assert 100.0 < p["Emit"].max() <= 1267.0 * 1.001
+
+
+def test_progressive_render_shows_each_pass_and_a_cancel_keeps_the_image(monkeypatch):
+    """Method PROGRESSIVE through Blender: the render result is written after every pass (the image
+    improves where the artist watches it), and Esc after some passes keeps them."""
+    from addon import engine
+    bpy.ops.wm.open_mainfile(filepath=str(DEMO))
+    scene = bpy.context.scene
+    _tiny(scene, photons=500)
+    scene.stpm.method, scene.stpm.passes, scene.stpm.k_nearest = "PROGRESSIVE", 3, 10
+    written = []
+    real_write = engine.write_passes
+
+    def counting_write(eng, passes, *args, **kwargs):
+        written.append(float(np.asarray(passes["Combined"])[..., :3].mean()))
+        return real_write(eng, passes, *args, **kwargs)
+
+    monkeypatch.setattr(engine, "write_passes", counting_write)
+    LAST_RENDER.clear()
+    bpy.ops.render.render()
+    prog = LAST_RENDER["stats"]["progressive"]
+    assert prog["passes"] == 3 and prog["stopped_by"] == "passes"
+    assert len(written) == 4                      # after each of the 3 passes, then the final result
+    assert written[-1] == pytest.approx(written[-2])  # the last pass shown is the final image
+    # Esc once two passes are on screen: the render stops and keeps them
+    scene.stpm.passes = 50
+    written.clear()
+    monkeypatch.setattr(STPMRenderEngine, "cancel_requested", lambda self: len(written) >= 2)
+    LAST_RENDER.clear()
+    bpy.ops.render.render()
+    prog = LAST_RENDER["stats"]["progressive"]
+    assert prog["stopped_by"] == "cancelled" and prog["passes"] == 2, prog
+    assert any("cancelled after 2 pass" in w for w in LAST_RENDER["warnings"])

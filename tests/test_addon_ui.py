@@ -102,6 +102,14 @@ def test_panels_draw_every_setting():
     assert {"method", "estimator", "temporal_alpha", "time_scale", "stpm.compare"} <= set(drawn["STPM_RENDER_PT_method"])
     assert {"motion_blur_position", "motion_steps", "motion_blur_shutter_curve"} <= set(drawn["STPM_RENDER_PT_motion_blur"])
     assert {"effects", "caustics", "indirect"} <= set(drawn["STPM_RENDER_PT_effects"])
+    # the progressive method's own settings appear with it
+    scene.stpm.method = "PROGRESSIVE"
+    log = []
+    panel = type("Drawn", (ui._STPMPanel,), {})()
+    panel.layout = _RecordingLayout(log)
+    ui.STPM_RENDER_PT_method.draw(panel, context)
+    assert {"passes", "time_limit", "noise_threshold", "shrink_alpha", "pass_offset"} <= set(log)
+    drawn["progressive"] = log
     scene.stpm.method = "ACCUMULATION"
     shown = {n for log in drawn.values() for n in log} | {"accumulation_steps"}
     assert set(SETTING_NAMES) - shown == set(), set(SETTING_NAMES) - shown

@@ -62,15 +62,18 @@ def caustic_settings(**kw):
     return RenderSettings(**d)
 
 
-def moving_caustic_scene(resolution=(96, 64)):
+def moving_caustic_scene(resolution=(96, 64), mirror=(-0.25, 0.25)):
     """The benchmark's moving caustic: a point light at z = 1 under a 0.6 x 0.6 mirror (z = 2, facing
     down) sliding x = -0.25 -> 0.25 over the shutter, so the 1.8 m wide caustic moves 3x that on the
     floor; a black shade under the light (the view gets caustic light only); a diffuse box sliding
-    x = 0.8 -> -0.8 through it.  Ortho view from z = 1.8, x in [-1.2, 1.2] (W:H must be 3:2)."""
+    x = 0.8 -> -0.8 through it.  Ortho view from z = 1.8, x in [-1.2, 1.2] (W:H must be 3:2).
+    ``mirror``: the mirror centre's x at the shutter's open and close ((0, 0): a static caustic and a
+    moving receiver only)."""
     mats = [Material.diffuse((0.8, 0.8, 0.8), name="floor"), Material.mirror(name="mirror"),
             Material.diffuse((0.0, 0.0, 0.0), name="shade")]
     objs = [plane_mesh(10.0, z=0.0, material=0, name="floor"),
-            (plane_mesh(0.6, z=0.0, material=1, flip=True, name="mirror"), moving((-0.25, 0, 2.0), (0.25, 0, 2.0))),
+            (plane_mesh(0.6, z=0.0, material=1, flip=True, name="mirror"),
+             moving((mirror[0], 0, 2.0), (mirror[1], 0, 2.0))),
             (plane_mesh(0.3, z=0.0, material=2, flip=True, name="shade"), translate(0, 0, 0.9)),
             (box_mesh((-0.3, -0.3, 0.0), (0.3, 0.3, 0.3), material=0, name="box"), moving((0.8, 0, 0), (-0.8, 0, 0)))]
     return make_scene(objs, mats, ortho_camera_down(height=1.8, ortho_scale=2.4),
@@ -78,13 +81,14 @@ def moving_caustic_scene(resolution=(96, 64)):
                       metadata={"name": "moving caustic"})
 
 
-def moving_caustic_radiance(x, y, t):
+def moving_caustic_radiance(x, y, t, mirror=(-0.25, 0.25)):
     """Exact radiance (W m^-2 sr^-1) of :func:`moving_caustic_scene` seen from above at (x, y) and
     normalised shutter time t (arrays broadcast together): the terms :func:`analytic_moving_caustic`
     integrates (its docstring derives them)."""
     I = 100.0 / (4 * np.pi)                               # point-light intensity (W/sr)
     shade = (np.abs(x) < 0.15) & (np.abs(y) < 0.15)
-    c, b = -0.25 + 0.5 * t, 0.8 - 1.6 * t                 # mirror and box centres (x)
+    c = mirror[0] + (mirror[1] - mirror[0]) * t           # mirror centre (x)
+    b = 0.8 - 1.6 * t                                     # box centre (x)
     on_box = (np.abs(x - b) < 0.3) & (np.abs(y) < 0.3) & ~shade
     z = np.where(on_box, 0.3, 0.0)
     # -- Caustic: virtual source through the moving aperture ----------------------------
@@ -108,7 +112,7 @@ def moving_caustic_radiance(x, y, t):
 
 
 def analytic_moving_caustic(resolution=(96, 64), filter_width: float = 1.5, sub: int = 8,
-                            n_t: int = 256) -> np.ndarray:
+                            n_t: int = 256, mirror=(-0.25, 0.25)) -> np.ndarray:
     """The exact pixel values (H, W, 3) of :func:`moving_caustic_scene`, by quadrature (no photons).
 
     Seen from the ortho camera (x in [-1.2, 1.2], y in [-0.8, 0.8], row 0 = top)
@@ -118,7 +122,7 @@ def analytic_moving_caustic(resolution=(96, 64), filter_width: float = 1.5, sub:
 
     * caustic: the light's mirror image V = (0, 0, 3) seen through the mirror
       aperture (|x s - c(t)| < 0.3, |y s| < 0.3 at s = 1 / (3 - z),
-      c(t) = -0.25 + 0.5 t), E = I (3 - z) / |p - V|^3, I = P / (4 pi);
+      c(t) = -0.25 + 0.5 t, or ``mirror``'s), E = I (3 - z) / |p - V|^3, I = P / (4 pi);
       blocked by the shade (|x|, |y| s' < 0.15 at s' = 2.1 / (3 - z)) and,
       for the floor, by the box (the path from (x, y, 0) to (0.9 x, 0.9 y, 0.3)
       crossing its footprint);
@@ -139,7 +143,7 @@ def analytic_moving_caustic(resolution=(96, 64), filter_width: float = 1.5, sub:
     x, y = np.meshgrid(-1.2 + u * pix, 0.8 - v * pix)
     F = np.zeros_like(x)
     for t in (np.arange(n_t) + 0.5) / n_t:
-        F += moving_caustic_radiance(x, y, t)
+        F += moving_caustic_radiance(x, y, t, mirror)
     F /= n_t
 
     # -- Pixel filter: separable Blackman-Harris over the fine points inside the image ---------

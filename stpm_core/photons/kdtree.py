@@ -478,6 +478,118 @@ if AVAILABLE:
             out_phi[i, 2] = p2
 
     @_jit
+    def _knn_radius(P, box, n_leaves, q, D, s, kq, cap2, out_r):
+        """Distance (n,) to the kq-th nearest photon of each query q (n, 4), at most sqrt(cap2).
+
+        The search is bounded by cap2 (squared, m^2): where fewer than kq photons lie nearer, the
+        answer is the cap, found without visiting anything beyond it.  Warm-started like _lookup.
+        """
+        bd = np.empty(2 * kq)
+        bi = np.empty(2 * kq, np.int64)
+        bx = np.empty(2 * kq)
+        qq = np.empty(4)
+        qnode = np.empty(box.shape[0], np.int64)
+        qdist = np.empty(box.shape[0])
+        r_prev = np.inf
+        for i in range(q.shape[0]):
+            qq[0], qq[1], qq[2], qq[3] = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+            bound0 = cap2
+            if i > 0 and r_prev < np.inf:
+                e0, e1, e2, e3 = qq[0] - q[i - 1, 0], qq[1] - q[i - 1, 1], qq[2] - q[i - 1, 2], qq[3] - q[i - 1, 3]
+                dp = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0))
+                bound0 = min(cap2, ((r_prev + dp) * (1.0 + 1e-9)) ** 2)
+            found = _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0)
+            if not found and bound0 < cap2:
+                found = _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, cap2)
+            if found:
+                r = np.sqrt(bd[kq - 1])
+                out_r[i] = r
+                r_prev = r
+            else:
+                out_r[i] = np.sqrt(cap2)
+                r_prev = np.inf
+
+    @_jit
+    def _range(P, box, n_leaves, q, ns, rad, half, D, cyl, s, cone, cone_k, stack, out_phi, out_cnt):
+        """Fixed-size kernels: photons inside each query's own region, summed (the progressive estimate).
+
+        q (n, 4): x, y, z and s t (D = 4; ignored for D = 3); ns (n, 3) float32 normals; rad (n,)
+        radius (m); half (n,) the cylinder's half-height in s t units (cyl only).  The region of
+        query i is, in (x, y, z, s t):
+
+        * D = 3: the ball |x - x_i| < rad_i (time ignored);
+        * D = 4, cyl False: the 4D ball |x - x_i|^2 + (s t - s t_i)^2 < rad_i^2;
+        * D = 4, cyl True: the cylinder |x - x_i| < rad_i and |s t - s t_i| <= half_i.
+
+        Writes out_phi (n, 3) W: sum of w Phi over the photons inside on the ns side (w = 1, or the
+        cone 1 - d / (cone_k rad) of the spatial distance d for D = 3 / cyl and of the 4D one for the
+        ball), out_cnt (n,) how many photons were inside (either side).  stack: int64 scratch of at
+        least the tree depth + 2.  Depth-first: a node is entered only if its box reaches the region.
+        """
+        N = P.shape[0]
+        first_leaf = n_leaves - 1
+        for i in range(q.shape[0]):
+            q0, q1, q2, q3 = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+            r2 = rad[i] * rad[i]
+            h = half[i]
+            inv_r = 1.0 / (cone_k * max(rad[i], 1e-300))
+            n0, n1, n2 = ns[i, 0], ns[i, 1], ns[i, 2]
+            p0 = 0.0
+            p1 = 0.0
+            p2 = 0.0
+            cnt = 0
+            top = 0
+            stack[0] = 0
+            top = 1
+            while top > 0:
+                top -= 1
+                node = stack[top]
+                # -- does the node's box reach the region? ---------------------------------------
+                row = node + 1
+                if D == 4 and cyl:
+                    if _box_dist2(box, row, q0, q1, q2, q3, 3) >= r2:
+                        continue
+                    lo3 = np.float64(box[row, 3])
+                    hi3 = np.float64(box[row, 7])
+                    if q3 < lo3 - h or q3 > hi3 + h:
+                        continue
+                elif _box_dist2(box, row, q0, q1, q2, q3, D) >= r2:
+                    continue
+                if node < first_leaf:
+                    stack[top] = 2 * node + 1
+                    stack[top + 1] = 2 * node + 2
+                    top += 2
+                    continue
+                # -- scan the leaf's contiguous rows ------------------------------------------------
+                leaf = node - first_leaf
+                for j in range((leaf * N) // n_leaves, ((leaf + 1) * N) // n_leaves):
+                    e0 = np.float64(P[j, 0]) - q0
+                    e1 = np.float64(P[j, 1]) - q1
+                    e2 = np.float64(P[j, 2]) - q2
+                    d2 = e0 * e0 + e1 * e1 + e2 * e2
+                    if D == 4:
+                        e3 = s * np.float64(P[j, 3]) - q3
+                        if cyl:
+                            if abs(e3) > h:
+                                continue
+                        else:
+                            d2 += e3 * e3
+                    if d2 >= r2:
+                        continue
+                    cnt += 1
+                    if P[j, 4] * n0 + P[j, 5] * n1 + P[j, 6] * n2 > 0.0:
+                        w = 1.0
+                        if cone:
+                            w = 1.0 - np.sqrt(d2) * inv_r
+                        p0 += w * P[j, 8]
+                        p1 += w * P[j, 9]
+                        p2 += w * P[j, 10]
+            out_phi[i, 0] = p0
+            out_phi[i, 1] = p1
+            out_phi[i, 2] = p2
+            out_cnt[i] = cnt
+
+    @_jit
     def _morton(q, lo, scale, D):
         """Morton codes (n,) int64 of the first D columns of q quantised to 2^10 cells per axis."""
         n = q.shape[0]
@@ -552,3 +664,61 @@ class FlatTree:
         out_phi, out_r, out_tau = np.empty_like(phi), np.empty_like(r), np.empty_like(tau)
         out_phi[order], out_r[order], out_tau[order] = phi, r, tau
         return out_phi, out_r, out_tau
+
+    def knn_radius(self, q: np.ndarray, kq: int, cap: float, workers: int) -> np.ndarray:
+        """Distance (n,) m to the kq-th nearest photon of each query q (n, 4) (x, y, z, s t), capped at ``cap``.
+
+        In the tree's own dimensions (3D: x, y, z; 4D: with s t).  Where fewer than kq photons lie
+        within ``cap``, the cap is returned; the search never looks beyond it.
+        """
+        n = q.shape[0]
+        q = np.ascontiguousarray(q, dtype=np.float64)
+        D = self.dims
+        out = np.empty(n)
+        if n == 0:
+            return out
+        lo = q.min(axis=0)
+        scale = 1024.0 / np.maximum(q.max(axis=0) - lo, 1e-30)
+        order = np.argsort(_morton(q, lo, scale, D), kind="stable")
+        qs = q[order]
+        r = np.empty(n)
+        cap2 = float(cap) ** 2 if np.isfinite(cap) else np.inf
+
+        def part(a, b):
+            _knn_radius(self.pts, self.box, self.n_leaves, qs[a:b], D, self.s, int(kq), cap2, r[a:b])
+
+        run_chunks(part, n, workers)
+        out[order] = r
+        return out
+
+    def range_sum(self, q: np.ndarray, ns: np.ndarray, rad: np.ndarray, half: np.ndarray | None, cone: bool,
+                  cone_k: float, workers: int):
+        """Sums Phi (n, 3) W and counts (n,) of the photons inside fixed regions (:func:`_range`).
+
+        q (n, 4): x, y, z and s t (the tree's own s; column 3 ignored by a 3D tree); rad (n,) m;
+        half (n,) the cylinder's half-height in s t units, or None for balls (3D: time ignored,
+        4D: balls in (x, y, z, s t)).  Queries run in Morton order, results in input order.
+        """
+        n = q.shape[0]
+        q = np.ascontiguousarray(q, dtype=np.float64)
+        ns = np.ascontiguousarray(ns, dtype=np.float32)
+        rad = np.ascontiguousarray(rad, dtype=np.float64)
+        cyl = half is not None and self.dims == 4
+        half = np.zeros(n) if half is None else np.ascontiguousarray(half, dtype=np.float64)
+        D = self.dims
+        lo = q.min(axis=0) if n else np.zeros(4)
+        scale = 1024.0 / np.maximum((q.max(axis=0) if n else np.ones(4)) - lo, 1e-30)
+        order = np.argsort(_morton(q, lo, scale, D), kind="stable")
+        qs, nss, rs, hs = q[order], ns[order], rad[order], half[order]
+        phi = np.zeros((n, 3))
+        cnt = np.zeros(n, np.int64)
+        depth = int(np.log2(max(self.n_leaves, 1))) + 4
+
+        def part(a, b):
+            _range(self.pts, self.box, self.n_leaves, qs[a:b], nss[a:b], rs[a:b], hs[a:b], D, cyl, self.s,
+                   cone, cone_k, np.empty(2 * depth, np.int64), phi[a:b], cnt[a:b])
+
+        run_chunks(part, n, workers)
+        out_phi, out_cnt = np.empty_like(phi), np.empty_like(cnt)
+        out_phi[order], out_cnt[order] = phi, cnt
+        return out_phi, out_cnt

@@ -1,0 +1,211 @@
+"""Partial results of progressive renders: one machine's passes, written so another can merge them.
+
+    stpm render shot.blend --method progressive --pass-offset 0  --passes 32 -o part_a.exr
+    stpm render shot.blend --method progressive --pass-offset 32 --passes 32 -o part_b.exr
+    stpm merge part_a.exr part_b.exr -o shot.exr           # = one render of passes 1..64
+
+A partial result is a multilayer EXR that any viewer opens (the mean of its
+passes, Blender's channel names) with the exact float64 sums of its passes
+beside it, and a JSON header attribute ``stpm:partial``:
+
+* ``format`` "stpm-partial", ``version`` 1;
+* ``pass_first``, ``pass_end``: the passes it holds, ``[first, end)`` (1-based);
+* ``n_even``, ``n_odd``: how many even / odd pass indices (for the noise estimate);
+* ``seed``, ``scene_hash`` (:func:`scene_hash`), ``settings_hash``
+  (:func:`settings_hash`: every setting that changes a pass's pixels), ``resolution``.
+
+Float64 in EXR: each float64 value x is stored as three float32 channels
+hi = f32(x), mid = f32(x - hi), lo = f32(x - hi - mid); each difference is exact in
+float64 and hi + mid + lo = x exactly (for |x| within float32's range), so the
+sums survive the file bit for bit.  Layers ``STPMSum<Pass>Hi`` / ``Mid`` / ``Lo``
+hold pass ``<Pass>``'s sum with that pass's channels; ``STPMSumEven*`` / ``STPMSumOdd*``
+the half sums of Combined RGB.
+
+Reading checks everything (a partial is untrusted input like any file): the
+header's types and ranges, every layer present with the right shape, every
+value finite; :func:`merge` refuses gaps, overlaps and partials of another
+scene, seed or settings.  Sums of disjoint pass ranges add in float64 (another
+association than one process's running sum: equal to about 1e-16 relative, so
+the float32 image is bit-equal but for a rare last-bit tie).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .errors import StpmError
+from .progressive import PassSums
+
+__all__ = ["PARTIAL_FORMAT", "PARTIAL_VERSION", "scene_hash", "settings_hash", "write_partial", "read_partial",
+           "merge", "split64", "join64"]
+
+PARTIAL_FORMAT = "stpm-partial"
+PARTIAL_VERSION = 1
+SUM_PREFIX = "STPMSum"
+_PARTS = ("Hi", "Mid", "Lo")
+# Settings that do not change a pass's pixels (how many passes, where to stop, threads)
+_NOT_HASHED = ("passes", "pass_offset", "time_limit", "noise_threshold", "threads")
+
+
+def split64(x: np.ndarray) -> np.ndarray:
+    """float64 (...,) -> float32 (..., 3) (hi, mid, lo) with hi + mid + lo == x exactly (|x| < 3e38)."""
+    x = np.asarray(x, dtype=np.float64)
+    hi = x.astype(np.float32)
+    r = x - hi.astype(np.float64)
+    mid = r.astype(np.float32)
+    lo = (r - mid.astype(np.float64)).astype(np.float32)
+    return np.stack([hi, mid, lo], axis=-1)
+
+
+def join64(parts: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`split64`: float32 (..., 3) -> float64 (...,)."""
+    p = np.asarray(parts, dtype=np.float64)
+    return (p[..., 0] + p[..., 1]) + p[..., 2]
+
+
+def scene_hash(scene) -> str:
+    """SHA-256 of the scene as the scene file stores it (header JSON and every array's bytes)."""
+    from .scenefile import scene_to_arrays
+    header, arrays = scene_to_arrays(scene)
+    h = hashlib.sha256(json.dumps(header, sort_keys=True, default=str).encode())
+    for key in sorted(arrays):
+        a = np.ascontiguousarray(arrays[key])
+        h.update(f"{key}|{a.dtype.str}|{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def settings_hash(settings) -> str:
+    """SHA-256 of the settings that change a pass's pixels (not passes, pass_offset, stops, threads)."""
+    d = {k: v for k, v in settings.to_dict().items() if k not in _NOT_HASHED}
+    return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
+
+
+def write_partial(path, sums: PassSums, *, seed: int, scene_digest: str, settings_digest: str,
+                  metadata: dict | None = None, atomic: bool = True) -> Path:
+    """Write ``sums`` (its mean as the visible passes, the exact sums beside) to the EXR ``path``."""
+    from .imageio import write_exr
+    if sums.count == 0:
+        raise StpmError("no pass to write")
+    passes = dict(sums.image())
+    H, W = next(iter(passes.values())).shape[:2]
+    halves = (("Even", sums.even), ("Odd", sums.odd))
+    for name, s in list(sums.sums.items()) + [(n, np.zeros((H, W, 3)) if s is None else s) for n, s in halves]:
+        parts = split64(s)
+        for k, part in enumerate(_PARTS):
+            passes[SUM_PREFIX + name + part] = parts[..., k]
+    head = {"format": PARTIAL_FORMAT, "version": PARTIAL_VERSION, "pass_first": sums.first, "pass_end": sums.end,
+            "n_even": sums.n_even, "n_odd": sums.n_odd, "seed": int(seed), "scene_hash": scene_digest,
+            "settings_hash": settings_digest, "resolution": [int(W), int(H)],
+            "passes": sorted(sums.sums)}
+    meta = dict(metadata or {})
+    meta["stpm:partial"] = json.dumps(head)
+    return write_exr(path, passes, meta, atomic=atomic)
+
+
+def _field(head: dict, key: str, kind, path, lo=None):
+    v = head.get(key)
+    ok = isinstance(v, kind) and not isinstance(v, bool)
+    if ok and lo is not None:
+        ok = v >= lo
+    if not ok:
+        raise StpmError(f"{path}: partial result header field {key!r} is invalid ({v!r:.60})")
+    return v
+
+
+def read_partial(path) -> tuple[PassSums, dict]:
+    """(PassSums, header) of a partial result; StpmError naming the file and the problem."""
+    from .imageio import read_exr
+    path = Path(path)
+    if not path.exists():
+        raise StpmError(f"partial result not found: {path}")
+    data = read_exr(path)
+    text = data["_metadata"].get("stpm:partial")
+    if not isinstance(text, str):
+        raise StpmError(f"{path}: not a partial result (no stpm:partial header; render it with --pass-offset)")
+    try:
+        head = json.loads(text)
+    except (ValueError, RecursionError):
+        raise StpmError(f"{path}: the stpm:partial header is not valid JSON") from None
+    if not isinstance(head, dict) or head.get("format") != PARTIAL_FORMAT:
+        raise StpmError(f"{path}: not an STPM partial result (format {head.get('format') if isinstance(head, dict) else None!r:.40})")
+    version = _field(head, "version", int, path, 1)
+    if version > PARTIAL_VERSION:
+        raise StpmError(f"{path}: partial result version {version} is newer than this STPM reads ({PARTIAL_VERSION})")
+    first = _field(head, "pass_first", int, path, 1)
+    end = _field(head, "pass_end", int, path, first + 1)
+    n_even = _field(head, "n_even", int, path, 0)
+    n_odd = _field(head, "n_odd", int, path, 0)
+    expect_even = sum(1 for i in range(first, end) if i % 2 == 0) if end - first < 1 << 24 else -1
+    if end - first >= 1 << 24 or n_even != expect_even or n_even + n_odd != end - first:
+        raise StpmError(f"{path}: partial result pass counts do not match its range {first}..{end - 1}")
+    _field(head, "seed", int, path, 0)
+    for key in ("scene_hash", "settings_hash"):
+        v = _field(head, key, str, path)
+        if len(v) != 64 or any(c not in "0123456789abcdef" for c in v):
+            raise StpmError(f"{path}: partial result header field {key!r} is not a SHA-256 digest")
+    res = head.get("resolution")
+    names = head.get("passes")
+    if not (isinstance(res, list) and len(res) == 2 and all(isinstance(x, int) and not isinstance(x, bool) and x > 0
+                                                            for x in res)):
+        raise StpmError(f"{path}: partial result header field 'resolution' is invalid")
+    if not (isinstance(names, list) and names and all(isinstance(n, str) for n in names) and "Combined" in names):
+        raise StpmError(f"{path}: partial result header field 'passes' is invalid")
+    W, H = res
+    sums = PassSums(first)
+    sums.end = end
+    sums.n_even, sums.n_odd = n_even, n_odd
+
+    def layer(name, channels):
+        parts = []
+        for part in _PARTS:
+            a = data.get(SUM_PREFIX + name + part)
+            if not isinstance(a, np.ndarray) or a.shape != (H, W, channels):
+                raise StpmError(f"{path}: partial result layer {SUM_PREFIX + name + part!r} is missing or has "
+                                "the wrong shape")
+            parts.append(a)
+        x = join64(np.stack(parts, axis=-1))
+        if not np.all(np.isfinite(x)):
+            raise StpmError(f"{path}: partial result layer {SUM_PREFIX + name!r} holds non-finite values")
+        return x
+
+    from .film import PASSES
+    channels = {n: c for n, c, _ in PASSES}
+    for name in names:
+        if name not in channels:
+            raise StpmError(f"{path}: partial result names an unknown pass {name!r:.40}")
+        sums.sums[name] = layer(name, channels[name])
+    sums.even = layer("Even", 3) if n_even else None
+    sums.odd = layer("Odd", 3) if n_odd else None
+    return sums, head
+
+
+def merge(paths) -> tuple[PassSums, dict]:
+    """The passes of several partial results as one (PassSums over their joint range, the first header).
+
+    Refuses (StpmError, one line) partials of different scenes, seeds, settings or sizes, and pass
+    ranges that overlap or leave a gap.  The sums are added in pass order.
+    """
+    if not paths:
+        raise StpmError("stpm merge needs at least one partial result")
+    parts = [(read_partial(p), Path(p)) for p in paths]
+    parts.sort(key=lambda x: x[0][1]["pass_first"])
+    (total, head0), p0 = parts[0]
+    for key in ("seed", "scene_hash", "settings_hash", "resolution", "passes"):
+        for (_, head), p in parts[1:]:
+            if head[key] != head0[key]:
+                what = {"scene_hash": "scene", "settings_hash": "render settings"}.get(key, key)
+                raise StpmError(f"{p} and {p0} are partials of different {what}: they cannot be merged")
+    for ((s, head), p), (_, prev) in zip(parts[1:], parts[:-1]):
+        if s.first < total.end:
+            raise StpmError(f"{p} (passes {s.first}..{s.end - 1}) overlaps passes {total.first}..{total.end - 1} "
+                            f"already merged (from {prev})")
+        if s.first > total.end:
+            raise StpmError(f"passes {total.end}..{s.first - 1} are missing between {prev} and {p}")
+        total = total.merged(s)
+    return total, head0
+
+

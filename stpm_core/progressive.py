@@ -1,0 +1,299 @@
+"""Method PROGRESSIVE: passes whose space-time kernel shrinks, averaged; stop at passes, time or noise.
+
+    result = render(scene, settings.replace(method="PROGRESSIVE", passes=64))
+
+Pass i (1-based over the whole render) traces ``photons_caustic`` +
+``photons_global`` photons and ``samples`` camera samples per pixel, each
+photon path and camera sample at its own shutter time, from random streams
+of (seed, i) alone; its photon look-ups use fixed-size kernels shrunk by the
+schedule of :mod:`stpm_core.photons.progressive` from the pilot's initial
+size.  The image is the mean of the passes.  So:
+
+* passes are independent: ``--pass-offset A --passes B`` renders passes
+  A + 1 .. A + B anywhere, and :class:`PassSums` of disjoint ranges add up
+  (``stpm merge``);
+* memory is one pass's photons (plus the pilot's, about a third of one pass);
+* the noise is estimated from the even and the odd passes (two independent
+  half images), see :func:`noise_estimate`.
+
+Stops (the first that holds, after at least one pass): ``passes`` passes
+rendered, ``time_limit`` seconds elapsed (a pass is not started when the
+last pass's time would overrun the limit), the 95th percentile of the block
+noise below ``noise_threshold`` (from two passes on).  A cancel (Blender's
+Esc) after at least one pass keeps the passes so far.
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+
+import numpy as np
+
+from .errors import RenderCancelled
+from .integrator import trace_image
+from .photons import build_photon_maps
+from .photons.progressive import ProgressiveMaps, auto_shrink_alpha, build_pilot
+from .photons.timescale import auto_time_scale
+from .sampling import rng_for
+
+__all__ = ["PassSums", "noise_estimate", "flip_visible_fraction", "render_passes", "summary", "pass_seed",
+           "STREAM_PASS", "NOISE_BLOCK", "NOISE_PERCENTILE"]
+
+STREAM_PASS = 0x9A55          # random stream of the passes' seeds
+NOISE_BLOCK = 8               # noise is averaged over NOISE_BLOCK x NOISE_BLOCK pixel blocks
+NOISE_PERCENTILE = 95.0       # ... and its 95th percentile over the blocks is compared with the threshold
+FLIP_VISIBLE = 0.05           # an LDR-FLIP error above this between the halves counts as a visible difference
+_LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+def pass_seed(seed: int, i: int) -> int:
+    """The seed of pass i (1-based): a pure function of (seed, i), the same on every machine."""
+    return int(rng_for(seed, STREAM_PASS, i).integers(0, 2**62))
+
+
+class PassSums:
+    """Float64 sums of pass images over a range of passes [first, end) (1-based pass indices).
+
+    Attributes
+    ----------
+    sums : pass name -> (H, W, C) float64, the sum of that pass over the passes in the range.
+    even, odd : (H, W, 3) float64 sums of Combined RGB over the even / odd pass indices.
+    n_even, n_odd : how many passes each holds; first, end : the pass range.
+    """
+
+    def __init__(self, first: int):
+        self.first = int(first)
+        self.end = int(first)
+        self.sums: dict = {}
+        self.even = None
+        self.odd = None
+        self.n_even = 0
+        self.n_odd = 0
+
+    @property
+    def count(self) -> int:
+        return self.end - self.first
+
+    def add(self, i: int, passes: dict) -> None:
+        """Add pass i's images (name -> (H, W, C) float32); passes must come in order."""
+        if i != self.end:
+            raise ValueError(f"pass {i} added after pass {self.end - 1} (passes are summed in order)")
+        for name, img in passes.items():
+            a = np.asarray(img, dtype=np.float64)
+            if name in self.sums:
+                self.sums[name] += a
+            else:
+                self.sums[name] = a.copy()
+        rgb = np.asarray(passes["Combined"], dtype=np.float64)[:, :, :3]
+        if i % 2 == 0:
+            self.even = rgb.copy() if self.even is None else self.even + rgb
+            self.n_even += 1
+        else:
+            self.odd = rgb.copy() if self.odd is None else self.odd + rgb
+            self.n_odd += 1
+        self.end += 1
+
+    def merged(self, other: "PassSums") -> "PassSums":
+        """The sums over both ranges (``other`` must start where this one ends)."""
+        if other.first != self.end:
+            raise ValueError(f"passes {other.first}..{other.end - 1} do not follow {self.first}..{self.end - 1}")
+        out = PassSums(self.first)
+        out.end = other.end
+        out.sums = {k: self.sums[k] + other.sums[k] for k in self.sums}
+        out.even = _add(self.even, other.even)
+        out.odd = _add(self.odd, other.odd)
+        out.n_even, out.n_odd = self.n_even + other.n_even, self.n_odd + other.n_odd
+        return out
+
+    def image(self) -> dict:
+        """The mean of the passes: name -> (H, W, C) float32."""
+        n = max(self.count, 1)
+        return {k: (v / n).astype(np.float32) for k, v in self.sums.items()}
+
+    def halves(self):
+        """(mean of the even passes, mean of the odd passes) of Combined RGB, or None before both exist."""
+        if not self.n_even or not self.n_odd:
+            return None
+        return self.even / self.n_even, self.odd / self.n_odd
+
+
+def _add(a, b):
+    if a is None:
+        return None if b is None else b.copy()
+    return a.copy() if b is None else a + b
+
+
+def noise_estimate(sums: PassSums, block: int = NOISE_BLOCK) -> dict:
+    """Estimated relative error of the mean image, from the two half images.
+
+    With A, B the means of the n_e even and n_o odd passes (independent) and F their
+    pass-weighted mean, Var F = (A - B)^2 n_e n_o / (n_e + n_o)^2 per pixel (an unbiased
+    one-sample estimate: E (A - B)^2 = sigma^2 (1/n_e + 1/n_o) for a per-pass variance sigma^2).
+    On luminance Y: the relative error e^2 = Var F / (Y_F + eps)^2 (eps = 1e-3 of the image's mean
+    Y, so black pixels do not dominate), averaged over ``block`` x ``block`` blocks, square-rooted.
+
+    Returns {'noise_p95': 95th percentile of the block errors, 'noise_mean': their mean,
+    'blocks': (Hb, Wb) array}; inf before both halves exist.
+    """
+    h = sums.halves()
+    if h is None:
+        return {"noise_p95": math.inf, "noise_mean": math.inf, "blocks": None}
+    A, B = (x @ _LUMA for x in h)
+    ne, no = sums.n_even, sums.n_odd
+    F = (ne * A + no * B) / (ne + no)
+    var = (A - B) ** 2 * (ne * no) / (ne + no) ** 2
+    eps = 1e-3 * max(float(np.mean(np.abs(F))), 1e-12)
+    e2 = var / (np.abs(F) + eps) ** 2
+    H, W = e2.shape
+    Hb, Wb = -(-H // block), -(-W // block)
+    pad = np.full((Hb * block, Wb * block), np.nan)
+    pad[:H, :W] = e2
+    blocks = np.sqrt(np.nanmean(pad.reshape(Hb, block, Wb, block), axis=(1, 3)))
+    return {"noise_p95": float(np.percentile(blocks, NOISE_PERCENTILE)), "noise_mean": float(np.mean(blocks)),
+            "blocks": blocks}
+
+
+def flip_visible_fraction(sums: PassSums) -> float | None:
+    """Fraction of pixels whose LDR-FLIP error between the two half images exceeds FLIP_VISIBLE
+    (the seed's perceptual reading: noise a viewer would see), after the Standard view transform
+    (clip to [0, 1], sRGB).  None when FLIP is unavailable or before both halves exist."""
+    h = sums.halves()
+    if h is None:
+        return None
+    try:
+        import flip_evaluator as flip
+    except ImportError:
+        return None
+
+    def srgb(x):
+        x = np.clip(x, 0.0, 1.0)
+        return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055).astype(np.float32)
+
+    err, _mean, _ = flip.evaluate(np.ascontiguousarray(srgb(h[0])), np.ascontiguousarray(srgb(h[1])), "LDR",
+                                  applyMagma=False)
+    return float(np.mean(np.asarray(err) > FLIP_VISIBLE))
+
+
+def render_passes(scene, settings, psettings, caster, lights, table, *, progress=None, cancel=None,
+                  on_pass=None, sums: PassSums | None = None):
+    """The pass loop of method PROGRESSIVE.
+
+    settings : the user's RenderSettings; psettings : after the effects plan (photon counts,
+    estimator).  on_pass(sums, info) is called after each pass (info: pass, passes, elapsed_s,
+    noise_p95).  Returns (sums, info dict for the stats, TraceStats list, photon stats list).
+    """
+    t0 = _time.perf_counter()
+    first = int(settings.pass_offset) + 1
+    last = first + int(settings.passes) - 1 if settings.passes > 0 else None
+    alpha = float(settings.shrink_alpha) or auto_shrink_alpha(psettings.estimator)
+    s = float(settings.time_scale) if settings.time_scale > 0 else auto_time_scale(scene)
+    with_photons = psettings.photons_caustic > 0 or psettings.photons_global > 0
+
+    def say(f, msg):
+        if progress is not None:
+            progress(min(max(f, 0.0), 1.0), msg)
+
+    # -- The pilot: the initial kernel size, from photons of its own ----------------------------
+    pilot = None
+    if with_photons:
+        say(0.0, "tracing pilot photons")
+        pilot = build_pilot(scene, psettings, caster, lights, time_scale=s, cancel=cancel)
+    sums = PassSums(first) if sums is None else sums
+    trace_stats, map_stats, pass_s = [], [], []
+    noise = {"noise_p95": math.inf, "noise_mean": math.inf}
+    stop = "passes"
+    i = first
+    while True:
+        # -- Progress: the fraction of the stop that comes first -----------------------------------
+        elapsed = _time.perf_counter() - t0
+        done = i - first
+        frac = [done / settings.passes] if settings.passes > 0 else []
+        if settings.time_limit > 0:
+            frac.append(elapsed / settings.time_limit)
+        if settings.noise_threshold > 0 and math.isfinite(noise["noise_p95"]) and noise["noise_p95"] > 0:
+            frac.append(min(1.0, (settings.noise_threshold / noise["noise_p95"]) ** 2))
+        f_lo = max(frac) if frac else 0.0
+
+        def span(f, msg, lo=f_lo, i=i):
+            hi = lo + (1 - lo) / max(1, (last - i + 1) if last is not None else 4)
+            say(lo + (hi - lo) * f, f"pass {i}: {msg}")
+
+        # -- One pass: its photons, read with this pass's kernel, and its camera samples ------------
+        t_pass = _time.perf_counter()
+        seed_i = pass_seed(settings.seed, i)
+        pset = psettings.replace(seed=seed_i)
+        try:
+            maps = None
+            if with_photons:
+                raw = build_photon_maps(scene, pset.replace(time_scale=s), caster, lights,
+                                        progress=lambda f, m: span(0.3 * f, m), cancel=cancel)
+                maps = ProgressiveMaps(raw, pilot, pass_index=i, alpha=alpha, kernel=psettings.kernel)
+            img, ts = trace_image(scene, pset, caster, lights, maps, table=table, stream=i,
+                                  progress=lambda f, m: span(f, m), cancel=cancel,
+                                  progress_span=(0.3 if maps is not None else 0.0, 1.0))
+        except RenderCancelled:
+            if sums.count == 0:
+                raise
+            stop = "cancelled"
+            break
+        sums.add(i, img)
+        trace_stats.append(ts)
+        if maps is not None:
+            map_stats.append(maps.stats)
+        pass_s.append(_time.perf_counter() - t_pass)
+        noise = noise_estimate(sums)
+        elapsed = _time.perf_counter() - t0
+        if on_pass is not None:
+            on_pass(sums, {"pass": i, "passes": sums.count, "elapsed_s": elapsed, "noise_p95": noise["noise_p95"]})
+        # -- Stop? ------------------------------------------------------------------------------
+        if last is not None and i >= last:
+            stop = "passes"
+            break
+        if settings.noise_threshold > 0 and noise["noise_p95"] <= settings.noise_threshold:
+            stop = "noise_threshold"
+            break
+        if settings.time_limit > 0 and elapsed + pass_s[-1] > settings.time_limit:
+            stop = "time_limit"
+            break
+        if cancel is not None and cancel():
+            stop = "cancelled"
+            break
+        i += 1
+    info = {
+        "passes": sums.count,
+        "pass_first": sums.first,
+        "pass_end": sums.end,
+        "stopped_by": stop,
+        "shrink_alpha": alpha,
+        "kernel_dims": 2 if psettings.estimator == "STANDARD" else 3,
+        "kernel_radius_scale": (map_stats[-1]["kernel_radius_scale"] if map_stats else 1.0),
+        "noise_p95": noise["noise_p95"],
+        "noise_mean": noise["noise_mean"],
+        "noise_flip_visible": flip_visible_fraction(sums),
+        "pass_seconds": pass_s,
+        "pilot_s": pilot.seconds if pilot is not None else 0.0,
+        "time_scale": s,
+    }
+    if map_stats:
+        for kind in ("caustic", "global"):
+            info[f"{kind}_median_radius"] = map_stats[-1].get(f"{kind}_median_radius", 0.0)
+            info[f"{kind}_photons_per_estimate"] = map_stats[-1].get(f"{kind}_photons_per_estimate", 0.0)
+    for k in list(info):
+        if isinstance(info[k], float) and not math.isfinite(info[k]):
+            info[k] = None
+    return sums, info, trace_stats, map_stats
+
+
+def summary(info: dict) -> str:
+    """One line for the render report and the CLI: passes, why it stopped, noise, kernel size."""
+    noise = info.get("noise_p95")
+    flip = info.get("noise_flip_visible")
+    parts = [f"{info.get('passes', 0)} passes ({info.get('pass_first', 1)}.."
+             f"{info.get('pass_end', 1) - 1}), stopped by {str(info.get('stopped_by', '?')).replace('_', ' ')}"]
+    if noise is not None:
+        parts.append(f"noise {noise:.4f} (95th percentile of 8x8 blocks)")
+    if flip is not None:
+        parts.append(f"{100 * flip:.1f} % of pixels differ visibly between the odd and even passes")
+    if info.get("kernel_radius_scale") is not None:
+        parts.append(f"kernel radius x{info['kernel_radius_scale']:.3f} of pass 1's")
+    return "; ".join(parts)
