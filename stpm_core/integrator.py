@@ -285,10 +285,19 @@ def _photon_terms(ctx, sh, hits, d, C, t_s, stats: TraceStats, dsts, idx_k, use_
     n_q_rows = _K.photon_albedo(sh, hits.position, hits.ns, d, C, ctx.ggx[0], t_s, rho, p_q, n_q, t_q, live)
     if n_q_rows == 0:
         return
+    extra = {}
+    if getattr(ctx.maps, "per_pixel", False):
+        # maps keeping statistics per pixel (compare's SPPM baseline) are told each query's pixel
+        rows = sh[live[:n_q_rows]]
+        samples = idx_k[rows] if use_idx else rows
+        x0, y0, tw, S, W = _SCRATCH.tile
+        p = samples // S
+        extra["pixels"] = (y0 + p // tw) * W + x0 + p % tw
     for kind, name in (("caustic", "Caustic"), ("global", "Indirect")):
         if not ctx.map_kinds.get(kind, False):
             continue
-        E = np.ascontiguousarray(ctx.maps.estimate(kind, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows]), np.float64)
+        E = np.ascontiguousarray(ctx.maps.estimate(kind, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows], **extra),
+                                 np.float64)
         stats.photon_lookups += n_q_rows
         _K.photon_add(dsts[name], sh, live[:n_q_rows], rho, E, idx_k, use_idx, beta_k, use_beta, ctx.clamp_indirect)
         touched.add(name)
@@ -517,7 +526,8 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
     # The camera uniforms: positions (P, S, 2), then time keys and jitters (P, S) (drawn into reused buffers)
     jit = rng.random(out=_scratch("jit", (P, S, 2)))
     px, py, xi = _scratch("px", (n,)), _scratch("py", (n,)), _scratch("xi", (n,))
-    with_time = time_override is None and not shutter.is_instant
+    stratum = isinstance(time_override, tuple)          # (lo, hi) of the shutter's mass: a progressive pass
+    with_time = (time_override is None or stratum) and not shutter.is_instant
     if with_time:
         perm_u = rng.random(out=_scratch("perm_u", (P, S)))
         time_u = rng.random(out=_scratch("time_u", (P, S)))
@@ -525,7 +535,10 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
         skip_uniforms(rng, 2 * P * S)
         perm_u = time_u = np.zeros((P, 0))
     _K.camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, film.radius, BH_INVERSE_CDF, px, py, xi)
-    if time_override is not None:
+    if stratum and with_time:
+        lo, hi = time_override
+        times = shutter.sample(lo + (hi - lo) * xi)
+    elif time_override is not None and not stratum:
         times = np.full(n, float(time_override))
     else:
         times = shutter.sample(xi if with_time else np.zeros(n))
@@ -537,6 +550,7 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
     _K.camera_rays(px, py, int(resolution[0]), int(resolution[1]), float(half_w), float(half_h), float(cx),
                    float(cy), R, pos, cam.type == "ORTHO", float(cam.clip_start), float(cam.clip_end), o, d, tmax0)
     axis = np.ascontiguousarray(-R[:, :, 2])
+    _SCRATCH.tile = (x0, y0, tw, S, int(resolution[0]))     # a sample's pixel, for per-pixel maps
     touched: set = set()
     layout = ctx.layout
     V = shade_paths(ctx, o, d, times, tmax0, rng, tstats, pos, axis,
@@ -561,7 +575,9 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     scene, settings : Scene, RenderSettings (samples, seed, max_depth, filter_width).
     caster : from ``make_caster(scene)``; lights : ``LightSet(scene)``.
     maps : ``PhotonMaps`` or None (then Caustic and Indirect are 0).
-    time_override : every camera sample at this normalised time (accumulation stills).
+    time_override : every camera sample at this normalised time (accumulation stills), or a tuple
+        (lo, hi) of shutter mass: the camera samples' times stratified over that part of the shutter
+        only (a progressive pass's time stratum).
     stream : extra random stream id (the accumulation instant), so stills differ.
     progress(fraction, message), cancel() -> bool: polled once per batch.
     """

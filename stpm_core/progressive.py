@@ -46,6 +46,28 @@ FLIP_VISIBLE = 0.05           # an LDR-FLIP error above this between the halves 
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
+STRATIFY_TIME = True          # each pass renders a time stratum of the shutter (pass_stratum); False: the whole shutter
+
+
+def pass_stratum(i: int) -> tuple[float, float]:
+    """The part of the shutter pass i (1-based) renders, as (lo, hi) of the shutter's mass.
+
+    Passes come in rounds of B = 2^floor(log2 i) passes (1, 2, 4, 8, ...); round B cuts the shutter
+    into B strata of equal mass and its passes take them in bit-reversed order (0, 1/2, 1/4, 3/4,
+    ...), so every round covers the shutter once and any run of passes spreads over it.  A pass's
+    photons and camera samples all have times in its stratum: the time a kernel can blur over
+    shrinks like 1 / i, and the photons of a pass are w = 1 / B times denser in time.
+    """
+    if i < 1:
+        raise ValueError(f"pass index must be >= 1, got {i}")
+    if not STRATIFY_TIME:
+        return 0.0, 1.0
+    bits = i.bit_length() - 1
+    B = 1 << bits
+    j = int(format(i - B, f"0{bits}b")[::-1], 2) if bits else 0
+    return j / B, (j + 1) / B
+
+
 def pass_seed(seed: int, i: int) -> int:
     """The seed of pass i (1-based): a pure function of (seed, i), the same on every machine."""
     return int(rng_for(seed, STREAM_PASS, i).integers(0, 2**62))
@@ -222,13 +244,17 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
         t_pass = _time.perf_counter()
         seed_i = pass_seed(settings.seed, i)
         pset = psettings.replace(seed=seed_i)
+        u_lo, u_hi = pass_stratum(i)
+        stratum = (u_lo, u_hi) if (u_lo, u_hi) != (0.0, 1.0) else None
         try:
             maps = None
             if with_photons:
-                raw = build_photon_maps(scene, pset.replace(time_scale=s), caster, lights,
+                raw = build_photon_maps(scene, pset.replace(time_scale=s), caster, lights, time_override=stratum,
                                         progress=lambda f, m: span(0.3 * f, m), cancel=cancel)
-                maps = ProgressiveMaps(raw, pilot, pass_index=i, alpha=alpha, kernel=psettings.kernel)
-            img, ts = trace_image(scene, pset, caster, lights, maps, table=table, stream=i,
+                t_lo, t_hi = scene.shutter.sample(np.array([u_lo, u_hi]))
+                maps = ProgressiveMaps(raw, pilot, pass_index=i, alpha=alpha, kernel=psettings.kernel,
+                                       stratum=(t_lo, t_hi, u_hi - u_lo))
+            img, ts = trace_image(scene, pset, caster, lights, maps, table=table, stream=i, time_override=stratum,
                                   progress=lambda f, m: span(f, m), cancel=cancel,
                                   progress_span=(0.3 if maps is not None else 0.0, 1.0))
         except RenderCancelled:

@@ -158,10 +158,11 @@ class Shutter:
             return np.ones_like(u)
         return np.interp(u, self._cdf_u, self._w) / self._total
 
-    def parabola_integral(self, t: np.ndarray, half_width: np.ndarray) -> np.ndarray:
+    def parabola_integral(self, t: np.ndarray, half_width: np.ndarray, lo=0.0, hi=1.0) -> np.ndarray:
         """Exact ``I = integral over [a, b] of (h^2 - (tau - t)^2) g(tau) dtau`` (n,), shutter^3.
 
-        t (n,) times, half_width h (n,) >= 0; ``[a, b] = [t - h, t + h]`` cut to [0, 1], where the
+        t (n,) times, half_width h (n,) >= 0; ``[a, b] = [t - h, t + h]`` cut to [lo, hi] (scalars or
+        (n,), within [0, 1]; default the shutter), where the
         parabola is >= 0; g the density.  ``pi s^2 I`` is KD4D's clipped ball measure
         (``slab_ball_volume``, docs/photon-mapping.md).
 
@@ -180,8 +181,8 @@ class Shutter:
         """
         t = np.asarray(t, dtype=np.float64)
         hw = np.asarray(half_width, dtype=np.float64)
-        a = np.clip(t - hw, 0.0, 1.0)
-        b = np.maximum(np.clip(t + hw, 0.0, 1.0), a)
+        a = np.clip(t - hw, lo, hi)
+        b = np.maximum(np.clip(t + hw, lo, hi), a)
         if self.is_box:
             xa, xb = a - t, b - t
             return (xb - xa) * np.maximum(hw * hw - (xa * xa + xa * xb + xb * xb) / 3.0, 0.0)

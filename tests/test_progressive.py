@@ -63,6 +63,43 @@ def test_automatic_alpha_follows_the_kernel_dimension():
     assert auto_shrink_alpha("TEMPORAL") == pytest.approx(0.4) == auto_shrink_alpha("KD4D")
 
 
+def test_pass_strata_cover_the_shutter_once_per_round():
+    from stpm_core.progressive import pass_stratum
+    assert pass_stratum(1) == (0.0, 1.0)
+    assert [pass_stratum(i) for i in (2, 3)] == [(0.0, 0.5), (0.5, 1.0)]
+    assert [pass_stratum(i)[0] for i in range(4, 8)] == [0.0, 0.5, 0.25, 0.75]      # bit-reversed
+    for B in (8, 64, 1024):
+        lo = sorted(pass_stratum(i) for i in range(B, 2 * B))
+        assert lo[0][0] == 0.0 and lo[-1][1] == 1.0
+        assert all(a[1] == b[0] for a, b in zip(lo, lo[1:]))                      # no gap, no overlap
+        assert all(hi - lo_ == 1.0 / B for lo_, hi in lo)
+
+
+def test_a_pass_traces_photons_and_camera_samples_in_its_stratum():
+    from stpm_core.integrator import trace_image
+    from stpm_core.lights import LightSet
+    from stpm_core.photons import build_photon_maps
+    from stpm_core.raycast import make_caster
+    scene = moving_caustic_scene((24, 16))
+    st = RenderSettings(**dict(BASE, photons_caustic=4000))
+    caster, lights = make_caster(scene), LightSet(scene)
+    maps = build_photon_maps(scene, st, caster, lights, time_override=(0.25, 0.5))
+    t = maps.maps["caustic"].time
+    assert t.size > 100 and t.min() >= 0.25 and t.max() <= 0.5
+    seen = []
+
+    class Spy:
+        def has(self, kind):
+            return kind == "caustic"
+
+        def estimate(self, kind, p, ns, tq):
+            seen.append(np.asarray(tq).copy())
+            return np.zeros((len(p), 3))
+    trace_image(scene, st, caster, lights, Spy(), time_override=(0.25, 0.5))
+    tq = np.concatenate(seen)
+    assert tq.min() >= 0.25 and tq.max() <= 0.5 and tq.max() - tq.min() > 0.2
+
+
 def test_settings_refuse_a_progressive_render_that_never_stops_and_bad_alphas():
     with pytest.raises(SettingsError, match="never stop"):
         RenderSettings(method="PROGRESSIVE", passes=0)

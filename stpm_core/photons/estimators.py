@@ -102,19 +102,20 @@ def shutter_mass(shutter, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.maximum(_shutter_cdf(shutter, b) - _shutter_cdf(shutter, a), 0.0)
 
 
-def slab_ball_volume(shutter, R: np.ndarray, t: np.ndarray, s: float) -> np.ndarray:
+def slab_ball_volume(shutter, R: np.ndarray, t: np.ndarray, s: float, lo=0.0, hi=1.0) -> np.ndarray:
     """Area x shutter-mass measure (n,) m^2 of 3-balls in (u, v, s*t) clipped to t in [0, 1].
 
     ``V/s = integral_{[a, b]} pi (R^2 - s^2 (tau - t)^2) g(tau) dtau = pi s^2 I(t, R/s)`` over the
     ball's time span ``[a, b] = [t - R/s, t + R/s]`` cut to [0, 1]: the disc the ball cuts at
     time tau, weighted by the shutter density g.  R (n,) m, t (n,) normalised shutter time,
-    s in m per shutter.  ``I = Shutter.parabola_integral`` is exact for the piecewise-linear g:
+    s in m per shutter; lo, hi: clip to [lo, hi] instead of the shutter (a progressive pass's time
+    stratum).  ``I = Shutter.parabola_integral`` is exact for the piecewise-linear g:
     closed form for a box shutter ((4/3) pi R^3 / s unclipped), per curve segment otherwise; it is
     > 0 wherever [a, b] overlaps the density's support and exactly 0 where it does not (no photon
     can be there: the caller's Phi is 0 too).
     """
     R = np.asarray(R, dtype=np.float64)
-    return np.pi * s * s * shutter.parabola_integral(np.asarray(t, dtype=np.float64), R / s)
+    return np.pi * s * s * shutter.parabola_integral(np.asarray(t, dtype=np.float64), R / s, lo, hi)
 
 
 # ---------------------------------------------------------------------------

@@ -108,7 +108,9 @@ def build_photon_maps(scene, settings, caster, lights, *, time_override=None, pr
     scene : Scene; settings : RenderSettings; caster : from make_caster(scene);
     lights : LightSet(scene).
     time_override : float or None -- every photon path at this one shutter time
-        (an accumulation-buffer still); estimates then reduce to STANDARD.
+        (an accumulation-buffer still); estimates then reduce to STANDARD.  A tuple (lo, hi) of
+        shutter mass: photon times stratified over that part of the shutter only (a progressive
+        pass's time stratum).
     progress : progress(fraction, message) or None; cancel : () -> bool or None
         (raises RenderCancelled between batches).
     """

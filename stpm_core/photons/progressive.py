@@ -193,8 +193,12 @@ class ProgressiveMaps:
     kernel-smoothed density).
     """
 
-    def __init__(self, maps, pilot: Pilot, *, pass_index: int, alpha: float, kernel: str = "BOX"):
+    def __init__(self, maps, pilot: Pilot, *, pass_index: int, alpha: float, kernel: str = "BOX",
+                 stratum: tuple | None = None):
         self.maps = maps
+        # the pass's time stratum: (lo, hi) shutter times and its shutter mass w (its photons' and camera
+        # samples' times lie in it); None = the whole shutter
+        self.stratum = (0.0, 1.0, 1.0) if stratum is None else tuple(float(x) for x in stratum)
         self.pilot = pilot
         self.pass_index = int(pass_index)
         self.alpha = float(alpha)
@@ -229,38 +233,48 @@ class ProgressiveMaps:
         pm = self.pilot.maps.maps[kind]
         q[:, :3] = p - pm.origin
         r, tau = self.pilot.initial_size(kind, q, ns)
-        r = r * self.radius_scale
         ok = np.isfinite(r)
-        # -- photons of this pass inside each region -----------------------------------------------
-        q[:, :3] = p - m.origin
+        r = np.where(ok, r, 0.0)
+        c = self.radius_scale
+        lo, hi, w = self.stratum
         timeless = self.estimator == "STANDARD" or m.timeless or pm.timeless
         cone = self.kernel == "CONE"
-        rr = np.where(ok, r, 0.0)
+        disc = 1.0 - 2.0 / (3.0 * CONE_K) if cone else 1.0     # mean cone weight over a disc
+        ball = 1.0 - 3.0 / (4.0 * CONE_K) if cone else 1.0     # ... over a ball
         half = None
+        # -- this pass's region at each query: the pilot's, shrunk by the schedule ------------------
+        # (pass photons lie in the stratum, at w-fold time density: a region holds k V_i / V_1 of them
+        # when its measure, clipped to the stratum and divided by w, is the pilot's times V_i / V_1)
         if timeless:
-            tree = m.flat_tree(3)
+            r = r * c                                            # a disc over the whole stratum
+        elif tau is not None:
+            W0 = shutter_mass(m.shutter, t - tau, t + tau)       # the pilot's window, as a pass-1 region
+            tau = tau * c
+            Wc = shutter_mass(m.shutter, np.maximum(t - tau, lo), np.minimum(t + tau, hi))
+            r = r * np.sqrt(np.where(Wc > 0, W0 * c ** 3 * w / np.maximum(Wc, 1e-300), 0.0))
+            half = s * tau                                       # the cylinder's half-height in s t
         else:
-            tree = m.flat_tree(4)
-            if tau is not None:
-                tau = np.where(ok, tau * self.radius_scale, 0.0)
-                half = s * tau                                   # the cylinder's half-height in s t
-        Phi, cnt = tree.range_sum(q, ns, rr, half, cone, CONE_K, m.workers)
-        # -- normalise by the region's measure (area, or area x shutter mass) ----------------------
-        rr = np.maximum(rr, 1e-12)
+            r = r * c * w ** (1.0 / 3.0)                         # the 4D ball, unclipped
+        # -- photons of this pass inside each region -----------------------------------------------
+        q[:, :3] = p - m.origin
+        tree = m.flat_tree(3) if timeless else m.flat_tree(4)
+        Phi, cnt = tree.range_sum(q, ns, r, half, cone, CONE_K, m.workers)
+        # -- normalise by the region's measure in the stratum (area x its share of the stratum's mass) --
+        rr = np.maximum(r, 1e-12)
         if timeless:
-            measure = (1.0 - 2.0 / (3.0 * CONE_K) if cone else 1.0) * np.pi * rr * rr
+            measure = disc * np.pi * rr * rr
         elif half is not None:
-            W = shutter_mass(m.shutter, t - tau, t + tau)
-            measure = (1.0 - 2.0 / (3.0 * CONE_K) if cone else 1.0) * np.pi * rr * rr * W
+            measure = disc * np.pi * rr * rr * Wc / w
         else:
-            measure = (1.0 - 3.0 / (4.0 * CONE_K) if cone else 1.0) * slab_ball_volume(m.shutter, rr, t, s)
+            measure = ball * slab_ball_volume(m.shutter, rr, t, s, lo, hi) / w
+        ok &= r > 0
         good = ok & (measure > 0)
         E[good] = Phi[good] / measure[good, None]
         st = self._photons_in[kind]
         st[0] += int(cnt.sum())
         st[1] += n
         if len(self._radius[kind]) < 64:
-            self._radius[kind].append(r[ok][:: max(1, ok.sum() // 256)])
+            self._radius[kind].append(r[ok][:: max(1, int(ok.sum()) // 256)])
         self._lookup_s += _time.perf_counter() - t0
         return E
 

@@ -99,7 +99,11 @@ def split_counts(total: int, weights: np.ndarray) -> np.ndarray:
 
 
 def _times(scene, n: int, rng, time_override) -> np.ndarray:
-    """One shutter time per photon path (n,): stratified shutter samples or the fixed still time."""
+    """One shutter time per photon path (n,): stratified shutter samples, the fixed still time, or
+    (``time_override`` a tuple (lo, hi) of shutter mass) stratified over that part of the shutter."""
+    if isinstance(time_override, tuple):
+        lo, hi = time_override
+        return scene.shutter.sample(lo + (hi - lo) * stratified_1d(n, rng))
     if time_override is not None:
         return np.full(n, float(time_override))
     return scene.shutter.sample(stratified_1d(n, rng))
