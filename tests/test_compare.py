@@ -507,13 +507,20 @@ def test_stpm_compare_command_line(tmp_path, capsys, monkeypatch):
     out = tmp_path / "rep"
     code = main([str(path), "--output", str(out), "--photon-budgets", "1,2:2",
                  "--accumulation-steps", "1,2", "--estimators", "temporal", "--reference-samples", "4",
-                 "--cache-dir", str(tmp_path / "cache"), "--quiet"])
+                 "--progressive-passes", "4", "--cache-dir", str(tmp_path / "cache"), "--quiet"])
     assert code == 0
     printed = capsys.readouterr().out
     assert str(out / "report.html") in printed
     data = json.loads((out / "report.json").read_text())
     assert [r["label"] for r in data["runs"]] == ["ACCUMULATION N=1", "TEMPORAL x1", "ACCUMULATION N=2",
-                                                  "TEMPORAL x2 s2"]
+                                                  "TEMPORAL x2 s2", "PROGRESSIVE TEMPORAL 4 passes",
+                                                  "SPPM 8 passes"]
+    # the progressive curves: measured after passes 1, 2, 4 (and 8), times growing
+    for label, marks in (("PROGRESSIVE TEMPORAL 4 passes", [1, 2, 4]), ("SPPM 8 passes", [1, 2, 4, 8])):
+        curve = _run(data, label)["curve"]
+        assert [c["pass"] for c in curve] == marks
+        assert all(a["wall_s"] < b["wall_s"] for a, b in zip(curve, curve[1:]))
+        assert curve[-1]["rmse"] == pytest.approx(_run(data, label)["rmse"])
     assert _run(data, "TEMPORAL x2 s2")["samples"] == 4
     assert data["reference"]["kind"] == "ray-traced" and data["reference"]["settings"]["samples"] == 8
     assert data["cost"]["target"]["label"] == "ACCUMULATION N=2"          # N=16 not run: the largest below
@@ -523,7 +530,7 @@ def test_stpm_compare_command_line(tmp_path, capsys, monkeypatch):
     assert cli.main(["compare", str(path), "--output", str(out2), "--time-budget", "1e-9", "--quiet"]) == 0
     data2 = json.loads((out2 / "report.json").read_text())
     status = [r["status"] for r in data2["runs"]]
-    assert len(status) == 3 * 5 + 6 and status[0] == "done" and set(status[1:]) == {"skipped"}
+    assert len(status) == 3 * 5 + 6 + 2 and status[0] == "done" and set(status[1:]) == {"skipped"}   # + PROGRESSIVE, SPPM
     assert list((tmp_path / "xdg" / "stpm" / "references").glob("*.npz"))
     # -- bad input: one clear line, non-zero exit ---------------------------------------------
     with pytest.raises(StpmError, match="not found"):

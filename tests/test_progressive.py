@@ -477,3 +477,44 @@ def test_merge_refuses_damaged_partials(parts):
 def test_pass_offset_needs_the_progressive_method(parts):
     out = _cli("render", "mc.stpm", "--pass-offset", "0", "-o", "x.exr", cwd=parts)
     assert out.returncode == 1 and "--method progressive" in out.stderr
+
+
+# ----------------------------------------------------------------------------
+# The SPPM baseline of stpm compare (one instant per pass, pbrt-v4's radius update)
+# ----------------------------------------------------------------------------
+def test_sppm_radius_follows_pbrts_update():
+    from stpm_core.compare.sppm import GAMMA, SPPMMaps, radical_inverse
+    assert [radical_inverse(i) for i in range(5)] == [0.0, 0.5, 0.25, 0.75, 0.125]
+    m = _plane(50_000, 4)
+    pilot = _pilot("STANDARD", 50_000, 5)
+    state = {k: {"R": np.full(10, np.nan), "N": np.zeros(10)} for k in ("caustic", "global")}
+    p = np.column_stack([np.linspace(-0.3, 0.3, 10), np.zeros(10), np.zeros(10)])
+    ns = np.tile(UP, (10, 1))
+    sm = SPPMMaps(_maps(m), pilot, state)
+    E1 = sm.estimate("caustic", p, ns, np.zeros(10), pixels=np.arange(10))
+    R1, N1 = state["caustic"]["R"].copy(), state["caustic"]["N"].copy()
+    q = np.zeros((10, 4))
+    q[:, :3] = p
+    r0, _ = pilot.initial_size("caustic", q, ns.astype(np.float32))
+    _, M = m.flat_tree(3).range_sum(q, ns.astype(np.float32), r0, None, False, 1.1, 1)
+    assert np.allclose(N1, GAMMA * M)
+    assert np.allclose(R1, r0 * np.sqrt(GAMMA * M / M))                  # first pass: N = 0
+    assert abs(E1[:, 0].mean() - 1.0) < 0.1                               # ~30 photons each: noisy but right
+    sm.estimate("caustic", p, ns, np.zeros(10), pixels=np.arange(10))
+    assert np.all(state["caustic"]["R"] < R1)                             # shrinks pass by pass
+
+
+def test_sppm_passes_are_stills_and_strobe_when_few():
+    from stpm_core.compare.sppm import render_sppm
+    scene = moving_caustic_scene(RES)
+    ref = analytic_moving_caustic(RES, sub=6, n_t=128)
+    errs_sppm, errs_prog = {}, {}
+    st = RenderSettings(passes=16, **dict(BASE, samples=1))
+    result = render_sppm(scene, st, on_pass=lambda img, info: errs_sppm.__setitem__(info["pass"],
+                                                                                   _rmse(img["Combined"], ref)))
+    assert result.stats["progressive"]["passes"] == 16 and result.stats["method"] == "SPPM"
+    render(scene, RenderSettings(method="PROGRESSIVE", passes=2, **dict(BASE, samples=1)),
+           on_pass=lambda img, info: errs_prog.__setitem__(info["pass"], _rmse(img["Combined"], ref)))
+    assert errs_sppm[16] < 0.5 * errs_sppm[1]                              # converging
+    # one instant per pass: its first passes are stills of the moving box and caustic
+    assert errs_sppm[1] > 1.3 * errs_prog[1] and errs_sppm[2] > errs_prog[2], (errs_sppm, errs_prog)

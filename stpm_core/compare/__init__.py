@@ -3,8 +3,9 @@
 Modules:
 
 * :mod:`.reference`   -- the reference image: supplied, or computed (TEMPORAL, many photons) and cached;
-* :mod:`.sweep`       -- the runs (STANDARD / TEMPORAL / KD4D x photon budgets, ACCUMULATION x N),
-  their wall time and error;
+* :mod:`.sweep`       -- the runs (STANDARD / TEMPORAL / KD4D x photon budgets, ACCUMULATION x N,
+  the PROGRESSIVE and SPPM curves), their wall time and error;
+* :mod:`.sppm`        -- the SPPM baseline: one shutter instant per pass, pbrt-v4's radius update;
 * :mod:`.metrics`     -- RMSE, relative MSE, FLIP and the error-map images;
 * :mod:`.costs`       -- time for each estimator to reach ACCUMULATION-16's error, speed-up;
 * :mod:`.plots`       -- the log-log error-vs-time chart as inline SVG;

@@ -28,7 +28,8 @@ from ..command_common import (EXIT_OK, FRAME_MAX, FRAME_MIN, CancelFlag, Command
 from ..errors import StpmError
 from .reference import REFERENCE_FACTORS, REFERENCE_METHOD, REFERENCE_METHODS, REFERENCE_STEPS
 from .run import run_compare
-from .sweep import DEFAULT_ACCUMULATION_STEPS, DEFAULT_PHOTON_BUDGETS, PHOTON_ESTIMATORS, parse_budget
+from .sweep import (DEFAULT_ACCUMULATION_STEPS, DEFAULT_PHOTON_BUDGETS, DEFAULT_PROGRESSIVE_PASSES, PHOTON_ESTIMATORS,
+                    parse_budget)
 
 __all__ = ["main", "build_parser", "K_EXPONENT_MAX"]
 
@@ -98,6 +99,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"accumulation-buffer instants (default {','.join(map(str, DEFAULT_ACCUMULATION_STEPS))})")
     p.add_argument("--estimators", type=_estimators, default=list(PHOTON_ESTIMATORS),
                    metavar="standard,temporal,kd4d", help="photon estimators to sweep (default all three)")
+    p.add_argument("--progressive-passes", type=int, dest="progressive_passes", default=DEFAULT_PROGRESSIVE_PASSES,
+                   metavar="P", help="add the progressive method's curve (P passes, measured pass by pass) and the "
+                   f"SPPM baseline (one shutter instant per pass); 0: neither (default {DEFAULT_PROGRESSIVE_PASSES})")
     p.add_argument("--resolution", type=_resolution, metavar="WxH", help="override the scene's resolution")
     p.add_argument("--samples", type=int, metavar="S", help="override the file's samples per pixel")
     p.add_argument("--reference-method", type=str.upper, dest="reference_method", default=REFERENCE_METHOD,
@@ -204,7 +208,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             report = run_compare(scene, settings, out_dir, reference=args.reference, time_budget=args.time_budget,
                                  photon_budgets=args.photon_budgets, accumulation_steps=args.accumulation_steps,
-                                 estimators=args.estimators, k_exponent=args.k_exponent, progress=bar,
+                                 estimators=args.estimators, k_exponent=args.k_exponent,
+                                 progressive_passes=args.progressive_passes, progress=bar,
                                  cancel=cancel, cache_dir=args.cache_dir,
                                  use_cache=not args.no_cache, reference_method=args.reference_method,
                                  reference_photon_factor=args.reference_photons,

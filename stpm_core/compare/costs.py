@@ -3,7 +3,8 @@
 For a metric (RMSE, relative MSE or FLIP) the **target** is the error of
 ACCUMULATION with N = ``target_steps`` instants (16 by default; the largest N
 run at or below it if that run was skipped).  Each photon estimator's runs
-form an error-vs-time curve: their Pareto front (by wall time, each run kept
+form an error-vs-time curve (a PROGRESSIVE or SPPM run is a curve by itself: its
+image measured after passes 1, 2, 4, ...): their Pareto front (by wall time, each run kept
 only if it beats every cheaper run).  The time it needs to reach the target is
 where that front first crosses it, interpolated linearly in log(time) -
 log(error) between the two runs either side.  Cases:
@@ -18,10 +19,24 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["pareto_front", "time_to_reach", "cost_of_accuracy", "METRICS", "TIME_DEPENDENT"]
+__all__ = ["pareto_front", "time_to_reach", "cost_of_accuracy", "curve_points", "METRICS", "TIME_DEPENDENT"]
 
 METRICS = ("rmse", "relmse", "flip")
-TIME_DEPENDENT = ("TEMPORAL", "KD4D")
+TIME_DEPENDENT = ("TEMPORAL", "KD4D", "PROGRESSIVE")
+_ORDER = ("STANDARD", "TEMPORAL", "KD4D", "PROGRESSIVE", "SPPM")
+
+
+def curve_points(runs, method: str, metric: str) -> list:
+    """(wall_s, error) points of ``method``'s finished runs; a PROGRESSIVE / SPPM run gives its curve."""
+    pts = []
+    for r in runs:
+        if r.method != method or r.status != "done":
+            continue
+        if getattr(r, "curve", None):
+            pts.extend((c["wall_s"], c.get(metric)) for c in r.curve)
+        else:
+            pts.append((r.wall_s, r.errors.get(metric)))
+    return pts
 
 
 def pareto_front(points):
@@ -81,13 +96,12 @@ def cost_of_accuracy(runs, *, target_steps: int = 16, metrics=METRICS) -> dict:
                      "wall_s": target.wall_s, **{m: target.errors.get(m) for m in metrics}}
     if target.accumulation_steps != target_steps:
         out["note"] = (f"ACCUMULATION N={target_steps} was not run; the target is {target.label}")
-    estimators = sorted({r.method for r in runs if r.method != "ACCUMULATION"},
-                        key=lambda m: ("STANDARD", "TEMPORAL", "KD4D").index(m))
+    estimators = sorted({r.method for r in runs if r.method != "ACCUMULATION"}, key=_ORDER.index)
     for m in metrics:
         goal = target.errors.get(m)
         per = {}
         for est in estimators:
-            pts = [(r.wall_s, r.errors.get(m)) for r in runs if r.method == est and r.status == "done"]
+            pts = curve_points(runs, est, m)
             if goal is None:
                 per[est] = {"time_s": None, "bound": "no target", "speedup": None}
                 continue

@@ -16,7 +16,8 @@ from .costs import pareto_front
 
 __all__ = ["error_vs_time_svg", "METHOD_COLORS", "log_ticks"]
 
-METHOD_COLORS = {"ACCUMULATION": "#333333", "STANDARD": "#d62728", "TEMPORAL": "#1f77b4", "KD4D": "#2ca02c"}
+METHOD_COLORS = {"ACCUMULATION": "#333333", "STANDARD": "#d62728", "TEMPORAL": "#1f77b4", "KD4D": "#2ca02c",
+                 "PROGRESSIVE": "#9467bd", "SPPM": "#ff7f0e"}
 _FALLBACK_COLORS = ("#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 
 

@@ -194,22 +194,27 @@ def _section_plot(rep: dict) -> str:
     for m in METRICS:
         series = {}
         for r in rep["runs"]:
-            if r["status"] == "done" and r[m] is not None:
+            if r["status"] == "done" and r.get("curve"):
+                series.setdefault(r["method"], []).extend(
+                    (c["wall_s"], c[m], f'{r["label"]}: pass {c["pass"]}') for c in r["curve"] if c.get(m) is not None)
+            elif r["status"] == "done" and r[m] is not None:
                 series.setdefault(r["method"], []).append((r["wall_s"], r[m], r["label"]))
-        order = [k for k in ("ACCUMULATION", "STANDARD", "TEMPORAL", "KD4D") if k in series]
+        order = [k for k in ("ACCUMULATION", "STANDARD", "TEMPORAL", "KD4D", "PROGRESSIVE", "SPPM") if k in series]
         tgt = (target[m], target["label"]) if target and target.get(m) is not None else None
         svgs.append(f'<figure>{error_vs_time_svg({k: series[k] for k in order}, ylabel=METRIC_NAMES[m], target=tgt, width=560, height=360)}'
                     f'<figcaption>{METRIC_NAMES[m]} against render time</figcaption></figure>')
     return ('<section id="plot"><h2>Error against render time</h2>'
             '<p class="note">Log-log; one curve per method (photon estimators: photon budget grows along the '
-            'curve; ACCUMULATION: N grows). Lower-left is better. The dashed line is the target: '
+            'curve; ACCUMULATION: N grows; PROGRESSIVE and SPPM: one render measured after passes 1, 2, 4, ...). '
+            'Lower-left is better. The dashed line is the target: '
             f'{escape(target["label"]) if target else "none"}.</p>'
             f'<div class="row">{"".join(svgs)}</div></section>')
 
 
 def _section_table(rep: dict) -> str:
     names = {"ACCUMULATION": "Accumulation buffer", "STANDARD": "Standard radiance estimate",
-             "TEMPORAL": "Time-dependent estimate (TEMPORAL)", "KD4D": "Time-dependent estimate (KD4D)"}
+             "TEMPORAL": "Time-dependent estimate (TEMPORAL)", "KD4D": "Time-dependent estimate (KD4D)",
+             "PROGRESSIVE": "Progressive, shrinking space-time kernel", "SPPM": "SPPM, one instant per pass (pbrt-v4)"}
     rows = []
     for method, label in rep["best"].items():
         r = next((x for x in rep["runs"] if x["label"] == label), None)

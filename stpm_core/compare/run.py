@@ -104,6 +104,7 @@ def _cross_check(name: str, other, ref, runs, target_steps: int) -> dict:
 def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float | None = None,
                 photon_budgets=DEFAULT_PHOTON_BUDGETS, accumulation_steps=DEFAULT_ACCUMULATION_STEPS,
                 estimators=PHOTON_ESTIMATORS, k_exponent: float = 0.0, target_steps: int = 16,
+                progressive_passes: int = 0,
                 progress=None, cancel=None,
                 cache_dir=None, use_cache: bool = True,
                 reference_method: str = REFERENCE_METHOD, reference_photon_factor: float | None = None,
@@ -125,6 +126,8 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
     k_exponent : e in the photon runs' k = round(f x k x b^e) (0: the file's k; see sweep.budget_k).
     accumulation_steps : the N of the ACCUMULATION runs.
     estimators : which photon estimators to sweep.
+    progressive_passes : P > 0 adds the PROGRESSIVE curve (P passes) and the SPPM baseline
+        (:mod:`stpm_core.compare.sppm`), each measured pass by pass (0: neither).
     target_steps : the accumulation N whose error the estimators must reach (16).
     progress(fraction, message), cancel() -> bool : as for render; progress spans reference + sweep.
         Cancelling during the sweep still writes the report (unfinished runs marked skipped,
@@ -149,7 +152,7 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
     except OSError as e:
         raise StpmError(f"cannot create report directory {out_dir}: {e.strerror or e}") from None
     runs = plan_runs(settings, photon_budgets=photon_budgets, accumulation_steps=accumulation_steps,
-                     estimators=estimators, k_exponent=k_exponent)
+                     estimators=estimators, k_exponent=k_exponent, progressive_passes=progressive_passes)
 
     # -- Progress: the reference weighs like the stills it costs -----------------------------
     ref_weight = 0.0
@@ -209,7 +212,8 @@ def run_compare(scene, settings, out_dir, *, reference=None, time_budget: float 
         "sweep": {"photon_budgets": [list(b) for b in sorted({parse_budget(b) for b in photon_budgets})],
                   "k_exponent": float(k_exponent),
                   "accumulation_steps": sorted({int(n) for n in accumulation_steps}),
-                  "estimators": list(estimators), "target_steps": int(target_steps), **sweep},
+                  "estimators": list(estimators), "target_steps": int(target_steps),
+                  "progressive_passes": int(progressive_passes), **sweep},
         "consistent": consistent,
         "runs": [r.to_json() for r in runs],
         "best": best,

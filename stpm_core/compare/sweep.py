@@ -11,7 +11,14 @@ Runs (:func:`plan_runs`):
   N x the file's camera samples per pixel; k may grow with the photons
   because a consistent estimate needs k -> infinity as well as k / N -> 0;
 * ACCUMULATION with N instants for each N: N complete stills with the file's
-  settings (its k too, whatever the budgets say), averaged (``stpm_core.render``).
+  settings (its k too, whatever the budgets say), averaged (``stpm_core.render``);
+* with ``progressive_passes`` P > 0, two progressive curves: method PROGRESSIVE
+  (the file's estimator form, TEMPORAL unless KD4D; P passes of the file's photons
+  and samples) and the SPPM baseline (``sppm.render_sppm``: one shutter instant
+  per pass, 1 sample per pixel, P x the file's samples passes, so both take
+  the same camera samples).  Each is one render whose image is measured after
+  passes 1, 2, 4, ... and P: its ``curve`` of (wall time, error) points, the time
+  spent measuring taken out.
 
 Runs go cheapest first (estimated cost in stills: a photon run at budget
 (b, s) is about (b + s) / 2 stills, ACCUMULATION N about N), so a time budget that
@@ -34,11 +41,13 @@ from ..errors import RenderCancelled, StpmError
 from .metrics import combined_rgb, image_errors
 
 __all__ = ["Run", "plan_runs", "parse_budget", "budget_k", "budget_label", "run_sweep", "warm_up", "is_consistent",
-           "PHOTON_ESTIMATORS", "METHOD_ORDER",
-           "DEFAULT_PHOTON_BUDGETS", "DEFAULT_ACCUMULATION_STEPS"]
+           "PHOTON_ESTIMATORS", "METHOD_ORDER", "CURVE_METHODS",
+           "DEFAULT_PHOTON_BUDGETS", "DEFAULT_ACCUMULATION_STEPS", "DEFAULT_PROGRESSIVE_PASSES", "checkpoints"]
 
 PHOTON_ESTIMATORS = ("STANDARD", "TEMPORAL", "KD4D")
-METHOD_ORDER = ("ACCUMULATION", "STANDARD", "TEMPORAL", "KD4D")
+METHOD_ORDER = ("ACCUMULATION", "STANDARD", "TEMPORAL", "KD4D", "PROGRESSIVE", "SPPM")
+CURVE_METHODS = ("PROGRESSIVE", "SPPM")        # one render each, measured pass by pass
+DEFAULT_PROGRESSIVE_PASSES = 32
 DEFAULT_PHOTON_BUDGETS = ((1, 1), (4, 1), (16, 1), (4, 4), (16, 4))   # (photons x, samples x[, k x])
 DEFAULT_ACCUMULATION_STEPS = (1, 2, 4, 8, 16, 32)
 _PHASES = ("photon_trace_s", "photon_map_build_s", "photon_lookup_s", "render_s")
@@ -51,8 +60,9 @@ class Run:
     Attributes
     ----------
     label : 'TEMPORAL x4', 'KD4D x16 s4' (16 x photons, 4 x samples), 'KD4D x16 s4 k15' (k = 15, not
-        the file's), 'ACCUMULATION N=16', ...
-    method : 'STANDARD' | 'TEMPORAL' | 'KD4D' | 'ACCUMULATION' (the curve it belongs to).
+        the file's), 'ACCUMULATION N=16', 'PROGRESSIVE TEMPORAL 32 passes', 'SPPM 128 passes', ...
+    method : 'STANDARD' | 'TEMPORAL' | 'KD4D' | 'ACCUMULATION' | 'PROGRESSIVE' | 'SPPM' (the curve it
+        belongs to).
     settings : the RenderSettings it renders with.
     photon_factor : photons as a multiple of the file's (1 for ACCUMULATION: per still).
     sample_factor : samples per pixel as a multiple of the file's (1 for ACCUMULATION: per still).
@@ -63,6 +73,7 @@ class Run:
     wall_s, phases : seconds from the render's stats.
     errors : {'rmse', 'relmse', 'flip'} against the reference (None where not computed).
     rgb : (H, W, 3) float32 Combined RGB (done runs), flip_map : (H, W, 3) magma map or None.
+    curve : PROGRESSIVE / SPPM: [{'pass', 'wall_s', 'rmse', 'relmse', 'flip'}] after passes 1, 2, 4, ...
     """
 
     label: str
@@ -81,6 +92,7 @@ class Run:
     errors: dict = field(default_factory=lambda: {"rmse": None, "relmse": None, "flip": None})
     rgb: np.ndarray | None = None
     flip_map: np.ndarray | None = None
+    curve: list = field(default_factory=list)
 
     def to_json(self) -> dict:
         """JSON-ready record (no images)."""
@@ -96,6 +108,8 @@ class Run:
             "wall_s": self.wall_s, "phases": dict(self.phases) if self.status == "done" else None,
             "photons_stored": dict(self.photons) if self.status == "done" else None,
             "rmse": self.errors.get("rmse"), "relmse": self.errors.get("relmse"), "flip": self.errors.get("flip"),
+            "passes": int(s.passes) if self.method in CURVE_METHODS else None,
+            "curve": list(self.curve) if self.method in CURVE_METHODS else None,
         }
 
 
@@ -116,6 +130,10 @@ def is_consistent(method: str, settings, scene) -> tuple[bool, str]:
         return True, "4D ball shrinks as photons grow"
     if method == "ACCUMULATION":
         return True, "as N and the photons per still grow"
+    if method == "PROGRESSIVE":
+        return True, "its space-time kernel shrinks pass by pass"
+    if method == "SPPM":
+        return True, "as passes grow (one instant per pass: few passes strobe)"
     raise StpmError(f"unknown method {method!r}")
 
 
@@ -179,13 +197,14 @@ def budget_k(k_file: int, photon_factor: float, k_factor: float = 1.0, k_exponen
 
 def plan_runs(settings, *, photon_budgets=DEFAULT_PHOTON_BUDGETS,
               accumulation_steps=DEFAULT_ACCUMULATION_STEPS, estimators=PHOTON_ESTIMATORS,
-              k_exponent: float = 0.0) -> list[Run]:
+              k_exponent: float = 0.0, progressive_passes: int = 0) -> list[Run]:
     """The sweep's runs, cheapest first (ties: ACCUMULATION, then STANDARD, TEMPORAL, KD4D).
 
     photon_budgets : items b (photons x b), (b, s) / 'b:s' (and samples x s) or (b, s, f) / 'b:s:f'
         (and k = f x the file's k x b^k_exponent, :func:`budget_k`).
     k_exponent : how k grows with the photon factor b in the photon runs (0: the file's k throughout).
         ACCUMULATION always uses the file's settings, k included.
+    progressive_passes : P > 0 adds the PROGRESSIVE and SPPM curves (module docstring); 0: neither.
     """
     budgets = sorted({parse_budget(b) for b in photon_budgets})
     steps = sorted({int(n) for n in accumulation_steps})
@@ -215,9 +234,30 @@ def plan_runs(settings, *, photon_budgets=DEFAULT_PHOTON_BUDGETS,
         st = settings.replace(method="ACCUMULATION", accumulation_steps=n)
         runs.append(Run(label=f"ACCUMULATION N={n}", method="ACCUMULATION", settings=st,
                         accumulation_steps=n, cost=float(n)))
+    # -- Progressive curves: PROGRESSIVE and the SPPM baseline ----------------------------------
+    P = int(progressive_passes)
+    if P < 0:
+        raise StpmError("progressive passes must be >= 0")
+    if P:
+        form = settings.estimator if settings.estimator in ("TEMPORAL", "KD4D") else "TEMPORAL"
+        stops = dict(pass_offset=0, time_limit=0.0, noise_threshold=0.0)
+        st = settings.replace(method="PROGRESSIVE", estimator=form, passes=P, **stops)
+        runs.append(Run(label=f"PROGRESSIVE {form} {P} passes", method="PROGRESSIVE", settings=st, cost=float(P)))
+        n_sppm = P * int(settings.samples)
+        st = settings.replace(method="PHOTON", estimator="STANDARD", passes=n_sppm, **stops)
+        runs.append(Run(label=f"SPPM {n_sppm} passes", method="SPPM", settings=st, cost=0.5 * n_sppm))
     order = {m: i for i, m in enumerate(METHOD_ORDER)}
     runs.sort(key=lambda r: (r.cost, order[r.method]))
     return runs
+
+
+def checkpoints(passes: int) -> set:
+    """Passes after which a curve run is measured: 1, 2, 4, ... and the last."""
+    out, i = {int(passes)}, 1
+    while i < passes:
+        out.add(i)
+        i *= 2
+    return out
 
 
 # ----------------------------------------------------------------------------
@@ -238,21 +278,22 @@ def warm_up(scene, runs: list[Run]) -> float:
     import dataclasses
 
     from ..render import render
+    from .sppm import render_sppm
 
     t0 = _time.perf_counter()
     small = dataclasses.replace(scene, resolution=WARM_UP_RESOLUTION)
     seen = set()
     for run in runs:
         st = run.settings
-        key = (st.method, st.estimator)
+        key = (run.method, st.method, st.estimator)
         if key in seen:
             continue
         seen.add(key)
-        st = st.replace(samples=1, accumulation_steps=1,
+        st = st.replace(samples=1, accumulation_steps=1, passes=2,
                         photons_caustic=min(int(st.photons_caustic), WARM_UP_PHOTONS),
                         photons_global=min(int(st.photons_global), WARM_UP_PHOTONS))
         try:
-            render(small, st)
+            (render_sppm if run.method == "SPPM" else render)(small, st)
         except StpmError:
             pass                      # the timed run will fail again and say why
     return _time.perf_counter() - t0
@@ -299,7 +340,10 @@ def run_sweep(scene, runs: list[Run], reference_rgb: np.ndarray, *, time_budget:
                 progress((_a + _c * float(f)) / total_cost, f"[{_i + 1}/{len(runs)}] {_label}: {msg}")
 
         try:
-            result = render(scene, run.settings, progress=sub, cancel=cancel)
+            if run.method in CURVE_METHODS:
+                result = _render_curve(scene, run, reference_rgb, sub, cancel, with_flip)
+            else:
+                result = render(scene, run.settings, progress=sub, cancel=cancel)
         except RenderCancelled:
             cancelled = True
             run.status, run.note = "skipped", "cancelled"
@@ -327,3 +371,31 @@ def run_sweep(scene, runs: list[Run], reference_rgb: np.ndarray, *, time_budget:
             "time_budget_s": None if time_budget is None else float(time_budget),
             "skipped": [r.label for r in runs if r.status == "skipped"],
             "budget_exhausted": exhausted, "cancelled": cancelled}
+
+
+def _render_curve(scene, run: Run, reference_rgb, progress, cancel, with_flip: bool):
+    """Render a PROGRESSIVE or SPPM run, measuring its image after each checkpoint pass into ``run.curve``.
+
+    The seconds spent measuring are subtracted from the wall times that follow, so the curve's times
+    are the render's own.  Returns the RenderResult (its stats' wall_s corrected the same way).
+    """
+    from ..render import render
+    from .sppm import render_sppm
+
+    marks = checkpoints(run.settings.passes)
+    spent = [0.0]
+    run.curve = []
+
+    def on_pass(passes, info):
+        if info["pass"] not in marks:
+            return
+        t0 = _time.perf_counter()
+        errs = image_errors(combined_rgb(passes), reference_rgb, with_flip=with_flip)
+        run.curve.append({"pass": int(info["pass"]), "wall_s": float(info["elapsed_s"]) - spent[0],
+                          **{m: errs[m] for m in ("rmse", "relmse", "flip")}})
+        spent[0] += _time.perf_counter() - t0
+
+    fn = render_sppm if run.method == "SPPM" else render
+    result = fn(scene, run.settings, progress=progress, cancel=cancel, on_pass=on_pass)
+    result.stats["wall_s"] = float(result.stats.get("wall_s", 0.0)) - spent[0]
+    return result
