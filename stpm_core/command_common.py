@@ -112,63 +112,52 @@ def _lower_choice(*allowed):
     return conv
 
 
+def _option_type(spec):
+    """argparse type of a settings option: the kind's syntax (the range is checked by the schema, exit 1)."""
+    if spec.kind == "enum":
+        return _lower_choice(*(v.lower() for v in spec.values))
+    if spec.kind == "int":
+        return int
+    if spec.kind == "float":
+        return finite_float
+    raise ValueError(f"setting {spec.name!r} of kind {spec.kind!r} has no command-line form")
+
+
 def add_setting_options(parser, skip: tuple[str, ...] = ()) -> None:
     """Add the RenderSettings options shared by ``render`` and ``compare`` (names fixed by interface.md).
 
-    ``skip``: option destinations the caller defines differently (``compare`` sweeps
-    accumulation steps and has its own --samples / --resolution).
+    One option per schema row with a ``flag`` (:data:`stpm_core.settings.RenderSettings.SPECS`):
+    its type from the row's kind, its help from the row's help / doc and range.  ``skip``: option
+    destinations the caller defines differently (``compare`` sweeps accumulation steps and has
+    its own --samples / --resolution).
     """
-    add = parser.add_argument
-
-    def opt(*names, **kw):
-        if kw.get("dest", names[0].lstrip("-")) not in skip:
-            add(*names, **kw)
-    opt("--method", dest="method", type=_lower_choice("photon", "accumulation", "progressive"),
-        metavar="{photon,accumulation,progressive}",
-        help="photon: time-stamped photon maps; accumulation: the average of N stills (the baseline); "
-             "progressive: passes whose space-time kernel shrinks (converges; see --passes, --time-limit)")
-    opt("--estimator", dest="estimator", type=_lower_choice("standard", "temporal", "kd4d"),
-        metavar="{standard,temporal,kd4d}", help="photon density estimate (method photon only)")
-    opt("--accumulation-steps", type=int, dest="accumulation_steps", metavar="N",
-        help="stills averaged by --method accumulation, integer in [1, 4096]")
-    opt("--samples", type=int, dest="samples", metavar="S", help="camera samples per pixel, integer in [1, 65536]")
-    opt("--photons-global", type=int, dest="photons_global", metavar="N",
-        help="photons emitted for the global (indirect) map, integer in [0, 2^31]")
-    opt("--photons-caustic", type=int, dest="photons_caustic", metavar="N",
-        help="photons emitted for the caustic map, integer in [0, 2^31]")
-    opt("--k", type=int, dest="k_nearest", metavar="K", help="photons per estimate, integer in [1, 100000]")
-    opt("--temporal-alpha", type=finite_float, dest="temporal_alpha", metavar="A",
-        help="TEMPORAL candidates as a multiple of k: 0 (automatic) or a number in [1, 1e6]")
-    opt("--time-scale", type=finite_float, dest="time_scale", metavar="S",
-        help="KD4D's scene units per shutter, >= 0 (0: automatic)")
-    opt("--passes", type=int, dest="passes", metavar="N",
-        help="progressive: stop after N passes (0: no pass limit), integer in [0, 2^24]")
-    opt("--time-limit", type=finite_float, dest="time_limit", metavar="S",
-        help="progressive: stop after S seconds of rendering, >= 0 (0: none)")
-    opt("--noise-threshold", type=finite_float, dest="noise_threshold", metavar="T",
-        help="progressive: stop when the estimated per-pixel relative error is below T, >= 0 (0: none)")
-    opt("--shrink-alpha", type=finite_float, dest="shrink_alpha", metavar="A",
-        help="progressive: the kernel's shrink parameter, 0 (automatic) or in (0, 1)")
-    opt("--pass-offset", type=int, dest="pass_offset", metavar="A",
-        help="progressive: index of the first pass (split a frame between machines; join with stpm merge)")
-    opt("--seed", type=int, dest="seed", metavar="S", help="random seed, integer in [0, 2^63 - 1]")
-    opt("--resolution", type=_resolution, dest="resolution", metavar="WxH",
-        help="image size, W and H integers in [1, 65536] (default: the scene's)")
+    from .settings import RenderSettings
+    for spec in RenderSettings.SPECS:
+        if spec.flag is None or spec.name in skip:
+            continue
+        kw = {"type": _option_type(spec), "dest": spec.name, "help": spec.help or spec.doc}
+        if spec.kind == "enum":
+            kw["metavar"] = "{" + ",".join(v.lower() for v in spec.values) + "}"
+        else:
+            kw["metavar"] = spec.metavar
+            kw["help"] += f", {spec.describe()}"
+        parser.add_argument(spec.flag, **kw)
+    if "resolution" not in skip:
+        parser.add_argument("--resolution", type=_resolution, dest="resolution", metavar="WxH",
+                            help="image size, W and H integers in [1, 65536] (default: the scene's)")
 
 
-# Command-line option -> RenderSettings field (only the ones the user gave override).
-_SETTING_OPTIONS = ("method", "estimator", "accumulation_steps", "samples", "photons_global",
-                    "photons_caustic", "k_nearest", "temporal_alpha", "time_scale", "seed", "passes",
-                    "time_limit", "noise_threshold", "shrink_alpha", "pass_offset")
-_OPTION_FLAGS = {"k_nearest": "--k"}
+def _setting_options(skip: tuple[str, ...] = ()) -> tuple:
+    """RenderSettings fields that are command-line options (schema rows with a ``flag``)."""
+    from .settings import RenderSettings
+    return tuple(s.name for s in RenderSettings.SPECS if s.flag is not None and s.name not in skip)
 
 
 def checked_overrides(args, skip: tuple[str, ...] = ()) -> dict:
     """The settings options the user gave (``args`` from :func:`add_setting_options`), as RenderSettings
     field -> value, checked before any (possibly slow, .blend) loading: SettingsError naming the option."""
     from .settings import RenderSettings
-    overrides = {k: getattr(args, k) for k in _SETTING_OPTIONS
-                 if k not in skip and getattr(args, k, None) is not None}
+    overrides = {k: getattr(args, k) for k in _setting_options(skip) if getattr(args, k, None) is not None}
     try:
         RenderSettings().replace(**overrides)
     except SettingsError as e:
@@ -178,10 +167,11 @@ def checked_overrides(args, skip: tuple[str, ...] = ()) -> dict:
 
 def option_message(message: str, overrides: dict) -> str:
     """A SettingsError about an option the user typed, named as typed (``--samples must ...``)."""
+    from .settings import RenderSettings
+    flags = {s.name: s.flag for s in RenderSettings.SPECS if s.flag is not None}
     for key in overrides:
-        if message.startswith(key + " "):
-            flag = _OPTION_FLAGS.get(key, "--" + key.replace("_", "-"))
-            return flag + message[len(key):]
+        if message.startswith(key + " ") and key in flags:
+            return flags[key] + message[len(key):]
     return message
 
 

@@ -52,6 +52,7 @@ import numpy as np
 
 from .errors import SceneError, SettingsError
 from .motion import MotionTransform
+from .schema import check_metadata
 from .nodes.compile import MAX_RAMP, compile_graph
 from .nodes.graph import ShaderGraph
 from .scene import (SCENE_FORMAT_VERSION, Camera, Instance, Light, Material, Mesh, Scene,
@@ -188,6 +189,7 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
         metadata = json.loads(json.dumps(scene.metadata, allow_nan=False))
     except (TypeError, ValueError) as e:
         raise SceneError(f"metadata must be JSON-serialisable: {e}") from None
+    check_metadata(metadata)                        # never write what cannot load
     header = {
         "format": FORMAT_NAME,
         "version": SCENE_FORMAT_VERSION,
@@ -836,13 +838,7 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
     res = h.list("resolution")
     if len(res) != 2 or any(isinstance(x, bool) or not isinstance(x, int) or not 1 <= x <= 65536 for x in res):
         raise SceneError(f"resolution must be two integers in [1, 65536], got {res!r}")
-    metadata = h.raw("metadata")
-    if not isinstance(metadata, dict):
-        raise SceneError(f"metadata must be a JSON object, got {type(metadata).__name__}")
-    if "warnings" in metadata:   # printed by the CLI and the add-on, one line each
-        mw = metadata["warnings"]
-        if not isinstance(mw, list) or not all(isinstance(w, str) for w in mw):
-            raise SceneError(f"metadata.warnings must be a list of strings, got {mw!r:.60}")
+    metadata = check_metadata(h.raw("metadata"))   # the keys STPM reads, typed (stpm_core.schema.METADATA)
 
     scene = Scene(meshes=meshes, instances=instances, camera=cam, lights=lights,
                   materials=materials, world=world, shutter=shutter,
