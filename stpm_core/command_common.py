@@ -13,7 +13,7 @@ so ``stpm --help`` stays quick.
 * the render-settings options both commands take (:func:`add_setting_options`)
   and their check before loading (:func:`checked_overrides`, :func:`option_message`);
 * scenes: :func:`load_any_scene` (core file or .blend, through
-  :mod:`stpm_core.blend_loader`), :func:`scene_kind`, :func:`settings_from_dict`,
+  :mod:`stpm_core.blend_loader`), :func:`open_blend_reader`, :func:`scene_kind`, :func:`settings_from_dict`,
   :class:`stdout_to_stderr`;
 * memory: :func:`check_memory` (:func:`image_memory`, :func:`available_memory`);
 * Ctrl-C / SIGTERM: :class:`CancelFlag` and :func:`check_cancel`.
@@ -26,7 +26,6 @@ import os
 import re
 import signal
 import sys
-import tempfile
 import time
 import unicodedata
 from dataclasses import fields
@@ -36,7 +35,7 @@ from .errors import RenderCancelled, SettingsError, StpmError
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_INTERNAL", "EXIT_CANCELLED", "FRAME_MIN", "FRAME_MAX",
            "UsageError", "CommandParser", "add_setting_options", "checked_overrides", "option_message",
-           "scene_kind", "settings_from_dict", "stdout_to_stderr", "load_any_scene",
+           "scene_kind", "settings_from_dict", "stdout_to_stderr", "load_any_scene", "open_blend_reader",
            "BYTES_PER_PIXEL", "available_memory", "image_memory", "check_memory", "CancelFlag", "check_cancel",
            "finite_float", "safe_text", "BYTES_PER_PHOTON_ESTIMATE", "photon_memory"]
 
@@ -231,77 +230,15 @@ class stdout_to_stderr:
         return False
 
 
-class _BlenderOutput:
-    """Capture file descriptors 1 and 2 while Blender loads a file, then pass on what the user should see.
-
-    Blender writes its log ("Read blend: ...") and its own error lines ("Error:
-    File format is not supported ...") straight to the descriptors from C.  On
-    success the captured lines go to stderr (stdout stays clean for ``plan
-    --json``), without the "Read blend:" line when ``quiet``.  On failure they
-    are dropped: the ``stpm: error:`` line says it once (``STPM_DEBUG`` keeps
-    them).  Ctrl-C messages printed meanwhile go to the real stderr at once.
-    """
-
-    def __init__(self, quiet: bool = False):
-        self.quiet = quiet
-        self._saved = None
-        self.text = ""
-
-    def __enter__(self):
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):
-                pass
-        try:
-            self._tmp = tempfile.TemporaryFile()
-            self._saved = (os.dup(1), os.dup(2))
-        except OSError:  # no real descriptors (embedded): leave them alone
-            self._saved = None
-            return self
-        os.dup2(self._tmp.fileno(), 1)
-        os.dup2(self._tmp.fileno(), 2)
-        flag = CancelFlag.active
-        if flag is not None:
-            self._flag_fd, flag.err_fd = flag.err_fd, self._saved[1]
-        return self
-
-    def __exit__(self, exc_type, exc, tb):
-        if self._saved is None:
-            return False
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):
-                pass
-        os.dup2(self._saved[0], 1)
-        os.dup2(self._saved[1], 2)
-        for fd in self._saved:
-            os.close(fd)
-        flag = CancelFlag.active
-        if flag is not None:
-            flag.err_fd = self._flag_fd
-        self._tmp.seek(0)
-        self.text = self._tmp.read().decode("utf-8", errors="replace")
-        self._tmp.close()
-        if exc_type is not None and not os.environ.get("STPM_DEBUG"):
-            return False
-        keep = [line for line in self.text.splitlines()
-                if line.strip() and not (self.quiet and "Read blend:" in line)]
-        if keep:
-            sys.stderr.write("\n".join(keep) + "\n")
-            sys.stderr.flush()
-        return False
-
-
-def load_any_scene(path, frame: int | None, *, quiet: bool = False, bake: bool = False):
+def load_any_scene(path, frame: int | None, *, quiet: bool = False, bake: bool = False, reader=None):
     """(Scene, RenderSettings, export seconds) from a core scene file or a .blend.
 
-    A core file holds one frame: asking for another is an error.  A .blend is
-    loaded through :func:`stpm_core.blend_loader.load_blend` (the add-on, bpy);
-    Blender's own console output is handled by :class:`_BlenderOutput`
-    (``quiet`` drops its "Read blend:" line).  ``bake``: a .blend's unsupported shader inputs
-    are baked first where no bake is cached (``stpm render``; core files: ignored).
+    A core file holds one frame: asking for another is an error.  A .blend is read in a child
+    process (:class:`stpm_core.blend_loader.BlendReader`: a crash of Blender's reader is one
+    line; Blender's log goes to stderr, ``quiet`` drops its "Read blend:" line; a Ctrl-C kills
+    the child).  ``reader``: an open BlendReader of ``path`` to reuse (a frame range reads the
+    file once); else one is opened for this frame.  ``bake``: a .blend's unsupported shader
+    inputs are baked first where no bake is cached (``stpm render``; core files: ignored).
     """
     path = Path(path)
     if not path.exists():
@@ -319,11 +256,20 @@ def load_any_scene(path, frame: int | None, *, quiet: bool = False, bake: bool =
         if settings is None:
             settings = settings_from_dict(None, path.name)
     else:
-        from .blend_loader import load_blend
-        with _BlenderOutput(quiet=quiet):  # Blender's log: to stderr, or dropped when it failed
-            scene, d = load_blend(path, frame, bake=True) if bake else load_blend(path, frame)
+        if reader is not None:
+            scene, d = reader.scene(frame)
+        else:
+            from .blend_loader import load_blend
+            scene, d = load_blend(path, frame, bake, quiet=quiet, cancel=CancelFlag.active)
         settings = settings_from_dict(d, path.name)
     return scene, settings, time.perf_counter() - t0
+
+
+def open_blend_reader(path, *, quiet: bool = False, bake: bool = False):
+    """A :class:`stpm_core.blend_loader.BlendReader` of ``path`` polling the command's
+    :class:`CancelFlag` (a context manager: use it for every frame of a range)."""
+    from .blend_loader import BlendReader
+    return BlendReader(path, bake=bake, quiet=quiet, cancel=CancelFlag.active)
 
 
 # ----------------------------------------------------------------------------
@@ -441,6 +387,9 @@ class CancelFlag:
         if self.signum is not None:
             from .imageio import remove_pending_temps
             remove_pending_temps()
+            loader = sys.modules.get(__package__ + ".blend_loader")
+            if loader is not None:               # a .blend reader process: killed, its folder removed
+                loader.kill_children()
             lead = "\n" if getattr(sys.stderr, "isatty", lambda: False)() else ""
             self._say(f"{lead}stpm: aborted\n")
             try:
