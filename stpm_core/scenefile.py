@@ -185,11 +185,15 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
     if scene.shutter.curve is not None:
         arrays["shutter/curve"] = np.asarray(scene.shutter.curve, dtype=np.float64)
 
-    try:
-        metadata = json.loads(json.dumps(scene.metadata, allow_nan=False))
-    except (TypeError, ValueError) as e:
+    try:   # NaN passes this first step, so that a typed key holding one is named below
+        metadata = json.loads(json.dumps(scene.metadata))
+    except (TypeError, ValueError, RecursionError) as e:
         raise SceneError(f"metadata must be JSON-serialisable: {e}") from None
     check_metadata(metadata)                        # never write what cannot load
+    try:
+        json.dumps(metadata, allow_nan=False)
+    except ValueError as e:
+        raise SceneError(f"metadata must be JSON-serialisable: {e}") from None
     header = {
         "format": FORMAT_NAME,
         "version": SCENE_FORMAT_VERSION,

@@ -176,6 +176,15 @@ def test_invalid_metadata_is_never_written_and_never_loaded(work, scene, data):
     assert str(e.value) == f"badmeta.stpm: {msg}"
 
 
+def test_a_nan_in_a_typed_metadata_key_is_named(work, scene):
+    """NaN is not JSON: still the key is named, not just 'not JSON-serialisable' (found by the test above)."""
+    import dataclasses
+    with pytest.raises(SceneError, match=r"^metadata\.film_transparent must be true or false, got nan$"):
+        save_scene(dataclasses.replace(scene, metadata={"film_transparent": float("nan")}), work / "nan.stpm")
+    with pytest.raises(SceneError, match="JSON-serialisable"):
+        save_scene(dataclasses.replace(scene, metadata={"free": float("inf")}), work / "inf.stpm")
+
+
 # ----------------------------------------------------------------------------
 # The add-on
 # ----------------------------------------------------------------------------
