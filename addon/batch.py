@@ -1,10 +1,13 @@
 """Batch use without the UI: load a .blend into the core's scene model, or render frames.
 
-* :func:`load_blend` -- used by ``stpm render/plan/compare SCENE.blend``: opens
-  the file with bpy and exports one frame (no RenderEngine: time steps through
-  ``scene.frame_set(frame, subframe=...)`` on the view-layer depsgraph, with
-  viewport visibility and subdivision levels set to their render values for
-  the time of the export: :func:`render_visibility`).
+* :func:`load_blend` -- opens the file with bpy and exports one frame (no RenderEngine:
+  time steps through ``scene.frame_set(frame, subframe=...)`` on the view-layer depsgraph,
+  with viewport visibility and subdivision levels set to their render values for the time
+  of the export: :func:`render_visibility`).
+* :func:`serve` -- the .blend reader process of ``stpm render/plan/compare SCENE.blend``
+  (started by :class:`stpm_core.blend_loader.BlendReader`): opens the file once and writes
+  each frame asked for to a core scene file, so a crash of Blender's own reader ends that
+  process, never ``stpm``.
 * :func:`render_blend` -- renders frames through Blender itself
   (``bpy.ops.render.render``), exactly what ``blender -b f.blend -E STPM -f N``
   does, and writes Blender's multilayer EXR plus a PNG preview per frame.
@@ -14,9 +17,12 @@ Frames are independent: a farm (e.g. Flamenco) runs one task per frame.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import re
 import sys
+import time
+import traceback
 from pathlib import Path
 
 import bpy
@@ -105,9 +111,71 @@ def load_blend(path, frame=None, bake: bool = False) -> tuple:
     """
     scene = _open(path)
     stpm_scene, settings = export_current(scene, frame, bake=bake)
-    stpm_scene.metadata["source"] = str(path)
-    stpm_scene.metadata["frame_range"] = [int(scene.frame_start), int(scene.frame_end)]   # for the CLI's check
+    _note_source(stpm_scene, path, scene)
     return stpm_scene, settings
+
+
+def serve(reply_fd: int) -> None:
+    """Answer the requests of :class:`stpm_core.blend_loader.BlendReader`, then exit (``os._exit``).
+
+    Runs in its own process (``python -c "from addon.batch import serve; serve(FD)"``) whose
+    stdout and stderr are the parent's log of Blender's output.  Requests are JSON lines on
+    stdin, each answered by one JSON line on the descriptor ``reply_fd``:
+
+    * ``{"open": PATH}`` -> ``{"ok": true, "frame_range": [start, end]}``: open the .blend (once);
+    * ``{"frame": F or null, "bake": bool, "out": FILE}`` -> ``{"ok": true, "settings": {...},
+      "export_s": s, "save_s": s}``: export frame F (None: the file's current frame) as
+      :func:`load_blend` does, write it to the core scene file FILE (uncompressed: it is read
+      once, at once) and answer with the file's ``scene.stpm`` values;
+    * a failure -> ``{"ok": false, "kind": "StpmError" | "SettingsError" | ..., "error": line}``
+      for the user's errors, ``{"ok": false, "bug": type, "error": ..., "traceback": ...}`` for
+      anything else.
+
+    End of input ends the process at once (no interpreter or Blender teardown).
+    """
+    from ._core import sub
+    save_scene = sub("scenefile").save_scene
+    reply_to = os.fdopen(reply_fd, "w", encoding="utf-8")
+
+    def reply(**answer) -> None:
+        reply_to.write(json.dumps(answer) + "\n")
+        reply_to.flush()
+
+    path = scene = None
+    while True:
+        line = sys.stdin.readline()
+        if not line:
+            break
+        try:
+            request = json.loads(line)
+            if "open" in request:
+                path = request["open"]
+                scene = _open(path)
+                reply(ok=True, frame_range=[int(scene.frame_start), int(scene.frame_end)])
+                continue
+            if scene is None:
+                raise RuntimeError("no .blend open")
+            t0 = time.perf_counter()
+            stpm_scene, settings = export_current(scene, request["frame"], bake=bool(request["bake"]))
+            _note_source(stpm_scene, path, scene)
+            t1 = time.perf_counter()
+            save_scene(stpm_scene, request["out"], compress=False)
+            del stpm_scene
+            reply(ok=True, settings=settings, export_s=t1 - t0, save_s=time.perf_counter() - t1)
+        except _core.StpmError as e:
+            reply(ok=False, kind=type(e).__name__, error=str(e))
+        except Exception as e:  # noqa: BLE001 -- a bug: the parent reports it as one
+            reply(ok=False, bug=type(e).__name__, error=str(e), traceback=traceback.format_exc())
+    for stream in (sys.stdout, sys.stderr):
+        stream.flush()
+    os._exit(0)
+
+
+def _note_source(stpm_scene, path, scene) -> None:
+    """Record where an exported scene came from: ``metadata['source']`` and ``['frame_range']``."""
+    stpm_scene.metadata["source"] = str(path)
+    if int(scene.frame_start) <= int(scene.frame_end):                                  # for the CLI's check
+        stpm_scene.metadata["frame_range"] = [int(scene.frame_start), int(scene.frame_end)]
 
 
 def _editable(idblock) -> bool:

@@ -37,8 +37,8 @@ from pathlib import Path
 
 from .command_common import (EXIT_CANCELLED, EXIT_ERROR, EXIT_INTERNAL, EXIT_OK, EXIT_USAGE, FRAME_MAX,
                              FRAME_MIN, CancelFlag, CommandParser, UsageError, add_setting_options,
-                             check_cancel, check_memory, checked_overrides, load_any_scene, option_message,
-                             safe_text, scene_kind)
+                             check_cancel, check_memory, checked_overrides, load_any_scene, open_blend_reader,
+                             option_message, safe_text, scene_kind)
 from .errors import RenderCancelled, SceneError, SettingsError, StpmError
 
 __all__ = ["main", "parse_frames", "load_any_scene"]
@@ -250,9 +250,14 @@ def _cmd_render(args) -> int:
     # A frame range keeps the baked static geometry from frame to frame while it does not change
     from .raycast import set_persistent_static
     set_persistent_static(many)
+    # A .blend is read by one child process for the whole range: opened once (blend_loader)
+    reader = open_blend_reader(scene_path, quiet=args.quiet, bake=not getattr(args, "no_bake", False)) \
+        if scene_path.is_file() and scene_kind(scene_path) == "blend" else None
     try:
-        return _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start)
+        return _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, reader)
     finally:
+        if reader is not None:
+            reader.close()
         set_persistent_static(False)
 
 
@@ -272,8 +277,11 @@ def _warn_frames_outside(scene, frames) -> None:
         _warn(f"{which} outside the file's frame range {rng[0]}..{rng[1]} (rendered anyway, as Blender does)")
 
 
-def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) -> int:
+def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, reader=None) -> int:
     """The frame loop of :func:`_cmd_render`: load, render and write each frame.
+
+    ``reader``: a .blend's :class:`~stpm_core.blend_loader.BlendReader` (one child process
+    exporting every frame), None for a core file.
 
     The outputs of a frame (EXR, PNG, stats) are written to temporary files and
     renamed into place together once all are written, so a failure, a kill or a
@@ -291,7 +299,9 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start) 
 
         # -- Scene and settings: file values, then command-line overrides -------------
         scene, settings, export_s = load_any_scene(scene_path, frame, quiet=args.quiet,
-                                                   bake=not getattr(args, "no_bake", False))
+                                                   bake=not getattr(args, "no_bake", False), reader=reader)
+        if reader is not None and index == len(frames) - 1:
+            reader.close()    # the last frame is read: Blender's memory is freed before it renders
         check_cancel(cancel)  # a Ctrl-C while Blender loaded: stop before rendering
         f_out = frame if frame is not None else (int(scene.frame) if float(scene.frame).is_integer() else None)
         out_exr = exr_for(f_out)

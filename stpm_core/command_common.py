@@ -13,7 +13,7 @@ so ``stpm --help`` stays quick.
 * the render-settings options both commands take (:func:`add_setting_options`)
   and their check before loading (:func:`checked_overrides`, :func:`option_message`);
 * scenes: :func:`load_any_scene` (core file or .blend, through
-  :mod:`stpm_core.blend_loader`), :func:`scene_kind`, :func:`settings_from_dict`,
+  :mod:`stpm_core.blend_loader`), :func:`open_blend_reader`, :func:`scene_kind`, :func:`settings_from_dict`,
   :class:`stdout_to_stderr`;
 * memory: :func:`check_memory` (:func:`image_memory`, :func:`available_memory`);
 * Ctrl-C / SIGTERM: :class:`CancelFlag` and :func:`check_cancel`.
@@ -26,7 +26,6 @@ import os
 import re
 import signal
 import sys
-import tempfile
 import time
 import unicodedata
 from dataclasses import fields
@@ -36,7 +35,7 @@ from .errors import RenderCancelled, SettingsError, StpmError
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_INTERNAL", "EXIT_CANCELLED", "FRAME_MIN", "FRAME_MAX",
            "UsageError", "CommandParser", "add_setting_options", "checked_overrides", "option_message",
-           "scene_kind", "settings_from_dict", "stdout_to_stderr", "load_any_scene",
+           "scene_kind", "settings_from_dict", "stdout_to_stderr", "load_any_scene", "open_blend_reader",
            "BYTES_PER_PIXEL", "available_memory", "image_memory", "check_memory", "CancelFlag", "check_cancel",
            "finite_float", "safe_text", "BYTES_PER_PHOTON_ESTIMATE", "photon_memory"]
 
@@ -112,63 +111,52 @@ def _lower_choice(*allowed):
     return conv
 
 
+def _option_type(spec):
+    """argparse type of a settings option: the kind's syntax (the range is checked by the schema, exit 1)."""
+    if spec.kind == "enum":
+        return _lower_choice(*(v.lower() for v in spec.values))
+    if spec.kind == "int":
+        return int
+    if spec.kind == "float":
+        return finite_float
+    raise ValueError(f"setting {spec.name!r} of kind {spec.kind!r} has no command-line form")
+
+
 def add_setting_options(parser, skip: tuple[str, ...] = ()) -> None:
     """Add the RenderSettings options shared by ``render`` and ``compare`` (names fixed by interface.md).
 
-    ``skip``: option destinations the caller defines differently (``compare`` sweeps
-    accumulation steps and has its own --samples / --resolution).
+    One option per schema row with a ``flag`` (:data:`stpm_core.settings.RenderSettings.SPECS`):
+    its type from the row's kind, its help from the row's help / doc and range.  ``skip``: option
+    destinations the caller defines differently (``compare`` sweeps accumulation steps and has
+    its own --samples / --resolution).
     """
-    add = parser.add_argument
-
-    def opt(*names, **kw):
-        if kw.get("dest", names[0].lstrip("-")) not in skip:
-            add(*names, **kw)
-    opt("--method", dest="method", type=_lower_choice("photon", "accumulation", "progressive"),
-        metavar="{photon,accumulation,progressive}",
-        help="photon: time-stamped photon maps; accumulation: the average of N stills (the baseline); "
-             "progressive: passes whose space-time kernel shrinks (converges; see --passes, --time-limit)")
-    opt("--estimator", dest="estimator", type=_lower_choice("standard", "temporal", "kd4d"),
-        metavar="{standard,temporal,kd4d}", help="photon density estimate (method photon only)")
-    opt("--accumulation-steps", type=int, dest="accumulation_steps", metavar="N",
-        help="stills averaged by --method accumulation, integer in [1, 4096]")
-    opt("--samples", type=int, dest="samples", metavar="S", help="camera samples per pixel, integer in [1, 65536]")
-    opt("--photons-global", type=int, dest="photons_global", metavar="N",
-        help="photons emitted for the global (indirect) map, integer in [0, 2^31]")
-    opt("--photons-caustic", type=int, dest="photons_caustic", metavar="N",
-        help="photons emitted for the caustic map, integer in [0, 2^31]")
-    opt("--k", type=int, dest="k_nearest", metavar="K", help="photons per estimate, integer in [1, 100000]")
-    opt("--temporal-alpha", type=finite_float, dest="temporal_alpha", metavar="A",
-        help="TEMPORAL candidates as a multiple of k: 0 (automatic) or a number in [1, 1e6]")
-    opt("--time-scale", type=finite_float, dest="time_scale", metavar="S",
-        help="KD4D's scene units per shutter, >= 0 (0: automatic)")
-    opt("--passes", type=int, dest="passes", metavar="N",
-        help="progressive: stop after N passes (0: no pass limit), integer in [0, 2^24]")
-    opt("--time-limit", type=finite_float, dest="time_limit", metavar="S",
-        help="progressive: stop after S seconds of rendering, >= 0 (0: none)")
-    opt("--noise-threshold", type=finite_float, dest="noise_threshold", metavar="T",
-        help="progressive: stop when the estimated per-pixel relative error is below T, >= 0 (0: none)")
-    opt("--shrink-alpha", type=finite_float, dest="shrink_alpha", metavar="A",
-        help="progressive: the kernel's shrink parameter, 0 (automatic) or in (0, 1)")
-    opt("--pass-offset", type=int, dest="pass_offset", metavar="A",
-        help="progressive: index of the first pass (split a frame between machines; join with stpm merge)")
-    opt("--seed", type=int, dest="seed", metavar="S", help="random seed, integer in [0, 2^63 - 1]")
-    opt("--resolution", type=_resolution, dest="resolution", metavar="WxH",
-        help="image size, W and H integers in [1, 65536] (default: the scene's)")
+    from .settings import RenderSettings
+    for spec in RenderSettings.SPECS:
+        if spec.flag is None or spec.name in skip:
+            continue
+        kw = {"type": _option_type(spec), "dest": spec.name, "help": spec.help or spec.doc}
+        if spec.kind == "enum":
+            kw["metavar"] = "{" + ",".join(v.lower() for v in spec.values) + "}"
+        else:
+            kw["metavar"] = spec.metavar
+            kw["help"] += f", {spec.describe()}"
+        parser.add_argument(spec.flag, **kw)
+    if "resolution" not in skip:
+        parser.add_argument("--resolution", type=_resolution, dest="resolution", metavar="WxH",
+                            help="image size, W and H integers in [1, 65536] (default: the scene's)")
 
 
-# Command-line option -> RenderSettings field (only the ones the user gave override).
-_SETTING_OPTIONS = ("method", "estimator", "accumulation_steps", "samples", "photons_global",
-                    "photons_caustic", "k_nearest", "temporal_alpha", "time_scale", "seed", "passes",
-                    "time_limit", "noise_threshold", "shrink_alpha", "pass_offset")
-_OPTION_FLAGS = {"k_nearest": "--k"}
+def _setting_options(skip: tuple[str, ...] = ()) -> tuple:
+    """RenderSettings fields that are command-line options (schema rows with a ``flag``)."""
+    from .settings import RenderSettings
+    return tuple(s.name for s in RenderSettings.SPECS if s.flag is not None and s.name not in skip)
 
 
 def checked_overrides(args, skip: tuple[str, ...] = ()) -> dict:
     """The settings options the user gave (``args`` from :func:`add_setting_options`), as RenderSettings
     field -> value, checked before any (possibly slow, .blend) loading: SettingsError naming the option."""
     from .settings import RenderSettings
-    overrides = {k: getattr(args, k) for k in _SETTING_OPTIONS
-                 if k not in skip and getattr(args, k, None) is not None}
+    overrides = {k: getattr(args, k) for k in _setting_options(skip) if getattr(args, k, None) is not None}
     try:
         RenderSettings().replace(**overrides)
     except SettingsError as e:
@@ -178,10 +166,11 @@ def checked_overrides(args, skip: tuple[str, ...] = ()) -> dict:
 
 def option_message(message: str, overrides: dict) -> str:
     """A SettingsError about an option the user typed, named as typed (``--samples must ...``)."""
+    from .settings import RenderSettings
+    flags = {s.name: s.flag for s in RenderSettings.SPECS if s.flag is not None}
     for key in overrides:
-        if message.startswith(key + " "):
-            flag = _OPTION_FLAGS.get(key, "--" + key.replace("_", "-"))
-            return flag + message[len(key):]
+        if message.startswith(key + " ") and key in flags:
+            return flags[key] + message[len(key):]
     return message
 
 
@@ -241,77 +230,15 @@ class stdout_to_stderr:
         return False
 
 
-class _BlenderOutput:
-    """Capture file descriptors 1 and 2 while Blender loads a file, then pass on what the user should see.
-
-    Blender writes its log ("Read blend: ...") and its own error lines ("Error:
-    File format is not supported ...") straight to the descriptors from C.  On
-    success the captured lines go to stderr (stdout stays clean for ``plan
-    --json``), without the "Read blend:" line when ``quiet``.  On failure they
-    are dropped: the ``stpm: error:`` line says it once (``STPM_DEBUG`` keeps
-    them).  Ctrl-C messages printed meanwhile go to the real stderr at once.
-    """
-
-    def __init__(self, quiet: bool = False):
-        self.quiet = quiet
-        self._saved = None
-        self.text = ""
-
-    def __enter__(self):
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):
-                pass
-        try:
-            self._tmp = tempfile.TemporaryFile()
-            self._saved = (os.dup(1), os.dup(2))
-        except OSError:  # no real descriptors (embedded): leave them alone
-            self._saved = None
-            return self
-        os.dup2(self._tmp.fileno(), 1)
-        os.dup2(self._tmp.fileno(), 2)
-        flag = CancelFlag.active
-        if flag is not None:
-            self._flag_fd, flag.err_fd = flag.err_fd, self._saved[1]
-        return self
-
-    def __exit__(self, exc_type, exc, tb):
-        if self._saved is None:
-            return False
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):
-                pass
-        os.dup2(self._saved[0], 1)
-        os.dup2(self._saved[1], 2)
-        for fd in self._saved:
-            os.close(fd)
-        flag = CancelFlag.active
-        if flag is not None:
-            flag.err_fd = self._flag_fd
-        self._tmp.seek(0)
-        self.text = self._tmp.read().decode("utf-8", errors="replace")
-        self._tmp.close()
-        if exc_type is not None and not os.environ.get("STPM_DEBUG"):
-            return False
-        keep = [line for line in self.text.splitlines()
-                if line.strip() and not (self.quiet and "Read blend:" in line)]
-        if keep:
-            sys.stderr.write("\n".join(keep) + "\n")
-            sys.stderr.flush()
-        return False
-
-
-def load_any_scene(path, frame: int | None, *, quiet: bool = False, bake: bool = False):
+def load_any_scene(path, frame: int | None, *, quiet: bool = False, bake: bool = False, reader=None):
     """(Scene, RenderSettings, export seconds) from a core scene file or a .blend.
 
-    A core file holds one frame: asking for another is an error.  A .blend is
-    loaded through :func:`stpm_core.blend_loader.load_blend` (the add-on, bpy);
-    Blender's own console output is handled by :class:`_BlenderOutput`
-    (``quiet`` drops its "Read blend:" line).  ``bake``: a .blend's unsupported shader inputs
-    are baked first where no bake is cached (``stpm render``; core files: ignored).
+    A core file holds one frame: asking for another is an error.  A .blend is read in a child
+    process (:class:`stpm_core.blend_loader.BlendReader`: a crash of Blender's reader is one
+    line; Blender's log goes to stderr, ``quiet`` drops its "Read blend:" line; a Ctrl-C kills
+    the child).  ``reader``: an open BlendReader of ``path`` to reuse (a frame range reads the
+    file once); else one is opened for this frame.  ``bake``: a .blend's unsupported shader
+    inputs are baked first where no bake is cached (``stpm render``; core files: ignored).
     """
     path = Path(path)
     if not path.exists():
@@ -329,11 +256,20 @@ def load_any_scene(path, frame: int | None, *, quiet: bool = False, bake: bool =
         if settings is None:
             settings = settings_from_dict(None, path.name)
     else:
-        from .blend_loader import load_blend
-        with _BlenderOutput(quiet=quiet):  # Blender's log: to stderr, or dropped when it failed
-            scene, d = load_blend(path, frame, bake=True) if bake else load_blend(path, frame)
+        if reader is not None:
+            scene, d = reader.scene(frame)
+        else:
+            from .blend_loader import load_blend
+            scene, d = load_blend(path, frame, bake, quiet=quiet, cancel=CancelFlag.active)
         settings = settings_from_dict(d, path.name)
     return scene, settings, time.perf_counter() - t0
+
+
+def open_blend_reader(path, *, quiet: bool = False, bake: bool = False):
+    """A :class:`stpm_core.blend_loader.BlendReader` of ``path`` polling the command's
+    :class:`CancelFlag` (a context manager: use it for every frame of a range)."""
+    from .blend_loader import BlendReader
+    return BlendReader(path, bake=bake, quiet=quiet, cancel=CancelFlag.active)
 
 
 # ----------------------------------------------------------------------------
@@ -451,6 +387,9 @@ class CancelFlag:
         if self.signum is not None:
             from .imageio import remove_pending_temps
             remove_pending_temps()
+            loader = sys.modules.get(__package__ + ".blend_loader")
+            if loader is not None:               # a .blend reader process: killed, its folder removed
+                loader.kill_children()
             lead = "\n" if getattr(sys.stderr, "isatty", lambda: False)() else ""
             self._say(f"{lead}stpm: aborted\n")
             try:

@@ -52,6 +52,7 @@ import numpy as np
 
 from .errors import SceneError, SettingsError
 from .motion import MotionTransform
+from .schema import check_metadata
 from .nodes.compile import MAX_RAMP, compile_graph
 from .nodes.graph import ShaderGraph
 from .scene import (SCENE_FORMAT_VERSION, Camera, Instance, Light, Material, Mesh, Scene,
@@ -184,9 +185,14 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
     if scene.shutter.curve is not None:
         arrays["shutter/curve"] = np.asarray(scene.shutter.curve, dtype=np.float64)
 
+    try:   # NaN passes this first step, so that a typed key holding one is named below
+        metadata = json.loads(json.dumps(scene.metadata))
+    except (TypeError, ValueError, RecursionError) as e:
+        raise SceneError(f"metadata must be JSON-serialisable: {e}") from None
+    check_metadata(metadata)                        # never write what cannot load
     try:
-        metadata = json.loads(json.dumps(scene.metadata, allow_nan=False))
-    except (TypeError, ValueError) as e:
+        json.dumps(metadata, allow_nan=False)
+    except ValueError as e:
         raise SceneError(f"metadata must be JSON-serialisable: {e}") from None
     header = {
         "format": FORMAT_NAME,
@@ -302,10 +308,10 @@ def _put_texture(arrays: dict, i: int, tx) -> dict:
 def _check_texture(where: str, px: np.ndarray, entry: dict) -> None:
     """Texture pixels (H, W, C) and header entry: dtype, shape, finiteness, colour space."""
     if entry["alpha_mode"] not in _ALPHA_MODES:
-        raise SceneError(f"{where}.alpha_mode must be one of {', '.join(_ALPHA_MODES)}, got {entry['alpha_mode']!r}")
+        raise SceneError(f"{where}.alpha_mode must be one of {', '.join(_ALPHA_MODES)}, got {entry['alpha_mode']!r:.60}")
     if entry["colorspace"] not in _TEXTURE_FIELDS["colorspace"]:
         raise SceneError(f"{where}.colorspace must be one of {', '.join(_TEXTURE_FIELDS['colorspace'])}, "
-                         f"got {entry['colorspace']!r}")
+                         f"got {entry['colorspace']!r:.60}")
     if px.dtype not in _TEXTURE_DTYPES:
         raise SceneError(f"{where}.pixels must be a uint8, uint16 or float32 array, got dtype {px.dtype}")
     if px.ndim != 3 or px.shape[0] < 1 or px.shape[1] < 1 or px.shape[2] not in (1, 3, 4):
@@ -332,20 +338,22 @@ def _graph_to_json(graph, where: str, n_textures: int) -> dict:
     return d
 
 
-def save_scene(scene: Scene, path, settings: RenderSettings | None = None) -> Path:
+def save_scene(scene: Scene, path, settings: RenderSettings | None = None, *, compress: bool = True) -> Path:
     """Write ``scene`` (and optionally its render settings) to one file at ``path``.
 
     The scene is validated first (a malformed scene is never written).  The
     file is written to a temporary name and renamed, so a crash never leaves a
     truncated scene behind.  Returns the path written (numpy would append
     ``.npz`` to a bare name; we do not: the name is used as given).
+    ``compress=False`` stores the members without deflate (a file read once at
+    once, such as a .blend reader's hand-over: faster to write and read).
     """
     header, arrays = scene_to_arrays(scene, settings)
     blob = np.frombuffer(json.dumps(header, allow_nan=False).encode("utf-8"), dtype=np.uint8)
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "wb") as f:
-        np.savez_compressed(f, header=blob, **arrays)
+        (np.savez_compressed if compress else np.savez)(f, header=blob, **arrays)
     os.replace(tmp, path)
     return path
 
@@ -372,7 +380,7 @@ class _Fields:
     def num(self, key: str) -> float:
         v = self.raw(key)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise SceneError(f"{self.name(key)} must be a number, got {v!r}")
+            raise SceneError(f"{self.name(key)} must be a number, got {v!r:.60}")
         try:
             v = float(v)
         except OverflowError:  # an integer too large for a float
@@ -384,7 +392,7 @@ class _Fields:
     def int(self, key: str, lo: int = -2**62, hi: int = 2**62) -> int:
         v = self.raw(key)
         if isinstance(v, bool) or not isinstance(v, int):
-            raise SceneError(f"{self.name(key)} must be an integer, got {v!r}")
+            raise SceneError(f"{self.name(key)} must be an integer, got {v!r:.60}")
         if not lo <= v <= hi:
             raise SceneError(f"{self.name(key)} must be in [{lo}, {hi}], got {v}")
         return v
@@ -392,26 +400,26 @@ class _Fields:
     def bool(self, key: str) -> bool:
         v = self.raw(key)
         if not isinstance(v, bool):
-            raise SceneError(f"{self.name(key)} must be true or false, got {v!r}")
+            raise SceneError(f"{self.name(key)} must be true or false, got {v!r:.60}")
         return v
 
     def str(self, key: str) -> str:
         v = self.raw(key)
         if not isinstance(v, str):
-            raise SceneError(f"{self.name(key)} must be a string, got {v!r}")
+            raise SceneError(f"{self.name(key)} must be a string, got {v!r:.60}")
         return v
 
     def enum(self, key: str, allowed: tuple) -> str:
         v = self.raw(key)
         if v not in allowed:
-            raise SceneError(f"{self.name(key)} must be one of {', '.join(allowed)}, got {v!r}")
+            raise SceneError(f"{self.name(key)} must be one of {', '.join(allowed)}, got {v!r:.60}")
         return v
 
     def vec3(self, key: str) -> np.ndarray:
         v = self.raw(key)
         if (not isinstance(v, list) or len(v) != 3
                 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v)):
-            raise SceneError(f"{self.name(key)} must be a list of 3 numbers, got {v!r}")
+            raise SceneError(f"{self.name(key)} must be a list of 3 numbers, got {v!r:.60}")
         try:
             a = np.array(v, dtype=np.float64)
         except OverflowError:
@@ -624,6 +632,13 @@ def _fmt_bytes(n: int) -> str:
     return f"{n} B"
 
 
+def _brief(e: BaseException) -> str:
+    """An exception's text for a one-line error: its first line, at most 160 characters (zipfile
+    quotes whole garbled headers)."""
+    text = (str(e).splitlines() or [""])[0]
+    return text if len(text) <= 160 else text[:157] + "..."
+
+
 def _npy_header(stream, key: str) -> tuple:
     """(shape, dtype, fortran_order, header bytes) of one .npy member, read from its first bytes."""
     from numpy.lib import format as npf
@@ -634,7 +649,7 @@ def _npy_header(stream, key: str) -> tuple:
         shape, fortran, dtype = npf._read_array_header(stream, version, max_header_size=_MAX_NPY_HEADER)
     except (ValueError, SyntaxError, tokenize.TokenError, TypeError, KeyError, EOFError, UnicodeError,
             zipfile.BadZipFile, zlib.error, OverflowError, RecursionError, MemoryError) as e:
-        raise SceneError(f"array {key!r} has a corrupt .npy header ({type(e).__name__}: {e})"
+        raise SceneError(f"array {key!r:.80} has a corrupt .npy header ({type(e).__name__}: {_brief(e)})"
                          .splitlines()[0]) from None
     if dtype.hasobject:
         raise SceneError(f"array {key!r} holds Python objects (dtype {dtype}): not allowed in a scene file")
@@ -703,7 +718,7 @@ def _read_container(path: Path) -> dict[str, np.ndarray]:
             RuntimeError, UnicodeError, OSError, SyntaxError, tokenize.TokenError, MemoryError,
             OverflowError) as e:
         # OSError also covers a file that vanished; a CRC mismatch is a BadZipFile; it is still one line.
-        raise SceneError(f"corrupt or truncated scene file ({type(e).__name__}: {e})".splitlines()[0]) from None
+        raise SceneError(f"corrupt or truncated scene file ({type(e).__name__}: {_brief(e)})") from None
 
 
 def _read_header(data: dict[str, np.ndarray]) -> _Fields:
@@ -722,10 +737,10 @@ def _read_header(data: dict[str, np.ndarray]) -> _Fields:
     h = _Fields(header, "")
     fmt = h.raw("format")
     if fmt != FORMAT_NAME:
-        raise SceneError(f"format must be {FORMAT_NAME!r}, got {fmt!r} (not an STPM scene file)")
+        raise SceneError(f"format must be {FORMAT_NAME!r}, got {fmt!r:.60} (not an STPM scene file)")
     version = h.raw("version")
     if isinstance(version, bool) or not isinstance(version, int):
-        raise SceneError(f"version must be an integer, got {version!r}")
+        raise SceneError(f"version must be an integer, got {version!r:.60}")
     if version > SCENE_FORMAT_VERSION:
         raise SceneError(f"version {version} is newer than this STPM reads ({SCENE_FORMAT_VERSION}); "
                          "update STPM")
@@ -835,14 +850,8 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
     # Scene-wide fields
     res = h.list("resolution")
     if len(res) != 2 or any(isinstance(x, bool) or not isinstance(x, int) or not 1 <= x <= 65536 for x in res):
-        raise SceneError(f"resolution must be two integers in [1, 65536], got {res!r}")
-    metadata = h.raw("metadata")
-    if not isinstance(metadata, dict):
-        raise SceneError(f"metadata must be a JSON object, got {type(metadata).__name__}")
-    if "warnings" in metadata:   # printed by the CLI and the add-on, one line each
-        mw = metadata["warnings"]
-        if not isinstance(mw, list) or not all(isinstance(w, str) for w in mw):
-            raise SceneError(f"metadata.warnings must be a list of strings, got {mw!r:.60}")
+        raise SceneError(f"resolution must be two integers in [1, 65536], got {res!r:.60}")
+    metadata = check_metadata(h.raw("metadata"))   # the keys STPM reads, typed (stpm_core.schema.METADATA)
 
     scene = Scene(meshes=meshes, instances=instances, camera=cam, lights=lights,
                   materials=materials, world=world, shutter=shutter,
@@ -922,8 +931,19 @@ def load_scene_with_settings(path) -> tuple[Scene, RenderSettings | None]:
             except (TypeError, ValueError, OverflowError) as e:  # a value the dataclass cannot take
                 raise SceneError(f"settings: {e}".splitlines()[0]) from None
     except SceneError as e:
-        raise SceneError(f"{path.name}: {e}") from None
+        raise SceneError(_one_line(f"{path.name}: {e}")) from None
     return scene, settings
+
+
+# An error line quotes the file's own text (names, keys, values): at most this many characters
+MAX_ERROR_LINE = 400
+
+
+def _one_line(text: str) -> str:
+    """``text``'s first line, cut to :data:`MAX_ERROR_LINE` characters (a name or value from the
+    file can be megabytes long)."""
+    line = (text.splitlines() or [""])[0]
+    return line if len(line) <= MAX_ERROR_LINE else line[:MAX_ERROR_LINE - 3] + "..."
 
 
 def load_scene(path) -> Scene:

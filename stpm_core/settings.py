@@ -1,171 +1,170 @@
 """Render settings: the same names as Blender's ``scene.stpm`` and ``stpm render``.
 
-See ``shared/interface.md``; names here are fixed (add, never rename).
+See ``shared/interface.md``; names here are fixed (add, never rename).  Each field is one row of
+the typed schema (:mod:`stpm_core.schema`): its kind, default, range or choices and doc are
+declared here once, and the scene-file loader, the command-line options and the add-on's
+``scene.stpm`` properties are derived from ``RenderSettings.SPECS``.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, fields
-
-import numpy as np
+from typing import ClassVar
 
 from .errors import SettingsError
+from .schema import setting, specs_of
 
 __all__ = ["RenderSettings", "METHODS", "ESTIMATORS", "EFFECTS", "KERNELS"]
 
-METHODS = ("PHOTON", "ACCUMULATION", "PROGRESSIVE")
-ESTIMATORS = ("STANDARD", "TEMPORAL", "KD4D")
-EFFECTS = ("AUTO", "MANUAL")
-KERNELS = ("BOX", "CONE")
+# Enum choices: (value, the add-on's label, its description)
+_METHOD_CHOICES = (
+    ("PHOTON", "Time-Dependent Photons", "Time-stamped photon maps: one photon pass for the whole shutter"),
+    ("ACCUMULATION", "Accumulation Buffer", "Average of complete stills at instants across the shutter (baseline)"),
+    ("PROGRESSIVE", "Progressive", "Passes whose space-time kernel shrinks: the image improves pass by pass and "
+                                   "converges; stop at a pass count, a time limit or a noise threshold"),
+)
+_ESTIMATOR_CHOICES = (
+    ("STANDARD", "Standard", "k nearest photons in space, time ignored (wrong on moving receivers)"),
+    ("TEMPORAL", "Temporal", "3D kd-tree, then the candidates nearest in time"),
+    ("KD4D", "4D kd-tree", "One kd-tree over space and scaled time"),
+)
+_EFFECTS_CHOICES = (
+    ("AUTO", "Automatic", "Simulate only what the scene calls for (see stpm plan)"),
+    ("MANUAL", "Manual", "Choose caustics and indirect light yourself"),
+)
+_KERNEL_CHOICES = (
+    ("BOX", "Box", "Constant density-estimation kernel"),
+    ("CONE", "Cone", "Cone filter: sharper caustics, a little more noise"),
+)
+METHODS = tuple(c[0] for c in _METHOD_CHOICES)
+ESTIMATORS = tuple(c[0] for c in _ESTIMATOR_CHOICES)
+EFFECTS = tuple(c[0] for c in _EFFECTS_CHOICES)
+KERNELS = tuple(c[0] for c in _KERNEL_CHOICES)
+
+_PROGRESSIVE_NEEDS_A_STOP = "method PROGRESSIVE would never stop: set passes, time_limit or noise_threshold"
 
 
 @dataclass
 class RenderSettings:
     """Everything that controls a render besides the scene.
 
-    Attributes
-    ----------
-    method : 'PHOTON' (time-stamped photon maps), 'ACCUMULATION' (average of
-        ``accumulation_steps`` complete stills, the baseline) or 'PROGRESSIVE' (passes of
-        ``samples`` camera samples per pixel and ``photons_*`` photons each, read with a
-        space-time kernel that shrinks pass by pass: converges; docs/photon-mapping.md).
-    estimator : 'STANDARD' | 'TEMPORAL' | 'KD4D' radiance estimate.
-    accumulation_steps : instants averaged by ACCUMULATION (>= 1).
-    samples : camera samples per pixel, each at its own shutter time.
-    photons_global : photons emitted for the global (indirect) map.
-    photons_caustic : photons emitted toward specular objects for the caustic map.
-    k_nearest : photons per radiance estimate.
-    temporal_alpha : TEMPORAL candidates as a multiple of k; 0 = automatic and consistent.
-    time_scale : KD4D's s in scene units per shutter; 0 = automatic.
-    seed : all randomness derives from it.
-    effects : 'AUTO' (simulate only what the scene calls for) or 'MANUAL'.
-    caustics, indirect : with effects='MANUAL', whether to build each map.
-    kernel : 'BOX' or 'CONE' density-estimation kernel.
-    max_depth : longest specular chain followed from the camera / photon bounces.
-    glossy_bounces, transmission_bounces : as Cycles' Glossy / Transmission bounces (defaults 4,
-        12): a camera path goes on through at most this many reflections (delta or rough) /
-        refractions, within max_depth in all.  Photon paths follow max_depth only.
-    filter_width : Blackman-Harris pixel filter width in pixels (Blender default 1.5).
-    threads : worker threads for ray casting / look-ups (0 = all cores).
-    passes : PROGRESSIVE: stop after this many passes (0 = no pass limit).
-    time_limit : PROGRESSIVE: stop after this many seconds of rendering (0 = none; as Cycles).
-    noise_threshold : PROGRESSIVE: stop when the estimated per-pixel relative error (95th
-        percentile over 8x8 blocks, from the odd and even passes) is below it (0 = none).
-    shrink_alpha : PROGRESSIVE: the kernel's shrink parameter a of V_{i+1} = V_i (i + a) / (i + 1);
-        0 = automatic (2 / (d + 2) for a d-dimensional kernel: 0.5 on surfaces, 0.4 in space x time).
-    pass_offset : PROGRESSIVE: index of the first pass rendered (a farm splits passes between
-        machines; ``stpm merge`` joins them).
-    clamp_direct, clamp_indirect : Cycles' Clamp Direct / Indirect: the largest channel of one
-        contribution to a sample -- at the camera's first hit (direct: its emission and
-        next-event estimate) or after a bounce and from the photon maps (indirect) -- is scaled
-        down to this value; 0 = off (the default: clamping loses energy).
+    Every field is a schema row (:func:`stpm_core.schema.setting`): its doc, kind and range are
+    listed under Attributes below (generated from the rows: ``RenderSettings.SPECS``).
+    ``validate()`` checks each field against its row, then the rules between fields (a
+    PROGRESSIVE render must have a stop); a bad value raises
+    :class:`~stpm_core.errors.SettingsError` with one line naming the field.
     """
 
-    method: str = "PHOTON"
-    estimator: str = "TEMPORAL"
-    accumulation_steps: int = 8
-    samples: int = 16
-    photons_global: int = 200_000
-    photons_caustic: int = 200_000
-    k_nearest: int = 50
-    temporal_alpha: float = 0.0
-    time_scale: float = 0.0
-    seed: int = 0
-    effects: str = "AUTO"
-    caustics: bool = True
-    indirect: bool = True
-    kernel: str = "BOX"
-    max_depth: int = 8
-    glossy_bounces: int = 4
-    transmission_bounces: int = 12
-    filter_width: float = 1.5
-    threads: int = 0
-    clamp_direct: float = 0.0
-    clamp_indirect: float = 0.0
-    passes: int = 16
-    time_limit: float = 0.0
-    noise_threshold: float = 0.0
-    shrink_alpha: float = 0.0
-    pass_offset: int = 0
+    method: str = setting(
+        "PHOTON", "enum", "'PHOTON' (time-stamped photon maps), 'ACCUMULATION' (average of accumulation_steps "
+        "complete stills, the baseline) or 'PROGRESSIVE' (passes of samples camera samples per pixel and "
+        "photons_* photons each, read with a space-time kernel that shrinks pass by pass: converges; "
+        "docs/photon-mapping.md)",
+        choices=_METHOD_CHOICES, label="Method", flag="--method",
+        help="photon: time-stamped photon maps; accumulation: the average of N stills (the baseline); "
+             "progressive: passes whose space-time kernel shrinks (converges; see --passes, --time-limit)")
+    estimator: str = setting(
+        "TEMPORAL", "enum", "'STANDARD' | 'TEMPORAL' | 'KD4D' radiance estimate",
+        choices=_ESTIMATOR_CHOICES, label="Estimator", flag="--estimator",
+        help="photon density estimate (method photon only)")
+    accumulation_steps: int = setting(
+        8, "int", "instants averaged by ACCUMULATION; each costs about one still", lo=1, hi=4096,
+        label="Accumulation Steps", flag="--accumulation-steps", metavar="N", ui={"soft_max": 64},
+        help="stills averaged by --method accumulation")
+    samples: int = setting(
+        16, "int", "camera samples per pixel, each at its own time in the shutter", lo=1, hi=1 << 16,
+        label="Samples", flag="--samples", metavar="S", ui={"soft_max": 1024})
+    photons_global: int = setting(
+        200_000, "int", "photons emitted for the global (indirect) map", lo=0, hi=1 << 31,
+        label="Global Photons", flag="--photons-global", metavar="N", ui={"soft_max": 10_000_000})
+    photons_caustic: int = setting(
+        200_000, "int", "caustic photons, emitted toward the specular objects for the caustic map",
+        lo=0, hi=1 << 31, label="Caustic Photons", flag="--photons-caustic", metavar="N",
+        ui={"soft_max": 10_000_000})
+    k_nearest: int = setting(
+        50, "int", "photons per radiance estimate (k)", lo=1, hi=100_000, label="Nearest Photons", flag="--k",
+        metavar="K", ui={"soft_max": 500})
+    temporal_alpha: float = setting(
+        0.0, "float", "TEMPORAL's candidates per estimate as a multiple of k; 0 = automatic and consistent, "
+        "1.5 = the paper's", lo=0.0, hi=1e6, gap=1.0, rule="0 (automatic) or >= 1",
+        label="Temporal Alpha", flag="--temporal-alpha", metavar="A", ui={"soft_max": 10.0},
+        help="TEMPORAL candidates as a multiple of k (0: automatic)")
+    time_scale: float = setting(
+        0.0, "float", "KD4D's s in scene units per shutter; 0 = automatic from the scene's motion",
+        lo=0.0, hi=1e30, label="Time Scale", flag="--time-scale", metavar="S", ui={"soft_max": 100.0},
+        help="KD4D's scene units per shutter (0: automatic)")
+    seed: int = setting(
+        0, "int", "all randomness derives from it: same seed, same image", lo=0, hi=2**63 - 1,
+        label="Seed", flag="--seed", metavar="S", help="random seed")
+    effects: str = setting(
+        "AUTO", "enum", "'AUTO' (simulate only what the scene calls for: stpm plan) or 'MANUAL' (caustics "
+        "and indirect say which maps to build)", choices=_EFFECTS_CHOICES, label="Effects")
+    caustics: bool = setting(
+        True, "bool", "with effects MANUAL: build the caustic photon map", label="Caustics")
+    indirect: bool = setting(
+        True, "bool", "with effects MANUAL: build the global photon map", label="Indirect")
+    kernel: str = setting(
+        "BOX", "enum", "'BOX' or 'CONE' density-estimation kernel", choices=_KERNEL_CHOICES, label="Kernel")
+    max_depth: int = setting(
+        8, "int", "longest specular chain followed from the camera, and photon bounces", lo=1, hi=1024,
+        label="Max Depth")
+    glossy_bounces: int = setting(
+        4, "int", "as Cycles' Glossy bounces: reflections (mirror or rough) a camera path goes on through, "
+        "within max_depth (photon paths follow max_depth only)", lo=0, hi=1024, label="Glossy Bounces")
+    transmission_bounces: int = setting(
+        12, "int", "as Cycles' Transmission bounces: refractions a camera path goes on through, within "
+        "max_depth", lo=0, hi=1024, label="Transmission Bounces")
+    filter_width: float = setting(
+        1.5, "float", "Blackman-Harris pixel filter width in pixels (Blender's default 1.5)", lo=0.0, hi=64.0,
+        label="Filter Width", ui={"subtype": "PIXEL"})
+    threads: int = setting(
+        0, "int", "worker threads for ray casting and look-ups (0 = all cores)", lo=0, hi=1024, label="Threads")
+    clamp_direct: float = setting(
+        0.0, "float", "as Cycles' Clamp Direct: the largest channel of one contribution at the camera's first "
+        "hit (its emission and next-event estimate) is scaled down to this value; 0 = off (clamping removes "
+        "fireflies and energy)", lo=0.0, hi=1e30, label="Clamp Direct", ui={"soft_max": 100.0})
+    clamp_indirect: float = setting(
+        0.0, "float", "as Cycles' Clamp Indirect: the same after a bounce and for photon-map light; 0 = off",
+        lo=0.0, hi=1e30, label="Clamp Indirect", ui={"soft_max": 100.0})
+    passes: int = setting(
+        16, "int", "PROGRESSIVE: stop after this many passes (0 = no pass limit); each pass traces the photon "
+        "counts and the samples per pixel set here", lo=0, hi=1 << 24,
+        label="Passes", flag="--passes", metavar="N", ui={"soft_max": 1024},
+        help="progressive: stop after N passes (0: no pass limit)")
+    time_limit: float = setting(
+        0.0, "float", "PROGRESSIVE: stop after this many seconds of rendering (0 = none; as Cycles)",
+        lo=0.0, hi=1e9, label="Time Limit", flag="--time-limit", metavar="S",
+        ui={"soft_max": 3600.0, "subtype": "TIME_ABSOLUTE"},
+        help="progressive: stop after S seconds of rendering (0: none)")
+    noise_threshold: float = setting(
+        0.0, "float", "PROGRESSIVE: stop when the estimated per-pixel relative error (95th percentile over "
+        "8x8 blocks, from the odd and even passes) is below it (0 = none)", lo=0.0, hi=1e6,
+        label="Noise Threshold", flag="--noise-threshold", metavar="T", ui={"soft_max": 0.2, "precision": 4},
+        help="progressive: stop when the estimated per-pixel relative error is below T (0: none)")
+    shrink_alpha: float = setting(
+        0.0, "float", "PROGRESSIVE: the kernel's shrink parameter a of V_{i+1} = V_i (i + a) / (i + 1); smaller "
+        "shrinks faster; 0 = automatic (2 / (d + 2) for a d-dimensional kernel: 0.5 on surfaces, 0.4 in space x "
+        "time)", lo=0.0, hi=1.0, hi_open=True, rule="0 (automatic) or in (0, 1)", label="Shrink Alpha",
+        ui={"precision": 3},
+        flag="--shrink-alpha", metavar="A", help="progressive: the kernel's shrink parameter (0: automatic)")
+    pass_offset: int = setting(
+        0, "int", "PROGRESSIVE: index of the first pass rendered (a farm splits one frame's passes between "
+        "machines; stpm merge joins them)", lo=0, hi=1 << 24, label="Pass Offset", flag="--pass-offset", metavar="A",
+        help="progressive: index of the first pass (split a frame between machines; join with stpm merge)")
+
+    SPECS: ClassVar[tuple] = ()          # the schema rows, in field order (filled below)
 
     def __post_init__(self) -> None:
         self.validate()
 
     def validate(self) -> "RenderSettings":
-        """Raise :class:`SettingsError` naming the first impossible value."""
-        def enum(name, allowed):
-            v = getattr(self, name)
-            if isinstance(v, str):
-                v = v.upper()
-                setattr(self, name, v)
-            if v not in allowed:
-                raise SettingsError(f"{name} must be one of {', '.join(allowed)}, got {v!r}")
-
-        def integer(name, lo, hi=2**62):
-            v = getattr(self, name)
-            if isinstance(v, np.integer) and not isinstance(v, np.bool_):
-                v = int(v)                                   # a numpy integer (bpy, numpy): exact
-                setattr(self, name, v)
-            if isinstance(v, bool) or not isinstance(v, int) or not (lo <= v <= hi):
-                raise SettingsError(f"{name} must be an integer in [{lo}, {hi}], got {v!r:.60}")
-
-        def real(name, lo, hi=float("inf")):
-            v = getattr(self, name)
-            # Numbers only: a string ("0.5"), a boolean or None is refused, not coerced
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
-                raise SettingsError(f"{name} must be a number, got {v!r:.60}")
-            try:
-                v = float(v)
-            except OverflowError:                            # an integer too large for a float
-                raise SettingsError(f"{name} must be in [{lo}, {hi}], got {v!r:.40}") from None
-            if not math.isfinite(v):
-                raise SettingsError(f"{name} must be a finite number in [{lo}, {hi}], got {v}")
-            if not (lo <= v <= hi):
-                raise SettingsError(f"{name} must be in [{lo}, {hi}], got {v}")
-            setattr(self, name, v)
-
-        def boolean(name):
-            # true / false only; the integers 0 and 1 (and numpy booleans) are unambiguous and coerced.
-            # A string ("false") is refused: read as a truth value it would mean the opposite.
-            v = getattr(self, name)
-            if isinstance(v, (bool, np.bool_)) or (isinstance(v, (int, np.integer)) and v in (0, 1)):
-                setattr(self, name, bool(v))
-                return
-            raise SettingsError(f"{name} must be true or false, got {v!r:.60}")
-
-        enum("method", METHODS)
-        enum("estimator", ESTIMATORS)
-        enum("effects", EFFECTS)
-        enum("kernel", KERNELS)
-        boolean("caustics")
-        boolean("indirect")
-        integer("accumulation_steps", 1, 4096)
-        integer("samples", 1, 1 << 16)
-        integer("photons_global", 0, 1 << 31)
-        integer("photons_caustic", 0, 1 << 31)
-        integer("k_nearest", 1, 100_000)
-        integer("seed", 0, 2**63 - 1)
-        integer("max_depth", 1, 1024)
-        integer("glossy_bounces", 0, 1024)
-        integer("transmission_bounces", 0, 1024)
-        integer("threads", 0, 1024)
-        real("temporal_alpha", 0.0, 1e6)
-        if 0.0 < self.temporal_alpha < 1.0:
-            raise SettingsError(f"temporal_alpha must be 0 (automatic) or >= 1, got {self.temporal_alpha}")
-        real("time_scale", 0.0, 1e30)
-        real("filter_width", 0.0, 64.0)
-        real("clamp_direct", 0.0, 1e30)
-        real("clamp_indirect", 0.0, 1e30)
-        integer("passes", 0, 1 << 24)
-        integer("pass_offset", 0, 1 << 24)
-        real("time_limit", 0.0, 1e9)
-        real("noise_threshold", 0.0, 1e6)
-        real("shrink_alpha", 0.0, 1.0)
-        if self.shrink_alpha >= 1.0:
-            raise SettingsError(f"shrink_alpha must be 0 (automatic) or in (0, 1), got {self.shrink_alpha}")
+        """Raise :class:`SettingsError` naming the first impossible value (fields in order, then the
+        rules between fields); values are canonicalised (numpy scalars -> int / float, 0 / 1 -> bool,
+        enums upper-cased)."""
+        for spec in self.SPECS:
+            setattr(self, spec.name, spec.check(getattr(self, spec.name)))
         if self.method == "PROGRESSIVE" and self.passes == 0 and self.time_limit == 0.0 \
                 and self.noise_threshold == 0.0:
-            raise SettingsError("method PROGRESSIVE would never stop: set passes, time_limit or noise_threshold")
+            raise SettingsError(_PROGRESSIVE_NEEDS_A_STOP)
         return self
 
     def to_dict(self) -> dict:
@@ -183,3 +182,8 @@ class RenderSettings:
         d = self.to_dict()
         d.update(changes)
         return RenderSettings.from_dict(d)
+
+
+RenderSettings.SPECS = specs_of(RenderSettings)
+RenderSettings.__doc__ += "\n    Attributes\n    ----------\n" + "".join(
+    f"    {s.name} : {s.doc} ({s.describe()}; default {s.default!r}).\n" for s in RenderSettings.SPECS)

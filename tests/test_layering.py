@@ -2,7 +2,8 @@
 
 * stpm_core never imports bpy (it runs without Blender);
 * stpm_core reaches the add-on (``addon``, where bpy lives) only through the one
-  seam stpm_core/blend_loader.py;
+  seam stpm_core/blend_loader.py, and that one imports none of it: it runs ``addon.batch.serve``
+  in a child process;
 * the two command lines share stpm_core/command_common.py instead of each
   other's internals: stpm_core/compare/* does not import stpm_core.cli, and
   stpm_core/cli.py imports no private (underscore) name from stpm_core.compare.
@@ -70,8 +71,8 @@ CORE_FILES = sorted(p for p in CORE.rglob("*.py") if "__pycache__" not in p.part
 def test_the_walk_sees_the_core_and_its_imports():
     names = {p.relative_to(CORE).as_posix() for p in CORE_FILES}
     assert {"cli.py", "blend_loader.py", "command_common.py", "compare/command.py"} <= names
-    # the parser is not vacuous: the seam's lazy import and cli's shared helpers are seen
-    assert any(_reaches(t, n, "addon") for t, n, _ in _imports(SEAM))
+    # the parser is not vacuous: the seam's imports and cli's shared helpers are seen
+    assert any(t == "stpm_core.errors" for t, _, _ in _imports(SEAM))
     assert any(t == "stpm_core.command_common" for t, _, _ in _imports(CORE / "cli.py"))
     assert any(t == "stpm_core.command_common" for t, _, _ in _imports(CORE / "compare" / "command.py"))
 
@@ -87,6 +88,15 @@ def test_only_the_blend_loader_imports_the_addon(path):
     bad = [f"line {line}: {t}{'.' + n if n else ''}" for t, n, line in _imports(path) if _reaches(t, n, "addon")]
     assert not bad, (f"stpm_core/{path.relative_to(CORE).as_posix()} imports the add-on {bad}: "
                      "go through stpm_core.blend_loader")
+
+
+def test_the_seam_reaches_the_addon_only_in_a_child_process():
+    """blend_loader imports nothing of the add-on (bpy never loads into stpm's own process, so a
+    crash of Blender's reader cannot end it): it starts ``addon.batch.serve`` in a child."""
+    assert not [line for t, n, line in _imports(SEAM) if _reaches(t, n, "addon")]
+    strings = [node.value for node in ast.walk(ast.parse(SEAM.read_text(encoding="utf-8")))
+               if isinstance(node, ast.Constant) and isinstance(node.value, str)]   # f-string parts too
+    assert any("from addon.batch import serve" in text for text in strings)
 
 
 @pytest.mark.parametrize("path", sorted((CORE / "compare").rglob("*.py")), ids=lambda p: p.name)
