@@ -40,6 +40,7 @@ fixed-k render of one pass's photons, and every later pass is sharper.
 from __future__ import annotations
 
 import math
+import threading
 import time as _time
 
 import numpy as np
@@ -56,6 +57,9 @@ PILOT_K = 16                  # photons per pilot search (k_p); fewer than k: th
 CAP_FACTOR = 4.0              # pilot searches stop at CAP_FACTOR x the pilot photons' own 90th-percentile radius
 CAP_SAMPLE = 4096             # pilot photons whose own radius sets the cap
 TEMPORAL_PILOT = 1.5          # TEMPORAL's pilot: spatial candidates per search as a multiple of PILOT_K (the paper's)
+GRID_FRACTION = 0.25          # pilot sizes are read on a grid of cells this x the pilot photons' median radius
+TIME_CELLS = 32               # ... and this many cells across the shutter (space-time kernels)
+_AXIS_BITS = 18               # grid cells per axis: 2^18 (keys: 3 x 18 bits + 7 bits of time)
 STREAM_PILOT = 0x9170         # the pilot's random stream (independent of every pass's)
 
 
@@ -109,6 +113,9 @@ class Pilot:
         self.time_scale = float(time_scale)
         self.seconds = float(seconds)
         self.cap = {}
+        self._median = {}
+        self._grids = {}
+        self._lock = threading.Lock()
 
     def _tree(self, kind: str):
         """(the pilot map's kd-tree for this kernel, its dimension d)."""
@@ -134,11 +141,79 @@ class Pilot:
             q[:, 3] = self.time_scale * m.time[idx]
             r = tree.knn_radius(q, PILOT_K + 1, np.inf, m.workers)     # + 1: the photon itself
             self.cap[kind] = CAP_FACTOR * float(np.percentile(r, 90.0))
+            self._median[kind] = float(np.median(r))
         return self.cap[kind]
 
     def initial_size(self, kind: str, q: np.ndarray, ns: np.ndarray):
         """Pass 1's region at queries q (n, 4) (x, y, z relative to the map origin, s t): (r (n,) m,
-        tau (n,) shutter units or None).
+        tau (n,) shutter units or None) -- :meth:`region_at` read on a grid.
+
+        The region of a query is the one at the centre of its grid cell (cells of GRID_FRACTION x the
+        pilot photons' median radius, TIME_CELLS across the shutter), evaluated once per cell and
+        kept: a pilot search per camera sample and pass costs as much as the pass's own look-up;
+        per cell it is paid once per render.  Still a pure function of the pilot and the point (the
+        passes' analysis holds); the k-NN radius moves by at most the distance it is read from, a
+        quarter of the radius, so the regions hardly differ from the exact ones.
+        """
+        m = self.maps.maps[kind]
+        n = q.shape[0]
+        if m.n <= PILOT_K:
+            return np.full(n, np.inf), None
+        grid = self._grid(kind)
+        h, lo, nt = grid["h"], grid["lo"], grid["nt"]
+        cells = np.clip(np.floor((q[:, :3] - lo) / h), 0, (1 << _AXIS_BITS) - 1).astype(np.int64)
+        it = np.clip(np.floor(q[:, 3] / self.time_scale * nt), 0, nt - 1).astype(np.int64) if nt > 1 \
+            else np.zeros(n, np.int64)
+        keys = (((cells[:, 0] << _AXIS_BITS) | cells[:, 1]) << _AXIS_BITS | cells[:, 2]) << 7 | it
+        uk, inv = np.unique(keys, return_inverse=True)
+        with self._lock:
+            known = grid["keys"]
+            pos = np.searchsorted(known, uk)
+            have = np.zeros(uk.size, bool) if known.size == 0 else \
+                (pos < known.size) & (known[np.minimum(pos, known.size - 1)] == uk)
+            new = uk[~have]
+            if new.size:
+                # the regions at the new cells' centres, merged into the sorted table
+                qc = np.empty((new.size, 4))
+                ci = np.stack([(new >> (7 + 2 * _AXIS_BITS)) & ((1 << _AXIS_BITS) - 1),
+                               (new >> (7 + _AXIS_BITS)) & ((1 << _AXIS_BITS) - 1),
+                               (new >> 7) & ((1 << _AXIS_BITS) - 1)], axis=1)
+                qc[:, :3] = lo + (ci + 0.5) * h
+                qc[:, 3] = self.time_scale * ((new & 127) + 0.5) / nt if nt > 1 else self.time_scale * 0.5
+                r_new, tau_new = self.region_at(kind, qc)
+                keys_all = np.concatenate([grid["keys"], new])
+                order = np.argsort(keys_all, kind="stable")
+                grid["keys"] = keys_all[order]
+                grid["r"] = np.concatenate([grid["r"], r_new])[order]
+                grid["tau"] = np.concatenate([grid["tau"], tau_new if tau_new is not None
+                                              else np.zeros(new.size)])[order]
+                pos = np.searchsorted(grid["keys"], uk)
+            r = grid["r"][pos][inv]
+            tau = grid["tau"][pos][inv] if grid["timed"] else None
+        return r, tau
+
+    def _grid(self, kind: str) -> dict:
+        """The cache of regions on kind's grid (built empty on first use)."""
+        with self._lock:
+            g = self._grids.get(kind)
+        if g is not None:
+            return g
+        m = self.maps.maps[kind]
+        median = self._median_radius(kind)
+        lo = m.position.min(axis=0) - 4 * self.search_cap(kind)
+        timed = self.estimator == "TEMPORAL" and not m.timeless
+        nt = TIME_CELLS if self.estimator != "STANDARD" and not m.timeless else 1
+        g = {"h": max(GRID_FRACTION * median, 1e-9), "lo": lo, "nt": nt, "timed": timed,
+             "keys": np.zeros(0, np.int64), "r": np.zeros(0), "tau": np.zeros(0)}
+        with self._lock:
+            return self._grids.setdefault(kind, g)
+
+    def _median_radius(self, kind: str) -> float:
+        self.search_cap(kind)
+        return self._median[kind]
+
+    def region_at(self, kind: str, q: np.ndarray):
+        """Pass 1's region exactly at points q (n, 4) (x, y, z relative to the map origin, s t).
 
         STANDARD / KD4D: the pilot's PILOT_K-th nearest photon (3D / 4D) fixes a ball holding
         PILOT_K - 1 pilot photons; r is its radius scaled so the ball's measure holds about k of a
@@ -156,9 +231,11 @@ class Pilot:
         c = self.scale[kind] ** (1.0 / d)
         if self.estimator == "TEMPORAL" and d == 3:
             m_c = min(int(math.ceil(TEMPORAL_PILOT * PILOT_K)), m.n)
-            qt = q.copy()
+            qt = np.ascontiguousarray(q, dtype=np.float64).copy()
             qt[:, 3] = q[:, 3] / self.time_scale                   # the 3D tree's queries carry t itself
-            _, r, tau = m.flat_tree(3).lookup(MODE_TEMPORAL, qt, ns, m_c, PILOT_K, False, CONE_K, m.workers)
+            up = np.zeros((n, 3), np.float32)
+            up[:, 2] = 1.0                                        # (the side test does not change r, tau)
+            _, r, tau = m.flat_tree(3).lookup(MODE_TEMPORAL, qt, up, m_c, PILOT_K, False, CONE_K, m.workers)
             return r * c, tau * c
         r = tree.knn_radius(q, PILOT_K, self.search_cap(kind), m.workers)
         return r * c, None
