@@ -255,8 +255,16 @@ def read_exr(path, view_layer: str = VIEW_LAYER) -> dict:
             spec = inp.spec()
             pixels = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
             err = inp.geterror() if pixels is None else ""
-            names = list(spec.channelnames)
-            meta = {a.name: a.value for a in spec.extra_attribs}
+            try:
+                names = list(spec.channelnames)
+            except (UnicodeDecodeError, ValueError) as e:
+                raise StpmError(f"cannot read EXR {path}: corrupt channel names ({type(e).__name__})") from None
+            meta = {}
+            for a in spec.extra_attribs:
+                try:
+                    meta[a.name] = a.value
+                except (UnicodeDecodeError, ValueError, TypeError):    # a damaged attribute: not readable
+                    continue
         finally:
             inp.close()
     shape = (spec.height, spec.width, spec.nchannels)
