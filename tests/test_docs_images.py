@@ -27,3 +27,18 @@ def test_make_images_quick_writes_three_panels(tmp_path, capsys):
              for line in out.splitlines() if "Caustic mean" in line}
     # time-less photons on the moving box: darker than the time-dependent estimate and the 16 stills
     assert means["STANDARD"] < means["TEMPORAL"] and means["STANDARD"] < means["ACCUMULATION"]
+
+
+def test_make_progressive_images_quick_writes_the_passes(tmp_path, capsys):
+    spec = importlib.util.spec_from_file_location("make_progressive_images",
+                                                  os.path.join(ROOT, "docs", "make_progressive_images.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.main(["--quick", "--out", str(tmp_path)]) == 0
+    from stpm_core.imageio import read_png
+    for name in ("progressive_passes.png", "progressive_passes_caustic.png"):
+        img = read_png(tmp_path / name)
+        assert img.shape[:2] == (45, 180)              # passes 1, 4, 16 at 60 x 45, side by side
+        assert img.max() > 0
+    out = capsys.readouterr().out
+    assert [int(line.split()[1]) for line in out.splitlines() if line.startswith("pass")] == [1, 4, 16]
