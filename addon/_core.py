@@ -53,16 +53,11 @@ MotionTransform = sub("motion").MotionTransform
 Shutter = sub("shutter").Shutter
 
 
-def passes_table() -> tuple:
-    """The one table of render passes ``(name, channels, channel_ids)``.
-
-    ``stpm_core.render.PASSES`` per the contract; ``stpm_core.film.PASSES`` is
-    the same tuple (the film owns it) and is used while render.py is absent.
-    """
-    try:
-        return tuple(sub("render").PASSES)
-    except (ImportError, AttributeError):
-        return tuple(sub("film").PASSES)
+def passes_table(denoise: bool = False) -> tuple:
+    """The one table of render passes ``(name, channels, channel_ids)``: ``stpm_core.film.PASSES``
+    (re-exported as ``stpm_core.render.PASSES``), with ``denoise`` plus the denoising passes
+    (``film.passes_for``: Denoising Albedo, Denoising Normal, Noisy Image)."""
+    return tuple(sub("film").passes_for(bool(denoise)))
 
 
 def render_function():

@@ -37,6 +37,10 @@ parent) once per command, and per frame a write and a read of the scene file.
 
 :func:`blend_frame_range` imports nothing: it reads the ``frame_range`` the exporter
 records in the scene's metadata.
+
+:func:`denoise_result` imports ``addon.denoise`` (and so bpy) in this process, only for a render
+made with ``denoise``: Blender's Denoise node (its compositor runs in the bpy module) on the
+render's passes.
 """
 from __future__ import annotations
 
@@ -56,7 +60,7 @@ from pathlib import Path
 from .errors import RenderCancelled, SceneError, SettingsError, StpmError
 
 __all__ = ["BlendSupportMissing", "BlendReader", "BlenderExportBug", "load_blend", "blend_frame_range",
-           "kill_children"]
+           "kill_children", "denoise_result"]
 
 
 class BlendSupportMissing(StpmError):
@@ -337,3 +341,24 @@ def blend_frame_range(scene) -> tuple[int, int] | None:
         return int(bscene.frame_start), int(bscene.frame_end)
     except Exception:  # noqa: BLE001 -- no bpy or no such scene: no range to check
         return None
+
+
+def denoise_result(result) -> list[str]:
+    """Denoise a render made with ``RenderSettings.denoise`` in place: its Combined becomes the image
+    of Blender's Denoise node (the add-on's STPM Denoise group, guided by Denoising Albedo and
+    Normal), Noisy Image keeps the raw one; ``stats['denoise_s']`` the seconds it took.  Returns
+    warning lines: where bpy cannot be imported, Combined stays raw (the guide passes are written
+    all the same, for a compositor elsewhere)."""
+    passes = result.passes
+    if "Denoising Albedo" not in passes or "Denoising Normal" not in passes:
+        return ["denoise: the render has no denoising passes; Combined is not denoised"]
+    try:
+        from addon import denoise  # bpy lives only in addon/
+    except ImportError as e:
+        return [f"denoise: Blender's bpy module is not available here ({e}); Combined is not denoised "
+                "(Denoising Albedo, Denoising Normal and Noisy Image are in the EXR for a compositor)"]
+    t0 = time.perf_counter()
+    passes.setdefault("Noisy Image", passes["Combined"])
+    passes["Combined"] = denoise.denoise_passes(passes)
+    result.stats["denoise_s"] = time.perf_counter() - t0
+    return []
