@@ -342,7 +342,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
                             on_pass=on_pass if settings.method == "PROGRESSIVE" else None)
         finally:
             bar.close()
-        if settings.denoise:        # Blender's Denoise node, where bpy runs (docs/blender.md, "Denoising")
+        if settings.denoise and not partial:     # Blender's Denoise node where bpy runs (docs/blender.md)
             from .blend_loader import denoise_result
             result.warnings.extend(denoise_result(result))
 

@@ -92,3 +92,24 @@ def test_a_rough_metal_stops_the_features_above_cycles_alpha_and_not_below(rough
         np.testing.assert_allclose(nrm, np.broadcast_to([0.0, 0.0, -1.0], (64, 3)), atol=1e-6)
     else:
         assert np.all(alb == 0.0) and np.all(nrm == 0.0)
+
+
+def test_progressive_passes_and_their_partial_results_carry_the_denoising_passes(tmp_path):
+    """PROGRESSIVE averages the guides pass by pass like every pass; ``stpm render --pass-offset``'s
+    partial results hold them (stpm merge reads them back)."""
+    from stpm_core.demo import demo_scene
+    from stpm_core.partial import read_partial, write_partial
+    from stpm_core.progressive import PassSums
+    st = RenderSettings(method="PROGRESSIVE", passes=2, samples=2, photons_global=2000, photons_caustic=2000,
+                        seed=1, denoise=True)
+    res = render(demo_scene((24, 18)), st)
+    assert {n for n, _c, _i in DENOISING_PASSES} <= set(res.passes)
+    assert np.array_equal(res.passes["Noisy Image"], res.passes["Combined"])
+    plain = render(demo_scene((24, 18)), st.replace(denoise=False))
+    for name, img in plain.passes.items():
+        assert np.array_equal(img, res.passes[name]), name
+    sums = PassSums(1)                       # passes count from 1
+    sums.add(1, res.passes)
+    write_partial(tmp_path / "p.exr", sums, seed=1, scene_digest="0" * 64, settings_digest="1" * 64)
+    back, _head = read_partial(tmp_path / "p.exr")
+    np.testing.assert_array_equal(back.sums["Denoising Normal"], res.passes["Denoising Normal"].astype(np.float64))
