@@ -113,3 +113,22 @@ def test_progressive_passes_and_their_partial_results_carry_the_denoising_passes
     write_partial(tmp_path / "p.exr", sums, seed=1, scene_digest="0" * 64, settings_digest="1" * 64)
     back, _head = read_partial(tmp_path / "p.exr")
     np.testing.assert_array_equal(back.sums["Denoising Normal"], res.passes["Denoising Normal"].astype(np.float64))
+
+
+def test_without_blender_the_command_line_keeps_the_raw_image_and_says_so(monkeypatch):
+    """``stpm render`` denoises in a Blender child process; where bpy cannot be found, Combined stays
+    the raw image and one warning line says why (the guide passes are written all the same)."""
+    from types import SimpleNamespace
+    import stpm_core.blend_loader as bl
+
+    def no_bpy():
+        raise ImportError("no module named 'bpy'")
+
+    monkeypatch.setattr(bl, "_child_env", no_bpy)
+    monkeypatch.setattr(bl, "_DENOISERS", {})
+    raw = np.full((4, 4, 4), 0.5, np.float32)
+    result = SimpleNamespace(passes={"Combined": raw, "Denoising Albedo": np.ones((4, 4, 3), np.float32),
+                                     "Denoising Normal": np.zeros((4, 4, 3), np.float32)}, stats={})
+    warnings = bl.denoise_result(result, "shot.blend")
+    assert len(warnings) == 1 and "bpy" in warnings[0] and "not denoised" in warnings[0]
+    assert result.passes["Combined"] is raw and "denoise_s" not in result.stats
