@@ -11,6 +11,7 @@ source checkout (``import addon; addon.register()`` with the repository root on
 * ``batch.py``      -- .blend loading and frame rendering without the UI
 * ``compare_op.py`` -- "Compare with Accumulation Buffer" (the stpm compare report)
 * ``bake_op.py``    -- "Bake Unsupported Inputs" (Cycles bakes of what the node interpreter cannot evaluate)
+* ``denoise.py``    -- the compositor's STPM Denoise group (Blender's Denoise node on the guide passes)
 """
 from __future__ import annotations
 

@@ -127,6 +127,9 @@ def serve(reply_fd: int) -> None:
       "export_s": s, "save_s": s}``: export frame F (None: the file's current frame) as
       :func:`load_blend` does, write it to the core scene file FILE (uncompressed: it is read
       once, at once) and answer with the file's ``scene.stpm`` values;
+    * ``{"denoise": NPZ, "out": NPY}`` -> ``{"ok": true, "denoise_s": s}``: Blender's Denoise node on the
+      passes in NPZ (Combined or Noisy Image, Denoising Albedo, Denoising Normal;
+      :func:`addon.denoise.denoise_passes`), the denoised RGBA written to NPY (no .blend needed);
     * a failure -> ``{"ok": false, "kind": "StpmError" | "SettingsError" | ..., "error": line}``
       for the user's errors, ``{"ok": false, "bug": type, "error": ..., "traceback": ...}`` for
       anything else.
@@ -152,6 +155,15 @@ def serve(reply_fd: int) -> None:
                 path = request["open"]
                 scene = _open(path)
                 reply(ok=True, frame_range=[int(scene.frame_start), int(scene.frame_end)])
+                continue
+            if "denoise" in request:
+                import numpy as np
+                from .denoise import denoise_passes
+                t0 = time.perf_counter()
+                with np.load(request["denoise"]) as data:
+                    denoised = denoise_passes({name: data[name] for name in data.files})
+                np.save(request["out"], denoised)
+                reply(ok=True, denoise_s=time.perf_counter() - t0)
                 continue
             if scene is None:
                 raise RuntimeError("no .blend open")

@@ -15,6 +15,7 @@ import bpy
 import numpy as np
 
 from . import _core
+from .denoise import compositor_problem
 from .export import export_scene
 from .properties import settings_from_scene
 
@@ -105,7 +106,7 @@ def write_passes(engine, passes: dict, width: int, height: int, layer_name: str 
     """
     x0, y0, w, h = region if region is not None else (0, 0, width, height)
     images = {}
-    for name, _channels, _ids in _core.passes_table():
+    for name, _channels, _ids in _core.passes_table(denoise=True):      # every pass the result holds
         img = passes.get(name)
         if img is not None:
             img = np.asarray(img, dtype=np.float32).reshape(height, width, -1)[::-1]  # bottom-up
@@ -151,7 +152,8 @@ class STPMRenderEngine(bpy.types.RenderEngine):
 
     # Render passes: the one table
     def update_render_passes(self, scene=None, renderlayer=None):
-        for name, channels, ids in _core.passes_table():
+        denoise = bool(getattr(getattr(scene, "stpm", None), "denoise", False))
+        for name, channels, ids in _core.passes_table(denoise):
             self.register_pass(scene, renderlayer, name, channels, ids, pass_type(ids))
 
     # Final render
@@ -185,6 +187,9 @@ class STPMRenderEngine(bpy.types.RenderEngine):
                 warnings.append(f"view layer {depsgraph.view_layer.name!r}: passes STPM does not produce stay empty: "
                                 f"{', '.join(missing)} (STPM writes "
                                 f"{', '.join(n for n, _c, _i in _core.passes_table())})")
+            denoise_problem = compositor_problem(scene)      # denoise on, but no STPM Denoise group to run
+            if denoise_problem:
+                warnings.append(denoise_problem)
             for w in warnings:
                 self.report({"WARNING"}, w)
             if self.cancel_requested():

@@ -19,11 +19,23 @@ from ._core import RenderSettings
 _INT32_MAX = 2**31 - 1
 
 
+def _denoise_changed(props, context) -> None:
+    """``denoise`` toggled: add or remove the compositor's STPM Denoise group (addon/denoise.py)."""
+    from .denoise import sync_compositor
+    sync_compositor(props.id_data)
+
+
+# What the add-on does when a setting changes (the schema is the core's: it knows no bpy)
+_UPDATES = {"denoise": _denoise_changed}
+
+
 def _property(spec):
     """The bpy property of one schema row (:class:`stpm_core.schema.Spec`)."""
     kw = {"name": spec.label or spec.name.replace("_", " ").title(),
           "description": spec.doc[:1].upper() + spec.doc[1:]}
     kw.update(spec.ui)
+    if spec.name in _UPDATES:
+        kw["update"] = _UPDATES[spec.name]
     if spec.kind == "enum":
         return EnumProperty(items=spec.choices, default=spec.default, **kw)
     if spec.kind == "bool":

@@ -201,6 +201,23 @@ class STPM_RENDER_PT_bake(_STPMPanel, bpy.types.Panel):
         self.layout.operator("stpm.bake_inputs", icon="RENDER_STILL")
 
 
+class STPM_RENDER_PT_denoising(_STPMPanel, bpy.types.Panel):
+    """Denoise toggle (as Cycles' Sampling > Render > Denoise): the compositor's STPM Denoise group."""
+
+    bl_label = "Denoising"
+    bl_parent_id = "STPM_RENDER_PT_sampling"
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.stpm, "denoise", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.active = context.scene.stpm.denoise
+        col = layout.column(align=True)
+        col.label(text="Compositor: Render Layers > STPM Denoise > output")
+        col.label(text="Passes: Denoising Albedo, Denoising Normal, Noisy Image")
+
+
 classes = (
     STPM_OT_apply_preset,
     STPM_OT_compute_plan,
@@ -211,6 +228,7 @@ classes = (
     STPM_RENDER_PT_motion_blur,
     STPM_RENDER_PT_effects,
     STPM_RENDER_PT_bake,
+    STPM_RENDER_PT_denoising,
 )
 
 

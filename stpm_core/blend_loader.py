@@ -37,6 +37,10 @@ parent) once per command, and per frame a write and a read of the scene file.
 
 :func:`blend_frame_range` imports nothing: it reads the ``frame_range`` the exporter
 records in the scene's metadata.
+
+:func:`denoise_result` runs Blender's Denoise node (the add-on's STPM Denoise group; the
+compositor runs in the bpy module) on a render made with ``denoise``, in a reader process too
+(:meth:`BlendReader.denoise`: no .blend opened, the passes handed over in a file).
 """
 from __future__ import annotations
 
@@ -56,7 +60,7 @@ from pathlib import Path
 from .errors import RenderCancelled, SceneError, SettingsError, StpmError
 
 __all__ = ["BlendSupportMissing", "BlendReader", "BlenderExportBug", "load_blend", "blend_frame_range",
-           "kill_children"]
+           "kill_children", "denoise_result"]
 
 
 class BlendSupportMissing(StpmError):
@@ -169,6 +173,31 @@ class BlendReader:
                         "wall_s": time.perf_counter() - t0}
         return scene, answer.get("settings")
 
+    def denoise(self, passes: dict):
+        """Blender's Denoise node on a render's passes, in the child (``addon.denoise.denoise_passes``:
+        the STPM Denoise group in a compositor of its own): the denoised RGBA (H, W, 4) float32.
+        Needs no .blend open: a reader made for this alone starts without opening its file."""
+        import numpy as np
+        if self._proc is None:
+            self._start(open_file=False)
+        self._count += 1
+        src = os.path.join(self._dir, f"denoise_{self._count}.npz")
+        out = os.path.join(self._dir, f"denoised_{self._count}.npy")
+        np.savez(src, **{name: np.asarray(passes[name], np.float32)
+                         for name in ("Combined", "Noisy Image", "Denoising Albedo", "Denoising Normal")
+                         if name in passes})
+        try:
+            answer = self._request({"denoise": src, "out": out}, None)
+            image = np.load(out)
+        finally:
+            for f in (src, out):
+                try:
+                    os.unlink(f)
+                except OSError:
+                    pass
+        self.timings = {"denoise_s": float(answer.get("denoise_s", 0.0))}
+        return image
+
     def close(self) -> None:
         """End the reader process (end of input: it exits at once) and remove its folder."""
         proc, self._proc = self._proc, None
@@ -190,7 +219,7 @@ class BlendReader:
             self._dir = None
 
     # ------------------------------------------------------------------ the child
-    def _start(self) -> None:
+    def _start(self, open_file: bool = True) -> None:
         try:
             env = _child_env()
         except ImportError as e:
@@ -213,8 +242,9 @@ class BlendReader:
             os.close(write_fd)
         self._reply_fd = read_fd
         _LIVE[self._proc.pid] = self._dir
-        answer = self._request({"open": str(self.path)}, None)
-        self.frame_range = answer.get("frame_range")
+        if open_file:
+            answer = self._request({"open": str(self.path)}, None)
+            self.frame_range = answer.get("frame_range")
 
     def _request(self, request: dict, frame) -> dict:
         """Send one request, wait for its answer (polling ``cancel``), pass Blender's output on."""
@@ -262,6 +292,8 @@ class BlendReader:
                 what = "was killed (SIGKILL: out of memory?)" if sig == "SIGKILL" else f"crashed ({sig})"
                 return StpmError(f"cannot open {name}: Blender's .blend reader {what}: the file is corrupt "
                                  "or truncated")
+            if "denoise" in request:
+                return StpmError(f"{name}: Blender crashed ({sig}) in its Denoise node (a bug)")
             which = f"frame {frame}" if frame is not None else "the current frame"
             return StpmError(f"{name}: Blender crashed ({sig}) exporting {which} (a corrupt file, or a bug)")
         tail = [ln for ln in self._last_log.splitlines() if ln.strip()][-1:] or ["no message"]
@@ -337,3 +369,47 @@ def blend_frame_range(scene) -> tuple[int, int] | None:
         return int(bscene.frame_start), int(bscene.frame_end)
     except Exception:  # noqa: BLE001 -- no bpy or no such scene: no range to check
         return None
+
+
+_DENOISERS: dict = {}          # a reader process kept for denoising, one per command (closed at exit)
+
+
+def _close_denoisers() -> None:
+    for reader in list(_DENOISERS.values()):
+        reader.close()
+    _DENOISERS.clear()
+
+
+atexit.register(_close_denoisers)
+
+
+def denoise_result(result, path, *, cancel=None) -> list[str]:
+    """Denoise a render made with ``RenderSettings.denoise`` in place: its Combined becomes the image
+    of Blender's Denoise node (the add-on's STPM Denoise group, guided by Denoising Albedo and
+    Normal), Noisy Image keeps the raw one; ``stats['denoise_s']`` the seconds it took.
+
+    Blender runs in a child process (:meth:`BlendReader.denoise`; bpy never loads into this one),
+    kept for the next frame of the command.  ``path``: the scene file, for error lines.  Returns
+    warning lines: where bpy cannot be found, Combined stays raw (the guide passes are written all
+    the same, for a compositor elsewhere).
+    """
+    passes = result.passes
+    if "Denoising Albedo" not in passes or "Denoising Normal" not in passes:
+        return ["denoise: the render has no denoising passes; Combined is not denoised"]
+    t0 = time.perf_counter()
+    reader = _DENOISERS.get("reader")
+    if reader is None:
+        reader = _DENOISERS["reader"] = BlendReader(path, quiet=True, cancel=cancel)
+    try:
+        denoised = reader.denoise(passes)
+    except BlendSupportMissing as e:
+        _DENOISERS.pop("reader", None)
+        return [f"denoise: {str(e).split(': ', 1)[-1]}; Combined is not denoised (Denoising Albedo, Denoising "
+                "Normal and Noisy Image are in the EXR for a compositor)"]
+    except (StpmError, BlenderExportBug):
+        _DENOISERS.pop("reader", None)
+        raise
+    passes.setdefault("Noisy Image", passes["Combined"])
+    passes["Combined"] = denoised
+    result.stats["denoise_s"] = time.perf_counter() - t0
+    return []

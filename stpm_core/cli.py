@@ -342,6 +342,9 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
                             on_pass=on_pass if settings.method == "PROGRESSIVE" else None)
         finally:
             bar.close()
+        if settings.denoise and not partial:     # Blender's Denoise node where bpy runs (docs/blender.md)
+            from .blend_loader import denoise_result
+            result.warnings.extend(denoise_result(result, scene_path, cancel=cancel))
 
         # -- Outputs: temporary files, renamed into place together -------------------------
         t_write = time.perf_counter()

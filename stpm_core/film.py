@@ -1,7 +1,8 @@
 """The film: named render passes and the pixel reconstruction filter.
 
 One source of truth for the passes: :data:`PASSES` lists ``(name, channels,
-channel_ids)`` and is used by the film, the EXR writer and the Blender add-on.
+channel_ids)`` and is used by the film, the EXR writer and the Blender add-on; with
+``RenderSettings.denoise`` a render adds :data:`DENOISING_PASSES` (:func:`passes_for`).
 
 Pixel estimator (see docs/rendering.md, "The pixel estimator")::
 
@@ -25,7 +26,8 @@ import numpy as np
 
 from .kernels import paths as _K
 
-__all__ = ["PASSES", "PASS_NAMES", "pass_channels", "blackman_harris", "filter_offsets", "BH_INVERSE_CDF", "Film"]
+__all__ = ["PASSES", "PASS_NAMES", "DENOISING_GUIDES", "DENOISING_PASSES", "ALL_PASSES", "passes_for",
+           "pass_channels", "blackman_harris", "filter_offsets", "BH_INVERSE_CDF", "Film"]
 
 # Render passes: (name, channel count, channel ids) -- Blender's names and order.
 PASSES: tuple[tuple[str, int, str], ...] = (
@@ -38,6 +40,21 @@ PASSES: tuple[tuple[str, int, str], ...] = (
     ("Caustic", 3, "RGB"),
 )
 PASS_NAMES: tuple[str, ...] = tuple(p[0] for p in PASSES)
+# With RenderSettings.denoise: Cycles' guide passes for a denoiser (summed by the film like the
+# others; kernels.paths.denoising_rows) and, under Cycles' name, the raw Combined (a copy), kept
+# beside the denoised image that Blender's Denoise node makes from the three.
+DENOISING_GUIDES: tuple[tuple[str, int, str], ...] = (
+    ("Denoising Albedo", 3, "RGB"),
+    ("Denoising Normal", 3, "XYZ"),
+)
+DENOISING_PASSES: tuple[tuple[str, int, str], ...] = DENOISING_GUIDES + (("Noisy Image", 4, "RGBA"),)
+# Every pass STPM can write, in the order it writes them
+ALL_PASSES: tuple[tuple[str, int, str], ...] = PASSES + DENOISING_PASSES
+
+
+def passes_for(denoise: bool = False) -> tuple:
+    """The passes a render writes: :data:`PASSES`, plus :data:`DENOISING_PASSES` with ``denoise``."""
+    return PASSES + DENOISING_PASSES if denoise else PASSES
 
 # Depth written where a camera ray escapes (Blender writes 1e10 for the background).
 DEPTH_BACKGROUND = 1.0e10
@@ -48,7 +65,7 @@ BH_A = (0.35875, 0.48829, 0.14128, 0.01168)
 
 def pass_channels(name: str) -> int:
     """Channel count of the pass called ``name`` (KeyError if unknown)."""
-    for n, c, _ in PASSES:
+    for n, c, _ in ALL_PASSES:
         if n == name:
             return c
     raise KeyError(name)
@@ -127,6 +144,8 @@ class Film:
     Parameters
     ----------
     width, height : image size in pixels.
+    passes : the passes summed, (name, channels, ids) in channel order (:data:`PASSES`; with
+        denoising, PASSES + :data:`DENOISING_GUIDES`).
     filter_width : Blackman-Harris width in pixels (``RenderSettings.filter_width``,
         Blender's default 1.5).  As in Cycles, the Blackman-Harris support is
         twice the width (radius = ``filter_width`` pixels), because the window is
@@ -139,10 +158,11 @@ class Film:
     and a pixel receives one tile, so float32 storage loses nothing visible.
     """
 
-    def __init__(self, width: int, height: int, filter_width: float = 1.5):
+    def __init__(self, width: int, height: int, filter_width: float = 1.5, passes: tuple = PASSES):
         self.width, self.height = int(width), int(height)
         self.radius = float(filter_width)
-        self.n_channels = sum(c for _, c, _ in PASSES)
+        self.passes = tuple(passes)             # PASSES, or PASSES + DENOISING_GUIDES
+        self.n_channels = sum(c for _, c, _ in self.passes)
         self._sum = np.zeros((self.height * self.width, self.n_channels), np.float32)
         self._wsum = np.zeros(self.height * self.width, np.float32)
 
@@ -158,7 +178,7 @@ class Film:
         if n == 0:
             return
         V = np.concatenate([np.asarray(values[name], dtype=np.float64).reshape(n, c)
-                            for name, c, _ in PASSES], axis=1)
+                            for name, c, _ in self.passes], axis=1)
         j = iy * self.width + ix
         acc = np.zeros((self.height * self.width, self.n_channels + 1))
         np.add.at(acc, j, np.concatenate([V, np.ones((n, 1))], axis=1))
@@ -197,7 +217,7 @@ class Film:
         n = next(iter(values.values())).shape[0] if values else 0
         if n == 0 or P == 0:
             return None
-        V = np.concatenate([np.asarray(values[name], np.float64).reshape(n, c) for name, c, _ in PASSES], axis=1)
+        V = np.concatenate([np.asarray(values[name], np.float64).reshape(n, c) for name, c, _ in self.passes], axis=1)
         return self.tile_sums_matrix(x0, y0, tw, th, V)
 
     def tile_sums_matrix(self, x0: int, y0: int, tw: int, th: int, V: np.ndarray, combined_is_sum: bool = False,
@@ -248,11 +268,10 @@ class Film:
         _K.tile_finish(win, 0, yb - y0, 0, xb - x0, np.ascontiguousarray(summed), comb, bool(alpha_one), w)
         return (y0, yb, x0, xb), [(0, C)], w
 
-    @staticmethod
-    def _first_channel(name: str) -> int:
-        """First image channel of pass ``name`` in :data:`PASSES` order."""
+    def _first_channel(self, name: str) -> int:
+        """First image channel of pass ``name`` in the film's pass order."""
         c0 = 0
-        for n, c, _ in PASSES:
+        for n, c, _ in self.passes:
             if n == name:
                 return c0
             c0 += c
@@ -267,7 +286,7 @@ class Film:
         w = self._wsum[:, None]
         img = np.where(w > 0, self._sum / np.where(w > 0, w, 1.0), 0.0)
         out, c0 = {}, 0
-        for name, c, _ in PASSES:
+        for name, c, _ in self.passes:
             a = img[:, c0:c0 + c].reshape(self.height, self.width, c)
             if name == "Depth":
                 a = np.where(w.reshape(self.height, self.width, 1) > 0, a, DEPTH_BACKGROUND)

@@ -109,12 +109,10 @@ def _oiio_write(path: Path, spec, pixels: np.ndarray, what: str) -> None:
 
 
 def _passes_table():
-    """The (name, channels, channel_ids) table: render.PASSES when present, else film.PASSES."""
-    try:
-        from .render import PASSES  # the public home named by the contract
-    except ImportError:
-        from .film import PASSES
-    return PASSES
+    """The (name, channels, channel_ids) table of every pass STPM writes (``film.ALL_PASSES``: the
+    passes of ``render.PASSES``, then the denoising passes)."""
+    from .film import ALL_PASSES
+    return ALL_PASSES
 
 
 def channel_names(passes: dict, view_layer: str = VIEW_LAYER) -> list[tuple[str, str, int]]:

@@ -39,7 +39,7 @@ import numpy as np
 from . import kernels as _kernels
 from .kernels import kernel_array
 from .camera import camera_to_world, image_plane
-from .film import BH_INVERSE_CDF, DEPTH_BACKGROUND, PASSES, Film
+from .film import BH_INVERSE_CDF, DENOISING_GUIDES, DEPTH_BACKGROUND, PASSES, Film
 from .kernels import paths as _K
 from .kernels.bsdf import ggx_albedo_tables
 from .kernels.closure import N_CLOSURE, pack_materials
@@ -117,10 +117,11 @@ def _has_shape(light) -> bool:
 # ----------------------------------------------------------------------------
 # Paths of one batch of camera samples, through the kernels (kernels.paths)
 # ----------------------------------------------------------------------------
-# Column of each pass in the per-sample matrix V (n, 20): PASSES order
+# Column of each pass in the per-sample matrix V (n, 26): PASSES order, then the denoising guides
+# (the film's channel order; the guides only with RenderSettings.denoise)
 _COL = {}
 _c = 0
-for _name, _nc, _ in PASSES:
+for _name, _nc, _ in PASSES + DENOISING_GUIDES:
     _COL[_name] = (_c, _c + _nc)
     _c += _nc
 _NO_IDX = np.zeros(0, np.int64)
@@ -133,7 +134,8 @@ def _compact_layout(ctx) -> dict[str, tuple[int, int]]:
     """Columns of the per-sample matrix of a tile: only the passes this render can fill.
 
     Depth, Normal, Emit, Direct always; Indirect / Caustic with their photon
-    map; ``Alpha`` (the coverage, Combined's alpha) with a transparent film.
+    map; ``Alpha`` (the coverage, Combined's alpha) with a transparent film; Denoising Albedo and
+    Normal with ``RenderSettings.denoise``.
     Combined RGB (= Emit + Direct + Indirect + Caustic) and an alpha of 1 are
     formed by the film sums.  Narrow rows: the tile's matrix is streamed from
     memory several times (first hit, next-event estimation, per-pixel sums).
@@ -145,6 +147,8 @@ def _compact_layout(ctx) -> dict[str, tuple[int, int]]:
         names.append(("Caustic", 3))
     if ctx.film_transparent:
         names.append(("Alpha", 1))
+    if ctx.features:
+        names.extend((name, k) for name, k, _ in DENOISING_GUIDES)
     out, c = {}, 0
     for name, k in names:
         out[name] = (c, c + k)
@@ -305,7 +309,7 @@ def _photon_terms(ctx, sh, hits, d, C, t_s, stats: TraceStats, dsts, idx_k, use_
 
 def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_axis,
                 V: np.ndarray | None = None, layout: dict | None = None,
-                touched: set | None = None) -> np.ndarray:
+                touched: set | None = None, cam_R: np.ndarray | None = None) -> np.ndarray:
     """Radiance of the camera rays o, d (n, 3) at times (n,) split into passes -> V (n, K).
 
     tmax0 (n,) clips the camera rays; cam_pos, cam_axis (k, 3) (k = 1 or n) are
@@ -329,6 +333,10 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     names of the passes among Emit, Direct, Indirect and Caustic that got any
     value (the others are 0 everywhere).
 
+    Denoising features (``ctx.features``): ``kernels.paths.denoising_rows`` after ``classify_hits``
+    (and ``denoising_seen_add`` for light shapes), carried through ``specular_step``; cam_R (k, 3, 3)
+    the camera's rotation at each sample's time for Cycles' camera-space normal (None: world space).
+
     Random numbers per bounce: per light with power (k, 2) at the shaded rows
     (skipped for delta lights), then (k', 3) for the delta lobes of the
     continuing rows and, from ``RR_START`` on, (k',) for Russian roulette.
@@ -350,6 +358,11 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     glossy = None                            # 1 where the ray left a rough lobe (None: none did)
     counts = None                            # (live rows, 2) int32 reflections, transmissions so far (None: 0)
     world_w = None                           # the world's weight where the ray escapes (with glossy)
+    feat = _NO_FLAGS                         # 1 where a path still looks for its denoising features (bounce 0: all)
+    dft = _NO_ROWS3                          # their throughput: the specular-like albedos met (bounce 0: 1)
+    if ctx.features:
+        ca, cn = cols["Denoising Albedo"][0], cols["Denoising Normal"][0]
+        cam_R = _IDENTITY_POSE[:, :3, :3].copy() if cam_R is None else np.ascontiguousarray(cam_R, np.float64)
     tmax = tmax0                             # camera clipping for the first segment
     guard = None                             # camera rays: the caster's own guard
     for bounce in range(ctx.max_depth + 1):
@@ -379,14 +392,26 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         # -- Misses, emission, first-hit passes; rows to shade and to continue ---------------------
         sh, spec = _scratch("sh", (m,), np.int64), _scratch("spec", (m,), np.int64)
         clamp = ctx.clamp_direct if bounce == 0 else ctx.clamp_indirect      # Cycles' Clamp Direct / Indirect
+        env_b, wposes_b = ctx.env_camera if bounce == 0 else ctx.env, _world_poses(ctx, t)
+        add_world = world_on and not (bounce == 0 and ctx.film_transparent)
         n_hit, n_sh, n_spec, n_emit = _K.classify_hits(
-            hits.t, C, ctx.env_camera if bounce == 0 else ctx.env, _world_poses(ctx, t), d,
-            world_on and not (bounce == 0 and ctx.film_transparent),
+            hits.t, C, env_b, wposes_b, d, add_world,
             idx_k, use_idx, beta_k, use_beta, glossy_k, world_w_k, use_glossy, V, cols["Emit"][0], bounce == 0, cols["Depth"][0], cols["Normal"][0], DEPTH_BACKGROUND,
             hits.position, hits.ns, cam_pos, cam_axis, covered, sh, spec, clamp)
+        # -- Denoising features: albedo and normal at the first diffuse-like vertex ---------------
+        feat_b, dft_b = _NO_FLAGS, _NO_ROWS3         # after this bounce's vertices (specular_step carries them)
+        if ctx.features:
+            feat_b, dft_b = _scratch("feat_b", (m,), np.uint8), _scratch("dft_b", (m, 3))
+            _K.denoising_rows(hits.t, C, env_b, wposes_b, d, add_world, idx_k, use_idx, beta_k, use_beta, glossy_k,
+                              world_w_k, use_glossy, hits.ns, hits.ng, E, E_avg, cam_R, bounce == 0, feat, dft,
+                              feat_b, dft_b, V, ca, cn, clamp)
         # -- Lights seen along the rays (before the next surface) -----------------------------------
         if ctx.shaped_lights:
             val = _seen_lights(ctx, o, d, t, hits.t, bounce == 0)
+            if val is not None and ctx.features:
+                # Cycles' Denoising Albedo sees them through specular-like rough lobes too
+                _K.denoising_seen_add(V, ca, np.arange(m), idx_k, use_idx, beta_k, use_beta, bounce == 0, feat,
+                                      dft, val, clamp)
             if val is not None and use_glossy:
                 val[glossy != 0] = 0.0           # after a rough lobe: next-event estimation counted them
             if val is not None:
@@ -417,16 +442,19 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         glossy_n, world_w_n = np.empty(n_spec, np.uint8), np.empty(n_spec)
         counts_n = np.empty((n_spec, 2), np.int32)
         counts_s = np.zeros((n_spec, 2), np.int32) if counts is None else np.ascontiguousarray(counts[spec])
+        feat_n, dft_n = (np.empty(n_spec, np.uint8), np.empty((n_spec, 3))) if ctx.features else (_NO_FLAGS, _NO_ROWS3)
         t_spec = t[spec] if ctx.world_li >= 0 and not ctx.lights.lights[ctx.world_li].transform.is_static else t[:1]
         n_go = _K.specular_step(spec, idx_k, use_idx, beta_k, use_beta, hits.position, hits.ng, hits.ns, d, C, E,
                                 E_avg, u, rr, u_rr, EPS, GUARD_FRACTION, ctx.stop_coat, ctx.env,
                                 _world_poses(ctx, t_spec), ctx.world_li >= 0, counts_s, ctx.glossy_bounces,
                                 ctx.transmission_bounces, idx_n, beta_n, o_n, d_n, guard_n, glossy_n, world_w_n,
-                                counts_n)
+                                counts_n, ctx.features, feat_b, dft_b, feat_n, dft_n)
         idx, beta, o, d, guard = idx_n[:n_go], beta_n[:n_go], o_n[:n_go], d_n[:n_go], guard_n[:n_go]
         glossy = glossy_n[:n_go] if glossy_n[:n_go].any() else None
         world_w = world_w_n[:n_go] if glossy is not None else None
         counts = counts_n[:n_go]
+        if ctx.features:
+            feat, dft = feat_n[:n_go], dft_n[:n_go]
         tmax = None
 
     if full:
@@ -470,6 +498,7 @@ class _Context:
     light_visible_camera: list = None        # per light: seen by camera rays (Blender's visible_camera)
     zero_passes: tuple = ()                  # passes that stay 0 for every sample
     layout: dict = None                      # columns of a tile's per-sample matrix (_compact_layout)
+    features: bool = False                   # RenderSettings.denoise: Denoising Albedo / Normal (kernels.paths.denoising_rows)
 
 
 def _map_kinds(maps) -> dict:
@@ -554,7 +583,8 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
     touched: set = set()
     layout = ctx.layout
     V = shade_paths(ctx, o, d, times, tmax0, rng, tstats, pos, axis,
-                    V=_scratch("V", (n, max(b for _, b in layout.values()))), layout=layout, touched=touched)
+                    V=_scratch("V", (n, max(b for _, b in layout.values()))), layout=layout, touched=touched,
+                    cam_R=R if ctx.features else None)
     # Image channel of every column of V; columns of passes nothing reached are left out
     chan, keep = [], []
     for name, (a, b) in layout.items():
@@ -610,8 +640,9 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     # Passes no sample can reach: photon passes without that map (the film sums skip them)
     ctx.zero_passes = tuple(name for name, kind in (("Caustic", "caustic"), ("Indirect", "global"))
                             if maps is None or not ctx.map_kinds.get(kind, False))
+    ctx.features = bool(getattr(settings, "denoise", False))
     ctx.layout = _compact_layout(ctx)
-    film = Film(W, H, settings.filter_width)
+    film = Film(W, H, settings.filter_width, passes=PASSES + DENOISING_GUIDES if ctx.features else PASSES)
     cam = scene.camera
 
     # Tiles: square blocks of about BATCH_SAMPLES samples
@@ -634,4 +665,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
         if progress is not None:
             progress(f0 + (f1 - f0) * (ti + 1) / len(tiles), f"tracing tile {ti + 1}/{len(tiles)}")
     stats.seconds = _time.perf_counter() - t_start
-    return film.resolve(), stats
+    passes = film.resolve()
+    if ctx.features:
+        passes["Noisy Image"] = passes["Combined"]       # Cycles' name for the raw image beside the denoised one
+    return passes, stats

@@ -19,12 +19,27 @@ still import.
 * Ray casting (:mod:`stpm_core.raycast`) checks ``import numba`` itself when
   choosing between its embree / numba / numpy backends (``STPM_NO_NUMBA``
   does not switch those off).
+
+Where the compiled kernels are cached (every kernel is ``cache=True``): decided here, once, when
+numba is imported, before any kernel module defines its dispatchers (numba picks a function's
+cache folder when it is decorated).  :func:`choose_cache_dir` has the rules; :data:`CACHE` says
+what was chosen.  An installed Blender extension sets ``STPM_KERNEL_CACHE`` to its user folder
+(``addon/_core.py``), so the cache survives a read-only install folder and reinstalls keep their
+own.  :func:`compile_counts` counts the kernels numba actually compiled in this process (numba's
+``numba:compile`` event fires only on a cache miss): a render reports it (``kernels_compiled``).
 """
 from __future__ import annotations
 
 import os
+import tempfile
+import threading
+import time
+from pathlib import Path
 
-__all__ = ["probe", "njit", "AVAILABLE", "IMPORT_ERROR", "invalidate_stale_caches", "KERNEL_SOURCES"]
+from ._version import __version__
+
+__all__ = ["probe", "njit", "AVAILABLE", "IMPORT_ERROR", "invalidate_stale_caches", "KERNEL_SOURCES",
+           "CACHE_ENV", "CACHE", "choose_cache_dir", "cache_key", "compile_counts"]
 
 
 def probe() -> tuple[bool, str]:
@@ -38,7 +53,144 @@ def probe() -> tuple[bool, str]:
     return True, ""
 
 
+# The compiled kernels' cache folder: set by the Blender extension to its user folder
+# (bpy.utils.extension_path_user); the compiled kernels go into a sub-folder named by cache_key()
+CACHE_ENV = "STPM_KERNEL_CACHE"
+_HERE = Path(__file__).resolve().parent
+
+
+def cache_key() -> str:
+    """The cache sub-folder of this STPM version on this CPU, e.g. ``0.1.0-skylake-avx512``.
+
+    numba's own cache index already keys each entry by the CPU (name and features), the numba
+    version and the source file's stamp; a folder per version and CPU keeps a shared home folder
+    (a farm) or two installed versions from overwriting each other's index files.
+    """
+    try:
+        from llvmlite import binding
+        cpu = binding.get_host_cpu_name() or "cpu"
+    except Exception:  # noqa: BLE001 -- any llvmlite failure: one folder for all CPUs (numba's keys still hold)
+        cpu = "cpu"
+    safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in cpu)
+    return f"{__version__}-{safe}"
+
+
+def _writable(folder: Path) -> bool:
+    """Can numba write cache files into folder (created if missing)?  numba's own test."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=folder).close()
+        return True
+    except OSError:
+        return False
+
+
+def _user_cache_root() -> Path:
+    """The platform's per-user cache folder for STPM (``~/.cache/stpm`` on Linux,
+    ``~/Library/Caches/stpm`` on macOS, ``%LOCALAPPDATA%\\stpm\\Cache`` on Windows)."""
+    from numba.misc.appdirs import AppDirs  # numba's vendored appdirs: what numba uses for its own
+    return Path(AppDirs(appname="stpm", appauthor=False).user_cache_dir)
+
+
+def choose_cache_dir(environ=None, package: Path = _HERE) -> tuple:
+    """(folder or None, source): where numba should cache the kernels, by these rules in order.
+
+    1. ``NUMBA_CACHE_DIR`` set by the user: numba's own setting wins (None, 'NUMBA_CACHE_DIR').
+    2. ``STPM_KERNEL_CACHE`` (the Blender extension sets its user folder): ``<it>/<cache_key()>``
+       ('extension').
+    3. ``stpm_core``'s own ``__pycache__`` folders writable (a source checkout, a user install):
+       numba's default, each module's ``__pycache__`` (None, 'in-tree').
+    4. Otherwise (a read-only install used outside Blender): the platform's user cache folder,
+       ``<it>/kernels/<cache_key()>`` ('user-cache').
+
+    A chosen folder that cannot be written falls through to the next rule.
+    """
+    env = os.environ if environ is None else environ
+    if env.get("NUMBA_CACHE_DIR"):
+        return None, "NUMBA_CACHE_DIR"
+    root = env.get(CACHE_ENV, "")
+    if root:
+        folder = Path(root) / cache_key()
+        if _writable(folder):
+            return folder, "extension"
+    if _writable(Path(package) / "kernels" / "__pycache__"):
+        return None, "in-tree"
+    try:
+        folder = _user_cache_root() / "kernels" / cache_key()
+    except Exception:  # noqa: BLE001 -- no numba: nothing to cache
+        return None, "in-tree"
+    if _writable(folder):
+        return folder, "user-cache"
+    return None, "in-tree"                     # nowhere writable: numba compiles every process
+
+
+def _configure_cache() -> dict:
+    """Point numba's cache at :func:`choose_cache_dir`'s folder (numba.config and the environment,
+    so that numba's config reload and child processes keep it); the chosen {'dir', 'source'}."""
+    folder, source = choose_cache_dir()
+    if folder is not None:
+        import numba
+        os.environ["NUMBA_CACHE_DIR"] = str(folder)
+        numba.config.CACHE_DIR = str(folder)
+    elif source == "NUMBA_CACHE_DIR":
+        folder = Path(os.environ["NUMBA_CACHE_DIR"])
+    return {"dir": str(folder) if folder is not None else "", "source": source}
+
+
+class _CompileCounter:
+    """Counts numba's compilations of STPM functions (``numba:compile`` events: numba fires them only
+    when a function is compiled, not when it is loaded from the cache) and their seconds."""
+
+    def __init__(self, package: str):
+        self.package = package
+        self.count = 0
+        self.seconds = 0.0
+        self._depth = 0                     # nested compiles (callees) hold numba's global compiler lock
+        self._t0 = 0.0
+        self._lock = threading.Lock()
+
+    def _ours(self, event) -> bool:
+        disp = (event.data or {}).get("dispatcher") if isinstance(event.data, dict) else None
+        module = getattr(getattr(disp, "py_func", None), "__module__", "") or ""
+        return module == self.package or module.startswith(self.package + ".")
+
+    def on_start(self, event):
+        with self._lock:
+            if self._depth == 0:
+                self._t0 = time.perf_counter()
+            self._depth += 1
+            if self._ours(event):
+                self.count += 1
+
+    def on_end(self, event):
+        with self._lock:
+            self._depth = max(self._depth - 1, 0)
+            if self._depth == 0:
+                self.seconds += time.perf_counter() - self._t0
+
+
+
 AVAILABLE, IMPORT_ERROR = probe()
+CACHE: dict = {"dir": "", "source": "none"}
+_COUNTER = _CompileCounter(__name__.rpartition(".")[0])
+if AVAILABLE:
+    try:
+        CACHE = _configure_cache()
+        from numba.core import event as _event
+
+        class _Listener(_CompileCounter, _event.Listener):
+            """numba's Listener interface around the counter."""
+
+        _COUNTER = _Listener(__name__.rpartition(".")[0])
+        _event.register("numba:compile", _COUNTER)
+    except Exception as _exc:  # noqa: BLE001 -- a numba without these: numba's default cache, no counts
+        CACHE = {"dir": "", "source": f"numba default ({type(_exc).__name__})"}
+
+
+def compile_counts() -> tuple:
+    """(functions compiled, seconds compiling) in this process so far: STPM's numba functions
+    compiled (not loaded from the cache), callees included; seconds of the outermost compiles."""
+    return _COUNTER.count, _COUNTER.seconds
 
 if AVAILABLE:
     from numba import njit  # noqa: F401  (the compiled kernels' decorator)
@@ -85,12 +237,22 @@ def invalidate_stale_caches(root=None, patterns=KERNEL_SOURCES) -> bool:
         digest = h.hexdigest()
         if stamp.exists() and stamp.read_text().strip() == digest:
             return False
-        for p in files:
-            os.utime(p, None)
+        # the new digest is written first: where it cannot be (a read-only install, even one whose
+        # owner could still touch the files' times) nothing is touched, or every process would
+        # make every cached kernel stale again
         stamp.parent.mkdir(exist_ok=True)
         tmp = stamp.with_name(f"{_STAMP}.{os.getpid()}.tmp")
         tmp.write_text(digest)
+    except OSError:
+        return False
+    try:
+        for p in files:
+            os.utime(p, None)
         os.replace(tmp, stamp)
         return True
     except OSError:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
         return False

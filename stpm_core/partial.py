@@ -172,8 +172,8 @@ def read_partial(path) -> tuple[PassSums, dict]:
             raise StpmError(f"{path}: partial result layer {SUM_PREFIX + name!r} holds non-finite values")
         return x
 
-    from .film import PASSES
-    channels = {n: c for n, c, _ in PASSES}
+    from .film import ALL_PASSES
+    channels = {n: c for n, c, _ in ALL_PASSES}
     for name in names:
         if name not in channels:
             raise StpmError(f"{path}: partial result names an unknown pass {name!r:.40}")

@@ -98,23 +98,25 @@ def _map_stats(maps) -> dict:
 # ----------------------------------------------------------------------------
 # render
 # ----------------------------------------------------------------------------
-_FIRST_RENDER = True     # this process has not rendered yet (the compiled kernels may still need loading)
-
-
 def render(scene, settings, *, progress=None, cancel=None, on_pass=None) -> RenderResult:
     """Render ``scene`` with ``settings``: :func:`_render`, with numba's own errors (a kernel that could
     not be compiled or loaded on this machine) turned into one :class:`KernelsUnavailable` line.
+    The first render of a process says whether the kernels load or compile
+    (``kernels.first_use_progress``); stats get ``kernels_compiled`` etc. (``kernels.compile_stats``).
 
     on_pass(passes, info): method PROGRESSIVE calls it after each pass with the image so far
     (name -> (H, W, C) float32) and info (pass, passes, elapsed_s, noise_p95), so a viewer can show it.
     """
     kernels.require()
+    compiled_before = kernels.compile_counts()
     try:
-        return _render(scene, settings, progress=progress, cancel=cancel, on_pass=on_pass)
+        result = _render(scene, settings, progress=progress, cancel=cancel, on_pass=on_pass)
     except Exception as exc:
         if kernels.is_numba_error(exc):
             raise kernels.KernelsUnavailable(f"a compiled kernel failed on this machine: {kernels.compile_error(exc)}") from exc
         raise
+    result.stats.update(kernels.compile_stats(compiled_before))
+    return result
 
 
 _NODE_MESSAGE = re.compile(r"^(material '.*?': )node ('.*?' \(\w+\))")
@@ -151,12 +153,7 @@ def _render(scene, settings, *, progress=None, cancel=None, on_pass=None) -> Ren
     warnings: list[str] = scene_warnings(scene)     # lights that emit nothing (zero area / scale)
     if cancel is not None and cancel():
         raise RenderCancelled("render cancelled")
-    global _FIRST_RENDER
-    if _FIRST_RENDER and progress is not None:
-        # numba compiles the ray-casting, shading and look-up kernels on a machine's first render
-        # (about a minute on 2 cores, more with node materials; then cached on disk): say so
-        progress(0.0, "loading compiled kernels (the first render on a machine compiles them: about a minute)")
-    _FIRST_RENDER = False
+    progress = kernels.first_use_progress(progress)    # a process's first render: 'loading' or 'compiling kernels'
 
     # -- Scene acceleration, lights, materials, plan --------------------------------
     caster = make_caster(scene)

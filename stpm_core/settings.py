@@ -150,6 +150,10 @@ class RenderSettings:
         0, "int", "PROGRESSIVE: index of the first pass rendered (a farm splits one frame's passes between "
         "machines; stpm merge joins them)", lo=0, hi=1 << 24, label="Pass Offset", flag="--pass-offset", metavar="A",
         help="progressive: index of the first pass (split a frame between machines; join with stpm merge)")
+    denoise: bool = setting(
+        False, "bool", "also write Cycles' guide passes (Denoising Albedo, Denoising Normal) and the raw Combined "
+        "as Noisy Image; Blender's Denoise node makes the denoised Combined of them (docs/blender.md, "
+        "\"Denoising\")", label="Denoise")
 
     SPECS: ClassVar[tuple] = ()          # the schema rows, in field order (filled below)
 

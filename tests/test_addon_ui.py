@@ -110,6 +110,13 @@ def test_panels_draw_every_setting():
     ui.STPM_RENDER_PT_method.draw(panel, context)
     assert {"passes", "time_limit", "noise_threshold", "shrink_alpha", "pass_offset"} <= set(log)
     drawn["progressive"] = log
+    log = []                                        # Denoising: the toggle in its header (as Cycles)
+    panel = type("Drawn", (ui._STPMPanel,), {})()
+    panel.layout = _RecordingLayout(log)
+    ui.STPM_RENDER_PT_denoising.draw_header(panel, context)
+    ui.STPM_RENDER_PT_denoising.draw(panel, context)
+    drawn["STPM_RENDER_PT_denoising"] = log
+    assert log == ["denoise"]
     scene.stpm.method = "ACCUMULATION"
     shown = {n for log in drawn.values() for n in log} | {"accumulation_steps"}
     assert set(SETTING_NAMES) - shown == set(), set(SETTING_NAMES) - shown

@@ -4,6 +4,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -65,7 +66,64 @@ print("RESULT" + json.dumps({"install": sorted(ret), "engine": scene.render.engi
 """
 
 
-def test_built_zip_installs_into_blender_and_renders(tmp_path):
+# Installs the zip with Blender's operator (nothing rendered): the first fresh process
+_INSTALL = r"""
+import json, sys
+import bpy
+ret = bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="user_default", enable_on_install=True)
+print("RESULT" + json.dumps({"install": sorted(ret)}))
+"""
+
+# A later fresh process: enable the installed extension, render the demo, report the engine's stats
+_RENDER_INSTALLED = r"""
+import json, sys
+import bpy
+blend, exr = sys.argv[1:3]
+bpy.ops.preferences.addon_enable(module="bl_ext.user_default.stpm")
+core = sys.modules["bl_ext.user_default.stpm._core"]
+bpy.ops.wm.open_mainfile(filepath=blend)
+scene = bpy.context.scene
+scene.stpm.samples, scene.stpm.photons_global, scene.stpm.photons_caustic = 1, 500, 500
+scene.render.resolution_x, scene.render.resolution_y = 16, 12
+scene.render.filepath, scene.render.use_file_extension = exr, False
+cached_before = core.sub("kernels").kernels_cached()     # what the status bar is told before the render
+bpy.ops.render.render(write_still=True)
+stats = sys.modules["bl_ext.user_default.stpm.engine"].LAST_RENDER["stats"]
+print("RESULT" + json.dumps({"engine": scene.render.engine, "core": core.core.__file__,
+                             "cached_before": cached_before,
+                             **{k: stats[k] for k in ("kernels_compiled", "kernel_compile_s", "kernel_cache",
+                                                     "kernel_cache_source")}}))
+"""
+
+
+def _blender_child(script: str, args: list, tmp_path: Path, read_only_install: bool = False) -> dict:
+    """Run script in a fresh bpy process with the throw-away user folder tmp_path / 'user' (no checkout
+    on sys.path); read_only_install: mode bits hold even for root (it drops CAP_DAC_OVERRIDE)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NUMBA_CACHE_DIR", "STPM_KERNEL_CACHE")}
+    env["BLENDER_USER_RESOURCES"] = str(tmp_path / "user")
+    prefix = []
+    if read_only_install and os.name == "posix" and os.geteuid() == 0:
+        if shutil.which("setpriv") is None:
+            pytest.skip("running as root without setpriv: a read-only folder cannot be made to hold")
+        prefix = ["setpriv", "--bounding-set=-dac_override,-dac_read_search", "--"]
+    proc = subprocess.run([*prefix, sys.executable, "-c", script, *map(str, args)], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=1200)
+    line = next((l for l in proc.stdout.splitlines() if l.startswith("RESULT")), None)
+    assert line is not None, proc.stdout[-2000:] + proc.stderr[-3000:]
+    return json.loads(line[len("RESULT"):])
+
+
+def _set_read_only(folder: Path, read_only: bool) -> None:
+    for d, _dirs, files in os.walk(folder):
+        os.chmod(d, 0o555 if read_only else 0o755)
+        for name in files:
+            os.chmod(os.path.join(d, name), 0o444 if read_only else 0o644)
+
+
+def test_built_zip_installs_into_blender_and_compiles_its_kernels_once(tmp_path):
+    """Issue 17: install, make the install folder read-only, render in a fresh process (the kernels
+    compile into the extension's user folder), render in another fresh process: nothing compiles,
+    as the engine's own report says (``kernels_compiled``), and the status bar was told so."""
     pytest.importorskip("bpy")
     zip_path = build_zip.build(build_zip.this_platform(), wheels=False, out_dir=tmp_path / "dist")
     with zipfile.ZipFile(zip_path) as zf:
@@ -73,7 +131,27 @@ def test_built_zip_installs_into_blender_and_renders(tmp_path):
     assert {"blender_manifest.toml", "__init__.py", "engine.py", "export/mesh.py",
             "stpm_core/__init__.py", "stpm_core/render.py"} <= names
     assert "build_zip.py" not in names and not any("__pycache__" in n for n in names)
-    _install_and_render(zip_path, tmp_path)
+    assert _blender_child(_INSTALL, [zip_path], tmp_path)["install"] == ["FINISHED"]
+    installed = tmp_path / "user" / "extensions" / "user_default" / "stpm"
+    user_folder = tmp_path / "user" / "extensions" / ".user" / "user_default" / "stpm" / "kernel-cache"
+    blend = ROOT / "blend_scenes" / "demo.blend"
+    _set_read_only(installed, True)
+    try:
+        first = _blender_child(_RENDER_INSTALLED, [blend, tmp_path / "first.exr"], tmp_path, read_only_install=True)
+        second = _blender_child(_RENDER_INSTALLED, [blend, tmp_path / "second.exr"], tmp_path, read_only_install=True)
+    finally:
+        _set_read_only(installed, False)
+    assert first["engine"] == "STPM" and Path(first["core"]).is_relative_to(installed)   # the bundled core
+    assert (tmp_path / "first.exr").stat().st_size > 0 and (tmp_path / "second.exr").stat().st_size > 0
+    # the first render compiled, into the extension's user folder (one sub-folder per version and CPU)
+    assert first["cached_before"] is False and first["kernels_compiled"] > 50
+    assert first["kernel_cache_source"] == "extension" and Path(first["kernel_cache"]).parent == user_folder
+    assert any(Path(first["kernel_cache"]).rglob("paths.classify_hits-*.nbi"))
+    assert not any(installed.rglob("*.nbi"))
+    # the second fresh process loaded every kernel
+    assert second["cached_before"] is True and second["kernels_compiled"] == 0
+    assert second["kernel_cache"] == first["kernel_cache"]
+    print(f"first render {first['kernel_compile_s']:.1f} s compiling, second {second['kernel_compile_s']:.1f} s")
 
 
 def _install_and_render(zip_path: Path, tmp_path: Path) -> None:

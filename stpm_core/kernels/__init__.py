@@ -22,15 +22,22 @@ numpy code these kernels replaced is the test oracles in ``tests/oracles/``.  nu
 of a kernel is invalidated only by edits of the kernel's own file, not of what it calls from
 other modules: ``numba_probe.invalidate_stale_caches`` (run when ``stpm_core`` is imported) touches
 every kernel source when any of them changed (docs/architecture.md, "Compiled kernels").
+
+Compiling or loading: :func:`kernels_cached` looks in numba's cache index whether the camera-path
+kernels are there for this CPU and these sources; :func:`first_use_progress` tells the user on a
+process's first render whether the kernels load or compile; :func:`compile_stats` is what a
+render reports (``kernels_compiled``: STPM functions numba compiled during it, 0 when everything
+came from the cache).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..errors import StpmError
-from ..numba_probe import AVAILABLE, IMPORT_ERROR
+from ..numba_probe import AVAILABLE, CACHE, IMPORT_ERROR, compile_counts
 
-__all__ = ["KernelsUnavailable", "require", "compile_error", "is_numba_error", "kernel_array"]
+__all__ = ["KernelsUnavailable", "require", "compile_error", "is_numba_error", "kernel_array", "kernels_cached",
+           "first_use_progress", "compile_stats"]
 
 
 class KernelsUnavailable(StpmError):
@@ -86,3 +93,59 @@ def kernel_array(a, dtype=np.float64) -> np.ndarray:
     (tests/test_kernel_signatures.py).
     """
     return np.require(a, dtype, ("C", "W"))
+
+
+def kernels_cached():
+    """True when the camera-path kernels are compiled in this process or in numba's on-disk cache for
+    this CPU and these sources, False when the next render compiles them, None when unknown.
+
+    Reads the index numba keeps per function (``<module>.<function>-<line>.py311.nbi``: its numba
+    version, the source file's stamp and one entry per signature and CPU) for
+    ``paths.classify_hits``, which every render uses; the cache is written all at once by a first
+    render, so one function stands for the others (a scene that needs a kernel no earlier render
+    needed still compiles that one: ``compile_stats`` reports it).
+    """
+    if not AVAILABLE:
+        return None
+    try:
+        from . import paths
+        dispatcher = paths.classify_hits
+        if dispatcher.overloads:
+            return True
+        index = dispatcher._cache._cache_file._load_index()      # {} when missing, stale or another numba
+        magic = dispatcher.targetctx.codegen().magic_tuple()     # (target triple, CPU name, CPU features)
+        return any(key[1] == magic for key in index)
+    except Exception:  # noqa: BLE001 -- numba internals differ: say nothing rather than something wrong
+        return None
+
+
+_FIRST_RENDER = [True]      # this process has not rendered yet
+
+
+def first_use_progress(progress):
+    """progress, after telling the user (on this process's first render) whether the kernels load
+    from the cache or compile; while they compile, every message of that render says so."""
+    if not _FIRST_RENDER[0] or progress is None:
+        return progress
+    _FIRST_RENDER[0] = False
+    cached = kernels_cached()
+    if cached:
+        progress(0.0, "loading compiled kernels")
+        return progress
+    if cached is None:
+        progress(0.0, "loading compiled kernels (or compiling them: about a minute on a first render)")
+        return progress
+    progress(0.0, "compiling kernels: the first render after installing or updating STPM (about a minute, "
+                  "more with node materials; cached afterwards)")
+    return lambda f, message: progress(f, f"{message} (compiling kernels on first use)" if message else message)
+
+
+def compile_stats(before=(0, 0.0)) -> dict:
+    """The render's report on compiled kernels since ``before`` (a :func:`compile_counts` value):
+    ``kernels_compiled`` (STPM functions numba compiled, callees included; 0 = all loaded from the
+    cache or already in memory), ``kernel_compile_s`` (seconds compiling) and ``kernel_cache`` (the
+    cache folder, '' = numba's default ``__pycache__`` beside each module) and
+    ``kernel_cache_source`` (why there: ``numba_probe.choose_cache_dir``)."""
+    n, seconds = compile_counts()
+    return {"kernels_compiled": int(n - before[0]), "kernel_compile_s": float(seconds - before[1]),
+            "kernel_cache": CACHE.get("dir", ""), "kernel_cache_source": CACHE.get("source", "")}

@@ -57,6 +57,8 @@ Per-hit functions (compiled once; the kernels call them):
   non-diffuse lobes alone);
 * :func:`diffuse_albedo` -- w_base (1 - F_coat(|wo . ns|)) base_color, what
   multiplies photon irradiance;
+* :func:`denoising_features` -- Cycles' Denoising Albedo / Normal at a vertex: each lobe's albedo
+  at wo, diffuse-like or specular-like by its roughness, and whether the features stop here;
 * :func:`fresnel_dielectric` -- F_diel(cos_i, eta), exact unpolarised, 1 under TIR;
 * :func:`ggx_albedo`, :func:`ggx_albedo_avg` -- look-ups of the single-scattering
   GGX albedo E(mu, alpha) (bilinear) and E_avg(alpha) (linear) in the tables
@@ -88,7 +90,8 @@ from .closure import (C_ALPHA, C_BASE, C_TINT_T, C_BUMPED, C_COAT, C_IOR, C_NS, 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
            "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
            "fresnel_dielectric_fss", "coat_albedo", "glass_albedo", "glass_albedo_avg", "build_glass_table",
-           "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch"]
+           "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch",
+           "denoising_features", "DENOISE_ALPHA"]
 
 DIFFUSE, COAT, METAL, GLASS_R, GLASS_T, METAL_MS = range(6)
 
@@ -1021,6 +1024,70 @@ def diffuse_albedo(C, cr, E, wo, ns):
         F = spec * fresnel_dielectric(mu, C[cr, C_IOR])
     k = C[cr, C_W_BASE] * (1.0 - F)
     return k * C[cr, C_BASE], k * C[cr, C_BASE + 1], k * C[cr, C_BASE + 2]
+
+
+#: Cycles' line between specular-like and diffuse-like closures for the denoising features: a lobe
+#: whose GGX alpha (roughness^2) is above it counts as diffuse (``denoising_passes.h``, 0.075^2
+#: compared with alpha_x alpha_y); DIFFUSE always does
+DENOISE_ALPHA = 0.075
+
+
+@njit(**_JIT)
+def denoising_features(C, cr, E, E_avg, wo, ns, ng):
+    """Cycles' denoising features of closure row C[cr] seen from wo: (diffuse-like albedo (3-tuple),
+    specular-like albedo (3-tuple), normal (3-tuple), stop).
+
+    As Cycles' ``film_write_denoising_features_surface``: each lobe's albedo at wo (its weight times
+    its directional reflectance, as STPM's BSDF defines it: DIFFUSE w_base (1 - F_coat) base_color,
+    COAT w_base F_coat, METAL w_metal F_metal(wo), GLASS w_glass (F + (1 - F) tint_t)) goes to the
+    diffuse-like sum when the lobe is DIFFUSE or its alpha is above :data:`DENOISE_ALPHA`, else to
+    the specular-like sum; the normal is the lobes' normals (DIFFUSE: the facing shading normal, the
+    others: the specular normal nss) weighted by their mean albedo.  stop: this vertex writes the
+    features (no lobe has any weight, or diffuse-like lobes hold more than a quarter of it); else
+    the camera path carries them on, its feature throughput times the specular-like albedo.
+    """
+    hit = _hit(C, cr, E, E_avg, wo, ns, ng)
+    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
+    w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
+    rough_like = C[cr, C_ALPHA] > DENOISE_ALPHA
+    d0 = d1 = d2 = 0.0                               # diffuse-like albedo
+    s0 = s1 = s2 = 0.0                               # specular-like albedo
+    n0 = n1 = n2 = 0.0                               # weighted normal
+    w_sum = 0.0
+    w_diffuse = 0.0
+    # -- DIFFUSE: the base under the coat
+    k = w_base * (1.0 - F_coat)
+    a0, a1, a2 = k * C[cr, C_BASE], k * C[cr, C_BASE + 1], k * C[cr, C_BASE + 2]
+    w = (a0 + a1 + a2) / 3.0
+    if w > 0.0:
+        d0, d1, d2 = d0 + a0, d1 + a1, d2 + a2
+        n0, n1, n2 = n0 + w * nsf[0], n1 + w * nsf[1], n2 + w * nsf[2]
+        w_sum += w
+        w_diffuse += w
+    if cos_o > 0.0:                                  # the specular lobes give nothing for wo under nss
+        for lobe in range(3):
+            if lobe == 0:                            # COAT (grey)
+                a0 = a1 = a2 = w_base * F_coat
+            elif lobe == 1:                          # METAL
+                a0, a1, a2 = w_metal * F_metal[0], w_metal * F_metal[1], w_metal * F_metal[2]
+            else:                                    # GLASS: reflection and transmission
+                a0 = w_glass * (F_glass + (1.0 - F_glass) * C[cr, C_TINT_T])
+                a1 = w_glass * (F_glass + (1.0 - F_glass) * C[cr, C_TINT_T + 1])
+                a2 = w_glass * (F_glass + (1.0 - F_glass) * C[cr, C_TINT_T + 2])
+            w = (a0 + a1 + a2) / 3.0
+            if not w > 0.0:
+                continue
+            n0, n1, n2 = n0 + w * nss[0], n1 + w * nss[1], n2 + w * nss[2]
+            w_sum += w
+            if rough_like:
+                d0, d1, d2 = d0 + a0, d1 + a1, d2 + a2
+                w_diffuse += w
+            else:
+                s0, s1, s2 = s0 + a0, s1 + a1, s2 + a2
+    if w_sum > 0.0:
+        n0, n1, n2 = n0 / w_sum, n1 / w_sum, n2 / w_sum
+    stop = (not w_sum > 0.0) or w_diffuse * 4.0 > w_sum
+    return (d0, d1, d2), (s0, s1, s2), (n0, n1, n2), stop
 
 
 # ----------------------------------------------------------------------------

@@ -15,6 +15,9 @@ equations with these names):
 * :func:`classify_hits` -- one bounce's bookkeeping: world radiance of misses,
   surface emission, Depth / Normal / coverage of the first hit, and the rows to
   shade (non-delta lobe) and to continue (delta lobe);
+* :func:`denoising_rows` (with ``RenderSettings.denoise``) -- Cycles' denoising features of the
+  bounce: Denoising Albedo and Normal at the first diffuse-like vertex, the feature throughput
+  through specular-like ones (:func:`denoising_seen_add`: light shapes seen on the way);
 * :func:`nee_light` -- next-event estimation of one light at the shaded rows:
   the light samples (:func:`stpm_core.kernels.lights.sample_light_rows`, every light
   type), the BSDF (:func:`stpm_core.kernels.bsdf.bsdf_eval`), the unshadowed
@@ -42,14 +45,16 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .bsdf import PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_eval_smooth, bsdf_sample_path, diffuse_albedo
+from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_eval_smooth, bsdf_sample_path,
+                   denoising_features, diffuse_albedo)
 from .environment import env_radiance
 from .closure import (C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, closure_row)
 from .light_params import P_TYPE, T_WORLD
 from .lights import sample_light_rows, seen_light, world_nee_pdf
 from .sampling import dot, offset_origin
 
-__all__ = ["camera_tile", "camera_rays", "classify_hits", "nee_light", "nee_accumulate",
+__all__ = ["camera_tile", "camera_rays", "classify_hits", "denoising_rows", "denoising_seen_add", "nee_light",
+           "nee_accumulate",
            "seen_lights_add", "photon_albedo", "photon_add", "specular_step", "scatter_add", "active_channels",
            "pixel_sums", "tile_finish"]
 
@@ -196,15 +201,10 @@ def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta,
             ww = world_w[r] if use_glossy else 1.0
             if add_world and ww > 0.0:
                 n_emit += 1
-                world = env_radiance(env, wposes[0 if one_w else r], (D[r, 0], D[r, 1], D[r, 2]))
-                if use_beta:
-                    e0, e1, e2 = beta[r, 0] * world[0] * ww, beta[r, 1] * world[1] * ww, beta[r, 2] * world[2] * ww
-                else:
-                    e0, e1, e2 = world[0] * ww, world[1] * ww, world[2] * ww
-                f = _clamp_scale(e0, e1, e2, clamp)
-                V[i, c_emit] += e0 * f
-                V[i, c_emit + 1] += e1 * f
-                V[i, c_emit + 2] += e2 * f
+                e0, e1, e2 = _world_seen(env, wposes, one_w, D, r, beta, use_beta, ww, clamp)
+                V[i, c_emit] += e0
+                V[i, c_emit + 1] += e1
+                V[i, c_emit + 2] += e2
             continue
         n_hit += 1
         if first:
@@ -216,14 +216,10 @@ def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta,
             covered[i] = 1.0
         if C[r, C_EMISSIVE] > 0.0 and emits:
             n_emit += 1
-            if use_beta:
-                e0, e1, e2 = beta[r, 0] * C[r, C_EMIT], beta[r, 1] * C[r, C_EMIT + 1], beta[r, 2] * C[r, C_EMIT + 2]
-            else:
-                e0, e1, e2 = C[r, C_EMIT], C[r, C_EMIT + 1], C[r, C_EMIT + 2]
-            f = _clamp_scale(e0, e1, e2, clamp)
-            V[i, c_emit] += e0 * f
-            V[i, c_emit + 1] += e1 * f
-            V[i, c_emit + 2] += e2 * f
+            e0, e1, e2 = _emission_seen(C, r, beta, use_beta, clamp)
+            V[i, c_emit] += e0
+            V[i, c_emit + 1] += e1
+            V[i, c_emit + 2] += e2
         if C[r, C_NONDELTA] > 0.0:
             sh[n_sh] = r
             n_sh += 1
@@ -231,6 +227,31 @@ def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta,
             spec[n_spec] = r
             n_spec += 1
     return n_hit, n_sh, n_spec, n_emit
+
+
+@njit(**_JIT)
+def _world_seen(env, wposes, one_w, D, r, beta, use_beta, ww, clamp):
+    """What row r adds to Emit where its ray escapes: beta[r] (1 when not use_beta) times the world's
+    radiance along D[r] times ww, clamped to ``clamp`` (0: off)."""
+    world = env_radiance(env, wposes[0 if one_w else r], (D[r, 0], D[r, 1], D[r, 2]))
+    if use_beta:
+        e0, e1, e2 = beta[r, 0] * world[0] * ww, beta[r, 1] * world[1] * ww, beta[r, 2] * world[2] * ww
+    else:
+        e0, e1, e2 = world[0] * ww, world[1] * ww, world[2] * ww
+    f = _clamp_scale(e0, e1, e2, clamp)
+    return e0 * f, e1 * f, e2 * f
+
+
+@njit(**_JIT)
+def _emission_seen(C, r, beta, use_beta, clamp):
+    """What row r adds to Emit where it hits an emissive surface: beta[r] (1 when not use_beta) times
+    the closure's emission, clamped to ``clamp`` (0: off)."""
+    if use_beta:
+        e0, e1, e2 = beta[r, 0] * C[r, C_EMIT], beta[r, 1] * C[r, C_EMIT + 1], beta[r, 2] * C[r, C_EMIT + 2]
+    else:
+        e0, e1, e2 = C[r, C_EMIT], C[r, C_EMIT + 1], C[r, C_EMIT + 2]
+    f = _clamp_scale(e0, e1, e2, clamp)
+    return e0 * f, e1 * f, e2 * f
 
 
 @njit(**_JIT)
@@ -273,6 +294,102 @@ def scatter_add(dst, rows, idx, use_idx, beta, use_beta, val, clamp):
     contribution clamped to ``clamp`` (0: off)."""
     for k in range(rows.shape[0]):
         _add_row(dst, rows[k], idx, use_idx, beta, use_beta, val, k, clamp)
+
+
+# ----------------------------------------------------------------------------
+# Denoising features (Cycles' Denoising Albedo and Denoising Normal)
+# ----------------------------------------------------------------------------
+@njit(**_JIT)
+def denoising_rows(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta, glossy, world_w, use_glossy, NS,
+                   NG, E, E_avg, cam_R, first, feat, dft, feat_next, dft_next, V, c_albedo, c_normal, clamp):
+    """One bounce's share of the denoising features, as Cycles writes them (``denoising_passes.h``,
+    and the albedo part of ``film_write_emission_or_background_pass``), for the rows of
+    :func:`classify_hits`'s bounce (same t, C, env, wposes, D, add_world, idx, beta, glossy, world_w,
+    clamp) that still carry features.
+
+    feat (m,) uint8: 1 where row r has not met its first diffuse-like vertex yet (every row on
+    the first bounce), dft (m, 3) its feature throughput (1 on the first bounce: the product of the
+    specular-like albedos met so far).  Where the row's ray escapes or hits an emitter, Denoising
+    Albedo (columns c_albedo ..) gets dft times what :func:`classify_hits` adds to Emit there (an
+    emitter also after a specular-like rough lobe, where Emit leaves it to next-event estimation:
+    Cycles' albedo gets the emission its BSDF-sampled rays find, e.g. a highlight).  At a
+    hit, ``bsdf.denoising_features``: where the diffuse-like lobes hold more than a quarter of the
+    lobes' weight (or none has any), Denoising Albedo gets dft times the diffuse-like albedo and
+    Denoising Normal (c_normal ..) the lobes' weighted normal in Cycles' camera space (x right, y
+    up, z into the view: (n . R_x, n . R_y, -n . R_z) with R (k, 3, 3) the camera's rotation at the
+    sample's time, k = 1 or one per sample) and the row carries no features on; otherwise its feature
+    throughput is multiplied by the specular-like albedo and the path, if it goes on
+    (:func:`specular_step`), takes it to its next vertex.  Results: feat_next, dft_next (m,).  first:
+    the bounce that starts every sample (feat and dft are not read: every row carries features with
+    throughput 1; V's rows were started, all 0, by :func:`classify_hits`).
+    """
+    m = t.shape[0]
+    one_w = wposes.shape[0] == 1
+    one_c = cam_R.shape[0] == 1
+    for r in range(m):
+        i = idx[r] if use_idx else r
+        on = first or feat[r] != 0
+        f0, f1, f2 = (1.0, 1.0, 1.0) if first else (dft[r, 0], dft[r, 1], dft[r, 2])
+        feat_next[r] = 0
+        dft_next[r, 0], dft_next[r, 1], dft_next[r, 2] = f0, f1, f2
+        if not on:
+            continue
+        if not np.isfinite(t[r]):
+            # -- The world seen: its contribution to Emit, times the feature throughput
+            ww = world_w[r] if use_glossy else 1.0
+            if add_world and ww > 0.0:
+                e0, e1, e2 = _world_seen(env, wposes, one_w, D, r, beta, use_beta, ww, clamp)
+                V[i, c_albedo] += f0 * e0
+                V[i, c_albedo + 1] += f1 * e1
+                V[i, c_albedo + 2] += f2 * e2
+            continue
+        # -- An emitter seen: its emission (also through a specular-like rough lobe, where Emit
+        # leaves it to next-event estimation), times the feature throughput
+        if C[r, C_EMISSIVE] > 0.0:
+            e0, e1, e2 = _emission_seen(C, r, beta, use_beta, clamp)
+            V[i, c_albedo] += f0 * e0
+            V[i, c_albedo + 1] += f1 * e1
+            V[i, c_albedo + 2] += f2 * e2
+        # -- The surface: write the features here, or carry them on through its specular-like lobes
+        diff, spec, n, stop = denoising_features(C, r, E, E_avg, (-D[r, 0], -D[r, 1], -D[r, 2]),
+                                                 (NS[r, 0], NS[r, 1], NS[r, 2]), (NG[r, 0], NG[r, 1], NG[r, 2]))
+        if stop:
+            V[i, c_albedo] += f0 * diff[0]
+            V[i, c_albedo + 1] += f1 * diff[1]
+            V[i, c_albedo + 2] += f2 * diff[2]
+            k = 0 if one_c else i
+            V[i, c_normal] += n[0] * cam_R[k, 0, 0] + n[1] * cam_R[k, 1, 0] + n[2] * cam_R[k, 2, 0]
+            V[i, c_normal + 1] += n[0] * cam_R[k, 0, 1] + n[1] * cam_R[k, 1, 1] + n[2] * cam_R[k, 2, 1]
+            V[i, c_normal + 2] -= n[0] * cam_R[k, 0, 2] + n[1] * cam_R[k, 1, 2] + n[2] * cam_R[k, 2, 2]
+        else:
+            feat_next[r] = 1
+            dft_next[r, 0], dft_next[r, 1], dft_next[r, 2] = f0 * spec[0], f1 * spec[1], f2 * spec[2]
+
+
+@njit(**_JIT)
+def denoising_seen_add(V, c_albedo, rows, idx, use_idx, beta, use_beta, first, feat, dft, val, clamp):
+    """Denoising Albedo of light shapes seen along the rows' rays (as :func:`scatter_add` adds them to
+    Emit, and also after a specular-like rough lobe): V[idx[r], c_albedo ..] += dft[r] * beta[r] *
+    val[k] clamped, r = rows[k], for the rows still carrying features (feat, dft as
+    :func:`denoising_rows` takes them: before the vertex)."""
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        if not (first or feat[r] != 0):
+            continue
+        i = idx[r] if use_idx else r
+        if use_beta:
+            c0, c1, c2 = beta[r, 0] * val[k, 0], beta[r, 1] * val[k, 1], beta[r, 2] * val[k, 2]
+        else:
+            c0, c1, c2 = val[k, 0], val[k, 1], val[k, 2]
+        g = _clamp_scale(c0, c1, c2, clamp)
+        if first:
+            V[i, c_albedo] += c0 * g
+            V[i, c_albedo + 1] += c1 * g
+            V[i, c_albedo + 2] += c2 * g
+        else:
+            V[i, c_albedo] += dft[r, 0] * c0 * g
+            V[i, c_albedo + 1] += dft[r, 1] * c1 * g
+            V[i, c_albedo + 2] += dft[r, 2] * c2 * g
 
 
 # ----------------------------------------------------------------------------
@@ -455,7 +572,7 @@ def photon_add(dst, rows, live, rho, E, idx, use_idx, beta, use_beta, clamp):
 @njit(**_JIT)
 def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg, U, rr, U_rr, EPS, guard_fraction,
                   stop_coat, env, wposes, world_mis, counts, max_glossy, max_transmission, idx_out, beta_out, o_out,
-                  d_out, guard_out, glossy_out, world_w_out, counts_out):
+                  d_out, guard_out, glossy_out, world_w_out, counts_out, use_feat, feat, dft, feat_out, dft_out):
     """Continue the hit rows spec (k,) through their delta and rough non-diffuse lobes; returns how
     many paths go on.
 
@@ -480,6 +597,9 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg,
     max_transmission (wi below the face, a refraction); a rough lobe while both are (the same
     condition that gives next-event estimation at the row its multiple-importance weight,
     ``integrator.mis_rows``).
+
+    use_feat: the denoising features go on with the paths (feat (m,) uint8 and dft (m, 3) of
+    :func:`denoising_rows`, indexed by hit row, copied to feat_out, dft_out of the next rays).
     """
     one_w = wposes.shape[0] == 1
     n_go = 0
@@ -526,6 +646,9 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg,
         world_w_out[n_go] = w_world
         counts_out[n_go, 0] = n_gl + (0 if trans else 1)
         counts_out[n_go, 1] = n_tr + (1 if trans else 0)
+        if use_feat:
+            feat_out[n_go] = feat[r]
+            dft_out[n_go, 0], dft_out[n_go, 1], dft_out[n_go, 2] = dft[r, 0], dft[r, 1], dft[r, 2]
         n_go += 1
     return n_go
 
