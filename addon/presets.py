@@ -4,7 +4,8 @@
 setting for frames that leave the studio.  The progressive variants render
 passes until a time limit (``Preview Progressive``: the image sharpens for
 as long as you watch) or a noise threshold (``Final Progressive``); their
-photon counts and samples are per pass.  Applied by ``stpm.apply_preset``.
+photon counts and samples are per pass: many small passes (1 sample per pixel, k = 20) measured
+best (docs/compare.md, "Progressive and SPPM").  Applied by ``stpm.apply_preset``.
 """
 from __future__ import annotations
 
@@ -20,15 +21,15 @@ PRESETS: dict[str, dict] = {
         "max_depth": 8, "motion_steps": 5,
     },
     "PREVIEW_PROGRESSIVE": {
-        "method": "PROGRESSIVE", "estimator": "TEMPORAL", "samples": 2, "photons_global": 20_000,
-        "photons_caustic": 50_000, "k_nearest": 10, "temporal_alpha": 0.0, "time_scale": 0.0,
+        "method": "PROGRESSIVE", "estimator": "TEMPORAL", "samples": 1, "photons_global": 20_000,
+        "photons_caustic": 50_000, "k_nearest": 20, "temporal_alpha": 0.0, "time_scale": 0.0,
         "passes": 0, "time_limit": 20.0, "noise_threshold": 0.0, "shrink_alpha": 0.0, "pass_offset": 0,
         "max_depth": 4, "motion_steps": 3,
     },
     "FINAL_PROGRESSIVE": {
-        "method": "PROGRESSIVE", "estimator": "TEMPORAL", "samples": 4, "photons_global": 200_000,
-        "photons_caustic": 400_000, "k_nearest": 10, "temporal_alpha": 0.0, "time_scale": 0.0,
-        "passes": 512, "time_limit": 0.0, "noise_threshold": 0.02, "shrink_alpha": 0.0, "pass_offset": 0,
+        "method": "PROGRESSIVE", "estimator": "TEMPORAL", "samples": 1, "photons_global": 100_000,
+        "photons_caustic": 200_000, "k_nearest": 20, "temporal_alpha": 0.0, "time_scale": 0.0,
+        "passes": 1024, "time_limit": 0.0, "noise_threshold": 0.02, "shrink_alpha": 0.0, "pass_offset": 0,
         "max_depth": 8, "motion_steps": 5,
     },
 }
@@ -39,7 +40,7 @@ PRESET_ITEMS = (
     ("PREVIEW_PROGRESSIVE", "Preview Progressive",
      "Passes that sharpen for 20 seconds (a shrinking space-time kernel); stop it any time with Esc"),
     ("FINAL_PROGRESSIVE", "Final Progressive",
-     "Passes until the estimated noise is under 2 % (at most 512 passes): converges instead of stopping at "
+     "Passes until the estimated noise is under 2 % (at most 1024 passes): converges instead of stopping at "
      "a kernel's blur"),
 )
 
