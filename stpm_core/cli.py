@@ -287,7 +287,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
     renamed into place together once all are written, so a failure, a kill or a
     Ctrl-C leaves either all of them or none under the final names.
     """
-    from .imageio import atomic_output, commit_temp, discard_temp, write_exr, write_json, write_png
+    from .imageio import write_exr, write_json, write_png
     from .progress import ProgressBar
     from .render import render
 
@@ -353,42 +353,35 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
         stats["export_s"] = float(export_s) + float(stats.get("export_s", 0.0) or 0.0)
         meta = {"stpm:settings": settings.to_dict(), "stpm:plan": plan,
                 "stpm:scene": str(scene_path), "stpm:frame": str(scene.frame if frame is None else frame)}
-        staged: list[tuple[Path, Path]] = []
-        try:
-            real_exr, real_png = real_target(out_exr), real_target(out_png)   # temp files beside the real target
-            with atomic_output(real_exr, commit=False) as tmp:
-                if partial:
-                    from .partial import scene_hash, settings_hash, write_partial
-                    write_partial(tmp, result.sums, seed=settings.seed, scene_digest=scene_hash(scene),
-                                  settings_digest=settings_hash(settings), metadata={**meta, "stpm:stats": stats},
-                                  atomic=False)
-                else:
-                    write_exr(tmp, result, {**meta, "stpm:stats": stats}, atomic=False)
-            staged.append((tmp, real_exr))
-            with atomic_output(real_png, commit=False) as tmp:
-                write_png(tmp, result.passes["Combined"][:, :, :3], atomic=False)
-            staged.append((tmp, real_png))
-            stats.update({
-                "render_wall_s": float(result.stats.get("wall_s", 0.0)),
-                "write_s": time.perf_counter() - t_write,
-                "wall_s": time.perf_counter() - t_frame,
-                "scene": str(scene_path), "frame": scene.frame if frame is None else frame,
-                "output_exr": str(out_exr), "output_png": str(out_png),
-                "settings": settings.to_dict(), "plan": plan,
-                "warnings": list(getattr(result, "warnings", []) or []),
-            })
-            if stats_path is not None:
-                real_stats = real_target(stats_path)
-                with atomic_output(real_stats, commit=False) as tmp:
-                    write_json(tmp, stats, atomic=False)
-                staged.append((tmp, real_stats))
-            check_cancel(cancel)  # a Ctrl-C while writing: none of this frame's outputs
-            while staged:
-                commit_temp(*staged[0])
-                staged.pop(0)
-        finally:
-            for tmp, _ in staged:
-                discard_temp(tmp)
+        def exr(tmp):
+            if partial:
+                from .partial import scene_hash, settings_hash, write_partial
+                write_partial(tmp, result.sums, seed=settings.seed, scene_digest=scene_hash(scene),
+                              settings_digest=settings_hash(settings), metadata={**meta, "stpm:stats": stats},
+                              atomic=False)
+            else:
+                write_exr(tmp, result, {**meta, "stpm:stats": stats}, atomic=False)
+
+        def stats_json(tmp):
+            write_json(tmp, stats, atomic=False)
+
+        stats.update({
+            "render_wall_s": float(result.stats.get("wall_s", 0.0)),
+            "scene": str(scene_path), "frame": scene.frame if frame is None else frame,
+            "output_exr": str(out_exr), "output_png": str(out_png),
+            "settings": settings.to_dict(), "plan": plan,
+            "warnings": list(getattr(result, "warnings", []) or []),
+        })
+        outputs = [(out_exr, exr), (out_png, lambda tmp: write_png(tmp, result.passes["Combined"][:, :, :3],
+                                                                     atomic=False))]
+        if stats_path is not None:
+            def timed_stats(tmp):
+                stats.update({"write_s": time.perf_counter() - t_write, "wall_s": time.perf_counter() - t_frame})
+                stats_json(tmp)
+            outputs.append((stats_path, timed_stats))
+        _write_together(outputs, cancel)
+        if stats_path is None:
+            stats.update({"write_s": time.perf_counter() - t_write, "wall_s": time.perf_counter() - t_frame})
         for w in stats["warnings"]:
             _warn(w)
         if stats.get("progressive") and not args.quiet:
@@ -406,9 +399,30 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
     return EXIT_OK
 
 
+def _write_together(outputs, cancel) -> None:
+    """Write each (path, write(tmp)) of ``outputs`` to a temporary file beside the path's real target
+    (folders resolved on disk), in order, then rename them all into place: a failure, a kill or a
+    Ctrl-C before the renames leaves none of them under their final names."""
+    from .imageio import atomic_output, commit_temp, discard_temp
+    staged: list[tuple[Path, Path]] = []
+    try:
+        for path, write in outputs:
+            real = real_target(path)
+            with atomic_output(real, commit=False) as tmp:
+                write(tmp)
+            staged.append((tmp, real))
+        check_cancel(cancel)  # a Ctrl-C while writing: none of the outputs
+        while staged:
+            commit_temp(*staged[0])
+            staged.pop(0)
+    finally:
+        for tmp, _ in staged:
+            discard_temp(tmp)
+
+
 def _cmd_merge(args) -> int:
     """``stpm merge``: partial results of one progressive render -> the image one process would have made."""
-    from .imageio import atomic_output, commit_temp, discard_temp, write_exr, write_json, write_png
+    from .imageio import write_exr, write_json, write_png
     from .partial import merge
     from .progressive import flip_visible_fraction, noise_estimate, summary
     if not args.output.lower().endswith(".exr"):
@@ -433,25 +447,11 @@ def _cmd_merge(args) -> int:
             "noise_flip_visible": flip_visible_fraction(sums), "parts": [str(p) for p in args.parts],
             "seed": head["seed"], "scene_hash": head["scene_hash"], "settings_hash": head["settings_hash"]}
     passes = sums.image()
-    staged = []
-    try:
-        with atomic_output(real_target(out_exr), commit=False) as tmp:
-            write_exr(tmp, passes, {"stpm:progressive": info}, atomic=False)
-        staged.append((tmp, real_target(out_exr)))
-        with atomic_output(real_target(out_png), commit=False) as tmp:
-            write_png(tmp, passes["Combined"][:, :, :3], atomic=False)
-        staged.append((tmp, real_target(out_png)))
-        if stats_path is not None:
-            with atomic_output(real_target(stats_path), commit=False) as tmp:
-                write_json(tmp, {"progressive": info}, atomic=False)
-            staged.append((tmp, real_target(stats_path)))
-        check_cancel(CancelFlag.active)
-        while staged:
-            commit_temp(*staged[0])
-            staged.pop(0)
-    finally:
-        for tmp, _ in staged:
-            discard_temp(tmp)
+    outputs = [(out_exr, lambda tmp: write_exr(tmp, passes, {"stpm:progressive": info}, atomic=False)),
+               (out_png, lambda tmp: write_png(tmp, passes["Combined"][:, :, :3], atomic=False))]
+    if stats_path is not None:
+        outputs.append((stats_path, lambda tmp: write_json(tmp, {"progressive": info}, atomic=False)))
+    _write_together(outputs, CancelFlag.active)
     if not args.quiet:
         print(f"merged {len(args.parts)} partial results: {summary({**info, 'kernel_radius_scale': None})}",
               file=sys.stderr)
