@@ -197,7 +197,7 @@ def flip_visible_fraction(sums: PassSums) -> float | None:
 
 
 def render_passes(scene, settings, psettings, caster, lights, table, *, progress=None, cancel=None,
-                  on_pass=None, sums: PassSums | None = None):
+                  on_pass=None):
     """The pass loop of method PROGRESSIVE.
 
     settings : the user's RenderSettings; psettings : after the effects plan (photon counts,
@@ -220,7 +220,7 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
     if with_photons:
         say(0.0, "tracing pilot photons")
         pilot = build_pilot(scene, psettings, caster, lights, time_scale=s, cancel=cancel)
-    sums = PassSums(first) if sums is None else sums
+    sums = PassSums(first)
     trace_stats, map_stats, pass_s = [], [], []
     noise = {"noise_p95": math.inf, "noise_mean": math.inf}
     stop = "passes"

@@ -21,21 +21,24 @@ ignored), 3 for the space-time kernels (TEMPORAL's cylinder and KD4D's ball:
 2 surface dimensions + time); the default a = 2 / (d + 2) is the edge case.
 docs/photon-mapping.md ("Progressive") derives it with units.
 
-Kernel shapes, in (x, y, z, s t) with s the scene's time scale (KD4D's s, m per shutter):
+Kernel shapes (:meth:`Pilot.region_at` gives pass 1's, :meth:`ProgressiveMaps.estimate` shrinks
+them and clips them to the pass's time stratum):
 
 * STANDARD: the ball |x - x_q| < r, normalised by the disc pi r^2 (time ignored);
-* TEMPORAL: the cylinder |x - x_q| < r, |t - t_q| <= r / s, normalised by
-  pi r^2 W, W the shutter mass of [t_q - r/s, t_q + r/s] clipped to the shutter;
-* KD4D: the 4D ball of radius R, normalised by the clipped ball measure V(R) / s
-  (``estimators.slab_ball_volume``).
+* TEMPORAL: the cylinder |x - x_q| < r, |t - t_q| <= tau with (r, tau) from the pilot's own
+  TEMPORAL search (its aspect follows the light), normalised by pi r^2 W, W the shutter mass of
+  the window;
+* KD4D: the 4D ball of radius R in (x, y, z, s t) (s the scene's time scale), normalised by the
+  clipped ball measure V(R) / s (``estimators.slab_ball_volume``).
 
 The initial size at each query point comes from a pilot photon map traced
 with its own random stream (never the pass's photons, or the passes would
 not be independent estimates of a fixed kernel and the analysis would no
-longer hold): the pilot's k_p-nearest region at the query (3D for STANDARD,
-4D for the others), scaled so that one pass's photons are expected to put
-about k = ``settings.k_nearest`` photons inside it.  So pass 1 looks like a
-fixed-k render of one pass's photons, and every later pass is sharper.
+longer hold): the pilot's k_p-nearest region at the query, scaled so that one
+pass's photons are expected to put about k = ``settings.k_nearest`` photons
+inside it, read on a grid of cells (one pilot search per cell and render).  So
+pass 1 looks like a fixed-k render of one pass's photons, and every later pass
+is sharper.
 """
 from __future__ import annotations
 
