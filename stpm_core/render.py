@@ -110,7 +110,8 @@ def render(scene, settings, *, progress=None, cancel=None, on_pass=None) -> Rend
     kernels.require()
     compiled_before = kernels.compile_counts()
     try:
-        result = _render(scene, settings, progress=progress, cancel=cancel, on_pass=on_pass)
+        with scene.frozen():          # bounds and instance offsets once per render, not per pass
+            result = _render(scene, settings, progress=progress, cancel=cancel, on_pass=on_pass)
     except Exception as exc:
         if kernels.is_numba_error(exc):
             raise kernels.KernelsUnavailable(f"a compiled kernel failed on this machine: {kernels.compile_error(exc)}") from exc

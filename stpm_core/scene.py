@@ -20,6 +20,7 @@ so does the renderer, so a half-built scene never renders.
 from __future__ import annotations
 
 import hashlib
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -395,8 +396,36 @@ class Scene:
                 or not self.camera.transform.is_static
                 or any(not l.transform.is_static for l in self.lights))
 
+    @contextmanager
+    def frozen(self):
+        """``with scene.frozen():`` -- the scene does not change inside (one render), so :meth:`bounds`
+        and what is derived from it (``raycast.geometry.instance_offsets``) are computed once and kept
+        in :meth:`frozen_cache` until the block ends.  A progressive render asks for them every pass.
+        Re-entrant: an inner block keeps the outer one's values."""
+        if "_frozen" in self.__dict__:
+            yield self
+            return
+        self.__dict__["_frozen"] = {}
+        try:
+            yield self
+        finally:
+            self.__dict__.pop("_frozen", None)
+
+    def frozen_cache(self) -> dict | None:
+        """The dict :meth:`frozen` keeps values in, or None outside a ``frozen`` block."""
+        return self.__dict__.get("_frozen")
+
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """World-space bounds (3,), (3,) of all geometry over the whole shutter."""
+        cache = self.frozen_cache()
+        if cache is not None:
+            if "bounds" not in cache:
+                cache["bounds"] = self._bounds()
+            lo, hi = cache["bounds"]
+            return lo.copy(), hi.copy()
+        return self._bounds()
+
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
         for inst in self.instances:
             vlo, vhi = self.meshes[inst.mesh].vertex_bounds()

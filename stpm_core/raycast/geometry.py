@@ -372,6 +372,9 @@ def instance_offsets(scene) -> np.ndarray:
     scale over its keys, so motion (a box sliding 1 km) does not count, only the object;
     floored at 1e-12 x the scene scale so that a degenerate object still gets a positive offset.
     """
+    cache = scene.frozen_cache() if hasattr(scene, "frozen_cache") else None
+    if cache is not None and "instance_offsets" in cache:
+        return cache["instance_offsets"].copy()
     floor = 1e-12 * scene_scale(scene)
     out = np.empty(len(scene.instances))
     for i, inst in enumerate(scene.instances):
@@ -380,6 +383,8 @@ def instance_offsets(scene) -> np.ndarray:
         axis_scale = np.sqrt(np.max(np.sum(M[:, :3, :3] ** 2, axis=1)))   # largest column norm
         size = float(np.linalg.norm(hi - lo) * axis_scale)
         out[i] = OFFSET_REL * (size if np.isfinite(size) and size > floor else floor)
+    if cache is not None:
+        cache["instance_offsets"] = out.copy()
     return out
 
 
