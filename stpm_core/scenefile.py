@@ -56,10 +56,10 @@ from .schema import check_metadata
 from .nodes.compile import MAX_RAMP, compile_graph
 from .nodes.graph import ShaderGraph
 from .scene import (SCENE_FORMAT_VERSION, Camera, Instance, Light, Material, Mesh, Scene,
-                    World, validate_scene)
+                    World, check_tiles, validate_scene)
 from .settings import RenderSettings
 from .shutter import Shutter
-from .textures import LINEAR_SPACES, SRGB_SPACES, Texture
+from .textures import COLOR_SPACES, Texture
 
 __all__ = ["save_scene", "load_scene", "load_scene_with_settings", "FORMAT_NAME",
            "SCENE_FORMAT_VERSION", "SCENE_SUFFIXES"]
@@ -86,7 +86,7 @@ _MATERIAL_FIELDS = {
     "roughness": "num", "specular": "num", "ior": "num", "emission": "vec3",
 }
 _WORLD_FIELDS = {"color": "vec3", "strength": "num"}
-_TEXTURE_FIELDS = {"name": "str", "colorspace": tuple(SRGB_SPACES) + tuple(LINEAR_SPACES), "half": "bool"}
+_TEXTURE_FIELDS = {"name": "str", "colorspace": COLOR_SPACES, "half": "bool"}
 _ALPHA_MODES = ("STRAIGHT", "PREMUL", "CHANNEL_PACKED", "NONE")      # Texture.alpha_mode (Blender's names)
 _TEXTURE_DTYPES = (np.dtype(np.uint8), np.dtype(np.uint16), np.dtype(np.float32))
 
@@ -527,6 +527,8 @@ def _check_props(props: dict, ntype: str, where: str, n_textures: int) -> None:
         if key == "image":
             if isinstance(v, bool) or not isinstance(v, int) or not -1 <= v < n_textures:
                 raise SceneError(f"{w} must be a texture index in [-1, {n_textures}), got {v!r:.60}")
+        elif key == "tiles" and ntype == "ShaderNodeTexImage":
+            check_tiles(v, w, n_textures)
         elif key == "elements":
             ok = isinstance(v, list) and 1 <= len(v) <= MAX_RAMP and all(
                 isinstance(e, list) and len(e) == 2 and _is_num(e[0]) and isinstance(e[1], list)
