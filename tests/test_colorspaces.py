@@ -92,3 +92,24 @@ def test_conversions_are_consistent():
     np.testing.assert_allclose(a @ b, np.eye(3), atol=1e-12)
     for name in cs.DATA_SPACES + cs.SCENE_LINEAR_SPACES:
         assert cs.space_of(name) == ("linear", None)
+
+
+def test_outputs_name_the_working_space(tmp_path):
+    """The CLI's outputs: the EXR holds the working space's values and names it (colorInteropID, as
+    Blender writes it; none for Rec.709), the PNG preview converts them to Rec.709 before sRGB
+    encoding (an ACEScg red preview equals the Rec.709 red it came from)."""
+    pytest.importorskip("OpenImageIO")
+    from stpm_core.imageio import read_exr, read_png, write_exr, write_png
+    red709 = np.array([0.6, 0.1, 0.05])
+    aces = cs.conversion("Linear Rec.709", "ACESCG") @ red709
+    img = np.tile(aces, (2, 3, 1))
+    write_png(tmp_path / "a.png", img, working="ACESCG")
+    write_png(tmp_path / "r.png", np.tile(red709, (2, 3, 1)))
+    np.testing.assert_array_equal(read_png(tmp_path / "a.png"), read_png(tmp_path / "r.png"))
+    assert not np.array_equal(read_png(tmp_path / "a.png"), (write_png(tmp_path / "w.png", img),
+                                                               read_png(tmp_path / "w.png"))[1])
+    passes = {"Combined": np.concatenate([img, np.ones((2, 3, 1))], axis=2).astype(np.float32)}
+    write_exr(tmp_path / "a.exr", passes, working="ACESCG")
+    write_exr(tmp_path / "r.exr", passes)
+    assert read_exr(tmp_path / "a.exr")["_metadata"].get("colorInteropID") == "lin_ap1_scene"
+    assert "colorInteropID" not in read_exr(tmp_path / "r.exr")["_metadata"]

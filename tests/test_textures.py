@@ -24,7 +24,7 @@ import pytest
 
 from oracles import texture_numpy as oracle
 from stpm_core import colorspaces
-from stpm_core.kernels.texture import srgb_eotf, tex_lookup, tex_lookup_batch, udim_lookup_batch
+from stpm_core.kernels.texture import srgb_eotf, tex_image_rows, tex_lookup, tex_lookup_batch
 from stpm_core.textures import (F32, H_MATRIX, H_SRGB, HALF, HALF_TABLE, N_HEADER, SRGB_TABLE, U8, U16, Texture,
                                 pack_textures, srgb_to_linear)
 
@@ -78,7 +78,7 @@ def _lookup(textures, tid: int, xy: np.ndarray, interp: str, ext: str) -> np.nda
     pack = pack_textures(textures)
     out = np.zeros((xy.shape[0], 4))
     tex_lookup_batch(pack.header, pack.u8, pack.u16, pack.f32, pack.half, tid, np.ascontiguousarray(xy, np.float64),
-                     oracle.INTERP[interp], oracle.EXT[ext], out)
+                     oracle.INTERP[interp], oracle.EXT[ext], False, out)
     return out
 
 
@@ -501,7 +501,7 @@ def _lookup_in(textures, working: str, tid: int, xy: np.ndarray, interp: str, ex
     pack = pack_textures(textures, working)
     out = np.zeros((xy.shape[0], 4))
     tex_lookup_batch(pack.header, pack.u8, pack.u16, pack.f32, pack.half, tid, np.ascontiguousarray(xy, np.float64),
-                     oracle.INTERP[interp], oracle.EXT[ext], out)
+                     oracle.INTERP[interp], oracle.EXT[ext], False, out)
     return out
 
 
@@ -578,10 +578,13 @@ def test_converted_bytes_interpolate_linear_values():
 def _udim_lookup(textures, tiles: dict, xy, interp, ext, alpha_linked=False, working="REC709") -> np.ndarray:
     pack = pack_textures(textures, working)
     prog = np.array([w for t, i in tiles.items() for w in (float(t), float(i))] or [0.0])
-    out = np.zeros((len(xy), 4))
-    udim_lookup_batch(pack.header, pack.u8, pack.u16, pack.f32, pack.half, prog, len(tiles),
-                      np.ascontiguousarray(xy, np.float64), oracle.INTERP[interp], oracle.EXT[ext], alpha_linked, out)
-    return out
+    xy = np.asarray(xy, np.float64)
+    n = len(xy)
+    st = np.zeros((7, n))                       # the interpreter's stack: vector 0..2, colour 3..5, alpha 6
+    st[0], st[1] = xy[:, 0], xy[:, 1]
+    tex_image_rows(pack.header, pack.u8, pack.u16, pack.f32, pack.half, 0, oracle.INTERP[interp], oracle.EXT[ext],
+                   bool(alpha_linked), st, 0, 3, 6, n, prog, 0, len(tiles))
+    return st[3:7].T.copy()
 
 
 def _udim_set(rng):

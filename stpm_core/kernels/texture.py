@@ -49,8 +49,7 @@ def _eotf_table() -> np.ndarray:
 
 _EOTF = _eotf_table()
 
-__all__ = ["tex_lookup", "tex_image_rows", "srgb_eotf", "tex_lookup_batch", "udim_tile", "udim_lookup_batch",
-           "MISSING"]
+__all__ = ["tex_lookup", "tex_image_rows", "srgb_eotf", "tex_lookup_batch", "udim_tile", "MISSING"]
 
 MISSING = (1.0, 0.0, 1.0, 1.0)        # Cycles' TEX_IMAGE_MISSING_R/G/B/A
 
@@ -299,21 +298,8 @@ def tex_image_rows(hdr, u8, u16, f32, half, tid, interp, ext, unassociate, st, v
 
 
 @njit(**JIT)
-def tex_lookup_batch(hdr, u8, u16, f32, half, tid, xy, interp, ext, out):
+def tex_lookup_batch(hdr, u8, u16, f32, half, tid, xy, interp, ext, unassociate, out):
     """:func:`tex_lookup` per row of xy (n, 2) into out (n, 4) (tests)."""
     for i in range(xy.shape[0]):
-        r, g, b, a = tex_lookup(hdr, u8, u16, f32, half, tid, xy[i, 0], xy[i, 1], interp, ext, False)
+        r, g, b, a = tex_lookup(hdr, u8, u16, f32, half, tid, xy[i, 0], xy[i, 1], interp, ext, unassociate)
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = r, g, b, a
-
-
-@njit(**JIT)
-def udim_lookup_batch(hdr, u8, u16, f32, half, prog, n_tiles, xy, interp, ext, unassociate, out):
-    """The UDIM path of :func:`tex_image_rows` per row of xy (n, 2) into out (n, 4), the tile table
-    at prog[0:2 n_tiles] (tests)."""
-    n = xy.shape[0]
-    st = np.zeros((7, n))
-    st[0, :] = xy[:, 0]
-    st[1, :] = xy[:, 1]
-    tex_image_rows(hdr, u8, u16, f32, half, 0, interp, ext, unassociate, st, 0, 3, 6, n, prog, 0, n_tiles)
-    for i in range(n):
-        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = st[3, i], st[4, i], st[5, i], st[6, i]
