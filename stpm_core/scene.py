@@ -34,7 +34,9 @@ __all__ = [
     "validate_scene", "scene_warnings", "SCENE_FORMAT_VERSION", "MAX_EMISSION", "check_tiles",
 ]
 
-SCENE_FORMAT_VERSION = 2          # 2 (2026-12-01): material graphs, textures, UV maps, tangents
+SCENE_FORMAT_VERSION = 3          # 2 (2026-12-01): material graphs, textures, UV maps, tangents
+                                  # 3 (2026-12-07): UDIM tile tables, metadata.working_space (written
+                                  # only by files that use them: others stay 2)
 
 #: Largest emission :func:`validate_scene` accepts (docs/scene-format.md, "Limits"):
 #: light ``power * max(color)`` (W, or W/m^2 for a sun), material ``emission``

@@ -27,7 +27,10 @@ meshes[i].uv_render, its tangents ``meshes/<i>/tangents/<j>`` (F, 3, 4) float32 
 their UV map names in meshes[i].tangents, its colour attributes ``meshes/<i>/colors/<j>``
 (F, 3, 4) float32 linear RGBA with the names in meshes[i].color_layers and the render-active
 name in meshes[i].color_render.  These keys are optional: a file without them loads with no
-graphs, textures, UVs, tangents or colour attributes.
+graphs, textures, UVs, tangents or colour attributes.  A UDIM Image Texture holds its tile table
+in its node's ``props["tiles"]`` ([tile, texture index] pairs, one texture per tile), and
+``metadata.working_space`` names the scene's working colour space; a file using either is
+written as version 3 (:func:`_version_needed`), every other one as version 2.
 
 Loading
 -------
@@ -196,7 +199,7 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
         raise SceneError(f"metadata must be JSON-serialisable: {e}") from None
     header = {
         "format": FORMAT_NAME,
-        "version": SCENE_FORMAT_VERSION,
+        "version": _version_needed(scene, materials),
         "frame": float(scene.frame),
         "resolution": [int(scene.resolution[0]), int(scene.resolution[1])],
         "shutter": {"open": float(scene.shutter.open), "close": float(scene.shutter.close),
@@ -214,6 +217,15 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
     if settings is not None:
         header["settings"] = settings.validate().to_dict()
     return header, arrays
+
+
+def _version_needed(scene: Scene, materials: list) -> int:
+    """The lowest format version that reads this scene as written: 3 when it uses UDIM tile tables
+    or a working space other than Linear Rec.709 (a version-2 reader would render the first tile
+    only, or the colours unconverted: it must refuse the file instead), else 2."""
+    udim = any("tiles" in n.get("props", {}) for m in materials for n in m.get("graph", {}).get("nodes", {}).values())
+    working = str(scene.metadata.get("working_space", "REC709")).upper() != "REC709"
+    return 3 if udim or working else 2
 
 
 def _put_corner_layers(arrays: dict, p: str, m: Mesh, where: str, attr: str, sub: str, width: int,

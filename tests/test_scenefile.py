@@ -771,9 +771,17 @@ def test_fuzz_arrays(tmp_path, data):
 
 
 def test_format_constants():
+    """A file says the lowest version that reads it as written: 2 unless it uses UDIM tiles or a
+    working space other than Rec.709 (3, which a version-2 reader refuses rather than misread)."""
     header, _ = _parts()
     assert header["format"] == FORMAT_NAME == "stpm-scene"
-    assert header["version"] == SCENE_FORMAT_VERSION
+    assert header["version"] == 2 and SCENE_FORMAT_VERSION == 3
+    scene = rich_scene()
+    scene.metadata["working_space"] = "ACESCG"
+    assert scene_to_arrays(scene)[0]["version"] == 3
+    scene = rich_scene()
+    scene.materials[0].graph.nodes["Image"].props["tiles"] = [[1001, 0]]
+    assert scene_to_arrays(scene)[0]["version"] == 3
 
 
 def test_scene_bounds_follow_the_vertices_and_motion():
