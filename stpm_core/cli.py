@@ -35,6 +35,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from .colorspaces import working_space_of
 from .command_common import (EXIT_CANCELLED, EXIT_ERROR, EXIT_INTERNAL, EXIT_OK, EXIT_USAGE, FRAME_MAX,
                              FRAME_MIN, CancelFlag, CommandParser, UsageError, add_setting_options,
                              check_cancel, check_memory, checked_overrides, load_any_scene, open_blend_reader,
@@ -351,6 +352,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
         plan = getattr(result, "plan", None) or {}
         stats = dict(result.stats)
         stats["export_s"] = float(export_s) + float(stats.get("export_s", 0.0) or 0.0)
+        working = working_space_of(scene.metadata)       # the passes' colour space (Blender 5)
         meta = {"stpm:settings": settings.to_dict(), "stpm:plan": plan,
                 "stpm:scene": str(scene_path), "stpm:frame": str(scene.frame if frame is None else frame)}
         def exr(tmp):
@@ -360,7 +362,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
                               settings_digest=settings_hash(settings), metadata={**meta, "stpm:stats": stats},
                               atomic=False)
             else:
-                write_exr(tmp, result, {**meta, "stpm:stats": stats}, atomic=False)
+                write_exr(tmp, result, {**meta, "stpm:stats": stats}, atomic=False, working=working)
 
         def stats_json(tmp):
             write_json(tmp, stats, atomic=False)
@@ -373,7 +375,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
             "warnings": list(getattr(result, "warnings", []) or []),
         })
         outputs = [(out_exr, exr), (out_png, lambda tmp: write_png(tmp, result.passes["Combined"][:, :, :3],
-                                                                     atomic=False))]
+                                                                     atomic=False, working=working))]
         if stats_path is not None:
             def timed_stats(tmp):
                 stats.update({"write_s": time.perf_counter() - t_write, "wall_s": time.perf_counter() - t_frame})

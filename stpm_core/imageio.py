@@ -136,8 +136,12 @@ def channel_names(passes: dict, view_layer: str = VIEW_LAYER) -> list[tuple[str,
     return out
 
 
+# The Color Interop Forum's ids of the working spaces (Blender writes one as ``colorInteropID``)
+INTEROP_IDS = {"REC709": "lin_rec709_scene", "REC2020": "lin_rec2020_scene", "ACESCG": "lin_ap1_scene"}
+
+
 def write_exr(path, result, metadata: dict | None = None, *, half: bool = False,
-              view_layer: str = VIEW_LAYER, atomic: bool = True) -> Path:
+              view_layer: str = VIEW_LAYER, atomic: bool = True, working: str = "REC709") -> Path:
     """Write a multilayer OpenEXR (ZIP compression) with Blender's channel names.
 
     ``atomic``: write a temporary file next to ``path`` and rename it into place
@@ -151,6 +155,8 @@ def write_exr(path, result, metadata: dict | None = None, *, half: bool = False,
     metadata : extra string attributes (values that are not strings are written
         as JSON).  ``result.stats`` is added as ``stpm:stats`` (JSON).
     half : write 16-bit half floats instead of 32-bit floats (Depth stays 32-bit).
+    working : the scene's working colour space (``stpm_core.colorspaces``): the passes are in it;
+        another than Linear Rec.709 is named in the ``colorInteropID`` attribute, as Blender does.
     """
     import OpenImageIO as oiio
 
@@ -181,6 +187,8 @@ def write_exr(path, result, metadata: dict | None = None, *, half: bool = False,
         spec.channelformats = tuple(oiio.TypeDesc(oiio.FLOAT) if n.endswith(".Depth.Z") else oiio.TypeDesc(oiio.HALF)
                                     for n in names)
     spec.attribute("compression", "zip")
+    if working != "REC709":
+        spec.attribute("colorInteropID", INTEROP_IDS[working])
     # Tell readers the alpha channel of Combined is alpha (Blender does the same).
     if f"{view_layer}.Combined.A" in names:
         spec.alpha_channel = names.index(f"{view_layer}.Combined.A")
@@ -293,20 +301,24 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
-def write_png(path, rgb: np.ndarray, *, atomic: bool = True) -> Path:
+def write_png(path, rgb: np.ndarray, *, atomic: bool = True, working: str = "REC709") -> Path:
     """Write an 8-bit sRGB preview of linear RGB(A) ``rgb`` (H, W, 3|4), row 0 = top.
 
     ``atomic``: through a temporary file renamed into place, as :func:`write_exr`.
 
-    Colour channels are clipped to [0, 1] and sRGB-encoded; alpha (if given)
-    is dropped: the preview is opaque, as the world colour is rendered.
+    Colour channels (in the working space ``working``, converted to Rec.709 first) are clipped to
+    [0, 1] and sRGB-encoded; alpha (if given) is dropped: the preview is opaque, as the world
+    colour is rendered.
     """
     import OpenImageIO as oiio
 
+    from .colorspaces import WORKING_SPACES, conversion
     rgb = np.asarray(rgb)
     if rgb.ndim != 3 or rgb.shape[2] < 3:
         raise StpmError(f"write_png: expected (H, W, 3) RGB, got {rgb.shape}")
-    v = np.round(linear_to_srgb(rgb[:, :, :3]) * 255.0).astype(np.uint8)
+    M = conversion(WORKING_SPACES[working], "REC709")
+    lin = rgb[:, :, :3] if M is None else np.asarray(rgb[:, :, :3], np.float64) @ M.T
+    v = np.round(linear_to_srgb(lin) * 255.0).astype(np.uint8)
     H, W = v.shape[:2]
     spec = oiio.ImageSpec(W, H, 3, oiio.UINT8)
     spec.attribute("oiio:ColorSpace", "sRGB")

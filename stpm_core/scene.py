@@ -32,10 +32,12 @@ from .shutter import Shutter
 
 __all__ = [
     "Mesh", "Instance", "Camera", "Light", "Material", "World", "Scene",
-    "validate_scene", "scene_warnings", "SCENE_FORMAT_VERSION", "MAX_EMISSION",
+    "validate_scene", "scene_warnings", "SCENE_FORMAT_VERSION", "MAX_EMISSION", "check_tiles",
 ]
 
-SCENE_FORMAT_VERSION = 2          # 2 (2026-12-01): material graphs, textures, UV maps, tangents
+SCENE_FORMAT_VERSION = 3          # 2 (2026-12-01): material graphs, textures, UV maps, tangents
+                                  # 3 (2026-12-07): UDIM tile tables, metadata.working_space (written
+                                  # only by files that use them: others stay 2)
 
 #: Largest emission :func:`validate_scene` accepts (docs/scene-format.md, "Limits"):
 #: light ``power * max(color)`` (W, or W/m^2 for a sun), material ``emission``
@@ -583,6 +585,26 @@ def scene_warnings(scene: Scene) -> list[str]:
     return out
 
 
+UDIM_FIRST, UDIM_LAST = 1001, 2000         # Blender's UDIM tile numbers
+
+
+def check_tiles(tiles, where: str, n_textures: int) -> None:
+    """An Image Texture's UDIM tile table: a list of [tile number, texture index] pairs, numbers
+    distinct in [1001, 2000], indices in [0, n_textures); SceneError naming ``where`` otherwise."""
+    ok = isinstance(tiles, (list, tuple)) and len(tiles) <= UDIM_LAST - UDIM_FIRST + 1
+    seen = set()
+    for t in (tiles if ok else ()):
+        ok = (isinstance(t, (list, tuple)) and len(t) == 2
+              and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in t)
+              and UDIM_FIRST <= t[0] <= UDIM_LAST and 0 <= t[1] < n_textures and int(t[0]) not in seen)
+        if not ok:
+            break
+        seen.add(int(t[0]))
+    if not ok:
+        raise SceneError(f"{where} must be a list of distinct [tile, texture] pairs, tile in "
+                         f"[{UDIM_FIRST}, {UDIM_LAST}] and texture in [0, {n_textures}), got {tiles!r:.80}")
+
+
 def validate_scene(scene: Scene) -> None:
     """Check every field; raise :class:`SceneError` naming the first bad one.
 
@@ -645,6 +667,9 @@ def validate_scene(scene: Scene) -> None:
             if img is not None and not (-1 <= int(img) < n_tex):
                 raise SceneError(f"materials[{mi}] ({mat.name!r}).graph node {nname!r}: props['image'] = {img} is "
                                  f"out of range [-1, {n_tex})")
+            if node.type == "ShaderNodeTexImage" and "tiles" in node.props:
+                check_tiles(node.props["tiles"], f"materials[{mi}] ({mat.name!r}).graph node {nname!r}: "
+                                                 f"props['tiles']", n_tex)
     for ii, inst in enumerate(scene.instances):
         if not (0 <= inst.mesh < len(scene.meshes)):
             raise SceneError(f"instances[{ii}] ({inst.name!r}).mesh index {inst.mesh} out of range [0, {len(scene.meshes)})")

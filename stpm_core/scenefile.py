@@ -27,7 +27,10 @@ meshes[i].uv_render, its tangents ``meshes/<i>/tangents/<j>`` (F, 3, 4) float32 
 their UV map names in meshes[i].tangents, its colour attributes ``meshes/<i>/colors/<j>``
 (F, 3, 4) float32 linear RGBA with the names in meshes[i].color_layers and the render-active
 name in meshes[i].color_render.  These keys are optional: a file without them loads with no
-graphs, textures, UVs, tangents or colour attributes.
+graphs, textures, UVs, tangents or colour attributes.  A UDIM Image Texture holds its tile table
+in its node's ``props["tiles"]`` ([tile, texture index] pairs, one texture per tile), and
+``metadata.working_space`` names the scene's working colour space; a file using either is
+written as version 3 (:func:`_version_needed`), every other one as version 2.
 
 Loading
 -------
@@ -56,10 +59,10 @@ from .schema import check_metadata
 from .nodes.compile import MAX_RAMP, compile_graph
 from .nodes.graph import ShaderGraph
 from .scene import (SCENE_FORMAT_VERSION, Camera, Instance, Light, Material, Mesh, Scene,
-                    World, validate_scene)
+                    World, check_tiles, validate_scene)
 from .settings import RenderSettings
 from .shutter import Shutter
-from .textures import LINEAR_SPACES, SRGB_SPACES, Texture
+from .textures import COLOR_SPACES, Texture
 
 __all__ = ["save_scene", "load_scene", "load_scene_with_settings", "FORMAT_NAME",
            "SCENE_FORMAT_VERSION", "SCENE_SUFFIXES"]
@@ -86,7 +89,7 @@ _MATERIAL_FIELDS = {
     "roughness": "num", "specular": "num", "ior": "num", "emission": "vec3",
 }
 _WORLD_FIELDS = {"color": "vec3", "strength": "num"}
-_TEXTURE_FIELDS = {"name": "str", "colorspace": tuple(SRGB_SPACES) + tuple(LINEAR_SPACES), "half": "bool"}
+_TEXTURE_FIELDS = {"name": "str", "colorspace": COLOR_SPACES, "half": "bool"}
 _ALPHA_MODES = ("STRAIGHT", "PREMUL", "CHANNEL_PACKED", "NONE")      # Texture.alpha_mode (Blender's names)
 _TEXTURE_DTYPES = (np.dtype(np.uint8), np.dtype(np.uint16), np.dtype(np.float32))
 
@@ -196,7 +199,7 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
         raise SceneError(f"metadata must be JSON-serialisable: {e}") from None
     header = {
         "format": FORMAT_NAME,
-        "version": SCENE_FORMAT_VERSION,
+        "version": _version_needed(scene, materials),
         "frame": float(scene.frame),
         "resolution": [int(scene.resolution[0]), int(scene.resolution[1])],
         "shutter": {"open": float(scene.shutter.open), "close": float(scene.shutter.close),
@@ -214,6 +217,15 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
     if settings is not None:
         header["settings"] = settings.validate().to_dict()
     return header, arrays
+
+
+def _version_needed(scene: Scene, materials: list) -> int:
+    """The lowest format version that reads this scene as written: 3 when it uses UDIM tile tables
+    or a working space other than Linear Rec.709 (a version-2 reader would render the first tile
+    only, or the colours unconverted: it must refuse the file instead), else 2."""
+    udim = any("tiles" in n.get("props", {}) for m in materials for n in m.get("graph", {}).get("nodes", {}).values())
+    working = str(scene.metadata.get("working_space", "REC709")).upper() != "REC709"
+    return 3 if udim or working else 2
 
 
 def _put_corner_layers(arrays: dict, p: str, m: Mesh, where: str, attr: str, sub: str, width: int,
@@ -527,6 +539,8 @@ def _check_props(props: dict, ntype: str, where: str, n_textures: int) -> None:
         if key == "image":
             if isinstance(v, bool) or not isinstance(v, int) or not -1 <= v < n_textures:
                 raise SceneError(f"{w} must be a texture index in [-1, {n_textures}), got {v!r:.60}")
+        elif key == "tiles" and ntype == "ShaderNodeTexImage":
+            check_tiles(v, w, n_textures)
         elif key == "elements":
             ok = isinstance(v, list) and 1 <= len(v) <= MAX_RAMP and all(
                 isinstance(e, list) and len(e) == 2 and _is_num(e[0]) and isinstance(e[1], list)

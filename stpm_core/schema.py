@@ -230,6 +230,11 @@ METADATA: tuple = (
                                             "by camera rays (alpha 0)"),
     Spec("light_visible_camera", "bools", [], "per light (scene order): seen by camera rays "
                                               "(Blender's Ray Visibility > Camera)"),
+    Spec("working_space", "enum", "REC709", "the scene's working colour space (Blender 5's "
+                                            "bpy.data.colorspace.working_space): every colour is an RGB "
+                                            "triple in it, image textures are converted into it",
+         choices=(("REC709", "Linear Rec.709", "Blender's default"), ("REC2020", "Linear Rec.2020", ""),
+                  ("ACESCG", "ACEScg", "ACES AP1 primaries"))),
 )
 
 

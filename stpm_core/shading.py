@@ -16,6 +16,7 @@ from functools import cached_property
 
 import numpy as np
 
+from .colorspaces import luma, working_space_of
 from .kernels.closure import C_EMIT, C_PROGRAM, N_CLOSURE, pack_materials
 from .kernels.svm import shade
 from .nodes.compile import compile_graph
@@ -186,9 +187,10 @@ def _color_attributes(meshes, names: list) -> tuple:
 def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
     """Build (or reuse: cached on the scene while its materials, meshes and textures lists are
     the same objects with the same lengths) the scene's :class:`ShadingData`."""
+    working = working_space_of(getattr(scene, "metadata", None))
     key = (id(scene.materials), len(scene.materials), id(scene.meshes), len(scene.meshes),
            id(getattr(scene, "textures", [])), len(getattr(scene, "textures", [])), len(scene.instances),
-           tuple(id(m.graph) for m in scene.materials))
+           tuple(id(m.graph) for m in scene.materials), working)
     cached = scene.__dict__.get("_shading_data")
     base = pack_materials(scene.materials) if closures is None else closures
     if cached is not None and cached[0] == key and (cached[2] is base or np.array_equal(cached[2], base)):
@@ -204,7 +206,8 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
         g = getattr(m, "graph", None)
         if g is None:
             continue
-        prog = compile_graph(g, n_textures=len(textures), uv_layers=uv_layers, color_layers=color_layers)
+        prog = compile_graph(g, n_textures=len(textures), uv_layers=uv_layers, color_layers=color_layers,
+                             luma=luma(working))
         w = prog.words                 # jumps are relative to the program's start: no relocation
         words.append(w)
         rows[i, C_PROGRAM] = float(at)
@@ -224,7 +227,7 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
     n_slots = max([int(prog_all[s]) for s in starts] + [1])
     if words:
         A = scene_attributes(scene, uv_layers, color_layers)
-        pack = pack_textures(textures)
+        pack = pack_textures(textures, working)
     else:
         A = _empty_attributes(len(scene.instances))
         pack = pack_textures([])

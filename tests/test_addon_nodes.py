@@ -134,16 +134,20 @@ def test_smart_project_uvs_and_render_active_layer():
     assert not np.array_equal(mesh.uv_layers["UVMap"], mesh.uv_layers["Second"])
 
 
-def test_one_texture_per_image_and_colour_spaces(tmp_path):
-    """An image used twice is one texture; Non-Color -> Linear; an unknown space -> Linear, warned;
-    an RGB image keeps 3 channels."""
+def test_one_texture_per_image_and_colour_spaces(tmp_path, monkeypatch):
+    """An image used twice is one texture; byte images keep their colour space's name (Non-Color,
+    Display P3: the renderer converts them); a space without a formula (Rec.1886: a 2.4 gamma) is
+    converted by OpenColorIO with Blender's config into float32 working-space values, and without
+    OpenColorIO read as linear, warned; an RGB image keeps 3 channels."""
     fresh()
     img = write_png(tmp_path / "a.png", RGBA)
     data = write_png(tmp_path / "data.png", OPAQUE, alpha=False)
     data.colorspace_settings.name = "Non-Color"
+    p3 = write_png(tmp_path / "p3.png", OPAQUE, alpha=False)
+    p3.colorspace_settings.name = "Display P3"
     odd = write_png(tmp_path / "odd.png", OPAQUE, alpha=False)
-    odd.colorspace_settings.name = "Display P3"
-    for name, image in (("A", img), ("B", img), ("C", data), ("D", odd)):
+    odd.colorspace_settings.name = "Rec.1886"
+    for name, image in (("A", img), ("B", img), ("C", data), ("D", p3), ("E", odd)):
         mat, tree, bsdf = surface_material(name, "ShaderNodeBsdfDiffuse")
         node = tree.nodes.new("ShaderNodeTexImage")
         node.image = image
@@ -151,14 +155,23 @@ def test_one_texture_per_image_and_colour_spaces(tmp_path):
         add_mesh("cube", name, location=(3 * len(bpy.data.objects), 0, 0), material=mat)
     add_camera()
     scene, warnings = export_now()
-    idx = {n: graph_of(scene, n).nodes["Image Texture"].props["image"] for n in "ABCD"}
-    assert idx["A"] == idx["B"] and len(set(idx.values())) == 3 and len(scene.textures) == 3
-    tc, td = scene.textures[idx["C"]], scene.textures[idx["D"]]
-    assert tc.colorspace == "Linear" and tc.pixels.shape == (2, 3, 3) and tc.pixels.dtype == np.uint8
+    idx = {n: graph_of(scene, n).nodes["Image Texture"].props["image"] for n in "ABCDE"}
+    assert idx["A"] == idx["B"] and len(set(idx.values())) == 4 and len(scene.textures) == 4
+    tc, td, te = scene.textures[idx["C"]], scene.textures[idx["D"]], scene.textures[idx["E"]]
+    assert tc.colorspace == "Non-Color" and tc.pixels.shape == (2, 3, 3) and tc.pixels.dtype == np.uint8
     np.testing.assert_array_equal(tc.pixels, RGBA[..., :3])
-    assert td.colorspace == "Linear"
+    assert td.colorspace == "Display P3" and td.pixels.dtype == np.uint8
+    assert te.colorspace == "Linear" and te.pixels.dtype == np.float32
+    np.testing.assert_allclose(te.pixels, (RGBA[..., :3] / 255.0) ** 2.4, rtol=2e-4, atol=1e-6)
+    assert not [w for w in warnings if "odd.png" in w or "p3.png" in w]
+    # without OpenColorIO the values are read as linear, and said so
+    from addon.export import nodes as node_export
+    monkeypatch.setattr(node_export, "_ocio_config", lambda: None)
+    scene, warnings = export_now()
+    te = scene.textures[graph_of(scene, "E").nodes["Image Texture"].props["image"]]
+    assert te.colorspace == "Linear" and te.pixels.dtype == np.uint8
     hits = [w for w in warnings if "'odd.png'" in w]
-    assert len(hits) == 1 and "'Display P3'" in hits[0] and "linear" in hits[0]
+    assert len(hits) == 1 and "'Rec.1886'" in hits[0] and "linear" in hits[0]
 
 
 def test_float_half_and_16_bit_images_keep_their_precision(tmp_path):
@@ -203,6 +216,95 @@ def test_float_half_and_16_bit_images_keep_their_precision(tmp_path):
     np.testing.assert_array_equal(tex["Grey"].pixels, grey[::-1])
     assert tex["Float"].pixels.dtype == np.float32 and tex["Float"].pixels.shape == (2, 2, 4)
     np.testing.assert_array_equal(tex["Float"].pixels.reshape(-1), flt)
+
+
+def _write_tile(oiio, path, arr, fmt):
+    """(H, W, C) values, row 0 at the bottom (as Blender's pixels), to an image file of type fmt."""
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(arr.shape[1], arr.shape[0], arr.shape[2], fmt))
+    out.write_image(np.ascontiguousarray(arr[::-1]))
+    out.close()
+
+
+def _udim_image(tmp_path, oiio, rng, space="Non-Color"):
+    """A UDIM image on disk: 1001 an 8-bit RGB PNG, 1002 a 16-bit RGB PNG, 1011 a half RGBA EXR; then
+    tile 1012 added in Blender without a file.  Returns (image, {tile: written array})."""
+    tiles = {1001: rng.integers(0, 256, (3, 4, 3)).astype(np.uint8),
+             1002: rng.integers(0, 65536, (2, 5, 3)).astype(np.uint16),
+             1011: rng.uniform(0, 2, (4, 2, 4)).astype(np.float16)}
+    for t, arr in tiles.items():
+        ext = "exr" if arr.dtype == np.float16 else "png"
+        fmt = {np.dtype(np.uint8): "uint8", np.dtype(np.uint16): "uint16", np.dtype(np.float16): "half"}[arr.dtype]
+        _write_tile(oiio, tmp_path / f"wood.{t}.{ext}", arr, fmt)
+    # Blender finds the tiles of one name and extension: the EXR tile gets the PNGs' name pattern
+    (tmp_path / "wood.1011.exr").rename(tmp_path / "wood.1011.png")
+    img = bpy.data.images.load(str(tmp_path / "wood.1001.png"))
+    img.source = "TILED"
+    img.colorspace_settings.name = space
+    img.tiles.new(1012)
+    return img, tiles
+
+
+def test_udim_tiles_are_read_in_their_stored_type(tmp_path):
+    """A UDIM image becomes one texture per tile, each in its file's stored type (uint8, uint16,
+    half), rows bottom-up, the image's colour space; the node holds [[tile, texture]] for the tiles
+    with pixels, a tile without a file is named once (it reads magenta, as in Cycles); packed tiles
+    read the same; "only the first tile" is never said."""
+    oiio = pytest.importorskip("OpenImageIO")
+    fresh()
+    rng = np.random.default_rng(11)
+    img, written = _udim_image(tmp_path, oiio, rng)
+    mat, tree, bsdf = surface_material("Udim", "ShaderNodeEmission")
+    node = tree.nodes.new("ShaderNodeTexImage")
+    node.image = img
+    tree.links.new(node.outputs["Color"], bsdf.inputs["Color"])
+    add_mesh("plane", "P", material=mat)
+    add_camera()
+    for packed in (False, True):
+        if packed:                     # (Blender packs only tiles with files: 1012 goes first)
+            img.tiles.remove(img.tiles[-1])
+            img.pack()
+            for f in tmp_path.glob("wood.*"):
+                f.unlink()
+        scene, warnings = export_now()
+        props = graph_of(scene, "Udim").nodes["Image Texture"].props
+        assert [t for t, _i in props["tiles"]] == [1001, 1002, 1011]
+        assert props["image"] == props["tiles"][0][1]
+        tex = {t: scene.textures[i] for t, i in props["tiles"]}
+        assert tex[1001].pixels.dtype == np.uint8 and tex[1001].colorspace == "Non-Color"
+        np.testing.assert_array_equal(tex[1001].pixels, written[1001])
+        assert tex[1002].pixels.dtype == np.uint16 and not tex[1002].half
+        np.testing.assert_array_equal(tex[1002].pixels, written[1002])
+        assert tex[1011].half and tex[1011].pixels.shape == (4, 2, 4)
+        np.testing.assert_array_equal(tex[1011].pixels.view(np.float16), written[1011])
+        assert tex[1011].alpha_mode == img.alpha_mode
+        hits = [w for w in warnings if "1012" in w]
+        assert len(hits) == (0 if packed else 1) and all("magenta" in h for h in hits), warnings
+        assert not [w for w in warnings if "first tile" in w]
+        assert sum(t.nbytes for t in scene.textures) == sum(a.nbytes for a in written.values())
+
+
+def test_udim_tiles_read_as_blender_reads_the_same_files(tmp_path):
+    """Each sRGB tile decodes to what Blender's own loader gives for that file as a plain image
+    (Image.pixels through image_texture: bytes as bytes, 16-bit linearised floats), and fails
+    if the tile were read as another one."""
+    oiio = pytest.importorskip("OpenImageIO")
+    fresh()
+    rng = np.random.default_rng(12)
+    img, written = _udim_image(tmp_path, oiio, rng, space="sRGB")
+    from addon.export.nodes import image_texture, tile_textures
+    warn = []
+    tiles = dict(tile_textures(img, warn.append))
+    assert tiles[1012] is None and len(warn) == 1
+    for t in (1001, 1002):
+        single = bpy.data.images.load(str(tmp_path / f"wood.{t}.png"), check_existing=False)
+        single.colorspace_settings.name = "sRGB"
+        ref = image_texture(single, warn.append)
+        # (Blender linearises 16-bit files with OpenColorIO's fast pow: 2.2e-5 relative from the EOTF)
+        np.testing.assert_allclose(tiles[t].decoded(), ref.decoded(), rtol=1e-6 if t == 1001 else 5e-5, atol=1e-7,
+                                   err_msg=str(t))
+    assert tiles[1001].colorspace == "sRGB" and tiles[1001].pixels.dtype == np.uint8
+    assert tiles[1001].decoded().shape != tiles[1002].decoded().shape
 
 
 def test_missing_image_is_magenta_index_and_warned_once(tmp_path):

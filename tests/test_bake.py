@@ -237,6 +237,29 @@ def test_baked_gabor_texture_matches_cycles_and_the_cache_is_reused(blender, tmp
     assert job.key not in report["baked"] and job.socket == "Base Color" and job.uv_map == "UVMap"
 
 
+def test_bake_in_an_acescg_file_matches_cycles(blender, tmp_path):
+    """In an ACEScg file the bake holds working-space values (the child writes its EXR in the
+    file's working space) and the export reads them unconverted: the baked Gabor still matches
+    Cycles; the key differs from the Rec.709 file's, so neither reads the other's bake."""
+    bpy = blender
+    from addon import batch
+    from cycles_ref import block_ztest, render_cycles, render_stpm
+    scene, mat = _gabor_scene(bpy)
+    resolver = bake.BakeResolver(bpy.context.evaluated_depsgraph_get())
+    (job709,) = bake.plan_jobs(bpy.context.evaluated_depsgraph_get(), resolver)
+    assert "FINISHED" in bpy.ops.wm.set_working_color_space(convert_colors=True, working_space="ACEScg")
+    report = batch.bake_current(scene)
+    assert len(report["baked"]) == 1 and not report["failed"] and job709.key not in report["baked"], report
+    core_scene, _ = _export(bpy)
+    assert core_scene.metadata["working_space"] == "ACESCG"
+    cyc = render_cycles(scene, tmp_path, samples=SPP, seeds=(0, 1, 2))
+    stpm, _res = render_stpm(scene, samples=SPP, seeds=(0, 1, 2))
+    r = block_ztest(stpm, cyc)
+    print(f"baked Gabor in ACEScg vs Cycles: {r.summary()}")
+    assert r.z_abs_max < 4.5, (r.summary(), np.round(r.z, 1))
+    assert abs(r.mean_ratio - 1.0) < 0.01, r.summary()
+
+
 def test_inputs_that_cannot_be_baked_are_named(blender):
     bpy = blender
     from test_addon_scenes import add_mesh

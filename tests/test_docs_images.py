@@ -42,3 +42,18 @@ def test_make_progressive_images_quick_writes_the_passes(tmp_path, capsys):
         assert img.max() > 0
     out = capsys.readouterr().out
     assert [int(line.split()[1]) for line in out.splitlines() if line.startswith("pass")] == [1, 4, 16]
+
+
+def test_make_udim_image_quick_writes_both_pictures(tmp_path, capsys):
+    spec = importlib.util.spec_from_file_location("make_udim_image", os.path.join(ROOT, "docs", "make_udim_image.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.main(["--quick", "--out", str(tmp_path)]) == 0
+    from stpm_core.imageio import read_png
+    udim = read_png(tmp_path / "udim_stpm_vs_cycles.png")
+    assert udim.shape[:2] == (48, 98)                  # STPM | Cycles, 48 x 48 each, a 2-pixel gap
+    assert read_png(tmp_path / "working_space_acescg_stpm_vs_cycles.png").shape[:2] == (48, 148)
+    out = capsys.readouterr().out
+    ratios = [float(line.split("mean ratio STPM / Cycles")[1].split(",")[0]) for line in out.splitlines()
+              if "mean ratio STPM / Cycles" in line]
+    assert len(ratios) == 2 and all(abs(r - 1.0) < 0.03 for r in ratios), out

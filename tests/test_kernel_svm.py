@@ -164,19 +164,21 @@ def oracle_rows(scene, hits, mat, C=None, **kw) -> list:
 
 
 def check_values(cases, textures=(), hits_per_case: int = 1, seed: int = 1, sd_clean: bool = True, atol=ATOL,
-                 **kw):
-    """cases: [(nodes, out)] -- ``out`` read through Emission x +-1.  Kernel vs oracle emission."""
+                 working: str = "REC709", rtol=RTOL, **kw):
+    """cases: [(nodes, out)] -- ``out`` read through Emission x +-1.  Kernel vs oracle emission, in
+    the working space ``working`` (the scene's metadata)."""
     graphs = [emit_graph(nodes, out, s) for nodes, out in cases for s in (1.0, -1.0)]
     rng = np.random.default_rng(seed)
     mat = np.repeat(np.arange(len(graphs)), hits_per_case)
     hits = make_hits(len(mat), rng)
     scene = make_scene(graphs, textures)
+    scene.metadata["working_space"] = working
     C, sd = run_kernel(scene, hits, mat)
     if sd_clean:
         assert not sd.unsupported, sd.unsupported
-    exp = np.array([row["emission"] for row in oracle_rows(scene, hits, mat, **kw)])
+    exp = np.array([row["emission"] for row in oracle_rows(scene, hits, mat, working=working, **kw)])
     got = C[:, C_EMIT:C_EMIT + 3]
-    bad = ~np.isclose(got, exp, rtol=RTOL, atol=atol).all(axis=1)
+    bad = ~np.isclose(got, exp, rtol=rtol, atol=atol).all(axis=1)
     if bad.any():
         lines = []
         for r in np.flatnonzero(bad)[:8]:
@@ -746,6 +748,54 @@ def test_image_texture(interp, ext):
         cases += [(linked, L("I", "Color")), (linked, L("I", "Alpha"))]
         check_values(cases, textures=texs, hits_per_case=16, seed=img,
                      atol=SRGB_ATOL if texs[img].is_srgb else ATOL)
+
+
+def test_udim_image_texture():
+    """A UDIM image (``props["tiles"]``): tiles 1001, 1002 and 1011 (other sizes and kinds), 1012
+    missing; the UV scaled over 3 x 2 tiles and shifted below 0: each hit reads its tile (magenta
+    in the missing one and outside), Color and Alpha, every interpolation; the table follows the
+    instruction in the program, and an instruction after it (a Math on the Alpha) still runs."""
+    rng = np.random.default_rng(41)
+    texs = _textures(rng) + [Texture(rng.uniform(0, 1, (3, 2, 4)).astype(np.float16), colorspace="Linear Rec.709",
+                                     name="half")]
+    tiles = [[1001, 0], [1002, 3], [1011, 1]]
+    cases = []
+    for interp in ("Closest", "Linear", "Cubic"):
+        props = {"image": 0, "tiles": tiles, "interpolation": interp, "extension": "REPEAT"}
+        nodes = {"U": N("ShaderNodeUVMap", props={"uv_map": "Second"}),
+                 "M": N("ShaderNodeMapping", {"Vector": L("U", "UV"), "Scale": (3.0, 2.0, 1.0),
+                                              "Location": (-0.2, -0.1, 0.0)}),
+                 "I": N("ShaderNodeTexImage", {"Vector": L("M", "Vector")}, props),
+                 "A": N("ShaderNodeMath", {0: L("I", "Alpha"), 1: 0.5}, {"operation": "MULTIPLY"})}
+        cases += [(nodes, L("I", "Color")), (nodes, L("A", "Value"))]
+    C, *_ = check_values(cases, textures=texs, hits_per_case=24, seed=7, atol=SRGB_ATOL)
+    em = C[:, C_EMIT:C_EMIT + 3]
+    assert np.any(np.all(np.isclose(np.abs(em), (1.0, 0.0, 1.0)), axis=1)), "no hit read the missing tile"
+    # in an ACEScg scene each tile is converted by its matrix
+    check_values(cases, textures=texs, hits_per_case=24, seed=8, atol=1e-6, rtol=1e-6, working="ACESCG")
+
+
+def test_working_space_conversions():
+    """ACEScg / Rec.2020 working spaces: a colour into a value socket and RGB to BW weigh by the
+    space's luminance (Y of its RGB -> XYZ), images of other primaries are converted per texel;
+    the Rec.709 weights would give other values (checked)."""
+    rng = np.random.default_rng(43)
+    texs = _textures(rng)
+    cases = []
+    for img in range(len(texs)):
+        nodes = {"I": N("ShaderNodeTexImage", {}, {"image": img, "interpolation": "Linear"}),
+                 "B": N("ShaderNodeRGBToBW", {"Color": L("I", "Color")}),
+                 "M": N("ShaderNodeMath", {0: L("I", "Color"), 1: 1.0}, {"operation": "MULTIPLY"})}
+        cases += [(nodes, L("I", "Color")), (nodes, L("B", "Val")), (nodes, L("M", "Value"))]
+    for working in ("ACESCG", "REC2020"):
+        check_values(cases, textures=texs, hits_per_case=12, seed=3, atol=1e-6, rtol=1e-6, working=working)
+    with pytest.raises(AssertionError):          # the oracle tells the spaces apart
+        g = [emit_graph(cases[1][0], cases[1][1], 1.0)]
+        scene = make_scene(g, texs)
+        hits = make_hits(4, np.random.default_rng(1))
+        C, _ = run_kernel(scene, hits, np.zeros(4, np.int64))
+        exp = [row["emission"] for row in oracle_rows(scene, hits, np.zeros(4, np.int64), working="ACESCG")]
+        np.testing.assert_allclose(C[:, C_EMIT:C_EMIT + 3], exp, rtol=1e-6, atol=1e-6)
 
 
 def test_image_texture_clip_far_outside():

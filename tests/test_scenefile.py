@@ -188,6 +188,23 @@ def test_round_trip_keeps_graphs_textures_and_uvs(tmp_path):
     assert loaded.meshes[1].color_layers == {} and loaded.meshes[1].color_render is None
 
 
+def test_round_trip_keeps_udim_tiles_and_the_working_space(tmp_path):
+    """A UDIM Image Texture's tile table, the textures' colour spaces of every kind Blender 5 offers
+    and the scene's working space come back as written, and compile to the same program."""
+    scene = rich_scene()
+    scene.materials[0].graph.nodes["Image"].props["tiles"] = [[1001, 0], [1002, 3], [1011, 1]]
+    scene.textures[1].colorspace = "ACEScg"
+    scene.textures[3].colorspace = "Display P3"
+    scene.metadata["working_space"] = "ACESCG"
+    loaded = load_scene(save_scene(scene, tmp_path / "u.stpm"))
+    assert loaded.materials[0].graph.nodes["Image"].props["tiles"] == [[1001, 0], [1002, 3], [1011, 1]]
+    assert [t.colorspace for t in loaded.textures] == ["sRGB", "ACEScg", "Non-Color", "Display P3"]
+    assert loaded.metadata["working_space"] == "ACESCG"
+    a, b = compile_graph(scene.materials[0].graph, 4, []), compile_graph(loaded.materials[0].graph, 4, [])
+    assert np.array_equal(a.words, b.words)
+    assert 1011.0 in a.words and 1002.0 in a.words                     # the tile table is in the program
+
+
 def test_files_without_the_node_fields_still_load(tmp_path):
     """The graph, texture and UV keys are optional (files written before they existed)."""
     header, arrays = _parts()
@@ -225,7 +242,7 @@ def _bad_texture_type(sc):
 
 
 def _bad_texture_space(sc):
-    sc.textures[0].colorspace = "Display P3"
+    sc.textures[0].colorspace = "AgX Log"
 
 
 def _bad_texture_nan(sc):
@@ -256,6 +273,26 @@ def _bad_alpha_mode(sc):
     sc.textures[1].alpha_mode = "MULTIPLY"
 
 
+def _bad_tiles_number(sc):
+    sc.materials[0].graph.nodes["Image"].props["tiles"] = [[1001, 0], [999, 1]]
+
+
+def _bad_tiles_index(sc):
+    sc.materials[0].graph.nodes["Image"].props["tiles"] = [[1001, 0], [1002, 4]]
+
+
+def _bad_tiles_twice(sc):
+    sc.materials[0].graph.nodes["Image"].props["tiles"] = [[1001, 0], [1001, 1]]
+
+
+def _bad_tiles_shape(sc):
+    sc.materials[0].graph.nodes["Image"].props["tiles"] = [1001, 0]
+
+
+def _bad_working_space(sc):
+    sc.metadata["working_space"] = "Linear Rec.709"
+
+
 BAD_SCENES = [
     ("NaN graph input", _bad_graph_nan, "materials[0] ('d').graph"),
     ("non-JSON property", _bad_graph_object, "materials[0] ('d').graph"),
@@ -270,6 +307,11 @@ BAD_SCENES = [
     ("unknown alpha mode", _bad_alpha_mode, "textures[1] ('half').alpha_mode"),
     ("unknown render colour attribute", _bad_color_render, "color_render"),
     ("colour attribute shape", _bad_color_shape, "color_layers['Col']"),
+    ("UDIM tile number", _bad_tiles_number, "props['tiles']"),
+    ("UDIM tile texture", _bad_tiles_index, "props['tiles']"),
+    ("UDIM tile listed twice", _bad_tiles_twice, "props['tiles']"),
+    ("UDIM tiles not pairs", _bad_tiles_shape, "props['tiles']"),
+    ("unknown working space", _bad_working_space, "metadata.working_space"),
 ]
 
 
@@ -729,9 +771,17 @@ def test_fuzz_arrays(tmp_path, data):
 
 
 def test_format_constants():
+    """A file says the lowest version that reads it as written: 2 unless it uses UDIM tiles or a
+    working space other than Rec.709 (3, which a version-2 reader refuses rather than misread)."""
     header, _ = _parts()
     assert header["format"] == FORMAT_NAME == "stpm-scene"
-    assert header["version"] == SCENE_FORMAT_VERSION
+    assert header["version"] == 2 and SCENE_FORMAT_VERSION == 3
+    scene = rich_scene()
+    scene.metadata["working_space"] = "ACESCG"
+    assert scene_to_arrays(scene)[0]["version"] == 3
+    scene = rich_scene()
+    scene.materials[0].graph.nodes["Image"].props["tiles"] = [[1001, 0]]
+    assert scene_to_arrays(scene)[0]["version"] == 3
 
 
 def test_scene_bounds_follow_the_vertices_and_motion():

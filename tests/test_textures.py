@@ -23,9 +23,10 @@ import numpy as np
 import pytest
 
 from oracles import texture_numpy as oracle
-from stpm_core.kernels.texture import srgb_eotf, tex_lookup, tex_lookup_batch
-from stpm_core.textures import (F32, HALF, HALF_TABLE, N_HEADER, SRGB_TABLE, U8, U16, Texture, pack_textures,
-                                srgb_to_linear)
+from stpm_core import colorspaces
+from stpm_core.kernels.texture import srgb_eotf, tex_image_rows, tex_lookup, tex_lookup_batch
+from stpm_core.textures import (F32, H_MATRIX, H_SRGB, HALF, HALF_TABLE, N_HEADER, SRGB_TABLE, U8, U16, Texture,
+                                pack_textures, srgb_to_linear)
 
 RTOL, ATOL = 1e-9, 1e-9
 # sRGB textures: the kernel's EOTF is a 4097-entry table with linear interpolation on [0, 1], within
@@ -77,7 +78,7 @@ def _lookup(textures, tid: int, xy: np.ndarray, interp: str, ext: str) -> np.nda
     pack = pack_textures(textures)
     out = np.zeros((xy.shape[0], 4))
     tex_lookup_batch(pack.header, pack.u8, pack.u16, pack.f32, pack.half, tid, np.ascontiguousarray(xy, np.float64),
-                     oracle.INTERP[interp], oracle.EXT[ext], out)
+                     oracle.INTERP[interp], oracle.EXT[ext], False, out)
     return out
 
 
@@ -200,9 +201,10 @@ def test_pack_layout():
     arrays = {U8: pack.u8, U16: pack.u16, HALF: pack.u16, F32: pack.f32}
     used = {U8: 0, U16: 0, F32: 0}
     for i, tx in enumerate(texs):
-        off, W, H, C, kind, srgb, assoc = pack.header[i]
-        assert (W, H, C, kind, srgb) == (tx.pixels.shape[1], tx.pixels.shape[0], tx.pixels.shape[2], tx.kind,
-                                         int(tx.is_srgb))
+        off, W, H, C, kind, srgb, assoc, matrix = pack.header[i]
+        # sRGB: 1 decoded after interpolation (8-bit), 2 per texel (every other kind); no matrix in Rec.709
+        assert (W, H, C, kind, srgb, matrix) == (tx.pixels.shape[1], tx.pixels.shape[0], tx.pixels.shape[2],
+                                                 tx.kind, 0 if not tx.is_srgb else (1 if kind == U8 else 2), -1)
         # associate: 0 none, 1 8-bit premultiplied when packed, 2 float / 16-bit per texel, 3 PREMUL floats
         expect = 0 if not tx.associates_alpha else (1 if kind == U8 else (3 if tx.alpha_mode == "PREMUL" else 2))
         assert assoc == expect, (i, assoc, expect)
@@ -490,3 +492,165 @@ def test_lookup_one_texel_images(ext):
         xy = _coords(rng, 100, tx.pixels.shape[1], 1)
         for interp in INTERPS:
             _close(_lookup(texs, tid, xy, interp, ext), oracle.sample(tx, xy, interp, ext), tx)
+
+
+# ----------------------------------------------------------------------------
+# Working spaces (Blender 5): images converted per texel into the scene's working space
+# ----------------------------------------------------------------------------
+def _lookup_in(textures, working: str, tid: int, xy: np.ndarray, interp: str, ext: str) -> np.ndarray:
+    pack = pack_textures(textures, working)
+    out = np.zeros((xy.shape[0], 4))
+    tex_lookup_batch(pack.header, pack.u8, pack.u16, pack.f32, pack.half, tid, np.ascontiguousarray(xy, np.float64),
+                     oracle.INTERP[interp], oracle.EXT[ext], False, out)
+    return out
+
+
+def test_pack_working_space_matrix():
+    """A texture whose primaries differ from the working space's carries its float32 matrix after the
+    texels (offset in H_MATRIX); one already in it (or data, or "Linear": already converted) none."""
+    rng = np.random.default_rng(21)
+    texs = [Texture(_pixels("U8", 2, 3, 3, rng)),                                        # sRGB
+            Texture(_pixels("F32", 2, 2, 3, rng), colorspace="Linear Rec.709"),
+            Texture(_pixels("U8", 2, 2, 1, rng), colorspace="Non-Color"),
+            Texture(_pixels("F32", 1, 2, 3, rng), colorspace="Linear"),
+            Texture(_pixels("HALF", 2, 2, 3, rng), colorspace="ACEScg"),
+            Texture(_pixels("U16", 2, 2, 4, rng), colorspace="Display P3")]
+    for working in ("REC709", "ACESCG", "REC2020"):
+        pack = pack_textures(texs, working)
+        for i, tx in enumerate(texs):
+            M = colorspaces.conversion(colorspaces.SPACES[tx.colorspace][1], working)
+            m = pack.header[i, H_MATRIX]
+            if M is None:
+                assert m == -1, (working, i)
+            else:
+                np.testing.assert_array_equal(pack.f32[m:m + 9], M.astype(np.float32).reshape(-1))
+            # 8-bit sRGB: decoded after interpolation unless converted (then per texel, as Cycles' half floats)
+            if tx.is_srgb:
+                assert pack.header[i, H_SRGB] == (1 if tx.kind == U8 and M is None else 2)
+        assert pack.nbytes == sum(t.nbytes for t in texs)          # matrices are not texels
+    assert list(pack_textures(texs, "ACESCG").header[:, H_MATRIX] >= 0) == [True, True, False, False, False, True]
+
+
+@pytest.mark.parametrize("working", ["ACESCG", "REC2020"])
+@pytest.mark.parametrize("interp", ["Closest", "Linear", "Cubic"])
+@pytest.mark.parametrize("kind", KINDS)
+def test_lookup_converted_to_working_space(kind, interp, working):
+    """sRGB, Linear Rec.709, Display P3 and ACEScg images in a working space of other primaries:
+    each texel decoded, multiplied by the matrix (float32 coefficients: 2e-7 relative), then
+    interpolated -- 8-bit images too -- and RGBA ones associated after the conversion (straight and
+    premultiplied), as the oracle converts them."""
+    rng = np.random.default_rng(_seed("working", kind, interp, working))
+    texs = [Texture(_pixels(kind, 5, 7, 3, rng), colorspace="sRGB"),
+            Texture(_pixels(kind, 4, 3, 3, rng, hdr=True), colorspace="Linear Rec.709"),
+            Texture(_rgba(kind, 3, 5, rng), colorspace="sRGB", alpha_mode="STRAIGHT"),
+            Texture(_rgba(kind, 4, 4, rng, premul=True), colorspace="Linear Rec.709", alpha_mode="PREMUL"),
+            Texture(_pixels(kind, 3, 3, 3, rng), colorspace="Display P3"),
+            Texture(_pixels(kind, 2, 5, 1, rng), colorspace="ACEScg")]
+    for tid, tx in enumerate(texs):
+        H, W = tx.pixels.shape[:2]
+        xy = _coords(rng, 120, W, H)
+        M = colorspaces.conversion(colorspaces.SPACES[tx.colorspace][1], working)
+        got = _lookup_in(texs, working, tid, xy, interp, "REPEAT")
+        exp = oracle.sample(tx, xy, interp, "REPEAT", working=M)
+        np.testing.assert_allclose(got, exp, rtol=1e-6, atol=1e-6, err_msg=f"{tx.colorspace} {tx.alpha_mode}")
+        # and a coloured one differs from reading the image unconverted (greys stay grey: the spaces
+        # share the D65 white)
+        if tx.pixels.shape[2] > 1:
+            assert np.abs(exp - oracle.sample(tx, xy, interp, "REPEAT")).max() > 1e-3
+
+
+def test_converted_bytes_interpolate_linear_values():
+    """An 8-bit sRGB image converted into ACEScg is interpolated in linear working-space values (as
+    Cycles' half-float copy), not in its sRGB encoding: halfway between a black and a white texel
+    reads 0.5 x M (1, 1, 1), where the Rec.709 path reads eotf(0.5) = 0.214."""
+    tx = Texture(np.array([[[0, 0, 0], [255, 255, 255]]], np.uint8), colorspace="sRGB")
+    xy = np.array([[0.5, 0.5]])
+    aces = _lookup_in([tx], "ACESCG", 0, xy, "Linear", "EXTEND")[0]
+    rec = _lookup_in([tx], "REC709", 0, xy, "Linear", "EXTEND")[0]
+    row_sums = colorspaces.conversion("Linear Rec.709", "ACESCG").sum(axis=1)
+    np.testing.assert_allclose(aces[:3], 0.5 * row_sums, rtol=1e-6)
+    np.testing.assert_allclose(rec[:3], srgb_to_linear(0.5), rtol=1e-6)
+
+
+# ----------------------------------------------------------------------------
+# UDIM: the tile from the coordinate's integer part, each tile its own texture
+# ----------------------------------------------------------------------------
+def _udim_lookup(textures, tiles: dict, xy, interp, ext, alpha_linked=False, working="REC709") -> np.ndarray:
+    pack = pack_textures(textures, working)
+    prog = np.array([w for t, i in tiles.items() for w in (float(t), float(i))] or [0.0])
+    xy = np.asarray(xy, np.float64)
+    n = len(xy)
+    st = np.zeros((7, n))                       # the interpreter's stack: vector 0..2, colour 3..5, alpha 6
+    st[0], st[1] = xy[:, 0], xy[:, 1]
+    tex_image_rows(pack.header, pack.u8, pack.u16, pack.f32, pack.half, 0, oracle.INTERP[interp], oracle.EXT[ext],
+                   bool(alpha_linked), st, 0, 3, 6, n, prog, 0, len(tiles))
+    return st[3:7].T.copy()
+
+
+def _udim_set(rng):
+    """Tiles 1001 (8-bit sRGB 4 x 3), 1002 (float RGBA 5 x 2), 1011 (half 3 x 3), 1013 (16-bit grey
+    2 x 2): different sizes and kinds; 1012 missing."""
+    texs = [Texture(_pixels("U8", 3, 4, 3, rng), colorspace="sRGB"),
+            Texture(_rgba("F32", 2, 5, rng), colorspace="Linear"),
+            Texture(_pixels("HALF", 3, 3, 3, rng, hdr=True), colorspace="Linear Rec.709"),
+            Texture(_pixels("U16", 2, 2, 1, rng), colorspace="Non-Color")]
+    return texs, {1001: 0, 1002: 1, 1011: 2, 1013: 3}
+
+
+def _udim_coords(rng, n: int) -> np.ndarray:
+    """Over tiles 1001-1014 and around them (negative, past tile column 9), on tile borders, and
+    texel centres / edges of each tile."""
+    edges = np.array([[1.0, 0.5], [0.999999, 0.5], [1.000001, 0.5], [0.5, 1.0], [2.0, 1.5], [-0.25, 0.5],
+                      [0.5, -0.25], [-1.0, 0.5], [-1.5, -1.5], [9.9, 0.2], [10.2, 0.2], [3.5, 1.5], [2.5, 1.5],
+                      [0.0, 0.0], [1.9999, 1.9999], [np.nan, 0.5], [0.5, np.inf]])
+    return np.concatenate([rng.uniform(-1.3, 3.3, (n, 2)), rng.uniform(0.0, 2.0, (n, 2)), edges])
+
+
+@pytest.mark.parametrize("ext", EXTS)
+@pytest.mark.parametrize("interp", ["Closest", "Linear", "Cubic"])
+def test_udim_lookup(interp, ext):
+    """Each coordinate reads its own tile (1001 + tx + 10 ty, truncated toward zero) at its
+    in-tile coordinate with the node's extension (filters never reach the neighbour tile), outside
+    every listed tile Cycles' magenta; mixed sizes and storage kinds; Alpha linked or not."""
+    rng = np.random.default_rng(_seed("udim", interp, ext))
+    texs, tiles = _udim_set(rng)
+    xy = _udim_coords(rng, 400)
+    # (Alpha linked under Clip: Cycles also un-associates 3-channel images, whose alpha fades at the
+    # border, and STPM's single-image look-up does not -- a known difference, not UDIM's: left out)
+    for linked in ((False, True) if ext != "CLIP" else (False,)):
+        got = _udim_lookup(texs, tiles, xy, interp, ext, linked)
+        exp = oracle.sample_udim({t: texs[i] for t, i in tiles.items()}, xy, interp, ext, linked)
+        np.testing.assert_allclose(got, exp, rtol=ASSOC_RTOL, atol=SRGB_ATOL)
+    # the rule itself, on a few points: tile 1012 is missing, u in (-1, 0) reads tile column 0
+    pts = np.array([[1.5, 1.5], [0.5, 0.5], [-0.5, 0.5], [10.5, 0.5], [0.5, -1.5]])
+    out = _udim_lookup(texs, tiles, pts, interp, ext)
+    np.testing.assert_array_equal(out[0], oracle.MISSING)
+    np.testing.assert_array_equal(out[3], oracle.MISSING)
+    np.testing.assert_array_equal(out[4], oracle.MISSING)
+    np.testing.assert_allclose(out[1], oracle.sample(texs[0], pts[1:2], interp, ext)[0], atol=SRGB_ATOL)
+    np.testing.assert_allclose(out[2], oracle.sample(texs[0], pts[2:3], interp, ext)[0], atol=SRGB_ATOL)
+
+
+def test_udim_lookup_in_a_working_space():
+    """Each tile is converted into the working space by its own matrix (tiles of one image share
+    its colour space; here they differ to show each tile's matrix is its own)."""
+    rng = np.random.default_rng(33)
+    texs, tiles = _udim_set(rng)
+    xy = _udim_coords(rng, 300)
+    M = {t: colorspaces.conversion(colorspaces.SPACES[texs[i].colorspace][1], "ACESCG") for t, i in tiles.items()}
+    got = _udim_lookup(texs, tiles, xy, "Linear", "REPEAT", working="ACESCG")
+    exp = oracle.sample_udim({t: texs[i] for t, i in tiles.items()}, xy, "Linear", "REPEAT", working=M)
+    np.testing.assert_allclose(got, exp, rtol=1e-6, atol=1e-6)
+
+
+def test_udim_tile_edges_do_not_blend_neighbours():
+    """Linear interpolation at u = 1 - 1/(4W) (inside tile 1001, next to tile 1002) blends with
+    tile 1001's own first column under Repeat, and reads only its last column under Extend: never
+    tile 1002's texels (Cycles looks each tile up alone)."""
+    a = Texture(np.array([[[10, 10, 10], [200, 200, 200]]], np.uint8), colorspace="Non-Color")
+    b = Texture(np.array([[[255, 0, 0], [255, 0, 0]]], np.uint8), colorspace="Non-Color")
+    xy = np.array([[1.0 - 1.0 / 8.0, 0.5]])
+    rep = _udim_lookup([a, b], {1001: 0, 1002: 1}, xy, "Linear", "REPEAT")[0]
+    ext = _udim_lookup([a, b], {1001: 0, 1002: 1}, xy, "Linear", "EXTEND")[0]
+    np.testing.assert_allclose(rep[:3], (0.75 * 200 + 0.25 * 10) / 255.0)
+    np.testing.assert_allclose(ext[:3], 200 / 255.0)

@@ -124,9 +124,11 @@ def _sky_scene(sky_type: str = "MULTIPLE_SCATTERING", strength: float = 0.05):
     return scene
 
 
-def _sky_matches_cycles(tmp_path, sky_type: str, seeds=(0, 1, 2)):
+def _sky_matches_cycles(tmp_path, sky_type: str, seeds=(0, 1, 2), working_space: str | None = None):
     from cycles_ref import block_ztest, render_cycles, render_stpm
     scene = _sky_scene(sky_type)
+    if working_space is not None:              # Blender 5: the whole file in another working space
+        assert "FINISHED" in bpy.ops.wm.set_working_color_space(convert_colors=True, working_space=working_space)
     t0 = time.perf_counter()
     report = batch.bake_current(scene)
     bake_s = time.perf_counter() - t0
@@ -148,6 +150,12 @@ def _sky_matches_cycles(tmp_path, sky_type: str, seeds=(0, 1, 2)):
 
 def test_sky_texture_world_lights_like_cycles(cache, tmp_path):
     _sky_matches_cycles(tmp_path, "MULTIPLE_SCATTERING")
+
+
+@pytest.mark.slow
+def test_sky_world_in_an_acescg_file_lights_like_cycles(cache, tmp_path):
+    """The bake holds the working space's values (Cycles computes the sky into it), read unconverted."""
+    _sky_matches_cycles(tmp_path, "MULTIPLE_SCATTERING", working_space="ACEScg")
 
 
 @pytest.mark.slow

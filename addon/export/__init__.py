@@ -23,12 +23,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._core import StpmError, scene_model
+from .._core import StpmError, scene_model, sub
 from . import camera as camera_export
 from . import lights as light_export
 from . import materials as material_export
 from . import mesh as mesh_export
 from . import motion
+from . import nodes as node_export
 from . import world as world_export
 
 __all__ = ["export_scene"]
@@ -277,8 +278,21 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                   "warnings": list(warnings),
                   # Render flags the scene dataclasses have no field for (read by the integrator)
                   "film_transparent": bool(render.film_transparent),
-                  "light_visible_camera": light_seen})
+                  "light_visible_camera": light_seen,
+                  "working_space": _working_space(warnings)})
     return out, warnings
+
+
+def _working_space(warnings: list) -> str:
+    """The file's working colour space (Blender 5's ``bpy.data.colorspace.working_space``) as the
+    scene's metadata id; one STPM does not know is warned and rendered as Linear Rec.709."""
+    import bpy
+    name = str(getattr(getattr(bpy.data, "colorspace", None), "working_space", "Linear Rec.709"))
+    ws = node_export.working_space()
+    if sub("colorspaces").working_id(name) is None:
+        _warn_once(warnings, f"working colour space {name!r} is not supported: colours are rendered as "
+                             f"Linear Rec.709 (use Linear Rec.709, Linear Rec.2020 or ACEScg)")
+    return ws
 
 
 def _warn_ignored_object_flags(obj, warnings: list) -> None:

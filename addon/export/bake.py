@@ -803,6 +803,10 @@ class BakeResolver:
         import bpy
         data = [BAKE_VERSION, bpy.app.version_string, info.signatures.get((cand.consumer, cand.socket), ""),
                 cand.kind, self.resolution, self.samples, uv_map, self._mesh_sig(me)]
+        from .nodes import working_space
+        working = working_space()
+        if working != "REC709":               # bakes hold working-space values (older keys unchanged)
+            data.append(working)
         if cand.world:
             props = {k: _plain(obj.get(k)) for k in obj.keys()} if hasattr(obj, "keys") else {}
             data.append([_plain([tuple(r) for r in obj.matrix_world]), _plain(tuple(obj.color)),

@@ -8,12 +8,12 @@ SPEC.json (written by :func:`addon.export.bake.run_jobs`) holds ``blend`` (the c
 
 The copy is never saved.  Per job, in the job's material: a new Emission shader (Strength 1)
 takes the socket that feeds the input and drives a new, active Material Output; a new active
-Image Texture node holds a float image (Linear Rec.709 for colours, Non-Color for scalars and
-data); every other material of the object gets a scratch image as its active node (Cycles bakes
+Image Texture node holds a float image (the file's working space, Linear Rec.709 by default, for
+colours, Non-Color for scalars and data); every other material of the object gets a scratch image as its active node (Cycles bakes
 each face into its own material's active image).  Cycles bakes EMIT on the job's UV map
 (``samples`` samples, margin ``max(4, res // 64)`` texels, Extend) with only that object
 selected, and the image is written as a linear 32-bit float EXR with ``Image.save_render`` and
-colour management overridden to Linear Rec.709 (``Image.save`` applies the display transform)
+colour management overridden to the working space (``Image.save`` applies the display transform)
 as ``<key>.exr`` (renamed into place), with a ``<key>.json`` note beside it.  Render visibility
 is applied first (viewport flags := render flags, as ``addon.batch.render_visibility`` does for
 the export), so the bake sees the objects and modifiers F12 renders.  Results: ``[{"key", "ok", "seconds", "error"}]``.
@@ -61,8 +61,16 @@ def _render_visibility(bpy, view_layer) -> None:
             obj.hide_set(False, view_layer=view_layer)
 
 
+def _working(bpy) -> str:
+    """The file's working colour space (Blender 5; Blender 4: Linear Rec.709): bakes are written in
+    it, so the export reads them as scene-linear values with no conversion."""
+    return str(getattr(getattr(bpy.data, "colorspace", None), "working_space", "Linear Rec.709"))
+
+
 def _linear_exr(settings) -> None:
-    """Image settings for ``Image.save_render``: RGB 32-bit float OpenEXR, linear (no view transform)."""
+    """Image settings for ``Image.save_render``: RGB 32-bit float OpenEXR, linear in the working
+    space (no view transform, no conversion)."""
+    import bpy
     if hasattr(settings, "media_type"):
         settings.media_type = "IMAGE"
     settings.file_format = "OPEN_EXR"
@@ -73,7 +81,7 @@ def _linear_exr(settings) -> None:
     if hasattr(settings, "color_management"):
         settings.color_management = "OVERRIDE"
         if hasattr(settings, "linear_colorspace_settings"):
-            settings.linear_colorspace_settings.name = "Linear Rec.709"
+            settings.linear_colorspace_settings.name = _working(bpy)
 
 
 def _active_image_node(bpy, mat, image):
@@ -124,7 +132,7 @@ def _bake(bpy, scene, view_layer, job: dict, samples: int, scratch) -> None:
     # Target image and scratch images for the object's other materials
     res = int(job["resolution"])
     image = bpy.data.images.new(f"stpm bake {job['key']}", res, res, alpha=False, float_buffer=True)
-    image.colorspace_settings.name = "Linear Rec.709" if job["kind"] == "color" else "Non-Color"
+    image.colorspace_settings.name = _working(bpy) if job["kind"] == "color" else "Non-Color"
     for i, slot in enumerate(obj.material_slots):
         m = slot.material
         if m is None or m.node_tree is None:

@@ -41,6 +41,8 @@ import numpy as np
 from .._core import scene_model, sub
 from . import nodes as node_export
 
+_colorspaces = sub("colorspaces")
+
 # Cycles' colour for an image that cannot be loaded
 MISSING_IMAGE = np.array([1.0, 0.0, 1.0])
 # Image means: at most this many pixels are read for one mean (a regular strided grid)
@@ -119,11 +121,16 @@ def sampled_mean(image, max_pixels: int = MAX_MEAN_PIXELS) -> np.ndarray:
 
 
 def linear_rgb(rgb: np.ndarray, image) -> np.ndarray:
-    """Pixel values (..., 3) float32 of ``image`` in linear RGB: 8-bit sRGB images are converted."""
-    if not image.is_float and image.colorspace_settings.name == "sRGB":
-        return np.where(rgb <= np.float32(0.04045), rgb / np.float32(12.92),
-                        ((rgb + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4))
-    return rgb
+    """Pixel values (..., 3) float32 of ``image`` (``Image.pixels``) in the working space: byte
+    images are converted from their colour space (sRGB decoded, primaries changed); float images
+    already are (Blender converts them on load); a byte image in a space without a formula is
+    read as linear."""
+    if image.is_float:
+        return rgb
+    space = image.colorspace_settings.name
+    if space not in _colorspaces.SPACES:
+        return rgb
+    return _colorspaces.to_working(rgb, space, node_export.working_space()).astype(np.float32)
 
 
 def image_mean(image) -> np.ndarray:
@@ -360,6 +367,15 @@ class MaterialExporter:
             if image is None:
                 self._warn(f"image texture {name!r} has no image, rendered magenta (1, 0, 1) as in Cycles")
                 continue
+            if image.source == "TILED":            # UDIM: one texture per tile, the node holds the table
+                tiles = self.textures.index_of_tiles(image, self._warn)
+                if tiles:
+                    node.props["tiles"] = tiles
+                    node.props["image"] = tiles[0][1]
+                else:
+                    self._warn(f"image {image.name!r}: no UDIM tile could be read, rendered magenta (1, 0, 1) "
+                               f"as in Cycles")
+                continue
             problem = self._image_problem(image)
             if problem is not None:
                 self._warn(problem)
@@ -367,8 +383,6 @@ class MaterialExporter:
             if image.source in ("SEQUENCE", "MOVIE"):
                 self._warn(f"image {image.name!r}: an image {image.source.lower()} is rendered as the one frame "
                            f"Blender has loaded")
-            elif image.source == "TILED":
-                self._warn(f"image {image.name!r}: UDIM tiles are not supported, only the first tile is used")
             node.props["image"] = self.textures.index_of(image, self._warn)
         compile_mod = sub("nodes.compile")
         try:

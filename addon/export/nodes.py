@@ -22,7 +22,18 @@ luminance, vector -> float: the average, float -> colour / vector: the value in 
 
 :class:`TextureTable` turns each distinct ``bpy.types.Image`` into one Texture, read through
 ``Image.pixels`` (files on disk, packed and generated images alike) and stored natively; baked
-inputs (:mod:`.bake`) are float EXR files it reads with OpenImageIO (``index_of_file``).
+inputs (:mod:`.bake`) are float EXR files it reads with OpenImageIO (``index_of_file``).  A UDIM
+image (source ``TILED``) becomes one Texture per tile (``index_of_tiles``): ``Image.pixels`` holds
+only the first tile, so each tile's file (the image's path with ``<UDIM>`` / ``<UVTILE>`` filled in,
+or its packed file) is read with OpenImageIO in its stored type, as Cycles reads image files.
+
+Colour spaces: byte images keep their colour space's name (``stpm_core.colorspaces``: sRGB,
+Display P3, the linear spaces, data); the renderer converts them into the scene's working space
+per texel.  Float images are already in the working space (Blender converts them when it loads
+them): "Linear".  An image in a space STPM has no formula for (Rec.1886, Filmic Log, AgX Log,
+ACEScc, ...) is converted into the working space with OpenColorIO and Blender's own config
+(OpenImageIO's ``colorconvert``) and stored as float32, or, without OpenColorIO, read as linear
+(warned).
 """
 from __future__ import annotations
 
@@ -30,13 +41,14 @@ import numpy as np
 
 from .._core import sub
 
+_colorspaces = sub("colorspaces")
 _graph = sub("nodes.graph")
 _compile = sub("nodes.compile")
 _textures = sub("textures")
 Link, Node, ShaderGraph = _graph.Link, _graph.Node, _graph.ShaderGraph
 
 __all__ = ["GraphBuilder", "TextureTable", "image_texture", "float_texture", "read_float_image", "graph_needed",
-           "CONSTANT_NODES", "curve_table"]
+           "CONSTANT_NODES", "curve_table", "tile_textures", "working_space", "tile_path"]
 
 # Value nodes the constant path (materials.py) reads directly
 CONSTANT_NODES = ("ShaderNodeValue", "ShaderNodeRGB")
@@ -435,16 +447,80 @@ def _texture(data: np.ndarray, colorspace: str, name: str, alpha_mode: str) -> "
                              alpha_mode=alpha_mode)
 
 
+def working_space() -> str:
+    """The open file's working space as a ``stpm_core.colorspaces.WORKING_SPACES`` id (Blender 4:
+    always Linear Rec.709; a space STPM does not know: REC709, the exporter warns)."""
+    import bpy
+    cs = getattr(bpy.data, "colorspace", None)
+    return _colorspaces.working_id(str(getattr(cs, "working_space", "Linear Rec.709"))) or "REC709"
+
+
+def _ocio_config() -> str | None:
+    """Path of the OpenColorIO config Blender uses ($OCIO, else its bundled one), or None."""
+    import os
+    env = os.environ.get("OCIO")
+    if env and os.path.isfile(env):
+        return env
+    try:
+        import bpy
+        for kind in ("LOCAL", "SYSTEM"):
+            path = os.path.join(bpy.utils.resource_path(kind), "datafiles", "colormanagement", "config.ocio")
+            if os.path.isfile(path):
+                return path
+    except Exception:  # noqa: BLE001 -- no Blender paths: no config
+        pass
+    return None
+
+
+def _ocio_to_working(px: np.ndarray, space: str) -> np.ndarray | None:
+    """Float32 texels (H, W, C) in colour space ``space`` -> the working space by OpenColorIO with
+    Blender's config (straight alpha kept), or None when OpenImageIO / OpenColorIO / the config is
+    missing or the conversion fails."""
+    config = _ocio_config()
+    if config is None:
+        return None
+    try:
+        import OpenImageIO as oiio
+        H, W, C = px.shape
+        rgb = np.ascontiguousarray(px[:, :, :3] if C >= 3 else np.repeat(px[:, :, :1], 3, axis=2), np.float32)
+        buf = oiio.ImageBuf(oiio.ImageSpec(W, H, 3, "float"))
+        buf.set_pixels(oiio.ROI(), rgb)
+        dst = _colorspaces.WORKING_SPACES[working_space()]
+        out = oiio.ImageBufAlgo.colorconvert(buf, space, dst, unpremult=False, colorconfig=config)
+        if out.has_error:
+            return None
+        conv = np.asarray(out.get_pixels(oiio.FLOAT), np.float32).reshape(H, W, 3)
+    except Exception:  # noqa: BLE001 -- any failure: the caller reads the values as linear
+        return None
+    return np.concatenate([conv, px[:, :, 3:4].astype(np.float32)], axis=2) if C == 4 else conv
+
+
+def _space_texture(px: np.ndarray, space: str, name: str, warn, alpha_mode: str) -> "_textures.Texture":
+    """Texels (H, W, C) of an image whose stored values are in colour space ``space``: a Texture
+    with that space when the renderer knows it, else converted with OpenColorIO (float32 "Linear"),
+    else read as linear (warned)."""
+    if space in _textures.COLOR_SPACES:
+        return _texture(px, space, name, alpha_mode)
+    conv = _ocio_to_working(px.astype(np.float32) / (255.0 if px.dtype == np.uint8 else
+                                                    65535.0 if px.dtype == np.uint16 else 1.0), space)
+    if conv is not None:
+        return _texture(conv, "Linear", name, alpha_mode)
+    warn(f"image {name!r}: colour space {space!r} could not be converted (no OpenColorIO), its values are used "
+         f"as linear (set it to sRGB, a Linear space or Non-Color)")
+    return _texture(px, "Linear", name, alpha_mode)
+
+
 def image_texture(image, warn) -> "_textures.Texture | None":
     """One ``bpy.types.Image`` -> Texture, or None when it has no pixels (missing file).
 
     ``Image.pixels`` is read once into float32 (W H C values, rows bottom-up: row 0 is v = 0).
     Byte images (``not is_float``) hold their file's values in the image's own colour space:
-    stored as uint8 (round(v * 255), exact) with ``colorspace`` "sRGB" or "Linear" from the
-    image's colour space (another space: "Linear", warned).  Float images are already
-    scene-linear in Blender (it converts them on load; their colour-space name no longer
-    applies): ``colorspace`` "Linear", stored as uint16 when every value is k / 65535 (a 16-bit
-    file read as data), float16 when every value is a half (a half-float EXR), else float32.
+    stored as uint8 (round(v * 255), exact) with ``colorspace`` the image's colour space (the
+    renderer converts it into the working space; a space without a formula: converted here,
+    :func:`_space_texture`).  Float images are already in the working space in Blender (it
+    converts them on load; their colour-space name no longer applies): ``colorspace`` "Linear",
+    stored as uint16 when every value is k / 65535 (a 16-bit file read as data), float16 when
+    every value is a half (a half-float EXR), else float32.
     NaN / inf texels are set to 0 (warned).  Channels: the fewest of 1 / 3 / 4 that keep every
     value (Blender always hands out 4: alpha is dropped when it is 1 everywhere or the alpha
     mode is None, RGB becomes grey when R = G = B everywhere).  ``alpha_mode`` is the image's
@@ -460,18 +536,10 @@ def image_texture(image, warn) -> "_textures.Texture | None":
     name = image.name
     alpha_mode = str(getattr(image, "alpha_mode", "STRAIGHT"))
     if not image.is_float:
-        space = image.colorspace_settings.name
-        if space in _textures.SRGB_SPACES:
-            cs = "sRGB"
-        else:
-            cs = "Linear"
-            if space not in _textures.LINEAR_SPACES:
-                warn(f"image {name!r}: colour space {space!r} is not supported, its values are used as "
-                     f"linear (set it to sRGB, Linear Rec.709 or Non-Color)")
         np.multiply(px, np.float32(255.0), out=px)
         np.clip(px, 0.0, 255.0, out=px)
         np.rint(px, out=px)
-        return _texture(px.astype(np.uint8), cs, name, alpha_mode)
+        return _space_texture(px.astype(np.uint8), image.colorspace_settings.name, name, warn, alpha_mode)
     return float_texture(px, name, warn, alpha_mode)
 
 
@@ -512,16 +580,129 @@ def read_float_image(path) -> np.ndarray:
     return np.ascontiguousarray(px[::-1])
 
 
+# ----------------------------------------------------------------------------
+# UDIM tiles
+# ----------------------------------------------------------------------------
+_NATIVE = {"uint8": np.uint8, "uint16": np.uint16, "half": np.float16, "float": np.float32}
+
+
+def tile_path(image, number: int) -> str:
+    """The file of UDIM tile ``number`` of ``image``: its path with ``<UDIM>`` (1001) or
+    ``<UVTILE>`` (u1_v1) filled in, made absolute."""
+    import bpy
+    path = bpy.path.abspath(image.filepath_raw or image.filepath, library=image.library)
+    u, v = (number - 1001) % 10, (number - 1001) // 10
+    return path.replace("<UDIM>", str(number)).replace("<UVTILE>", f"u{u + 1}_v{v + 1}")
+
+
+def read_native(path) -> np.ndarray:
+    """An image file -> (H, W, C) texels in its stored type (uint8, uint16, float16, else float32),
+    row 0 at the bottom, colour not associated with alpha (as Blender keeps byte images), at most 4
+    channels; through OpenImageIO."""
+    import OpenImageIO as oiio
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(str(path), config)
+    if inp is None:
+        raise OSError(f"cannot read {path}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        fmt = str(spec.format)
+        dtype = fmt if fmt in _NATIVE else "float"
+        px = inp.read_image(0, 0, 0, spec.nchannels, dtype)
+    finally:
+        inp.close()
+    if px is None:
+        raise OSError(f"cannot read {path}: {oiio.geterror()}")
+    px = np.asarray(px, _NATIVE[dtype]).reshape(spec.height, spec.width, spec.nchannels)
+    if px.shape[2] > 4:
+        px = px[:, :, :4]
+    return np.ascontiguousarray(px[::-1])
+
+
+def _tile_pixels(image, number: int, warn):
+    """(H, W, C) native texels of tile ``number`` (its packed file, else its file on disk), or None."""
+    import os
+    import tempfile
+    packed = next((p for p in getattr(image, "packed_files", ()) if getattr(p, "tile_number", 0) == number), None)
+    if packed is not None and packed.packed_file is not None:
+        suffix = os.path.splitext(packed.filepath or image.filepath_raw or "")[1] or ".png"
+        fd, tmp = tempfile.mkstemp(suffix=suffix)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(bytes(packed.packed_file.data))
+            return read_native(tmp)
+        except (OSError, ValueError) as e:
+            warn(f"image {image.name!r}: packed UDIM tile {number} could not be read ({e}); rendered magenta "
+                 f"(1, 0, 1) as a missing tile in Cycles")
+            return None
+        finally:
+            os.unlink(tmp)
+    path = tile_path(image, number)
+    if not os.path.isfile(path):
+        warn(f"image {image.name!r}: UDIM tile {number} has no file ({path!r}: generated or never saved?); "
+             f"rendered magenta (1, 0, 1) as a missing tile in Cycles (save the image to render it)")
+        return None
+    try:
+        return read_native(path)
+    except (OSError, ValueError) as e:
+        warn(f"image {image.name!r}: UDIM tile {number} ({path!r}) could not be read ({e}); rendered magenta "
+             f"(1, 0, 1) as a missing tile in Cycles")
+        return None
+
+
+def tile_textures(image, warn) -> list:
+    """[(tile number, Texture or None)] of a UDIM image, every tile in its stored type and the
+    image's colour space and alpha mode (8-bit and 16-bit tiles keep their integers; half and float
+    tiles are linear in the image's colour space, converted by the renderer as Blender converts
+    float images on load).  A tile without pixels is None (warned: it reads magenta)."""
+    if getattr(image, "is_dirty", False):
+        warn(f"image {image.name!r}: unsaved edits of its UDIM tiles are not rendered (STPM reads the tile "
+             f"files); save the image")
+    space = image.colorspace_settings.name
+    alpha_mode = str(getattr(image, "alpha_mode", "STRAIGHT"))
+    out = []
+    for tile in image.tiles:
+        number = int(tile.number)
+        px = _tile_pixels(image, number, warn)
+        tex = None
+        if px is not None:
+            name = f"{image.name}.{number}"
+            if px.dtype == np.float32 or px.dtype == np.float16:
+                if not np.isfinite(px).all():
+                    warn(f"image {name!r}: NaN or infinite pixels are rendered as 0")
+                    px = np.nan_to_num(px, nan=0.0, posinf=0.0, neginf=0.0)
+            if alpha_mode == "NONE" and px.shape[2] == 4:
+                px = np.ascontiguousarray(px[:, :, :3])
+            tex = _space_texture(_fewest_channels(px) if px.shape[2] in (3, 4) else px, space, name, warn,
+                                 alpha_mode)
+        out.append((number, tex))
+    return out
+
+
 class TextureTable:
     """The textures of one export: each distinct image once (``textures[i]`` = texture id i)."""
 
     def __init__(self):
         self.textures: list = []
         self._index: dict = {}
+        self._tiles: dict = {}
 
     def index_of(self, image, warn) -> int:
         """Texture index of ``image`` (read on first use); -1 when it has no pixels."""
         return self._cached(image.as_pointer(), lambda: image_texture(image, warn))
+
+    def index_of_tiles(self, image, warn) -> list:
+        """[[tile number, texture index]] of a UDIM image's tiles with pixels (read on first use)."""
+        key = ("tiles", image.as_pointer())
+        if key not in self._tiles:
+            pairs = []
+            for number, tex in tile_textures(image, warn):
+                if tex is not None:
+                    pairs.append([number, len(self.textures)])
+                    self.textures.append(tex)
+            self._tiles[key] = pairs
+        return [list(p) for p in self._tiles[key]]
 
     def _cached(self, key, make) -> int:
         """Index of the texture cached under ``key``, made by ``make()`` on first use (None: -1)."""

@@ -454,6 +454,9 @@ def world_bake_key(world, view: str, memo: dict | None = None) -> str:
     data = [WORLD_BAKE_VERSION, bpy.app.version_string, "world", view, [int(x) for x in WORLD_BAKE_RESOLUTION],
             int(WORLD_BAKE_SAMPLES), int(WORLD_REFINE_SAMPLES), repr(float(WORLD_REFINE_SHARE)),
             tree_signature(world.node_tree, {} if memo is None else memo)]
+    from .nodes import working_space
+    if working_space() != "REC709":           # the bake holds working-space values (older keys unchanged)
+        data.append(working_space())
     return hashlib.sha256(json.dumps(data, default=repr).encode()).hexdigest()[:24]
 
 

@@ -18,7 +18,7 @@ holds only a panoramic camera (so no object is rendered), with the job's world:
   wide, whose coverage 16 samples estimate to a few per cent) are rendered again: at most
   :data:`MAX_REFINE_BOXES` crops (render border) around them, margin :data:`REFINE_MARGIN`
   pixels, at up to ``refine_samples`` samples, pasted into the image;
-* the image is written as a 32-bit float RGB OpenEXR, linear Rec.709 (colour management
+* the image is written as a 32-bit float RGB OpenEXR, linear in the working space (colour management
   overridden), renamed into place as ``job["path"]``, with a ``.json`` note beside it.
 """
 from __future__ import annotations
@@ -242,7 +242,9 @@ def _save(bpy, np, scene, px, path: str, linear_exr) -> None:
     H, W = px.shape[:2]
     img = bpy.data.images.new("stpm world bake result", W, H, alpha=False, float_buffer=True)
     try:
-        img.colorspace_settings.name = "Linear Rec.709"
+        # the working space: the EXR holds scene-linear values, read back without conversion
+        img.colorspace_settings.name = str(getattr(getattr(bpy.data, "colorspace", None), "working_space",
+                                                   "Linear Rec.709"))
         rgba = np.ones((H, W, 4), np.float32)
         rgba[:, :, :3] = px
         img.pixels.foreach_set(rgba.ravel())

@@ -86,7 +86,6 @@ _TEX_BRICK = OP["TEX_BRICK"]
 _TEX_MAGIC = OP["TEX_MAGIC"]
 _TEX_WHITE_NOISE = OP["TEX_WHITE_NOISE"]
 
-_LUMA = (0.2126, 0.7152, 0.0722)       # Rec.709 luminance: Blender's colour -> float conversion
 
 
 # ----------------------------------------------------------------------------
@@ -653,7 +652,8 @@ def _value_node(op, prog, pc, st, n):
             s = int(prog[pc + 2])
             o = int(prog[pc + 3])
             if kind == 0:
-                st[o, k] = _LUMA[0] * st[s, k] + _LUMA[1] * st[s + 1, k] + _LUMA[2] * st[s + 2, k]
+                w = int(prog[pc + 4])      # the working space's luminance weights (a constant)
+                st[o, k] = st[w, k] * st[s, k] + st[w + 1, k] * st[s + 1, k] + st[w + 2, k] * st[s + 2, k]
             elif kind == 1:
                 st[o, k] = (st[s, k] + st[s + 1, k] + st[s + 2, k]) * (1.0 / 3.0)
             else:
@@ -1113,7 +1113,8 @@ def _texture_node(op, prog, pc, st, n, X):
     """TEX_IMAGE, TEX_CHECKER, TEX_GRADIENT over the batch."""
     if op == _TEX_IMAGE:
         tex_image_rows(X[0], X[1], X[2], X[3], X[4], int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]),
-                       int(prog[pc + 4]) != 0, st, int(prog[pc + 5]), int(prog[pc + 6]), int(prog[pc + 7]), n)
+                       int(prog[pc + 4]) != 0, st, int(prog[pc + 5]), int(prog[pc + 6]), int(prog[pc + 7]), n,
+                       prog, pc + 9, int(prog[pc + 8]))
     elif op == _TEX_CHECKER:
         vs, c1, c2, ss, cs, fs = (int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]),
                                   int(prog[pc + 5]), int(prog[pc + 6]))
@@ -1311,7 +1312,11 @@ def run_program(prog, start, st, rows, C, G, A, X, seed):
             _geometry_node(op, prog, pc, st, n, rows, G, A)
         elif op == _MAPPING:
             _mapping(prog, pc, st, n)
-        elif op == _TEX_IMAGE or op == _TEX_CHECKER or op == _TEX_GRADIENT:
+        elif op == _TEX_IMAGE:
+            _texture_node(op, prog, pc, st, n, X)
+            pc += _LEN[op] + 2 * int(prog[pc + 8])          # then the UDIM tile table
+            continue
+        elif op == _TEX_CHECKER or op == _TEX_GRADIENT:
             _texture_node(op, prog, pc, st, n, X)
         elif op >= _TEX_NOISE and op <= _TEX_WHITE_NOISE:
             _procedural_node(op, prog, pc, st, n)
@@ -1463,4 +1468,4 @@ def _lengths() -> np.ndarray:
     return out
 
 
-_LEN = _lengths()          # words per instruction (RAMP / CURVES add their tables)
+_LEN = _lengths()          # words per instruction (RAMP / CURVES add their tables, TEX_IMAGE its tiles)

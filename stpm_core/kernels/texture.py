@@ -18,6 +18,20 @@ that are not data have associated (premultiplied) alpha, as Cycles loads them: 8
 premultiplied when packed (``textures.pack_textures``), float / 16-bit ones per texel as read,
 after decoding; the colour is divided by alpha again only when the node's Alpha output is used.  Returns
 (r, g, b, a) linear, a = 1 for images without alpha.
+
+Working space.  A texture whose colour space has other primaries than the scene's working space
+(``colorspaces``; e.g. an sRGB image in an ACEScg scene) carries a 3x3 matrix (header column
+``H_MATRIX``): each texel is decoded (sRGB EOTF), multiplied by the matrix and premultiplied by its
+alpha before interpolation -- 8-bit ones too, as Cycles converts such images to linear half
+floats when it loads them (``ImageMetaData::detect_colorspace``); STPM keeps the bytes and
+converts per texel in float.
+
+UDIM (:func:`tex_image_rows` with a tile table, as Cycles' ``svm_node_tex_image``): the tile is
+``1001 + tx + 10 ty`` with ``tx = int(x)``, ``ty = int(y)`` (truncated toward zero; only for
+``x > -1``, ``y > -1``, ``tx < 10``); the look-up reads that tile's own texture at ``(x - tx,
+y - ty)`` with the node's interpolation and extension (Repeat wraps within the tile, bilinear and
+cubic filters never reach into the neighbouring tile); a coordinate in no listed tile reads
+Cycles' missing-image magenta ``(1, 0, 1, 1)``.
 """
 from __future__ import annotations
 
@@ -35,7 +49,9 @@ def _eotf_table() -> np.ndarray:
 
 _EOTF = _eotf_table()
 
-__all__ = ["tex_lookup", "tex_image_rows", "srgb_eotf", "tex_lookup_batch"]
+__all__ = ["tex_lookup", "tex_image_rows", "srgb_eotf", "tex_lookup_batch", "udim_tile", "MISSING"]
+
+MISSING = (1.0, 0.0, 1.0, 1.0)        # Cycles' TEX_IMAGE_MISSING_R/G/B/A
 
 
 @njit(**JIT)
@@ -82,9 +98,17 @@ def _chan(kind, u8, u16, f32, half, i):
 
 
 @njit(**JIT)
+def _to_working(f32, m, r, g, b):
+    """(r, g, b) times the row-major 3x3 matrix at f32[m:m + 9]."""
+    return (f32[m] * r + f32[m + 1] * g + f32[m + 2] * b, f32[m + 3] * r + f32[m + 4] * g + f32[m + 5] * b,
+            f32[m + 6] * r + f32[m + 7] * g + f32[m + 8] * b)
+
+
+@njit(**JIT)
 def _texel(hdr, u8, u16, f32, half, tid, ix, iy):
     """(r, g, b, a) of texel (ix, iy) (already wrapped; -1 -> 0): 8-bit values as stored (an sRGB
-    image stays encoded), other kinds of an sRGB image decoded to linear here, per texel."""
+    image stays encoded), other kinds, and 8-bit images converted into the working space, decoded
+    to linear working-space colour here, per texel."""
     if ix < 0 or iy < 0:
         return 0.0, 0.0, 0.0, 0.0
     C = hdr[tid, 3]
@@ -98,11 +122,13 @@ def _texel(hdr, u8, u16, f32, half, tid, ix, iy):
         g = _chan(kind, u8, u16, f32, half, base + 1)
         b = _chan(kind, u8, u16, f32, half, base + 2)
         a = _chan(kind, u8, u16, f32, half, base + 3) if C == 4 else 1.0
-    if kind != 0:
-        # Blender's linear float32 buffer: straight images decoded then premultiplied in float32;
-        # premultiplied ones kept (sRGB ones: decoded on the straight colour, alpha 0 / 1 directly)
+    m = hdr[tid, 7]
+    if kind != 0 or m >= 0:
+        # Blender's linear float32 buffer: straight images decoded (and converted) then premultiplied
+        # in float32; premultiplied ones kept (sRGB ones: decoded on the straight colour, alpha 0 / 1
+        # directly)
         assoc = hdr[tid, 6]
-        srgb = hdr[tid, 5] != 0
+        srgb = hdr[tid, 5] == 2
         if assoc == 3:
             if srgb:
                 if a != 0.0 and a != 1.0:
@@ -112,9 +138,13 @@ def _texel(hdr, u8, u16, f32, half, tid, ix, iy):
                     b = float(np.float32(srgb_eotf(b / a)) * a32)
                 else:
                     r, g, b = srgb_eotf(r), srgb_eotf(g), srgb_eotf(b)
+            if m >= 0:
+                r, g, b = _to_working(f32, m, r, g, b)
         else:
             if srgb:
                 r, g, b = srgb_eotf(r), srgb_eotf(g), srgb_eotf(b)
+            if m >= 0:
+                r, g, b = _to_working(f32, m, r, g, b)
             if assoc == 2:
                 a32 = np.float32(a)
                 r, g, b = float(np.float32(r) * a32), float(np.float32(g) * a32), float(np.float32(b) * a32)
@@ -181,7 +211,7 @@ def _bicubic(hdr, u8, u16, f32, half, tid, x, y, ext):
 
 
 @njit(**JIT)
-def tex_lookup(hdr, u8, u16, f32, half, tid, x, y, interp, ext, unassociate=False):
+def tex_lookup(hdr, u8, u16, f32, half, tid, x, y, interp, ext, unassociate):
     """(r, g, b, a) of texture tid at (x, y); interp 0 Closest, 1 Linear, 2 Cubic; ext 0 Repeat,
     1 Extend, 2 Clip, 3 Mirror (see the module docstring).  unassociate: divide the colour by
     alpha (0 < alpha < 1; images whose alpha is associated), as Cycles does when the Alpha output
@@ -194,21 +224,56 @@ def tex_lookup(hdr, u8, u16, f32, half, tid, x, y, interp, ext, unassociate=Fals
         r, g, b, a = _bilinear(hdr, u8, u16, f32, half, tid, x, y, ext)
     else:
         r, g, b, a = _bicubic(hdr, u8, u16, f32, half, tid, x, y, ext)
-    byte = hdr[tid, 4] == 0
     if unassociate and hdr[tid, 6] != 0 and a != 1.0 and a != 0.0:
         r, g, b = r / a, g / a, b / a
-    if byte and hdr[tid, 5] != 0:
+    if hdr[tid, 5] == 1:
         r, g, b = srgb_eotf(r), srgb_eotf(g), srgb_eotf(b)
     return r, g, b, a
 
 
 @njit(**JIT)
-def tex_image_rows(hdr, u8, u16, f32, half, tid, interp, ext, unassociate, st, vs, cs, as_, n):
+def udim_tile(prog, at, n_tiles, x, y):
+    """(texture id, x, y) of the UDIM tile holding (x, y) in the tile table prog[at:at + 2 n_tiles]
+    ((tile number, texture id) pairs), coordinates made relative to the tile; texture id -1 when
+    no listed tile holds it (coordinates unchanged), as Cycles' ``svm_node_tex_image``."""
+    if not (x > -1.0 and y > -1.0 and x < 10.0 and y < 1.0e6):
+        return -1, x, y
+    tx = int(x)                    # truncated toward zero, as C's (int) cast: (-1, 0) -> tile column 0
+    ty = int(y)
+    tile = 1001 + tx + 10 * ty
+    for i in range(n_tiles):
+        if int(prog[at + 2 * i]) == tile:
+            return int(prog[at + 2 * i + 1]), x - tx, y - ty
+    return -1, x, y
+
+
+@njit(**JIT)
+def tex_image_rows(hdr, u8, u16, f32, half, tid, interp, ext, unassociate, st, vs, cs, as_, n, prog, tiles_at,
+                   n_tiles):
     """Image Texture over a batch of the interpreter's stack st (n_slots, >= n): the vector in
     slots vs .. vs + 2 of each row k < n -> colour (slots cs ..) and alpha (slot as_; -1 unused).
-    The same values as :func:`tex_lookup`, with the interpolation chosen once per batch."""
-    byte = hdr[tid, 4] == 0
-    srgb = byte and hdr[tid, 5] != 0
+    The same values as :func:`tex_lookup`, with the interpolation chosen once per batch.  A UDIM
+    image (n_tiles > 0) reads the tile table prog[tiles_at:tiles_at + 2 n_tiles] (:func:`udim_tile`;
+    tid unused): each row its tile's texture, magenta outside the listed tiles."""
+    if n_tiles > 0:
+        for k in range(n):
+            x, y = st[vs, k], st[vs + 1, k]
+            if not (math.isfinite(x) and math.isfinite(y)):
+                r = g = b = a = 0.0
+            else:
+                t, x, y = udim_tile(prog, tiles_at, n_tiles, x, y)
+                if t < 0:
+                    r, g, b, a = MISSING
+                else:
+                    r, g, b, a = tex_lookup(hdr, u8, u16, f32, half, t, x, y, interp, ext, unassociate)
+            if cs >= 0:
+                st[cs, k] = r
+                st[cs + 1, k] = g
+                st[cs + 2, k] = b
+            if as_ >= 0:
+                st[as_, k] = a
+        return
+    srgb = hdr[tid, 5] == 1
     unassociate = unassociate and hdr[tid, 6] != 0
     for k in range(n):
         x, y = st[vs, k], st[vs + 1, k]
@@ -233,8 +298,8 @@ def tex_image_rows(hdr, u8, u16, f32, half, tid, interp, ext, unassociate, st, v
 
 
 @njit(**JIT)
-def tex_lookup_batch(hdr, u8, u16, f32, half, tid, xy, interp, ext, out):
+def tex_lookup_batch(hdr, u8, u16, f32, half, tid, xy, interp, ext, unassociate, out):
     """:func:`tex_lookup` per row of xy (n, 2) into out (n, 4) (tests)."""
     for i in range(xy.shape[0]):
-        r, g, b, a = tex_lookup(hdr, u8, u16, f32, half, tid, xy[i, 0], xy[i, 1], interp, ext)
+        r, g, b, a = tex_lookup(hdr, u8, u16, f32, half, tid, xy[i, 0], xy[i, 1], interp, ext, unassociate)
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = r, g, b, a

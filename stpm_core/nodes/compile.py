@@ -4,8 +4,9 @@
 Every value node the surface depends on is emitted once, in dependency order, into the program's
 value section, which runs for every hit; the shader tree (Mix Shader choices, BSDFs, Emission)
 goes to the closure section, which each hit walks to one closure.  Links are
-converted as Blender converts them (colour -> float: Rec.709 luminance, vector -> float: the
-average, float -> colour / vector: the value in every channel).
+converted as Blender converts them (colour -> float: the working space's luminance,
+:func:`stpm_core.colorspaces.luma`; vector -> float: the average, float -> colour / vector: the
+value in every channel).
 
 What the interpreter cannot evaluate is never silently averaged: the node's output falls back to
 the consuming socket's own default value and :class:`Program.unsupported` names the node, its type
@@ -24,6 +25,7 @@ from .ops import (BLEND_MODES, COLOR_MODES, CONVERT, EXTENSIONS, GRADIENT_TYPES,
 __all__ = ["Program", "compile_graph", "colorband", "SUPPORTED_NODES", "MAX_RAMP", "RAMP_TABLE", "CURVE_TABLE"]
 
 MAX_RAMP = 32          # colour ramp elements (Blender allows 32)
+LUMA_REC709 = (0.2126, 0.7152, 0.0722)   # colour -> float weights in Blender's default working space
 RAMP_TABLE = 256       # a colour ramp is sampled at RAMP_TABLE + 1 points (Cycles' RAMP_TABLE_SIZE)
 CURVE_TABLE = 256      # RGB Curves: samples of each channel's curve on [0, 1]
 
@@ -55,8 +57,10 @@ class Program:
 
 
 class _Compiler:
-    def __init__(self, graph: ShaderGraph, n_textures: int, uv_layers: list, color_layers: list | None = None):
+    def __init__(self, graph: ShaderGraph, n_textures: int, uv_layers: list, color_layers: list | None = None,
+                 luma=LUMA_REC709):
         self.g = graph
+        self.luma = tuple(float(w) for w in luma)   # colour -> float weights of the working space
         self.color_layers = color_layers if color_layers is not None else []
         self.n_textures = n_textures
         self.consts: list[float] = []
@@ -156,9 +160,9 @@ class _Compiler:
             if kind == FLT:
                 src_type = self.g.nodes[v.node].outputs.get(v.socket, "RGBA")
                 self.emit("CONVERT", float(CONVERT["VECTOR_TO_FLOAT" if src_type == "VECTOR" else "COLOR_TO_FLOAT"]),
-                          slot, out)
+                          slot, out, self.const(self.luma))
             else:
-                self.emit("CONVERT", float(CONVERT["FLOAT_TO_VEC"]), slot, out)
+                self.emit("CONVERT", float(CONVERT["FLOAT_TO_VEC"]), slot, out, self.const(self.luma))
             return out
         if v is None and implicit is not None:
             return implicit()
@@ -526,7 +530,8 @@ def _combine_xyz(c, name, node):
 
 def _rgb_to_bw(c, name, node):
     out = c.alloc(FLT)
-    c.emit("CONVERT", float(CONVERT["COLOR_TO_FLOAT"]), c.input(name, node, "Color", VEC, (0.5, 0.5, 0.5)), out)
+    c.emit("CONVERT", float(CONVERT["COLOR_TO_FLOAT"]), c.input(name, node, "Color", VEC, (0.5, 0.5, 0.5)), out,
+           c.const(c.luma))
     return {"Val": (out, FLT)}
 
 
@@ -613,16 +618,19 @@ def _tex_image(c, name, node):
     if img < 0 or img >= c.n_textures:
         c.warn(name, node, "has no image (or it could not be loaded): magenta, as Cycles")
         c.emit("COMBINE_XYZ", c.const((1.0,)), c.const((0.0,)), c.const((1.0,)), color)
-        c.emit("CONVERT", float(CONVERT["VECTOR_TO_FLOAT"]), c.const((1.0, 1.0, 1.0)), alpha)
+        c.emit("CONVERT", float(CONVERT["VECTOR_TO_FLOAT"]), c.const((1.0, 1.0, 1.0)), alpha, c.const(c.luma))
         return {"Color": (color, VEC), "Alpha": (alpha, FLT)}
     proj = node.props.get("projection", "FLAT")
     if proj != "FLAT":
         c.warn(name, node, f"projection {proj} is not supported; Flat is used")
     vec = c.input(name, node, "Vector", VEC, implicit=lambda: c.uv_slot(""))
     alpha_used = c.used(name, "Alpha")
+    tiles = [(int(t), int(i)) for t, i in node.props.get("tiles", []) if 0 <= int(i) < c.n_textures]
     c.emit("TEX_IMAGE", float(img), float(INTERPOLATIONS.get(node.props.get("interpolation", "Linear"), 1)),
            float(EXTENSIONS.get(node.props.get("extension", "REPEAT"), 0)), 1.0 if alpha_used else 0.0, vec, color,
-           alpha)
+           alpha, float(len(tiles)))
+    for t, i in tiles:                         # UDIM: (tile number, texture id) pairs after the instruction
+        c.code.extend((float(t), float(i)))
     return {"Color": (color, VEC), "Alpha": (alpha, FLT)}
 
 
@@ -817,8 +825,10 @@ SUPPORTED_NODES = tuple(sorted(set(_HANDLERS) | set(SHADERS)))
 
 
 def compile_graph(graph: ShaderGraph, n_textures: int = 0, uv_layers: list | None = None,
-                  color_layers: list | None = None) -> Program:
+                  color_layers: list | None = None, luma=LUMA_REC709) -> Program:
     """Compile ``graph`` (textures referenced by index < n_textures).
+
+    luma: the working space's colour -> float weights (:func:`stpm_core.colorspaces.luma`).
 
     uv_layers: the scene-wide list of UV-map names (extended in place with the names this program
     reads; "" = each mesh's render-active map); the program's UVMAP operands index it.
@@ -826,7 +836,7 @@ def compile_graph(graph: ShaderGraph, n_textures: int = 0, uv_layers: list | Non
     render-active colour attribute).
     """
     layers = uv_layers if uv_layers is not None else []
-    c = _Compiler(graph, n_textures, layers, color_layers)
+    c = _Compiler(graph, n_textures, layers, color_layers, luma)
     c.shader(graph.surface)         # value nodes go to the value section as they are first read
     return Program(words=c.finish(), unsupported=c.unsupported, uv_layers=layers, color_layers=c.color_layers,
                    uses_mix=c.uses_mix,

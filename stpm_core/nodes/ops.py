@@ -25,7 +25,7 @@ __all__ = ["OP", "LAYOUT", "MATH_OPS", "VMATH_OPS", "BLEND_MODES", "MAPPING_TYPE
 # Operand names; "*" marks a vec3 slot (three slots), "#" an integer property.
 LAYOUT = {
     "END": (),
-    "CONVERT": ("#kind", "in", "out"),                  # CONVERT kinds below
+    "CONVERT": ("#kind", "in", "out", "*luma"),         # CONVERT kinds below; luma: COLOR_TO_FLOAT's weights
     # offset: 0 at the hit; 1 / 2 at the hit moved along the surface's x / y differential (Bump)
     "TEXCOORD": ("#offset", "*generated", "*normal", "*uv", "*object", "*reflection"),
     "UVMAP": ("#layer", "#offset", "*out"),
@@ -48,7 +48,8 @@ LAYOUT = {
     "MAP_RANGE": ("#type", "value", "from_min", "from_max", "to_min", "to_max", "steps", "#clamp", "out"),
     "RAMP": ("fac", "#interp", "#n", "*color", "alpha"),          # then the n x (r, g, b, a) table on [0, 1]
     "CURVES": ("fac", "*color", "#n", "*out"),                      # then 3 x n table words (R, G, B on [0, 1])
-    "TEX_IMAGE": ("#image", "#interp", "#ext", "#unassociate", "*vector", "*color", "alpha"),
+    # then the UDIM tile table: #tiles x (tile number, texture id); #image unused when #tiles > 0
+    "TEX_IMAGE": ("#image", "#interp", "#ext", "#unassociate", "*vector", "*color", "alpha", "#tiles"),
     "TEX_CHECKER": ("*vector", "*color1", "*color2", "scale", "*color", "fac"),
     "TEX_GRADIENT": ("#type", "*vector", "*color", "fac"),
     "TEX_NOISE": ("#dims", "#type", "#normalize", "#color_used", "*vector", "w", "scale", "detail", "roughness",

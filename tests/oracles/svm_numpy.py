@@ -35,7 +35,13 @@ Image Texture: :func:`texture_numpy.sample` (RGBA images held with associated al
 loads them); the colour is un-associated when the node's Alpha output is linked to a node that
 reaches the output (``ImageTextureNode::compile`` after ``ShaderGraph::clean``; Cycles' constant
 folding, which can drop a link such as ``Alpha x 0``, is not modelled: tests avoid foldable
-consumers).  No image: ``IMAGE_MISSING_RGBA`` (1, 0, 1, 1).
+consumers).  No image: ``IMAGE_MISSING_RGBA`` (1, 0, 1, 1).  A UDIM image (``props["tiles"]``):
+:func:`texture_numpy.sample_udim`.
+
+Working space (``evaluate(..., working=...)``): colour -> float conversions (linked colour into a
+value socket, RGB to BW) weigh by the working space's luminance (Cycles' ``rgb_to_y``, the Y row of
+its RGB -> XYZ matrix; ``stpm_core.colorspaces.luma``, checked against OpenColorIO there), and
+images whose primaries differ are converted per texel (:func:`texture_numpy.sample` ``working``).
 """
 from __future__ import annotations
 
@@ -44,6 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from stpm_core import colorspaces
 from stpm_core.nodes.graph import Link, ShaderGraph
 
 from . import texture_numpy
@@ -729,8 +736,11 @@ def closure_row(c: Closure) -> dict:
 # The evaluator
 # ----------------------------------------------------------------------------
 class _Eval:
-    def __init__(self, graph: ShaderGraph, hit: Hit, textures, ramp: str, srgb: str = "cycles", roots=()):
+    def __init__(self, graph: ShaderGraph, hit: Hit, textures, ramp: str, srgb: str = "cycles", roots=(),
+                 working: str = "REC709"):
         self.g = graph
+        self.working = working                        # the working space (its luma, its image conversions)
+        self.luma = np.asarray(colorspaces.luma(working))
         self.hit = hit
         self.textures = list(textures or [])
         self.ramp = ramp
@@ -789,7 +799,7 @@ class _Eval:
             src = self.out_type(v.node, v.socket)
             if kind == "f":
                 if isinstance(got, np.ndarray):
-                    return float(np.dot(LUMA, got)) if src == "RGBA" else float(np.sum(got) * (1.0 / 3.0))
+                    return float(np.dot(self.luma, got)) if src == "RGBA" else float(np.sum(got) * (1.0 / 3.0))
                 return float(got)
             return np.full(3, float(got)) if not isinstance(got, np.ndarray) else got.copy()
         if v is None and implicit is not None:
@@ -1017,7 +1027,7 @@ def _h_combine_xyz(e, node):
 
 
 def _h_rgb_to_bw(e, node):
-    return {"Val": float(np.dot(LUMA, e.inp(node, "Color", "v")))}
+    return {"Val": float(np.dot(e.luma, e.inp(node, "Color", "v")))}
 
 
 def _clamp_node(value, lo, hi, typ):                     # svm_node_clamp
@@ -1087,16 +1097,28 @@ def _h_curves(e, node):                                  # svm_node_curves on [0
     return {"Color": (1.0 - fac) * c + fac * looked}
 
 
+def _to_working(e, tex):
+    """The image's matrix into the working space (None: read as stored)."""
+    prim = colorspaces.SPACES.get(tex.colorspace, ("linear", None))[1]
+    return colorspaces.conversion(prim, e.working)
+
+
 def _h_tex_image(e, node):
     img = int(node.props.get("image", -1))
     if img < 0 or img >= len(e.textures):
         return {"Color": np.array([1.0, 0.0, 1.0]), "Alpha": 1.0}   # IMAGE_MISSING_RGBA (1, 0, 1, 1)
     tex = e.textures[img]
     vec = e.inp(node, "Vector", "v", implicit=lambda: _uv3(e.hit, ""))
+    interp, ext = node.props.get("interpolation", "Linear"), node.props.get("extension", "REPEAT")
+    if node.props.get("tiles"):                                      # UDIM
+        tiles = {int(t): e.textures[int(i)] for t, i in node.props["tiles"]}
+        rgba = texture_numpy.sample_udim(tiles, vec[None, :2], interp, ext, e.output_linked(node, "Alpha"),
+                                         working={t: _to_working(e, x) for t, x in tiles.items()})[0]
+        return {"Color": rgba[:3].copy(), "Alpha": float(rgba[3])}
     # ImageTextureNode::compile: NODE_IMAGE_ALPHA_UNASSOCIATE when the Alpha output is linked
     unassociate = texture_numpy.unassociate_flag(tex, e.output_linked(node, "Alpha"))
-    rgba = texture_numpy.sample(tex, vec[None, :2], node.props.get("interpolation", "Linear"),
-                                node.props.get("extension", "REPEAT"), srgb=e.srgb, unassociate=unassociate)[0]
+    rgba = texture_numpy.sample(tex, vec[None, :2], interp, ext, srgb=e.srgb, unassociate=unassociate,
+                                working=_to_working(e, tex))[0]
     return {"Color": rgba[:3].copy(), "Alpha": float(rgba[3])}
 
 
@@ -1146,11 +1168,12 @@ _HANDLERS = {
 }
 
 
-def evaluate(graph: ShaderGraph, hit: Hit, textures=(), *, ramp: str = "cycles", srgb: str = "cycles") -> list:
+def evaluate(graph: ShaderGraph, hit: Hit, textures=(), *, ramp: str = "cycles", srgb: str = "cycles",
+             working: str = "REC709") -> list:
     """[(weight, :class:`Closure`)]: every leaf closure of the surface with its Mix Shader weight
     (one entry, weight 1, without Mix Shaders).  ramp / srgb: see the module docstring and
-    :func:`texture_numpy.sample`."""
-    e = _Eval(graph, hit, textures, ramp, srgb)
+    :func:`texture_numpy.sample`; working: the scene's working space (id)."""
+    e = _Eval(graph, hit, textures, ramp, srgb, working=working)
     return e.shader(graph.surface, 1.0)
 
 

@@ -45,6 +45,20 @@ NONE).  Cycles holds RGBA images with *associated* alpha:
   Cycles premultiplies them again, a round trip within one byte step that also caps the colour at
   alpha; not modelled.)
 
+Working space (Blender 5).  Cycles converts an image whose colour space is neither raw nor
+sRGB-in-Rec.709 into the scene's working space when it loads it, byte images included
+(``ImageMetaData::detect_colorspace`` makes them half floats; ``ColorSpaceManager::to_scene_linear``
+with OpenColorIO): per texel, on the un-associated colour, the colour space's transfer function
+then the primaries' 3x3 matrix, then the alpha associated again (:func:`cycles_texels` with
+``working``: the matrix, from ``stpm_core.colorspaces`` -- checked against OpenColorIO there).  A
+converted image is therefore interpolated in linear working-space values, whatever its storage.
+(Cycles' half storage rounds to 2^-11 relative; not modelled: the kernel keeps float precision.)
+
+UDIM (:func:`sample_udim`; ``svm_node_tex_image``): ``tx = (int) x``, ``ty = (int) y`` (C truncation),
+tile ``1001 + 10 ty + tx`` when ``tx, ty >= 0`` and ``tx < 10``; found: the tile's image at
+``(x - tx, y - ty)``; not found: ``TEX_IMAGE_MISSING`` (1, 0, 1, 1) (no sRGB decoding, no
+un-association: ``svm_image_texture`` returns it before both).
+
 ``svm_image_texture`` divides the interpolated colour by its alpha (alpha not 0 or 1) when the
 instruction has ``NODE_IMAGE_ALPHA_UNASSOCIATE``, before the sRGB conversion (no clamp: Cycles
 >= 3.0).  ``ImageTextureNode::compile`` sets that flag when the Alpha output is linked (after
@@ -56,7 +70,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["texels", "cycles_texels", "srgb_to_linear", "wrap_index", "bspline_weights", "sample", "INTERP", "EXT",
-           "DATA_SPACES", "ALPHA_MODES", "is_data", "has_alpha", "associates", "unassociate_flag"]
+           "DATA_SPACES", "ALPHA_MODES", "is_data", "has_alpha", "associates", "unassociate_flag", "sample_udim",
+           "MISSING"]
 
 INTERP = {"Closest": 0, "Linear": 1, "Cubic": 2, "Smart": 2}
 EXT = {"REPEAT": 0, "EXTEND": 1, "CLIP": 2, "MIRROR": 3}
@@ -65,6 +80,7 @@ ALPHA_MODES = ("STRAIGHT", "PREMUL", "CHANNEL_PACKED", "NONE")
 DATA_SPACES = ("Non-Color", "Raw", "Generic Data", "Non-Colour Data", "Utility - Raw")
 
 _U8, _U16, _HALF, _F32 = 0, 1, 2, 3
+MISSING = np.array([1.0, 0.0, 1.0, 1.0])          # TEX_IMAGE_MISSING_R/G/B/A
 
 
 def srgb_to_linear(c):
@@ -134,10 +150,36 @@ def texels(tex) -> np.ndarray:
     return out
 
 
-def cycles_texels(tex, srgb_before: bool | None = None) -> np.ndarray:
+def _converted_texels(tex, M) -> np.ndarray:
+    """(H, W, 4) texels of an image Cycles converts into the working space (matrix M (3, 3)): the
+    straight colour (PREMUL ones divided by alpha where it is not 0 or 1), sRGB-decoded if sRGB,
+    times M, then associated with alpha (unless data, NONE or channel packed)."""
+    T = texels(tex)
+    mode = _alpha_mode(tex)
+    alpha = has_alpha(tex)
+    if alpha and mode == "NONE":
+        T[:, :, 3] = 1.0
+    a = T[:, :, 3:4]
+    c = T[:, :, :3]
+    if alpha and mode == "PREMUL":
+        div = (a != 0.0) & (a != 1.0)
+        c = np.where(div, c / np.where(div, a, 1.0), c)
+    if tex.is_srgb:
+        c = srgb_to_linear(c)
+    c = c @ np.asarray(M, np.float64).T
+    if alpha and associates(tex):
+        c = c * a
+    T[:, :, :3] = c
+    return T
+
+
+def cycles_texels(tex, srgb_before: bool | None = None, working=None) -> np.ndarray:
     """(H, W, 4) texels as Cycles' image kernel holds them: alpha handled per the module docstring
     (associated alpha), float buffers of sRGB images converted to linear per texel.  srgb_before:
-    convert an sRGB image per texel here (default: for every kind but uint8)."""
+    convert an sRGB image per texel here (default: for every kind but uint8).  working: the 3x3
+    matrix into the working space, or None (see "Working space" above)."""
+    if working is not None:
+        return _converted_texels(tex, working)
     T = texels(tex)
     k = _kind(tex)
     mode = _alpha_mode(tex)
@@ -197,7 +239,8 @@ def _fetch(T, ix, iy):
     return np.where(ok[..., None], v, 0.0)
 
 
-def sample(tex, xy, interp="Linear", ext="REPEAT", srgb="cycles", unassociate: bool = False) -> np.ndarray:
+def sample(tex, xy, interp="Linear", ext="REPEAT", srgb="cycles", unassociate: bool = False,
+           working=None) -> np.ndarray:
     """(n, 4) RGBA of texture ``tex`` (a :class:`stpm_core.textures.Texture`) at (u, v) rows of xy.
 
     interp / ext: names or codes (``INTERP`` / ``EXT``).  srgb: where the sRGB EOTF goes for an
@@ -205,12 +248,15 @@ def sample(tex, xy, interp="Linear", ext="REPEAT", srgb="cycles", unassociate: b
     float buffers), "cycles" (after for uint8 storage, before for every other kind).
     unassociate: the instruction's NODE_IMAGE_ALPHA_UNASSOCIATE flag (see :func:`unassociate_flag`
     for when Cycles sets it): the interpolated colour divided by its alpha (alpha not 0 or 1).
+    working: the 3x3 matrix into the working space (the image is converted per texel), or None.
     """
     interp = INTERP.get(interp, interp)
     ext = EXT.get(ext, ext)
     xy = np.atleast_2d(np.asarray(xy, np.float64))
     order = srgb if srgb != "cycles" else ("after" if _kind(tex) == _U8 else "before")
-    T = cycles_texels(tex, srgb_before=order == "before")
+    if working is not None:
+        order = "before"
+    T = cycles_texels(tex, srgb_before=order == "before", working=working)
     H, W = T.shape[:2]
     x = xy[:, 0] * W
     y = xy[:, 1] * H
@@ -243,4 +289,26 @@ def sample(tex, xy, interp="Linear", ext="REPEAT", srgb="cycles", unassociate: b
         out[:, :3] = np.where(div, out[:, :3] / np.where(div, a, 1.0), out[:, :3])
     if tex.is_srgb and order == "after":
         out[:, :3] = srgb_to_linear(out[:, :3])
+    return out
+
+
+def sample_udim(tiles: dict, xy, interp="Linear", ext="REPEAT", unassociate: bool = False,
+                working=None) -> np.ndarray:
+    """(n, 4) RGBA of a UDIM image at (u, v) rows of xy; tiles: {tile number: Texture}; working:
+    {tile number: matrix or None} (or one matrix / None for every tile).  See "UDIM" above."""
+    xy = np.atleast_2d(np.asarray(xy, np.float64))
+    out = np.tile(MISSING, (xy.shape[0], 1))
+    finite = np.isfinite(xy).all(axis=1)
+    out[~finite] = 0.0
+    ok = finite & (xy[:, 0] > -1.0) & (xy[:, 1] > -1.0) & (xy[:, 0] < 10.0)
+    tx = np.where(ok, np.trunc(np.where(ok, xy[:, 0], 0.0)), 0).astype(np.int64)
+    ty = np.where(ok, np.trunc(np.where(ok, xy[:, 1], 0.0)), 0).astype(np.int64)
+    number = 1001 + 10 * ty + tx
+    for t, tex in tiles.items():
+        rows = ok & (number == t)
+        if not rows.any():
+            continue
+        M = working.get(t) if isinstance(working, dict) else working
+        local = xy[rows] - np.stack([tx[rows], ty[rows]], 1)
+        out[rows] = sample(tex, local, interp, ext, unassociate=unassociate_flag(tex, unassociate), working=M)
     return out
