@@ -360,7 +360,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
                 from .partial import scene_hash, settings_hash, write_partial
                 write_partial(tmp, result.sums, seed=settings.seed, scene_digest=scene_hash(scene),
                               settings_digest=settings_hash(settings), metadata={**meta, "stpm:stats": stats},
-                              atomic=False)
+                              atomic=False, working=working)
             else:
                 write_exr(tmp, result, {**meta, "stpm:stats": stats}, atomic=False, working=working)
 
@@ -449,8 +449,10 @@ def _cmd_merge(args) -> int:
             "noise_flip_visible": flip_visible_fraction(sums), "parts": [str(p) for p in args.parts],
             "seed": head["seed"], "scene_hash": head["scene_hash"], "settings_hash": head["settings_hash"]}
     passes = sums.image()
-    outputs = [(out_exr, lambda tmp: write_exr(tmp, passes, {"stpm:progressive": info}, atomic=False)),
-               (out_png, lambda tmp: write_png(tmp, passes["Combined"][:, :, :3], atomic=False))]
+    working = head["working_space"]
+    outputs = [(out_exr, lambda tmp: write_exr(tmp, passes, {"stpm:progressive": info}, atomic=False,
+                                               working=working)),
+               (out_png, lambda tmp: write_png(tmp, passes["Combined"][:, :, :3], atomic=False, working=working))]
     if stats_path is not None:
         outputs.append((stats_path, lambda tmp: write_json(tmp, {"progressive": info}, atomic=False)))
     _write_together(outputs, CancelFlag.active)

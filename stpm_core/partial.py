@@ -12,7 +12,8 @@ beside it, and a JSON header attribute ``stpm:partial``:
 * ``pass_first``, ``pass_end``: the passes it holds, ``[first, end)`` (1-based);
 * ``n_even``, ``n_odd``: how many even / odd pass indices (for the noise estimate);
 * ``seed``, ``scene_hash`` (:func:`scene_hash`), ``settings_hash``
-  (:func:`settings_hash`: every setting that changes a pass's pixels), ``resolution``.
+  (:func:`settings_hash`: every setting that changes a pass's pixels), ``resolution``,
+  ``working_space`` (the colour space the passes are in: ``stpm_core.colorspaces``).
 
 Float64 in EXR: each float64 value x is stored as three float32 channels
 hi = f32(x), mid = f32(x - hi), lo = f32(x - hi - mid); each difference is exact in
@@ -85,7 +86,7 @@ def settings_hash(settings) -> str:
 
 
 def write_partial(path, sums: PassSums, *, seed: int, scene_digest: str, settings_digest: str,
-                  metadata: dict | None = None, atomic: bool = True) -> Path:
+                  metadata: dict | None = None, atomic: bool = True, working: str = "REC709") -> Path:
     """Write ``sums`` (its mean as the visible passes, the exact sums beside) to the EXR ``path``."""
     from .imageio import write_exr
     if sums.count == 0:
@@ -100,10 +101,10 @@ def write_partial(path, sums: PassSums, *, seed: int, scene_digest: str, setting
     head = {"format": PARTIAL_FORMAT, "version": PARTIAL_VERSION, "pass_first": sums.first, "pass_end": sums.end,
             "n_even": sums.n_even, "n_odd": sums.n_odd, "seed": int(seed), "scene_hash": scene_digest,
             "settings_hash": settings_digest, "resolution": [int(W), int(H)],
-            "passes": sorted(sums.sums)}
+            "passes": sorted(sums.sums), "working_space": working}
     meta = dict(metadata or {})
     meta["stpm:partial"] = json.dumps(head)
-    return write_exr(path, passes, meta, atomic=atomic)
+    return write_exr(path, passes, meta, atomic=atomic, working=working)
 
 
 def _field(head: dict, key: str, kind, path, lo=None):
@@ -154,6 +155,11 @@ def read_partial(path) -> tuple[PassSums, dict]:
         raise StpmError(f"{path}: partial result header field 'resolution' is invalid")
     if not (isinstance(names, list) and names and all(isinstance(n, str) for n in names) and "Combined" in names):
         raise StpmError(f"{path}: partial result header field 'passes' is invalid")
+    from .colorspaces import WORKING_SPACES
+    working = head.get("working_space", "REC709")       # absent in a partial of a Rec.709 scene
+    if not isinstance(working, str) or working not in WORKING_SPACES:
+        raise StpmError(f"{path}: partial result header field 'working_space' is invalid ({working!r:.40})")
+    head["working_space"] = working
     W, H = res
     sums = PassSums(first)
     sums.end = end
@@ -194,10 +200,11 @@ def merge(paths) -> tuple[PassSums, dict]:
     parts = [(read_partial(p), Path(p)) for p in paths]
     parts.sort(key=lambda x: x[0][1]["pass_first"])
     (total, head0), p0 = parts[0]
-    for key in ("seed", "scene_hash", "settings_hash", "resolution", "passes"):
+    for key in ("seed", "scene_hash", "settings_hash", "resolution", "passes", "working_space"):
         for (_, head), p in parts[1:]:
             if head[key] != head0[key]:
-                what = {"scene_hash": "scene", "settings_hash": "render settings"}.get(key, key)
+                what = {"scene_hash": "scene", "settings_hash": "render settings",
+                        "working_space": "working colour spaces"}.get(key, key)
                 raise StpmError(f"{p} and {p0} are partials of different {what}: they cannot be merged")
     for ((s, head), p), (_, prev) in zip(parts[1:], parts[:-1]):
         if s.first < total.end:

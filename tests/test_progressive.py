@@ -520,3 +520,24 @@ def test_sppm_passes_are_stills_and_strobe_when_few():
     assert errs_sppm[16] < 0.5 * errs_sppm[1]                              # converging
     # one instant per pass: its first passes are stills of the moving box and caustic
     assert errs_sppm[1] > 1.3 * errs_prog[1] and errs_sppm[2] > errs_prog[2], (errs_sppm, errs_prog)
+
+
+def test_partials_carry_their_working_space_and_do_not_mix_them(tmp_path):
+    # a Blender 5 file in ACEScg: the partial says so, the merged EXR is tagged as Blender tags it,
+    # and a partial of another working space is refused
+    from stpm_core.errors import StpmError
+    from stpm_core.imageio import read_exr
+    from stpm_core.partial import merge, read_partial, write_partial
+    rng = np.random.default_rng(1)
+
+    def sums(first):
+        s = PassSums(first)
+        s.add(first, {"Combined": rng.random((4, 6, 4)).astype(np.float32)})
+        return s
+    kw = dict(seed=1, scene_digest="c" * 64, settings_digest="d" * 64)
+    write_partial(tmp_path / "a.exr", sums(1), working="ACESCG", **kw)
+    write_partial(tmp_path / "b.exr", sums(2), working="REC709", **kw)
+    assert read_partial(tmp_path / "a.exr")[1]["working_space"] == "ACESCG"
+    assert read_exr(tmp_path / "a.exr")["_metadata"].get("colorInteropID")
+    with pytest.raises(StpmError, match="different working colour spaces"):
+        merge([tmp_path / "a.exr", tmp_path / "b.exr"])
