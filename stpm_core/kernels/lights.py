@@ -114,6 +114,23 @@ def spherical_rect_sample(o, s, ex, ey, u0, u1):
 # One sample per light type: (wi0, wi1, wi2, dist, w0, w1, w2)
 # ----------------------------------------------------------------------------
 @njit(**JIT)
+def _sample_point_delta(prm, M, p):
+    """:func:`_sample_point` of radius 0, a true point: the exact direction, weight I / d^2 (0 at
+    the light itself), spot-masked.  No random numbers; small enough to be inlined (the sampling
+    loop of such lights contains no call, ``sample_light_rows``)."""
+    c = column(M, 3)
+    I0, I1, I2 = intensity(prm)
+    to_p, d = normalize(sub(p, c))                  # light -> p
+    wi = neg(to_p)
+    g = 1.0 / max(d * d, 1e-300) if d > 0.0 else 0.0
+    w0, w1, w2 = I0 * g, I1 * g, I2 * g
+    if int(prm[P_TYPE]) == T_SPOT:
+        a = spot_attenuation(prm, dot(wi, light_axis(M)))   # (-wi) . (-Z): the direction leaving the light
+        w0, w1, w2 = w0 * a, w1 * a, w2 * a
+    return wi[0], wi[1], wi[2], d, w0, w1, w2
+
+
+@njit(**JIT)
 def _sample_point(prm, M, p, u0, u1):
     """POINT / SPOT of intensity I = color P / (4 pi) W/sr at M's translation.
 
@@ -123,16 +140,13 @@ def _sample_point(prm, M, p, u0, u1):
     distance to its far side there), weight I Omega / (pi r^2).  SPOT: times the cone mask of the
     direction the light leaves along (its axis: M's -Z column, normalised).
     """
+    r = prm[P_RADIUS]
+    if r <= 0.0:
+        return _sample_point_delta(prm, M, p)
     c = column(M, 3)
     I0, I1, I2 = intensity(prm)
-    r = prm[P_RADIUS]
     to_p, d = normalize(sub(p, c))                  # light -> p
-    if r <= 0.0:
-        # -- a true point
-        wi = neg(to_p)
-        dist = d
-        g = 1.0 / max(d * d, 1e-300) if d > 0.0 else 0.0
-    elif prm[P_SOFT] != 0.0:
+    if prm[P_SOFT] != 0.0:
         # -- soft falloff: disc of radius r through c facing p; pdf_A = 1 / (pi r^2), L = I / (pi r^2)
         dx, dy = concentric_disk(u0, u1)
         wi, dist = normalize(sub(madd(c, r, to_world((dx, dy, 0.0), to_p)), p))
@@ -312,8 +326,11 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
     wi: unit direction from p toward the light sample; dist: its distance (inf for SUN / WORLD;
     shadow rays test [eps, dist)); w: the weight W m^-2 sr^-1, 0 where the light gives nothing
     (behind an area light, outside a spot, a dead light).  S[k, 7]: the WORLD's sampling density
-    of wi (:func:`world_nee_pdf`, for multiple importance sampling), inf for other lights.  The light type is chosen once, outside
-    the loops: each loop body is one sampler, with no branch or call it does not need.  The loops
+    of wi (:func:`world_nee_pdf`, for multiple importance sampling), inf for other lights, written
+    in the same loop.  The light type is chosen once, outside the loops: each loop body is one
+    sampler, with no branch or call it does not need (a POINT / SPOT of radius 0 has a loop of
+    its own, :func:`_sample_point_delta`, which LLVM inlines: a loop with a call in it saves and
+    reloads its floating-point values around the call on every row).  The loops
     make no array views (the pose M is one buffer, refilled per row only when the light moves; the
     env arrays are taken out of their tuple once): a view per row would cost two atomic
     reference-count operations per row (``sampling.row3``).
@@ -323,47 +340,56 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
     n = rows.shape[0]
     M = pose_buffer(poses)
     img, func, marg, cond, par = env
-    if typ == T_POINT or typ == T_SPOT:
+    # Column 7 (written in the same loop): the density the world's samples were drawn with
+    # (multiple importance sampling against camera paths that go on through rough lobes); inf
+    # for every other light, which next-event estimation handles alone
+    if (typ == T_POINT or typ == T_SPOT) and prm[P_RADIUS] <= 0.0:
+        for k in range(n):
+            if not one:
+                load_pose(poses, k, M)
+            _put(S, k, _sample_point_delta(prm, M, row3(P, rows[k])))
+            S[k, 7] = np.inf
+    elif typ == T_POINT or typ == T_SPOT:
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
             _put(S, k, _sample_point(prm, M, row3(P, rows[k]), U[k, 0], U[k, 1]))
+            S[k, 7] = np.inf
     elif typ == T_AREA:
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
             _put(S, k, _sample_area(prm, M, row3(P, rows[k]), U[k, 0], U[k, 1]))
+            S[k, 7] = np.inf
     elif typ == T_SUN:
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
             _put(S, k, _sample_sun(prm, M, U[k, 0], U[k, 1]))
+            S[k, 7] = np.inf
     elif typ == T_MESH:
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
             _put(S, k, _sample_mesh(M, steps, corners, q, cdf, Le, T[k], row3(P, rows[k]), U[k, 0], U[k, 1]))
+            S[k, 7] = np.inf
     elif typ == T_WORLD and par[E_TEXTURED] != 0.0:
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
-            _put(S, k, _sample_env(img, func, marg, cond, par, M, _toward(NG, D, rows[k]), U[k, 0], U[k, 1]))
+            nk = _toward(NG, D, rows[k])
+            _put(S, k, _sample_env(img, func, marg, cond, par, M, nk, U[k, 0], U[k, 1]))
+            S[k, 7] = world_nee_pdf(func, par, M, nk, (S[k, 0], S[k, 1], S[k, 2]))
     elif typ == T_WORLD:
-        for k in range(n):
-            _put(S, k, _sample_world(prm, _toward(NG, D, rows[k]), U[k, 0], U[k, 1]))
-    else:
-        for k in range(n):
-            _put(S, k, (0.0, 0.0, 1.0, np.inf, 0.0, 0.0, 0.0))     # (no other type codes)
-    # Column 7: the density the world's samples were drawn with (multiple importance sampling
-    # against camera paths that go on through rough lobes); inf for every other light, which
-    # next-event estimation handles alone
-    if typ == T_WORLD:
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
-            S[k, 7] = world_nee_pdf(func, par, M, _toward(NG, D, rows[k]), (S[k, 0], S[k, 1], S[k, 2]))
+            nk = _toward(NG, D, rows[k])
+            _put(S, k, _sample_world(prm, nk, U[k, 0], U[k, 1]))
+            S[k, 7] = world_nee_pdf(func, par, M, nk, (S[k, 0], S[k, 1], S[k, 2]))
     else:
         for k in range(n):
+            _put(S, k, (0.0, 0.0, 1.0, np.inf, 0.0, 0.0, 0.0))     # (no other type codes)
             S[k, 7] = np.inf
     if prm[P_DEAD] != 0.0:
         # no emitting direction at any key (zero Z scale, zero area): nothing

@@ -46,8 +46,8 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_eval_smooth, bsdf_sample_path,
-                   denoising_features, diffuse_albedo)
+from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_eval_plain, bsdf_eval_smooth,
+                   bsdf_sample_path, denoising_features, diffuse_albedo, needs_bsdf_call)
 from .environment import env_radiance
 from .closure import (C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, closure_row)
 from .light_params import P_TYPE, T_WORLD
@@ -435,19 +435,25 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
     by the balance heuristic p_l / (p_l + p_c), p_l = S[k, 7] the world's own density, and the
     escaping paths by p_c / (p_l + p_c) (docs/rendering.md, "Path partition").
 
-    Three loops, each with only the code its rows need (a loop that contains a call it never
-    takes still runs about twice slower per row; docs/rendering.md "NEE cost"): the light
-    samples (one sampler, chosen once per call), the mixture BSDF of rows whose closure has a
-    rough lobe, then the smooth BSDF, contribution and shadow ray of every row.
+    Three loops, each with only the code its rows need (a loop that contains a call, even one it
+    never takes, saves and reloads its floating-point values around it and runs up to twice
+    slower per row; docs/rendering.md "NEE cost"): the light samples (one sampler, chosen once
+    per call), the BSDF of the rows whose closure needs a compiled call (``needs_bsdf_call``: the
+    mixture of a rough lobe, or the coat / replaced-normal terms of ``bsdf_eval_smooth``) into
+    F, then, with no call, the bare diffuse BSDF of the others (``bsdf_eval_plain``), the
+    contribution and the shadow ray of every row.
     """
     n = rows.shape[0]
     sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, D, T, U, S)
     is_world = int(prm[P_TYPE]) == T_WORLD
-    # -- The BSDF of rows with a rough lobe: the compiled mixture (bsdf_eval_pdf) -------------
+    # -- The BSDF of rows that need a call: a rough lobe's mixture (bsdf_eval_pdf), a coat or a
+    #    replaced normal (bsdf_eval_smooth) -------------------------------------------------------
     F = np.empty((n, 3))
     for k in range(n):
         r = rows[k]
         cr = crow[r]
+        if not needs_bsdf_call(C, cr):
+            continue
         if C[cr, C_ROUGH_LOBE] > 0:
             wo = (-D[r, 0], -D[r, 1], -D[r, 2])
             wi = (S[k, 0], S[k, 1], S[k, 2])
@@ -460,6 +466,10 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
                     x = p_c / (S[k, 7] + p_c)
                     f0, f1, f2 = f0 - c0 * x, f1 - c1 * x, f2 - c2 * x
             F[k, 0], F[k, 1], F[k, 2] = f0, f1, f2
+        else:
+            F[k, 0], F[k, 1], F[k, 2] = bsdf_eval_smooth(C, cr, (-D[r, 0], -D[r, 1], -D[r, 2]),
+                                                         (S[k, 0], S[k, 1], S[k, 2]), (NS[r, 0], NS[r, 1], NS[r, 2]),
+                                                         (NG[r, 0], NG[r, 1], NG[r, 2]))
     n_live = 0
     for k in range(n):
         r = rows[k]
@@ -468,10 +478,10 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
         ns = (NS[r, 0], NS[r, 1], NS[r, 2])
         # -- BSDF and the unshadowed contribution ------------------------------------------
         cr = crow[r]
-        if C[cr, C_ROUGH_LOBE] > 0:
+        if needs_bsdf_call(C, cr):
             f0, f1, f2 = F[k, 0], F[k, 1], F[k, 2]
         else:
-            f0, f1, f2 = bsdf_eval_smooth(C, cr, (-D[r, 0], -D[r, 1], -D[r, 2]), (wi0, wi1, wi2), ns, g)
+            f0, f1, f2 = bsdf_eval_plain(C, cr, (-D[r, 0], -D[r, 1], -D[r, 2]), (wi0, wi1, wi2), ns, g)
         cosa = abs(ns[0] * wi0 + ns[1] * wi1 + ns[2] * wi2)
         c0 = f0 * cosa * w0
         c1 = f1 * cosa * w1
