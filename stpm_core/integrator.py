@@ -47,7 +47,7 @@ from .kernels.light_params import light_params, light_poses, mesh_arrays
 from .world_light import constant_environment
 from .kernels.svm import shade_rows
 from .parallel import ordered_map, worker_count
-from .raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
+from .raycast.geometry import GUARD_FRACTION, OFFSET_POS, instance_offsets, offset_lengths
 from .sampling import rng_for, skip_uniforms
 from .shading import hit_geometry, shading_data
 from .transparency import pass_through, shadow_transmittance
@@ -215,7 +215,7 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
     lights = ctx.lights
     P, NG, NS = hits.position, hits.ng, hits.ns
     EPS = _scratch("eps", (P.shape[0],))
-    EPS[sh] = offset_lengths(ctx.inst_offset, hits.instance[sh], P[sh])   # shadow-ray offsets of the shaded rows
+    _K.offset_rows(sh, ctx.inst_offset, hits.instance, P, OFFSET_POS, EPS)   # shadow-ray offsets of the shaded rows
     so, sd = _scratch("so", (k, 3)), _scratch("sd", (k, 3))
     stmax, live = _scratch("stmax", (k,)), _scratch("live", (k,), np.int64)
     contrib = _scratch("contrib", (k, 3))

@@ -55,7 +55,7 @@ from .lights import sample_light_rows, seen_light, world_nee_pdf
 from .sampling import dot, load_pose, offset_origin, pose_buffer, row3
 
 __all__ = ["camera_tile", "camera_rays", "classify_hits", "denoising_rows", "denoising_seen_add", "nee_light",
-           "nee_accumulate",
+           "offset_rows", "nee_accumulate",
            "seen_lights_add", "photon_albedo", "photon_add", "specular_step", "scatter_add", "active_channels",
            "pixel_sums", "tile_finish"]
 
@@ -507,6 +507,22 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
         live[n_live] = k
         n_live += 1
     return n_live
+
+
+@njit(**_JIT)
+def offset_rows(rows, inst_offset, instance, P, offset_pos, EPS):
+    """EPS[r] for each hit r in rows: ``raycast.geometry.offset_lengths`` of the hit, the object's
+    offset inst_offset[instance[r]] + offset_pos x the hit point's largest |coordinate|, with the
+    same float operations (numpy's row-wise maximum over 3 columns and the gathers around it cost
+    about 40 ns a row, more than next-event estimation's own loop).  Hit points are finite."""
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        m = 0.0
+        for a in range(3):
+            v = abs(P[r, a])
+            if v > m:
+                m = v
+        EPS[r] = inst_offset[instance[r]] + offset_pos * m
 
 
 @njit(**_JIT)
