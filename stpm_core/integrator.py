@@ -45,9 +45,9 @@ from .kernels.bsdf import ggx_albedo_tables
 from .kernels.closure import N_CLOSURE, pack_materials
 from .kernels.light_params import light_params, light_poses, mesh_arrays
 from .world_light import constant_environment
-from .kernels.svm import shade
+from .kernels.svm import shade_rows
 from .parallel import ordered_map, worker_count
-from .raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
+from .raycast.geometry import GUARD_FRACTION, OFFSET_POS, instance_offsets, offset_lengths
 from .sampling import rng_for, skip_uniforms
 from .shading import hit_geometry, shading_data
 from .transparency import pass_through, shadow_transmittance
@@ -195,10 +195,11 @@ def _first_pose(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.ndarray, rng, stats: TraceStats,
-            dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool, mis: np.ndarray = None,
+def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.ndarray, t_s: np.ndarray, rng,
+            stats: TraceStats, dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool, mis: np.ndarray = None,
             clamp: float = 0.0) -> bool:
-    """Next-event estimation at the hit rows sh (k,) of ``hits`` (rays d, closures C), added straight
+    """Next-event estimation at the hit rows sh (k,) of ``hits`` (rays d, closures C, hit r's is row
+    crow[r], ``kernels.svm.shade_rows``), added straight
     into dst (n, 3) (the Direct pass: dst[idx[row]] += beta[row] * contribution, light by light);
     returns whether any shadow ray was cast.  mis (k,) uint8: the paths of these rows may go on
     through their rough lobes (the world's samples are then weighed against them,
@@ -214,7 +215,7 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.nda
     lights = ctx.lights
     P, NG, NS = hits.position, hits.ng, hits.ns
     EPS = _scratch("eps", (P.shape[0],))
-    EPS[sh] = offset_lengths(ctx.inst_offset, hits.instance[sh], P[sh])   # shadow-ray offsets of the shaded rows
+    _K.offset_rows(sh, ctx.inst_offset, hits.instance, P, OFFSET_POS, EPS)   # shadow-ray offsets of the shaded rows
     so, sd = _scratch("so", (k, 3)), _scratch("sd", (k, 3))
     stmax, live = _scratch("stmax", (k,)), _scratch("live", (k,), np.int64)
     contrib = _scratch("contrib", (k, 3))
@@ -227,7 +228,7 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, t_s: np.nda
         u = _light_uniforms(light, k, rng, _scratch("u_light", (k, 2)))
         prm, mesh = ctx.light_data[li]
         poses = light_poses(lights, li, t_s)
-        m = _K.nee_light(sh, P, NG, NS, d, C, E, E_avg, prm, poses, *mesh, t_s, u, EPS,
+        m = _K.nee_light(sh, P, NG, NS, d, C, crow, E, E_avg, prm, poses, *mesh, t_s, u, EPS,
                          _no_mis(k) if mis is None else mis, ctx.stop_coat, contrib, so, sd, stmax, live, S)
         if m == 0:
             continue
@@ -276,7 +277,8 @@ def _seen_lights(ctx, o, d, t, t_scene, first: bool) -> np.ndarray | None:
     return L
 
 
-def _photon_terms(ctx, sh, hits, d, C, t_s, stats: TraceStats, dsts, idx_k, use_idx, beta_k, use_beta, touched):
+def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k, use_idx, beta_k, use_beta,
+                  touched):
     """Caustic and Indirect at the hit rows sh (k,): rho_d / pi * E_kind(p, ns_f, t) added into the passes.
 
     rho_d and the query rows from ``kernels.paths.photon_albedo`` (once for both maps), the
@@ -286,7 +288,7 @@ def _photon_terms(ctx, sh, hits, d, C, t_s, stats: TraceStats, dsts, idx_k, use_
     rho = _scratch("rho", (k, 3))
     p_q, n_q, t_q = _scratch("p_q", (k, 3)), _scratch("n_q", (k, 3)), _scratch("t_q", (k,))
     live = _scratch("live_q", (k,), np.int64)
-    n_q_rows = _K.photon_albedo(sh, hits.position, hits.ns, d, C, ctx.ggx[0], t_s, rho, p_q, n_q, t_q, live)
+    n_q_rows = _K.photon_albedo(sh, hits.position, hits.ns, d, C, crow, ctx.ggx[0], t_s, rho, p_q, n_q, t_q, live)
     if n_q_rows == 0:
         return
     extra = {}
@@ -315,7 +317,7 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     tmax0 (n,) clips the camera rays; cam_pos, cam_axis (k, 3) (k = 1 or n) are
     the camera position and unit view axis at each sample's time (for Depth).
 
-    Per bounce: cast, ``kernels.svm.shade`` (the hits' closures), ``classify_hits``
+    Per bounce: cast, ``kernels.svm.shade_rows`` (the hits' closures), ``classify_hits``
     (misses see the world, emission, the first hit's Depth / Normal / coverage, the
     rows to shade and to continue), light shapes seen along the rays, next-event
     estimation (:func:`_direct`) and photon look-ups (:func:`_photon_terms`) at the
@@ -376,11 +378,11 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
             stats.camera_rays += m
         else:
             stats.bounce_rays += m
-        # -- Closures of the hits: constant rows, or the material's node program per hit ------------
-        C = _scratch("closure", (m, N_CLOSURE))
+        # -- Closures of the hits: the material table's rows, or the node programs' per hit ---------
+        crow = _scratch("crow", (m,), np.int64)            # hit r's closure is row crow[r] of C
         sd = ctx.shading
-        shade(sd, hits.material, hit_geometry(hits, d, sd=sd, times=t) if sd.uses_programs else None,
-              int(rng.integers(1 << 62)) if sd.uses_mix else 0, C)
+        C = shade_rows(sd, hits.material, hit_geometry(hits, d, sd=sd, times=t) if sd.uses_programs else None,
+                       int(rng.integers(1 << 62)) if sd.uses_mix else 0, _scratch("closure", (m, N_CLOSURE)), crow)
         if sd.transparent:
             # transparent hits (cut-outs, Transparent BSDF): the rays go on to what lies behind
             beta = pass_through(ctx.caster, sd, ctx.inst_offset, hits, d, t, C, beta, rng, tmax=tmax)
@@ -395,14 +397,14 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         env_b, wposes_b = ctx.env_camera if bounce == 0 else ctx.env, _world_poses(ctx, t)
         add_world = world_on and not (bounce == 0 and ctx.film_transparent)
         n_hit, n_sh, n_spec, n_emit = _K.classify_hits(
-            hits.t, C, env_b, wposes_b, d, add_world,
+            hits.t, C, crow, env_b, wposes_b, d, add_world,
             idx_k, use_idx, beta_k, use_beta, glossy_k, world_w_k, use_glossy, V, cols["Emit"][0], bounce == 0, cols["Depth"][0], cols["Normal"][0], DEPTH_BACKGROUND,
             hits.position, hits.ns, cam_pos, cam_axis, covered, sh, spec, clamp)
         # -- Denoising features: albedo and normal at the first diffuse-like vertex ---------------
         feat_b, dft_b = _NO_FLAGS, _NO_ROWS3         # after this bounce's vertices (specular_step carries them)
         if ctx.features:
             feat_b, dft_b = _scratch("feat_b", (m,), np.uint8), _scratch("dft_b", (m, 3))
-            _K.denoising_rows(hits.t, C, env_b, wposes_b, d, add_world, idx_k, use_idx, beta_k, use_beta, glossy_k,
+            _K.denoising_rows(hits.t, C, crow, env_b, wposes_b, d, add_world, idx_k, use_idx, beta_k, use_beta, glossy_k,
                               world_w_k, use_glossy, hits.ns, hits.ng, E, E_avg, cam_R, bounce == 0, feat, dft,
                               feat_b, dft_b, V, ca, cn, clamp)
         # -- Lights seen along the rays (before the next surface) -----------------------------------
@@ -425,11 +427,11 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         # -- Shade non-delta vertices: Direct, Caustic, Indirect -------------------------------------
         if n_sh:
             t_s = np.take(t, sh, out=_scratch("t_s", (n_sh,)))
-            if len(ctx.lights) and _direct(ctx, sh, hits, d, C, t_s, rng, stats, L_direct, idx_k, use_idx,
+            if len(ctx.lights) and _direct(ctx, sh, hits, d, C, crow, t_s, rng, stats, L_direct, idx_k, use_idx,
                                            beta_k, use_beta, mis=mis_rows(ctx, bounce, counts, sh), clamp=clamp):
                 touched.add("Direct")
             if ctx.maps is not None:
-                _photon_terms(ctx, sh, hits, d, C, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched)
+                _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched)
         if bounce == ctx.max_depth or n_spec == 0:
             break
         # -- Continue through delta and rough non-diffuse lobes (the diffuse lobe ends here) ---------
@@ -444,8 +446,8 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         counts_s = np.zeros((n_spec, 2), np.int32) if counts is None else np.ascontiguousarray(counts[spec])
         feat_n, dft_n = (np.empty(n_spec, np.uint8), np.empty((n_spec, 3))) if ctx.features else (_NO_FLAGS, _NO_ROWS3)
         t_spec = t[spec] if ctx.world_li >= 0 and not ctx.lights.lights[ctx.world_li].transform.is_static else t[:1]
-        n_go = _K.specular_step(spec, idx_k, use_idx, beta_k, use_beta, hits.position, hits.ng, hits.ns, d, C, E,
-                                E_avg, u, rr, u_rr, EPS, GUARD_FRACTION, ctx.stop_coat, ctx.env,
+        n_go = _K.specular_step(spec, idx_k, use_idx, beta_k, use_beta, hits.position, hits.ng, hits.ns, d, C, crow,
+                                E, E_avg, u, rr, u_rr, EPS, GUARD_FRACTION, ctx.stop_coat, ctx.env,
                                 _world_poses(ctx, t_spec), ctx.world_li >= 0, counts_s, ctx.glossy_bounces,
                                 ctx.transmission_bounces, idx_n, beta_n, o_n, d_n, guard_n, glossy_n, world_w_n,
                                 counts_n, ctx.features, feat_b, dft_b, feat_n, dft_n)

@@ -47,7 +47,9 @@ Per-hit functions (compiled once; the kernels call them):
   :func:`bsdf_sample` returns wi through a non-delta lobe (for MIS);
 * :func:`bsdf_eval` -- the same f; materials without a rough lobe take the
   short form :func:`bsdf_eval_smooth`, ``w_base (1 - F_coat(wo)) base_color / pi`` (equal to
-  rounding), which calls nothing (``paths.nee_light`` uses it in a loop of its own);
+  rounding), and a diffuse without coat or replaced normal the shortest,
+  :func:`bsdf_eval_plain`, ``w_base base_color / pi``, which calls nothing (``paths.nee_light``
+  evaluates it in its loop without calls, the others in a loop of their own);
 * :func:`bsdf_sample` -- wi from the lobe u0 picks (probability p_j
   proportional to an albedo estimate at wo) and the direction u1, u2 pick;
   weight = f_nd |cos| / pdf_nd for a non-delta lobe, throughput / p_j for a
@@ -88,7 +90,7 @@ from .closure import (C_ALPHA, C_BASE, C_TINT_T, C_BUMPED, C_COAT, C_IOR, C_NS, 
                       C_W_BASE, C_W_GLASS, C_W_METAL, closure_row)
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
-           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
+           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_eval_plain", "needs_bsdf_call", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
            "fresnel_dielectric_fss", "coat_albedo", "glass_albedo", "glass_albedo_avg", "build_glass_table",
            "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch",
            "denoising_features", "DENOISE_ALPHA"]
@@ -801,12 +803,34 @@ def bsdf_eval(C, cr, E, E_avg, wo, wi, ns, ng):
 
 
 @njit(**_JIT)
+def needs_bsdf_call(C, cr):
+    """Does evaluating closure row C[cr] need more than :func:`bsdf_eval_plain` (a rough lobe, a
+    coat or a replaced normal)?"""
+    return C[cr, C_ROUGH_LOBE] > 0 or C[cr, C_COAT] > 0 or C[cr, C_BUMPED] > 0
+
+
+@njit(**_JIT)
+def bsdf_eval_plain(C, cr, wo, wi, ns, ng):
+    """(f0, f1, f2) of a closure that is a bare diffuse lobe (no rough lobe, no coat, no replaced
+    normal: ``not needs_bsdf_call(C, cr)``): w_base base_color / pi where wi lies above both the
+    facing shading and geometric normals, else 0.  :func:`bsdf_eval_smooth` of such a closure, bit
+    for bit; small enough that LLVM inlines it, so a loop calling it contains no call (a call
+    makes the loop save and reload its floating-point values around it, on every row)."""
+    nsf, ngf, _ = _oriented(wo, ns, ng)
+    scale = 0.0
+    if dot(wi, nsf) > 0 and dot(wi, ngf) > 0:
+        scale = C[cr, C_W_BASE]
+    return (scale * C[cr, C_BASE] * _INV_PI, scale * C[cr, C_BASE + 1] * _INV_PI, scale * C[cr, C_BASE + 2] * _INV_PI)
+
+
+@njit(**_JIT)
 def bsdf_eval_smooth(C, cr, wo, wi, ns, ng):
     """(f0, f1, f2) of a closure without a rough lobe (``C[cr, C_ROUGH_LOBE] == 0``): the diffuse
-    lobe w_base (1 - F_coat(wo)) base_color / pi directly (no hit set-up, no call: loops that
-    call it per row stay free of the compiled rough-lobe code, see ``paths.nee_light``).  The
-    coat's Fresnel is taken at its own normal, as :func:`_hit` does (ns raised where it differs
-    from ng)."""
+    lobe w_base (1 - F_coat(wo)) base_color / pi directly (no hit set-up, no call to the compiled
+    rough-lobe code).  The coat's Fresnel is taken at its own normal, as :func:`_hit` does (ns
+    raised where it differs from ng); without coat or replaced normal it is :func:`bsdf_eval_plain`."""
+    if not (C[cr, C_COAT] > 0 or C[cr, C_BUMPED] > 0):
+        return bsdf_eval_plain(C, cr, wo, wi, ns, ng)
     nsf, ngf, _ = _oriented(wo, ns, ng)
     scale = 0.0
     if dot(wi, nsf) > 0 and dot(wi, ngf) > 0:

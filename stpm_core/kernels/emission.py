@@ -89,9 +89,9 @@ from .light_params import (P_ANGLE, P_COLOR, P_COS_HALF, P_FLUX, P_POWER, P_RADI
                            P_SUN_R, P_TYPE, T_AREA, T_MESH, T_POINT, T_SPOT, T_SUN, T_WORLD, kernel_light,
                            light_poses)
 from .sampling import (JIT, TWO_PI, add, area_point, area_shape, axis_or_z, basis, column,
-                       concentric_disk, cosine_hemisphere, dot, edot, intensity, light_axis, madd, mesh_point, neg,
-                       normalize, one_minus_cos_from_sin2, plane_point, scale, spot_attenuation, sub, to_world,
-                       uniform_cone, uniform_sphere, vec3)
+                       concentric_disk, cosine_hemisphere, dot, edot, intensity, light_axis, load_pose, madd,
+                       mesh_point, neg, normalize, one_minus_cos_from_sin2, plane_point, pose_buffer, row3, scale,
+                       spot_attenuation, sub, to_world, uniform_cone, uniform_sphere, vec3)
 
 __all__ = ["emit_photons", "emit_toward_photons", "emit", "emit_toward"]
 
@@ -145,15 +145,15 @@ def _sun_photon(row, cos_half, Z, ce, R, back, n, u1, u2, i):
 
 
 @njit(**JIT)
-def _world_photon(row, env, M, ce, R, n, u1, u2, i):
+def _world_photon(row, img, func, marg, cond, par, M, ce, R, n, u1, u2, i):
     """World photon i through the disc of radius R about ce perpendicular to its direction d (point
     u2[i]), moved 2R back along d.  Returns origin, direction, power (3-tuples).
 
     A constant world: d uniform (u1[i]), power 4 pi * pi R^2 * L / n.  An environment image
     (``kernels.environment``, M its map-to-world rotation): the direction omega the light comes
     from is drawn from q = a / (4 pi) + (1 - a) p_img (a = ``E_PHOTON_UNIFORM``, u1[i, 0] choosing
-    the technique and reused inside it), d = -omega, power L(omega) pi R^2 / (q n)."""
-    par = env[4]
+    the technique and reused inside it), d = -omega, power L(omega) pi R^2 / (q n).  img, func,
+    marg, cond, par: the env arrays."""
     if par[E_TEXTURED] == 0.0:
         d = uniform_sphere(u1[i, 0], u1[i, 1])
         g = 4.0 * np.pi * np.pi * R * R
@@ -164,10 +164,10 @@ def _world_photon(row, env, M, ce, R, n, u1, u2, i):
         if u0 < a:
             w = uniform_sphere(u0 / a, u1[i, 1])
         else:
-            w0, w1, w2, _ = env_sample(env, M, (u0 - a) / (1.0 - a), u1[i, 1])
+            w0, w1, w2, _ = env_sample(func, marg, cond, par, M, (u0 - a) / (1.0 - a), u1[i, 1])
             w = (w0, w1, w2)
-        q = a * 0.25 / np.pi + (1.0 - a) * env_pdf(env, M, w)
-        L = env_radiance(env, M, w)
+        q = a * 0.25 / np.pi + (1.0 - a) * env_pdf(func, par, M, w)
+        L = env_radiance(img, par, M, w)
         g = np.pi * R * R / (q * n) if q > 0.0 else 0.0
         d = neg(w)
         P = (g * L[0], g * L[1], g * L[2])
@@ -212,7 +212,8 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_s
     n = o.shape[0]
     typ = int(row[P_TYPE])
     one_pose = poses.shape[0] == 1
-    M0 = poses[0]                            # a static pose: one view, not one per photon
+    M = pose_buffer(poses)                   # refilled per photon only when the light moves (no views per photon)
+    img, func, marg, cond, par = env
     one_time = times.shape[0] == 1
     cos_half = row[P_COS_HALF]
     omega_c = TWO_PI * (1.0 - cos_half)              # SPOT: the cone's solid angle
@@ -220,7 +221,8 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_s
         cos_half = math.cos(0.5 * row[P_ANGLE])
     scene_c = vec3(row, P_SCENE_C)
     for i in range(n):
-        M = M0 if one_pose else poses[i]
+        if not one_pose:
+            load_pose(poses, i, M)
         # ---- POINT / SPOT: uniform sphere / cone, origin on the light's disc or sphere ----
         if typ == T_POINT or typ == T_SPOT:
             if typ == T_POINT:
@@ -238,7 +240,7 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_s
                                            u1[i, 0], u1[i, 1])
             side = 1.0 if u_side[i] < 0.5 else -1.0
             di = to_world(cosine_hemisphere(u2[i, 0], u2[i, 1]), scale(nrm, side))
-            Pi = scale(vec3(Le[j], 0), 2.0 * np.pi * A / (qj * n))
+            Pi = scale(row3(Le, j), 2.0 * np.pi * A / (qj * n))
         # ---- AREA: uniform point of the shape, cosine direction about the emitting normal ----
         elif typ == T_AREA:
             c, ex, ey, A, n_emit, disk = area_shape(row, M)
@@ -252,7 +254,7 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_s
                                      n, u1, u2, i)
         # ---- WORLD: every direction, through the scene's bounding sphere ----
         else:
-            oi, di, Pi = _world_photon(row, env, M, scene_c, row[P_SCENE_R], n, u1, u2, i)
+            oi, di, Pi = _world_photon(row, img, func, marg, cond, par, M, scene_c, row[P_SCENE_R], n, u1, u2, i)
         _store(o, d, P, i, oi, di, Pi)
 
 
@@ -272,7 +274,8 @@ def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, env, times, cent
     n = o.shape[0]
     typ = int(row[P_TYPE])
     one_pose = poses.shape[0] == 1
-    M0 = poses[0]                            # a static pose: one view, not one per photon
+    M = pose_buffer(poses)                   # refilled per photon only when the light moves (no views per photon)
+    img, func, marg, cond, par = env
     one_time = times.shape[0] == 1
     one_c = centers.shape[0] == 1
     scene_c, scene_r = vec3(row, P_SCENE_C), row[P_SCENE_R]
@@ -283,15 +286,16 @@ def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, env, times, cent
         cos_half = math.cos(0.5 * row[P_ANGLE])
         tan_half = math.tan(0.5 * min(row[P_ANGLE], 3.0))
     for i in range(n):
-        M = M0 if one_pose else poses[i]
-        x = vec3(centers[0 if one_c else i], 0)
+        if not one_pose:
+            load_pose(poses, i, M)
+        x = row3(centers, 0 if one_c else i)
         # ---- SUN / WORLD: a disc upstream, starting outside the whole scene ----
         if typ == T_WORLD or typ == T_SUN:
             v = sub(x, scene_c)
             back = math.sqrt(dot(v, v)) + scene_r + radius
             if typ == T_WORLD:
                 # every direction through the target; shifted with its own centre
-                oi, di, Pi = _world_photon(row, env, M, first, radius, n, u1, u2, i)
+                oi, di, Pi = _world_photon(row, img, func, marg, cond, par, M, first, radius, n, u1, u2, i)
                 oi = sub(add(oi, sub(x, first)), scale(di, max(back - 2.0 * radius, 0.0)))
             else:
                 # a disc covering the target sphere
@@ -325,7 +329,7 @@ def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, env, times, cent
         # ---- Power: emitted intensity toward d * omega / n ----
         if typ == T_MESH:
             # dPhi = Le |cos_l| dA dw (both sides); point pdf q_j / A, direction pdf 1 / omega
-            Pi = scale(vec3(Le[j], 0), abs(edot(di, nrm)) * A / qj * omega / n)
+            Pi = scale(row3(Le, j), abs(edot(di, nrm)) * A / qj * omega / n)
         elif typ == T_AREA:
             # dPhi = L cos_l dA dw; point pdf 1 / A, direction pdf 1 / omega
             Lr = row[P_POWER] / (np.pi * max(A, 1e-300))

@@ -5,7 +5,9 @@ piecewise-constant distribution over the image for next-event estimation and for
 (docs/lights-and-materials.md, "World", has the equations with these names).
 
 The world reaches the kernels as one tuple ``env = (img, func, marg, cond, par)``
-(:func:`stpm_core.world_light.environment_arrays` packs it):
+(:func:`stpm_core.world_light.environment_arrays` packs it); a kernel unpacks it once and hands
+the per-direction functions below the arrays they read (taking an array out of a tuple inside a
+per-row loop costs two atomic reference-count operations per row, ``sampling.row3``):
 
 * img (H, W, 3) float32: the radiance image (already times colour and strength), row 0 at
   the bottom; (1, 1, 3) for a constant world;
@@ -32,7 +34,7 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .sampling import JIT, JIT_INLINE, search_right
+from .sampling import JIT, JIT_INLINE, load_pose, pose_buffer, search_right
 
 __all__ = ["N_ENV", "E_TEXTURED", "E_INTERP", "E_MEAN", "E_NEE_COS", "E_PHOTON_UNIFORM", "E_L",
            "env_radiance", "env_pdf", "env_sample", "env_lookup_batch", "env_pdf_batch", "env_sample_batch"]
@@ -103,9 +105,9 @@ def _image(img, interp, u, v):
 
 
 @njit(**JIT)
-def env_radiance(env, M, d):
-    """Radiance (3-tuple, W m^-2 sr^-1) the world sends back along world direction d (toward -d)."""
-    img, par = env[0], env[4]
+def env_radiance(img, par, M, d):
+    """Radiance (3-tuple, W m^-2 sr^-1) the world (img, par of ``env``) sends back along world
+    direction d (toward -d)."""
     if par[E_TEXTURED] == 0.0:
         return par[E_L], par[E_L + 1], par[E_L + 2]
     u, v = _uv(_to_map(M, d))
@@ -113,9 +115,9 @@ def env_radiance(env, M, d):
 
 
 @njit(**JIT)
-def env_pdf(env, M, d):
-    """Solid-angle density (1/sr) with which :func:`env_sample` draws world direction d."""
-    func, par = env[1], env[4]
+def env_pdf(func, par, M, d):
+    """Solid-angle density (1/sr) with which :func:`env_sample` draws world direction d (func, par
+    of ``env``)."""
     Hd, Wd = func.shape[0], func.shape[1]
     u, v = _uv(_to_map(M, d))
     sin_t = math.sin(np.pi * v)
@@ -127,10 +129,10 @@ def env_pdf(env, M, d):
 
 
 @njit(**JIT)
-def env_sample(env, M, u0, u1):
-    """A world direction drawn from the image distribution with uniforms u0 (row), u1 (column);
-    returns (d0, d1, d2, pdf) with pdf the solid-angle density (0: a pole, nothing drawn)."""
-    func, marg, cond, par = env[1], env[2], env[3], env[4]
+def env_sample(func, marg, cond, par, M, u0, u1):
+    """A world direction drawn from the image distribution (func, marg, cond, par of ``env``) with
+    uniforms u0 (row), u1 (column); returns (d0, d1, d2, pdf) with pdf the solid-angle density
+    (0: a pole, nothing drawn)."""
     Hd, Wd = func.shape[0], func.shape[1]
     j = min(max(search_right(marg, u0) - 1, 0), Hd - 1)
     w = marg[j + 1] - marg[j]
@@ -158,28 +160,39 @@ def env_sample(env, M, u0, u1):
 @njit(**JIT)
 def env_lookup_batch(env, poses, d, out):
     """out[i] = :func:`env_radiance` along d[i] (n, 3); poses (k, 4, 4), k = 1 or one per row."""
+    img, par = env[0], env[4]
     one = poses.shape[0] == 1
+    M = pose_buffer(poses)
     for i in range(d.shape[0]):
-        L = env_radiance(env, poses[0 if one else i], (d[i, 0], d[i, 1], d[i, 2]))
+        if not one:
+            load_pose(poses, i, M)
+        L = env_radiance(img, par, M, (d[i, 0], d[i, 1], d[i, 2]))
         out[i, 0], out[i, 1], out[i, 2] = L[0], L[1], L[2]
 
 
 @njit(**JIT)
 def env_pdf_batch(env, poses, d, out):
     """out[i] = :func:`env_pdf` of direction d[i] (n, 3); poses (k, 4, 4), k = 1 or one per row (tests)."""
+    func, par = env[1], env[4]
     one = poses.shape[0] == 1
+    M = pose_buffer(poses)
     for i in range(d.shape[0]):
-        out[i] = env_pdf(env, poses[0 if one else i], (d[i, 0], d[i, 1], d[i, 2]))
+        if not one:
+            load_pose(poses, i, M)
+        out[i] = env_pdf(func, par, M, (d[i, 0], d[i, 1], d[i, 2]))
 
 
 @njit(**JIT)
 def env_sample_batch(env, poses, u, d_out, pdf_out, pdf_again):
     """:func:`env_sample` per row of u (n, 2) into d_out (n, 3), pdf_out (n,); pdf_again (n,) is
     :func:`env_pdf` of the drawn direction (tests: the two must agree)."""
+    func, marg, cond, par = env[1], env[2], env[3], env[4]
     one = poses.shape[0] == 1
+    M = pose_buffer(poses)
     for i in range(u.shape[0]):
-        M = poses[0 if one else i]
-        d0, d1, d2, p = env_sample(env, M, u[i, 0], u[i, 1])
+        if not one:
+            load_pose(poses, i, M)
+        d0, d1, d2, p = env_sample(func, marg, cond, par, M, u[i, 0], u[i, 1])
         d_out[i, 0], d_out[i, 1], d_out[i, 2] = d0, d1, d2
         pdf_out[i] = p
-        pdf_again[i] = env_pdf(env, M, (d0, d1, d2))
+        pdf_again[i] = env_pdf(func, par, M, (d0, d1, d2))

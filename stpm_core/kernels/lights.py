@@ -40,9 +40,9 @@ from .light_params import P_ANGLE, P_COLOR, P_DEAD, P_POWER, P_RADIUS, P_SOFT, P
     T_SPOT, T_SUN, T_WORLD
 from .environment import E_NEE_COS, E_TEXTURED, env_pdf, env_radiance, env_sample
 from .sampling import (JIT, TWO_PI, area_point, area_shape, axis_or_z, clip, column, concentric_disk,
-                       cosine_hemisphere, cross, dot, edot, intensity, light_axis, madd, mesh_point, neg, normalize,
-                       one_minus_cos_from_sin2, scale, sign, spot_attenuation, sub, to_world, uniform_cone,
-                       uniform_sphere, unit, vec3)
+                       cosine_hemisphere, cross, dot, edot, intensity, light_axis, load_pose, madd, mesh_point, neg,
+                       normalize, one_minus_cos_from_sin2, pose_buffer, row3, scale, sign, spot_attenuation, sub,
+                       to_world, uniform_cone, uniform_sphere, unit, vec3)
 
 __all__ = ["sample_light_rows", "world_nee_pdf", "seen_light", "sample_direct_batch", "seen_batch", "spherical_rect_sample",
            "spherical_rect_batch"]
@@ -114,6 +114,23 @@ def spherical_rect_sample(o, s, ex, ey, u0, u1):
 # One sample per light type: (wi0, wi1, wi2, dist, w0, w1, w2)
 # ----------------------------------------------------------------------------
 @njit(**JIT)
+def _sample_point_delta(prm, M, p):
+    """:func:`_sample_point` of radius 0, a true point: the exact direction, weight I / d^2 (0 at
+    the light itself), spot-masked.  No random numbers; small enough to be inlined (the sampling
+    loop of such lights contains no call, ``sample_light_rows``)."""
+    c = column(M, 3)
+    I0, I1, I2 = intensity(prm)
+    to_p, d = normalize(sub(p, c))                  # light -> p
+    wi = neg(to_p)
+    g = 1.0 / max(d * d, 1e-300) if d > 0.0 else 0.0
+    w0, w1, w2 = I0 * g, I1 * g, I2 * g
+    if int(prm[P_TYPE]) == T_SPOT:
+        a = spot_attenuation(prm, dot(wi, light_axis(M)))   # (-wi) . (-Z): the direction leaving the light
+        w0, w1, w2 = w0 * a, w1 * a, w2 * a
+    return wi[0], wi[1], wi[2], d, w0, w1, w2
+
+
+@njit(**JIT)
 def _sample_point(prm, M, p, u0, u1):
     """POINT / SPOT of intensity I = color P / (4 pi) W/sr at M's translation.
 
@@ -123,16 +140,13 @@ def _sample_point(prm, M, p, u0, u1):
     distance to its far side there), weight I Omega / (pi r^2).  SPOT: times the cone mask of the
     direction the light leaves along (its axis: M's -Z column, normalised).
     """
+    r = prm[P_RADIUS]
+    if r <= 0.0:
+        return _sample_point_delta(prm, M, p)
     c = column(M, 3)
     I0, I1, I2 = intensity(prm)
-    r = prm[P_RADIUS]
     to_p, d = normalize(sub(p, c))                  # light -> p
-    if r <= 0.0:
-        # -- a true point
-        wi = neg(to_p)
-        dist = d
-        g = 1.0 / max(d * d, 1e-300) if d > 0.0 else 0.0
-    elif prm[P_SOFT] != 0.0:
+    if prm[P_SOFT] != 0.0:
         # -- soft falloff: disc of radius r through c facing p; pdf_A = 1 / (pi r^2), L = I / (pi r^2)
         dx, dy = concentric_disk(u0, u1)
         wi, dist = normalize(sub(madd(c, r, to_world((dx, dy, 0.0), to_p)), p))
@@ -236,12 +250,12 @@ def _sample_world(prm, n, u0, u1):
 
 
 @njit(**JIT)
-def _sample_env(env, M, n, u0, u1):
-    """WORLD with an environment image (``kernels.environment``, map-to-world rotation M): wi from
-    the mixture p = c p_cos + (1 - c) p_img (c = env's ``E_NEE_COS``; p_cos cosine about n, or
-    uniform on the sphere for a zero n), u0 choosing the technique and reused inside it; weight
-    L(wi) / p.  Distance inf."""
-    c = env[4][E_NEE_COS]
+def _sample_env(img, func, marg, cond, par, M, n, u0, u1):
+    """WORLD with an environment image (``kernels.environment``'s env arrays, map-to-world rotation
+    M): wi from the mixture p = c p_cos + (1 - c) p_img (c = ``par[E_NEE_COS]``; p_cos cosine
+    about n, or uniform on the sphere for a zero n), u0 choosing the technique and reused inside
+    it; weight L(wi) / p.  Distance inf."""
+    c = par[E_NEE_COS]
     no_n = n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0
     if u0 < c:
         u0 = u0 / c
@@ -250,32 +264,32 @@ def _sample_env(env, M, n, u0, u1):
         else:
             wi = to_world(cosine_hemisphere(u0, u1), n)
     else:
-        d0, d1, d2, _ = env_sample(env, M, (u0 - c) / (1.0 - c), u1)
+        d0, d1, d2, _ = env_sample(func, marg, cond, par, M, (u0 - c) / (1.0 - c), u1)
         wi = (d0, d1, d2)
     if no_n:
         p_a = 0.25 / np.pi
     else:
         p_a = max(wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2], 0.0) / np.pi
-    pdf = c * p_a + (1.0 - c) * env_pdf(env, M, wi)
+    pdf = c * p_a + (1.0 - c) * env_pdf(func, par, M, wi)
     if not pdf > 0.0:
         return wi[0], wi[1], wi[2], np.inf, 0.0, 0.0, 0.0
-    L = env_radiance(env, M, wi)
+    L = env_radiance(img, par, M, wi)
     return wi[0], wi[1], wi[2], np.inf, L[0] / pdf, L[1] / pdf, L[2] / pdf
 
 
 @njit(**JIT)
-def world_nee_pdf(env, M, n, wi):
+def world_nee_pdf(func, par, M, n, wi):
     """Solid-angle density (1/sr) with which next-event estimation draws wi toward the WORLD from
     a point whose geometric normal turned toward the viewer is n (zero: no normal): cos / pi
     about n (uniform 1 / (4 pi) without one) for a constant world, the mixture of
-    :func:`_sample_env` for an environment image (M its map-to-world rotation)."""
+    :func:`_sample_env` for an environment image (func, par of its env arrays, M its
+    map-to-world rotation)."""
     no_n = n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0
     p_a = 0.25 / np.pi if no_n else max(wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2], 0.0) / np.pi
-    par = env[4]
     if par[E_TEXTURED] == 0.0:
         return p_a
     c = par[E_NEE_COS]
-    return c * p_a + (1.0 - c) * env_pdf(env, M, wi)
+    return c * p_a + (1.0 - c) * env_pdf(func, par, M, wi)
 
 
 # ----------------------------------------------------------------------------
@@ -312,42 +326,70 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
     wi: unit direction from p toward the light sample; dist: its distance (inf for SUN / WORLD;
     shadow rays test [eps, dist)); w: the weight W m^-2 sr^-1, 0 where the light gives nothing
     (behind an area light, outside a spot, a dead light).  S[k, 7]: the WORLD's sampling density
-    of wi (:func:`world_nee_pdf`, for multiple importance sampling), inf for other lights.  The light type is chosen once, outside
-    the loops: each loop body is one sampler, with no branch or call it does not need.
+    of wi (:func:`world_nee_pdf`, for multiple importance sampling), inf for other lights, written
+    in the same loop.  The light type is chosen once, outside the loops: each loop body is one
+    sampler, with no branch or call it does not need (a POINT / SPOT of radius 0 has a loop of
+    its own, :func:`_sample_point_delta`, which LLVM inlines: a loop with a call in it saves and
+    reloads its floating-point values around the call on every row).  The loops
+    make no array views (the pose M is one buffer, refilled per row only when the light moves; the
+    env arrays are taken out of their tuple once): a view per row would cost two atomic
+    reference-count operations per row (``sampling.row3``).
     """
     typ = int(prm[P_TYPE])
     one = poses.shape[0] == 1
     n = rows.shape[0]
-    if typ == T_POINT or typ == T_SPOT:
+    M = pose_buffer(poses)
+    img, func, marg, cond, par = env
+    # Column 7 (written in the same loop): the density the world's samples were drawn with
+    # (multiple importance sampling against camera paths that go on through rough lobes); inf
+    # for every other light, which next-event estimation handles alone
+    if (typ == T_POINT or typ == T_SPOT) and prm[P_RADIUS] <= 0.0:
         for k in range(n):
-            _put(S, k, _sample_point(prm, poses[0 if one else k], vec3(P[rows[k]], 0), U[k, 0], U[k, 1]))
+            if not one:
+                load_pose(poses, k, M)
+            _put(S, k, _sample_point_delta(prm, M, row3(P, rows[k])))
+            S[k, 7] = np.inf
+    elif typ == T_POINT or typ == T_SPOT:
+        for k in range(n):
+            if not one:
+                load_pose(poses, k, M)
+            _put(S, k, _sample_point(prm, M, row3(P, rows[k]), U[k, 0], U[k, 1]))
+            S[k, 7] = np.inf
     elif typ == T_AREA:
         for k in range(n):
-            _put(S, k, _sample_area(prm, poses[0 if one else k], vec3(P[rows[k]], 0), U[k, 0], U[k, 1]))
+            if not one:
+                load_pose(poses, k, M)
+            _put(S, k, _sample_area(prm, M, row3(P, rows[k]), U[k, 0], U[k, 1]))
+            S[k, 7] = np.inf
     elif typ == T_SUN:
         for k in range(n):
-            _put(S, k, _sample_sun(prm, poses[0 if one else k], U[k, 0], U[k, 1]))
+            if not one:
+                load_pose(poses, k, M)
+            _put(S, k, _sample_sun(prm, M, U[k, 0], U[k, 1]))
+            S[k, 7] = np.inf
     elif typ == T_MESH:
         for k in range(n):
-            _put(S, k, _sample_mesh(poses[0 if one else k], steps, corners, q, cdf, Le, T[k], vec3(P[rows[k]], 0),
-                                    U[k, 0], U[k, 1]))
-    elif typ == T_WORLD and env[4][E_TEXTURED] != 0.0:
+            if not one:
+                load_pose(poses, k, M)
+            _put(S, k, _sample_mesh(M, steps, corners, q, cdf, Le, T[k], row3(P, rows[k]), U[k, 0], U[k, 1]))
+            S[k, 7] = np.inf
+    elif typ == T_WORLD and par[E_TEXTURED] != 0.0:
         for k in range(n):
-            _put(S, k, _sample_env(env, poses[0 if one else k], _toward(NG, D, rows[k]), U[k, 0], U[k, 1]))
+            if not one:
+                load_pose(poses, k, M)
+            nk = _toward(NG, D, rows[k])
+            _put(S, k, _sample_env(img, func, marg, cond, par, M, nk, U[k, 0], U[k, 1]))
+            S[k, 7] = world_nee_pdf(func, par, M, nk, (S[k, 0], S[k, 1], S[k, 2]))
     elif typ == T_WORLD:
         for k in range(n):
-            _put(S, k, _sample_world(prm, _toward(NG, D, rows[k]), U[k, 0], U[k, 1]))
+            if not one:
+                load_pose(poses, k, M)
+            nk = _toward(NG, D, rows[k])
+            _put(S, k, _sample_world(prm, nk, U[k, 0], U[k, 1]))
+            S[k, 7] = world_nee_pdf(func, par, M, nk, (S[k, 0], S[k, 1], S[k, 2]))
     else:
         for k in range(n):
             _put(S, k, (0.0, 0.0, 1.0, np.inf, 0.0, 0.0, 0.0))     # (no other type codes)
-    # Column 7: the density the world's samples were drawn with (multiple importance sampling
-    # against camera paths that go on through rough lobes); inf for every other light, which
-    # next-event estimation handles alone
-    if typ == T_WORLD:
-        for k in range(n):
-            S[k, 7] = world_nee_pdf(env, poses[0 if one else k], _toward(NG, D, rows[k]), (S[k, 0], S[k, 1], S[k, 2]))
-    else:
-        for k in range(n):
             S[k, 7] = np.inf
     if prm[P_DEAD] != 0.0:
         # no emitting direction at any key (zero Z scale, zero area): nothing
@@ -438,9 +480,11 @@ def seen_batch(prm, poses, o, d, t_scene, camera_ray, L_out):
     """:func:`seen_light` for rays o + s d (n, 3) before t_scene (n,): writes L_out (n, 3)
     (overwrites; sum over lights in the caller).  poses (k, 4, 4): k = 1 or one per ray."""
     one = poses.shape[0] == 1
-    M0 = poses[0]
+    M = pose_buffer(poses)
     for i in range(o.shape[0]):
-        L = seen_light(prm, M0 if one else poses[i], vec3(o[i], 0), vec3(d[i], 0), t_scene[i], camera_ray)
+        if not one:
+            load_pose(poses, i, M)
+        L = seen_light(prm, M, row3(o, i), row3(d, i), t_scene[i], camera_ray)
         L_out[i, 0], L_out[i, 1], L_out[i, 2] = L[0], L[1], L[2]
 
 

@@ -9,9 +9,10 @@ equations with these names):
 * :func:`camera_tile` -- stratified film positions (placed by the pixel
   filter's inverse CDF) and permuted stratified shutter numbers of one tile;
 * :func:`camera_rays` -- pinhole / ortho rays, camera clipping ``tmax0``;
-* the closure of every hit comes first, from :func:`stpm_core.kernels.svm.shade_closures`
-  (the material's constant row, or its node program evaluated per hit); nothing after it
-  depends on how it was made;
+* the closure of every hit comes first, from :func:`stpm_core.kernels.svm.shade_rows`:
+  hit r's closure is row ``crow[r]`` of ``C`` (the material table itself when no material has a
+  node program, else one row per hit filled by the interpreter); nothing after it depends on
+  how it was made;
 * :func:`classify_hits` -- one bounce's bookkeeping: world radiance of misses,
   surface emission, Depth / Normal / coverage of the first hit, and the rows to
   shade (non-delta lobe) and to continue (delta lobe);
@@ -45,16 +46,16 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_eval_smooth, bsdf_sample_path,
-                   denoising_features, diffuse_albedo)
+from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_eval_plain, bsdf_eval_smooth,
+                   bsdf_sample_path, denoising_features, diffuse_albedo, needs_bsdf_call)
 from .environment import env_radiance
 from .closure import (C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, closure_row)
 from .light_params import P_TYPE, T_WORLD
 from .lights import sample_light_rows, seen_light, world_nee_pdf
-from .sampling import dot, offset_origin
+from .sampling import dot, load_pose, offset_origin, pose_buffer, row3
 
 __all__ = ["camera_tile", "camera_rays", "classify_hits", "denoising_rows", "denoising_seen_add", "nee_light",
-           "nee_accumulate",
+           "offset_rows", "nee_accumulate",
            "seen_lights_add", "photon_albedo", "photon_add", "specular_step", "scatter_add", "active_channels",
            "pixel_sums", "tile_finish"]
 
@@ -161,12 +162,12 @@ def camera_rays(px, py, W, H, half_w, half_h, cx, cy, R, pos, ortho, clip_start,
 # One bounce's bookkeeping
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta, glossy, world_w, use_glossy, V,
-                  c_emit, first, c_depth, c_normal, depth_bg, P, NS, cam_pos, cam_axis, covered, sh, spec, clamp):
+def classify_hits(t, C, crow, env, wposes, D, add_world, idx, use_idx, beta, use_beta, glossy, world_w, use_glossy,
+                  V, c_emit, first, c_depth, c_normal, depth_bg, P, NS, cam_pos, cam_axis, covered, sh, spec, clamp):
     """Bookkeeping of m rays' hits; returns (n_hit, n_sh, n_spec, n_emit) (n_emit: rows added to Emit).
 
-    t (m,) hit distances (inf: miss), C (m, N_CLOSURE) the hits' closures
-    (``kernels.svm.shade_closures``).  Row r belongs to sample ``idx[r]`` (``r`` when
+    t (m,) hit distances (inf: miss), C (*, N_CLOSURE) closure rows, crow (m,) the row of C of each
+    hit (``kernels.svm.shade_rows``).  Row r belongs to sample ``idx[r]`` (``r`` when
     not use_idx) with throughput ``beta[r]`` (1 when not use_beta).  V (n, K)
     holds the samples' pass values, Emit in columns c_emit .. c_emit + 2.  The
     first bounce (every sample once, in order) starts each sample's row of V:
@@ -189,6 +190,8 @@ def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta,
     n_emit = 0
     one = cam_pos.shape[0] == 1
     one_w = wposes.shape[0] == 1
+    M = pose_buffer(wposes)                  # no views or tuple items per row (sampling.row3)
+    img, par = env[0], env[4]
     for r in range(m):
         i = idx[r] if use_idx else r
         if first:
@@ -201,7 +204,9 @@ def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta,
             ww = world_w[r] if use_glossy else 1.0
             if add_world and ww > 0.0:
                 n_emit += 1
-                e0, e1, e2 = _world_seen(env, wposes, one_w, D, r, beta, use_beta, ww, clamp)
+                if not one_w:
+                    load_pose(wposes, r, M)
+                e0, e1, e2 = _world_seen(img, par, M, D, r, beta, use_beta, ww, clamp)
                 V[i, c_emit] += e0
                 V[i, c_emit + 1] += e1
                 V[i, c_emit + 2] += e2
@@ -214,26 +219,28 @@ def classify_hits(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta,
             for c in range(3):
                 V[i, c_normal + c] = NS[r, c]
             covered[i] = 1.0
-        if C[r, C_EMISSIVE] > 0.0 and emits:
+        cr = crow[r]
+        if C[cr, C_EMISSIVE] > 0.0 and emits:
             n_emit += 1
-            e0, e1, e2 = _emission_seen(C, r, beta, use_beta, clamp)
+            e0, e1, e2 = _emission_seen(C, cr, r, beta, use_beta, clamp)
             V[i, c_emit] += e0
             V[i, c_emit + 1] += e1
             V[i, c_emit + 2] += e2
-        if C[r, C_NONDELTA] > 0.0:
+        if C[cr, C_NONDELTA] > 0.0:
             sh[n_sh] = r
             n_sh += 1
-        if C[r, C_HAS_DELTA] > 0.0 or C[r, C_ROUGH_LOBE] > 0.0:
+        if C[cr, C_HAS_DELTA] > 0.0 or C[cr, C_ROUGH_LOBE] > 0.0:
             spec[n_spec] = r
             n_spec += 1
     return n_hit, n_sh, n_spec, n_emit
 
 
 @njit(**_JIT)
-def _world_seen(env, wposes, one_w, D, r, beta, use_beta, ww, clamp):
+def _world_seen(img, par, M, D, r, beta, use_beta, ww, clamp):
     """What row r adds to Emit where its ray escapes: beta[r] (1 when not use_beta) times the world's
-    radiance along D[r] times ww, clamped to ``clamp`` (0: off)."""
-    world = env_radiance(env, wposes[0 if one_w else r], (D[r, 0], D[r, 1], D[r, 2]))
+    radiance along D[r] (img, par: the env arrays, M its mapping at the row's time) times ww,
+    clamped to ``clamp`` (0: off)."""
+    world = env_radiance(img, par, M, row3(D, r))
     if use_beta:
         e0, e1, e2 = beta[r, 0] * world[0] * ww, beta[r, 1] * world[1] * ww, beta[r, 2] * world[2] * ww
     else:
@@ -243,13 +250,13 @@ def _world_seen(env, wposes, one_w, D, r, beta, use_beta, ww, clamp):
 
 
 @njit(**_JIT)
-def _emission_seen(C, r, beta, use_beta, clamp):
+def _emission_seen(C, cr, r, beta, use_beta, clamp):
     """What row r adds to Emit where it hits an emissive surface: beta[r] (1 when not use_beta) times
-    the closure's emission, clamped to ``clamp`` (0: off)."""
+    the emission of its closure C[cr], clamped to ``clamp`` (0: off)."""
     if use_beta:
-        e0, e1, e2 = beta[r, 0] * C[r, C_EMIT], beta[r, 1] * C[r, C_EMIT + 1], beta[r, 2] * C[r, C_EMIT + 2]
+        e0, e1, e2 = beta[r, 0] * C[cr, C_EMIT], beta[r, 1] * C[cr, C_EMIT + 1], beta[r, 2] * C[cr, C_EMIT + 2]
     else:
-        e0, e1, e2 = C[r, C_EMIT], C[r, C_EMIT + 1], C[r, C_EMIT + 2]
+        e0, e1, e2 = C[cr, C_EMIT], C[cr, C_EMIT + 1], C[cr, C_EMIT + 2]
     f = _clamp_scale(e0, e1, e2, clamp)
     return e0 * f, e1 * f, e2 * f
 
@@ -300,12 +307,12 @@ def scatter_add(dst, rows, idx, use_idx, beta, use_beta, val, clamp):
 # Denoising features (Cycles' Denoising Albedo and Denoising Normal)
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def denoising_rows(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta, glossy, world_w, use_glossy, NS,
-                   NG, E, E_avg, cam_R, first, feat, dft, feat_next, dft_next, V, c_albedo, c_normal, clamp):
+def denoising_rows(t, C, crow, env, wposes, D, add_world, idx, use_idx, beta, use_beta, glossy, world_w, use_glossy,
+                   NS, NG, E, E_avg, cam_R, first, feat, dft, feat_next, dft_next, V, c_albedo, c_normal, clamp):
     """One bounce's share of the denoising features, as Cycles writes them (``denoising_passes.h``,
     and the albedo part of ``film_write_emission_or_background_pass``), for the rows of
-    :func:`classify_hits`'s bounce (same t, C, env, wposes, D, add_world, idx, beta, glossy, world_w,
-    clamp) that still carry features.
+    :func:`classify_hits`'s bounce (same t, C, crow, env, wposes, D, add_world, idx, beta, glossy,
+    world_w, clamp) that still carry features.
 
     feat (m,) uint8: 1 where row r has not met its first diffuse-like vertex yet (every row on
     the first bounce), dft (m, 3) its feature throughput (1 on the first bounce: the product of the
@@ -325,6 +332,8 @@ def denoising_rows(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta
     """
     m = t.shape[0]
     one_w = wposes.shape[0] == 1
+    M = pose_buffer(wposes)                  # no views or tuple items per row (sampling.row3)
+    img, par = env[0], env[4]
     one_c = cam_R.shape[0] == 1
     for r in range(m):
         i = idx[r] if use_idx else r
@@ -338,20 +347,23 @@ def denoising_rows(t, C, env, wposes, D, add_world, idx, use_idx, beta, use_beta
             # -- The world seen: its contribution to Emit, times the feature throughput
             ww = world_w[r] if use_glossy else 1.0
             if add_world and ww > 0.0:
-                e0, e1, e2 = _world_seen(env, wposes, one_w, D, r, beta, use_beta, ww, clamp)
+                if not one_w:
+                    load_pose(wposes, r, M)
+                e0, e1, e2 = _world_seen(img, par, M, D, r, beta, use_beta, ww, clamp)
                 V[i, c_albedo] += f0 * e0
                 V[i, c_albedo + 1] += f1 * e1
                 V[i, c_albedo + 2] += f2 * e2
             continue
         # -- An emitter seen: its emission (also through a specular-like rough lobe, where Emit
         # leaves it to next-event estimation), times the feature throughput
-        if C[r, C_EMISSIVE] > 0.0:
-            e0, e1, e2 = _emission_seen(C, r, beta, use_beta, clamp)
+        cr = crow[r]
+        if C[cr, C_EMISSIVE] > 0.0:
+            e0, e1, e2 = _emission_seen(C, cr, r, beta, use_beta, clamp)
             V[i, c_albedo] += f0 * e0
             V[i, c_albedo + 1] += f1 * e1
             V[i, c_albedo + 2] += f2 * e2
         # -- The surface: write the features here, or carry them on through its specular-like lobes
-        diff, spec, n, stop = denoising_features(C, r, E, E_avg, (-D[r, 0], -D[r, 1], -D[r, 2]),
+        diff, spec, n, stop = denoising_features(C, cr, E, E_avg, (-D[r, 0], -D[r, 1], -D[r, 2]),
                                                  (NS[r, 0], NS[r, 1], NS[r, 2]), (NG[r, 0], NG[r, 1], NG[r, 2]))
         if stop:
             V[i, c_albedo] += f0 * diff[0]
@@ -396,12 +408,12 @@ def denoising_seen_add(V, c_albedo, rows, idx, use_idx, beta, use_beta, first, f
 # Next-event estimation
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cdf, Le, env, T, U, EPS, mis,
+def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners, q, cdf, Le, env, T, U, EPS, mis,
               stop_coat, contrib, so, sd, stmax, live, S):
     """Next-event estimation of one light at the hit rows ``rows`` (n,); returns the shadow-ray count.
 
     P, NG, NS, D (m, 3): hit points, geometric / shading normals and ray
-    directions of the bounce; C (m, N_CLOSURE) the hits' closures; E, E_avg
+    directions of the bounce; C, crow the hits' closures (hit r's is row crow[r] of C); E, E_avg
     the GGX albedo tables (``kernels.bsdf.ggx_albedo_tables``).  The light:
     its parameter row prm, poses (k, 4, 4) (k = 1 static, else one per row of
     ``rows``), mesh arrays and environment (``kernels.light_params``).  T (n,) the rows'
@@ -410,7 +422,7 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
 
     Per row k (hit r = rows[k]), with wo = -D[r]: (wi, dist, weight) =
     ``lights.sample_light_rows`` (the WORLD samples cosine directions about ng
-    turned toward wo), f = ``bsdf_eval``(C[r], wo, wi), contrib[k] = f |ns . wi|
+    turned toward wo), f = ``bsdf_eval``(C[crow[r]], wo, wi), contrib[k] = f |ns . wi|
     weight.  Where it is positive, a shadow ray from p offset by EPS[r] along
     ng to wi's side, aimed at the light point, stopping a margin short of it
     (emissive triangles are geometry the shadow ray must not reach): so, sd
@@ -423,30 +435,41 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
     by the balance heuristic p_l / (p_l + p_c), p_l = S[k, 7] the world's own density, and the
     escaping paths by p_c / (p_l + p_c) (docs/rendering.md, "Path partition").
 
-    Three loops, each with only the code its rows need (a loop that contains a call it never
-    takes still runs about twice slower per row; docs/rendering.md "NEE cost"): the light
-    samples (one sampler, chosen once per call), the mixture BSDF of rows whose closure has a
-    rough lobe, then the smooth BSDF, contribution and shadow ray of every row.
+    Three loops, each with only the code its rows need (a loop that contains a call, even one it
+    never takes, saves and reloads its floating-point values around it and runs up to twice
+    slower per row; docs/rendering.md "NEE cost"): the light samples (one sampler, chosen once
+    per call), the BSDF of the rows whose closure needs a compiled call (``needs_bsdf_call``: the
+    mixture of a rough lobe, or the coat / replaced-normal terms of ``bsdf_eval_smooth``) into
+    F, then, with no call, the bare diffuse BSDF of the others (``bsdf_eval_plain``), the
+    contribution and the shadow ray of every row.
     """
     n = rows.shape[0]
     sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, D, T, U, S)
     is_world = int(prm[P_TYPE]) == T_WORLD
-    # -- The BSDF of rows with a rough lobe: the compiled mixture (bsdf_eval_pdf) -------------
+    # -- The BSDF of rows that need a call: a rough lobe's mixture (bsdf_eval_pdf), a coat or a
+    #    replaced normal (bsdf_eval_smooth) -------------------------------------------------------
     F = np.empty((n, 3))
     for k in range(n):
         r = rows[k]
-        if C[r, C_ROUGH_LOBE] > 0:
+        cr = crow[r]
+        if not needs_bsdf_call(C, cr):
+            continue
+        if C[cr, C_ROUGH_LOBE] > 0:
             wo = (-D[r, 0], -D[r, 1], -D[r, 2])
             wi = (S[k, 0], S[k, 1], S[k, 2])
             ns = (NS[r, 0], NS[r, 1], NS[r, 2])
             g = (NG[r, 0], NG[r, 1], NG[r, 2])
-            f0, f1, f2, _ = bsdf_eval_pdf(C, r, E, E_avg, wo, wi, ns, g)
+            f0, f1, f2, _ = bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, g)
             if is_world and mis[k] != 0:
-                c0, c1, c2, p_c = bsdf_eval_cont(C, r, E, E_avg, wo, wi, ns, g, stop_coat)
+                c0, c1, c2, p_c = bsdf_eval_cont(C, cr, E, E_avg, wo, wi, ns, g, stop_coat)
                 if p_c > 0.0:
                     x = p_c / (S[k, 7] + p_c)
                     f0, f1, f2 = f0 - c0 * x, f1 - c1 * x, f2 - c2 * x
             F[k, 0], F[k, 1], F[k, 2] = f0, f1, f2
+        else:
+            F[k, 0], F[k, 1], F[k, 2] = bsdf_eval_smooth(C, cr, (-D[r, 0], -D[r, 1], -D[r, 2]),
+                                                         (S[k, 0], S[k, 1], S[k, 2]), (NS[r, 0], NS[r, 1], NS[r, 2]),
+                                                         (NG[r, 0], NG[r, 1], NG[r, 2]))
     n_live = 0
     for k in range(n):
         r = rows[k]
@@ -454,10 +477,11 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
         g = (NG[r, 0], NG[r, 1], NG[r, 2])
         ns = (NS[r, 0], NS[r, 1], NS[r, 2])
         # -- BSDF and the unshadowed contribution ------------------------------------------
-        if C[r, C_ROUGH_LOBE] > 0:
+        cr = crow[r]
+        if needs_bsdf_call(C, cr):
             f0, f1, f2 = F[k, 0], F[k, 1], F[k, 2]
         else:
-            f0, f1, f2 = bsdf_eval_smooth(C, r, (-D[r, 0], -D[r, 1], -D[r, 2]), (wi0, wi1, wi2), ns, g)
+            f0, f1, f2 = bsdf_eval_plain(C, cr, (-D[r, 0], -D[r, 1], -D[r, 2]), (wi0, wi1, wi2), ns, g)
         cosa = abs(ns[0] * wi0 + ns[1] * wi1 + ns[2] * wi2)
         c0 = f0 * cosa * w0
         c1 = f1 * cosa * w1
@@ -486,6 +510,22 @@ def nee_light(rows, P, NG, NS, D, C, E, E_avg, prm, poses, steps, corners, q, cd
 
 
 @njit(**_JIT)
+def offset_rows(rows, inst_offset, instance, P, offset_pos, EPS):
+    """EPS[r] for each hit r in rows: ``raycast.geometry.offset_lengths`` of the hit, the object's
+    offset inst_offset[instance[r]] + offset_pos x the hit point's largest |coordinate|, with the
+    same float operations (numpy's row-wise maximum over 3 columns and the gathers around it cost
+    about 40 ns a row, more than next-event estimation's own loop).  Hit points are finite."""
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        m = 0.0
+        for a in range(3):
+            v = abs(P[r, a])
+            if v > m:
+                m = v
+        EPS[r] = inst_offset[instance[r]] + offset_pos * m
+
+
+@njit(**_JIT)
 def nee_accumulate(dst, rows, idx, use_idx, beta, use_beta, contrib, live, blocked, clamp):
     """dst[idx[rows[k]]] += beta[rows[k]] * contrib[k], k = live[j], for every shadow ray j not blocked.
 
@@ -510,10 +550,11 @@ def seen_lights_add(prm, poses, O, D, t_scene, camera_ray, L):
     caller skips lights that camera rays may not see (Blender's visible_camera).
     """
     one = poses.shape[0] == 1
-    M0 = poses[0]
+    M = pose_buffer(poses)                   # refilled per ray only when the light moves (no views per row)
     for r in range(O.shape[0]):
-        l0, l1, l2 = seen_light(prm, M0 if one else poses[r], (O[r, 0], O[r, 1], O[r, 2]),
-                                (D[r, 0], D[r, 1], D[r, 2]), t_scene[r], camera_ray)
+        if not one:
+            load_pose(poses, r, M)
+        l0, l1, l2 = seen_light(prm, M, row3(O, r), row3(D, r), t_scene[r], camera_ray)
         L[r, 0] += l0
         L[r, 1] += l1
         L[r, 2] += l2
@@ -523,10 +564,10 @@ def seen_lights_add(prm, poses, O, D, t_scene, camera_ray, L):
 # Photon-map look-ups at shaded vertices
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def photon_albedo(rows, P, NS, D, C, E, T, rho, p_q, n_q, t_q, live):
+def photon_albedo(rows, P, NS, D, C, crow, E, T, rho, p_q, n_q, t_q, live):
     """Diffuse albedo rho (n, 3) of the shaded rows ``rows`` (n,) and the query rows of a look-up.
 
-    rho[k] = ``diffuse_albedo``(C[r], E, wo, ns_f) (E: the GGX tables) with ns_f the shading normal
+    rho[k] = ``diffuse_albedo``(C[crow[r]], E, wo, ns_f) (E: the GGX tables) with ns_f the shading normal
     turned toward wo = -D[r].  Rows with some rho > 0 are queried: their
     point, ns_f and time go to p_q, n_q (n, 3) and t_q (n,), their k to live;
     returns how many.
@@ -538,7 +579,7 @@ def photon_albedo(rows, P, NS, D, C, E, T, rho, p_q, n_q, t_q, live):
         s0, s1, s2 = NS[r, 0], NS[r, 1], NS[r, 2]
         if s0 * wo[0] + s1 * wo[1] + s2 * wo[2] < 0.0:
             s0, s1, s2 = -s0, -s1, -s2
-        a0, a1, a2 = diffuse_albedo(C, r, E, wo, (s0, s1, s2))
+        a0, a1, a2 = diffuse_albedo(C, crow[r], E, wo, (s0, s1, s2))
         rho[k, 0], rho[k, 1], rho[k, 2] = a0, a1, a2
         if a0 > 0.0 or a1 > 0.0 or a2 > 0.0:
             p_q[n_live, 0], p_q[n_live, 1], p_q[n_live, 2] = P[r, 0], P[r, 1], P[r, 2]
@@ -570,13 +611,13 @@ def photon_add(dst, rows, live, rho, E, idx, use_idx, beta, use_beta, clamp):
 # Continuing through delta lobes
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg, U, rr, U_rr, EPS, guard_fraction,
+def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, E_avg, U, rr, U_rr, EPS, guard_fraction,
                   stop_coat, env, wposes, world_mis, counts, max_glossy, max_transmission, idx_out, beta_out, o_out,
                   d_out, guard_out, glossy_out, world_w_out, counts_out, use_feat, feat, dft, feat_out, dft_out):
     """Continue the hit rows spec (k,) through their delta and rough non-diffuse lobes; returns how
     many paths go on.
 
-    Per row j (hit r = spec[j]): (wi, weight, kind) = ``bsdf_sample_path``(C[r],
+    Per row j (hit r = spec[j]): (wi, weight, kind) = ``bsdf_sample_path``(C[crow[r]],
     wo = -D[r], U[j], stop_coat): the DIFFUSE lobe (which the photon maps carry) stops the path,
     a delta lobe or a rough one continues it (docs/rendering.md, "Path partition"); beta' = beta[r] *
     weight (weight alone when not use_beta).  The path goes on if some beta' > 0, and, when rr
@@ -602,12 +643,14 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg,
     :func:`denoising_rows`, indexed by hit row, copied to feat_out, dft_out of the next rays).
     """
     one_w = wposes.shape[0] == 1
+    M = pose_buffer(wposes)                  # no views or tuple items per row (sampling.row3)
+    func, par = env[1], env[4]
     n_go = 0
     for j in range(spec.shape[0]):
         r = spec[j]
         wo = (-D[r, 0], -D[r, 1], -D[r, 2])
         g = (NG[r, 0], NG[r, 1], NG[r, 2])
-        wi0, wi1, wi2, w0, w1, w2, kind, p_c = bsdf_sample_path(C, r, E, E_avg, wo, (NS[r, 0], NS[r, 1], NS[r, 2]),
+        wi0, wi1, wi2, w0, w1, w2, kind, p_c = bsdf_sample_path(C, crow[r], E, E_avg, wo, (NS[r, 0], NS[r, 1], NS[r, 2]),
                                                                 g, U[j, 0], U[j, 1], U[j, 2], stop_coat)
         if use_beta:
             b0, b1, b2 = beta[r, 0] * w0, beta[r, 1] * w1, beta[r, 2] * w2
@@ -641,7 +684,9 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, E, E_avg,
         if kind == PATH_GLOSSY:
             w_world = 0.0
             if world_mis:
-                p_l = world_nee_pdf(env, wposes[0 if one_w else j], g_f, (wi0, wi1, wi2))
+                if not one_w:
+                    load_pose(wposes, j, M)
+                p_l = world_nee_pdf(func, par, M, g_f, (wi0, wi1, wi2))
                 w_world = p_c / (p_c + p_l)
         world_w_out[n_go] = w_world
         counts_out[n_go, 0] = n_gl + (0 if trans else 1)

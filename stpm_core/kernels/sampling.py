@@ -48,7 +48,7 @@ from ..numba_probe import njit
 from .light_params import P_COLOR, P_COS_HALF, P_POWER, P_SHAPE, P_SIZE, P_SIZE_Y, P_SMOOTH, S_DISK, S_ELLIPSE
 
 __all__ = ["JIT", "JIT_INLINE", "TWO_PI", "INV_4PI", "dot", "edot", "cross", "normalize", "unit", "column",
-           "vec3", "sub", "add", "neg", "scale", "madd", "plane_point", "clip", "sign", "basis", "to_world",
+           "vec3", "row3", "pose_buffer", "load_pose", "sub", "add", "neg", "scale", "madd", "plane_point", "clip", "sign", "basis", "to_world",
            "concentric_disk", "cosine_hemisphere", "uniform_sphere", "uniform_cone", "axis_or_z",
            "one_minus_cos_from_sin2", "light_axis", "intensity", "spot_attenuation", "area_shape", "area_point",
            "search_right", "mesh_point", "mesh_choice", "mesh_choices"]
@@ -110,6 +110,35 @@ def column(M, j):
 def vec3(a, k):
     """(a[k], a[k + 1], a[k + 2]) of a 1-D array (a parameter row's 3 columns from k, a row of an (n, 3))."""
     return (a[k], a[k + 1], a[k + 2])
+
+
+@njit(**JIT_INLINE)
+def row3(A, r):
+    """(A[r, 0], A[r, 1], A[r, 2]) of an (n, 3) array, read in place.  In a per-row loop, prefer this
+    to ``vec3(A[r], 0)``: every array view a loop makes (``A[r]``, ``poses[k]``, an array taken
+    out of a tuple) takes and drops a reference to its parent, two atomic operations per row that
+    the compiler leaves in (docs/rendering.md, "Where the tracer's time goes")."""
+    return (A[r, 0], A[r, 1], A[r, 2])
+
+
+@njit(**JIT)
+def pose_buffer(poses):
+    """A (4, 4) copy of poses[0]: the matrix a per-row loop hands to per-row functions, refilled
+    with :func:`load_pose` when poses has one matrix per row (a view ``poses[k]`` per row would
+    cost two atomic reference-count operations per row, see :func:`row3`)."""
+    M = np.empty((4, 4))
+    for a in range(4):
+        for b in range(4):
+            M[a, b] = poses[0, a, b]                 # (not load_pose(poses, 0, M): a literal 0 would compile a second signature)
+    return M
+
+
+@njit(**JIT)
+def load_pose(poses, k, M):
+    """M (4, 4) = poses[k], element by element (no view)."""
+    for a in range(4):
+        for b in range(4):
+            M[a, b] = poses[k, a, b]
 
 
 @njit(**JIT)

@@ -39,7 +39,8 @@ from .procedural import (brick_color, brick_texture, magic_texture, noise_textur
 from .texture import tex_image_rows
 from ..nodes.ops import OP
 
-__all__ = ["shade", "shade_closures", "constant_closures", "run_program", "hash_uniform", "max_slots"]
+__all__ = ["shade", "shade_rows", "shade_closures", "constant_closures", "closure_rows", "run_program", "hash_uniform",
+           "max_slots"]
 
 # Opcodes as module constants (numba folds globals)
 _END = OP["END"]
@@ -1453,6 +1454,38 @@ def shade(sd, mat, G, seed, C) -> None:
         shade_closures(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, seed, C)
     else:
         constant_closures(mat, sd.closures, C)
+
+
+@njit(**JIT)
+def closure_rows(mat, closures, crow):
+    """crow[r] = the row of ``closures`` (M + 1, N_CLOSURE) that is hit r's constant closure (a miss,
+    material -1: the inert last row)."""
+    for r in range(mat.shape[0]):
+        crow[r] = closure_row(closures, mat[r])
+
+
+@njit(**JIT)
+def _identity_rows(crow):
+    for r in range(crow.shape[0]):
+        crow[r] = r
+
+
+def shade_rows(sd, mat, G, seed, C, crow) -> np.ndarray:
+    """The closures of hits with materials mat (m,) and geometry G for a ``shading.ShadingData`` sd,
+    as rows of an array: returns the array and fills crow (m,) int64 with the row of each hit.
+
+    Without node programs every hit's closure is its material's constant row: the array is the
+    material table ``sd.closures`` itself and crow the material rows (:func:`closure_rows`), 8
+    bytes per hit instead of a copied N_CLOSURE row of 256 (a tile of 65k hits would write and
+    then read 16 MB of copies, several times what the caches hold).  With node programs, C
+    (m, N_CLOSURE) receives one row per hit (:func:`shade`) and crow[r] = r.  The camera-path
+    kernels (``kernels.paths``) read hit r's closure as row crow[r]."""
+    if sd.uses_programs or sd.transparent:
+        shade(sd, mat, G, seed, C)
+        _identity_rows(crow)
+        return C
+    closure_rows(mat, sd.closures, crow)
+    return sd.closures
 
 
 def max_slots(prog: np.ndarray, starts) -> int:
