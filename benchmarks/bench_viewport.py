@@ -91,7 +91,8 @@ def measure_viewport(size=SIZE) -> dict:
     node = bpy.data.materials["Floor"].node_tree.nodes["Diffuse BSDF"]
 
     def view_update(_scene, depsgraph):                 # what Blender's view_update hands over
-        session.sync(depsgraph)
+        if depsgraph.mode == "VIEWPORT":
+            session.sync(depsgraph)
     bpy.app.handlers.depsgraph_update_post.append(view_update)
     try:
         for k in range(REPEATS):

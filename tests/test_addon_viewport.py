@@ -57,12 +57,15 @@ def non_core_threads() -> set:
 
 @pytest.fixture
 def on_updates():
-    """Register fn(depsgraph) as a depsgraph_update_post handler for the test."""
+    """Register fn(depsgraph) as a depsgraph_update_post handler for the test, called for the
+    view layer's (viewport) depsgraph only, as Blender calls view_update (an F12 render's own
+    depsgraph reports its updates to the same handlers)."""
     added = []
 
     def add(fn):
         def handler(_scene, depsgraph):
-            fn(depsgraph)
+            if depsgraph.mode == "VIEWPORT":
+                fn(depsgraph)
         bpy.app.handlers.depsgraph_update_post.append(handler)
         added.append(handler)
     yield add
@@ -192,11 +195,11 @@ def test_viewport_renders_pass_by_pass_restarts_on_edits_and_moves_without_reexp
         st.samples = 1
         scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 24, 16, 100
         LAST_RENDER.clear()
+        starts = session.starts
         bpy.ops.render.render()
-        assert LAST_RENDER["stats"]["resolution"] == [24, 16]
+        assert LAST_RENDER["stats"]["resolution"] == [24, 16] and session.starts == starts
         shown = session.images
-        assert session.wait(lambda s: s.images > shown)
-        assert session.image()[0].shape == (H, W, 4)
+        assert session.wait(lambda s: s.images > shown and s.image()[0].shape == (H, W, 4))
     finally:
         assert session.stop()
     # No thread of the session is left: its worker and the renders' tile pools are gone
