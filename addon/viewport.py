@@ -170,8 +170,12 @@ class ViewportSession:
         needs_export = first
         if not first:
             what = forget_for_updates(self.cache, depsgraph.updates)
-            if signature.get("world") != (self._signature or {}).get("world"):
+            before = self._signature or {}
+            if signature["world"] != before.get("world"):
                 self.cache.forget_world()          # another world assigned: a Scene update, not a World one
+            if signature["working_space"] != before.get("working_space"):
+                self.cache.forget_materials()      # colours converted to another working space
+                self.cache.forget_world()
             needs_export = bool(what["objects"] or what["materials"] or what["world"] or what["other"]) \
                 or signature != self._signature
         self._signature = signature
@@ -375,8 +379,9 @@ class ViewportSession:
     def stopped(self) -> bool:
         return self._stopping
 
-    def wait(self, predicate, timeout: float = 30.0, poll: float = 0.01) -> bool:
-        """Wait until ``predicate(self)`` holds (tests, the benchmark); False on timeout."""
+    def wait(self, predicate, timeout: float = 300.0, poll: float = 0.01) -> bool:
+        """Wait until ``predicate(self)`` holds (tests, the benchmark); False on timeout (the default
+        leaves room for a first render that compiles the kernels)."""
         t_end = time.perf_counter() + timeout
         while time.perf_counter() < t_end:
             if predicate(self):
@@ -409,10 +414,14 @@ def _no_frame_set(frame: int, subframe: float) -> None:
 
 def _scene_signature(scene) -> dict:
     """What of the Blender scene, besides its objects, the viewport's export reads: a change
-    (seen as a Scene update, e.g. another world assigned, Film > Transparent) re-exports."""
+    (seen as a Scene update, e.g. another world assigned, Film > Transparent) re-exports; the
+    file's working colour space (Blender 5), which the materials' and world's colours are
+    converted to, also makes them stale."""
+    from .export.nodes import working_space
     return {"world": scene.world.name_full if scene.world is not None else None,
             "film_transparent": bool(scene.render.film_transparent),
-            "frame": (int(scene.frame_current), float(scene.frame_subframe))}
+            "frame": (int(scene.frame_current), float(scene.frame_subframe)),
+            "working_space": working_space()}
 
 
 # ---------------------------------------------------------------------------------------------

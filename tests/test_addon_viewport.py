@@ -327,7 +327,7 @@ def test_view_update_and_view_draw_delegate_to_one_session_per_engine(monkeypatc
 
 
 # ----------------------------------------------------------------------------- previews
-def _preview_of(material, done: threading.Event, timeout: float = 120.0) -> np.ndarray:
+def _preview_of(material, done: threading.Event, timeout: float = 300.0) -> np.ndarray:
     """Blender's preview of ``material`` rendered by the engine: (H, W, 4) float, row 0 = bottom."""
     done.clear()
     with bpy.context.temp_override(id=material):
