@@ -12,6 +12,8 @@ source checkout (``import addon; addon.register()`` with the repository root on
 * ``compare_op.py`` -- "Compare with Accumulation Buffer" (the stpm compare report)
 * ``bake_op.py``    -- "Bake Unsupported Inputs" (Cycles bakes of what the node interpreter cannot evaluate)
 * ``denoise.py``    -- the compositor's STPM Denoise group (Blender's Denoise node on the guide passes)
+* ``viewport.py``   -- the rendered viewport (a session per 3D view: export, worker thread, image, restarts)
+* ``preview.py``    -- material / world / light previews (``is_preview``)
 """
 from __future__ import annotations
 

@@ -141,11 +141,16 @@ def write_passes(engine, passes: dict, width: int, height: int, layer_name: str 
 
 
 class STPMRenderEngine(bpy.types.RenderEngine):
-    """Time-dependent photon mapping (Cammarano & Jensen 2002)."""
+    """Time-dependent photon mapping (Cammarano & Jensen 2002).
+
+    One instance per render: F12, each material / world preview, and each 3D view in Rendered
+    mode get their own, and share nothing (the viewport's state lives in the instance's
+    :class:`addon.viewport.ViewportSession`).
+    """
 
     bl_idname = "STPM"
     bl_label = "STPM Photon Mapper"
-    bl_use_preview = False
+    bl_use_preview = True            # material / world / light previews: addon/preview.py
     bl_use_postprocess = True        # compositor and sequencer run after us
     bl_use_shading_nodes_custom = False  # Blender's own shader nodes (Cycles' node editor)
     bl_use_eevee_viewport = True     # Material preview in the viewport uses EEVEE
@@ -156,11 +161,16 @@ class STPMRenderEngine(bpy.types.RenderEngine):
         for name, channels, ids in _core.passes_table(denoise):
             self.register_pass(scene, renderlayer, name, channels, ids, pass_type(ids))
 
-    # Final render
+    # Final render and previews
     def render(self, depsgraph):
-        """Blender's entry point: :meth:`_render`, with any unexpected exception turned into one
-        ERROR line in the render report (the traceback goes to the console for bug reports)."""
+        """Blender's entry point: :meth:`_render` (previews: :func:`addon.preview.render_preview`),
+        with any unexpected exception turned into one ERROR line in the render report (the
+        traceback goes to the console for bug reports)."""
         try:
+            if self.is_preview:
+                from . import preview
+                preview.render_preview(self, depsgraph)
+                return
             self._render(depsgraph)
         except Exception as exc:  # a bug or an unforeseen scene: never a raw traceback in the UI
             traceback.print_exc()
@@ -251,6 +261,26 @@ class STPMRenderEngine(bpy.types.RenderEngine):
         LAST_RENDER.update(stats=stats, warnings=list(self.stpm_warnings), passes=written, scene=stpm_scene, plan=plan)
         self.update_stats("STPM", f"Done in {stats['wall_s']:.1f} s (export {export_s:.2f} s)")
 
+    # Rendered viewport: addon/viewport.py does the work (ViewportSession), these only delegate
+    def view_update(self, context, depsgraph):
+        """Blender's viewport sync (Rendered mode turned on, an edit): export what changed, restart."""
+        from . import viewport
+        viewport.view_update(self, context, depsgraph)
+
+    def view_draw(self, context, depsgraph):
+        """Draw the newest image; a moved or resized view, or changed settings, restart without export."""
+        from . import viewport
+        viewport.view_draw(self, context, depsgraph)
+
+    def __del__(self):
+        """Blender frees this engine (a view left Rendered mode): stop its viewport thread."""
+        try:
+            if "stpm_viewport" in self.__dict__:
+                from . import viewport
+                viewport.stop_engine_session(self)
+        except (ReferenceError, ImportError):       # freed RNA, or the interpreter is shutting down
+            pass
+
     def cancel_requested(self) -> bool:
         """Has the user cancelled (Esc)?  Blender's ``test_break``, polled by the core about every second."""
         return bool(self.test_break())
@@ -288,7 +318,8 @@ def _compatible_panels():
                  "DATA_PT_light", "DATA_PT_EEVEE_light", "MATERIAL_PT_preview", "EEVEE_MATERIAL_PT_context_material",
                  "EEVEE_MATERIAL_PT_surface", "EEVEE_WORLD_PT_surface", "WORLD_PT_context_world",
                  "CYCLES_LIGHT_PT_light", "CYCLES_MATERIAL_PT_surface", "CYCLES_WORLD_PT_surface",
-                 "CYCLES_CAMERA_PT_dof", "VIEWLAYER_PT_layer_passes"):
+                 "CYCLES_CAMERA_PT_dof", "VIEWLAYER_PT_layer_passes",
+                 "CYCLES_WORLD_PT_preview", "CYCLES_LIGHT_PT_preview"):   # world / light previews (bl_use_preview)
         panel = getattr(bpy.types, name, None)
         if panel is not None and hasattr(panel, "COMPAT_ENGINES"):
             panels.append(panel)

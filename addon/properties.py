@@ -4,7 +4,9 @@ Names and meanings are fixed by ``shared/interface.md``.  The render settings ar
 here: one property per row of the core's schema (:data:`stpm_core.settings.RenderSettings.SPECS`,
 :mod:`stpm_core.schema`) -- its label, default, min / max, enum items and description -- so the
 add-on, the command line and the scene-file loader cannot disagree.  Declared here are only the
-export settings the core has no field for (``motion_steps``, ``bake_resolution``).
+settings the core has no field for: export (``motion_steps``, ``bake_resolution``) and the
+rendered viewport's stops (``preview_passes``, ``preview_time_limit``, as Cycles' viewport
+samples: :func:`addon.viewport.viewport_settings` turns them into ``passes`` / ``time_limit``).
 :func:`settings_from_scene` turns the properties into the core's settings object.
 """
 from __future__ import annotations
@@ -71,6 +73,15 @@ class STPM_SceneSettings(bpy.types.PropertyGroup):
         name="Bake Resolution", default=512, min=16, soft_max=4096, max=16384, subtype="PIXEL",
         description="Width and height of the texture each unsupported shader input is baked to "
                     "(Bake Unsupported Inputs, stpm render)")
+
+    # The rendered viewport (addon/viewport.py): progressive passes until one of these stops it
+    preview_passes: IntProperty(
+        name="Viewport Passes", default=1024, min=0, soft_min=1, max=1 << 24,
+        description="Progressive passes the rendered viewport renders (one camera sample per pixel each), "
+                    "unlimited if 0")
+    preview_time_limit: FloatProperty(
+        name="Viewport Time Limit", default=0.0, min=0.0, max=1e9, soft_max=3600.0, subtype="TIME_ABSOLUTE",
+        description="Seconds the rendered viewport renders after each change; 0 = no limit")
 
     @classmethod
     def register(cls) -> None:

@@ -105,6 +105,18 @@ class STPM_RENDER_PT_sampling(_STPMPanel, bpy.types.Panel):
         self.layout.menu(STPM_MT_presets.bl_idname, text="", icon="PRESET")
 
 
+class STPM_RENDER_PT_sampling_viewport(_STPMPanel, bpy.types.Panel):
+    """The rendered viewport's stops (as Cycles' Sampling > Viewport)."""
+
+    bl_label = "Viewport"
+    bl_parent_id = "STPM_RENDER_PT_sampling"
+
+    def draw(self, context):
+        col = self._column()
+        col.prop(context.scene.stpm, "preview_passes", text="Passes")
+        col.prop(context.scene.stpm, "preview_time_limit", text="Time Limit")
+
+
 class STPM_RENDER_PT_photons(_STPMPanel, bpy.types.Panel):
     bl_label = "Photons"
     PROPS = ("photons_global", "photons_caustic", "k_nearest", "kernel")
@@ -223,6 +235,7 @@ classes = (
     STPM_OT_compute_plan,
     STPM_MT_presets,
     STPM_RENDER_PT_sampling,
+    STPM_RENDER_PT_sampling_viewport,
     STPM_RENDER_PT_photons,
     STPM_RENDER_PT_method,
     STPM_RENDER_PT_motion_blur,

@@ -43,6 +43,8 @@ def test_engine_and_panels_register_and_unregister():
         assert panel.bl_context == "render" and "STPM" in panel.COMPAT_ENGINES
     engine = bpy.types.RenderEngine.bl_rna_get_subclass_py("STPM")
     assert engine.bl_label == "STPM Photon Mapper" and engine.bl_use_postprocess
+    assert engine.bl_use_preview                           # material / world previews (addon/preview.py)
+    assert {"view_update", "view_draw"} <= set(vars(engine))           # the rendered viewport
     addon.unregister()
     assert not hasattr(bpy.types.Scene, "stpm") and not hasattr(bpy.types, "STPM_RENDER_PT_sampling")
     addon.register()
@@ -117,6 +119,12 @@ def test_panels_draw_every_setting():
     ui.STPM_RENDER_PT_denoising.draw(panel, context)
     drawn["STPM_RENDER_PT_denoising"] = log
     assert log == ["denoise"]
+    log = []                                        # Sampling > Viewport: the rendered viewport's stops
+    panel = type("Drawn", (ui._STPMPanel,), {})()
+    panel.layout = _RecordingLayout(log)
+    ui.STPM_RENDER_PT_sampling_viewport.draw(panel, context)
+    assert log == ["preview_passes", "preview_time_limit"]
+    assert ui.STPM_RENDER_PT_sampling_viewport.bl_parent_id == "STPM_RENDER_PT_sampling"
     scene.stpm.method = "ACCUMULATION"
     shown = {n for log in drawn.values() for n in log} | {"accumulation_steps"}
     assert set(SETTING_NAMES) - shown == set(), set(SETTING_NAMES) - shown

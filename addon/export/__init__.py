@@ -18,6 +18,10 @@ become ``Scene.textures`` and every mesh carries its UV maps, and the tangents i
 tangent-space Normal Maps read (taken at the current frame: a deforming mesh's UVs and
 tangents do not change across the shutter).  Shader inputs the interpreter cannot evaluate read
 their cached bakes (:mod:`.bake`; :func:`rendered_meshes` lists what a bake plan covers).
+
+The rendered viewport exports with ``motion_blur=False`` (the current frame alone: it cannot move
+Blender's frame), ``camera=False`` (it brings the view's camera) and an :class:`.cache.ExportCache`
+(meshes, materials and the world of the last export are reused while no update touched them).
 """
 from __future__ import annotations
 
@@ -31,8 +35,9 @@ from . import mesh as mesh_export
 from . import motion
 from . import nodes as node_export
 from . import world as world_export
+from .cache import ExportCache
 
-__all__ = ["export_scene"]
+__all__ = ["export_scene", "ExportCache"]
 
 
 def _instance_key(inst) -> tuple:
@@ -96,7 +101,8 @@ def default_bakes(depsgraph):
     return bake.BakeResolver(depsgraph)
 
 
-def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default") -> tuple:
+def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default", motion_blur: bool = True,
+                 camera: bool = True, cache: ExportCache | None = None) -> tuple:
     """Export the depsgraph's scene at its current frame.
 
     Parameters
@@ -108,22 +114,31 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
     bakes : a :class:`.bake.BakeResolver` (inputs the interpreter cannot evaluate read their
         cached bakes; missing ones are named), "default" (one for the open file's cache), or
         None (no baking: such inputs use their defaults, named by the node compiler).
+    motion_blur : False: the current frame alone (an instant shutter; ``frame_set`` is never
+        called), whatever the scene's motion blur settings.
+    camera : False: no camera is exported and none is needed (``Scene.camera`` is a default
+        :class:`Camera` the caller replaces: the rendered viewport's view).
+    cache : an :class:`.cache.ExportCache` to take unchanged meshes, materials and the world from
+        and to keep this export's in (the rendered viewport); None converts everything.
 
-    Returns (Scene, warnings: list[str]).  Raises StpmError when there is no camera.
+    Returns (Scene, warnings: list[str]).  Raises StpmError when there is no camera (and
+    ``camera`` is True).
     """
     scene = depsgraph.scene
     render = scene.render
     warnings: list[str] = []
     frame_now, sub_now = scene.frame_current, float(scene.frame_subframe)
     frame = frame_now + sub_now
-    shutter = motion.shutter_from_render(render, frame)
-    cam_obj = scene.camera
-    if cam_obj is None:
+    shutter = motion.shutter_from_render(render, frame) if motion_blur else _core_shutter(frame)
+    cam_obj = scene.camera if camera else None
+    if camera and cam_obj is None:
         raise StpmError(f"scene {scene.name!r} has no active camera")
-    if cam_obj.type != "CAMERA":  # Blender lets an Empty or a Light be the scene camera
+    if cam_obj is not None and cam_obj.type != "CAMERA":  # Blender lets an Empty or a Light be the scene camera
         raise StpmError(f"the scene camera {cam_obj.name!r} is not a camera object (object type {cam_obj.type}); "
                         f"set a Camera in Scene Properties > Camera")
-    cam_name = cam_obj.name_full
+    cam_name = cam_obj.name_full if cam_obj is not None else None
+    if cache is not None:
+        cache.begin()
 
     # 1. Everything at the current frame
     if isinstance(bakes, str):
@@ -132,7 +147,13 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
         except Exception as e:  # noqa: BLE001 -- never fail an export on the bake cache
             warnings.append(f"baked inputs are not used: the bake cache could not be opened ({type(e).__name__}: {e})")
             bakes = None
-    mats = material_export.MaterialExporter(warnings, bakes=bakes)
+    if cache is not None and cache.materials is not None:
+        mats = cache.materials            # no material changed since the last export: reuse its conversions
+        mats.warnings = warnings
+    else:
+        mats = material_export.MaterialExporter(warnings, bakes=bakes)
+        if cache is not None:
+            cache.materials = mats
     meshes: list = []
     mesh_cache: dict = {}
     records: dict = {}
@@ -174,12 +195,19 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
         data_key = (obj.data.as_pointer() if inst.is_instance and obj.data is not None else obj.name_full,
                     tuple(mat_ids.tolist()))
         if data_key not in mesh_cache:
+            tangent_maps, color_maps = mats.tangent_maps(mat_ids.tolist()), mats.color_maps(mat_ids.tolist())
+            kept_key = (data_key, tuple(tangent_maps), tuple(color_maps))
+            kept = cache.mesh(kept_key) if cache is not None else None
+            if kept is not None:        # unchanged since the last export (ExportCache)
+                meshes.append(kept)
+                mesh_cache[data_key] = len(meshes) - 1
+        if data_key not in mesh_cache:
             me, cleanup = mesh_export.evaluated_mesh(obj)
             if me is None:
                 continue
-            arr = mesh_export.mesh_arrays(me, tangent_maps=mats.tangent_maps(mat_ids.tolist()),
+            arr = mesh_export.mesh_arrays(me, tangent_maps=tangent_maps,
                                           warn=lambda text: _warn_once(warnings, text),
-                                          color_maps=mats.color_maps(mat_ids.tolist()))
+                                          color_maps=color_maps)
             cleanup()
             if arr["triangles"].shape[0] == 0:
                 mesh_cache[data_key] = -1
@@ -192,6 +220,8 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                                                color_layers=arr["color_layers"],
                                                color_render=arr["color_render"]))
                 mesh_cache[data_key] = len(meshes) - 1
+                if cache is not None:
+                    cache.keep_mesh(kept_key, None if inst.is_instance else obj.original.name_full, meshes[-1])
         if mesh_cache[data_key] < 0:
             continue
         records[key] = _Record("MESH", obj.name if not inst.is_instance else f"{obj.name}@{inst.parent.name}",
@@ -199,7 +229,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                                use_deform=use_deform and not inst.is_instance and obj.type == "MESH",
                                is_instance=inst.is_instance)
     _warn_holdout_collections(getattr(depsgraph, "view_layer", None), warnings)
-    if cam_matrix is None:  # a camera hidden from render still defines the view
+    if cam_matrix is None and cam_obj is not None:  # a camera hidden from render still defines the view
         cam_eval = cam_obj.evaluated_get(depsgraph)
         cam_matrix = np.array(cam_eval.matrix_world, dtype=np.float64)
         records[("", cam_name, ())] = _Record("CAMERA", cam_name, cam_name, cam_matrix)
@@ -263,15 +293,27 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
             if obj is not None:
                 lights.append(light_export.export_light(obj, t, samples[key], warnings))
                 light_seen.append(bool(getattr(obj, "visible_camera", True)))
-        elif r.kind == "CAMERA" and cam is None:
+        elif r.kind == "CAMERA" and cam is None and cam_obj is not None:
             cam = camera_export.export_camera(cam_obj.evaluated_get(depsgraph), t, samples[key], warnings)
+    if cam is None:          # camera=False: the caller brings its own
+        cam = scene_model.Camera()
+    if cache is not None and cache.world is not None:
+        world, world_warnings = cache.world       # the world did not change since the last export
+        warnings.extend(w for w in world_warnings if w not in warnings)
+    else:
+        said = len(warnings)
+        world = world_export.export_world(scene.world, warnings, times, world_keys or None, bakes=bakes)
+        if cache is not None:
+            cache.world = (world, list(warnings[said:]))
+    if cache is not None:
+        cache.end()
 
     if abs(render.pixel_aspect_x - render.pixel_aspect_y) > 1e-6:
         warnings.append("non-square pixel aspect is ignored")
     out = scene_model.Scene(
         meshes=meshes, instances=instances, camera=cam, lights=lights, materials=mats.materials,
         textures=mats.textures.textures,
-        world=world_export.export_world(scene.world, warnings, times, world_keys or None, bakes=bakes),
+        world=world,
         shutter=shutter,
         resolution=camera_export.render_resolution(render), frame=float(frame),
         metadata={"exporter": "stpm-blender", "blender_scene": scene.name, "motion_steps": int(len(times)),
@@ -293,6 +335,11 @@ def _working_space(warnings: list) -> str:
         _warn_once(warnings, f"working colour space {name!r} is not supported: colours are rendered as "
                              f"Linear Rec.709 (use Linear Rec.709, Linear Rec.2020 or ACEScg)")
     return ws
+
+
+def _core_shutter(frame: float):
+    """An instant shutter at ``frame`` (no motion blur)."""
+    return motion.Shutter(open=frame, close=frame)
 
 
 def _warn_ignored_object_flags(obj, warnings: list) -> None:

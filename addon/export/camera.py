@@ -1,7 +1,10 @@
-"""Blender camera -> :class:`stpm_core.scene.Camera` (motion added by the caller)."""
+"""Blender camera -> :class:`stpm_core.scene.Camera` (motion added by the caller); a 3D view's
+matrices -> Camera (:func:`view_camera`, the rendered viewport)."""
 from __future__ import annotations
 
-from .._core import scene_model
+import numpy as np
+
+from .._core import MotionTransform, scene_model
 from .motion import transform_from_samples, without_scale
 
 
@@ -39,4 +42,57 @@ def export_camera(cam_obj, times, matrices, warnings: list) -> "scene_model.Came
         shift_y=float(cam.shift_y),
         clip_start=float(cam.clip_start),
         clip_end=float(cam.clip_end),
+    )
+
+
+# Sensor width given to a view's camera: any value works, the lens is derived from it
+_VIEW_SENSOR = 36.0
+
+
+def view_camera(view_matrix, window_matrix, width: int, height: int) -> "scene_model.Camera":
+    """The camera of a 3D view: its world-to-view matrix and its projection (OpenGL clip space,
+    Blender's ``RegionView3D.view_matrix`` / ``window_matrix``), for an image of width x height
+    pixels covering the whole region.  No bpy: the matrices are plain 4 x 4 arrays.
+
+    Perspective when the projection's last row is (0, 0, -1, 0), else orthographic.  With
+    ``P`` the projection, a view-space point (x, y, z) lands at NDC ``x_ndc = (P00 x + P02 z) /
+    -z`` (perspective), so the frame spans the image-plane tangents ``(+-1 + P02) / P00``: half
+    width ``1 / P00``, centre ``P02 / P00``; the core's horizontally fitted camera has half width
+    ``sensor / (2 lens)`` and centre ``shift_x * sensor / lens`` (stpm_core/camera.py), so
+    ``lens = sensor P00 / 2``, ``shift_x = P02 / 2``, ``shift_y = P12 P00 / (2 P11)``.
+    Orthographic: ``x_ndc = P00 x + P03``, ``ortho_scale = 2 / P00``, ``shift_x = -P03 / 2``,
+    ``shift_y = -P13 P00 / (2 P11)``.  Clipping distances come from P's third row; an orthographic
+    view whose near plane lies behind its eye (Blender's ortho views clip symmetrically around
+    it) moves the eye back along the view axis until it is in front.
+    """
+    V = np.asarray(view_matrix, dtype=np.float64).reshape(4, 4)
+    P = np.asarray(window_matrix, dtype=np.float64).reshape(4, 4)
+    cam_to_world = np.linalg.inv(V)
+    perspective = abs(P[3, 2] + 1.0) < 1e-6 and abs(P[3, 3]) < 1e-6
+    if perspective:
+        near, far = P[2, 3] / (P[2, 2] - 1.0), P[2, 3] / (P[2, 2] + 1.0)
+        shift_x, shift_y = 0.5 * P[0, 2], 0.5 * P[1, 2] * P[0, 0] / P[1, 1]
+    else:
+        near, far = (P[2, 3] + 1.0) / P[2, 2], (P[2, 3] - 1.0) / P[2, 2]
+        shift_x, shift_y = -0.5 * P[0, 3], -0.5 * P[1, 3] * P[0, 0] / P[1, 1]
+        back = max(0.0, -near) + 1e-3 * max(far - near, 1e-6)     # eye in front of the near plane
+        if near <= 0.0:
+            axis = cam_to_world[:3, 2] / max(np.linalg.norm(cam_to_world[:3, 2]), 1e-300)   # view +Z (backwards)
+            cam_to_world = cam_to_world.copy()
+            cam_to_world[:3, 3] += back * axis
+            near, far = near + back, far + back
+    if not np.isfinite(far) or far <= near:
+        far = near * 1e9
+    return scene_model.Camera(
+        type="PERSP" if perspective else "ORTHO",
+        transform=MotionTransform.static(cam_to_world),
+        lens=float(_VIEW_SENSOR * P[0, 0] / 2.0) if perspective else 50.0,
+        sensor_width=_VIEW_SENSOR,
+        sensor_height=_VIEW_SENSOR * height / max(width, 1),
+        sensor_fit="HORIZONTAL",
+        ortho_scale=float(2.0 / P[0, 0]) if not perspective else 6.0,
+        shift_x=float(shift_x),
+        shift_y=float(shift_y),
+        clip_start=float(max(near, 1e-6)),
+        clip_end=float(far),
     )

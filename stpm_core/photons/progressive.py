@@ -143,8 +143,9 @@ class Pilot:
             q[:, :3] = m.position[idx]
             q[:, 3] = self.time_scale * m.time[idx]
             r = tree.knn_radius(q, PILOT_K + 1, np.inf, m.workers)     # + 1: the photon itself
-            self.cap[kind] = CAP_FACTOR * float(np.percentile(r, 90.0))
+            # _median first: tile threads that see cap[kind] go on to read _median[kind]
             self._median[kind] = float(np.median(r))
+            self.cap[kind] = CAP_FACTOR * float(np.percentile(r, 90.0))
         return self.cap[kind]
 
     def initial_size(self, kind: str, q: np.ndarray, ns: np.ndarray):
