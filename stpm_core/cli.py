@@ -502,9 +502,34 @@ def main(argv: list[str] | None = None) -> int:
     SIGINT / SIGTERM are handled from the start (:class:`CancelFlag`), so a
     Ctrl-C at any moment, loading included, ends with one line and status 130.
     """
+    own_process = argv is None  # the console script: the process ends when this returns
     argv = list(sys.argv[1:] if argv is None else argv)
-    with CancelFlag() as cancel:
-        return _main(argv, cancel)
+    with CancelFlag(keep_after_cancel=own_process) as cancel:
+        status = _main(argv, cancel)
+    if own_process and cancel.set:
+        _end_cancelled_process(status)
+    return status
+
+
+def _end_cancelled_process(status: int) -> None:
+    """End a cancelled ``stpm`` process now, with ``status``.
+
+    Python's own shutdown puts the default signal actions back before it tears
+    the modules down, so a second Ctrl-C in that window would kill the process by
+    the signal (status -2) without a word.  The exit handlers (reader processes
+    and temporary folders) run here, with STPM's handler still installed, then
+    the process ends.
+    """
+    import atexit
+    try:
+        atexit._run_exitfuncs()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError, RuntimeError):
+                pass
+        os._exit(status)
 
 
 def _main(argv: list[str], cancel: CancelFlag) -> int:

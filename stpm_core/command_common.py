@@ -351,13 +351,16 @@ class CancelFlag:
 
     ``stpm_core.cli.main`` installs one for the whole command (``CancelFlag.active``);
     a nested ``with CancelFlag()`` (``stpm compare``) returns that one.  ``err_fd``:
-    where the messages go (a descriptor; None = sys.stderr).
+    where the messages go (a descriptor; None = sys.stderr).  ``keep_after_cancel``:
+    after a cancel, leave the handler installed on exit (for a process that ends
+    right after; a second signal then still aborts with one line).
     """
 
     active: "CancelFlag | None" = None
 
-    def __init__(self):
+    def __init__(self, keep_after_cancel: bool = False):
         self.signum: int | None = None
+        self.keep_after_cancel = keep_after_cancel
         self.err_fd: int | None = None
         self._old: dict = {}
         self._outer = None
@@ -420,6 +423,12 @@ class CancelFlag:
 
     def __exit__(self, *exc):
         if self._outer is not None:
+            return False
+        if self.signum is not None and self.keep_after_cancel and CancelFlag.active is self:
+            # Cancelled, and the process is about to exit 128 + signum: the handler stays, so
+            # a second signal in that window still aborts with one line and 130 / 143 rather
+            # than killing the process by the signal's default action.
+            CancelFlag.active = None
             return False
         for sig, old in self._old.items():
             signal.signal(sig, old if old is not None else signal.SIG_DFL)
