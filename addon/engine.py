@@ -200,6 +200,10 @@ class STPMRenderEngine(bpy.types.RenderEngine):
             denoise_problem = compositor_problem(scene)      # denoise on, but no STPM Denoise group to run
             if denoise_problem:
                 warnings.append(denoise_problem)
+            if settings.method == "PROGRESSIVE" and settings.pass_offset > 0:
+                warnings.append(f"Pass Offset {settings.pass_offset}: this image holds passes "
+                                f"{settings.pass_offset + 1} on only, and is not a partial result stpm merge "
+                                "joins (a farm writes those with stpm render --pass-offset; docs/cli.md)")
             for w in warnings:
                 self.report({"WARNING"}, w)
             if self.cancel_requested():

@@ -29,7 +29,7 @@ PRESETS: dict[str, dict] = {
     "FINAL_PROGRESSIVE": {
         "method": "PROGRESSIVE", "estimator": "TEMPORAL", "samples": 1, "photons_global": 100_000,
         "photons_caustic": 200_000, "k_nearest": 20, "temporal_alpha": 0.0, "time_scale": 0.0,
-        "passes": 1024, "time_limit": 0.0, "noise_threshold": 0.02, "shrink_alpha": 0.0, "pass_offset": 0,
+        "passes": 1024, "time_limit": 0.0, "noise_threshold": 0.1, "shrink_alpha": 0.0, "pass_offset": 0,
         "max_depth": 8, "motion_steps": 5,
     },
 }

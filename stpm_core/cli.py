@@ -41,6 +41,7 @@ from .command_common import (EXIT_CANCELLED, EXIT_ERROR, EXIT_INTERNAL, EXIT_OK,
                              check_cancel, check_memory, checked_overrides, load_any_scene, open_blend_reader,
                              option_message, safe_text, scene_kind)
 from .errors import RenderCancelled, SceneError, SettingsError, StpmError
+from .strata import is_round_end, round_ends_near
 
 __all__ = ["main", "parse_frames", "load_any_scene"]
 
@@ -262,6 +263,24 @@ def _cmd_render(args) -> int:
         set_persistent_static(False)
 
 
+def _warn_progressive_options(args, overrides: dict, settings) -> None:
+    """Warnings for progressive options that do nothing, or do what the user may not expect."""
+    given = [f for f, k in (("--passes", "passes"), ("--time-limit", "time_limit"),
+                            ("--noise-threshold", "noise_threshold"), ("--shrink-alpha", "shrink_alpha"))
+             if k in overrides]
+    if settings.method != "PROGRESSIVE" and given:
+        _warn(f"{' / '.join(given)} {'has' if len(given) == 1 else 'have'} no effect with --method "
+              f"{settings.method.lower()}: they set progressive rendering (--method progressive)")
+    per_pass = ("samples", "photons_caustic", "photons_global")
+    if settings.method == "PROGRESSIVE" and str(overrides.get("method", "")).upper() == "PROGRESSIVE" \
+            and not any(k in overrides for k in per_pass) \
+            and (settings.samples > 4 or settings.photons_caustic + settings.photons_global > 400_000):
+        _warn(f"every progressive pass traces the file's {settings.samples} samples per pixel and "
+              f"{settings.photons_caustic + settings.photons_global:,} photons: many small passes converge "
+              "faster (the Final Progressive preset: --samples 1 --photons-caustic 200000 --photons-global 100000 "
+              "--k-nearest 20)")
+
+
 def _warn(line: str) -> None:
     print(f"stpm: warning: {safe_text(line)}", file=sys.stderr, flush=True)
 
@@ -319,6 +338,17 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
         if partial and settings.method != "PROGRESSIVE":
             raise StpmError(f"--pass-offset renders part of a progressive render: it needs --method progressive "
                             f"(the settings say {settings.method.lower()})")
+        if partial and settings.passes > 0 and not is_round_end(settings.pass_offset + settings.passes):
+            n = settings.pass_offset + settings.passes
+            ends = ", ".join(str(m) for m in round_ends_near(n) if m > settings.pass_offset)
+            raise UsageError(f"--pass-offset {settings.pass_offset} --passes {settings.passes} ends at pass {n}, "
+                             f"inside a round of time strata, and a partial result holds whole rounds: end at "
+                             f"pass {ends} or another round end (docs/cli.md, \"Partial renders\")")
+        if index == 0:
+            _warn_progressive_options(args, overrides, settings)
+            if partial and settings.denoise:
+                _warn("denoise is not applied to a partial result (--pass-offset): the merged EXR holds the "
+                      "noisy passes; denoise it in Blender's compositor (docs/blender.md, \"Denoising\")")
         check_memory(scene.resolution, settings.method, settings)
         if index == 0:
             if scene_path.suffix.lower() == ".blend" or scene_kind(scene_path) == "blend":
@@ -442,6 +472,9 @@ def _cmd_merge(args) -> int:
                 raise StpmError(f"the {what} {p} is the partial result {part} itself: choose another --output")
     check_cancel(CancelFlag.active)
     sums, head = merge(args.parts)
+    if sums.first != 1:
+        _warn(f"the partial results hold passes {sums.first}..{sums.end - 1}: passes 1..{sums.first - 1} are "
+              "missing (the image is right but noisier than one of passes 1..)")
     noise = noise_estimate(sums)
     info = {"passes": sums.count, "pass_first": sums.first, "pass_end": sums.end, "stopped_by": "merge",
             "noise_p95": noise["noise_p95"] if noise["noise_p95"] < 1e300 else None,
@@ -450,8 +483,8 @@ def _cmd_merge(args) -> int:
             "seed": head["seed"], "scene_hash": head["scene_hash"], "settings_hash": head["settings_hash"]}
     passes = sums.image()
     working = head["working_space"]
-    outputs = [(out_exr, lambda tmp: write_exr(tmp, passes, {"stpm:progressive": info}, atomic=False,
-                                               working=working)),
+    meta = {**head.get("provenance", {}), "stpm:progressive": info}
+    outputs = [(out_exr, lambda tmp: write_exr(tmp, passes, meta, atomic=False, working=working)),
                (out_png, lambda tmp: write_png(tmp, passes["Combined"][:, :, :3], atomic=False, working=working))]
     if stats_path is not None:
         outputs.append((stats_path, lambda tmp: write_json(tmp, {"progressive": info}, atomic=False)))

@@ -8,8 +8,9 @@ A partial result is a multilayer EXR that any viewer opens (the mean of its
 passes, Blender's channel names) with the exact float64 sums of its passes
 beside it, and a JSON header attribute ``stpm:partial``:
 
-* ``format`` "stpm-partial", ``version`` 1;
-* ``pass_first``, ``pass_end``: the passes it holds, ``[first, end)`` (1-based);
+* ``format`` "stpm-partial", ``version`` 2;
+* ``pass_first``, ``pass_end``: the passes it holds, ``[first, end)`` (1-based; whole
+  rounds of time strata: first - 1 and end - 1 are round ends, :mod:`stpm_core.strata`);
 * ``n_even``, ``n_odd``: how many even / odd pass indices (for the noise estimate);
 * ``seed``, ``scene_hash`` (:func:`scene_hash`), ``settings_hash``
   (:func:`settings_hash`: every setting that changes a pass's pixels), ``resolution``,
@@ -39,12 +40,13 @@ import numpy as np
 
 from .errors import StpmError
 from .progressive import PassSums
+from .strata import is_round_end
 
 __all__ = ["PARTIAL_FORMAT", "PARTIAL_VERSION", "scene_hash", "settings_hash", "write_partial", "read_partial",
            "merge", "split64", "join64"]
 
 PARTIAL_FORMAT = "stpm-partial"
-PARTIAL_VERSION = 1
+PARTIAL_VERSION = 2          # 2: passes in pairs of one time stratum, whole rounds only (stpm_core.strata)
 SUM_PREFIX = "STPMSum"
 _PARTS = ("Hi", "Mid", "Lo")
 # Settings that do not change a pass's pixels (how many passes, where to stop, threads)
@@ -136,6 +138,9 @@ def read_partial(path) -> tuple[PassSums, dict]:
     version = _field(head, "version", int, path, 1)
     if version > PARTIAL_VERSION:
         raise StpmError(f"{path}: partial result version {version} is newer than this STPM reads ({PARTIAL_VERSION})")
+    if version < PARTIAL_VERSION:
+        raise StpmError(f"{path}: partial result version {version} comes from an older STPM whose passes sample "
+                        "the shutter differently: render it again")
     first = _field(head, "pass_first", int, path, 1)
     end = _field(head, "pass_end", int, path, first + 1)
     n_even = _field(head, "n_even", int, path, 0)
@@ -143,6 +148,8 @@ def read_partial(path) -> tuple[PassSums, dict]:
     expect_even = sum(1 for i in range(first, end) if i % 2 == 0) if end - first < 1 << 24 else -1
     if end - first >= 1 << 24 or n_even != expect_even or n_even + n_odd != end - first:
         raise StpmError(f"{path}: partial result pass counts do not match its range {first}..{end - 1}")
+    if not (is_round_end(first - 1) and is_round_end(end - 1)):
+        raise StpmError(f"{path}: partial result range {first}..{end - 1} does not hold whole rounds of time strata")
     _field(head, "seed", int, path, 0)
     for key in ("scene_hash", "settings_hash"):
         v = _field(head, key, str, path)
@@ -160,9 +167,12 @@ def read_partial(path) -> tuple[PassSums, dict]:
     if not isinstance(working, str) or working not in WORKING_SPACES:
         raise StpmError(f"{path}: partial result header field 'working_space' is invalid ({working!r:.40})")
     head["working_space"] = working
+    # where it came from (the render's settings, plan, scene and frame), carried into a merged EXR
+    head["provenance"] = {k: v for k, v in data["_metadata"].items()
+                          if k in ("stpm:settings", "stpm:plan", "stpm:scene", "stpm:frame") and isinstance(v, str)}
     W, H = res
     sums = PassSums(first)
-    sums.end = end
+    sums.end = sums.next = end
     sums.n_even, sums.n_odd = n_even, n_odd
 
     def layer(name, channels):
@@ -203,8 +213,14 @@ def merge(paths) -> tuple[PassSums, dict]:
     for key in ("seed", "scene_hash", "settings_hash", "resolution", "passes", "working_space"):
         for (_, head), p in parts[1:]:
             if head[key] != head0[key]:
-                what = {"scene_hash": "scene", "settings_hash": "render settings",
-                        "working_space": "working colour spaces"}.get(key, key)
+                if key == "resolution":
+                    what = f"resolutions ({'x'.join(map(str, head[key]))} and {'x'.join(map(str, head0[key]))})"
+                elif key == "seed":
+                    what = f"seeds ({head[key]} and {head0[key]})"
+                else:
+                    what = {"scene_hash": "scenes (another file, frame, camera or edit of the scene)",
+                            "settings_hash": "render settings (besides passes, stops and threads)",
+                            "working_space": "working colour spaces", "passes": "render passes"}[key]
                 raise StpmError(f"{p} and {p0} are partials of different {what}: they cannot be merged")
     for ((s, head), p), (_, prev) in zip(parts[1:], parts[:-1]):
         if s.first < total.end:

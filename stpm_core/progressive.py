@@ -13,14 +13,19 @@ size.  The image is the mean of the passes.  So:
   A + 1 .. A + B anywhere, and :class:`PassSums` of disjoint ranges add up
   (``stpm merge``);
 * memory is one pass's photons (plus the pilot's, about a third of one pass);
-* the noise is estimated from the even and the odd passes (two independent
-  half images), see :func:`noise_estimate`.
+* each pass renders a time stratum of the shutter, and the image holds whole
+  rounds of strata (:mod:`stpm_core.strata`: 1, 2, 3, 4, 8, 16, 32, 48, ...
+  passes), so every part of the shutter weighs alike;
+* the noise is estimated from the even and the odd passes (two independent,
+  identically distributed half images), see :func:`noise_estimate`.
 
 Stops (the first that holds, after at least one pass): ``passes`` passes
-rendered, ``time_limit`` seconds elapsed (a pass is not started when the
-last pass's time would overrun the limit), the 95th percentile of the block
-noise below ``noise_threshold`` (from two passes on).  A cancel (Blender's
-Esc) after at least one pass keeps the passes so far.
+rendered, ``time_limit`` seconds elapsed (a round is not started, nor a
+pass, when the last pass's time says it would overrun the limit), the 95th
+percentile of the block noise below ``noise_threshold`` (from two passes on).
+A cancel (Blender's Esc) after at least one pass keeps the passes so far.
+Passes of a round cut short by a stop are left out of the image (``left_out``
+in the stats), and said so.
 """
 from __future__ import annotations
 
@@ -35,9 +40,11 @@ from .photons import build_photon_maps
 from .photons.progressive import ProgressiveMaps, auto_shrink_alpha, build_pilot
 from .photons.timescale import auto_time_scale
 from .sampling import rng_for
+from .strata import is_round_end, pass_stratum, round_end_after, round_ends_near
 
-__all__ = ["PassSums", "noise_estimate", "flip_visible_fraction", "render_passes", "summary", "pass_seed",
-           "STREAM_PASS", "NOISE_BLOCK", "NOISE_PERCENTILE"]
+__all__ = ["PassSums", "noise_estimate", "flip_visible_fraction", "render_passes", "summary", "progressive_warnings",
+           "pass_seed",
+           "pass_stratum", "STREAM_PASS", "NOISE_BLOCK", "NOISE_PERCENTILE"]
 
 STREAM_PASS = 0x9A55          # random stream of the passes' seeds
 NOISE_BLOCK = 8               # noise is averaged over NOISE_BLOCK x NOISE_BLOCK pixel blocks
@@ -46,81 +53,85 @@ FLIP_VISIBLE = 0.05           # an LDR-FLIP error above this between the halves 
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
-STRATIFY_TIME = True          # each pass renders a time stratum of the shutter (pass_stratum); False: the whole shutter
-
-
-def pass_stratum(i: int) -> tuple[float, float]:
-    """The part of the shutter pass i (1-based) renders, as (lo, hi) of the shutter's mass.
-
-    Passes come in rounds of B = 2^floor(log2 i) passes (1, 2, 4, 8, ...); round B cuts the shutter
-    into B strata of equal mass and its passes take them in bit-reversed order (0, 1/2, 1/4, 3/4,
-    ...), so every round covers the shutter once and any run of passes spreads over it.  A pass's
-    photons and camera samples all have times in its stratum: the time a kernel can blur over
-    shrinks like 1 / i, and the photons of a pass are w = 1 / B times denser in time.
-    """
-    if i < 1:
-        raise ValueError(f"pass index must be >= 1, got {i}")
-    if not STRATIFY_TIME:
-        return 0.0, 1.0
-    bits = i.bit_length() - 1
-    B = 1 << bits
-    j = int(format(i - B, f"0{bits}b")[::-1], 2) if bits else 0
-    return j / B, (j + 1) / B
-
-
 def pass_seed(seed: int, i: int) -> int:
     """The seed of pass i (1-based): a pure function of (seed, i), the same on every machine."""
     return int(rng_for(seed, STREAM_PASS, i).integers(0, 2**62))
 
 
 class PassSums:
-    """Float64 sums of pass images over a range of passes [first, end) (1-based pass indices).
+    """Float64 sums of pass images over a range of passes (1-based pass indices).
+
+    The image holds whole rounds of time strata only (:mod:`stpm_core.strata`): passes
+    [first, end), where end - 1 is a round end.  Passes after it, of a round not
+    finished yet, wait in a pending sum until the round ends (then they join) or the
+    render stops (then they are left out: they would weight part of the shutter twice).
 
     Attributes
     ----------
-    sums : pass name -> (H, W, C) float64, the sum of that pass over the passes in the range.
-    even, odd : (H, W, 3) float64 sums of Combined RGB over the even / odd pass indices.
-    n_even, n_odd : how many passes each holds; first, end : the pass range.
+    sums : pass name -> (H, W, C) float64, the sum of that pass over passes [first, end).
+    even, odd : (H, W, 3) float64 sums of Combined RGB over the even / odd passes of [first, end).
+    n_even, n_odd : how many passes each holds; first, end : the range the image holds.
+    next : the next pass to add (passes [end, next) are pending).
+    stratified : False for passes that all render the whole shutter (every count is a round end).
     """
 
-    def __init__(self, first: int):
+    def __init__(self, first: int, *, stratified: bool = True):
         self.first = int(first)
         self.end = int(first)
+        self.next = int(first)
+        self.stratified = bool(stratified)
         self.sums: dict = {}
         self.even = None
         self.odd = None
         self.n_even = 0
         self.n_odd = 0
+        self._pending = None          # the pending passes: sums, halves and their counts
 
     @property
     def count(self) -> int:
+        """Passes in the image."""
         return self.end - self.first
+
+    @property
+    def pending(self) -> int:
+        """Passes rendered after the last round end (not in the image)."""
+        return self.next - self.end
 
     def add(self, i: int, passes: dict) -> None:
         """Add pass i's images (name -> (H, W, C) float32); passes must come in order."""
-        if i != self.end:
-            raise ValueError(f"pass {i} added after pass {self.end - 1} (passes are summed in order)")
+        if i != self.next:
+            raise ValueError(f"pass {i} added after pass {self.next - 1} (passes are summed in order)")
+        if self._pending is None:
+            self._pending = {"sums": {}, "even": None, "odd": None, "n_even": 0, "n_odd": 0}
+        p = self._pending
         for name, img in passes.items():
             a = np.asarray(img, dtype=np.float64)
-            if name in self.sums:
-                self.sums[name] += a
-            else:
-                self.sums[name] = a.copy()
+            p["sums"][name] = p["sums"][name] + a if name in p["sums"] else a.copy()
         rgb = np.asarray(passes["Combined"], dtype=np.float64)[:, :, :3]
-        if i % 2 == 0:
-            self.even = rgb.copy() if self.even is None else self.even + rgb
-            self.n_even += 1
-        else:
-            self.odd = rgb.copy() if self.odd is None else self.odd + rgb
-            self.n_odd += 1
-        self.end += 1
+        half = "even" if i % 2 == 0 else "odd"
+        p[half] = rgb.copy() if p[half] is None else p[half] + rgb
+        p["n_" + half] += 1
+        self.next += 1
+        if not self.stratified or is_round_end(i):
+            self._fold()
+
+    def _fold(self) -> None:
+        """The pending passes complete a round: they join the image."""
+        p = self._pending
+        for name, v in p["sums"].items():
+            self.sums[name] = self.sums[name] + v if name in self.sums else v
+        self.even, self.odd = _add(self.even, p["even"]), _add(self.odd, p["odd"])
+        self.n_even += p["n_even"]
+        self.n_odd += p["n_odd"]
+        self.end = self.next
+        self._pending = None
 
     def merged(self, other: "PassSums") -> "PassSums":
-        """The sums over both ranges (``other`` must start where this one ends)."""
+        """The sums over both ranges (``other`` must start where this one ends; pending passes are left out)."""
         if other.first != self.end:
             raise ValueError(f"passes {other.first}..{other.end - 1} do not follow {self.first}..{self.end - 1}")
-        out = PassSums(self.first)
-        out.end = other.end
+        out = PassSums(self.first, stratified=self.stratified)
+        out.end = out.next = other.end
         out.sums = {k: self.sums[k] + other.sums[k] for k in self.sums}
         out.even = _add(self.even, other.even)
         out.odd = _add(self.odd, other.odd)
@@ -128,12 +139,29 @@ class PassSums:
         return out
 
     def image(self) -> dict:
-        """The mean of the passes: name -> (H, W, C) float32."""
+        """The mean of the passes in the image: name -> (H, W, C) float32.
+
+        Before the first round ends (a range that begins after pass 4 and stops early)
+        there is no time-balanced image: the mean of the pending passes is returned."""
+        if self.count == 0 and self._pending is not None:
+            return self.preview()
         n = max(self.count, 1)
         return {k: (v / n).astype(np.float32) for k, v in self.sums.items()}
 
+    def preview(self) -> dict:
+        """The mean of every pass rendered, pending ones included: what a progressive display
+        shows after each pass (faint bands along motion trails until the round ends)."""
+        p = self._pending
+        if p is None:
+            return self.image()
+        n = self.next - self.first
+        return {k: ((self.sums[k] + v if k in self.sums else v) / n).astype(np.float32)
+                for k, v in p["sums"].items()}
+
     def halves(self):
-        """(mean of the even passes, mean of the odd passes) of Combined RGB, or None before both exist."""
+        """(mean of the even passes, mean of the odd passes) of Combined RGB in the image, or None
+        before both exist.  Pass pairs (2q - 1, 2q) render the same stratum, so the halves of whole
+        rounds are identically distributed."""
         if not self.n_even or not self.n_odd:
             return None
         return self.even / self.n_even, self.odd / self.n_odd
@@ -258,7 +286,7 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
                                   progress=lambda f, m: span(f, m), cancel=cancel,
                                   progress_span=(0.3 if maps is not None else 0.0, 1.0))
         except RenderCancelled:
-            if sums.count == 0:
+            if sums.next == sums.first:
                 raise
             stop = "cancelled"
             break
@@ -270,7 +298,7 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
         noise = noise_estimate(sums)
         elapsed = _time.perf_counter() - t0
         if on_pass is not None:
-            on_pass(sums, {"pass": i, "passes": sums.count, "elapsed_s": elapsed, "noise_p95": noise["noise_p95"]})
+            on_pass(sums, {"pass": i, "passes": i - first + 1, "elapsed_s": elapsed, "noise_p95": noise["noise_p95"]})
         # -- Stop? ------------------------------------------------------------------------------
         if last is not None and i >= last:
             stop = "passes"
@@ -278,15 +306,19 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
         if settings.noise_threshold > 0 and noise["noise_p95"] <= settings.noise_threshold:
             stop = "noise_threshold"
             break
-        if settings.time_limit > 0 and elapsed + pass_s[-1] > settings.time_limit:
+        # the time limit: not a round that cannot end in time (its passes would be left out)
+        if settings.time_limit > 0 and elapsed + (round_end_after(i + 1) - i) * pass_s[-1] > settings.time_limit:
             stop = "time_limit"
             break
         if cancel is not None and cancel():
             stop = "cancelled"
             break
         i += 1
+    left_out = [sums.end, sums.next - 1] if sums.pending and sums.count else None
     info = {
         "passes": sums.count,
+        "passes_rendered": sums.next - sums.first,
+        "left_out": left_out,
         "pass_first": sums.first,
         "pass_end": sums.end,
         "stopped_by": stop,
@@ -308,6 +340,26 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
         if isinstance(info[k], float) and not math.isfinite(info[k]):
             info[k] = None
     return sums, info, trace_stats, map_stats
+
+
+def progressive_warnings(info: dict) -> list[str]:
+    """The render report's warnings about a progressive render's stop (cancel, passes left out)."""
+    out = []
+    if info.get("stopped_by") == "cancelled":
+        out.append(f"cancelled after {info.get('passes_rendered', info.get('passes', 0))} pass(es): the image "
+                   "holds the passes so far")
+    lo_hi = info.get("left_out")
+    if lo_hi:
+        lo, hi = lo_hi
+        ends = ", ".join(str(n) for n in round_ends_near(hi, 2) if n > 0)
+        out.append(f"passes {lo}-{hi} are left out of the image: the round of time strata they began (it ends at "
+                   f"pass {round_end_after(hi)}) did not finish, and a part of a round weights part of the shutter "
+                   f"twice; pass counts {ends}, ... use every pass")
+    elif info.get("passes") == 0 and info.get("passes_rendered"):
+        out.append(f"no round of time strata finished (passes {info.get('pass_first')}-"
+                   f"{info.get('pass_first') + info.get('passes_rendered') - 1}): the image is their mean and "
+                   "weights parts of the shutter unevenly")
+    return out
 
 
 def summary(info: dict) -> str:

@@ -184,15 +184,14 @@ def _render(scene, settings, *, progress=None, cancel=None, on_pass=None) -> Ren
     progressive = sums = None
     if settings.method == "PROGRESSIVE":
         # -- Passes with a shrinking space-time kernel (stpm_core/progressive.py) ------------------
-        from .progressive import render_passes
+        from .progressive import progressive_warnings, render_passes
         t0 = _time.perf_counter()
         sums, progressive, trace_stats, map_stats = render_passes(
             scene, settings, psettings, caster, lights, table, progress=progress, cancel=cancel,
-            on_pass=None if on_pass is None else (lambda sm, info: on_pass(sm.image(), info)))
+            on_pass=None if on_pass is None else (lambda sm, info: on_pass(sm.preview(), info)))
         passes = sums.image()
         photon_s = sum(float(m.get("photon_trace_s", 0.0)) for m in map_stats)
-        if progressive["stopped_by"] == "cancelled":
-            warnings.append(f"cancelled after {progressive['passes']} pass(es): the image holds the passes so far")
+        warnings.extend(progressive_warnings(progressive))
     elif settings.method == "PHOTON":
         # -- Photon maps over the whole shutter ----------------------------------------
         t0 = _time.perf_counter()

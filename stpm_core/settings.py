@@ -12,6 +12,7 @@ from typing import ClassVar
 
 from .errors import SettingsError
 from .schema import setting, specs_of
+from .strata import is_round_end, round_ends_near
 
 __all__ = ["RenderSettings", "METHODS", "ESTIMATORS", "EFFECTS", "KERNELS"]
 
@@ -65,7 +66,7 @@ class RenderSettings:
     estimator: str = setting(
         "TEMPORAL", "enum", "'STANDARD' | 'TEMPORAL' | 'KD4D' radiance estimate",
         choices=_ESTIMATOR_CHOICES, label="Estimator", flag="--estimator",
-        help="photon density estimate (method photon only)")
+        help="photon density estimate (methods photon and progressive)")
     accumulation_steps: int = setting(
         8, "int", "instants averaged by ACCUMULATION; each costs about one still", lo=1, hi=4096,
         label="Accumulation Steps", flag="--accumulation-steps", metavar="N", ui={"soft_max": 64},
@@ -169,6 +170,11 @@ class RenderSettings:
         if self.method == "PROGRESSIVE" and self.passes == 0 and self.time_limit == 0.0 \
                 and self.noise_threshold == 0.0:
             raise SettingsError(_PROGRESSIVE_NEEDS_A_STOP)
+        if self.method == "PROGRESSIVE" and not is_round_end(self.pass_offset):
+            ends = ", ".join(str(n) for n in round_ends_near(self.pass_offset, 2))
+            raise SettingsError(f"pass_offset {self.pass_offset} is inside a round of time strata; passes are "
+                                f"split between machines at round ends: 0, 1, 2, 3, 4, 8, 16, 32, then every 16 "
+                                f"(nearest: {ends})")
         return self
 
     def to_dict(self) -> dict:

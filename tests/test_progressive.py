@@ -15,6 +15,7 @@ Layers tested, cheapest first:
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 import subprocess
@@ -65,14 +66,42 @@ def test_automatic_alpha_follows_the_kernel_dimension():
 
 def test_pass_strata_cover_the_shutter_once_per_round():
     from stpm_core.progressive import pass_stratum
-    assert pass_stratum(1) == (0.0, 1.0)
-    assert [pass_stratum(i) for i in (2, 3)] == [(0.0, 0.5), (0.5, 1.0)]
-    assert [pass_stratum(i)[0] for i in range(4, 8)] == [0.0, 0.5, 0.25, 0.75]      # bit-reversed
-    for B in (8, 64, 1024):
-        lo = sorted(pass_stratum(i) for i in range(B, 2 * B))
-        assert lo[0][0] == 0.0 and lo[-1][1] == 1.0
-        assert all(a[1] == b[0] for a, b in zip(lo, lo[1:]))                      # no gap, no overlap
-        assert all(hi - lo_ == 1.0 / B for lo_, hi in lo)
+    from stpm_core.strata import STRATA_CAP, is_round_end
+    assert [pass_stratum(i) for i in (1, 2, 3, 4)] == [(0.0, 1.0)] * 4           # pairs 1, 2: the whole shutter
+    assert [pass_stratum(i) for i in range(5, 9)] == [(0.0, 0.5)] * 2 + [(0.5, 1.0)] * 2
+    assert [pass_stratum(i)[0] for i in range(9, 17, 2)] == [0.0, 0.5, 0.25, 0.75]  # bit-reversed
+    ends = [n for n in range(200) if is_round_end(n)]
+    assert ends[:9] == [0, 1, 2, 3, 4, 8, 16, 32, 32 + 2 * STRATA_CAP]
+    for a, b in zip(ends[4:], ends[5:]):                 # every round: each stratum once per pair, no gap
+        odd = sorted(pass_stratum(i) for i in range(a + 1, b + 1, 2))
+        assert odd == sorted(pass_stratum(i) for i in range(a + 2, b + 1, 2))   # the halves alike
+        assert odd[0][0] == 0.0 and odd[-1][1] == 1.0
+        assert all(x[1] == y[0] for x, y in zip(odd, odd[1:]))
+        assert len({hi - lo for lo, hi in odd}) == 1
+    with pytest.raises(ValueError):
+        pass_stratum(0)
+
+
+def test_an_image_holds_whole_rounds_and_passes_of_a_cut_round_are_left_out():
+    """Passes 1..20: the image is the mean of passes 1..16 (a round of 8 strata began at 17); the
+    preview shown after each pass includes them all; the halves are the odd / even passes of 1..16."""
+    rng = np.random.default_rng(3)
+    imgs = {i: {"Combined": rng.random((4, 5, 4)).astype(np.float32)} for i in range(1, 21)}
+    s = PassSums(1)
+    for i in range(1, 21):
+        s.add(i, imgs[i])
+        assert s.end - 1 in (0, 1, 2, 3, 4, 8, 16) and s.next == i + 1
+    assert s.count == 16 and s.pending == 4
+    want = sum(imgs[i]["Combined"].astype(np.float64) for i in range(1, 17)) / 16
+    assert np.allclose(s.image()["Combined"], want, atol=1e-6)
+    every = sum(imgs[i]["Combined"].astype(np.float64) for i in range(1, 21)) / 20
+    assert np.allclose(s.preview()["Combined"], every, atol=1e-6)
+    assert s.n_odd == s.n_even == 8
+    # a stratified-free run (SPPM) folds every pass
+    u = PassSums(1, stratified=False)
+    for i in range(1, 6):
+        u.add(i, imgs[i])
+    assert u.count == 5 and u.pending == 0
 
 
 def test_a_pass_traces_photons_and_camera_samples_in_its_stratum():
@@ -194,6 +223,31 @@ def _pilot(estimator, N, seed, **kw):
     n_pilot = int(math.ceil(N * (PILOT_K - 1) / 30))
     return Pilot(_maps(_plane(n_pilot, seed, **kw)), {"caustic": (30 / (PILOT_K - 1)) * n_pilot / N, "global": 1.0},
                  estimator, 1.0, 0.0)
+
+
+@pytest.mark.parametrize("estimator", ["STANDARD", "TEMPORAL"])
+def test_pilot_region_table_is_bounded_and_does_not_change_the_regions(estimator, monkeypatch):
+    """The table of pilot regions per grid cell stops growing at GRID_CELLS_MAX cells (it grew by a
+    cell per camera sample and pass, and its upkeep came to dominate late passes); regions of cells
+    beyond it are computed on the fly: the same values as with an unbounded table."""
+    import stpm_core.photons.progressive as pp
+    rng = np.random.default_rng(4)
+    batches = []
+    for _ in range(6):
+        q = np.column_stack([rng.uniform(-0.4, 0.4, (3000, 2)), np.zeros(3000), rng.random(3000)])
+        batches.append((q, np.tile(UP, (3000, 1)).astype(np.float32)))
+    big = _pilot(estimator, 20_000, 5)
+    want = [big.initial_size("caustic", q, n) for q, n in batches]
+    monkeypatch.setattr(pp, "GRID_CELLS_MAX", 4000)
+    small = _pilot(estimator, 20_000, 5)
+    for (q, n), (r0, tau0) in zip(batches, want):
+        r, tau = small.initial_size("caustic", q, n)
+        assert np.array_equal(r, r0) and (tau is None) == (tau0 is None)
+        assert tau is None or np.array_equal(tau, tau0)
+        assert small._grids["caustic"]["keys"].size <= 4000
+    assert big._grids["caustic"]["keys"].size > 4000              # the small table did fill up
+    keys = big._grids["caustic"]["keys"]
+    assert np.all(np.diff(keys) > 0)                              # sorted, no duplicates (merged, not sorted)
 
 
 @pytest.mark.parametrize("estimator", ["STANDARD", "TEMPORAL", "KD4D"])
@@ -394,6 +448,47 @@ def test_noise_threshold_stops_near_the_true_noise_and_harder_scenes_take_more_p
     assert np.mean(runs["hard"]) > 1.5 * np.mean(runs["easy"]), runs
 
 
+def _moving_occluder_scene(res=(32, 24)):
+    """The soft-shadow scene with its occluder sliding x = -0.5 -> 0.5 over the shutter: motion blur."""
+    from scenes import moving
+    light = Light(type="AREA", power=200.0, size=0.6, transform=MotionTransform.static(translate(0, 0, 1.5)))
+    occluder = (plane_mesh(0.4, z=0.0, material=0, name="occluder"), moving((-0.5, 0, 0.6), (0.5, 0, 0.6)))
+    return make_scene([plane_mesh(10.0, material=0), occluder], [Material.diffuse((0.8, 0.8, 0.8))],
+                      ortho_camera_down(height=3.0, ortho_scale=2.0), [light], resolution=res,
+                      shutter=Shutter(1.0, 2.0))
+
+
+def test_noise_threshold_stops_with_motion_blur():
+    """Time strata must not read as noise: the odd and even passes of whole rounds cover the same strata,
+    so on a motion-blurred shadow the estimate follows the true error and the threshold is reached
+    (before, the halves covered different parts of the shutter and the estimate stalled near 0.19)."""
+    scene = _moving_occluder_scene()
+    ref = render(scene, RenderSettings(samples=1024, photons_caustic=0, photons_global=0, seed=77)).passes["Combined"]
+    st = RenderSettings(method="PROGRESSIVE", passes=400, noise_threshold=0.08, samples=1, photons_caustic=0,
+                        photons_global=0)
+    for seed in range(2):
+        pr = (r := render(scene, st.replace(seed=seed))).stats["progressive"]
+        assert pr["stopped_by"] == "noise_threshold" and pr["noise_p95"] <= 0.08, pr
+        true = _true_noise(r.passes["Combined"], ref)
+        assert 0.08 / 1.5 <= true <= 0.08 * 1.5 and true / pr["noise_p95"] < 1.3, (seed, true, pr)
+
+
+def test_a_stop_inside_a_round_leaves_its_passes_out_of_the_image():
+    """20 passes on a moving shadow: the image is the one of 16 passes (bit for bit) -- passes 17-20
+    reached 4 of the 8 time strata of their round and would band the motion trail -- and says so."""
+    scene = _moving_occluder_scene((16, 12))
+    st = RenderSettings(method="PROGRESSIVE", passes=20, samples=1, photons_caustic=0, photons_global=0)
+    shown = []
+    r20 = render(scene, st, on_pass=lambda img, info: shown.append(img["Combined"]))
+    r16 = render(scene, st.replace(passes=16))
+    pr = r20.stats["progressive"]
+    assert pr["passes"] == 16 and pr["passes_rendered"] == 20 and pr["left_out"] == [17, 20]
+    assert np.array_equal(r20.passes["Combined"], r16.passes["Combined"])
+    assert any("passes 17-20 are left out" in w and "ends at pass 32" in w for w in r20.warnings), r20.warnings
+    assert len(shown) == 20 and not np.array_equal(shown[-1], r20.passes["Combined"])   # the preview had them
+    assert r16.stats["progressive"]["left_out"] is None and not any("left out" in w for w in r16.warnings)
+
+
 def test_noise_estimate_of_known_noise():
     # Passes = a flat image of 1 plus Gaussian noise of sigma per pass: the mean of n passes has a
     # relative standard error sigma / sqrt(n), which the odd/even estimate recovers
@@ -421,10 +516,10 @@ def parts(tmp_path_factory):
     from stpm_core.scenefile import save_scene
     d = tmp_path_factory.mktemp("merge")
     save_scene(moving_caustic_scene((24, 16)), d / "mc.stpm", RenderSettings(**dict(BASE, photons_caustic=2000)))
-    for args in (("--passes", "5", "-o", "full.exr"), ("--pass-offset", "0", "--passes", "2", "-o", "a.exr"),
-                 ("--pass-offset", "2", "--passes", "3", "-o", "b.exr"), ("--pass-offset", "3", "--passes", "2",
+    for args in (("--passes", "8", "-o", "full.exr"), ("--pass-offset", "0", "--passes", "4", "-o", "a.exr"),
+                 ("--pass-offset", "4", "--passes", "4", "-o", "b.exr"), ("--pass-offset", "8", "--passes", "8",
                                                                             "-o", "c.exr"),
-                 ("--pass-offset", "2", "--passes", "3", "--seed", "5", "-o", "s.exr")):
+                 ("--pass-offset", "4", "--passes", "4", "--seed", "5", "-o", "s.exr")):
         out = _cli("render", "mc.stpm", "--method", "progressive", "-q", *args, cwd=d)
         assert out.returncode == 0, out.stderr
     return d
@@ -437,9 +532,25 @@ def test_merged_partials_equal_one_process(parts):
     full, merged = read_exr(parts / "full.exr"), read_exr(parts / "m.exr")
     for name in ("Combined", "Caustic", "Direct", "Depth", "Normal"):
         assert np.array_equal(full[name], merged[name]), name
-    import json
     info = json.loads((parts / "m.json").read_text())["progressive"]
-    assert info["passes"] == 5 and info["pass_first"] == 1 and info["pass_end"] == 6
+    assert info["passes"] == 8 and info["pass_first"] == 1 and info["pass_end"] == 9
+    meta = merged["_metadata"]                      # where it came from, as a render's EXR says
+    assert json.loads(meta["stpm:settings"])["method"] == "PROGRESSIVE" and meta["stpm:scene"].endswith("mc.stpm")
+    assert "stpm:plan" in meta and "stpm:frame" in meta
+    # a later range alone merges (it is a whole image), with a warning that passes are missing
+    out = _cli("merge", "b.exr", "-o", "late.exr", cwd=parts)
+    assert out.returncode == 0 and "passes 1..4 are missing" in out.stderr, out.stderr
+
+
+def test_partials_are_whole_rounds_of_time_strata(parts):
+    """A partial that would end inside a round, or a pass offset inside one: one line before rendering."""
+    out = _cli("render", "mc.stpm", "--method", "progressive", "--pass-offset", "0", "--passes", "6", "-o", "x.exr",
+               cwd=parts)
+    assert out.returncode == 2 and "inside a round of time strata" in out.stderr and "8, 16" in out.stderr, out.stderr
+    out = _cli("render", "mc.stpm", "--method", "progressive", "--pass-offset", "5", "--passes", "3", "-o", "x.exr",
+               cwd=parts)
+    assert out.returncode == 1 and "--pass-offset 5 is inside a round" in out.stderr, out.stderr
+    assert not (parts / "x.exr").exists()
 
 
 @pytest.mark.parametrize("files,message", [
@@ -472,6 +583,22 @@ def test_merge_refuses_damaged_partials(parts):
     assert out.returncode == 1 and "pass counts" in out.stderr, out.stderr
     assert not (parts / "bad.exr").exists()
     del oiio
+
+
+def test_progressive_options_that_do_nothing_or_surprise_are_named(parts):
+    """--passes on a photon render does nothing: said.  --method progressive on a file set up for one
+    big photon render makes every pass that big: said, with the preset's per-pass values."""
+    out = _cli("render", "mc.stpm", "--passes", "8", "--time-limit", "5", "-q", "-o", "y.exr", cwd=parts)
+    assert out.returncode == 0 and "--passes / --time-limit have no effect with --method photon" in out.stderr, \
+        out.stderr
+    from stpm_core.scenefile import save_scene
+    save_scene(moving_caustic_scene((12, 8)), parts / "big.stpm",
+               RenderSettings(**dict(BASE, samples=16, photons_caustic=500)))
+    out = _cli("render", "big.stpm", "--method", "progressive", "--passes", "1", "-q", "-o", "z.exr", cwd=parts)
+    assert out.returncode == 0 and "every progressive pass traces the file's 16 samples" in out.stderr, out.stderr
+    out = _cli("render", "big.stpm", "--method", "progressive", "--passes", "1", "--samples", "1", "-q",
+               "-o", "z.exr", cwd=parts)
+    assert out.returncode == 0 and "every progressive pass" not in out.stderr, out.stderr
 
 
 def test_pass_offset_needs_the_progressive_method(parts):

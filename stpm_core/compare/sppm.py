@@ -133,7 +133,7 @@ def render_sppm(scene, settings, *, progress=None, cancel=None, on_pass=None):
     seed = int(rng_for(settings.seed, STREAM_SPPM).integers(0, 2**62))
     pilot = build_pilot(scene, psettings.replace(seed=seed), caster, lights, time_scale=1.0, cancel=cancel)
     state = {kind: {"R": np.full(W * H, np.nan), "N": np.zeros(W * H)} for kind in KINDS}
-    sums = PassSums(1)
+    sums = PassSums(1, stratified=False)          # every pass renders the whole shutter
     passes = max(1, int(settings.passes))
     photon_s = render_s = 0.0
     stopped = "passes"

@@ -62,6 +62,7 @@ CAP_SAMPLE = 4096             # pilot photons whose own radius sets the cap
 TEMPORAL_PILOT = 1.5          # TEMPORAL's pilot: spatial candidates per search as a multiple of PILOT_K (the paper's)
 GRID_FRACTION = 0.25          # pilot sizes are read on a grid of cells this x the pilot photons' median radius
 TIME_CELLS = 32               # ... and this many cells across the shutter (space-time kernels)
+GRID_CELLS_MAX = 1 << 17      # cells a region table keeps (3 MiB); regions of cells beyond are computed, not kept
 _AXIS_BITS = 18               # grid cells per axis: 2^18 (keys: 3 x 18 bits + 7 bits of time)
 STREAM_PILOT = 0x9170         # the pilot's random stream (independent of every pass's)
 
@@ -185,12 +186,19 @@ class Pilot:
                 qc[:, :3] = lo + (ci + 0.5) * h
                 qc[:, 3] = self.time_scale * ((new & 127) + 0.5) / nt if nt > 1 else self.time_scale * 0.5
                 r_new, tau_new = self.region_at(kind, qc)
-                keys_all = np.concatenate([grid["keys"], new])
-                order = np.argsort(keys_all, kind="stable")
-                grid["keys"] = keys_all[order]
-                grid["r"] = np.concatenate([grid["r"], r_new])[order]
-                grid["tau"] = np.concatenate([grid["tau"], tau_new if tau_new is not None
-                                              else np.zeros(new.size)])[order]
+                tau_new = tau_new if tau_new is not None else np.zeros(new.size)
+                if known.size + new.size > GRID_CELLS_MAX:
+                    # a full table: these cells' regions are used, not kept (the same values either way)
+                    r_u, tau_u = np.empty(uk.size), np.empty(uk.size)
+                    if have.any():
+                        r_u[have], tau_u[have] = grid["r"][pos[have]], grid["tau"][pos[have]]
+                    r_u[~have], tau_u[~have] = r_new, tau_new
+                    return r_u[inv], (tau_u[inv] if grid["timed"] else None)
+                # (new is sorted and disjoint from the table: one merge, no sort of the whole table)
+                at = np.searchsorted(known, new)
+                grid["keys"] = np.insert(known, at, new)
+                grid["r"] = np.insert(grid["r"], at, r_new)
+                grid["tau"] = np.insert(grid["tau"], at, tau_new)
                 pos = np.searchsorted(grid["keys"], uk)
             r = grid["r"][pos][inv]
             tau = grid["tau"][pos][inv] if grid["timed"] else None
