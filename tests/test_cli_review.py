@@ -415,12 +415,16 @@ def test_default_output_keeps_a_hash_in_the_scene_name(tiny, tmp_path, capsys):
 
 
 def test_sigterm_cancels_and_a_second_signal_aborts(tmp_path):
-    """SIGTERM: cancelled cleanly, exit 143.  Two SIGINTs: 'stpm: aborted' at once, exit 130.  No file left."""
-    # 160x120 is 6 tiles: once the first is done, the next ones are in flight and a cancel waits for them
+    """SIGTERM: cancelled cleanly, exit 143.  A second signal before the cancel is done: 'stpm: aborted'
+    at once, exit 128 + that signal.  No file left either way.
+
+    The second signal is SIGTERM right after a SIGINT: two different signals are handled one after
+    the other however close they come (two SIGINTs that close would be handled once), and a cancel
+    takes a few milliseconds, too short to aim a second SIGINT into reliably."""
     scene = save_scene(demo_scene(resolution=(160, 120)), tmp_path / "long.stpm",
-                       settings=RenderSettings(samples=32, photons_caustic=0, photons_global=0))
-    for signals, status, last in (((signal.SIGTERM,), 143, "stpm: render cancelled"),
-                                  ((signal.SIGINT, signal.SIGINT), 130, "stpm: aborted")):
+                       settings=RenderSettings(samples=64, photons_caustic=0, photons_global=0))
+    for signals, status, last in (((signal.SIGTERM,), {143}, "stpm: render cancelled"),
+                                  ((signal.SIGINT, signal.SIGTERM), {130, 143}, "stpm: aborted")):
         out = tmp_path / "out"
         out.mkdir()
         p = subprocess.Popen([*_stpm_cmd(), "render", str(scene), "-o", str(out / "c.exr"), "--stats",
@@ -432,9 +436,8 @@ def test_sigterm_cancels_and_a_second_signal_aborts(tmp_path):
             assert line, p.communicate(timeout=60)[1]
         for sig in signals:
             p.send_signal(sig)
-            time.sleep(0.05)
         _, err = p.communicate(timeout=120)
-        assert p.returncode == status, err
+        assert p.returncode in status, err
         assert err.strip().splitlines()[-1] == last and "Traceback" not in err, err
         assert list(out.iterdir()) == []
         out.rmdir()
