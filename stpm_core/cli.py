@@ -370,7 +370,8 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
                      + (f", noise {noise:.4f}" if noise is not None and noise < 1e30 else ""))
         try:
             result = render(scene, settings, progress=lambda f, m: bar(f, label + m), cancel=cancel,
-                            on_pass=on_pass if settings.method == "PROGRESSIVE" else None)
+                            on_pass=on_pass if settings.method == "PROGRESSIVE" else None,
+                            scheduled_rounds=partial)
         finally:
             bar.close()
         if settings.denoise and not partial:     # Blender's Denoise node where bpy runs (docs/blender.md)

@@ -14,14 +14,15 @@ size.  The image is the mean of the passes.  So:
   (``stpm merge``);
 * memory is one pass's photons (plus the pilot's, about a third of one pass);
 * each pass renders a time stratum of the shutter, and the image holds whole
-  rounds of strata (:mod:`stpm_core.strata`: 1, 2, 3, 4, 8, 16, 32, 48, ...
-  passes), so every part of the shutter weighs alike;
+  rounds of strata (:mod:`stpm_core.strata`: 1, 2, 3, 4, 8, ..., 256 passes,
+  then every 128), so every part of the shutter weighs alike;
 * the noise is estimated from the even and the odd passes (two independent,
   identically distributed half images), see :func:`noise_estimate`.
 
 Stops (the first that holds, after at least one pass): ``passes`` passes
-rendered, ``time_limit`` seconds elapsed (a round is not started, nor a
-pass, when the last pass's time says it would overrun the limit), the 95th
+rendered, ``time_limit`` seconds elapsed (a round is only started when the
+last pass's time says it can end in time; else a smaller round that can, or
+none), the 95th
 percentile of the block noise below ``noise_threshold`` (from two passes on).
 A cancel (Blender's Esc) after at least one pass keeps the passes so far.
 Passes of a round cut short by a stop are left out of the image (``left_out``
@@ -40,7 +41,7 @@ from .photons import build_photon_maps
 from .photons.progressive import ProgressiveMaps, auto_shrink_alpha, build_pilot
 from .photons.timescale import auto_time_scale
 from .sampling import rng_for
-from .strata import is_round_end, pass_stratum, round_end_after, round_ends_near
+from .strata import Rounds, is_round_end, pass_stratum, round_end_after, round_ends_near
 
 __all__ = ["PassSums", "noise_estimate", "flip_visible_fraction", "render_passes", "summary", "progressive_warnings",
            "pass_seed",
@@ -51,6 +52,7 @@ NOISE_BLOCK = 8               # noise is averaged over NOISE_BLOCK x NOISE_BLOCK
 NOISE_PERCENTILE = 95.0       # ... and its 95th percentile over the blocks is compared with the threshold
 FLIP_VISIBLE = 0.05           # an LDR-FLIP error above this between the halves counts as a visible difference
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
+TIME_SLACK = 0.1              # a round begun under a time limit is finished if it overruns the limit by at most this
 
 
 def pass_seed(seed: int, i: int) -> int:
@@ -97,8 +99,9 @@ class PassSums:
         """Passes rendered after the last round end (not in the image)."""
         return self.next - self.end
 
-    def add(self, i: int, passes: dict) -> None:
-        """Add pass i's images (name -> (H, W, C) float32); passes must come in order."""
+    def add(self, i: int, passes: dict, round_end: bool | None = None) -> None:
+        """Add pass i's images (name -> (H, W, C) float32); passes must come in order.  ``round_end``:
+        whether pass i ends a round (None: as the schedule says, :func:`stpm_core.strata.is_round_end`)."""
         if i != self.next:
             raise ValueError(f"pass {i} added after pass {self.next - 1} (passes are summed in order)")
         if self._pending is None:
@@ -112,7 +115,7 @@ class PassSums:
         p[half] = rgb.copy() if p[half] is None else p[half] + rgb
         p["n_" + half] += 1
         self.next += 1
-        if not self.stratified or is_round_end(i):
+        if not self.stratified or (is_round_end(i) if round_end is None else round_end):
             self._fold()
 
     def _fold(self) -> None:
@@ -225,12 +228,14 @@ def flip_visible_fraction(sums: PassSums) -> float | None:
 
 
 def render_passes(scene, settings, psettings, caster, lights, table, *, progress=None, cancel=None,
-                  on_pass=None):
+                  on_pass=None, scheduled_rounds: bool = False):
     """The pass loop of method PROGRESSIVE.
 
     settings : the user's RenderSettings; psettings : after the effects plan (photon counts,
     estimator).  on_pass(sums, info) is called after each pass (info: pass, passes, elapsed_s,
-    noise_p95).  Returns (sums, info dict for the stats, TraceStats list, photon stats list).
+    noise_p95).  ``scheduled_rounds``: keep to the schedule of rounds even when a time limit cuts one
+    short (a partial result must hold scheduled rounds), instead of taking smaller rounds that fit.
+    Returns (sums, info dict for the stats, TraceStats list, photon stats list).
     """
     t0 = _time.perf_counter()
     first = int(settings.pass_offset) + 1
@@ -249,7 +254,8 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
         say(0.0, "tracing pilot photons")
         pilot = build_pilot(scene, psettings, caster, lights, time_scale=s, cancel=cancel)
     sums = PassSums(first)
-    trace_stats, map_stats, pass_s = [], [], []
+    rounds = Rounds()
+    trace_stats, map_stats, pass_s, wall_at = [], [], [], []
     noise = {"noise_p95": math.inf, "noise_mean": math.inf}
     stop = "passes"
     i = first
@@ -272,7 +278,7 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
         t_pass = _time.perf_counter()
         seed_i = pass_seed(settings.seed, i)
         pset = psettings.replace(seed=seed_i)
-        u_lo, u_hi = pass_stratum(i)
+        u_lo, u_hi = rounds.stratum(i)
         stratum = (u_lo, u_hi) if (u_lo, u_hi) != (0.0, 1.0) else None
         try:
             maps = None
@@ -290,13 +296,14 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
                 raise
             stop = "cancelled"
             break
-        sums.add(i, img)
+        sums.add(i, img, round_end=rounds.is_end(i))
         trace_stats.append(ts)
         if maps is not None:
             map_stats.append(maps.stats)
         pass_s.append(_time.perf_counter() - t_pass)
         noise = noise_estimate(sums)
         elapsed = _time.perf_counter() - t0
+        wall_at.append(elapsed)
         if on_pass is not None:
             on_pass(sums, {"pass": i, "passes": i - first + 1, "elapsed_s": elapsed, "noise_p95": noise["noise_p95"]})
         # -- Stop? ------------------------------------------------------------------------------
@@ -306,15 +313,38 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
         if settings.noise_threshold > 0 and noise["noise_p95"] <= settings.noise_threshold:
             stop = "noise_threshold"
             break
-        # the time limit: not a round that cannot end in time (its passes would be left out)
-        if settings.time_limit > 0 and elapsed + (round_end_after(i + 1) - i) * pass_s[-1] > settings.time_limit:
-            stop = "time_limit"
-            break
+        # The next round: the schedule's, or (unless the schedule must be kept) a smaller one that
+        # ends by the pass limit, within the time limit (else its passes would be left out), and not
+        # long after the noise so far says the threshold is reached (it is read at round ends)
+        fit = None
+        if settings.time_limit > 0:
+            # the wall time a pass takes (its overheads too): the last one's, or the last four's mean
+            walls = np.diff([0.0] + wall_at)[-4:]
+            p_est = max(float(walls[-1]), float(walls.mean()), 1e-9)
+            fit = int(max(settings.time_limit - elapsed, 0.0) / p_est)
+            # a round begun is finished unless that would overrun the limit by more than TIME_SLACK
+            if not rounds.is_end(i) and elapsed + (rounds.end_of(i) - i) * p_est > \
+                    (1.0 + TIME_SLACK) * settings.time_limit:
+                stop = "time_limit"
+                break
+        if rounds.is_end(i):
+            want = fit if last is None else (last - i if fit is None else min(fit, last - i))
+            if settings.noise_threshold > 0 and math.isfinite(noise["noise_p95"]) and not scheduled_rounds:
+                # noise ~ 1 / sqrt(passes) at best: the passes still needed, at least
+                more = sums.count * ((noise["noise_p95"] / settings.noise_threshold) ** 2 - 1.0)
+                want = max(1, int(math.ceil(more))) if want is None else min(want, max(1, int(math.ceil(more))))
+            if scheduled_rounds:
+                n = round_end_after(i + 1) - i
+            else:
+                n = rounds.begin(i + 1, max(want, 1) if want is not None else None)
+            if fit is not None and (n == 0 or n > fit):
+                stop = "time_limit"
+                break
         if cancel is not None and cancel():
             stop = "cancelled"
             break
         i += 1
-    left_out = [sums.end, sums.next - 1] if sums.pending and sums.count else None
+    left_out = [sums.end, sums.next - 1, rounds.end_of(sums.next - 1)] if sums.pending and sums.count else None
     info = {
         "passes": sums.count,
         "passes_rendered": sums.next - sums.first,
@@ -322,6 +352,7 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
         "pass_first": sums.first,
         "pass_end": sums.end,
         "stopped_by": stop,
+        "scheduled_rounds": rounds.scheduled,
         "shrink_alpha": alpha,
         "kernel_dims": 2 if psettings.estimator == "STANDARD" else 3,
         "kernel_radius_scale": (map_stats[-1]["kernel_radius_scale"] if map_stats else 1.0),
@@ -348,13 +379,13 @@ def progressive_warnings(info: dict) -> list[str]:
     if info.get("stopped_by") == "cancelled":
         out.append(f"cancelled after {info.get('passes_rendered', info.get('passes', 0))} pass(es): the image "
                    "holds the passes so far")
-    lo_hi = info.get("left_out")
-    if lo_hi:
-        lo, hi = lo_hi
+    left = info.get("left_out")
+    if left:
+        lo, hi, end = left
         ends = ", ".join(str(n) for n in round_ends_near(hi, 2) if n > 0)
         out.append(f"passes {lo}-{hi} are left out of the image: the round of time strata they began (it ends at "
-                   f"pass {round_end_after(hi)}) did not finish, and a part of a round weights part of the shutter "
-                   f"twice; pass counts {ends}, ... use every pass")
+                   f"pass {end}) did not finish, and a part of a round weights part of the shutter twice; pass "
+                   f"counts {ends}, ... use every pass")
     elif info.get("passes") == 0 and info.get("passes_rendered"):
         out.append(f"no round of time strata finished (passes {info.get('pass_first')}-"
                    f"{info.get('pass_first') + info.get('passes_rendered') - 1}): the image is their mean and "

@@ -98,7 +98,7 @@ def _map_stats(maps) -> dict:
 # ----------------------------------------------------------------------------
 # render
 # ----------------------------------------------------------------------------
-def render(scene, settings, *, progress=None, cancel=None, on_pass=None) -> RenderResult:
+def render(scene, settings, *, progress=None, cancel=None, on_pass=None, scheduled_rounds=False) -> RenderResult:
     """Render ``scene`` with ``settings``: :func:`_render`, with numba's own errors (a kernel that could
     not be compiled or loaded on this machine) turned into one :class:`KernelsUnavailable` line.
     The first render of a process says whether the kernels load or compile
@@ -106,12 +106,15 @@ def render(scene, settings, *, progress=None, cancel=None, on_pass=None) -> Rend
 
     on_pass(passes, info): method PROGRESSIVE calls it after each pass with the image so far
     (name -> (H, W, C) float32) and info (pass, passes, elapsed_s, noise_p95), so a viewer can show it.
+    scheduled_rounds: PROGRESSIVE keeps to the schedule of time-strata rounds under a time limit (for a
+    partial result, ``stpm render --pass-offset``) rather than taking smaller rounds that fit.
     """
     kernels.require()
     compiled_before = kernels.compile_counts()
     try:
         with scene.frozen():          # bounds and instance offsets once per render, not per pass
-            result = _render(scene, settings, progress=progress, cancel=cancel, on_pass=on_pass)
+            result = _render(scene, settings, progress=progress, cancel=cancel, on_pass=on_pass,
+                             scheduled_rounds=scheduled_rounds)
     except Exception as exc:
         if kernels.is_numba_error(exc):
             raise kernels.KernelsUnavailable(f"a compiled kernel failed on this machine: {kernels.compile_error(exc)}") from exc
@@ -132,7 +135,7 @@ def _already_said(message: str, said: list) -> bool:
     return m is not None and any(w.startswith(m.group(1)) and m.group(2) in w for w in said)
 
 
-def _render(scene, settings, *, progress=None, cancel=None, on_pass=None) -> RenderResult:
+def _render(scene, settings, *, progress=None, cancel=None, on_pass=None, scheduled_rounds=False) -> RenderResult:
     """Render ``scene`` with ``settings`` (RenderSettings).
 
     progress(fraction in [0, 1], message) is called at least once per tile;
@@ -188,7 +191,8 @@ def _render(scene, settings, *, progress=None, cancel=None, on_pass=None) -> Ren
         t0 = _time.perf_counter()
         sums, progressive, trace_stats, map_stats = render_passes(
             scene, settings, psettings, caster, lights, table, progress=progress, cancel=cancel,
-            on_pass=None if on_pass is None else (lambda sm, info: on_pass(sm.preview(), info)))
+            on_pass=None if on_pass is None else (lambda sm, info: on_pass(sm.preview(), info)),
+            scheduled_rounds=scheduled_rounds)
         passes = sums.image()
         photon_s = sum(float(m.get("photon_trace_s", 0.0)) for m in map_stats)
         warnings.extend(progressive_warnings(progressive))

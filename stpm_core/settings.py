@@ -12,7 +12,7 @@ from typing import ClassVar
 
 from .errors import SettingsError
 from .schema import setting, specs_of
-from .strata import is_round_end, round_ends_near
+from .strata import is_round_end, round_ends_near, round_ends_text
 
 __all__ = ["RenderSettings", "METHODS", "ESTIMATORS", "EFFECTS", "KERNELS"]
 
@@ -173,8 +173,7 @@ class RenderSettings:
         if self.method == "PROGRESSIVE" and not is_round_end(self.pass_offset):
             ends = ", ".join(str(n) for n in round_ends_near(self.pass_offset, 2))
             raise SettingsError(f"pass_offset {self.pass_offset} is inside a round of time strata; passes are "
-                                f"split between machines at round ends: 0, 1, 2, 3, 4, 8, 16, 32, then every 16 "
-                                f"(nearest: {ends})")
+                                f"split between machines at round ends: {round_ends_text()} (nearest: {ends})")
         return self
 
     def to_dict(self) -> dict:

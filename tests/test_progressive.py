@@ -70,8 +70,9 @@ def test_pass_strata_cover_the_shutter_once_per_round():
     assert [pass_stratum(i) for i in (1, 2, 3, 4)] == [(0.0, 1.0)] * 4           # pairs 1, 2: the whole shutter
     assert [pass_stratum(i) for i in range(5, 9)] == [(0.0, 0.5)] * 2 + [(0.5, 1.0)] * 2
     assert [pass_stratum(i)[0] for i in range(9, 17, 2)] == [0.0, 0.5, 0.25, 0.75]  # bit-reversed
-    ends = [n for n in range(200) if is_round_end(n)]
-    assert ends[:9] == [0, 1, 2, 3, 4, 8, 16, 32, 32 + 2 * STRATA_CAP]
+    ends = [n for n in range(8 * STRATA_CAP + 1) if is_round_end(n)]
+    C = STRATA_CAP
+    assert ends == [0, 1, 2, 3, 4] + [2 ** k for k in range(3, (4 * C).bit_length())] + [4 * C + 2 * C, 4 * C + 4 * C]
     for a, b in zip(ends[4:], ends[5:]):                 # every round: each stratum once per pair, no gap
         odd = sorted(pass_stratum(i) for i in range(a + 1, b + 1, 2))
         assert odd == sorted(pass_stratum(i) for i in range(a + 2, b + 1, 2))   # the halves alike
@@ -474,19 +475,42 @@ def test_noise_threshold_stops_with_motion_blur():
 
 
 def test_a_stop_inside_a_round_leaves_its_passes_out_of_the_image():
-    """20 passes on a moving shadow: the image is the one of 16 passes (bit for bit) -- passes 17-20
-    reached 4 of the 8 time strata of their round and would band the motion trail -- and says so."""
+    """Cancelled after pass 20 of 32 on a moving shadow: the image is the one of 16 passes (bit for bit)
+    -- passes 17-20 reached 2 of the 16 time strata of their round and would band the motion trail --
+    and says so; the display after each pass had them."""
     scene = _moving_occluder_scene((16, 12))
-    st = RenderSettings(method="PROGRESSIVE", passes=20, samples=1, photons_caustic=0, photons_global=0)
+    st = RenderSettings(method="PROGRESSIVE", passes=32, samples=1, photons_caustic=0, photons_global=0)
     shown = []
-    r20 = render(scene, st, on_pass=lambda img, info: shown.append(img["Combined"]))
+    r20 = render(scene, st, on_pass=lambda img, info: shown.append(img["Combined"]), cancel=lambda: len(shown) >= 20)
     r16 = render(scene, st.replace(passes=16))
     pr = r20.stats["progressive"]
-    assert pr["passes"] == 16 and pr["passes_rendered"] == 20 and pr["left_out"] == [17, 20]
+    assert pr["stopped_by"] == "cancelled" and pr["scheduled_rounds"]
+    assert pr["passes"] == 16 and pr["passes_rendered"] == 20 and pr["left_out"] == [17, 20, 32]
     assert np.array_equal(r20.passes["Combined"], r16.passes["Combined"])
     assert any("passes 17-20 are left out" in w and "ends at pass 32" in w for w in r20.warnings), r20.warnings
-    assert len(shown) == 20 and not np.array_equal(shown[-1], r20.passes["Combined"])   # the preview had them
+    assert len(shown) == 20 and not np.array_equal(shown[-1], r20.passes["Combined"])
     assert r16.stats["progressive"]["left_out"] is None and not any("left out" in w for w in r16.warnings)
+
+
+def test_pass_and_time_limits_end_with_smaller_whole_rounds():
+    """passes = 20: passes 17-20 form a round of 2 strata (not the schedule's 16), so all 20 are in the
+    image and every part of the shutter weighs alike.  A time limit likewise takes rounds that fit in
+    the time left: nothing left out, and it is not stopped early by a round that would not fit."""
+    from stpm_core.progressive import render_passes  # noqa: F401  (the loop under test)
+    from stpm_core.strata import Rounds
+    r = Rounds()
+    assert r.begin(17, 4) == 4 and not r.scheduled                                       # 2 strata, in pairs
+    assert [r.stratum(i) for i in range(17, 21)] == [(0.0, 0.5)] * 2 + [(0.5, 1.0)] * 2 and r.is_end(20)
+    assert r.begin(21, 3) == 1 and r.stratum(21) == (0.0, 1.0) and r.is_end(21) and r.begin(22, 0) == 0
+    assert r.begin(22, 100) == 16 and r.stratum(22) == (0.0, 1 / 8)                   # the schedule's 8 strata again
+    scene = _moving_occluder_scene((16, 12))
+    st = RenderSettings(method="PROGRESSIVE", passes=20, samples=1, photons_caustic=0, photons_global=0)
+    pr = render(scene, st).stats["progressive"]
+    assert pr["passes"] == pr["passes_rendered"] == 20 and pr["left_out"] is None and not pr["scheduled_rounds"]
+    timed = render(scene, st.replace(passes=0, time_limit=1.5)).stats["progressive"]
+    assert timed["stopped_by"] == "time_limit" and timed["left_out"] is None
+    assert timed["passes"] == timed["passes_rendered"] > 16
+    assert sum(timed["pass_seconds"]) > 0.6 * 1.5, timed["pass_seconds"]     # the time was used
 
 
 def test_noise_estimate_of_known_noise():
