@@ -328,7 +328,10 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
                 stop = "time_limit"
                 break
         if rounds.is_end(i):
-            want = fit if last is None else (last - i if fit is None else min(fit, last - i))
+            # (a round takes at most half the time left: it still ends in time if the passes slow
+            # down twofold, as on a machine that gets busy; the last rounds are smaller)
+            half = None if fit is None else max(1, fit // 2)
+            want = half if last is None else (last - i if half is None else min(half, last - i))
             if settings.noise_threshold > 0 and math.isfinite(noise["noise_p95"]) and not scheduled_rounds:
                 # noise ~ 1 / sqrt(passes) at best: the passes still needed, at least
                 more = sums.count * ((noise["noise_p95"] / settings.noise_threshold) ** 2 - 1.0)
