@@ -41,7 +41,7 @@ from .command_common import (EXIT_CANCELLED, EXIT_ERROR, EXIT_INTERNAL, EXIT_OK,
                              check_cancel, check_memory, checked_overrides, load_any_scene, open_blend_reader,
                              option_message, safe_text, scene_kind)
 from .errors import RenderCancelled, SceneError, SettingsError, StpmError
-from .strata import is_round_end, round_ends_near
+from .strata import is_round_end, round_end_after, round_ends_near
 
 __all__ = ["main", "parse_frames", "load_any_scene"]
 
@@ -339,11 +339,11 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
             raise StpmError(f"--pass-offset renders part of a progressive render: it needs --method progressive "
                             f"(the settings say {settings.method.lower()})")
         if partial and settings.passes > 0 and not is_round_end(settings.pass_offset + settings.passes):
-            n = settings.pass_offset + settings.passes
-            ends = ", ".join(str(m) for m in round_ends_near(n) if m > settings.pass_offset)
-            raise UsageError(f"--pass-offset {settings.pass_offset} --passes {settings.passes} ends at pass {n}, "
-                             f"inside a round of time strata, and a partial result holds whole rounds: end at "
-                             f"pass {ends} or another round end (docs/cli.md, \"Partial renders\")")
+            n, a = settings.pass_offset + settings.passes, settings.pass_offset
+            counts = ", ".join(str(m - a) for m in round_ends_near(n) if m > a)
+            raise StpmError(f"--pass-offset {a} --passes {settings.passes} ends at pass {n}, inside a round of "
+                            f"time strata, and a partial result holds whole rounds: with --pass-offset {a} use "
+                            f"--passes {counts} (docs/cli.md, \"Splitting one frame between machines\")")
         if index == 0:
             _warn_progressive_options(args, overrides, settings)
             if partial and settings.denoise:
@@ -386,6 +386,14 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
         working = working_space_of(scene.metadata)       # the passes' colour space (Blender 5)
         meta = {"stpm:settings": settings.to_dict(), "stpm:plan": plan,
                 "stpm:scene": str(scene_path), "stpm:frame": str(scene.frame if frame is None else frame)}
+        if partial and result.sums is not None and result.sums.count == 0:
+            a = settings.pass_offset
+            why = str(stats.get("progressive", {}).get("stopped_by", "?")).replace("_", " ")
+            raise StpmError(f"the render stopped ({why}) before its "
+                            f"first round of time strata (passes {a + 1}..{round_end_after(a + 1)}) was done, and a "
+                            "partial result holds whole rounds: nothing written; give it more --time-limit, or "
+                            "--passes instead")
+
         def exr(tmp):
             if partial:
                 from .partial import scene_hash, settings_hash, write_partial
@@ -491,7 +499,9 @@ def _cmd_merge(args) -> int:
         outputs.append((stats_path, lambda tmp: write_json(tmp, {"progressive": info}, atomic=False)))
     _write_together(outputs, CancelFlag.active)
     if not args.quiet:
-        print(f"merged {len(args.parts)} partial results: {summary({**info, 'kernel_radius_scale': None})}",
+        n_parts = len(args.parts)
+        print(f"merged {n_parts} partial result{'' if n_parts == 1 else 's'}: "
+              f"{summary({**info, 'kernel_radius_scale': None})}",
               file=sys.stderr)
     print(f"wrote {safe_text(out_exr)}")
     print(f"wrote {safe_text(out_png)}")

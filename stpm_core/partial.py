@@ -210,7 +210,7 @@ def merge(paths) -> tuple[PassSums, dict]:
     parts = [(read_partial(p), Path(p)) for p in paths]
     parts.sort(key=lambda x: x[0][1]["pass_first"])
     (total, head0), p0 = parts[0]
-    for key in ("seed", "scene_hash", "settings_hash", "resolution", "passes", "working_space"):
+    for key in ("resolution", "seed", "settings_hash", "scene_hash", "passes", "working_space"):
         for (_, head), p in parts[1:]:
             if head[key] != head0[key]:
                 if key == "resolution":

@@ -380,8 +380,10 @@ def progressive_warnings(info: dict) -> list[str]:
     """The render report's warnings about a progressive render's stop (cancel, passes left out)."""
     out = []
     if info.get("stopped_by") == "cancelled":
-        out.append(f"cancelled after {info.get('passes_rendered', info.get('passes', 0))} pass(es): the image "
-                   "holds the passes so far")
+        done, held = info.get("passes_rendered", info.get("passes", 0)), info.get("passes", 0)
+        first = info.get("pass_first", 1)
+        what = f"passes {first}-{first + held - 1}" if held > 1 else (f"pass {first}" if held else "its passes")
+        out.append(f"cancelled after {done} pass{'' if done == 1 else 'es'}: the image holds {what}")
     left = info.get("left_out")
     if left:
         lo, hi, end = left
@@ -400,8 +402,12 @@ def summary(info: dict) -> str:
     """One line for the render report and the CLI: passes, why it stopped, noise, kernel size."""
     noise = info.get("noise_p95")
     flip = info.get("noise_flip_visible")
-    parts = [f"{info.get('passes', 0)} passes ({info.get('pass_first', 1)}.."
-             f"{info.get('pass_end', 1) - 1}), stopped by {str(info.get('stopped_by', '?')).replace('_', ' ')}"]
+    n = int(info.get("passes", 0) or 0)
+    first, end = info.get("pass_first", 1), info.get("pass_end", 1)
+    held = f"{n} pass{'' if n == 1 else 'es'} ({first}..{end - 1})" if n else "no whole round of passes"
+    why = str(info.get("stopped_by", "?"))
+    parts = [held if why == "merge" else
+             f"{held}, stopped by {'a cancel' if why == 'cancelled' else why.replace('_', ' ')}"]
     if noise is not None:
         parts.append(f"noise {noise:.4f} (95th percentile of 8x8 blocks)")
     if flip is not None:

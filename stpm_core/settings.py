@@ -41,7 +41,8 @@ ESTIMATORS = tuple(c[0] for c in _ESTIMATOR_CHOICES)
 EFFECTS = tuple(c[0] for c in _EFFECTS_CHOICES)
 KERNELS = tuple(c[0] for c in _KERNEL_CHOICES)
 
-_PROGRESSIVE_NEEDS_A_STOP = "method PROGRESSIVE would never stop: set passes, time_limit or noise_threshold"
+_PROGRESSIVE_NEEDS_A_STOP = ("method PROGRESSIVE would never stop: set passes, time_limit or noise_threshold "
+                             "(--passes, --time-limit, --noise-threshold)")
 
 
 @dataclass

@@ -411,7 +411,7 @@ def test_a_cancel_or_a_time_limit_keeps_the_passes_so_far():
                     cancel=lambda: len(shown) >= 3)
     assert result.stats["progressive"]["stopped_by"] == "cancelled"
     assert result.stats["progressive"]["passes"] == len(shown) == 3
-    assert any("cancelled after 3 pass" in w for w in result.warnings)
+    assert any("cancelled after 3 passes: the image holds passes 1-3" in w for w in result.warnings), result.warnings
     assert np.all(np.isfinite(result.passes["Combined"])) and result.passes["Combined"][..., :3].max() > 0
     # a cancel before the first pass finished has nothing to keep
     with pytest.raises(RenderCancelled):
@@ -488,6 +488,7 @@ def test_a_stop_inside_a_round_leaves_its_passes_out_of_the_image():
     assert pr["passes"] == 16 and pr["passes_rendered"] == 20 and pr["left_out"] == [17, 20, 32]
     assert np.array_equal(r20.passes["Combined"], r16.passes["Combined"])
     assert any("passes 17-20 are left out" in w and "ends at pass 32" in w for w in r20.warnings), r20.warnings
+    assert any("cancelled after 20 passes: the image holds passes 1-16" in w for w in r20.warnings), r20.warnings
     assert len(shown) == 20 and not np.array_equal(shown[-1], r20.passes["Combined"])
     assert r16.stats["progressive"]["left_out"] is None and not any("left out" in w for w in r16.warnings)
 
@@ -543,7 +544,8 @@ def parts(tmp_path_factory):
     for args in (("--passes", "8", "-o", "full.exr"), ("--pass-offset", "0", "--passes", "4", "-o", "a.exr"),
                  ("--pass-offset", "4", "--passes", "4", "-o", "b.exr"), ("--pass-offset", "8", "--passes", "8",
                                                                             "-o", "c.exr"),
-                 ("--pass-offset", "4", "--passes", "4", "--seed", "5", "-o", "s.exr")):
+                 ("--pass-offset", "4", "--passes", "4", "--seed", "5", "-o", "s.exr"),
+                 ("--pass-offset", "4", "--passes", "4", "--resolution", "12x8", "-o", "r.exr")):
         out = _cli("render", "mc.stpm", "--method", "progressive", "-q", *args, cwd=d)
         assert out.returncode == 0, out.stderr
     return d
@@ -568,19 +570,26 @@ def test_merged_partials_equal_one_process(parts):
 
 def test_partials_are_whole_rounds_of_time_strata(parts):
     """A partial that would end inside a round, or a pass offset inside one: one line before rendering."""
-    out = _cli("render", "mc.stpm", "--method", "progressive", "--pass-offset", "0", "--passes", "6", "-o", "x.exr",
+    out = _cli("render", "mc.stpm", "--method", "progressive", "--pass-offset", "4", "--passes", "5", "-o", "x.exr",
                cwd=parts)
-    assert out.returncode == 2 and "inside a round of time strata" in out.stderr and "8, 16" in out.stderr, out.stderr
+    assert out.returncode == 1 and "inside a round of time strata" in out.stderr, out.stderr
+    assert "use --passes 4, 12, 28" in out.stderr and "Splitting one frame between machines" in out.stderr, out.stderr
     out = _cli("render", "mc.stpm", "--method", "progressive", "--pass-offset", "5", "--passes", "3", "-o", "x.exr",
                cwd=parts)
     assert out.returncode == 1 and "--pass-offset 5 is inside a round" in out.stderr, out.stderr
-    assert not (parts / "x.exr").exists()
+    # a time limit that ends the first round early: said, nothing written (a partial holds whole rounds)
+    out = _cli("render", "mc.stpm", "--method", "progressive", "--pass-offset", "16", "--passes", "0",
+               "--time-limit", "0.001", "-q", "-o", "x.exr", cwd=parts)
+    assert out.returncode == 1 and "before its first round of time strata (passes 17..32)" in out.stderr, out.stderr
+    assert out.stderr.count("\n") == 1, out.stderr
+    assert not (parts / "x.exr").exists() and not (parts / "x.png").exists()
 
 
 @pytest.mark.parametrize("files,message", [
     (("a.exr", "a.exr"), "overlaps"),
     (("a.exr", "c.exr"), "missing"),
-    (("a.exr", "s.exr"), "different seed"),
+    (("a.exr", "s.exr"), "different seeds (5 and 1)"),
+    (("a.exr", "r.exr"), "different resolutions (12x8 and 24x16)"),
     (("a.exr", "full.exr"), "not a partial result"),
     (("a.exr", "nothere.exr"), "not found"),
 ])
