@@ -187,7 +187,9 @@ class BlendReader:
                          for name in ("Combined", "Noisy Image", "Denoising Albedo", "Denoising Normal")
                          if name in passes})
         try:
-            answer = self._request({"denoise": src, "out": out}, None)
+            # (Blender's own lines about it -- "Saved: '/tmp/stpm_denoise_...'", the compositor's
+            # timing -- name temporary files gone by now: not passed on, unless STPM_DEBUG)
+            answer = self._request({"denoise": src, "out": out}, None, chatter=False)
             image = np.load(out)
         finally:
             for f in (src, out):
@@ -246,8 +248,9 @@ class BlendReader:
             answer = self._request({"open": str(self.path)}, None)
             self.frame_range = answer.get("frame_range")
 
-    def _request(self, request: dict, frame) -> dict:
-        """Send one request, wait for its answer (polling ``cancel``), pass Blender's output on."""
+    def _request(self, request: dict, frame, chatter: bool = True) -> dict:
+        """Send one request, wait for its answer (polling ``cancel``), pass Blender's output on when it
+        succeeded (``chatter`` False: not even then, unless STPM_DEBUG)."""
         try:
             self._proc.stdin.write((json.dumps(request) + "\n").encode())
             self._proc.stdin.flush()
@@ -270,7 +273,7 @@ class BlendReader:
             self._buf += chunk
         line, self._buf = self._buf.split(b"\n", 1)
         answer = json.loads(line)
-        self._pass_log(ok=bool(answer.get("ok")))
+        self._pass_log(ok=bool(answer.get("ok")) and chatter)
         if answer.get("ok"):
             return answer
         message = str(answer.get("error", "")).replace(": Error: ", ": ")   # Blender's "Error: " said once

@@ -336,6 +336,7 @@ def test_stpm_render_denoises_a_blend_as_f12_does(tmp_path):
                           str(tmp_path / "out.exr"), "--stats", str(tmp_path / "stats.json"), "--quiet"],
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
+    assert "Saved:" not in out.stderr and "stpm_denoise_" not in out.stderr, out.stderr   # no temp-file chatter
     exr = sorted(tmp_path.glob("out*.exr"))[0]
     passes = read_exr(exr)
     assert {"Combined", "Denoising Albedo", "Denoising Normal", "Noisy Image"} <= set(passes)
