@@ -279,7 +279,11 @@ def open_blend_reader(path, *, quiet: bool = False, bake: bool = False):
 # 100x100, 1 sample): 239 (PHOTON: the film's float32 sums, resolve()'s temporaries, the passes,
 # the EXR / PNG writers' copies) and 481 (ACCUMULATION: also a float64 sum and one still's passes).
 # Rounded up; photon maps and per-tile buffers come on top (docs/cli.md, "Memory").
-BYTES_PER_PIXEL = {"PHOTON": 256, "ACCUMULATION": 512}
+BYTES_PER_PIXEL = {"PHOTON": 256, "ACCUMULATION": 512,
+                   # 800 measured the same way (8 passes at 1600x1200): float64 sums of the 30 pass
+                   # channels twice (whole rounds, the pending round's), the odd / even halves, this
+                   # pass's float32 image and the one shown
+                   "PROGRESSIVE": 1024}
 
 
 def available_memory() -> int | None:

@@ -109,7 +109,10 @@ class PassSums:
         p = self._pending
         for name, img in passes.items():
             a = np.asarray(img, dtype=np.float64)
-            p["sums"][name] = p["sums"][name] + a if name in p["sums"] else a.copy()
+            if name in p["sums"]:
+                p["sums"][name] += a
+            else:
+                p["sums"][name] = a.copy()
         rgb = np.asarray(passes["Combined"], dtype=np.float64)[:, :, :3]
         half = "even" if i % 2 == 0 else "odd"
         p[half] = rgb.copy() if p[half] is None else p[half] + rgb
@@ -122,7 +125,10 @@ class PassSums:
         """The pending passes complete a round: they join the image."""
         p = self._pending
         for name, v in p["sums"].items():
-            self.sums[name] = self.sums[name] + v if name in self.sums else v
+            if name in self.sums:
+                self.sums[name] += v
+            else:
+                self.sums[name] = v
         self.even, self.odd = _add(self.even, p["even"]), _add(self.odd, p["odd"])
         self.n_even += p["n_even"]
         self.n_odd += p["n_odd"]
