@@ -79,6 +79,16 @@ def _stpm_passes(scene, samples: int, **settings) -> dict:
     return render(core, RenderSettings(**kw)).passes
 
 
+def _textured_floor(png) -> None:
+    """A 6 m plane "Floor" whose Principled Base Color is the image ``png`` (Closest interpolation)."""
+    mat, tree, bsdf = _principled("Floor")
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.load(str(png))
+    tex.interpolation = "Closest"
+    tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    add_mesh("plane", "Floor", material=mat, size=6.0)
+
+
 def _principled(name, **inputs):
     mat, tree, out = _empty_material(name)
     bsdf = tree.nodes.new("ShaderNodeBsdfPrincipled")
@@ -138,12 +148,7 @@ def _guides_scene(png: Path, size=(64, 48)):
     add_camera(location=(0, -5.5, 2.6), rotation=(math.radians(68), 0, 0))
     add_light("AREA", energy=300.0, location=(1.5, -1.5, 4.0), size=1.5)
     set_world((0.3, 0.35, 0.4), 1.0)
-    mat, tree, bsdf = _principled("Floor")
-    tex = tree.nodes.new("ShaderNodeTexImage")
-    tex.image = bpy.data.images.load(str(png))
-    tex.interpolation = "Closest"
-    tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
-    add_mesh("plane", "Floor", material=mat, size=6.0)
+    _textured_floor(png)
     _sphere("RoughMetal", (-1.3, 0, 0.7), 0.7, _principled("RoughMetal", **{
         "Base Color": (0.9, 0.6, 0.3, 1), "Metallic": 1.0, "Roughness": 0.4})[0])
     _sphere("GlossyMetal", (0.2, 0.6, 0.7), 0.7, _principled("GlossyMetal", **{
@@ -244,12 +249,7 @@ def _flip_scene(tmp_path, size):
     cam = add_camera(location=(0, -5.5, 2.6), rotation=(math.radians(68), 0, 0))
     add_light("AREA", energy=120.0, location=(1.5, -1.0, 3.5), size=0.5)
     set_world((0.5, 0.55, 0.6), 1.0)
-    mat, tree, bsdf = _principled("Floor")
-    tex = tree.nodes.new("ShaderNodeTexImage")
-    tex.image = bpy.data.images.load(str(png))
-    tex.interpolation = "Closest"
-    tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
-    add_mesh("plane", "Floor", material=mat, size=6.0)
+    _textured_floor(png)
     metal = (-0.9, 0.2, 0.8)
     _sphere("Metal", metal, 0.8, _principled("Metal", **{
         "Base Color": (0.95, 0.65, 0.45, 1), "Metallic": 1.0, "Roughness": 0.35})[0])
