@@ -8,7 +8,7 @@ lobe       weight (before Fresnel)                     shape
 DIFFUSE    w_base = (1-metallic)(1-transmission)       base_color / pi * (1 - F_coat(wo))
 COAT       w_base                                      specular * F_diel(ior); mirror or GGX
 METAL      w_metal = metallic                          Schlick(F0 = base_color); mirror or GGX
-GLASS_R    w_glass = (1-metallic) transmission         F_diel(eta); mirror or GGX
+GLASS_R    w_glass = (1-metallic) transmission         F_diel(eta) tint_r; mirror or GGX
 GLASS_T    w_glass                                     (1 - F_diel) tint_t; refraction or GGX BTDF
 METAL_MS   (probability 0: rough metal's multiple scattering scales METAL, Cycles' way)
 =========  ==========================================  ==========================
@@ -52,7 +52,8 @@ __all__ = ["MaterialTable", "bsdf_eval", "bsdf_pdf", "bsdf_sample", "diffuse_alb
 class MaterialTable:
     """Per-material arrays (M,) / (M, 3) gathered once, indexed by hit material ids.
 
-    Attributes: base_color (M, 3), tint_t (M, 3) (the glass transmission tint), metallic, transmission, roughness, specular,
+    Attributes: base_color (M, 3), tint_t (M, 3) (the glass transmission tint), tint_r (M, 3) (the
+    glass reflection tint), metallic, transmission, roughness, specular,
     ior (M,), emission (M, 3), alpha = roughness^2 (M,), and the lobe weights
     w_base, w_metal, w_glass (M,).  Index -1 (a miss) reads as black, no lobes.
     ``closures`` (M + 1, N_CLOSURE): the same numbers as closure rows, what the BSDF kernels read.
@@ -64,6 +65,7 @@ class MaterialTable:
         # One extra row at the end: index -1 lands on an inert black material
         self.base_color = np.zeros((M + 1, 3))
         self.tint_t = np.zeros((M + 1, 3))       # GLASS_T's transmission tint (None: base_color)
+        self.tint_r = np.zeros((M + 1, 3))       # GLASS_R's reflection tint (None: white)
         self.emission = np.zeros((M + 1, 3))
         self.metallic = np.zeros(M + 1)
         self.transmission = np.zeros(M + 1)
@@ -74,6 +76,8 @@ class MaterialTable:
             self.base_color[i] = np.asarray(m.base_color, float)
             tint = getattr(m, "transmission_tint", None)
             self.tint_t[i] = np.asarray(m.base_color if tint is None else tint, float)
+            tint_r = getattr(m, "reflection_tint", None)
+            self.tint_r[i] = 1.0 if tint_r is None else np.asarray(tint_r, float)
             self.emission[i] = np.asarray(m.emission, float)
             self.metallic[i] = m.metallic
             self.transmission[i] = m.transmission

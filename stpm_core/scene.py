@@ -257,6 +257,10 @@ class Material:
     transmission_tint : (3,) in [0, 1] or None: the colour the glass lobe's refraction is tinted
         by.  None (the default, also :meth:`glass`, as Cycles' Glass BSDF) = ``base_color``; a
         Principled BSDF's is ``sqrt(base_color)`` (Cycles' svm/closure.h), which the exporter sets.
+    reflection_tint : (3,) in [0, 1] or None: the colour the glass lobe's reflection is tinted by.
+        None (the default, also :meth:`glass`, whose reflection is thus untinted) = white, a
+        Principled BSDF's (Cycles' specular tint, white by default); a Glass BSDF's is its colour
+        (Cycles' svm/closure.h), which the exporter sets.
     name : str.
     graph : the material's shader-node graph (:class:`stpm_core.nodes.ShaderGraph`)
         or None.  With a graph, every hit evaluates it (``kernels.svm``); the
@@ -274,6 +278,7 @@ class Material:
     name: str = "material"
     graph: object = None
     transmission_tint: np.ndarray | None = None
+    reflection_tint: np.ndarray | None = None
 
     @classmethod
     def diffuse(cls, color=(0.8, 0.8, 0.8), name: str = "diffuse") -> "Material":
@@ -715,12 +720,13 @@ def validate_scene(scene: Scene) -> None:
             raise SceneError(f"{p}.base_color must be <= 1 (energy conserving), got {np.asarray(m.base_color).tolist()}")
         _check_vec3(f"{p}.emission", m.emission, nonneg=True)
         _check_emission(f"{p}.emission", float(np.max(m.emission)), "W/(m^2 sr)")
-        tint = getattr(m, "transmission_tint", None)
-        if tint is not None:
-            _check_vec3(f"{p}.transmission_tint", tint, nonneg=True)
-            if np.any(np.asarray(tint, float) > 1.0):
-                raise SceneError(f"{p}.transmission_tint must be <= 1 (energy conserving), "
-                                 f"got {np.asarray(tint, float).tolist()}")
+        for tint_name in ("transmission_tint", "reflection_tint"):
+            tint = getattr(m, tint_name, None)
+            if tint is not None:
+                _check_vec3(f"{p}.{tint_name}", tint, nonneg=True)
+                if np.any(np.asarray(tint, float) > 1.0):
+                    raise SceneError(f"{p}.{tint_name} must be <= 1 (energy conserving), "
+                                     f"got {np.asarray(tint, float).tolist()}")
         for name in ("metallic", "transmission", "roughness", "specular"):
             _check_range(f"{p}.{name}", getattr(m, name), 0.0, 1.0)
         _check_range(f"{p}.ior", m.ior, 1.0, 10.0)

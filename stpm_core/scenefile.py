@@ -167,8 +167,9 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
     materials = []
     for i, m in enumerate(scene.materials):
         d = _fields_to_json(m, _MATERIAL_FIELDS)
-        if getattr(m, "transmission_tint", None) is not None:
-            d["transmission_tint"] = _scalar_to_json("vec3", m.transmission_tint)
+        for tint_name in ("transmission_tint", "reflection_tint"):      # written only when set
+            if getattr(m, tint_name, None) is not None:
+                d[tint_name] = _scalar_to_json("vec3", getattr(m, tint_name))
         if getattr(m, "graph", None) is not None:
             d["graph"] = _graph_to_json(m.graph, f"materials[{i}] ({m.name!r}).graph", len(textures))
         materials.append(d)
@@ -790,8 +791,9 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
     for i, d in enumerate(h.list("materials")):
         f = _Fields(d, f"materials[{i}]")
         m = Material(**f.read(_MATERIAL_FIELDS))
-        if f.d.get("transmission_tint") is not None:
-            m.transmission_tint = f.vec3("transmission_tint")
+        for tint_name in ("transmission_tint", "reflection_tint"):      # absent or null: None
+            if f.d.get(tint_name) is not None:
+                setattr(m, tint_name, f.vec3(tint_name))
         if f.d.get("graph") is not None:
             m.graph = _graph_from_json(f.d["graph"], f"materials[{i}].graph", len(textures))
         materials.append(m)

@@ -199,6 +199,7 @@ def test_materials_from_node_trees():
         "Diffuse": node_material("Diffuse", "ShaderNodeBsdfDiffuse", Color=(0.5, 0.5, 0.5, 1)),
         "Glossy": node_material("Glossy", "ShaderNodeBsdfGlossy", Color=(0.9, 0.8, 0.7, 1), Roughness=0.1),
         "Glass": node_material("Glass", "ShaderNodeBsdfGlass", IOR=1.7, Roughness=0.0),
+        "Tinted": node_material("Tinted", "ShaderNodeBsdfGlass", Color=(0.8, 0.3, 0.2, 1), Roughness=0.3),
         "Emission": node_material("Emission", "ShaderNodeEmission", Color=(1, 1, 1, 1), Strength=5.0),
     }
     for i, (name, (mat, _)) in enumerate(specs.items()):
@@ -212,6 +213,10 @@ def test_materials_from_node_trees():
     # Cycles tints a Principled BSDF's refraction by sqrt(base colour), a Glass BSDF's by its colour
     np.testing.assert_allclose(p.transmission_tint, np.sqrt((0.2, 0.4, 0.6)), atol=1e-6)
     assert M["Glass"].transmission_tint is None and M["Diffuse"].transmission_tint is None
+    # ... and a Glass BSDF's reflection by its colour too (white, the default, is left None)
+    np.testing.assert_allclose(M["Tinted"].reflection_tint, (0.8, 0.3, 0.2), atol=1e-6)
+    assert M["Tinted"].transmission_tint is None and M["Tinted"].roughness == pytest.approx(0.3)
+    assert all(M[k].reflection_tint is None for k in ("Glass", "Principled", "Diffuse", "Glossy", "Emission"))
     assert (M["Diffuse"].metallic, M["Diffuse"].specular, M["Diffuse"].transmission) == (0, 0, 0)
     assert M["Glossy"].metallic == 1.0 and M["Glossy"].roughness == pytest.approx(0.1)
     assert M["Glass"].transmission == 1.0 and M["Glass"].ior == pytest.approx(1.7)
@@ -254,6 +259,13 @@ def test_mix_image_and_unsupported_nodes_warn_and_approximate():
     add_mesh("cube", "Textured", location=(3, 0, 0), material=tex_mat)
     toon, _ = node_material("Toon", "ShaderNodeBsdfToon")
     add_mesh("cube", "Toon", location=(6, 0, 0), material=toon)
+    # A tinted Glass BSDF mixed with a Principled BSDF: the glass tints blend as the parameters
+    gmix, gm = node_material("GlassMix", "ShaderNodeMixShader", Fac=0.25)
+    glass = gmix.node_tree.nodes.new("ShaderNodeBsdfGlass")
+    glass.inputs["Color"].default_value = (0.8, 0.3, 0.2, 1)
+    gmix.node_tree.links.new(glass.outputs[0], gm.inputs[1])
+    gmix.node_tree.links.new(gmix.node_tree.nodes.new("ShaderNodeBsdfPrincipled").outputs[0], gm.inputs[2])
+    add_mesh("cube", "GlassMix", location=(9, 0, 0), material=gmix)
     out, warnings = export_now()
     M = {m.name: m for m in out.materials}
     assert M["Mix"].metallic == pytest.approx(0.25)
@@ -261,6 +273,8 @@ def test_mix_image_and_unsupported_nodes_warn_and_approximate():
     np.testing.assert_allclose(M["Textured"].base_color, (0.5, 0.0, 0.0), atol=1e-6)
     np.testing.assert_allclose(M["Toon"].base_color, 0.8)
     assert M["Toon"].metallic == 0 and M["Toon"].transmission == 0
+    np.testing.assert_allclose(M["GlassMix"].reflection_tint, 0.75 * np.array([0.8, 0.3, 0.2]) + 0.25, atol=1e-6)
+    assert M["Mix"].reflection_tint is None
     text = "\n".join(warnings)
     # The image is rendered from its texels (the material carries its node graph), not as the
     # mean colour: no mean-colour warning; the constant Mix Shader and the Toon BSDF still warn

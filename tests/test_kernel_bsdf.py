@@ -1,6 +1,7 @@
 """The compiled BSDF (stpm_core.kernels.bsdf) agrees with the numpy oracle (tests/oracles/bsdf_numpy.py).
 
-Random materials of every kind (diffuse, coated, metal, glass, mixtures) at
+Random materials of every kind (diffuse, coated, metal, glass, mixtures; glass with Cycles'
+reflection and transmission tints: a Glass BSDF's, a Principled BSDF's, unrelated ones) at
 roughness 0, 1e-3, 0.3 and 1, random directions and normals (ns tilted from
 ng, either side, grazing wo / wi, wi near the mirror direction), the same
 uniforms: eval, pdf, sample (wi, weight, is_delta) and the diffuse albedo.
@@ -35,6 +36,12 @@ def _unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
+def _glass_bsdf(color, ior, roughness) -> Material:
+    """Cycles' Glass BSDF of this colour: reflection and refraction tinted by it (svm/closure.h)."""
+    color = np.asarray(color, float)
+    return Material(base_color=color, transmission=1.0, ior=ior, roughness=roughness, reflection_tint=color.copy())
+
+
 def _materials(rng) -> list:
     """Every lobe combination at every test roughness, random colours / weights / ior."""
     col = lambda: rng.uniform(0.05, 1.0, 3)
@@ -52,6 +59,14 @@ def _materials(rng) -> list:
             Material(base_color=col(), metallic=rng.uniform(0.1, 0.9), specular=rng.uniform(0.2, 1.0),
                      roughness=r, ior=ior()),                                             # metal + coat
             Material(base_color=col(), transmission=rng.uniform(0.1, 0.9), roughness=r, ior=ior()),  # glass + diffuse
+            _glass_bsdf(col(), ior(), r),                                                 # Cycles' Glass BSDF
+            Material(base_color=(c := col()), transmission=1.0, roughness=r, ior=ior(),
+                     transmission_tint=np.sqrt(c)),                                       # Principled glass
+            Material(base_color=col(), metallic=rng.uniform(0.1, 0.9), transmission=rng.uniform(0.1, 0.9),
+                     specular=rng.uniform(0.0, 1.0), roughness=r, ior=ior(), transmission_tint=col(),
+                     reflection_tint=col()),                                              # unrelated tints
+            Material(base_color=col(), transmission=1.0, roughness=r, ior=ior(),
+                     reflection_tint=np.zeros(3)),                                        # no reflection at all
         ]
     mats += [Material.emitter((2.0, 3.0, 4.0)), Material(base_color=np.zeros(3), specular=0.5, roughness=0.3)]
     return mats
@@ -219,6 +234,8 @@ def test_coat_albedo_table_is_the_integral_of_the_coat(mu, roughness, ior):
     Material.mirror((0.9, 0.7, 0.4), roughness=1.0),
     Material(base_color=np.array([0.8, 0.8, 0.3]), metallic=0.5, transmission=0.3, specular=0.5, roughness=0.6),
     Material.glass(1.5, roughness=1.0),
+    Material(base_color=np.array([0.9, 0.5, 0.3]), transmission=1.0, roughness=0.4, ior=1.5,
+             reflection_tint=np.array([0.3, 0.6, 0.9])),                  # the reflect / refract split tinted
 ])
 @pytest.mark.parametrize("theta", [0.3, 1.2])
 def test_sampled_weights_reproduce_the_eval_integral(mat, theta):
@@ -257,7 +274,70 @@ def test_material_table_closures_match_its_arrays():
                      (kc.C_SPECULAR, t.specular), (kc.C_IOR, t.ior), (kc.C_ALPHA, t.alpha), (kc.C_W_BASE, t.w_base),
                      (kc.C_W_METAL, t.w_metal), (kc.C_W_GLASS, t.w_glass)]:
         assert np.array_equal(c[:, col], arr), col
+    assert np.array_equal(c[:, kc.C_TINT_T:kc.C_TINT_T + 3], t.tint_t)
+    assert np.array_equal(c[:, kc.C_TINT_R:kc.C_TINT_R + 3], t.tint_r)
+    assert np.all(t.tint_r[[i for i, m in enumerate(mats) if m.reflection_tint is None]] == 1.0)  # None: white
     for col, arr in [(kc.C_ROUGH_LOBE, t.rough_lobe), (kc.C_NONDELTA, t.nondelta), (kc.C_COAT, t.coat),
                      (kc.C_EMISSIVE, t.emission.max(axis=1) > 0)]:
         assert np.array_equal(c[:, col] > 0, arr), col
     assert np.all(c[:, kc.C_PROGRAM] == -1.0)
+
+
+# ----------------------------------------------------------------------------
+# Cycles' glass reflection tint (a Glass BSDF's Color)
+# ----------------------------------------------------------------------------
+@pytest.mark.parametrize("roughness", [0.0, 0.3])
+def test_glass_bsdf_reflection_is_tinted_by_its_colour(roughness):
+    """A Glass BSDF (Cycles: reflection_tint = transmission_tint = Color) and the same glass with an
+    untinted reflection: kernels = oracle (eval, pdf, sample); rough: the reflected f is the
+    untinted one times the colour, the refracted f the same; smooth: with equal tints the mirror is
+    chosen with probability F and every sample (mirror or refraction) weighs the colour; the
+    denoising albedo is w_glass (F tint_r + (1 - F) tint_t)."""
+    color = np.array([0.8, 0.3, 0.2])
+    tinted = _glass_bsdf(color, 1.5, roughness)
+    plain = Material(base_color=color.copy(), transmission=1.0, ior=1.5, roughness=roughness)
+    table = MaterialTable([tinted, plain])
+    E, E_avg = kb.ggx_albedo_tables()
+    rng = np.random.default_rng(31)
+    # kernels against the oracle, both materials, random geometry
+    n = 20_000
+    mat = rng.integers(0, 2, n)
+    wo, wi, ns, ng = _geometry(rng, n)
+    u = rng.random((n, 3))
+    _assert_close(bsdf.bsdf_eval(table, mat, wo, wi, ns, ng), oracle.bsdf_eval(table, mat, wo, wi, ns, ng), RTOL, "f")
+    _assert_close(bsdf.bsdf_pdf(table, mat, wo, wi, ns, ng), oracle.bsdf_pdf(table, mat, wo, wi, ns, ng), RTOL, "pdf")
+    wi_k, w_k, d_k = bsdf.bsdf_sample(table, mat, wo, ns, ng, u)
+    wi_o, w_o, d_o = oracle.bsdf_sample(table, mat, wo, ns, ng, u)
+    assert np.array_equal(d_k, d_o) and (d_k.mean() > 0.5 if roughness == 0.0 else not d_k.any())
+    _assert_close(wi_k, wi_o, RTOL, "wi")
+    _assert_close(w_k, w_o, RTOL, "weight")
+    # one view direction, flat normals
+    theta = 1.1
+    m = 100_000
+    N = np.tile([0.0, 0.0, 1.0], (m, 1))
+    wo1 = np.tile([np.sin(theta), 0.0, np.cos(theta)], (m, 1))
+    F = kb.fresnel_dielectric(np.cos(theta), 1.5)
+    if roughness > 0:
+        d = uniform_sphere(rng.random((m, 2)))
+        f_t = bsdf.bsdf_eval(table, np.zeros(m, int), wo1, d, N, N)
+        f_p = bsdf.bsdf_eval(table, np.ones(m, int), wo1, d, N, N)
+        up = d[:, 2] > 0
+        assert (f_p[up] > 0).all(axis=1).mean() > 0.5 and (f_p[~up] > 0).all(axis=1).mean() > 0.1
+        np.testing.assert_allclose(f_t[up], f_p[up] * color, rtol=1e-12, atol=0)
+        np.testing.assert_allclose(f_t[~up], f_p[~up], rtol=1e-12, atol=0)
+    else:
+        wi1, w1, delta = bsdf.bsdf_sample(table, np.zeros(m, int), wo1, N, N, rng.random((m, 3)))
+        assert delta.all()
+        np.testing.assert_allclose(w1, np.tile(color, (m, 1)), rtol=1e-12)
+        refl = wi1[:, 2] > 0
+        assert abs(refl.mean() - F) < 4 * np.sqrt(F * (1 - F) / m)
+        # the untinted mirror: weight F / p_R with p_R = F / (F + (1 - F) mean(color))
+        wi1, w1, _ = bsdf.bsdf_sample(table, np.ones(m, int), wo1, N, N, rng.random((m, 3)))
+        refl = wi1[:, 2] > 0
+        np.testing.assert_allclose(w1[refl], F + (1 - F) * color.mean(), rtol=1e-12)
+    o = (float(np.sin(theta)), 0.0, float(np.cos(theta)))
+    z = (0.0, 0.0, 1.0)
+    for row, tint_r in ((0, color), (1, np.ones(3))):
+        diff, spec, _, _ = kb.denoising_features(table.closures, row, E, E_avg, o, z, z)
+        albedo = np.add(diff, spec)
+        np.testing.assert_allclose(albedo, F * tint_r + (1 - F) * color, rtol=1e-12)

@@ -37,7 +37,7 @@ from oracles import svm_numpy as O
 from oracles import texture_numpy as TO
 from stpm_core.kernels import svm
 from stpm_core.kernels.closure import (C_BASE, C_EMIT, C_IOR, C_METALLIC, C_PASS, C_PROGRAM, C_ROUGHNESS,
-                                       C_SPECULAR, C_TINT_T, C_TRANSMISSION, C_TRANSPARENT, N_CLOSURE, pack_materials)
+                                       C_SPECULAR, C_TINT_R, C_TINT_T, C_TRANSMISSION, C_TRANSPARENT, N_CLOSURE, pack_materials)
 from stpm_core.nodes.compile import colorband, compile_graph
 from stpm_core.nodes.graph import Link, Node, ShaderGraph
 from stpm_core.nodes.ops import BLEND_MODES, GRADIENT_TYPES, MATH_OPS, VMATH_OPS
@@ -998,9 +998,10 @@ def _big_graph(k: int, img: int = 0) -> ShaderGraph:
     return surface(nodes, "P")
 
 
-def _compare_rows(C, rows, cols=("base", "tint_t", "emission", "metallic", "transmission", "roughness", "specular",
-                                 "ior"), atol=ATOL):
+def _compare_rows(C, rows, cols=("base", "tint_t", "tint_r", "emission", "metallic", "transmission", "roughness",
+                                 "specular", "ior"), atol=ATOL):
     col = {"base": slice(C_BASE, C_BASE + 3), "tint_t": slice(C_TINT_T, C_TINT_T + 3),
+           "tint_r": slice(C_TINT_R, C_TINT_R + 3),
            "emission": slice(C_EMIT, C_EMIT + 3), "metallic": C_METALLIC,
            "transmission": C_TRANSMISSION, "roughness": C_ROUGHNESS, "specular": C_SPECULAR, "ior": C_IOR}
     for name in cols:
@@ -1031,7 +1032,8 @@ def _check_derived(C):
         m = Material(base_color=C[r, C_BASE:C_BASE + 3].copy(), metallic=C[r, C_METALLIC],
                      transmission=C[r, C_TRANSMISSION], roughness=C[r, C_ROUGHNESS], specular=C[r, C_SPECULAR],
                      ior=C[r, C_IOR], emission=C[r, C_EMIT:C_EMIT + 3].copy(),
-                     transmission_tint=C[r, C_TINT_T:C_TINT_T + 3].copy())
+                     transmission_tint=C[r, C_TINT_T:C_TINT_T + 3].copy(),
+                     reflection_tint=C[r, C_TINT_R:C_TINT_R + 3].copy())
         ref = pack_materials([m])[0]
         keep = np.ones(N_CLOSURE, bool)
         keep[C_PROGRAM] = False
@@ -1293,6 +1295,9 @@ def test_transparent_add_and_alpha_closures():
     assert abs(passed.mean() - 0.7) < 0.03
     assert np.allclose(C[p, C_TRANSPARENT:C_TRANSPARENT + 3][passed], 1.0)
     assert np.allclose(C[p, C_BASE:C_BASE + 3][~passed], (0.3, 0.6, 0.9))
+    # glass tints: a transparent closure has none, a Principled BSDF reflects untinted (white)
+    assert np.all(C[t, C_TINT_R:C_TINT_R + 3] == 0) and np.all(C[p, C_TINT_R:C_TINT_R + 3][passed] == 0)
+    assert np.all(C[p, C_TINT_R:C_TINT_R + 3][~passed] == 1)
     # Add: half emission x 2, half transparency x 2; the means are the sums Cycles renders
     em = C[a, C_PASS] == 0
     assert abs(em.mean() - 0.5) < 0.03

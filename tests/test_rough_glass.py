@@ -98,9 +98,12 @@ def test_glass_albedo_table_against_quadrature(roughness, mu, eta):
 
 
 @pytest.mark.parametrize("side,roughness", [(1, 0.3), (-1, 0.3), (1, 0.7), (-1, 0.7)])
-def test_pdf_matches_sample_histogram_rough_glass(side, roughness):
-    """bsdf_pdf integrated over regions of both hemispheres equals the fraction of samples landing there."""
+@pytest.mark.parametrize("reflection_tint", [None, (0.2, 0.5, 0.9)])
+def test_pdf_matches_sample_histogram_rough_glass(side, roughness, reflection_tint):
+    """bsdf_pdf integrated over regions of both hemispheres equals the fraction of samples landing there
+    (with a reflection tint too: Cycles' reflect / refract split F mean(tint_r) against (1 - F) mean(tint_t))."""
     mat = Material.glass(IOR, color=(0.8, 0.6, 0.4), roughness=roughness)
+    mat.reflection_tint = None if reflection_tint is None else np.array(reflection_tint)
     table, wo, wi, w, _ = _sample(mat, 0.6, side, n=300_000)
     rng = np.random.default_rng(3)
     n = 600_000
@@ -118,6 +121,10 @@ def test_pdf_matches_sample_histogram_rough_glass(side, roughness):
 
 @pytest.mark.parametrize("mat", [
     Material.glass(IOR, color=(0.9, 0.5, 0.3), roughness=0.4),
+    Material(base_color=np.array([0.9, 0.5, 0.3]), transmission=1.0, roughness=0.4, ior=IOR,
+             reflection_tint=np.array([0.9, 0.5, 0.3])),                                         # Glass BSDF
+    Material(base_color=np.array([0.7, 0.6, 0.5]), transmission=0.6, roughness=0.5, ior=IOR,
+             reflection_tint=np.array([0.2, 0.4, 1.0])),                                         # tinted, + diffuse
     Material(base_color=np.array([0.7, 0.6, 0.5]), transmission=0.6, roughness=0.5, ior=IOR),     # glass + diffuse
     Material(base_color=np.array([0.8, 0.8, 0.8]), metallic=0.4, transmission=0.8, roughness=0.3, ior=IOR),
 ])

@@ -806,45 +806,52 @@ def test_scene_bounds_follow_the_vertices_and_motion():
 
 
 # ----------------------------------------------------------------------------
-# Material.transmission_tint (a Principled glass's sqrt(base_color), Cycles' transmission tint)
+# Material.transmission_tint (a Principled glass's sqrt(base_color), Cycles' transmission tint) and
+# Material.reflection_tint (a Glass BSDF's colour, Cycles' reflection tint)
 # ----------------------------------------------------------------------------
-def test_transmission_tint_round_trip(tmp_path):
-    """A set tint survives bit-exact; None (the default: base_color) is not written and loads as None."""
+TINTS = ("transmission_tint", "reflection_tint")
+
+
+@pytest.mark.parametrize("key", TINTS)
+def test_glass_tint_round_trip(tmp_path, key):
+    """A set tint survives bit-exact; None (the default: base_color / white) is not written and loads as None."""
     scene = rich_scene()
     scene.materials[2].base_color = np.array([0.8, 0.3, 0.2])
-    scene.materials[2].transmission_tint = np.sqrt(np.array([0.8, 0.3, 0.2]))
+    setattr(scene.materials[2], key, np.sqrt(np.array([0.8, 0.3, 0.2])))
     header, _arrays = scene_to_arrays(scene, RenderSettings())
-    assert header["materials"][2]["transmission_tint"] == [float(x) for x in np.sqrt([0.8, 0.3, 0.2])]
-    assert all("transmission_tint" not in d for i, d in enumerate(header["materials"]) if i != 2)
+    assert header["materials"][2][key] == [float(x) for x in np.sqrt([0.8, 0.3, 0.2])]
+    assert all(k not in d for i, d in enumerate(header["materials"]) for k in TINTS if (i, k) != (2, key))
     loaded = load_scene(save_scene(scene, tmp_path / "t.stpm"))
     _assert_same(scene, loaded)
-    assert loaded.materials[0].transmission_tint is None
-    assert loaded.materials[2].transmission_tint.dtype == np.float64
+    assert all(getattr(loaded.materials[0], k) is None for k in TINTS)
+    assert getattr(loaded.materials[2], key).dtype == np.float64
 
 
+@pytest.mark.parametrize("key", TINTS)
 @pytest.mark.parametrize("tint, match", [
-    (np.array([0.5, 0.5]), r"materials\[2\] \('g'\)\.transmission_tint must have shape \(3,\)"),
-    (np.array([0.5, -0.1, 0.5]), r"materials\[2\] \('g'\)\.transmission_tint must be non-negative"),
-    (np.array([0.5, 1.5, 0.5]), r"materials\[2\] \('g'\)\.transmission_tint must be <= 1"),
-    (np.array([0.5, np.nan, 0.5]), r"materials\[2\] \('g'\)\.transmission_tint contains NaN"),
+    (np.array([0.5, 0.5]), r"materials\[2\] \('g'\)\.{key} must have shape \(3,\)"),
+    (np.array([0.5, -0.1, 0.5]), r"materials\[2\] \('g'\)\.{key} must be non-negative"),
+    (np.array([0.5, 1.5, 0.5]), r"materials\[2\] \('g'\)\.{key} must be <= 1"),
+    (np.array([0.5, np.nan, 0.5]), r"materials\[2\] \('g'\)\.{key} contains NaN"),
 ])
-def test_bad_transmission_tint_is_never_written(tmp_path, tint, match):
+def test_bad_glass_tint_is_never_written(tmp_path, key, tint, match):
     scene = rich_scene()
-    scene.materials[2].transmission_tint = tint
-    with pytest.raises(SceneError, match=match):
+    setattr(scene.materials[2], key, tint)
+    with pytest.raises(SceneError, match=match.format(key=key)):
         save_scene(scene, tmp_path / "bad.stpm")
     assert not (tmp_path / "bad.stpm").exists()
 
 
+@pytest.mark.parametrize("key", TINTS)
 @pytest.mark.parametrize("value, words", [
     ([0.5, 0.5], "must be a list of 3 numbers"),
     ([0.5, -0.5, 0.5], "must be non-negative"),
     ([0.5, 2.0, 0.5], "must be <= 1"),
     ("red", "must be a list of 3 numbers"),
 ])
-def test_malformed_transmission_tint_in_a_file(tmp_path, value, words):
+def test_malformed_glass_tint_in_a_file(tmp_path, key, value, words):
     header, arrays = _parts()
-    header["materials"][2]["transmission_tint"] = value
+    header["materials"][2][key] = value
     _write_raw(tmp_path / "bad.stpm", header, arrays)
     msg = _load_error(tmp_path / "bad.stpm")
-    assert "materials[2]" in msg and "transmission_tint" in msg and words in msg, msg
+    assert "materials[2]" in msg and key in msg and words in msg, msg

@@ -9,7 +9,8 @@ Principled BSDF    Base Color, Metallic, Roughness, Transmission Weight, IOR,
                    sqrt(Base Color) as Cycles (``Material.transmission_tint``)
 Diffuse BSDF       Color (Lambertian, no coat)
 Glossy BSDF        Color, Roughness (metallic 1)
-Glass BSDF         Color (also its refraction tint), Roughness, IOR (transmission 1)
+Glass BSDF         Color (also its refraction and reflection tints, as Cycles:
+                   ``Material.reflection_tint``), Roughness, IOR (transmission 1)
 Emission           Color * Strength (radiance, W m^-2 sr^-1, as in Cycles)
 Mix Shader         every parameter blended by Fac (approximate: warned)
 Image Texture      on a colour input: the image's mean linear colour
@@ -164,7 +165,8 @@ def default_material(name: str = "STPM default") -> "scene_model.Material":
 def _params(**kw) -> dict:
     """A full parameter dict (base_color (3,), emission (3,) float64, scalars float)."""
     p = {"base_color": np.full(3, 0.8), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
-         "specular": 0.0, "ior": 1.5, "emission": np.zeros(3), "transmission_tint": None}
+         "specular": 0.0, "ior": 1.5, "emission": np.zeros(3), "transmission_tint": None,
+         "reflection_tint": None}
     p.update(kw)
     return p
 
@@ -173,6 +175,12 @@ def _tint(p: dict) -> np.ndarray:
     """The transmission tint (3,) of parameters p: theirs, else the base colour (a Glass BSDF's)."""
     t = p.get("transmission_tint")
     return np.clip(np.asarray(p["base_color"] if t is None else t, dtype=np.float64), 0.0, 1.0)
+
+
+def _tint_r(p: dict) -> np.ndarray:
+    """The reflection tint (3,) of parameters p: theirs, else white (a Principled BSDF's)."""
+    t = p.get("reflection_tint")
+    return np.clip(np.ones(3) if t is None else np.asarray(t, dtype=np.float64), 0.0, 1.0)
 
 
 class MaterialExporter:
@@ -439,8 +447,13 @@ class MaterialExporter:
             tint = _tint(p)
             if np.array_equal(tint, np.clip(base, 0.0, 1.0)):
                 tint = None                     # the default: the base colour
+        tint_r = None
+        if p.get("reflection_tint") is not None:
+            tint_r = _tint_r(p)
+            if np.all(tint_r == 1.0):
+                tint_r = None                   # the default: white
         return scene_model.Material(
-            base_color=np.clip(base, 0.0, 1.0), transmission_tint=tint,
+            base_color=np.clip(base, 0.0, 1.0), transmission_tint=tint, reflection_tint=tint_r,
             metallic=float(np.clip(p["metallic"], 0, 1)), transmission=float(np.clip(p["transmission"], 0, 1)),
             roughness=float(np.clip(p["roughness"], 0, 1)), specular=float(np.clip(p["specular"], 0, 1)),
             ior=float(np.clip(p["ior"], 1.0, 10.0)), emission=np.maximum(np.asarray(p["emission"], float), 0.0),
@@ -551,7 +564,9 @@ class MaterialExporter:
             return _params(base_color=self._color(node, "Color"), metallic=1.0,
                            roughness=self._value(node, "Roughness", 0.5))
         if kind == "ShaderNodeBsdfGlass":
-            return _params(base_color=self._color(node, "Color", (1, 1, 1)), transmission=1.0,
+            color = self._color(node, "Color", (1, 1, 1))
+            # Cycles tints a Glass BSDF's reflection by its colour too (svm/closure.h)
+            return _params(base_color=color, reflection_tint=np.clip(color, 0.0, 1.0), transmission=1.0,
                            roughness=self._value(node, "Roughness", 0.0), ior=self._value(node, "IOR", 1.5))
         if kind == "ShaderNodeEmission":
             return _params(base_color=np.zeros(3), roughness=1.0,
@@ -567,6 +582,8 @@ class MaterialExporter:
                      for k in FIELDS}
             if any(sd.get("transmission_tint") is not None for sd in sides):
                 mixed["transmission_tint"] = (1 - fac) * _tint(sides[0]) + fac * _tint(sides[1])
+            if any(sd.get("reflection_tint") is not None for sd in sides):
+                mixed["reflection_tint"] = (1 - fac) * _tint_r(sides[0]) + fac * _tint_r(sides[1])
             return mixed
         # with a graph, the node compiler names the shader (the graph renders the same grey; a
         # group's shaders it inlines)

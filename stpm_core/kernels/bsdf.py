@@ -15,7 +15,9 @@ DIFFUSE    w_base (1 - F_coat(wo)) base_color / pi, F_coat = specular F_diel(cos
 COAT       w_base specular F_diel(ior): delta mirror (roughness 0) or GGX with Cycles' energy
            compensation (1 + F_ms (1 - E(mu_o)) / E(mu_o))
 METAL      w_metal Schlick(base_color): delta mirror or GGX (rough: times k_metal)
-GLASS_R    w_glass F_diel(eta): delta mirror or GGX (rough: times k_glass)
+GLASS_R    w_glass F_diel(eta) tint_r: delta mirror or GGX (rough: times k_glass).
+           tint_r = the closure's C_TINT_R, Cycles' reflection tint: white for a Principled BSDF
+           (its specular tint, which STPM does not have), the colour for a Glass BSDF
 GLASS_T    w_glass (1 - F_diel(eta)) tint_t: delta refraction, or (roughness > 0, ior != 1)
            Walter et al.'s GGX BTDF (1 - F(wo.h)) tint_t D G2 |wo.h||wi.h| eta^2 / (cos_o cos_i
            (wo.h + eta wi.h)^2) times k_glass, Cycles' glass energy compensation
@@ -38,7 +40,7 @@ wo is below it (Cycles' microfacet closures: no lobe for wo under N).  A reflect
 unless wi is above both ng and its normal, a refraction unless wi is below ng (and, rough, below
 nss); a sampled reflection below ng or refraction above it has weight 0.  Rough glass samples one
 visible normal h and reflects or refracts through it, the choice per microfacet as Cycles
-(F(wo.h) against (1 - F) mean(tint)) inside the glass lobes' joint probability.
+(F(wo.h) mean(tint_r) against (1 - F) mean(tint_t)) inside the glass lobes' joint probability.
 
 Per-hit functions (compiled once; the kernels call them):
 
@@ -86,7 +88,7 @@ import numpy as np
 
 from ..numba_probe import njit
 from .sampling import JIT_INLINE, basis, cosine_hemisphere, dot
-from .closure import (C_ALPHA, C_BASE, C_TINT_T, C_BUMPED, C_COAT, C_IOR, C_NS, C_ROUGH_LOBE, C_ROUGHNESS, C_SPECULAR,
+from .closure import (C_ALPHA, C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_COAT, C_IOR, C_NS, C_ROUGH_LOBE, C_ROUGHNESS, C_SPECULAR,
                       C_W_BASE, C_W_GLASS, C_W_METAL, closure_row)
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
@@ -635,7 +637,8 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
     e0 = w_base * (1.0 - F_coat) * mean_base                          # DIFFUSE
     e1 = w_base * F_coat                                              # COAT (F_coat: its albedo)
     e2 = w_metal * ((F_metal[0] * ms_scale[0] + F_metal[1] * ms_scale[1] + F_metal[2] * ms_scale[2]) / 3.0)  # METAL
-    e3 = w_glass * F_glass                                            # GLASS_R
+    mean_tint_r = (C[cr, C_TINT_R] + C[cr, C_TINT_R + 1] + C[cr, C_TINT_R + 2]) / 3.0
+    e3 = w_glass * F_glass * mean_tint_r                              # GLASS_R
     mean_tint = (C[cr, C_TINT_T] + C[cr, C_TINT_T + 1] + C[cr, C_TINT_T + 2]) / 3.0
     e4 = w_glass * (1.0 - F_glass) * mean_tint                        # GLASS_T
     e5 = 0.0                                                          # METAL_MS (no longer a lobe)
@@ -708,8 +711,9 @@ def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
     Reflection (wi above ng and nss): the GGX lobes about nss.  Refraction (wi below ng and nss):
     rough GLASS_T, Walter et al.'s BTDF as Cycles evaluates it (no 1 / eta^2 radiance scaling),
     h = -(wo + eta wi) turned toward nss.  The glass lobes pick reflection or refraction per
-    microfacet h as Cycles: refraction with probability (1 - F) t / (F + (1 - F) t), F = F_diel(wo.h,
-    eta), t = mean(tint), inside their joint probability p_lobe[GLASS_R] + p_lobe[GLASS_T]."""
+    microfacet h as Cycles: refraction with probability (1 - F) t / (F r + (1 - F) t), F =
+    F_diel(wo.h, eta), r = mean(tint_r), t = mean(tint_t), inside their joint probability
+    p_lobe[GLASS_R] + p_lobe[GLASS_T]."""
     ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
     if not C[cr, C_ROUGH_LOBE] > 0:
         return f0, f1, f2, pdf
@@ -731,6 +735,7 @@ def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
     lam_o = _ggx_lambda(cos_o, alpha)
     G1o = 1.0 / (1.0 + lam_o)
     p_glass = p_lobe[GLASS_R] + p_lobe[GLASS_T]
+    r_mean = (C[cr, C_TINT_R] + C[cr, C_TINT_R + 1] + C[cr, C_TINT_R + 2]) / 3.0
     t_mean = (C[cr, C_TINT_T] + C[cr, C_TINT_T + 1] + C[cr, C_TINT_T + 2]) / 3.0
     if cos_is > 0 and side > 0:
         # -- GGX reflection terms (rough COAT / METAL / GLASS_R), about the specular normal nss; f
@@ -745,18 +750,18 @@ def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
         spec = D * G2 / max(4.0 * cos_oe * max(abs(cos_i), _EPS), 1e-300)
         if not bump_ok:
             spec = 0.0
-        # COAT: specular F_diel(wo.h, ior); METAL: Schlick(base, wo.h); GLASS_R: F_diel(wo.h, eta)
+        # COAT: specular F_diel(wo.h, ior); METAL: Schlick(base, wo.h); GLASS_R: F_diel(wo.h, eta) tint_r
         F_c = C[cr, C_SPECULAR] * fresnel_dielectric(wo_h, C[cr, C_IOR])
         F_m = _fresnel_schlick(C, cr, wo_h)
         F_g = fresnel_dielectric(wo_h, eta_glass)
         s = w_base * F_c * k_coat * coat_w * spec
         sg = w_glass * F_g * spec
         sm = w_metal * spec
-        f0 = f0 + (s + sg * k_glass[0] + sm * F_m[0] * ms_scale[0])
-        f1 = f1 + (s + sg * k_glass[1] + sm * F_m[1] * ms_scale[1])
-        f2 = f2 + (s + sg * k_glass[2] + sm * F_m[2] * ms_scale[2])
-        rt = F_g + (1.0 - F_g) * t_mean
-        split_r = F_g / rt if rt > 0 else 0.0
+        f0 = f0 + (s + sg * C[cr, C_TINT_R] * k_glass[0] + sm * F_m[0] * ms_scale[0])
+        f1 = f1 + (s + sg * C[cr, C_TINT_R + 1] * k_glass[1] + sm * F_m[1] * ms_scale[1])
+        f2 = f2 + (s + sg * C[cr, C_TINT_R + 2] * k_glass[2] + sm * F_m[2] * ms_scale[2])
+        rt = F_g * r_mean + (1.0 - F_g) * t_mean
+        split_r = F_g * r_mean / rt if rt > 0 else 0.0
         pdf = pdf + p_ggx * (p_lobe[COAT] * coat_w + p_lobe[METAL] + p_glass * split_r)
     elif cos_is < 0 and side < 0 and w_glass > 0 and abs(C[cr, C_IOR] - 1.0) >= _ETA1:
         # -- Rough GLASS_T: f |ns . wi| = (1 - F) tint D G2 |wo.h| |wi.h| eta^2 / (cos_o (wo.h + eta wi.h)^2)
@@ -779,7 +784,7 @@ def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
         f0 = f0 + st * C[cr, C_TINT_T] * k_glass[0]
         f1 = f1 + st * C[cr, C_TINT_T + 1] * k_glass[1]
         f2 = f2 + st * C[cr, C_TINT_T + 2] * k_glass[2]
-        rt = F_g + (1.0 - F_g) * t_mean
+        rt = F_g * r_mean + (1.0 - F_g) * t_mean
         split_t = (1.0 - F_g) * t_mean / rt if rt > 0 else 0.0
         pdf = pdf + p_glass * split_t * G1o * common
     return f0, f1, f2, pdf
@@ -870,20 +875,21 @@ def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
     # -- Direction
     if (lobe == GLASS_R or lobe == GLASS_T) and grough:
         # Rough glass: a GGX visible normal about nss, then reflect or refract through it, the
-        # choice per microfacet as Cycles (F = F_diel(wo.h, eta) against (1 - F) mean(tint)), by
-        # where u0 fell inside the two glass lobes' joint probability
+        # choice per microfacet as Cycles (F mean(tint_r), F = F_diel(wo.h, eta), against
+        # (1 - F) mean(tint_t)), by where u0 fell inside the two glass lobes' joint probability
         p_glass = p_lobe[GLASS_R] + p_lobe[GLASS_T]
         t, b = basis(nss)
         lx, ly, lz = _normalized((dot(wo, t), dot(wo, b), max(cos_o, 1e-6)), 0.0)
         hw = _to_frame(_ggx_sample_vndf(lx, ly, lz, alpha, u1, u2), t, b, nss)
         wo_h = min(max(dot(wo, hw), 0.0), 1.0)
         F_g = fresnel_dielectric(wo_h, eta_glass)
+        r_mean = (C[cr, C_TINT_R] + C[cr, C_TINT_R + 1] + C[cr, C_TINT_R + 2]) / 3.0
         t_mean = (C[cr, C_TINT_T] + C[cr, C_TINT_T + 1] + C[cr, C_TINT_T + 2]) / 3.0
-        rt = F_g + (1.0 - F_g) * t_mean
+        rt = F_g * r_mean + (1.0 - F_g) * t_mean
         if not rt > 0:
             return lobe, 0.0, False, (0.0, 0.0, 0.0)
         us = min(max((u0 - (p_lobe[DIFFUSE] + p_lobe[COAT] + p_lobe[METAL])) / p_glass, 0.0), 1.0)
-        if us < F_g / rt:
+        if us < F_g * r_mean / rt:
             lobe = GLASS_R
             wi = _reflect(wo, hw)
         else:
@@ -938,7 +944,7 @@ def _delta_weight(C, cr, hit, lobe, p_chosen, wi):
         t0, t1, t2 = w_metal * F_metal[0], w_metal * F_metal[1], w_metal * F_metal[2]
     elif lobe == GLASS_R:
         thr = C[cr, C_W_GLASS] * F_glass
-        t0 = t1 = t2 = thr
+        t0, t1, t2 = thr * C[cr, C_TINT_R], thr * C[cr, C_TINT_R + 1], thr * C[cr, C_TINT_R + 2]
     else:
         thr = C[cr, C_W_GLASS] * (1.0 - F_glass)
         t0, t1, t2 = thr * C[cr, C_TINT_T], thr * C[cr, C_TINT_T + 1], thr * C[cr, C_TINT_T + 2]
@@ -1063,7 +1069,7 @@ def denoising_features(C, cr, E, E_avg, wo, ns, ng):
 
     As Cycles' ``film_write_denoising_features_surface``: each lobe's albedo at wo (its weight times
     its directional reflectance, as STPM's BSDF defines it: DIFFUSE w_base (1 - F_coat) base_color,
-    COAT w_base F_coat, METAL w_metal F_metal(wo), GLASS w_glass (F + (1 - F) tint_t)) goes to the
+    COAT w_base F_coat, METAL w_metal F_metal(wo), GLASS w_glass (F tint_r + (1 - F) tint_t)) goes to the
     diffuse-like sum when the lobe is DIFFUSE or its alpha is above :data:`DENOISE_ALPHA`, else to
     the specular-like sum; the normal is the lobes' normals (DIFFUSE: the facing shading normal, the
     others: the specular normal nss) weighted by their mean albedo.  stop: this vertex writes the
@@ -1095,9 +1101,9 @@ def denoising_features(C, cr, E, E_avg, wo, ns, ng):
             elif lobe == 1:                          # METAL
                 a0, a1, a2 = w_metal * F_metal[0], w_metal * F_metal[1], w_metal * F_metal[2]
             else:                                    # GLASS: reflection and transmission
-                a0 = w_glass * (F_glass + (1.0 - F_glass) * C[cr, C_TINT_T])
-                a1 = w_glass * (F_glass + (1.0 - F_glass) * C[cr, C_TINT_T + 1])
-                a2 = w_glass * (F_glass + (1.0 - F_glass) * C[cr, C_TINT_T + 2])
+                a0 = w_glass * (F_glass * C[cr, C_TINT_R] + (1.0 - F_glass) * C[cr, C_TINT_T])
+                a1 = w_glass * (F_glass * C[cr, C_TINT_R + 1] + (1.0 - F_glass) * C[cr, C_TINT_T + 1])
+                a2 = w_glass * (F_glass * C[cr, C_TINT_R + 2] + (1.0 - F_glass) * C[cr, C_TINT_T + 2])
             w = (a0 + a1 + a2) / 3.0
             if not w > 0.0:
                 continue

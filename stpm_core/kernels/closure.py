@@ -35,6 +35,9 @@ metallic, transmission, roughness, specular, ior.  Derived columns
 ``C_TINT_T``       the transmission tint (3 columns) of the GLASS_T lobe (and the F_ss of rough
                    glass' energy compensation), as Cycles: sqrt(base colour) for a Principled BSDF,
                    the colour itself for a Glass BSDF (``Material.transmission_tint``; None = base)
+``C_TINT_R``       the reflection tint (3 columns) of the GLASS_R lobe, as Cycles: white for a
+                   Principled BSDF (its specular tint, which STPM does not have), the colour itself
+                   for a Glass BSDF (``Material.reflection_tint``; None = white)
 =================  =============================================================
 
 The last row (index M, where hit material -1 lands) is an inert black closure.
@@ -48,7 +51,7 @@ from ..numba_probe import njit
 __all__ = ["N_CLOSURE", "pack_materials", "finish_closure", "closure_row"] + [
     "C_BASE", "C_EMIT", "C_METALLIC", "C_TRANSMISSION", "C_ROUGHNESS", "C_SPECULAR", "C_IOR", "C_ALPHA",
     "C_W_BASE", "C_W_METAL", "C_W_GLASS", "C_ROUGH_LOBE", "C_NONDELTA", "C_COAT", "C_HAS_DELTA",
-    "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED", "C_TRANSPARENT", "C_PASS", "C_TINT_T"]
+    "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED", "C_TRANSPARENT", "C_PASS", "C_TINT_T", "C_TINT_R"]
 
 C_BASE = 0            # 3 columns: base colour RGB
 C_EMIT = 3            # 3 columns: emitted radiance RGB
@@ -72,7 +75,8 @@ C_BUMPED = 24         # 1 where a Normal input (normal map, bump) replaced the h
 C_TRANSPARENT = 25    # 3 columns: the tint of a transparent closure (C_PASS = 1), else 0
 C_PASS = 28           # 1 where the hit's closure is transparent: the ray passes on, tinted
 C_TINT_T = 29         # 3 columns: the GLASS_T transmission tint (Principled: sqrt(base); Glass BSDF: its colour)
-N_CLOSURE = 32
+C_TINT_R = 32         # 3 columns: the GLASS_R reflection tint (Principled: white; Glass BSDF: its colour)
+N_CLOSURE = 35
 
 
 @njit(cache=True, nogil=True)
@@ -118,6 +122,8 @@ def pack_materials(materials) -> np.ndarray:
         rows[i, C_BASE:C_BASE + 3] = np.asarray(m.base_color, float)
         tint = getattr(m, "transmission_tint", None)
         rows[i, C_TINT_T:C_TINT_T + 3] = np.asarray(m.base_color if tint is None else tint, float)
+        tint_r = getattr(m, "reflection_tint", None)
+        rows[i, C_TINT_R:C_TINT_R + 3] = 1.0 if tint_r is None else np.asarray(tint_r, float)
         rows[i, C_EMIT:C_EMIT + 3] = np.asarray(m.emission, float)
         rows[i, C_METALLIC] = m.metallic
         rows[i, C_TRANSMISSION] = m.transmission

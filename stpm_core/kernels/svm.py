@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .closure import (C_BASE, C_TINT_T, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
+from .closure import (C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
                       C_TRANSMISSION, closure_row, finish_closure)
 from .sampling import JIT, JIT_INLINE
 
@@ -1202,7 +1202,7 @@ def _procedural_node(op, prog, pc, st, n):
 def _closure(op, prog, pc, st, k, C, r, w):
     """Write the primary columns of closure row C[r] from a closure instruction (BSDF_*, EMISSION)
     at batch row k, then its derived columns (``closure.finish_closure``).  w: the weight of the
-    closure (2^d under d Add Shaders) on its colour and emission."""
+    closure (2^d under d Add Shaders) on its colour, emission and glass tints (C_TINT_T, C_TINT_R)."""
     metallic = transmission = specular = 0.0
     rough = 0.5
     ior = 1.5
@@ -1238,6 +1238,12 @@ def _closure(op, prog, pc, st, k, C, r, w):
     b0, b1, b2 = _clamp01(b0), _clamp01(b1), _clamp01(b2)
     _primary(C, r, w * b0, w * b1, w * b2, w * max(e0, 0.0), w * max(e1, 0.0),
              w * max(e2, 0.0), metallic, transmission, rough, specular, ior)
+    # Cycles' glass reflection tint (svm/closure.h): a Glass BSDF's colour, a Principled BSDF's
+    # specular tint (white: STPM has none); white for the others (they have no glass lobe)
+    if op == _BSDF_GLASS:
+        C[r, C_TINT_R], C[r, C_TINT_R + 1], C[r, C_TINT_R + 2] = w * b0, w * b1, w * b2
+    else:
+        C[r, C_TINT_R] = C[r, C_TINT_R + 1] = C[r, C_TINT_R + 2] = w
     if op == _BSDF_PRINCIPLED:
         # Cycles' Principled BSDF tints its refraction by sqrt(base colour) (svm/closure.h), the
         # Glass BSDF by its colour
@@ -1255,6 +1261,7 @@ def _transparent(C, r, t0, t1, t2):
     white one a Principled BSDF's Alpha mixes in): nothing scatters, C_PASS = 1."""
     _primary(C, r, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.5)
     C[r, C_TINT_T] = C[r, C_TINT_T + 1] = C[r, C_TINT_T + 2] = 0.0
+    C[r, C_TINT_R] = C[r, C_TINT_R + 1] = C[r, C_TINT_R + 2] = 0.0
     C[r, C_TRANSPARENT] = max(t0, 0.0)
     C[r, C_TRANSPARENT + 1] = max(t1, 0.0)
     C[r, C_TRANSPARENT + 2] = max(t2, 0.0)
@@ -1476,8 +1483,8 @@ def shade_rows(sd, mat, G, seed, C, crow) -> np.ndarray:
 
     Without node programs every hit's closure is its material's constant row: the array is the
     material table ``sd.closures`` itself and crow the material rows (:func:`closure_rows`), 8
-    bytes per hit instead of a copied N_CLOSURE row of 256 (a tile of 65k hits would write and
-    then read 16 MB of copies, several times what the caches hold).  With node programs, C
+    bytes per hit instead of a copied N_CLOSURE row of 280 (a tile of 65k hits would write and
+    then read 18 MB of copies, several times what the caches hold).  With node programs, C
     (m, N_CLOSURE) receives one row per hit (:func:`shade`) and crow[r] = r.  The camera-path
     kernels (``kernels.paths``) read hit r's closure as row crow[r]."""
     if sd.uses_programs or sd.transparent:

@@ -10,7 +10,10 @@ tables from :func:`stpm_core.kernels.bsdf.ggx_albedo_tables`;
 test can check the kernels module builds the same numbers.
 
 Changes since: GLASS_T is tinted by ``MaterialTable.tint_t`` (the material's transmission tint,
-Cycles' sqrt(base) for a Principled BSDF) instead of base_color.  Normals as they come, as Cycles and the kernels (issue 14, item 5): ``ns``
+Cycles' sqrt(base) for a Principled BSDF) instead of base_color, and GLASS_R by
+``MaterialTable.tint_r`` (the reflection tint, Cycles' Glass BSDF colour; white otherwise): its
+Fresnel weight is F tint_r, and rough glass reflects with probability F mean(tint_r) / (F
+mean(tint_r) + (1 - F) mean(tint_t)) (Cycles' ``FresnelDielectricTint``, bsdf_microfacet.h).  Normals as they come, as Cycles and the kernels (issue 14, item 5): ``ns``
 turns with ``ng`` (the back-face flip) instead of onto ``ng``'s side, and the specular lobes use
 ``nss``, ``ns`` raised by ``ensure_valid_specular_reflection`` where it differs from ``ng``, and
 vanish where ``wo`` is below it.
@@ -242,6 +245,7 @@ class _Hit:
             self.nss[d] = _valid_specular(self.ng[d], self.wo[d], self.ns[d])
         self.base = table.base_color[m]
         self.tint = table.tint_t[m]              # GLASS_T's transmission tint (Principled: sqrt(base))
+        self.tint_r = table.tint_r[m]            # GLASS_R's reflection tint (Glass BSDF: its colour)
         self.alpha = np.maximum(table.alpha[m], 1e-4)
         self.rough = table.roughness[m] > 0.0
         self.spec = table.specular[m]
@@ -308,7 +312,7 @@ class _Hit:
             self.w_base * (1.0 - self.F_coat) * mean_base,
             self.w_base * self.F_coat,
             self.w_metal * (self.F_metal * self.ms_scale).mean(axis=1),
-            self.w_glass * self.F_glass,
+            self.w_glass * self.F_glass * self.tint_r.mean(axis=1),
             self.w_glass * (1.0 - self.F_glass) * mean_tint,
             np.zeros(n),                                     # METAL_MS: no longer a lobe
         ], axis=-1)
@@ -376,14 +380,16 @@ def _eval_pdf(h: _Hit, wi: np.ndarray, diffuse: bool = True, coat: float = 1.0):
         F_c = hr.spec * fresnel_dielectric(wo_h, hr.ior)
         # METAL (rough): Schlick(base, wo.h)
         F_m = fresnel_schlick(hr.base, wo_h)
-        # GLASS_R (rough): exact dielectric at wo.h, energy-compensated; reflection or refraction
-        # chosen per microfacet (F against (1 - F) mean(tint)) inside p_lobe[GLASS_R] + p_lobe[GLASS_T]
+        # GLASS_R (rough): exact dielectric at wo.h times the reflection tint, energy-compensated;
+        # reflection or refraction chosen per microfacet (F mean(tint_r) against (1 - F) mean(tint))
+        # inside p_lobe[GLASS_R] + p_lobe[GLASS_T]
         F_g = fresnel_dielectric(wo_h, hr.eta_glass)
-        f[r] += (hr.w_base * F_c * hr.k_coat * coat * spec)[:, None] + (hr.w_glass * F_g * spec)[:, None] * hr.k_glass \
+        f[r] += (hr.w_base * F_c * hr.k_coat * coat * spec)[:, None] \
+            + (hr.w_glass * F_g * spec)[:, None] * hr.tint_r * hr.k_glass \
             + (hr.w_metal * spec)[:, None] * F_m * hr.ms_scale
-        t_mean = hr.tint.mean(axis=1)
-        rt = F_g + (1.0 - F_g) * t_mean
-        split_r = np.where(rt > 0, F_g / np.where(rt > 0, rt, 1.0), 0.0)
+        refl_w = F_g * hr.tint_r.mean(axis=1)
+        rt = refl_w + (1.0 - F_g) * hr.tint.mean(axis=1)
+        split_r = np.where(rt > 0, refl_w / np.where(rt > 0, rt, 1.0), 0.0)
         p_glass = hr.p_lobe[:, GLASS_R] + hr.p_lobe[:, GLASS_T]
         pdf[r] += p_ggx * (hr.p_lobe[:, COAT] * coat + hr.p_lobe[:, METAL] + p_glass * split_r)
         # GLASS_T (rough): Walter et al.'s BTDF as Cycles, wi below ng and nss
@@ -396,7 +402,8 @@ def _eval_pdf(h: _Hit, wi: np.ndarray, diffuse: bool = True, coat: float = 1.0):
 def _refraction(h: _Hit, wi: np.ndarray):
     """Rough GLASS_T f (n, 3) and pdf (n,) at wi: f |ns.wi| = w_glass (1 - F(wo.h)) tint k_glass
     D G2 |wo.h| |wi.h| eta^2 / (cos_o (wo.h + eta wi.h)^2), h = -(wo + eta wi) toward nss; pdf =
-    (p_R + p_T) (1 - F) t / (F + (1 - F) t) G1(wo) D |wo.h| / cos_o eta^2 |wi.h| / (wo.h + eta wi.h)^2."""
+    (p_R + p_T) (1 - F) t / (F r + (1 - F) t) G1(wo) D |wo.h| / cos_o eta^2 |wi.h| / (wo.h + eta wi.h)^2
+    (r, t: the means of the reflection and transmission tints)."""
     n = wi.shape[0]
     cos_is = _dot(wi, h.nss)
     cos_i = _dot(wi, h.ns)
@@ -418,9 +425,9 @@ def _refraction(h: _Hit, wi: np.ndarray):
     common = D * wo_h * jac / np.maximum(h.cos_o, _EPS)
     st = h.w_glass * (1.0 - F) * G2 * common / np.maximum(np.abs(cos_i), _EPS)
     f = np.where(valid[:, None], st[:, None] * h.tint * h.k_glass, 0.0)
-    t_mean = h.tint.mean(axis=1)
-    rt = F + (1.0 - F) * t_mean
-    split_t = np.where(rt > 0, (1.0 - F) * t_mean / np.where(rt > 0, rt, 1.0), 0.0)
+    trans_w = (1.0 - F) * h.tint.mean(axis=1)
+    rt = F * h.tint_r.mean(axis=1) + trans_w
+    split_t = np.where(rt > 0, trans_w / np.where(rt > 0, rt, 1.0), 0.0)
     p_glass = h.p_lobe[:, GLASS_R] + h.p_lobe[:, GLASS_T]
     pdf = np.where(valid, p_glass * split_t * G1o * common, 0.0)
     return f, pdf
@@ -536,7 +543,7 @@ def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
     wi = np.zeros((n, 3))
     weight = np.zeros((n, 3))
     # Rough glass: a visible normal, then reflect or refract through it, chosen per microfacet by
-    # where u0 fell inside p_lobe[GLASS_R] + p_lobe[GLASS_T] (F against (1 - F) mean(tint))
+    # where u0 fell inside p_lobe[GLASS_R] + p_lobe[GLASS_T] (F mean(tint_r) against (1 - F) mean(tint))
     rg = ok & ((lobe == GLASS_R) | (lobe == GLASS_T)) & h.grough
     i = np.nonzero(rg)[0]
     if i.size:
@@ -549,10 +556,11 @@ def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
         wo_h = np.clip(_dot(wo_i, hw), 0.0, 1.0)
         eta = h.eta_glass[i]
         F = fresnel_dielectric(wo_h, eta)
-        rt = F + (1.0 - F) * h.tint[i].mean(axis=1)
+        refl_w = F * h.tint_r[i].mean(axis=1)
+        rt = refl_w + (1.0 - F) * h.tint[i].mean(axis=1)
         pl = h.p_lobe[i]
         us = np.clip((u[i, 0] - (pl[:, DIFFUSE] + pl[:, COAT] + pl[:, METAL])) / (pl[:, GLASS_R] + pl[:, GLASS_T]), 0, 1)
-        refl = us < F / np.where(rt > 0, rt, 1.0)
+        refl = us < refl_w / np.where(rt > 0, rt, 1.0)
         cos_t = np.sqrt(np.maximum(0.0, 1.0 - (1.0 - wo_h * wo_h) / (eta * eta)))
         refr = -wo_i / eta[:, None] + (wo_h / eta - cos_t)[:, None] * hw
         wi[i] = np.where(refl[:, None], _reflect(wo_i, hw), refr)
@@ -598,7 +606,7 @@ def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
         thr = np.zeros((i.size, 3))
         thr += np.where(li == COAT, h.w_base[i] * h.F_coat[i], 0.0)[:, None]
         thr += np.where(li == METAL, h.w_metal[i], 0.0)[:, None] * h.F_metal[i]
-        thr += np.where(li == GLASS_R, h.w_glass[i] * h.F_glass[i], 0.0)[:, None]
+        thr += np.where(li == GLASS_R, h.w_glass[i] * h.F_glass[i], 0.0)[:, None] * h.tint_r[i]
         thr += np.where(li == GLASS_T, h.w_glass[i] * (1.0 - h.F_glass[i]), 0.0)[:, None] * h.tint[i]
         # Reflections must stay above ng, refractions cross it (no leaks)
         side = _dot(wi[i], h.ng[i])

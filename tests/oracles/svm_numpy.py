@@ -19,7 +19,9 @@ What the project defines itself (not Blender), kept to the project's documented 
   black base, roughness 1; an unconnected shader socket -> black; an unknown shader -> grey
   diffuse; the closure row keeps base in [0, 1], emission >= 0, metallic, transmission, roughness,
   specular in [0, 1], ior in [1, 10] (:func:`closure_row`); its transmission tint (``tint_t``) is
-  Cycles' (svm/closure.h): sqrt(base) for a Principled BSDF, the (clamped) colour otherwise;
+  Cycles' (svm/closure.h): sqrt(base) for a Principled BSDF, the (clamped) colour otherwise; its
+  reflection tint (``tint_r``) too: the (clamped) colour for a Glass BSDF, a Principled BSDF's
+  specular tint (white: the project has none), white for closures without a glass lobe;
 * a node the interpreter does not evaluate gives the consuming socket its default
   (:data:`UNSUPPORTED` lists what the oracle treats so);
 * Mix Shader: :func:`evaluate` returns every leaf closure with its weight (Cycles' closure weights,
@@ -717,7 +719,8 @@ class Closure:
 def closure_row(c: Closure) -> dict:
     """The closure row's primary columns for c: base [0, 1], emission >= 0, metallic,
     transmission, roughness, specular [0, 1], ior [1, 10]; tint_t the transmission tint
-    (Principled: sqrt(base), Transparent: 0, else base)."""
+    (Principled: sqrt(base), Transparent: 0, else base); tint_r the reflection tint (Glass: base,
+    Transparent: 0, else white)."""
     base = np.clip(c.base, 0.0, 1.0)
     if c.kind == "principled":
         tint = np.sqrt(base)                     # Cycles: transmission_tint = sqrt(base_color)
@@ -725,7 +728,13 @@ def closure_row(c: Closure) -> dict:
         tint = np.zeros(3)
     else:
         tint = base
-    return {"base": base, "tint_t": tint, "emission": np.maximum(c.emission, 0.0),
+    if c.kind == "glass":
+        tint_r = base                            # Cycles: a Glass BSDF's reflection_tint = color
+    elif c.kind == "transparent":
+        tint_r = np.zeros(3)
+    else:
+        tint_r = np.ones(3)                      # Principled: specular_tint (white); others: no glass lobe
+    return {"base": base, "tint_t": tint, "tint_r": tint_r, "emission": np.maximum(c.emission, 0.0),
             "metallic": _saturate(c.metallic), "transmission": _saturate(c.transmission),
             "roughness": _saturate(c.roughness), "specular": _saturate(c.specular),
             "ior": min(max(c.ior, 1.0), 10.0), "transparent": np.maximum(c.transparent, 0.0),
