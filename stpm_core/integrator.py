@@ -256,9 +256,11 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
     return cast_any
 
 
-def _seen_lights(ctx, o, d, t, t_scene, first: bool) -> np.ndarray | None:
+def _seen_lights(ctx, o, d, t, t_scene, first: bool, glossy=None, p_c=None):
     """Radiance (m, 3) of light shapes hit by rays o + s d (unit d) at times t before t_scene (m,),
-    summed over lights in order; None when no light can be seen by these rays.
+    summed over lights in order, and the same weighed for multiple importance sampling (rows
+    that left a rough lobe, ``glossy`` (m,) uint8 or None, with density p_c (m,):
+    ``kernels.paths.seen_lights_add``); (None, None) when no light can be seen by these rays.
 
     What camera rays and delta chains see of the lights themselves, as in Cycles: camera rays see
     light i only if Blender's Object > Visibility > Camera is on for it
@@ -266,15 +268,41 @@ def _seen_lights(ctx, o, d, t, t_scene, first: bool) -> np.ndarray | None:
     emitters of radiance color P / (pi A), POINT / SPOT spheres of radius r > 0 have radiance
     I / (pi r^2), spot-masked (``kernels.lights.seen_light``).
     """
-    L = None
+    L = Lw = None
     vis = ctx.light_visible_camera
+    use_glossy = glossy is not None
     for li in ctx.shaped_lights:
         if first and not (li < len(vis) and vis[li]):
             continue
         if L is None:
-            L = np.zeros((o.shape[0], 3))
-        _K.seen_lights_add(ctx.light_data[li][0], light_poses(ctx.lights, li, t), o, d, t_scene, first, L)
-    return L
+            L, Lw = np.zeros((o.shape[0], 3)), np.zeros((o.shape[0], 3))
+        _K.seen_lights_add(ctx.light_data[li][0], light_poses(ctx.lights, li, t), o, d, t_scene, first, L, Lw,
+                           glossy if use_glossy else _NO_FLAGS, use_glossy, p_c if use_glossy else _NO_U)
+    return L, Lw
+
+
+def _glossy_emission(ctx, gem: np.ndarray, hits, o, t: np.ndarray, C, crow, p_c, dst, idx_k, use_idx: bool,
+                     beta_k, use_beta: bool, clamp: float) -> None:
+    """Emission of the emissive hits gem (k,) of rays that left a rough lobe (density p_c (m,), from
+    o (m, 3) at times t (m,)), weighed against next-event estimation and added into dst (Emit).
+
+    The hit's triangle belongs to a MESH light with power (``ctx.mesh_emitters``): the balance
+    heuristic p_c / (p_c + p_l) (``kernels.paths.mesh_emission_mis``); else next-event estimation
+    never draws it, and the path counts it whole (weight 1)."""
+    W = np.ones(gem.size)
+    inst = hits.instance[gem]
+    for li, (instance, J_of_prim) in ctx.mesh_emitters.items():
+        sel = np.flatnonzero(inst == instance)
+        if sel.size == 0:
+            continue
+        rows = np.ascontiguousarray(gem[sel])
+        J = np.ascontiguousarray(J_of_prim[hits.prim[rows]], np.int64)
+        Wl = np.ones(sel.size)
+        steps, corners, q = ctx.light_data[li][1][:3]              # kernels.light_params.mesh_arrays
+        _K.mesh_emission_mis(rows, o, hits.position, t, p_c, light_poses(ctx.lights, li, t[rows]), steps, corners,
+                             q, J, Wl)
+        W[sel] = Wl
+    _K.emission_rows_add(dst, gem, C, crow, W, idx_k, use_idx, beta_k, use_beta, float(clamp))
 
 
 def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k, use_idx, beta_k, use_beta,
@@ -360,6 +388,7 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     glossy = None                            # 1 where the ray left a rough lobe (None: none did)
     counts = None                            # (live rows, 2) int32 reflections, transmissions so far (None: 0)
     world_w = None                           # the world's weight where the ray escapes (with glossy)
+    p_c = None                               # the density the rough lobe drew the ray with (with glossy)
     feat = _NO_FLAGS                         # 1 where a path still looks for its denoising features (bounce 0: all)
     dft = _NO_ROWS3                          # their throughput: the specular-like albedos met (bounce 0: 1)
     if ctx.features:
@@ -393,13 +422,19 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         world_w_k = world_w if use_glossy else _NO_U
         # -- Misses, emission, first-hit passes; rows to shade and to continue ---------------------
         sh, spec = _scratch("sh", (m,), np.int64), _scratch("spec", (m,), np.int64)
+        gem = _scratch("gem", (m,), np.int64)
         clamp = ctx.clamp_direct if bounce == 0 else ctx.clamp_indirect      # Cycles' Clamp Direct / Indirect
         env_b, wposes_b = ctx.env_camera if bounce == 0 else ctx.env, _world_poses(ctx, t)
         add_world = world_on and not (bounce == 0 and ctx.film_transparent)
-        n_hit, n_sh, n_spec, n_emit = _K.classify_hits(
+        n_hit, n_sh, n_spec, n_emit, n_gem = _K.classify_hits(
             hits.t, C, crow, env_b, wposes_b, d, add_world,
             idx_k, use_idx, beta_k, use_beta, glossy_k, world_w_k, use_glossy, V, cols["Emit"][0], bounce == 0, cols["Depth"][0], cols["Normal"][0], DEPTH_BACKGROUND,
-            hits.position, hits.ns, cam_pos, cam_axis, covered, sh, spec, clamp)
+            hits.position, hits.ns, cam_pos, cam_axis, covered, sh, spec, gem, clamp)
+        if n_gem:
+            # emitters hit through a rough lobe: weighed against next-event estimation there
+            _glossy_emission(ctx, gem[:n_gem], hits, o, t, C, crow, p_c, L_emit, idx_k, use_idx, beta_k, use_beta,
+                             clamp)
+            touched.add("Emit")
         # -- Denoising features: albedo and normal at the first diffuse-like vertex ---------------
         feat_b, dft_b = _NO_FLAGS, _NO_ROWS3         # after this bounce's vertices (specular_step carries them)
         if ctx.features:
@@ -409,15 +444,14 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                               feat_b, dft_b, V, ca, cn, clamp)
         # -- Lights seen along the rays (before the next surface) -----------------------------------
         if ctx.shaped_lights:
-            val = _seen_lights(ctx, o, d, t, hits.t, bounce == 0)
+            val, val_w = _seen_lights(ctx, o, d, t, hits.t, bounce == 0, glossy, p_c)
             if val is not None and ctx.features:
                 # Cycles' Denoising Albedo sees them through specular-like rough lobes too
                 _K.denoising_seen_add(V, ca, np.arange(m), idx_k, use_idx, beta_k, use_beta, bounce == 0, feat,
                                       dft, val, clamp)
-            if val is not None and use_glossy:
-                val[glossy != 0] = 0.0           # after a rough lobe: next-event estimation counted them
             if val is not None:
-                _K.scatter_add(L_emit, np.arange(m), idx_k, use_idx, beta_k, use_beta, val, clamp)
+                # after a rough lobe, weighed against next-event estimation at its vertex
+                _K.scatter_add(L_emit, np.arange(m), idx_k, use_idx, beta_k, use_beta, val_w, clamp)
                 touched.add("Emit")
         if n_emit:
             touched.add("Emit")
@@ -441,7 +475,7 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         EPS = offset_lengths(ctx.inst_offset, hits.instance[spec], hits.position[spec])
         idx_n = np.empty(n_spec, np.int64)
         beta_n, o_n, d_n, guard_n = np.empty((n_spec, 3)), np.empty((n_spec, 3)), np.empty((n_spec, 3)), np.empty(n_spec)
-        glossy_n, world_w_n = np.empty(n_spec, np.uint8), np.empty(n_spec)
+        glossy_n, world_w_n, pc_n = np.empty(n_spec, np.uint8), np.empty(n_spec), np.empty(n_spec)
         counts_n = np.empty((n_spec, 2), np.int32)
         counts_s = np.zeros((n_spec, 2), np.int32) if counts is None else np.ascontiguousarray(counts[spec])
         feat_n, dft_n = (np.empty(n_spec, np.uint8), np.empty((n_spec, 3))) if ctx.features else (_NO_FLAGS, _NO_ROWS3)
@@ -450,10 +484,11 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                                 E, E_avg, u, rr, u_rr, EPS, GUARD_FRACTION, ctx.stop_coat, ctx.env,
                                 _world_poses(ctx, t_spec), ctx.world_li >= 0, counts_s, ctx.glossy_bounces,
                                 ctx.transmission_bounces, idx_n, beta_n, o_n, d_n, guard_n, glossy_n, world_w_n,
-                                counts_n, ctx.features, feat_b, dft_b, feat_n, dft_n)
+                                pc_n, counts_n, ctx.features, feat_b, dft_b, feat_n, dft_n)
         idx, beta, o, d, guard = idx_n[:n_go], beta_n[:n_go], o_n[:n_go], d_n[:n_go], guard_n[:n_go]
         glossy = glossy_n[:n_go] if glossy_n[:n_go].any() else None
         world_w = world_w_n[:n_go] if glossy is not None else None
+        p_c = pc_n[:n_go] if glossy is not None else None
         counts = counts_n[:n_go]
         if ctx.features:
             feat, dft = feat_n[:n_go], dft_n[:n_go]
@@ -497,10 +532,26 @@ class _Context:
     ggx: tuple = None                        # (E (32, 32), E_avg (32,)) GGX albedo tables (kernels.bsdf)
     light_data: list = None                  # per light: (parameter row, mesh arrays) (kernels.light_params)
     shaped_lights: tuple = ()                # lights a ray can hit (AREA, POINT / SPOT of radius > 0) with power
+    mesh_emitters: dict = None               # MESH light index -> (instance, (F,) int64 prim -> its triangle j or -1)
     light_visible_camera: list = None        # per light: seen by camera rays (Blender's visible_camera)
     zero_passes: tuple = ()                  # passes that stay 0 for every sample
     layout: dict = None                      # columns of a tile's per-sample matrix (_compact_layout)
     features: bool = False                   # RenderSettings.denoise: Denoising Albedo / Normal (kernels.paths.denoising_rows)
+
+
+def _mesh_emitters(scene, lights) -> dict:
+    """MESH lights with power: light index -> (instance, J), J (F,) int64 over the instance mesh's
+    triangles: the light's triangle index j of each emitting triangle, -1 for the others (what
+    ``kernels.paths.mesh_emission_mis`` needs to find next-event estimation's density of a hit)."""
+    out = {}
+    for li, l in enumerate(lights.lights):
+        if l.type != "MESH" or not l.power > 0:
+            continue
+        F = len(scene.meshes[scene.instances[l.instance].mesh].triangles)
+        J = np.full(F, -1, np.int64)
+        J[np.asarray(l.prims, np.int64)] = np.arange(len(l.prims))
+        out[li] = (int(l.instance), J)
+    return out
 
 
 def _map_kinds(maps) -> dict:
@@ -638,6 +689,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     ctx.env_camera = lights.lights[ctx.world_li].env_camera if ctx.world_li >= 0 else ctx.env
     ctx.shaped_lights = tuple(li for li, l in enumerate(lights.lights)
                               if _has_shape(l) and l.power > 0 and np.any(np.asarray(l.color, float) > 0))
+    ctx.mesh_emitters = _mesh_emitters(scene, lights)
     ctx.light_visible_camera = [bool(v) for v in (scene.metadata.get("light_visible_camera") or [])]
     # Passes no sample can reach: photon passes without that map (the film sums skip them)
     ctx.zero_passes = tuple(name for name, kind in (("Caustic", "caustic"), ("Indirect", "global"))

@@ -12,7 +12,11 @@ implementation it replaced is the test oracle ``tests/oracles/lights_numpy.py``)
 * :func:`seen_light` -- radiance of the light's shape hit by one ray (AREA lights, one-sided;
   POINT / SPOT spheres of radius > 0), as ``integrator._seen_lights`` for one light;
 * :func:`spherical_rect_sample` -- a point of a rectangle uniform in the solid angle it subtends;
-* :func:`sample_direct_batch`, :func:`seen_batch`, :func:`spherical_rect_batch` -- the same over
+* :func:`light_pdf`, :func:`mesh_light_pdf`, :func:`world_nee_pdf` -- the solid-angle density with
+  which :func:`sample_light_rows` draws a direction, for multiple importance sampling against
+  camera paths that reach the light through a rough lobe (``paths.mis_weight``);
+* :func:`sample_direct_batch`, :func:`sample_pdf_batch`, :func:`light_pdf_batch`, :func:`seen_batch`,
+  :func:`spherical_rect_batch` -- the same over
   arrays of rows (``LightSet.sample_direct`` and the tests call these).
 
 Photon emission is :mod:`.emission`; the vector helpers, warps and light shapes (area shape
@@ -40,11 +44,12 @@ from .light_params import P_ANGLE, P_COLOR, P_DEAD, P_POWER, P_RADIUS, P_SOFT, P
     T_SPOT, T_SUN, T_WORLD
 from .environment import E_NEE_COS, E_TEXTURED, env_pdf, env_radiance, env_sample
 from .sampling import (JIT, TWO_PI, area_point, area_shape, axis_or_z, clip, column, concentric_disk,
-                       cosine_hemisphere, cross, dot, edot, intensity, light_axis, load_pose, madd, mesh_point, neg,
+                       cosine_hemisphere, cross, dot, edot, intensity, light_axis, load_pose, madd, mesh_choice, mesh_point, mesh_triangle, neg,
                        normalize, one_minus_cos_from_sin2, pose_buffer, row3, scale, sign, spot_attenuation, sub,
                        to_world, uniform_cone, uniform_sphere, unit, vec3)
 
-__all__ = ["sample_light_rows", "world_nee_pdf", "seen_light", "sample_direct_batch", "seen_batch", "spherical_rect_sample",
+__all__ = ["sample_light_rows", "world_nee_pdf", "light_pdf", "mesh_light_pdf", "seen_light", "sample_direct_batch",
+           "sample_pdf_batch", "light_pdf_batch", "seen_batch", "spherical_rect_sample",
            "spherical_rect_batch"]
 
 
@@ -292,6 +297,70 @@ def world_nee_pdf(func, par, M, n, wi):
     return c * p_a + (1.0 - c) * env_pdf(func, par, M, wi)
 
 
+@njit(**JIT)
+def light_pdf(prm, M, p, wi):
+    """Solid-angle density (1/sr) with which :func:`sample_light_rows` draws the direction wi (unit)
+    from p toward an AREA light or a POINT / SPOT of radius > 0 at pose M, for multiple
+    importance sampling against camera paths that reach the light through a rough lobe
+    (docs/rendering.md, "Multiple importance sampling").  The same cases as the samplers:
+
+    * AREA rectangle sampled by solid angle (:func:`_sample_area`'s test): 1 / S;
+    * AREA otherwise: t^2 / (cos_l A), t the distance along wi to the light's plane;
+    * POINT / SPOT with soft falloff (a disc of radius r through the centre c facing p):
+      t^2 / (cos_q pi r^2) where wi crosses the disc at distance t, else 0;
+    * POINT / SPOT sphere: 1 / Omega, Omega = 2 pi (1 - cos theta_max) the cone it subtends from
+      outside (1 / (4 pi) from inside).
+
+    inf for every other light (delta lights and suns: next-event estimation alone counts them)
+    and where wi cannot reach the light's front (the sample then weighs nothing)."""
+    typ = int(prm[P_TYPE])
+    if typ == T_AREA:
+        c, ex, ey, A, n_emit, disk = area_shape(prm, M)
+        if not disk:
+            exx = edot(ex, ex)
+            exy = edot(ex, ey)
+            if abs(exy) <= 1e-5 * math.sqrt(exx * edot(ey, ey)):
+                eyo = sub(ey, scale(ex, exy / max(exx, 1e-300)))
+                _, S = spherical_rect_sample(p, sub(sub(c, ex), eyo), scale(ex, 2.0), scale(eyo, 2.0), 0.5, 0.5)
+                if S > 1e-7:
+                    return 1.0 / S
+        cos_l = -dot(wi, n_emit)
+        if not cos_l > 0.0 or not A > 0.0:
+            return np.inf
+        t = dot(sub(c, p), n_emit) / -cos_l
+        return t * t / (cos_l * A)
+    if (typ == T_POINT or typ == T_SPOT) and prm[P_RADIUS] > 0.0:
+        r = prm[P_RADIUS]
+        to_p, d = normalize(sub(p, column(M, 3)))          # light -> p
+        if prm[P_SOFT] != 0.0:
+            cos_q = -dot(wi, to_p)
+            if not cos_q > 0.0:
+                return 0.0
+            t = d / cos_q                                   # to the disc through c facing p
+            x = madd(sub(p, column(M, 3)), t, wi)
+            if edot(x, x) > r * r:
+                return 0.0
+            return t * t / (cos_q * np.pi * r * r)
+        if d <= r:
+            return 0.25 / np.pi
+        return 1.0 / (TWO_PI * one_minus_cos_from_sin2((r * r) / max(d * d, 1e-300)))
+    return np.inf
+
+
+@njit(**JIT)
+def mesh_light_pdf(M, steps, corners, q, j, t, p, x):
+    """Solid-angle density (1/sr) with which :func:`sample_light_rows` draws the point x of emitting
+    triangle j of a MESH light (pose M, arrays of ``light_params.mesh_arrays``) from p at
+    normalised time t: q_j dist^2 / (A_j(t) |cos_l|) (inf where the triangle is seen edge-on)."""
+    C0, e1, e2 = mesh_triangle(M, steps, corners, j, t)
+    nrm, two_A = normalize(cross(e1, e2))
+    wi, dist = normalize(sub(x, p))
+    den = 0.5 * two_A * abs(edot(wi, nrm))
+    if not den > 0.0:
+        return np.inf
+    return q[j] * dist * dist / den
+
+
 # ----------------------------------------------------------------------------
 # Light samples for many shading points
 # ----------------------------------------------------------------------------
@@ -311,7 +380,7 @@ def _toward(NG, D, r):
 
 
 @njit(**JIT)
-def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, D, T, U, S):
+def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, D, T, U, S, want_pdf):
     """One sample of light ``prm`` for each shading row k, the point p = P[rows[k]] (world) at
     normalised time T[k] with uniforms U[k] (2,); writes S[k] = (wi0, wi1, wi2, dist, w0, w1, w2).
 
@@ -325,9 +394,11 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
 
     wi: unit direction from p toward the light sample; dist: its distance (inf for SUN / WORLD;
     shadow rays test [eps, dist)); w: the weight W m^-2 sr^-1, 0 where the light gives nothing
-    (behind an area light, outside a spot, a dead light).  S[k, 7]: the WORLD's sampling density
-    of wi (:func:`world_nee_pdf`, for multiple importance sampling), inf for other lights, written
-    in the same loop.  The light type is chosen once, outside the loops: each loop body is one
+    (behind an area light, outside a spot, a dead light).  S[k, 7]: the density with which wi was
+    drawn, for multiple importance sampling, written in the same loop: the WORLD's
+    (:func:`world_nee_pdf`) always; with want_pdf also an AREA's, a POINT / SPOT sphere's
+    (:func:`light_pdf`) and a MESH light's (:func:`mesh_light_pdf`); inf otherwise (delta lights
+    and suns always).  The light type is chosen once, outside the loops: each loop body is one
     sampler, with no branch or call it does not need (a POINT / SPOT of radius 0 has a loop of
     its own, :func:`_sample_point_delta`, which LLVM inlines: a loop with a call in it saves and
     reloads its floating-point values around the call on every row).  The loops
@@ -353,14 +424,16 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
-            _put(S, k, _sample_point(prm, M, row3(P, rows[k]), U[k, 0], U[k, 1]))
-            S[k, 7] = np.inf
+            p = row3(P, rows[k])
+            _put(S, k, _sample_point(prm, M, p, U[k, 0], U[k, 1]))
+            S[k, 7] = light_pdf(prm, M, p, (S[k, 0], S[k, 1], S[k, 2])) if want_pdf else np.inf
     elif typ == T_AREA:
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
-            _put(S, k, _sample_area(prm, M, row3(P, rows[k]), U[k, 0], U[k, 1]))
-            S[k, 7] = np.inf
+            p = row3(P, rows[k])
+            _put(S, k, _sample_area(prm, M, p, U[k, 0], U[k, 1]))
+            S[k, 7] = light_pdf(prm, M, p, (S[k, 0], S[k, 1], S[k, 2])) if want_pdf else np.inf
     elif typ == T_SUN:
         for k in range(n):
             if not one:
@@ -371,8 +444,14 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
-            _put(S, k, _sample_mesh(M, steps, corners, q, cdf, Le, T[k], row3(P, rows[k]), U[k, 0], U[k, 1]))
-            S[k, 7] = np.inf
+            p = row3(P, rows[k])
+            _put(S, k, _sample_mesh(M, steps, corners, q, cdf, Le, T[k], p, U[k, 0], U[k, 1]))
+            if want_pdf:
+                j = mesh_choice(q, cdf, U[k, 0], U[k, 1])[0]
+                x = (p[0] + S[k, 3] * S[k, 0], p[1] + S[k, 3] * S[k, 1], p[2] + S[k, 3] * S[k, 2])
+                S[k, 7] = mesh_light_pdf(M, steps, corners, q, j, T[k], p, x)
+            else:
+                S[k, 7] = np.inf
     elif typ == T_WORLD and par[E_TEXTURED] != 0.0:
         for k in range(n):
             if not one:
@@ -468,11 +547,33 @@ def sample_direct_batch(prm, poses, steps, corners, q, cdf, Le, env, p, times, u
     n = p.shape[0]
     ng = normals if use_normals else np.zeros((n, 3))
     S = np.empty((n, 8))
-    sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, np.arange(n), p, ng, -ng, times, u, S)
+    no_pdf = n < 0            # False as a run-time bool: a literal False would compile sample_light_rows twice
+    sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, np.arange(n), p, ng, -ng, times, u, S, no_pdf)
     for i in range(n):
         wi_out[i, 0], wi_out[i, 1], wi_out[i, 2] = S[i, 0], S[i, 1], S[i, 2]
         dist_out[i] = S[i, 3]
         weight_out[i, 0], weight_out[i, 1], weight_out[i, 2] = S[i, 4], S[i, 5], S[i, 6]
+
+
+@njit(**JIT)
+def sample_pdf_batch(prm, poses, steps, corners, q, cdf, Le, env, p, times, u, normals, S_out):
+    """:func:`sample_light_rows` with want_pdf for every row i of p (n, 3) at times (n,) with uniforms
+    u (n, 2) and WORLD normals (n, 3): writes S_out (n, 8), the samples and their densities (tests)."""
+    want_pdf = p.shape[0] >= 0    # True as a run-time bool (one compiled sample_light_rows)
+    sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, np.arange(p.shape[0]), p, normals, -normals,
+                      times, u, S_out, want_pdf)
+
+
+@njit(**JIT)
+def light_pdf_batch(prm, poses, p, wi, pdf_out):
+    """:func:`light_pdf` from points p toward unit directions wi (n, 3): writes pdf_out (n,); poses
+    (k, 4, 4), k = 1 or one per row (tests)."""
+    one = poses.shape[0] == 1
+    M = pose_buffer(poses)
+    for i in range(p.shape[0]):
+        if not one:
+            load_pose(poses, i, M)
+        pdf_out[i] = light_pdf(prm, M, row3(p, i), row3(wi, i))
 
 
 @njit(**JIT)

@@ -50,8 +50,7 @@ from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_e
                    bsdf_sample_path, denoising_features, diffuse_albedo, needs_bsdf_call)
 from .environment import env_radiance
 from .closure import (C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, closure_row)
-from .light_params import P_TYPE, T_WORLD
-from .lights import sample_light_rows, seen_light, world_nee_pdf
+from .lights import light_pdf, mesh_light_pdf, sample_light_rows, seen_light, world_nee_pdf
 from .sampling import dot, load_pose, offset_origin, pose_buffer, row3
 
 __all__ = ["camera_tile", "camera_rays", "classify_hits", "denoising_rows", "denoising_seen_add", "nee_light",
@@ -163,8 +162,10 @@ def camera_rays(px, py, W, H, half_w, half_h, cx, cy, R, pos, ortho, clip_start,
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
 def classify_hits(t, C, crow, env, wposes, D, add_world, idx, use_idx, beta, use_beta, glossy, world_w, use_glossy,
-                  V, c_emit, first, c_depth, c_normal, depth_bg, P, NS, cam_pos, cam_axis, covered, sh, spec, clamp):
-    """Bookkeeping of m rays' hits; returns (n_hit, n_sh, n_spec, n_emit) (n_emit: rows added to Emit).
+                  V, c_emit, first, c_depth, c_normal, depth_bg, P, NS, cam_pos, cam_axis, covered, sh, spec, gem,
+                  clamp):
+    """Bookkeeping of m rays' hits; returns (n_hit, n_sh, n_spec, n_emit, n_gem) (n_emit: rows added
+    to Emit; n_gem: emissive hits of rays that left a rough lobe, written to gem).
 
     t (m,) hit distances (inf: miss), C (*, N_CLOSURE) closure rows, crow (m,) the row of C of each
     hit (``kernels.svm.shade_rows``).  Row r belongs to sample ``idx[r]`` (``r`` when
@@ -177,7 +178,8 @@ def classify_hits(t, C, crow, env, wposes, D, add_world, idx, use_idx, beta, use
     of misses (if add_world; ``kernels.environment.env_radiance`` of env with wposes (k, 4, 4)
     its mapping, k = 1 or m; times world_w[r] when use_glossy, :func:`specular_step`) and
     emission of emissive hits into Emit, except on rows that left a rough lobe (``glossy[r]`` 1,
-    when use_glossy: next-event estimation there counted the lights).
+    when use_glossy): those go to gem, in row order, for the caller to weigh against next-event
+    estimation (:func:`mesh_emission_mis`, :func:`emission_rows_add`).
     Writes the hit rows with a non-delta lobe into sh and those with a delta or a rough lobe
     (where the path may go on, :func:`specular_step`) into spec, in row order.  Each emission /
     world contribution is clamped to ``clamp`` (0: off).
@@ -188,6 +190,7 @@ def classify_hits(t, C, crow, env, wposes, D, add_world, idx, use_idx, beta, use
     n_sh = 0
     n_spec = 0
     n_emit = 0
+    n_gem = 0
     one = cam_pos.shape[0] == 1
     one_w = wposes.shape[0] == 1
     M = pose_buffer(wposes)                  # no views or tuple items per row (sampling.row3)
@@ -220,19 +223,23 @@ def classify_hits(t, C, crow, env, wposes, D, add_world, idx, use_idx, beta, use
                 V[i, c_normal + c] = NS[r, c]
             covered[i] = 1.0
         cr = crow[r]
-        if C[cr, C_EMISSIVE] > 0.0 and emits:
-            n_emit += 1
-            e0, e1, e2 = _emission_seen(C, cr, r, beta, use_beta, clamp)
-            V[i, c_emit] += e0
-            V[i, c_emit + 1] += e1
-            V[i, c_emit + 2] += e2
+        if C[cr, C_EMISSIVE] > 0.0:
+            if emits:
+                n_emit += 1
+                e0, e1, e2 = _emission_seen(C, cr, r, beta, use_beta, clamp)
+                V[i, c_emit] += e0
+                V[i, c_emit + 1] += e1
+                V[i, c_emit + 2] += e2
+            else:
+                gem[n_gem] = r
+                n_gem += 1
         if C[cr, C_NONDELTA] > 0.0:
             sh[n_sh] = r
             n_sh += 1
         if C[cr, C_HAS_DELTA] > 0.0 or C[cr, C_ROUGH_LOBE] > 0.0:
             spec[n_spec] = r
             n_spec += 1
-    return n_hit, n_sh, n_spec, n_emit
+    return n_hit, n_sh, n_spec, n_emit, n_gem
 
 
 @njit(**_JIT)
@@ -429,11 +436,15 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
     (n, 3), stmax (n,), and live (n,) the row k it belongs to.  S (>= n, 8): the light samples
     (``sample_light_rows``; a textured MESH light's caller reads the light points from it).
 
-    The WORLD on rows k with ``mis[k]`` (uint8: camera paths go on from them through their rough lobes,
-    :func:`specular_step`, and pick up the world where they escape): the part f_c of f those
+    Rows k with ``mis[k]`` (uint8: camera paths go on from them through their rough lobes,
+    :func:`specular_step`, and pick up the light where they reach it: the world where they escape,
+    an AREA light or a POINT / SPOT sphere seen along the ray, :func:`seen_lights_add`, an
+    emitting triangle of a MESH light they hit, :func:`mesh_emission_mis`): the part f_c of f those
     lobes sample with density p_c (``bsdf_eval_cont``, stop_coat as the continuation) is weighed
-    by the balance heuristic p_l / (p_l + p_c), p_l = S[k, 7] the world's own density, and the
-    escaping paths by p_c / (p_l + p_c) (docs/rendering.md, "Path partition").
+    by the power heuristic p_l^2 / (p_l^2 + p_c^2) (:func:`mis_weight`), p_l = S[k, 7] the light's own density
+    (``sample_light_rows`` with want_pdf, set when any row has mis), and the paths that reach
+    the light by p_c / (p_l + p_c) (docs/rendering.md, "Multiple importance sampling").  Delta
+    lights and suns (p_l = inf) keep f whole: the paths do not see them.
 
     Three loops, each with only the code its rows need (a loop that contains a call, even one it
     never takes, saves and reloads its floating-point values around it and runs up to twice
@@ -444,8 +455,12 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
     contribution and the shadow ray of every row.
     """
     n = rows.shape[0]
-    sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, D, T, U, S)
-    is_world = int(prm[P_TYPE]) == T_WORLD
+    any_mis = False
+    for k in range(n):
+        if mis[k] != 0:
+            any_mis = True
+            break
+    sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, D, T, U, S, any_mis)
     # -- The BSDF of rows that need a call: a rough lobe's mixture (bsdf_eval_pdf), a coat or a
     #    replaced normal (bsdf_eval_smooth) -------------------------------------------------------
     F = np.empty((n, 3))
@@ -460,11 +475,10 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
             ns = (NS[r, 0], NS[r, 1], NS[r, 2])
             g = (NG[r, 0], NG[r, 1], NG[r, 2])
             f0, f1, f2, _ = bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, g)
-            if is_world and mis[k] != 0:
+            if mis[k] != 0 and S[k, 7] < np.inf:
                 c0, c1, c2, p_c = bsdf_eval_cont(C, cr, E, E_avg, wo, wi, ns, g, stop_coat)
-                if p_c > 0.0:
-                    x = p_c / (S[k, 7] + p_c)
-                    f0, f1, f2 = f0 - c0 * x, f1 - c1 * x, f2 - c2 * x
+                x = mis_weight(p_c, S[k, 7])
+                f0, f1, f2 = f0 - c0 * x, f1 - c1 * x, f2 - c2 * x
             F[k, 0], F[k, 1], F[k, 2] = f0, f1, f2
         else:
             F[k, 0], F[k, 1], F[k, 2] = bsdf_eval_smooth(C, cr, (-D[r, 0], -D[r, 1], -D[r, 2]),
@@ -543,11 +557,17 @@ def nee_accumulate(dst, rows, idx, use_idx, beta, use_beta, contrib, live, block
 # Light shapes seen along rays
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
-def seen_lights_add(prm, poses, O, D, t_scene, camera_ray, L):
-    """L[r] += radiance of this light's shape hit by ray r (O + s D, unit D) before t_scene[r].
+def seen_lights_add(prm, poses, O, D, t_scene, camera_ray, L, Lw, glossy, use_glossy, p_c):
+    """L[r] += radiance of this light's shape hit by ray r (O + s D, unit D) before t_scene[r]; Lw[r]
+    += the same weighed for multiple importance sampling.
 
     ``kernels.lights.seen_light`` per row; poses (k, 4, 4), k = 1 or one per ray.  The
-    caller skips lights that camera rays may not see (Blender's visible_camera).
+    caller skips lights that camera rays may not see (Blender's visible_camera).  Rows that
+    left a rough lobe (``glossy[r]``, when use_glossy; next-event estimation at that vertex
+    drew this light with density p_l, ``lights.light_pdf`` from the ray's origin) add to Lw the
+    radiance times the power heuristic :func:`mis_weight`(p_c[r], p_l), p_c the density with which the
+    lobe drew D[r] (:func:`specular_step`); the others add it whole.  L (the denoising features'
+    look) gets the radiance unweighed.
     """
     one = poses.shape[0] == 1
     M = pose_buffer(poses)                   # refilled per ray only when the light moves (no views per row)
@@ -555,9 +575,67 @@ def seen_lights_add(prm, poses, O, D, t_scene, camera_ray, L):
         if not one:
             load_pose(poses, r, M)
         l0, l1, l2 = seen_light(prm, M, row3(O, r), row3(D, r), t_scene[r], camera_ray)
+        if not (l0 > 0.0 or l1 > 0.0 or l2 > 0.0):
+            continue
         L[r, 0] += l0
         L[r, 1] += l1
         L[r, 2] += l2
+        w = 1.0
+        if use_glossy and glossy[r] != 0:
+            w = mis_weight(p_c[r], light_pdf(prm, M, row3(O, r), row3(D, r)))
+        Lw[r, 0] += l0 * w
+        Lw[r, 1] += l1 * w
+        Lw[r, 2] += l2 * w
+
+
+@njit(**_JIT)
+def mis_weight(p_c, p_l):
+    """Cycles' power heuristic p_c^2 / (p_c^2 + p_l^2): the weight of a path that reached a light
+    through a rough lobe (density p_c) against next-event estimation's p_l (which weighs its own
+    sample by 1 minus it); 1 for p_l = 0 (next-event estimation could not draw it), 0 for p_l =
+    inf (a light it alone counts) or p_c = 0."""
+    if not p_l > 0.0:
+        return 1.0
+    if not p_l < np.inf or not p_c > 0.0:
+        return 0.0
+    a, b = p_c * p_c, p_l * p_l
+    return a / (a + b)
+
+
+@njit(**_JIT)
+def mesh_emission_mis(rows, O, P, T, p_c, poses, steps, corners, q, J, W):
+    """W[k] *= :func:`mis_weight`(p_c, p_l) of hit row r = rows[k] (a ray that left a rough
+    lobe with density p_c[r] from O[r] and hit P[r], on emitting triangle J[k] of a MESH light, at
+    normalised time T[r]), p_l the density with which next-event estimation at O[r] draws that
+    point (``lights.mesh_light_pdf``; poses (1 or k, 4, 4) the light's, steps, corners, q its
+    arrays).  J[k] < 0 (the triangle is not the light's): W[k] unchanged."""
+    one = poses.shape[0] == 1
+    M = pose_buffer(poses)
+    for k in range(rows.shape[0]):
+        j = J[k]
+        if j < 0:
+            continue
+        if not one:
+            load_pose(poses, k, M)
+        r = rows[k]
+        W[k] *= mis_weight(p_c[r], mesh_light_pdf(M, steps, corners, q, j, T[r], row3(O, r), row3(P, r)))
+
+
+@njit(**_JIT)
+def emission_rows_add(dst, rows, C, crow, W, idx, use_idx, beta, use_beta, clamp):
+    """dst[idx[r]] += beta[r] W[k] emission of C[crow[r]] for r = rows[k] (idx / beta optional), each
+    clamped to ``clamp`` (0: off)."""
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        cr = crow[r]
+        w = W[k]
+        if not w > 0.0:
+            continue
+        i = idx[r] if use_idx else r
+        c0, c1, c2 = w * C[cr, C_EMIT], w * C[cr, C_EMIT + 1], w * C[cr, C_EMIT + 2]
+        if use_beta:
+            c0, c1, c2 = c0 * beta[r, 0], c1 * beta[r, 1], c2 * beta[r, 2]
+        _add_clamped(dst, i, c0, c1, c2, clamp)
 
 
 # ----------------------------------------------------------------------------
@@ -613,7 +691,7 @@ def photon_add(dst, rows, live, rho, E, idx, use_idx, beta, use_beta, clamp):
 @njit(**_JIT)
 def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, E_avg, U, rr, U_rr, EPS, guard_fraction,
                   stop_coat, env, wposes, world_mis, counts, max_glossy, max_transmission, idx_out, beta_out, o_out,
-                  d_out, guard_out, glossy_out, world_w_out, counts_out, use_feat, feat, dft, feat_out, dft_out):
+                  d_out, guard_out, glossy_out, world_w_out, pc_out, counts_out, use_feat, feat, dft, feat_out, dft_out):
     """Continue the hit rows spec (k,) through their delta and rough non-diffuse lobes; returns how
     many paths go on.
 
@@ -625,12 +703,14 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, 
     clip(max beta', 0.05, 1), then beta' /= q.  For those: idx_out = the sample (idx[r], or r),
     beta_out = beta', the next ray from p offset by EPS[j] along ng to wi's side (o_out, d_out =
     wi), its self-intersection guard guard_out = guard_fraction * EPS[j], and glossy_out = 1 after
-    a rough lobe (the next vertex then adds no emission: next-event estimation at this vertex
-    counted the lights through that lobe), 0 after a delta lobe.  world_w_out: the weight of the
+    a rough lobe (the lights the next vertex reaches are then weighed against next-event
+    estimation at this one), 0 after a delta lobe.  world_w_out: the weight of the
     world's radiance if the ray escapes: 1 after a delta lobe; after a rough lobe, with
-    world_mis (the world is a light of next-event estimation, :func:`nee_light`), the balance
-    heuristic p_c / (p_c + p_l) of the continuation's density p_c against the world's own p_l
-    (``lights.world_nee_pdf``; env and wposes (1 or k, 4, 4) its mapping), else 0.
+    world_mis (the world is a light of next-event estimation, :func:`nee_light`), the power
+    heuristic :func:`mis_weight` of the continuation's density p_c against the world's own p_l
+    (``lights.world_nee_pdf``; env and wposes (1 or k, 4, 4) its mapping), else 0.  pc_out: the
+    continuation's density p_c (1/sr) after a rough lobe (inf after a delta lobe), against which
+    the lights the ray reaches are weighed (:func:`seen_lights_add`, :func:`mesh_emission_mis`).
 
     Bounce budgets, as Cycles' Glossy / Transmission bounces: counts (k, 2) int32 the row's
     reflections and transmissions so far (counts_out the next rays' after this one).  A delta
@@ -687,8 +767,9 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, 
                 if not one_w:
                     load_pose(wposes, j, M)
                 p_l = world_nee_pdf(func, par, M, g_f, (wi0, wi1, wi2))
-                w_world = p_c / (p_c + p_l)
+                w_world = mis_weight(p_c, p_l)
         world_w_out[n_go] = w_world
+        pc_out[n_go] = p_c if kind == PATH_GLOSSY else np.inf
         counts_out[n_go, 0] = n_gl + (0 if trans else 1)
         counts_out[n_go, 1] = n_tr + (1 if trans else 0)
         if use_feat:

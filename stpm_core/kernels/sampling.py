@@ -51,7 +51,7 @@ __all__ = ["JIT", "JIT_INLINE", "TWO_PI", "INV_4PI", "dot", "edot", "cross", "no
            "vec3", "row3", "pose_buffer", "load_pose", "sub", "add", "neg", "scale", "madd", "plane_point", "clip", "sign", "basis", "to_world",
            "concentric_disk", "cosine_hemisphere", "uniform_sphere", "uniform_cone", "axis_or_z",
            "one_minus_cos_from_sin2", "light_axis", "intensity", "spot_attenuation", "area_shape", "area_point",
-           "search_right", "mesh_point", "mesh_choice", "mesh_choices"]
+           "search_right", "mesh_point", "mesh_triangle", "mesh_choice", "mesh_choices"]
 
 JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 # Only for tiny indexing helpers called with constant indices or ids of several integer types:
@@ -377,6 +377,16 @@ def mesh_point(M, steps, corners, q, cdf, t, u0, u1):
     unit geometric normal e1 x e2 / |e1 x e2| and the triangle's world area A.
     """
     j, qj, b1, b2 = mesh_choice(q, cdf, u0, u1)
+    C0, e1, e2 = mesh_triangle(M, steps, corners, j, t)
+    nrm, two_A = normalize(cross(e1, e2))
+    return plane_point(C0, b1, e1, b2, e2), nrm, 0.5 * two_A, j, qj
+
+
+@njit(**JIT)
+def mesh_triangle(M, steps, corners, j, t):
+    """Emitting triangle j of a MESH light at normalised time t: (C0, e1, e2), its first world
+    corner and the two edges from it (corners linear in t between vertex steps, then M; as
+    :func:`mesh_point` uses them)."""
     K = steps.shape[0]
     i = 0
     a = 0.0
@@ -386,8 +396,7 @@ def mesh_point(M, steps, corners, q, cdf, t, u0, u1):
     C0 = _mesh_corner(M, corners, i, j, 0, a)
     e1 = sub(_mesh_corner(M, corners, i, j, 1, a), C0)
     e2 = sub(_mesh_corner(M, corners, i, j, 2, a), C0)
-    nrm, two_A = normalize(cross(e1, e2))
-    return plane_point(C0, b1, e1, b2, e2), nrm, 0.5 * two_A, j, qj
+    return C0, e1, e2
 
 
 @njit(**JIT)

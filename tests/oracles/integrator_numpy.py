@@ -175,8 +175,10 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=Fal
     """Next-event estimate (n, 3): sum over lights of f(wo, wi) |cos(ns, wi)| L_i / p * V.
 
     eps (n,): each point's shadow-ray origin offset (``_eps_rows``).  mis (n,) bool: the paths may
-    go on through their rough lobes after this; the world's samples then weigh the part f_c of f those lobes
-    sample (density p_c) by p_l / (p_l + p_c), p_l = cos(ng_f, wi) / pi its own density.
+    go on through their rough lobes after this; the samples of the world, of AREA lights, POINT /
+    SPOT spheres and MESH lights then weigh the part f_c of f those lobes sample (density p_c) by
+    the power heuristic p_l^2 / (p_l^2 + p_c^2), p_l the light's own density (the world's cos(ng_f, wi) / pi,
+    ``lights_numpy.nee_pdf``; delta lights and suns: inf, no weighing).
 
     Lights of zero power are skipped; shadow rays are cast only for samples
     whose unshadowed contribution is positive (light in front, BSDF > 0).
@@ -188,14 +190,20 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=Fal
         if lights.power[li] <= 0.0:
             continue
         # Sample a point / direction on the light at each sample's time
-        wi, dist, weight = lights_numpy.sample_direct(lights, li, p, times,
-                                                      _light_uniforms(lights.lights[li], n, rng),
+        u_l = _light_uniforms(lights.lights[li], n, rng)
+        wi, dist, weight = lights_numpy.sample_direct(lights, li, p, times, u_l,
                                                       normals=_world_normals(lights.lights[li], ng, wo))
         f = bsdf_eval(ctx.table, mat, wo, wi, ns, ng)
-        if np.any(mis) and lights.lights[li].type == "WORLD":
+        if np.any(mis):
+            if lights.lights[li].type == "WORLD":
+                p_l = np.maximum(np.einsum("ij,ij->i", wi, _face_forward(ng, wo)), 0.0) / np.pi
+            else:
+                j = x_l = None
+                if lights.lights[li].type == "MESH":
+                    j, x_l = lights_numpy.mesh_triangle_of_sample(lights, li, u_l), p + dist[:, None] * wi
+                p_l = lights_numpy.nee_pdf(lights, li, p, wi, times, x=x_l, j=j)
             f_c, p_c = bsdf_eval_cont(ctx.table, mat, wo, wi, ns, ng)
-            p_l = np.maximum(np.einsum("ij,ij->i", wi, _face_forward(ng, wo)), 0.0) / np.pi
-            x = np.where((p_c > 0) & mis, p_c / np.maximum(p_l + p_c, 1e-300), 0.0)
+            x = np.where(mis & np.isfinite(p_l), _mis_weight(p_c, p_l), 0.0)
             f = f - f_c * x[:, None]
         contrib = f * (np.abs(np.einsum("ij,ij->i", ns, wi)))[:, None]
         contrib *= weight
@@ -235,9 +243,19 @@ def _photon_term(ctx, kind: str, p, ns_f, wo, mat, times, stats: TraceStats) -> 
     return out
 
 
-def _seen_lights(lights, o, d, t, t_scene, camera_ray=False, visible_camera=None):
+def _seen_lights(lights, o, d, t, t_scene, camera_ray=False, visible_camera=None, only=None):
     """Radiance (n, 3) of light shapes hit before t_scene: the numpy light oracle's ``seen_lights_numpy``."""
-    return lights_numpy.seen_lights_numpy(lights, o, d, t, t_scene, camera_ray, visible_camera)
+    return lights_numpy.seen_lights_numpy(lights, o, d, t, t_scene, camera_ray, visible_camera, only)
+
+
+def _mis_weight(p_c: np.ndarray, p_l: np.ndarray) -> np.ndarray:
+    """Power heuristic (n,) p_c^2 / (p_c^2 + p_l^2) of a path that reached a light through a rough
+    lobe (density p_c) against next-event estimation's p_l: 1 where p_l = 0, 0 where p_l = inf or
+    p_c = 0."""
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        w = p_c ** 2 / (p_c ** 2 + p_l ** 2)
+    w = np.where(np.isfinite(p_l) & (p_c > 0), w, 0.0)
+    return np.where(p_l > 0, w, 1.0)
 
 
 # ----------------------------------------------------------------------------
@@ -286,16 +304,16 @@ def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, coun
         q = np.clip(np.max(beta, axis=1), 0.05, 1.0)
         go &= rng.random(idx.size) < q
         beta = beta / q[:, None]
-    # the world's weight where the ray escapes: 1 after a delta lobe, the balance heuristic after a
+    # the world's weight where the ray escapes: 1 after a delta lobe, the power heuristic after a
     # rough one when the world is a light (0 when it is not: it sends nothing then)
     world_w = np.ones(idx.size)
     g = kind == 2
     if np.any(g):
         p_l = np.maximum(np.einsum("ij,ij->i", wi, _face_forward(ng, wo)), 0.0) / np.pi
         p_g = np.where(g, p_c, 0.0)                      # (delta rows: inf, unused)
-        w = np.where(p_g > 0, p_g / np.maximum(p_g + p_l, 1e-300), 0.0) if ctx.world_light else 0.0
+        w = _mis_weight(p_g, p_l) if ctx.world_light else 0.0
         world_w = np.where(g, w, 1.0)
-    return idx, beta, wi, go, g, world_w, counts
+    return idx, beta, wi, go, g, world_w, counts, np.where(g, p_c, np.inf)
 
 
 def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.ndarray,
@@ -320,6 +338,7 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
     beta = None
     glossy = None                            # (live rows,) bool: the ray left a rough lobe
     world_w = None                           # (live rows,) the world's weight where the ray escapes
+    p_cont = None                            # (live rows,) the density the rough lobe drew the ray with
     counts = None                            # (live rows, 2) reflections, transmissions so far
     tmax = tmax0                             # camera clipping for the first segment
     guard = None                             # camera rays: the caster's own guard
@@ -333,11 +352,13 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
     covered = np.zeros(n)
     world_L = ctx.world_radiance
 
-    def add(dst: np.ndarray, rows, value: np.ndarray, w=None, emitted: bool = False) -> None:
-        """dst[idx[rows]] += w * value (rows None = all live rows; w None = beta); emitted light
-        is not added on rows that left a rough lobe (next-event estimation counted it there)."""
-        if emitted and glossy is not None:
-            value = np.where((glossy if rows is None else glossy[rows])[:, None], 0.0, value)
+    def add(dst: np.ndarray, rows, value: np.ndarray, w=None, emitted=None) -> None:
+        """dst[idx[rows]] += w * value (rows None = all live rows; w None = beta); emitted (rows,)
+        the multiple-importance weight of light reached through a rough lobe, used on rows that
+        left one (None: 1)."""
+        if emitted is not None and glossy is not None:
+            g = glossy if rows is None else glossy[rows]
+            value = np.where(g[:, None], emitted[:, None] * value, value)
         w = beta if w is None else w
         if w is not None:
             value = (w if rows is None else w[rows]) * value
@@ -359,8 +380,13 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         # Cycles' defaults: lights are invisible to camera rays (visible_camera off) and
         # visible to glossy / transmission rays, i.e. in mirrors and through glass.
         if ctx.visible_lights:
-            add(L_emit, None, _seen_lights(ctx.lights, o, d, t, hits.t, camera_ray=(bounce == 0),
-                                           visible_camera=ctx.light_visible_camera), emitted=True)
+            for li in range(len(ctx.lights)):
+                if ctx.lights.lights[li].type not in ("AREA", "POINT", "SPOT"):
+                    continue                  # meshes: their triangles are hit (below); the world: misses
+                val = _seen_lights(ctx.lights, o, d, t, hits.t, camera_ray=(bounce == 0),
+                                   visible_camera=ctx.light_visible_camera, only=li)
+                w = None if glossy is None else _mis_weight(p_cont, lights_numpy.nee_pdf(ctx.lights, li, o, d, t))
+                add(L_emit, None, val, emitted=w)
 
         # -- Escaped rays see the world ------------------------------------------------
         if not all_hit and np.any(world_L > 0):
@@ -387,13 +413,17 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
             beta = None if beta is None else beta[keep]
             glossy = None if glossy is None else glossy[keep]
             world_w = None if world_w is None else world_w[keep]
+            p_cont = None if p_cont is None else p_cont[keep]
+            o, d = o[keep], d[keep]
             counts = None if counts is None else counts[keep]
             t = t[keep]
             p, ng, ns, mat = hits.position[keep], hits.ng[keep], hits.ns[keep], hits.material[keep]
+            hit_inst, hit_prim = hits.instance[keep], hits.prim[keep]
             eps = _eps_rows(ctx, hits.instance[keep], p)
-            wo = -d[keep]                     # directions are unit (camera, bsdf_sample)
+            wo = -d                           # directions are unit (camera, bsdf_sample)
         else:
             p, ng, ns, mat = hits.position, hits.ng, hits.ns, hits.material
+            hit_inst, hit_prim = hits.instance, hits.prim
             eps = _eps_rows(ctx, hits.instance, p)
             wo = -d
 
@@ -401,7 +431,17 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         if ctx.any_emission:
             e_rows = np.nonzero(ctx.emissive[mat])[0]
             if e_rows.size:
-                add(L_emit, e_rows, emission(ctx.table, mat[e_rows]), emitted=True)
+                w = None
+                if glossy is not None:
+                    inst, prim = _rows(hit_inst, e_rows), _rows(hit_prim, e_rows)
+                    w = np.ones(e_rows.size)
+                    for li, (instance, J) in ctx.mesh_emitters.items():
+                        sel = np.nonzero((inst == instance) & (J[prim] >= 0))[0]
+                        if sel.size:
+                            r = e_rows[sel]
+                            w[sel] = _mis_weight(p_cont[r], lights_numpy.nee_pdf(
+                                ctx.lights, li, o[r], d[r], t[r], x=p[r], j=J[prim[sel]]))
+                add(L_emit, e_rows, emission(ctx.table, mat[e_rows]), emitted=w)
 
         # -- Shade non-delta vertices: Direct, Caustic, Indirect -----------------------------
         nd = has_nondelta(ctx.table, mat)
@@ -430,11 +470,11 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
             break
         p, ng, eps = p[spec], ng[spec], eps[spec]
         counts = np.zeros((spec.size, 2), np.int32) if counts is None else counts[spec]
-        idx, beta, wi, go, gl, ww, counts = _specular_step(ctx, rng, spec, idx, beta, mat[spec], wo[spec], ns[spec],
-                                                           ng, bounce, counts)
-        idx, beta, glossy, world_w, counts = idx[go], beta[go], gl[go], ww[go], counts[go]
+        idx, beta, wi, go, gl, ww, counts, pc = _specular_step(ctx, rng, spec, idx, beta, mat[spec], wo[spec],
+                                                               ns[spec], ng, bounce, counts)
+        idx, beta, glossy, world_w, counts, p_cont = idx[go], beta[go], gl[go], ww[go], counts[go], pc[go]
         if not glossy.any():
-            glossy = world_w = None
+            glossy = world_w = p_cont = None
         o = _offset(p[go], ng[go], wi[go], eps[go])
         guard = GUARD_FRACTION * eps[go]
         d = wi[go]
@@ -492,6 +532,14 @@ def trace_image_numpy(scene, settings, caster, lights, maps=None, *, time_overri
     ctx.glossy_bounces, ctx.transmission_bounces = int(settings.glossy_bounces), int(settings.transmission_bounces)
     ctx.any_emission = any(np.any(np.asarray(m.emission) > 0) for m in scene.materials)
     ctx.emissive = np.any(table.emission > 0, axis=1)
+    # MESH lights with power: light index -> (instance, J), J[prim] its triangle index (-1: none)
+    ctx.mesh_emitters = {}
+    for li, l in enumerate(lights.lights):
+        if l.type == "MESH" and l.power > 0:
+            J = -np.ones(len(scene.meshes[scene.instances[l.instance].mesh].triangles), np.int64)
+            for jj, prim in enumerate(np.asarray(l.prims)):
+                J[prim] = jj
+            ctx.mesh_emitters[li] = (l.instance, J)
     ctx.light_visible_camera = [bool(v) for v in (scene.metadata.get("light_visible_camera") or [])]
     ctx.visible_lights = any(l.type == "AREA" or (l.type in ("POINT", "SPOT") and l.radius > 0) for l in lights.lights)
     film = Film(W, H, settings.filter_width)

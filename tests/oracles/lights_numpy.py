@@ -369,17 +369,20 @@ def sample_sun(lights, li, p, times, u):
 # ---------------------------------------------------------------------------
 
 def seen_lights_numpy(lights, o: np.ndarray, d: np.ndarray, t: np.ndarray, t_scene: np.ndarray,
-                      camera_ray: bool = False, visible_camera=None) -> np.ndarray:
+                      camera_ray: bool = False, visible_camera=None, only: int | None = None) -> np.ndarray:
     """Radiance (n, 3) of light shapes hit by rays o + s d (unit d) before t_scene (n,), at times t (n,).
 
     Camera rays see light i only if ``visible_camera[i]``.  AREA lights are one-sided emitters
     facing their local -Z with radiance ``color P / (pi A)``; POINT / SPOT lights of radius r > 0
     are spheres of radiance ``I / (pi r^2)`` (spots masked by their cone).  Radius-0 lights and
-    suns are not visible; meshes (their triangles are geometry) and the world neither.
+    suns are not visible; meshes (their triangles are geometry) and the world neither.  only: the
+    one light to look at (None: all).
     """
     n = o.shape[0]
     L = np.zeros((n, 3))
     for li, light in enumerate(lights.lights):
+        if only is not None and li != only:
+            continue
         if light.type in ("MESH", "WORLD"):
             continue                          # emissive triangles: the caster hits them (Emit); world: misses
         color = np.asarray(light.color, float)
@@ -512,3 +515,82 @@ def sky_radiance(lights, d: np.ndarray, times: np.ndarray) -> np.ndarray:
         inside = np.sum(d * Z, axis=-1) >= cos_half
         L += inside[:, None] * (np.asarray(l.color, float) * float(l.power) / omega)[None, :]
     return L
+
+
+# ---------------------------------------------------------------------------
+# Densities of next-event estimation's samples (multiple importance sampling)
+# ---------------------------------------------------------------------------
+def _triangle_solid_angle(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Solid angle (n,) of the triangles with corners a, b, c (n, 3) seen from the origin (Van
+    Oosterom and Strackee 1983: tan(Omega / 2) = |a . (b x c)| / (|a||b||c| + (a.b)|c| + (a.c)|b|
+    + (b.c)|a|))."""
+    la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
+    num = np.abs(np.einsum("ij,ij->i", a, np.cross(b, c)))
+    den = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", a, c) * lb
+           + np.einsum("ij,ij->i", b, c) * la)
+    return 2.0 * np.arctan2(num, den)
+
+
+def nee_pdf(lights, li: int, p: np.ndarray, wi: np.ndarray, times: np.ndarray, x: np.ndarray | None = None,
+            j: np.ndarray | None = None) -> np.ndarray:
+    """Solid-angle density (n,) with which :func:`sample_direct` draws the unit direction wi (n, 3)
+    from p (n, 3) at times (n,), written from the geometry (not from the samplers' weights):
+
+    AREA rectangle (edges orthogonal within 1e-5, solid angle S > 1e-7 sr: the two triangles'
+    solid angles): 1 / S; other AREA shapes: t^2 / (cos_l A), t the distance to the light's plane
+    along wi (inf where wi meets its back); POINT / SPOT with soft falloff: t^2 / (cos pi r^2) where
+    wi crosses the disc of radius r through the centre facing p, else 0; sphere: 1 / (2 pi (1 -
+    cos theta_max)) (1 / (4 pi) from inside); MESH: q_j |x - p|^2 / (A_j |cos_l|) for the point x
+    (n, 3) of its triangles j (n,); delta lights and suns: inf.
+    """
+    l = lights.lights[li]
+    n = p.shape[0]
+    times = np.broadcast_to(np.atleast_1d(np.asarray(times, float)), (n,))
+    out = np.full(n, np.inf)
+    if l.type == "AREA":
+        c, ex, ey, A, n_emit = lights._area_shape(li, np.ascontiguousarray(times))
+        done = np.zeros(n, bool)
+        if l.shape in ("SQUARE", "RECTANGLE"):
+            dot = np.einsum("ij,ij->i", ex, ey)
+            exx = np.einsum("ij,ij->i", ex, ex)
+            ortho = np.abs(dot) <= 1e-5 * np.sqrt(exx * np.einsum("ij,ij->i", ey, ey))
+            eyo = ey - (dot / np.maximum(exx, 1e-300))[:, None] * ex
+            k00, k10, k11, k01 = (c + sx * ex + sy * eyo - p for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1)))
+            S = _triangle_solid_angle(k00, k10, k11) + _triangle_solid_angle(k00, k11, k01)
+            done = ortho & (S > 1e-7)
+            out[done] = 1.0 / S[done]
+        cos_l = -np.einsum("ij,ij->i", wi, n_emit)
+        rest = ~done & (cos_l > 0) & (A > 0)
+        t = np.einsum("ij,ij->i", c - p, n_emit)[rest] / -cos_l[rest]
+        out[rest] = t * t / (cos_l[rest] * A[rest])
+    elif l.type in ("POINT", "SPOT") and l.radius > 0:
+        r = float(l.radius)
+        c = lights._frame(li, times)[0]
+        v = p - c
+        d = np.linalg.norm(v, axis=1)
+        if l.use_soft_falloff:
+            cos_q = -np.einsum("ij,ij->i", wi, v / d[:, None])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = d / cos_q
+                hit = p + t[:, None] * wi - c
+                ok = (cos_q > 0) & (np.einsum("ij,ij->i", hit, hit) <= r * r)
+                out = np.where(ok, t * t / (cos_q * np.pi * r * r), 0.0)
+        else:
+            sin2 = (r / np.maximum(d, r)) ** 2
+            one_minus_cos = sin2 / (1.0 + np.sqrt(1.0 - sin2))       # 1 - cos theta_max, without cancellation
+            out = np.where(d <= r, 1.0 / (4.0 * np.pi), 1.0 / (2.0 * np.pi * one_minus_cos))
+    elif l.type == "MESH":
+        C = mesh_corners(l, j, times)
+        cr = np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0])
+        A = 0.5 * np.linalg.norm(cr, axis=1)
+        w, dist = _normalize(x - p)
+        cos_l = np.abs(np.einsum("ij,ij->i", w, cr)) / np.maximum(2.0 * A, 1e-300)
+        ok = A * cos_l > 0
+        out[ok] = l.q[j[ok]] * dist[ok] ** 2 / (A[ok] * cos_l[ok])
+    return out
+
+
+def mesh_triangle_of_sample(lights, li: int, u: np.ndarray) -> np.ndarray:
+    """The emitting triangle j (n,) a MESH light's sample from uniforms u (n, 2) lies on."""
+    ml = lights.lights[li]
+    return np.minimum(np.searchsorted(ml.cdf, u[:, 0], side="right"), ml.q.shape[0] - 1)
