@@ -115,6 +115,10 @@ class RenderSettings:
     transmission_bounces: int = setting(
         12, "int", "as Cycles' Transmission bounces: refractions a camera path goes on through, within "
         "max_depth", lo=0, hi=1024, label="Transmission Bounces")
+    transparent_max_bounces: int = setting(
+        8, "int", "as Cycles' Transparent bounces: transparent surfaces (Transparent BSDF, alpha cut-outs) one "
+        "ray segment -- camera, shadow or photon -- passes in a row; the next one absorbs it (black, "
+        "shadowed). Passes are not bounces", lo=0, hi=1024, label="Transparent Bounces")
     filter_width: float = setting(
         1.5, "float", "Blackman-Harris pixel filter width in pixels (Blender's default 1.5)", lo=0.0, hi=64.0,
         label="Filter Width", ui={"subtype": "PIXEL"})

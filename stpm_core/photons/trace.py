@@ -36,7 +36,7 @@ from ..parallel import ordered_map, worker_count
 from ..raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from ..sampling import rng_for, stratified_1d
 from ..shading import constant_shading, hit_geometry, shading_data
-from ..transparency import pass_through
+from ..transparency import TRANSPARENT_MAX_BOUNCES, pass_through
 from .record import make_records, photon_origin, PHOTON_DTYPE
 
 __all__ = ["specular_targets", "split_counts", "trace_photon_paths", "trace_caustic_map", "trace_global_map"]
@@ -111,7 +111,8 @@ def _times(scene, n: int, rng, time_override) -> np.ndarray:
 
 def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, inst_offset: np.ndarray,
                        target_instance: int | None = None, min_nondelta: int = 1,
-                       origin: np.ndarray | None = None, shading=None) -> np.ndarray:
+                       origin: np.ndarray | None = None, shading=None,
+                       transparent_bounces: int = TRANSPARENT_MAX_BOUNCES) -> np.ndarray:
     """Trace photon paths and return the stored records.
 
     Parameters
@@ -124,6 +125,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         after >= ``min_nondelta`` diffuse bounces, a rough coat's counting as one; 0 also
         stores first hits, which only tests use).
     max_depth : bounces followed.
+    transparent_bounces : transparent surfaces passed in a row before one absorbs the photon
+        (``RenderSettings.transparent_max_bounces``).
     inst_offset : (n_instances,) per-object part of the ray-origin offset along the geometric
         normal (scene units; ``raycast.geometry.instance_offsets``, applied by ``offset_lengths``).
     origin : (3,) world point stored positions are relative to (record.photon_origin).
@@ -192,7 +195,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
                 stored.append(make_records(hits.position[idx[extra]], -d[extra], Phi[extra], t[extra], origin))
         if sd.transparent:
             # transparent hits: the photon goes on behind, its power tinted (not a bounce)
-            Phi = pass_through(caster, sd, inst_offset, hits, d, t, C, Phi, rng, at=idx)
+            Phi = pass_through(caster, sd, inst_offset, hits, d, t, C, Phi, rng, at=idx, limit=transparent_bounces)
         last = depth == max_depth
         # -- Random numbers of the bounce: BSDF lobe and direction, then the roulette ----------
         U = rng.random((k, 3)) if not last else _NO_U3
@@ -275,7 +278,7 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
         Phi = Phi * (n / float(n_pair))                  # this batch's share of the pair's photons
         return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="caustic",
                                   max_depth=settings.max_depth, inst_offset=inst_offset, target_instance=ii,
-                                  shading=shading)
+                                  shading=shading, transparent_bounces=settings.transparent_max_bounces)
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing caustic photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
@@ -303,7 +306,7 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
         Phi = Phi * (n / float(n_light))
         return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global",
                                   max_depth=settings.max_depth, inst_offset=inst_offset, min_nondelta=min_nondelta,
-                                  shading=shading)
+                                  shading=shading, transparent_bounces=settings.transparent_max_bounces)
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing global photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
