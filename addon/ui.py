@@ -98,8 +98,8 @@ class _STPMPanel:
 
 class STPM_RENDER_PT_sampling(_STPMPanel, bpy.types.Panel):
     bl_label = "Sampling"
-    PROPS = ("samples", "seed", "max_depth", "glossy_bounces", "transmission_bounces", "filter_width", "threads",
-             "clamp_direct", "clamp_indirect")
+    PROPS = ("samples", "seed", "max_depth", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
+             "transparent_max_bounces", "filter_width", "threads", "clamp_direct", "clamp_indirect")
 
     def draw_header_preset(self, context):
         self.layout.menu(STPM_MT_presets.bl_idname, text="", icon="PRESET")

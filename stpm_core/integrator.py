@@ -244,7 +244,7 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
         if ctx.shading.transparent:
             # shadow rays pass transparent surfaces, tinted by them
             T = shadow_transmittance(ctx.caster, ctx.shading, ctx.inst_offset, so[:m], sd[:m], t_live, stmax[:m],
-                                     GUARD_FRACTION * EPS[sh[lv]], rng)
+                                     GUARD_FRACTION * EPS[sh[lv]], rng, limit=ctx.transparent_max_bounces)
             contrib[lv] *= T
             blocked = ~np.any(T > 0.0, axis=1)
         else:
@@ -414,7 +414,8 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                        int(rng.integers(1 << 62)) if sd.uses_mix else 0, _scratch("closure", (m, N_CLOSURE)), crow)
         if sd.transparent:
             # transparent hits (cut-outs, Transparent BSDF): the rays go on to what lies behind
-            beta = pass_through(ctx.caster, sd, ctx.inst_offset, hits, d, t, C, beta, rng, tmax=tmax)
+            beta = pass_through(ctx.caster, sd, ctx.inst_offset, hits, d, t, C, beta, rng, tmax=tmax,
+                                limit=ctx.transparent_max_bounces)
         use_idx, use_beta, use_glossy = idx is not None, beta is not None, glossy is not None
         idx_k = idx if use_idx else _NO_IDX
         beta_k = beta if use_beta else _NO_ROWS3
@@ -525,6 +526,7 @@ class _Context:
     stop_coat: bool = False                  # camera paths end on a rough coat too (kernels.bsdf.bsdf_sample_path)
     glossy_bounces: int = 4                  # RenderSettings.glossy_bounces / transmission_bounces
     transmission_bounces: int = 12
+    transparent_max_bounces: int = 8         # RenderSettings.transparent_max_bounces: passes in a row (transparency)
     clamp_direct: float = 0.0                # RenderSettings.clamp_direct / clamp_indirect (0: off)
     clamp_indirect: float = 0.0
     closures: np.ndarray = None              # (M + 1, N_CLOSURE) material closure rows (kernels.closure)
@@ -680,7 +682,8 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                    closures=closures, ggx=ggx_albedo_tables(),
                    clamp_direct=float(settings.clamp_direct), clamp_indirect=float(settings.clamp_indirect),
                    glossy_bounces=int(settings.glossy_bounces),
-                   transmission_bounces=int(settings.transmission_bounces))
+                   transmission_bounces=int(settings.transmission_bounces),
+                   transparent_max_bounces=int(settings.transparent_max_bounces))
     ctx.shading = shading_data(scene, closures)
     ctx.light_data = [(light_params(lights, li), mesh_arrays(lights, li)) for li in range(len(lights))]
     ctx.world_li = next((li for li, l in enumerate(lights.lights) if l.type == "WORLD"), -1)

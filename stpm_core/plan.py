@@ -27,7 +27,9 @@ The rules (docs/effects.md has them with what each one saves):
 
 ``settings.effects == 'MANUAL'`` replaces the caustics / indirect decisions by
 ``settings.caustics`` / ``settings.indirect``; motion is always read from the
-scene.  The renderer follows the plan (:func:`apply_plan`): 0 caustic photons
+scene.  ``settings.diffuse_bounces == 0`` turns both off whatever the rest says (Cycles'
+direct light only: every photon-map look-up is a diffuse bounce of the camera path).  The
+renderer follows the plan (:func:`apply_plan`): 0 caustic photons
 without caustics, 0 global photons without indirect light, and the STANDARD
 estimator when the plan is not time dependent (static photon maps need no
 temporal selection; every estimator then converges to the same answer and
@@ -420,6 +422,12 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
         reasons.append(f"effects MANUAL: caustics {'on' if caustics else 'off'}, "
                        f"indirect {'on' if indirect else 'off'} as set (automatic choice: "
                        f"caustics {'on' if auto_caustics else 'off'}, indirect {'on' if auto_indirect else 'off'})")
+
+    # -- Cycles' diffuse bounce budget: 0 is direct light only -----------------------------------
+    if settings is not None and int(getattr(settings, "diffuse_bounces", 4)) == 0 and (caustics or indirect):
+        caustics = indirect = False
+        reasons.append("caustics, indirect: off (diffuse_bounces = 0: direct light only, as in Cycles; a camera "
+                       "vertex reading a photon map makes a diffuse bounce)")
 
     # -- Time dependence -----------------------------------------------------------------------
     time_dependent = shutter_open and lighting_moves and (caustics or indirect)

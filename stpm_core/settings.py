@@ -109,12 +109,21 @@ class RenderSettings:
     max_depth: int = setting(
         8, "int", "longest specular chain followed from the camera, and photon bounces", lo=1, hi=1024,
         label="Max Depth")
+    diffuse_bounces: int = setting(
+        4, "int", "as Cycles' Diffuse bounces: diffuse reflections a light path may make, counted as Cycles "
+        "counts them (a camera vertex reading a photon map makes one, next-event estimation none): 0 = direct "
+        "light only (no photon maps, no caustics), 1 = the caustics and one bounce of indirect light",
+        lo=0, hi=1024, label="Diffuse Bounces")
     glossy_bounces: int = setting(
         4, "int", "as Cycles' Glossy bounces: reflections (mirror or rough) a camera path goes on through, "
         "within max_depth (photon paths follow max_depth only)", lo=0, hi=1024, label="Glossy Bounces")
     transmission_bounces: int = setting(
         12, "int", "as Cycles' Transmission bounces: refractions a camera path goes on through, within "
         "max_depth", lo=0, hi=1024, label="Transmission Bounces")
+    transparent_max_bounces: int = setting(
+        8, "int", "as Cycles' Transparent bounces: transparent surfaces (Transparent BSDF, alpha cut-outs) one "
+        "ray segment -- camera, shadow or photon -- passes in a row; the next one absorbs it (black, "
+        "shadowed). Passes are not bounces", lo=0, hi=1024, label="Transparent Bounces")
     filter_width: float = setting(
         1.5, "float", "Blackman-Harris pixel filter width in pixels (Blender's default 1.5)", lo=0.0, hi=64.0,
         label="Filter Width", ui={"subtype": "PIXEL"})

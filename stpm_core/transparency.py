@@ -4,8 +4,9 @@ A hit whose closure is transparent (``closure.C_PASS`` = 1: the node program cho
 BSDF, or a Principled BSDF's Alpha said so, ``kernels.svm``) scatters nothing: the ray goes on
 in the same direction from just behind the surface, its weight multiplied by the closure's tint
 ``C_TRANSPARENT``, as Cycles' transparent bounces do.  These passes do not count as bounces;
-after ``TRANSPARENT_MAX_BOUNCES`` (Cycles' default ``transparent_max_bounces``, 8) in a row a
-ray is absorbed.
+a ray segment (camera, shadow or photon) passes at most ``RenderSettings.transparent_max_bounces``
+surfaces in a row (Cycles' ``transparent_max_bounces``, default ``TRANSPARENT_MAX_BOUNCES`` = 8):
+the next transparent one absorbs it (black, shadowed; ``limit`` below).
 
 * :func:`pass_through` -- camera rays and photons: the hits (and their closures) of transparent
   rows are replaced, in place, by what lies behind them.
@@ -27,7 +28,7 @@ from .shading import hit_geometry
 
 __all__ = ["TRANSPARENT_MAX_BOUNCES", "pass_through", "shadow_transmittance"]
 
-TRANSPARENT_MAX_BOUNCES = 8
+TRANSPARENT_MAX_BOUNCES = 8          # RenderSettings.transparent_max_bounces' default (Cycles' too)
 
 
 def _behind(position: np.ndarray, ng: np.ndarray, instance: np.ndarray, d: np.ndarray, inst_offset) -> tuple:

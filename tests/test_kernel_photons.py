@@ -33,8 +33,10 @@ def _same_records(a: np.ndarray, b: np.ndarray) -> None:
     assert np.abs(a["wi_oct"].astype(int) - b["wi_oct"].astype(int)).max() <= 1
 
 
-@pytest.mark.parametrize("mode", ["caustic", "global"])
-def test_photon_kernel_matches_the_numpy_tracer(mode):
+@pytest.mark.parametrize("mode,budget", [("caustic", None), ("global", None), ("global", 2), ("caustic", 0)])
+def test_photon_kernel_matches_the_numpy_tracer(mode, budget):
+    """budget: the diffuse_bounces budget (None: none; 2: global photons stored after at most one
+    counted diffuse bounce; 0: nothing stored)."""
     scene = _scene()
     caster, lights, table = make_caster(scene), LightSet(scene), MaterialTable(scene.materials)
     n = 20_000
@@ -46,10 +48,13 @@ def test_photon_kernel_matches_the_numpy_tracer(mode):
     else:
         o, d, Phi = lights.emit(0, n, t, np.random.default_rng(2))
         kw = dict(mode="global", min_nondelta=1)
-    args = dict(max_depth=8, inst_offset=instance_offsets(scene), origin=np.zeros(3), **kw)
+    args = dict(max_depth=8, inst_offset=instance_offsets(scene), origin=np.zeros(3), diffuse_bounces=budget, **kw)
     rng_k, rng_n = np.random.default_rng(3), np.random.default_rng(3)
     got = trace_photon_paths(caster, table, o, d, Phi, t, rng_k, **args)
     want = trace_numpy(caster, table, o, d, Phi, t, rng_n, **args)
-    assert len(want) > 500                        # the scene really stores photons of this kind
-    _same_records(got, want)
+    if budget == 0:
+        assert len(want) == 0 and len(got) == 0
+    else:
+        assert len(want) > 500                    # the scene really stores photons of this kind
+        _same_records(got, want)
     assert rng_k.random() == rng_n.random()       # the same numbers were drawn

@@ -299,7 +299,7 @@ def test_a_closed_furnace_converges_to_the_interreflection():
     from test_photons import P, _area_uniform_points, _sphere_furnace, trace
     rho = 0.5
     scene, mesh = _sphere_furnace(rho)
-    settings = dict(photons_global=30_000, photons_caustic=0, max_depth=40)
+    settings = dict(photons_global=30_000, photons_caustic=0, max_depth=40, diffuse_bounces=1024)  # no budget
     pilot_maps = trace(scene, **{**settings, "photons_global": 15_000, "seed": 99})
     pilot = Pilot(pilot_maps, {"caustic": 1.0, "global": (30 / (PILOT_K - 1)) * 0.5}, "STANDARD", 1.0, 0.0)
     rng = np.random.default_rng(4)

@@ -12,6 +12,12 @@ docs/photon-mapping.md ("Tracing") has the equations:
   delta or a glossy lobe, ``n_nondelta`` those through the DIFFUSE lobe or a rough coat
   (the dim, broad reflection of a plastic's dielectric layer: the global map carries it, so
   the caustic photons need not be aimed at every Principled surface);
+* **diffuse bounce budget** (``RenderSettings.diffuse_bounces``, Cycles' count):
+  ``n_diffuse`` counts the photon's bounces off the DIFFUSE lobe that Cycles would count
+  as diffuse bounces -- all but a first one at the photon's first hit (the light came
+  straight from the light there: Cycles' next-event estimation, no bounce).  A camera
+  vertex reading the photon adds one (its own diffuse bounce), so a photon is stored only
+  while ``n_diffuse + 1 <= max_diffuse`` and stops once no later vertex could be stored;
 * **scatter**: global photons: (wi, weight, lobe) = ``bsdf_sample_lobe`` at the hit, with
   weight = f |cos| / pdf (n, 3) or a delta lobe's throughput; caustic photons:
   ``bsdf_sample_path`` (they stop where the DIFFUSE lobe is chosen, and a rough lobe's
@@ -35,15 +41,17 @@ _JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
 
 @njit(**_JIT)
-def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, caustic, min_nondelta, last, U, U_rr,
-                  EPS, guard_fraction, store, o_next, d_next, Phi_next, T_next, nd_next, nn_next, guard_next):
+def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, n_diffuse, caustic, min_nondelta,
+                  max_diffuse, last, U, U_rr, EPS, guard_fraction, store, o_next, d_next, Phi_next, T_next, nd_next,
+                  nn_next, ndf_next, guard_next):
     """One bounce of the photons whose rays hit: rows (k,) index the bounce's hit arrays.
 
     P, NG, NS (m, 3) hit points and normals; D (k, 3), Phi (k, 3) W, T (k,),
-    n_delta, n_nondelta (k,) int32: direction, power, time and bounce counts of
+    n_delta, n_nondelta, n_diffuse (k,) int32: direction, power, time and bounce counts of
     each kept photon (row j of these belongs to hit rows[j]); C (k, N_CLOSURE)
     the closures of its hit.  caustic: the caustic map's rules (else global with
-    ``min_nondelta``).  last: the final bounce (store only; U, U_rr unused).
+    ``min_nondelta``).  max_diffuse: Cycles' diffuse bounce budget (module docstring; the
+    caller passes a large number for none).  last: the final bounce (store only; U, U_rr unused).
     U (k, 3), U_rr (k,) uniforms for the BSDF sample and the roulette; EPS (k,)
     origin offsets (scene units).
 
@@ -56,8 +64,10 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
     for j in range(rows.shape[0]):
         r = rows[j]
         nondelta = C[j, C_NONDELTA] > 0.0
-        # -- Store the photon -------------------------------------------------------------
-        if nondelta and ((caustic and n_delta[j] >= 1) or (not caustic and n_nondelta[j] >= min_nondelta)):
+        # -- Store the photon (a camera vertex reading it makes one more diffuse bounce) ----------
+        readable = n_diffuse[j] + 1 <= max_diffuse
+        if nondelta and readable and ((caustic and n_delta[j] >= 1)
+                                      or (not caustic and n_nondelta[j] >= min_nondelta)):
             store[n_store] = j
             n_store += 1
         if last:
@@ -72,15 +82,22 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
                                                                   U[j, 2], caustic)
             spec_bounce = kind != PATH_STOP
             diffuse_bounce = False
+            diffuse_lobe = False                         # (the DIFFUSE lobe stops a caustic path)
         else:
             wi0, wi1, wi2, w0, w1, w2, lobe = bsdf_sample_lobe(C, j, E, E_avg, wo, ns, g, U[j, 0], U[j, 1], U[j, 2])
-            diffuse_bounce = lobe == DIFFUSE or (lobe == COAT and C[j, C_ROUGHNESS] > 0.0)
+            diffuse_lobe = lobe == DIFFUSE
+            diffuse_bounce = diffuse_lobe or (lobe == COAT and C[j, C_ROUGHNESS] > 0.0)
             spec_bounce = not diffuse_bounce
         # -- Possibly terminate the path with Russian roulette (by albedo) -------------------
         q = min(max(max(w0, max(w1, w2)), 0.0), 1.0)
         alive = U_rr[j] < q
         if caustic:
             alive = alive and spec_bounce
+        # Cycles' diffuse bounces: the DIFFUSE lobe's, but at the first hit (next-event estimation's light)
+        first = n_delta[j] == 0 and n_nondelta[j] == 0
+        nd = n_diffuse[j] + (1 if (diffuse_lobe and not first) else 0)
+        if nd + 1 > max_diffuse:
+            alive = False                                # no camera vertex may read it any more
         if not alive:
             continue
         qq = q if q > 0.0 else 1.0
@@ -95,6 +112,7 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
         T_next[n_next] = T[j]
         nd_next[n_next] = n_delta[j] + (1 if spec_bounce else 0)
         nn_next[n_next] = n_nondelta[j] + (1 if diffuse_bounce else 0)
+        ndf_next[n_next] = nd
         guard_next[n_next] = guard_fraction * e
         n_next += 1
     return n_store, n_next

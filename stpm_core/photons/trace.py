@@ -18,6 +18,13 @@ Two maps (docs/photon-mapping.md, "Tracing"):
   next-event estimation's job and L S+ D belongs to the caustic map, so the
   camera reads the global map directly at its first diffuse vertex.
 
+Both follow ``settings.diffuse_bounces`` as Cycles counts diffuse bounces: the camera vertex
+reading a photon makes one, each of the photon's bounces off a DIFFUSE lobe another, except one
+at its first hit (that light came straight from the light: next-event estimation's, no bounce in
+Cycles).  A photon is stored only where the sum is within the budget and stops where it no
+longer can be (``kernels.photon_paths``): with 0 no photon is stored (direct light only, as
+Cycles: no caustics either); with 1 the caustic map and the global map's L D D photons.
+
 Russian roulette by albedo: after a bounce with throughput ``weight`` =
 f |cos| / pdf (n, 3), a photon survives with q = min(1, max_c weight_c) and
 its power becomes Phi * weight / q, so surviving photons keep about the same
@@ -36,7 +43,7 @@ from ..parallel import ordered_map, worker_count
 from ..raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from ..sampling import rng_for, stratified_1d
 from ..shading import constant_shading, hit_geometry, shading_data
-from ..transparency import pass_through
+from ..transparency import TRANSPARENT_MAX_BOUNCES, pass_through
 from .record import make_records, photon_origin, PHOTON_DTYPE
 
 __all__ = ["specular_targets", "split_counts", "trace_photon_paths", "trace_caustic_map", "trace_global_map"]
@@ -46,6 +53,7 @@ STREAM_GLOBAL = 0x610B
 BATCH = 1 << 16               # photon paths traced together
 _NO_U3 = np.zeros((0, 3))
 _NO_U = np.zeros(0)
+_NO_BUDGET = 1 << 30          # diffuse_bounces=None: no diffuse bounce budget
 
 
 def has_delta(table, mat) -> np.ndarray:
@@ -111,7 +119,8 @@ def _times(scene, n: int, rng, time_override) -> np.ndarray:
 
 def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, inst_offset: np.ndarray,
                        target_instance: int | None = None, min_nondelta: int = 1,
-                       origin: np.ndarray | None = None, shading=None) -> np.ndarray:
+                       origin: np.ndarray | None = None, shading=None, diffuse_bounces: int | None = None,
+                       transparent_bounces: int = TRANSPARENT_MAX_BOUNCES) -> np.ndarray:
     """Trace photon paths and return the stored records.
 
     Parameters
@@ -124,6 +133,11 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         after >= ``min_nondelta`` diffuse bounces, a rough coat's counting as one; 0 also
         stores first hits, which only tests use).
     max_depth : bounces followed.
+    diffuse_bounces : Cycles' diffuse bounce budget (``RenderSettings.diffuse_bounces``): a photon
+        is stored only where a camera vertex reading it makes at most this many diffuse bounces on
+        the whole path, and stops where none could (``kernels.photon_paths``); None: no budget.
+    transparent_bounces : transparent surfaces passed in a row before one absorbs the photon
+        (``RenderSettings.transparent_max_bounces``).
     inst_offset : (n_instances,) per-object part of the ray-origin offset along the geometric
         normal (scene units; ``raycast.geometry.instance_offsets``, applied by ``offset_lengths``).
     origin : (3,) world point stored positions are relative to (record.photon_origin).
@@ -155,6 +169,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     o, d, Phi, t = o[live], d[live], Phi[live], t[live]
     n_delta = np.zeros(o.shape[0], dtype=np.int32)      # delta bounces so far
     n_nondelta = np.zeros(o.shape[0], dtype=np.int32)   # non-delta bounces so far
+    n_diffuse = np.zeros(o.shape[0], dtype=np.int32)    # diffuse bounces as Cycles counts them
+    max_diffuse = _NO_BUDGET if diffuse_bounces is None else int(diffuse_bounces)
     stored = []
     guard = None                                         # emitted rays: the caster's own guard
     for depth in range(max_depth + 1):
@@ -170,7 +186,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         if k == 0:
             break
         d, Phi, t = np.ascontiguousarray(d[idx]), np.ascontiguousarray(Phi[idx]), t[idx]
-        n_delta, n_nondelta = n_delta[idx], n_nondelta[idx]
+        n_delta, n_nondelta, n_diffuse = n_delta[idx], n_nondelta[idx], n_diffuse[idx]
         C = np.empty((k, N_CLOSURE))
         sd = shading if shading is not None else constant_shading(closures)
         if sd.uses_programs:
@@ -185,14 +201,14 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
             # the irradiance there whatever this photon's pick (camera paths weigh by their own
             # pick), so a photon whose pick scatters nothing here (transparency, emission, a delta
             # lobe) is stored as well, by the map's path rule
-            rule = (n_delta >= 1) if caustic else (n_nondelta >= min_nondelta)
+            rule = ((n_delta >= 1) if caustic else (n_nondelta >= min_nondelta)) & (n_diffuse + 1 <= max_diffuse)
             extra = np.flatnonzero(sd.store_mask[hits.material[idx]]
                                    & (C[:, C_NONDELTA] <= 0.0) & rule)
             if extra.size:
                 stored.append(make_records(hits.position[idx[extra]], -d[extra], Phi[extra], t[extra], origin))
         if sd.transparent:
             # transparent hits: the photon goes on behind, its power tinted (not a bounce)
-            Phi = pass_through(caster, sd, inst_offset, hits, d, t, C, Phi, rng, at=idx)
+            Phi = pass_through(caster, sd, inst_offset, hits, d, t, C, Phi, rng, at=idx, limit=transparent_bounces)
         last = depth == max_depth
         # -- Random numbers of the bounce: BSDF lobe and direction, then the roulette ----------
         U = rng.random((k, 3)) if not last else _NO_U3
@@ -201,10 +217,10 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         store = np.empty(k, np.int64)
         o_n, d_n, Phi_n = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
         t_n, g_n = np.empty(k), np.empty(k)
-        nd_n, nn_n = np.empty(k, np.int32), np.empty(k, np.int32)
+        nd_n, nn_n, ndf_n = np.empty(k, np.int32), np.empty(k, np.int32), np.empty(k, np.int32)
         n_store, n_next = photon_bounce(idx, hits.position, hits.ng, hits.ns, d, C, E, E_avg, Phi, t, n_delta,
-                                        n_nondelta, caustic, int(min_nondelta), last, U, U_rr, EPS, GUARD_FRACTION,
-                                        store, o_n, d_n, Phi_n, t_n, nd_n, nn_n, g_n)
+                                        n_nondelta, n_diffuse, caustic, int(min_nondelta), max_diffuse, last, U, U_rr,
+                                        EPS, GUARD_FRACTION, store, o_n, d_n, Phi_n, t_n, nd_n, nn_n, ndf_n, g_n)
         # -- Store the photons --------------------------------------------------------------
         if n_store:
             s = store[:n_store]
@@ -212,7 +228,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         if last:
             break
         o, d, Phi, t, guard = o_n[:n_next], d_n[:n_next], Phi_n[:n_next], t_n[:n_next], g_n[:n_next]
-        n_delta, n_nondelta = nd_n[:n_next], nn_n[:n_next]
+        n_delta, n_nondelta, n_diffuse = nd_n[:n_next], nn_n[:n_next], ndf_n[:n_next]
     if not stored:
         return np.empty(0, dtype=PHOTON_DTYPE)
     return np.concatenate(stored)
@@ -275,7 +291,8 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
         Phi = Phi * (n / float(n_pair))                  # this batch's share of the pair's photons
         return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="caustic",
                                   max_depth=settings.max_depth, inst_offset=inst_offset, target_instance=ii,
-                                  shading=shading)
+                                  shading=shading, diffuse_bounces=settings.diffuse_bounces,
+                                  transparent_bounces=settings.transparent_max_bounces)
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing caustic photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
@@ -303,7 +320,8 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
         Phi = Phi * (n / float(n_light))
         return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global",
                                   max_depth=settings.max_depth, inst_offset=inst_offset, min_nondelta=min_nondelta,
-                                  shading=shading)
+                                  shading=shading, diffuse_bounces=settings.diffuse_bounces,
+                                  transparent_bounces=settings.transparent_max_bounces)
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing global photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)

@@ -18,7 +18,7 @@ __all__ = ["trace_photon_paths"]
 
 def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, inst_offset: np.ndarray,
                        target_instance: int | None = None, min_nondelta: int = 1,
-                       origin: np.ndarray | None = None) -> np.ndarray:
+                       origin: np.ndarray | None = None, diffuse_bounces: int | None = None) -> np.ndarray:
     """Trace photon paths and return the stored records.
 
     Parameters
@@ -34,6 +34,9 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     inst_offset : (n_instances,) per-object part of the ray-origin offset along the geometric
         normal (scene units; ``raycast.geometry.instance_offsets``, applied by ``offset_lengths``).
     origin : (3,) world point stored positions are relative to (record.photon_origin).
+    diffuse_bounces : Cycles' diffuse bounce budget (None: none): a photon is stored while the
+        DIFFUSE-lobe bounces it made (but one at its first hit) plus 1 (the camera vertex reading
+        it) are within it, and stops when they no longer are.
 
     Returns
     -------
@@ -48,6 +51,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     o, d, Phi, t = o[live], d[live], Phi[live], t[live]
     n_delta = np.zeros(o.shape[0], dtype=np.int32)      # delta bounces so far
     n_nondelta = np.zeros(o.shape[0], dtype=np.int32)   # non-delta bounces so far
+    n_diffuse = np.zeros(o.shape[0], dtype=np.int32)    # diffuse bounces as Cycles counts them
+    budget = np.inf if diffuse_bounces is None else diffuse_bounces
     stored = []
     guard = None                                         # emitted rays: the caster's own guard
     for depth in range(max_depth + 1):
@@ -62,7 +67,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         if idx.size == 0:
             break
         d, Phi, t = d[idx], Phi[idx], t[idx]
-        n_delta, n_nondelta = n_delta[idx], n_nondelta[idx]
+        n_delta, n_nondelta, n_diffuse = n_delta[idx], n_nondelta[idx], n_diffuse[idx]
         p, ng, ns, mat = hits.position[idx], hits.ng[idx], hits.ns[idx], hits.material[idx]
         wo = -d                                          # toward where the photon came from
         nondelta = has_nondelta(table, mat)
@@ -71,6 +76,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
             store = nondelta & (n_delta >= 1)
         else:
             store = nondelta & (n_nondelta >= min_nondelta)
+        store &= n_diffuse + 1 <= budget
         if np.any(store):
             stored.append(make_records(p[store], wo[store], Phi[store], t[store], origin))
         if depth == max_depth:
@@ -81,16 +87,20 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
             # L (S|G)+ D: on through delta and glossy lobes; the DIFFUSE lobe and a rough coat stop
             wi, weight, kind, _ = bsdf_sample_path(table, mat, wo, ns, ng, u, stop_coat=True)
             spec_b = kind != 0
+            diffuse_lobe = np.zeros(idx.size, bool)
         else:
             wi, weight, is_delta, lobe = bsdf_sample_lobe(table, mat, wo, ns, ng, u)
             rough = table.roughness[np.where(mat < 0, table.size, mat)] > 0
             spec_b = ~((lobe == DIFFUSE) | ((lobe == COAT) & rough))
+            diffuse_lobe = lobe == DIFFUSE
         # -- Possibly terminate the path with Russian roulette (by albedo) -------------------
         q = np.clip(weight.max(axis=1), 0.0, 1.0)
         alive = rng.random(idx.size) < q
         if mode == "caustic":
             alive &= spec_b
         Phi = Phi * weight / np.where(q > 0, q, 1.0)[:, None]
+        n_diffuse = n_diffuse + (diffuse_lobe & ((n_delta + n_nondelta) > 0))   # not at the first hit
+        alive &= n_diffuse + 1 <= budget
         n_delta = n_delta + spec_b                       # delta or glossy bounces
         n_nondelta = n_nondelta + ~spec_b                # diffuse (or rough coat) bounces
         # -- Spawn the continuation rays, offset off the surface ------------------------------
@@ -100,7 +110,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         sel = np.nonzero(alive)[0]
         o, d, Phi, t = o[sel], wi[sel], Phi[sel], t[sel]
         guard = GUARD_FRACTION * e[sel]                  # the rays' own guards (geometry.ray_guard)
-        n_delta, n_nondelta = n_delta[sel], n_nondelta[sel]
+        n_delta, n_nondelta, n_diffuse = n_delta[sel], n_nondelta[sel], n_diffuse[sel]
     if not stored:
         return np.empty(0, dtype=PHOTON_DTYPE)
     return np.concatenate(stored)
