@@ -166,17 +166,18 @@ def _no_mis(k: int) -> np.ndarray:
 
 
 def mis_rows(ctx, bounce: int, counts, sh: np.ndarray) -> np.ndarray:
-    """(k,) uint8: 1 where the shaded row sh[i]'s path may go on through a rough lobe (bounces and
-    both bounce budgets left, ``kernels.paths.specular_step``): next-event estimation of the world
-    is then weighed against that continuation."""
+    """(k,) uint8 bits: where the shaded row sh[i]'s path may go on through a rough lobe (bounces
+    left, ``kernels.paths.specular_step``): 1 through a reflection (the Glossy budget left), 2
+    through a refraction (the Transmission budget left).  Next-event estimation of a light on
+    that side of the surface is then weighed against the continuation (``kernels.paths.nee_light``)."""
     out = _scratch("mis", (sh.size,), np.uint8)
     if bounce >= ctx.max_depth:
         out[:] = 0
     elif counts is None:
-        out[:] = 1 if (ctx.glossy_bounces > 0 and ctx.transmission_bounces > 0) else 0
+        out[:] = (1 if ctx.glossy_bounces > 0 else 0) | (2 if ctx.transmission_bounces > 0 else 0)
     else:
         c = counts[sh]
-        out[:] = (c[:, 0] < ctx.glossy_bounces) & (c[:, 1] < ctx.transmission_bounces)
+        out[:] = (c[:, 0] < ctx.glossy_bounces) * np.uint8(1) | (c[:, 1] < ctx.transmission_bounces) * np.uint8(2)
     return out
 
 

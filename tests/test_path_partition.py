@@ -52,6 +52,23 @@ def test_rough_metal_furnace_counts_each_path_once(roughness):
     assert L == pytest.approx((depth + 2) * LE, rel=0.04), L / LE
 
 
+def test_rough_reflections_go_on_without_a_transmission_budget():
+    """Cycles counts a rough reflection against the Glossy budget alone: with Transmission bounces 0
+    the rough-metal furnace still converges to (max_depth + 2) Le (before, a rough lobe needed both
+    budgets: the paths stopped at the first wall, 2 Le, and reflections of lights lost their
+    multiple importance sampling)."""
+    depth = 3
+    s = RenderSettings(samples=64, max_depth=depth, photons_caustic=0, photons_global=0, effects="MANUAL",
+                       caustics=False, indirect=False, seed=5, filter_width=0.0, transmission_bounces=0)
+    L = render(_furnace(0.8), s).passes["Combined"][..., :3].mean()
+    assert L == pytest.approx((depth + 2) * LE, rel=0.04), L / LE
+    # and with one glossy bounce: the first wall and the one it reflects, next-event estimation at both
+    s = RenderSettings(samples=64, max_depth=depth, photons_caustic=0, photons_global=0, effects="MANUAL",
+                       caustics=False, indirect=False, seed=5, filter_width=0.0, glossy_bounces=1)
+    L = render(_furnace(0.8), s).passes["Combined"][..., :3].mean()
+    assert L == pytest.approx(3 * LE, rel=0.04), L / LE
+
+
 def test_glossy_caustic_goes_to_the_caustic_map():
     """A point light between a diffuse floor and a rough metal plate above it: photons that reach
     the floor by the plate (L G D) are caustic photons; the global map holds only paths with a

@@ -436,7 +436,8 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
     (n, 3), stmax (n,), and live (n,) the row k it belongs to.  S (>= n, 8): the light samples
     (``sample_light_rows``; a textured MESH light's caller reads the light points from it).
 
-    Rows k with ``mis[k]`` (uint8: camera paths go on from them through their rough lobes,
+    Rows k with ``mis[k]`` (uint8 bits: 1 a path may go on from them through a rough reflection, 2
+    through a rough refraction, ``integrator.mis_rows``; the bit of wi's side counts: camera paths go on from them through their rough lobes,
     :func:`specular_step`, and pick up the light where they reach it: the world where they escape,
     an AREA light or a POINT / SPOT sphere seen along the ray, :func:`seen_lights_add`, an
     emitting triangle of a MESH light they hit, :func:`mesh_emission_mis`): the part f_c of f those
@@ -475,7 +476,8 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
             ns = (NS[r, 0], NS[r, 1], NS[r, 2])
             g = (NG[r, 0], NG[r, 1], NG[r, 2])
             f0, f1, f2, _ = bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, g)
-            if mis[k] != 0 and S[k, 7] < np.inf:
+            if mis[k] != 0 and S[k, 7] < np.inf and mis[k] & (1 if (wi[0] * g[0] + wi[1] * g[1] + wi[2] * g[2])
+                                                             * (wo[0] * g[0] + wo[1] * g[1] + wo[2] * g[2]) > 0.0 else 2):
                 c0, c1, c2, p_c = bsdf_eval_cont(C, cr, E, E_avg, wo, wi, ns, g, stop_coat)
                 x = mis_weight(p_c, S[k, 7])
                 f0, f1, f2 = f0 - c0 * x, f1 - c1 * x, f2 - c2 * x
@@ -713,11 +715,11 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, 
     the lights the ray reaches are weighed (:func:`seen_lights_add`, :func:`mesh_emission_mis`).
 
     Bounce budgets, as Cycles' Glossy / Transmission bounces: counts (k, 2) int32 the row's
-    reflections and transmissions so far (counts_out the next rays' after this one).  A delta
-    lobe goes on while its own kind's count is below max_glossy (a reflection) or
-    max_transmission (wi below the face, a refraction); a rough lobe while both are (the same
-    condition that gives next-event estimation at the row its multiple-importance weight,
-    ``integrator.mis_rows``).
+    reflections and transmissions so far (counts_out the next rays' after this one).  A lobe,
+    delta or rough, goes on while the count of the kind it sampled is below max_glossy (a
+    reflection) or max_transmission (wi below the face, a refraction), as Cycles counts them (the
+    same condition that gives next-event estimation at the row its multiple-importance weight on
+    that side of the surface, ``integrator.mis_rows``).
 
     use_feat: the denoising features go on with the paths (feat (m,) uint8 and dft (m, 3) of
     :func:`denoising_rows`, indexed by hit row, copied to feat_out, dft_out of the next rays).
@@ -740,9 +742,7 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, 
         n_gl, n_tr = counts[j, 0], counts[j, 1]
         g_f = g if dot(g, wo) >= 0.0 else (-g[0], -g[1], -g[2])
         trans = g_f[0] * wi0 + g_f[1] * wi1 + g_f[2] * wi2 < 0.0
-        if kind == PATH_GLOSSY:
-            go = go and n_gl < max_glossy and n_tr < max_transmission
-        elif trans:
+        if trans:
             go = go and n_tr < max_transmission
         else:
             go = go and n_gl < max_glossy

@@ -171,11 +171,12 @@ def _fill(a: np.ndarray, value: float) -> np.ndarray:
     return a
 
 
-def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=False) -> np.ndarray:
+def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=(False, False)) -> np.ndarray:
     """Next-event estimate (n, 3): sum over lights of f(wo, wi) |cos(ns, wi)| L_i / p * V.
 
-    eps (n,): each point's shadow-ray origin offset (``_eps_rows``).  mis (n,) bool: the paths may
-    go on through their rough lobes after this; the samples of the world, of AREA lights, POINT /
+    eps (n,): each point's shadow-ray origin offset (``_eps_rows``).  mis: ((n,) bool, (n,) bool) the
+    paths may go on through a rough reflection / a rough refraction after this (the glossy /
+    transmission budget left); a sample on that side of the surface of the world, of AREA lights, POINT /
     SPOT spheres and MESH lights then weigh the part f_c of f those lobes sample (density p_c) by
     the power heuristic p_l^2 / (p_l^2 + p_c^2), p_l the light's own density (the world's cos(ng_f, wi) / pi,
     ``lights_numpy.nee_pdf``; delta lights and suns: inf, no weighing).
@@ -186,6 +187,7 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=Fal
     n = p.shape[0]
     Ld = np.zeros((n, 3))
     lights = ctx.lights
+    mis_refl_all, mis_trans_all = mis
     for li in range(len(lights)):
         if lights.power[li] <= 0.0:
             continue
@@ -194,7 +196,8 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=Fal
         wi, dist, weight = lights_numpy.sample_direct(lights, li, p, times, u_l,
                                                       normals=_world_normals(lights.lights[li], ng, wo))
         f = bsdf_eval(ctx.table, mat, wo, wi, ns, ng)
-        if np.any(mis):
+        mis_refl, mis_trans = np.broadcast_to(mis_refl_all, (n,)), np.broadcast_to(mis_trans_all, (n,))
+        if np.any(mis_refl | mis_trans):
             if lights.lights[li].type == "WORLD":
                 p_l = np.maximum(np.einsum("ij,ij->i", wi, _face_forward(ng, wo)), 0.0) / np.pi
             else:
@@ -203,7 +206,11 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=Fal
                     j, x_l = lights_numpy.mesh_triangle_of_sample(lights, li, u_l), p + dist[:, None] * wi
                 p_l = lights_numpy.nee_pdf(lights, li, p, wi, times, x=x_l, j=j)
             f_c, p_c = bsdf_eval_cont(ctx.table, mat, wo, wi, ns, ng)
-            x = np.where(mis & np.isfinite(p_l), _mis_weight(p_c, p_l), 0.0)
+            # the continuation of wi's side may go on: a reflection (wi on wo's side of ng) within
+            # the glossy budget, a refraction within the transmission budget
+            refl = np.einsum("ij,ij->i", wi, ng) * np.einsum("ij,ij->i", wo, ng) > 0
+            ok = np.where(refl, mis_refl, mis_trans)
+            x = np.where(ok & np.isfinite(p_l), _mis_weight(p_c, p_l), 0.0)
             f = f - f_c * x[:, None]
         contrib = f * (np.abs(np.einsum("ij,ij->i", ns, wi)))[:, None]
         contrib *= weight
@@ -298,7 +305,7 @@ def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, coun
     # rough lobe within both
     trans = np.einsum("ij,ij->i", wi, _face_forward(ng, wo)) < 0.0
     gl_ok, tr_ok = counts[:, 0] < ctx.glossy_bounces, counts[:, 1] < ctx.transmission_bounces
-    go &= np.where(kind == 2, gl_ok & tr_ok, np.where(trans, tr_ok, gl_ok))
+    go &= np.where(trans, tr_ok, gl_ok)
     counts = counts + np.stack([~trans, trans], axis=1).astype(np.int32)
     if bounce + 1 >= RR_START:
         q = np.clip(np.max(beta, axis=1), 0.05, 1.0)
@@ -451,8 +458,8 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
             mat_s, t_s = _rows(mat, sh), _rows(t, sh)
             if len(ctx.lights):
                 c = np.zeros((p.shape[0], 2), np.int32) if counts is None else counts
-                mis = (bounce < ctx.max_depth) & (_rows(c[:, 0], sh) < ctx.glossy_bounces) & \
-                    (_rows(c[:, 1], sh) < ctx.transmission_bounces)
+                mis = ((bounce < ctx.max_depth) & (_rows(c[:, 0], sh) < ctx.glossy_bounces),
+                       (bounce < ctx.max_depth) & (_rows(c[:, 1], sh) < ctx.transmission_bounces))
                 add(L_direct, sh, _direct(ctx, p_s, ng_s, ns_s, wo_s, mat_s, t_s, _rows(eps, sh), rng, stats,
                                           mis=mis))
             if ctx.maps is not None:
