@@ -73,6 +73,8 @@ def srgb_eotf(c):
 def _wrap(i, n, ext):
     """Texel index i of an axis of n texels under extension ext; -1 = outside (Clip)."""
     if ext == 0:                       # REPEAT
+        if n & (n - 1) == 0:
+            return i & (n - 1)         # a power-of-two axis: the same number without a division
         i = i % n
         return i + n if i < 0 else i
     if ext == 1:                       # EXTEND
