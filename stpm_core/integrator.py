@@ -411,8 +411,11 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         # -- Closures of the hits: the material table's rows, or the node programs' per hit ---------
         crow = _scratch("crow", (m,), np.int64)            # hit r's closure is row crow[r] of C
         sd = ctx.shading
+        # room for a row per hit and the material table after them (shade_rows: hits without a
+        # program of their own, misses among them, point into the table)
         C = shade_rows(sd, hits.material, hit_geometry(hits, d, sd=sd, times=t) if sd.uses_programs else None,
-                       int(rng.integers(1 << 62)) if sd.uses_mix else 0, _scratch("closure", (m, N_CLOSURE)), crow)
+                       int(rng.integers(1 << 62)) if sd.uses_mix else 0,
+                       _scratch("closure", (m + sd.closures.shape[0], N_CLOSURE)), crow)
         if sd.transparent:
             # transparent hits (cut-outs, Transparent BSDF): the rays go on to what lies behind
             beta = pass_through(ctx.caster, sd, ctx.inst_offset, hits, d, t, C, beta, rng, tmax=tmax,

@@ -92,7 +92,7 @@ from .closure import (C_ALPHA, C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_COAT, C_I
                       C_W_BASE, C_W_GLASS, C_W_METAL, closure_row)
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
-           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_eval_plain", "needs_bsdf_call", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
+           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_eval_plain", "bsdf_eval_plain_w", "needs_bsdf_call", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
            "fresnel_dielectric_fss", "coat_albedo", "glass_albedo", "glass_albedo_avg", "build_glass_table",
            "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch",
            "denoising_features", "DENOISE_ALPHA"]
@@ -821,11 +821,18 @@ def bsdf_eval_plain(C, cr, wo, wi, ns, ng):
     facing shading and geometric normals, else 0.  :func:`bsdf_eval_smooth` of such a closure, bit
     for bit; small enough that LLVM inlines it, so a loop calling it contains no call (a call
     makes the loop save and reload its floating-point values around it, on every row)."""
+    return bsdf_eval_plain_w(C[cr, C_W_BASE], C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2], wo, wi, ns, ng)
+
+
+@njit(**_JIT)
+def bsdf_eval_plain_w(w_base, b0, b1, b2, wo, wi, ns, ng):
+    """:func:`bsdf_eval_plain` of a closure whose C_W_BASE is w_base and base colour (b0, b1, b2),
+    read from the row earlier (``paths.nee_light`` reads each row once)."""
     nsf, ngf, _ = _oriented(wo, ns, ng)
     scale = 0.0
     if dot(wi, nsf) > 0 and dot(wi, ngf) > 0:
-        scale = C[cr, C_W_BASE]
-    return (scale * C[cr, C_BASE] * _INV_PI, scale * C[cr, C_BASE + 1] * _INV_PI, scale * C[cr, C_BASE + 2] * _INV_PI)
+        scale = w_base
+    return (scale * b0 * _INV_PI, scale * b1 * _INV_PI, scale * b2 * _INV_PI)
 
 
 @njit(**_JIT)

@@ -48,7 +48,7 @@ import numpy as np
 
 from ..numba_probe import njit
 
-__all__ = ["N_CLOSURE", "pack_materials", "finish_closure", "closure_row"] + [
+__all__ = ["N_CLOSURE", "pack_materials", "finish_closure", "finish_closure_at", "closure_row"] + [
     "C_BASE", "C_EMIT", "C_METALLIC", "C_TRANSMISSION", "C_ROUGHNESS", "C_SPECULAR", "C_IOR", "C_ALPHA",
     "C_W_BASE", "C_W_METAL", "C_W_GLASS", "C_ROUGH_LOBE", "C_NONDELTA", "C_COAT", "C_HAS_DELTA",
     "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED", "C_TRANSPARENT", "C_PASS", "C_TINT_T", "C_TINT_R"]
@@ -82,25 +82,33 @@ N_CLOSURE = 35
 @njit(cache=True, nogil=True)
 def finish_closure(c):
     """Fill the derived columns of closure row c (N_CLOSURE,) from its primary columns, in place."""
-    metallic = c[C_METALLIC]
-    transmission = c[C_TRANSMISSION]
-    rough = c[C_ROUGHNESS]
-    c[C_ALPHA] = rough * rough
-    c[C_W_METAL] = metallic
-    c[C_W_GLASS] = (1.0 - metallic) * transmission
+    finish_closure_at(c.reshape((1, c.shape[0])), 0)
+
+
+@njit(cache=True, nogil=True, inline="always")      # per hit in kernels.svm: no call left there
+def finish_closure_at(C, r):
+    """:func:`finish_closure` of row r of C (*, N_CLOSURE), without making a view of the row (the
+    interpreter finishes one row per hit: ``kernels.svm``)."""
+    metallic = C[r, C_METALLIC]
+    transmission = C[r, C_TRANSMISSION]
+    rough = C[r, C_ROUGHNESS]
+    C[r, C_ALPHA] = rough * rough
+    C[r, C_W_METAL] = metallic
+    w_glass = (1.0 - metallic) * transmission
+    C[r, C_W_GLASS] = w_glass
     w_base = (1.0 - metallic) * (1.0 - transmission)
-    c[C_W_BASE] = w_base
-    coat = w_base > 0.0 and c[C_SPECULAR] > 0.0
-    rough_lobe = rough > 0.0 and (metallic > 0.0 or c[C_W_GLASS] > 0.0 or coat)
-    base_max = max(c[C_BASE], max(c[C_BASE + 1], c[C_BASE + 2]))
-    c[C_ROUGH_LOBE] = 1.0 if rough_lobe else 0.0
-    c[C_NONDELTA] = 1.0 if ((w_base > 0.0 and base_max > 0.0) or rough_lobe) else 0.0
-    c[C_COAT] = 1.0 if coat else 0.0
+    C[r, C_W_BASE] = w_base
+    coat = w_base > 0.0 and C[r, C_SPECULAR] > 0.0
+    rough_lobe = rough > 0.0 and (metallic > 0.0 or w_glass > 0.0 or coat)
+    base_max = max(C[r, C_BASE], max(C[r, C_BASE + 1], C[r, C_BASE + 2]))
+    C[r, C_ROUGH_LOBE] = 1.0 if rough_lobe else 0.0
+    C[r, C_NONDELTA] = 1.0 if ((w_base > 0.0 and base_max > 0.0) or rough_lobe) else 0.0
+    C[r, C_COAT] = 1.0 if coat else 0.0
     smooth = rough == 0.0
-    index_matched = abs(c[C_IOR] - 1.0) < 1e-4         # rough glass of ior 1 refracts as a delta (Cycles)
-    c[C_HAS_DELTA] = 1.0 if ((smooth and (c[C_W_GLASS] > 0.0 or metallic > 0.0 or coat))
-                             or (c[C_W_GLASS] > 0.0 and index_matched)) else 0.0
-    c[C_EMISSIVE] = 1.0 if (c[C_EMIT] > 0.0 or c[C_EMIT + 1] > 0.0 or c[C_EMIT + 2] > 0.0) else 0.0
+    index_matched = abs(C[r, C_IOR] - 1.0) < 1e-4         # rough glass of ior 1 refracts as a delta (Cycles)
+    C[r, C_HAS_DELTA] = 1.0 if ((smooth and (w_glass > 0.0 or metallic > 0.0 or coat))
+                                or (w_glass > 0.0 and index_matched)) else 0.0
+    C[r, C_EMISSIVE] = 1.0 if (C[r, C_EMIT] > 0.0 or C[r, C_EMIT + 1] > 0.0 or C[r, C_EMIT + 2] > 0.0) else 0.0
 
 
 @njit(cache=True, nogil=True)

@@ -46,10 +46,10 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_eval_plain, bsdf_eval_smooth,
+from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_eval_plain_w, bsdf_eval_smooth,
                    bsdf_sample_path, denoising_features, diffuse_albedo, needs_bsdf_call)
 from .environment import env_radiance
-from .closure import (C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, closure_row)
+from .closure import (C_BASE, C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, C_W_BASE, closure_row)
 from .lights import light_pdf, mesh_light_pdf, sample_light_rows, seen_light, world_nee_pdf
 from .sampling import dot, load_pose, offset_origin, pose_buffer, row3
 
@@ -453,7 +453,10 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
     per call), the BSDF of the rows whose closure needs a compiled call (``needs_bsdf_call``: the
     mixture of a rough lobe, or the coat / replaced-normal terms of ``bsdf_eval_smooth``) into
     F, then, with no call, the bare diffuse BSDF of the others (``bsdf_eval_plain``), the
-    contribution and the shadow ray of every row.
+    contribution and the shadow ray of every row.  The second loop reads each row's closure once,
+    keeping what the last one needs of a bare diffuse (its weight and colour) in F: the last loop
+    reads no closure row (with node programs every hit has a 280-byte row of its own, and the
+    rows of a tile are several times what the caches hold).
     """
     n = rows.shape[0]
     any_mis = False
@@ -464,12 +467,16 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
     sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, D, T, U, S, any_mis)
     # -- The BSDF of rows that need a call: a rough lobe's mixture (bsdf_eval_pdf), a coat or a
     #    replaced normal (bsdf_eval_smooth) -------------------------------------------------------
-    F = np.empty((n, 3))
+    F = np.empty((n, 4))
+    call = np.empty(n, np.uint8)
     for k in range(n):
         r = rows[k]
         cr = crow[r]
         if not needs_bsdf_call(C, cr):
+            call[k] = 0
+            F[k, 0], F[k, 1], F[k, 2], F[k, 3] = C[cr, C_W_BASE], C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
             continue
+        call[k] = 1
         if C[cr, C_ROUGH_LOBE] > 0:
             wo = (-D[r, 0], -D[r, 1], -D[r, 2])
             wi = (S[k, 0], S[k, 1], S[k, 2])
@@ -493,11 +500,11 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
         g = (NG[r, 0], NG[r, 1], NG[r, 2])
         ns = (NS[r, 0], NS[r, 1], NS[r, 2])
         # -- BSDF and the unshadowed contribution ------------------------------------------
-        cr = crow[r]
-        if needs_bsdf_call(C, cr):
+        if call[k] != 0:
             f0, f1, f2 = F[k, 0], F[k, 1], F[k, 2]
         else:
-            f0, f1, f2 = bsdf_eval_plain(C, cr, (-D[r, 0], -D[r, 1], -D[r, 2]), (wi0, wi1, wi2), ns, g)
+            f0, f1, f2 = bsdf_eval_plain_w(F[k, 0], F[k, 1], F[k, 2], F[k, 3], (-D[r, 0], -D[r, 1], -D[r, 2]),
+                                           (wi0, wi1, wi2), ns, g)
         cosa = abs(ns[0] * wi0 + ns[1] * wi1 + ns[2] * wi2)
         c0 = f0 * cosa * w0
         c1 = f1 * cosa * w1

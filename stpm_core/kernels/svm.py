@@ -31,7 +31,7 @@ import numpy as np
 
 from ..numba_probe import njit
 from .closure import (C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
-                      C_TRANSMISSION, closure_row, finish_closure)
+                      C_TRANSMISSION, closure_row, finish_closure_at)
 from .sampling import JIT, JIT_INLINE
 
 from .procedural import (brick_color, brick_texture, magic_texture, noise_texture, voronoi_texture, wave_texture,
@@ -39,7 +39,7 @@ from .procedural import (brick_color, brick_texture, magic_texture, noise_textur
 from .texture import tex_image_rows
 from ..nodes.ops import OP
 
-__all__ = ["shade", "shade_rows", "shade_closures", "constant_closures", "closure_rows", "run_program", "hash_uniform",
+__all__ = ["shade", "shade_rows", "shade_closures", "shade_closure_rows", "constant_closures", "closure_rows", "run_program", "hash_uniform",
            "max_slots"]
 
 # Opcodes as module constants (numba folds globals)
@@ -593,44 +593,61 @@ def _smoothstep(e0, e1, x):
 
 @njit(**JIT)
 def _value_node(op, prog, pc, st, n):
-    """MATH, MIX_FLOAT, MIX_VECTOR, MIX_COLOR, CLAMP, MAP_RANGE, CONVERT, SEPARATE/COMBINE_XYZ."""
-    for k in range(n):
-        if op == _MATH:
-            r = math_op(int(prog[pc + 1]), st[int(prog[pc + 2]), k], st[int(prog[pc + 3]), k], st[int(prog[pc + 4]), k])
-            if int(prog[pc + 5]):
+    """MATH, MIX_FLOAT, MIX_VECTOR, MIX_COLOR, CLAMP, MAP_RANGE, CONVERT, SEPARATE/COMBINE_XYZ.
+
+    The operands are read from the program once per batch, before the rows' loop: inside it,
+    every store to the stack might change a program word as far as the compiler knows (both are
+    float64 arrays), so words read there are read and converted again on every row."""
+    if op == _MATH:
+        mop, sa, sb, sc, cl, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4), \
+            _i(prog, pc, 5), _i(prog, pc, 6)
+        for k in range(n):
+            r = math_op(mop, st[sa, k], st[sb, k], st[sc, k])
+            if cl:
                 r = _clamp01(r)
-            st[int(prog[pc + 6]), k] = r
-        elif op == _MIX_FLOAT:
-            t = st[int(prog[pc + 1]), k]
-            if int(prog[pc + 4]):
+            st[out, k] = r
+    elif op == _MIX_FLOAT:
+        sf, sa, sb, cl, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4), _i(prog, pc, 5)
+        for k in range(n):
+            t = st[sf, k]
+            if cl:
                 t = _clamp01(t)
-            st[int(prog[pc + 5]), k] = (1.0 - t) * st[int(prog[pc + 2]), k] + t * st[int(prog[pc + 3]), k]
-        elif op == _MIX_VECTOR:
-            t = st[int(prog[pc + 1]), k]
-            if int(prog[pc + 4]):
+            st[out, k] = (1.0 - t) * st[sa, k] + t * st[sb, k]
+    elif op == _MIX_VECTOR:
+        sf, sa, sb, cl, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4), _i(prog, pc, 5)
+        for k in range(n):
+            t = st[sf, k]
+            if cl:
                 t = _clamp01(t)
-            a0, a1, a2 = _v3(st, int(prog[pc + 2]), k)
-            b0, b1, b2 = _v3(st, int(prog[pc + 3]), k)
-            _put3(st, k, int(prog[pc + 5]), (1.0 - t) * a0 + t * b0, (1.0 - t) * a1 + t * b1, (1.0 - t) * a2 + t * b2)
-        elif op == _MIX_COLOR:
-            t = st[int(prog[pc + 2]), k]
-            if int(prog[pc + 5]):
+            a0, a1, a2 = _v3(st, sa, k)
+            b0, b1, b2 = _v3(st, sb, k)
+            _put3(st, k, out, (1.0 - t) * a0 + t * b0, (1.0 - t) * a1 + t * b1, (1.0 - t) * a2 + t * b2)
+    elif op == _MIX_COLOR:
+        blend, sf, sa, sb, cl, cr, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4), \
+            _i(prog, pc, 5), _i(prog, pc, 6), _i(prog, pc, 7)
+        for k in range(n):
+            t = st[sf, k]
+            if cl:
                 t = _clamp01(t)
-            a0, a1, a2 = _v3(st, int(prog[pc + 3]), k)
-            b0, b1, b2 = _v3(st, int(prog[pc + 4]), k)
-            r, g, b = mix_color(int(prog[pc + 1]), t, a0, a1, a2, b0, b1, b2)
-            if int(prog[pc + 6]):
+            a0, a1, a2 = _v3(st, sa, k)
+            b0, b1, b2 = _v3(st, sb, k)
+            r, g, b = mix_color(blend, t, a0, a1, a2, b0, b1, b2)
+            if cr:
                 r, g, b = _clamp01(r), _clamp01(g), _clamp01(b)
-            _put3(st, k, int(prog[pc + 7]), r, g, b)
-        elif op == _CLAMP:
-            v, lo, hi = st[int(prog[pc + 2]), k], st[int(prog[pc + 3]), k], st[int(prog[pc + 4]), k]
-            if int(prog[pc + 1]) == 1 and lo > hi:
+            _put3(st, k, out, r, g, b)
+    elif op == _CLAMP:
+        typ, sv, slo, shi, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4), _i(prog, pc, 5)
+        for k in range(n):
+            v, lo, hi = st[sv, k], st[slo, k], st[shi, k]
+            if typ == 1 and lo > hi:
                 lo, hi = hi, lo
-            st[int(prog[pc + 5]), k] = min(max(v, lo), hi)
-        elif op == _MAP_RANGE:
-            typ = int(prog[pc + 1])
-            v, f0, f1 = st[int(prog[pc + 2]), k], st[int(prog[pc + 3]), k], st[int(prog[pc + 4]), k]
-            t0, t1, steps = st[int(prog[pc + 5]), k], st[int(prog[pc + 6]), k], st[int(prog[pc + 7]), k]
+            st[out, k] = min(max(v, lo), hi)
+    elif op == _MAP_RANGE:
+        typ, sv, sf0, sf1, st0, st1, ssteps, cl, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), \
+            _i(prog, pc, 4), _i(prog, pc, 5), _i(prog, pc, 6), _i(prog, pc, 7), _i(prog, pc, 8), _i(prog, pc, 9)
+        for k in range(n):
+            v, f0, f1 = st[sv, k], st[sf0, k], st[sf1, k]
+            t0, t1, steps = st[st0, k], st[st1, k], st[ssteps, k]
             if typ == 0 or typ == 1:
                 fac = _safe_div(v - f0, f1 - f0)
                 if typ == 1:
@@ -645,27 +662,32 @@ def _value_node(op, prog, pc, st, n):
                     x = _clamp01(_safe_div(v - f0, f1 - f0))
                     fac = x * x * x * (x * (x * 6.0 - 15.0) + 10.0)
             r = t0 + fac * (t1 - t0) if f1 != f0 else 0.0
-            if int(prog[pc + 8]):
+            if cl:
                 r = min(max(r, t1), t0) if t0 > t1 else min(max(r, t0), t1)
-            st[int(prog[pc + 9]), k] = r
-        elif op == _CONVERT:
-            kind = int(prog[pc + 1])
-            s = int(prog[pc + 2])
-            o = int(prog[pc + 3])
-            if kind == 0:
-                w = int(prog[pc + 4])      # the working space's luminance weights (a constant)
+            st[out, k] = r
+    elif op == _CONVERT:
+        kind, s, o, w = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4)
+        if kind == 0:
+            # the working space's luminance weights (a constant)
+            for k in range(n):
                 st[o, k] = st[w, k] * st[s, k] + st[w + 1, k] * st[s + 1, k] + st[w + 2, k] * st[s + 2, k]
-            elif kind == 1:
+        elif kind == 1:
+            for k in range(n):
                 st[o, k] = (st[s, k] + st[s + 1, k] + st[s + 2, k]) * (1.0 / 3.0)
-            else:
+        else:
+            for k in range(n):
                 _put3(st, k, o, st[s, k], st[s, k], st[s, k])
-        elif op == _SEPARATE_XYZ:
-            x, y, z = _v3(st, int(prog[pc + 1]), k)
-            _put1(st, k, int(prog[pc + 2]), x)
-            _put1(st, k, int(prog[pc + 3]), y)
-            _put1(st, k, int(prog[pc + 4]), z)
-        elif op == _COMBINE_XYZ:
-            _put3(st, k, int(prog[pc + 4]), st[int(prog[pc + 1]), k], st[int(prog[pc + 2]), k], st[int(prog[pc + 3]), k])
+    elif op == _SEPARATE_XYZ:
+        sv, ox, oy, oz = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4)
+        for k in range(n):
+            x, y, z = _v3(st, sv, k)
+            _put1(st, k, ox, x)
+            _put1(st, k, oy, y)
+            _put1(st, k, oz, z)
+    elif op == _COMBINE_XYZ:
+        sx, sy, sz, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4)
+        for k in range(n):
+            _put3(st, k, out, st[sx, k], st[sy, k], st[sz, k])
 
 
 @njit(**JIT)
@@ -1198,7 +1220,7 @@ def _procedural_node(op, prog, pc, st, n):
 # ----------------------------------------------------------------------------
 # Closures
 # ----------------------------------------------------------------------------
-@njit(**JIT)
+@njit(**JIT_INLINE)            # per hit: inlined into the closure loop (a call there cost ~25 % of it)
 def _closure(op, prog, pc, st, k, C, r, w):
     """Write the primary columns of closure row C[r] from a closure instruction (BSDF_*, EMISSION)
     at batch row k, then its derived columns (``closure.finish_closure``).  w: the weight of the
@@ -1255,7 +1277,7 @@ def _closure(op, prog, pc, st, k, C, r, w):
     C[r, C_PASS] = 0.0
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)            # (inlined: no call left in the closure loop)
 def _transparent(C, r, t0, t1, t2):
     """Closure row C[r] := a transparent closure of tint (t0, t1, t2) (a Transparent BSDF, or the
     white one a Principled BSDF's Alpha mixes in): nothing scatters, C_PASS = 1."""
@@ -1268,7 +1290,7 @@ def _transparent(C, r, t0, t1, t2):
     C[r, C_PASS] = 1.0
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)            # (inlined with _closure, _transparent)
 def _primary(C, r, b0, b1, b2, e0, e1, e2, metallic, transmission, rough, specular, ior):
     """Closure row C[r]'s primary columns (colour, emission >= 0, the rest clamped to their ranges)
     and its derived columns."""
@@ -1283,7 +1305,7 @@ def _primary(C, r, b0, b1, b2, e0, e1, e2, metallic, transmission, rough, specul
     C[r, C_ROUGHNESS] = _clamp01(rough)
     C[r, C_SPECULAR] = _clamp01(specular)
     C[r, C_IOR] = min(max(ior, 1.0), 10.0)
-    finish_closure(C[r])
+    finish_closure_at(C, r)
 
 
 # ----------------------------------------------------------------------------
@@ -1296,15 +1318,32 @@ def run_program(prog, start, st, rows, C, G, A, X, seed):
     st (n_slots, >= n) float64 scratch.  The value section runs instruction by instruction over
     the whole batch; then each hit walks the closure section to one closure, its Mix Shader
     choices drawn from ``hash_uniform(seed, row)`` (rescaled at each choice, so nested mixes stay
-    independent).
+    independent).  The columns no closure instruction writes (C_PROGRAM, C_NS, C_BUMPED) are left
+    as they are (:func:`shade_closures` copies them from the material's constant row).
     """
-    n = rows.shape[0]
+    _constants(prog, start, st, rows.shape[0])
+    _run_batch(prog, start, st, rows, C, G, A, X, seed, C, -1)
+
+
+@njit(**JIT)
+def _constants(prog, start, st, n):
+    """The program's constants into slots 0 .. n_const - 1 of the first n columns of st.  No
+    instruction writes these slots: a material's batches fill them once (:func:`shade_closures`)."""
     n_const = int(prog[start + 1])
-    closure_at = start + int(prog[start + 2])
     for j in range(n_const):
         v = prog[start + 3 + j]
         for k in range(n):
             st[j, k] = v
+
+
+@njit(**JIT)
+def _run_batch(prog, start, st, rows, C, G, A, X, seed, closures, cr):
+    """:func:`run_program` for a batch whose constants are in st already.  cr >= 0: each hit's row
+    first gets the columns no closure instruction writes (C_PROGRAM, C_NS, C_BUMPED) from row cr
+    of closures (the material's constant row), so that the row is whole without a copy of it."""
+    n = rows.shape[0]
+    n_const = int(prog[start + 1])
+    closure_at = start + int(prog[start + 2])
     pc = start + 3 + n_const
     while pc < closure_at:
         op = int(prog[pc])
@@ -1335,14 +1374,27 @@ def run_program(prog, start, st, rows, C, G, A, X, seed):
             pc += _curves(prog, pc, st, n)
             continue
         pc += _LEN[op]
+    _closures(prog, start, closure_at, st, rows, C, G[1], G[2], G[3], seed, closures, cr)
+
+
+@njit(**JIT)
+def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, closures, cr):
+    """The closure section of :func:`_run_batch`: each hit rows[k] walks it to one closure (NG, NS,
+    D: the hits' normals and directions, for a Normal input)."""
+    n = rows.shape[0]
     for k in range(n):
         r = rows[k]
-        u = hash_uniform(seed, r)
+        if cr >= 0:
+            for c in range(C_PROGRAM, C_BUMPED + 1):
+                C[r, c] = closures[cr, c]
+        u = -1.0                       # the hit's uniform, drawn at its first choice (hash_uniform)
         q = closure_at
         w = 1.0
         while True:
             op = int(prog[q])
             if op == _MIX_SHADER:
+                if u < 0.0:
+                    u = hash_uniform(seed, r)
                 f = _clamp01(st[int(prog[q + 1]), k])
                 if u < f:
                     u = u / f
@@ -1352,6 +1404,8 @@ def run_program(prog, start, st, rows, C, G, A, X, seed):
                     q += 3
                 continue
             if op == _ADD_SHADER:
+                if u < 0.0:
+                    u = hash_uniform(seed, r)
                 w *= 2.0
                 if u < 0.5:
                     u = 2.0 * u
@@ -1368,6 +1422,8 @@ def run_program(prog, start, st, rows, C, G, A, X, seed):
                 a = _clamp01(st[int(prog[q + 5]), k])
                 if a < 1.0:
                     # Alpha: Cycles' mix of a Transparent BSDF (1 - alpha) and the BSDF (alpha)
+                    if u < 0.0:
+                        u = hash_uniform(seed, r)
                     if u >= a:
                         _transparent(C, r, w, w, w)
                         break
@@ -1380,16 +1436,20 @@ def run_program(prog, start, st, rows, C, G, A, X, seed):
                 elif op != _EMISSION:
                     ns = int(prog[q + (op - _BSDF_DIFFUSE) + 2])      # DIFFUSE +2, GLOSSY +3, GLASS +4
                 if ns >= 0:
-                    _set_normal(G, C, r, st[ns, k], st[ns + 1, k], st[ns + 2, k])
+                    _set_normal(NG, NS, D, C, r, st[ns, k], st[ns + 1, k], st[ns + 2, k])
+            elif cr >= 0:
+                # not a closure instruction (the compiler ends every branch with one): the
+                # material's constant row, as before the program ran
+                for c in range(C.shape[1]):
+                    C[r, c] = closures[cr, c]
             break
 
 
 @njit(**JIT)
-def _set_normal(G, C, r, x, y, z):
+def _set_normal(NG, NS, D, C, r, x, y, z):
     """Hit r's shading normal := the shader's Normal input (world, facing the viewer as Cycles' N),
     stored on the geometric normal's side as the hit arrays keep it; the smooth normal it replaces
     goes to the closure's C_NS columns (C_BUMPED = 1) for the BSDF's bump shadowing term."""
-    NG, NS, D = G[1], G[2], G[3]
     x, y, z = _unit(x, y, z)
     if x == 0.0 and y == 0.0 and z == 0.0:
         return
@@ -1399,6 +1459,9 @@ def _set_normal(G, C, r, x, y, z):
     C[r, C_BUMPED] = 1.0
     NS[r, 0], NS[r, 1], NS[r, 2] = x, y, z
 
+
+# _run_batch copies the columns C_PROGRAM .. C_BUMPED of the constant row as one run
+assert C_NS == C_PROGRAM + 1 and C_BUMPED == C_NS + 3
 
 BATCH = 256          # hits interpreted together (the stack of a batch stays in the CPU's cache)
 
@@ -1413,15 +1476,47 @@ def shade_closures(mat, closures, prog, n_slots, G, A, X, seed, C):
     Hits are grouped by material (stable order) and each material's program runs over batches of
     up to ``BATCH`` of its hits.
     """
+    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, np.empty(0, np.int64), False)
+
+
+@njit(**JIT)
+def shade_closure_rows(mat, closures, prog, n_slots, G, A, X, seed, C, crow):
+    """:func:`shade_closures` with the closure of hit r in row crow[r] of C (m + M + 1, N_CLOSURE):
+    the hits on materials with a program get their own row r, the others (constant materials,
+    misses) row m + their material's row, where the material table is copied.  A 280-byte row
+    is copied for no hit that has none of its own (a miss, a flat material): 8 bytes of crow
+    instead (:func:`shade_rows`)."""
+    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, crow, True)
+
+
+@njit(**JIT)
+def _shade(mat, closures, prog, n_slots, G, A, X, seed, C, crow, compact):
+    """:func:`shade_closures` (compact False) and :func:`shade_closure_rows` (compact True).
+
+    Rows on materials with a program are not copied from the constant row first: the program
+    writes every column of them (``_run_batch``), so each such row is written once."""
     m = mat.shape[0]
     nc = closures.shape[0]
+    nw = closures.shape[1]
     key = np.empty(m, np.int64)
     count = np.zeros(nc + 1, np.int64)
+    if compact:
+        for c in range(nc):
+            for k in range(nw):
+                C[m + c, k] = closures[c, k]
     for r in range(m):
         cr = closure_row(closures, mat[r])
-        for k in range(closures.shape[1]):
-            C[r, k] = closures[cr, k]
-        key[r] = cr if closures[cr, C_PROGRAM] >= 0.0 else -1
+        if closures[cr, C_PROGRAM] >= 0.0:
+            key[r] = cr
+            if compact:
+                crow[r] = r
+        else:
+            key[r] = -1
+            if compact:
+                crow[r] = m + cr
+            else:
+                for k in range(nw):
+                    C[r, k] = closures[cr, k]
         count[key[r] + 1] += 1
     # rows grouped by material, in row order within a material (a counting sort)
     first = np.empty(nc + 1, np.int64)
@@ -1439,8 +1534,9 @@ def shade_closures(mat, closures, prog, n_slots, G, A, X, seed, C):
         i, j = first[cr + 1], first[cr + 1] + count[cr + 1]
         if j > i:
             start = int(closures[cr, C_PROGRAM])
+            _constants(prog, start, st, min(BATCH, j - i))      # once per material: no slot overwrites them
             for b in range(i, j, BATCH):
-                run_program(prog, start, st, order[b:min(b + BATCH, j)], C, G, A, X, seed)
+                _run_batch(prog, start, st, order[b:min(b + BATCH, j)], C, G, A, X, seed, closures, cr)
 
 
 @njit(**JIT)
@@ -1486,10 +1582,21 @@ def shade_rows(sd, mat, G, seed, C, crow) -> np.ndarray:
     bytes per hit instead of a copied N_CLOSURE row of 280 (a tile of 65k hits would write and
     then read 18 MB of copies, several times what the caches hold).  With node programs, C
     (m, N_CLOSURE) receives one row per hit (:func:`shade`) and crow[r] = r.  The camera-path
-    kernels (``kernels.paths``) read hit r's closure as row crow[r]."""
-    if sd.uses_programs or sd.transparent:
+    kernels (``kernels.paths``) read hit r's closure as row crow[r].
+
+    With node programs and room for the material table after the hits' rows (C of at least
+    m + M + 1 rows), only the hits on materials with a program get a row of their own, the
+    others point into that copy of the table (:func:`shade_closure_rows`); the returned array is
+    C.  Transparent materials need a row per hit (``transparency.pass_through`` rewrites them):
+    then C[:m] is filled and returned, crow[r] = r."""
+    m = mat.shape[0]
+    if sd.transparent or (sd.uses_programs and C.shape[0] < m + sd.closures.shape[0]):
+        C = C[:m]
         shade(sd, mat, G, seed, C)
         _identity_rows(crow)
+        return C
+    if sd.uses_programs:
+        shade_closure_rows(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, seed, C, crow)
         return C
     closure_rows(mat, sd.closures, crow)
     return sd.closures

@@ -340,8 +340,14 @@ def _texcoord(c, name, node):
     outs = {}
     slots = {}
     for ident in ("Generated", "Normal", "UV", "Object", "Reflection"):
-        slots[ident] = c.alloc(VEC)
-        outs[ident] = (slots[ident], VEC)
+        # only the outputs something reads get a slot; the others are not computed (-1), as
+        # Cycles compiles only linked outputs (an unused Normal output cost a corner-normal
+        # interpolation and a square root per hit)
+        if c.used(name, ident):
+            slots[ident] = c.alloc(VEC)
+            outs[ident] = (slots[ident], VEC)
+        else:
+            slots[ident] = -1.0
     for ident in ("Camera", "Window"):
         if c.used(name, ident):
             c.warn(name, node, f"the {ident} output is not supported")
