@@ -93,11 +93,6 @@ _TEX_WHITE_NOISE = OP["TEX_WHITE_NOISE"]
 # Stack helpers
 # ----------------------------------------------------------------------------
 @njit(**JIT)
-def _i(prog, pc, k):
-    return int(prog[pc + k])
-
-
-@njit(**JIT)
 def _v3(st, s, k):
     """The vec3 in slots s .. s + 2 of batch row k (st: (n_slots, n))."""
     return st[s, k], st[s + 1, k], st[s + 2, k]
@@ -599,22 +594,22 @@ def _value_node(op, prog, pc, st, n):
     every store to the stack might change a program word as far as the compiler knows (both are
     float64 arrays), so words read there are read and converted again on every row."""
     if op == _MATH:
-        mop, sa, sb, sc, cl, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4), \
-            _i(prog, pc, 5), _i(prog, pc, 6)
+        mop, sa, sb, sc, cl, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), \
+            int(prog[pc + 5]), int(prog[pc + 6])
         for k in range(n):
             r = math_op(mop, st[sa, k], st[sb, k], st[sc, k])
             if cl:
                 r = _clamp01(r)
             st[out, k] = r
     elif op == _MIX_FLOAT:
-        sf, sa, sb, cl, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4), _i(prog, pc, 5)
+        sf, sa, sb, cl, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), int(prog[pc + 5])
         for k in range(n):
             t = st[sf, k]
             if cl:
                 t = _clamp01(t)
             st[out, k] = (1.0 - t) * st[sa, k] + t * st[sb, k]
     elif op == _MIX_VECTOR:
-        sf, sa, sb, cl, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4), _i(prog, pc, 5)
+        sf, sa, sb, cl, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), int(prog[pc + 5])
         for k in range(n):
             t = st[sf, k]
             if cl:
@@ -623,8 +618,8 @@ def _value_node(op, prog, pc, st, n):
             b0, b1, b2 = _v3(st, sb, k)
             _put3(st, k, out, (1.0 - t) * a0 + t * b0, (1.0 - t) * a1 + t * b1, (1.0 - t) * a2 + t * b2)
     elif op == _MIX_COLOR:
-        blend, sf, sa, sb, cl, cr, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4), \
-            _i(prog, pc, 5), _i(prog, pc, 6), _i(prog, pc, 7)
+        blend, sf, sa, sb, cl, cr, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), \
+            int(prog[pc + 5]), int(prog[pc + 6]), int(prog[pc + 7])
         for k in range(n):
             t = st[sf, k]
             if cl:
@@ -636,15 +631,15 @@ def _value_node(op, prog, pc, st, n):
                 r, g, b = _clamp01(r), _clamp01(g), _clamp01(b)
             _put3(st, k, out, r, g, b)
     elif op == _CLAMP:
-        typ, sv, slo, shi, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4), _i(prog, pc, 5)
+        typ, sv, slo, shi, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), int(prog[pc + 5])
         for k in range(n):
             v, lo, hi = st[sv, k], st[slo, k], st[shi, k]
             if typ == 1 and lo > hi:
                 lo, hi = hi, lo
             st[out, k] = min(max(v, lo), hi)
     elif op == _MAP_RANGE:
-        typ, sv, sf0, sf1, st0, st1, ssteps, cl, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), \
-            _i(prog, pc, 4), _i(prog, pc, 5), _i(prog, pc, 6), _i(prog, pc, 7), _i(prog, pc, 8), _i(prog, pc, 9)
+        typ, sv, sf0, sf1, st0, st1, ssteps, cl, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), \
+            int(prog[pc + 4]), int(prog[pc + 5]), int(prog[pc + 6]), int(prog[pc + 7]), int(prog[pc + 8]), int(prog[pc + 9])
         for k in range(n):
             v, f0, f1 = st[sv, k], st[sf0, k], st[sf1, k]
             t0, t1, steps = st[st0, k], st[st1, k], st[ssteps, k]
@@ -666,7 +661,7 @@ def _value_node(op, prog, pc, st, n):
                 r = min(max(r, t1), t0) if t0 > t1 else min(max(r, t0), t1)
             st[out, k] = r
     elif op == _CONVERT:
-        kind, s, o, w = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4)
+        kind, s, o, w = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4])
         if kind == 0:
             # the working space's luminance weights (a constant)
             for k in range(n):
@@ -678,14 +673,14 @@ def _value_node(op, prog, pc, st, n):
             for k in range(n):
                 _put3(st, k, o, st[s, k], st[s, k], st[s, k])
     elif op == _SEPARATE_XYZ:
-        sv, ox, oy, oz = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4)
+        sv, ox, oy, oz = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4])
         for k in range(n):
             x, y, z = _v3(st, sv, k)
             _put1(st, k, ox, x)
             _put1(st, k, oy, y)
             _put1(st, k, oz, z)
     elif op == _COMBINE_XYZ:
-        sx, sy, sz, out = _i(prog, pc, 1), _i(prog, pc, 2), _i(prog, pc, 3), _i(prog, pc, 4)
+        sx, sy, sz, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4])
         for k in range(n):
             _put3(st, k, out, st[sx, k], st[sy, k], st[sz, k])
 
@@ -1476,7 +1471,9 @@ def shade_closures(mat, closures, prog, n_slots, G, A, X, seed, C):
     Hits are grouped by material (stable order) and each material's program runs over batches of
     up to ``BATCH`` of its hits.
     """
-    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, np.empty(0, np.int64), False)
+    no_rows = np.empty(0, np.int64)
+    # compact False as a run-time bool: a literal would compile _shade once per literal
+    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, no_rows, no_rows.shape[0] > 0)
 
 
 @njit(**JIT)
@@ -1486,7 +1483,8 @@ def shade_closure_rows(mat, closures, prog, n_slots, G, A, X, seed, C, crow):
     misses) row m + their material's row, where the material table is copied.  A 280-byte row
     is copied for no hit that has none of its own (a miss, a flat material): 8 bytes of crow
     instead (:func:`shade_rows`)."""
-    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, crow, True)
+    # compact True as a run-time bool: a literal would compile _shade once per literal
+    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, crow, crow.shape[0] >= 0)
 
 
 @njit(**JIT)

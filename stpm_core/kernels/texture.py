@@ -207,7 +207,7 @@ def _bilinear8(u8, base, W, H, C, x, y, ext):
     ix0, iy0 = int(x0), int(y0)
     if ext == 0:
         # Repeat: one (slow, integer) modulo per axis; the next texel wraps to 0 at the edge
-        ix0, iy0 = _wrap(ix0, W, 0), _wrap(iy0, H, 0)
+        ix0, iy0 = _wrap(ix0, W, ext), _wrap(iy0, H, ext)     # (ext, not a literal 0: one compiled _wrap)
         ix1 = ix0 + 1 if ix0 + 1 < W else 0
         iy1 = iy0 + 1 if iy0 + 1 < H else 0
     else:
