@@ -287,9 +287,9 @@ def _glossy_emission(ctx, gem: np.ndarray, hits, o, t: np.ndarray, C, crow, p_c,
     """Emission of the emissive hits gem (k,) of rays that left a rough lobe (density p_c (m,), from
     o (m, 3) at times t (m,)), weighed against next-event estimation and added into dst (Emit).
 
-    The hit's triangle belongs to a MESH light with power (``ctx.mesh_emitters``): the balance
-    heuristic p_c / (p_c + p_l) (``kernels.paths.mesh_emission_mis``); else next-event estimation
-    never draws it, and the path counts it whole (weight 1)."""
+    The hit's triangle belongs to a MESH light with power (``ctx.mesh_emitters``): the power
+    heuristic p_c^2 / (p_c^2 + p_l^2) (``kernels.paths.mesh_emission_mis``); else next-event
+    estimation never draws it, and the path counts it whole (weight 1)."""
     W = np.ones(gem.size)
     inst = hits.instance[gem]
     for li, (instance, J_of_prim) in ctx.mesh_emitters.items():
