@@ -194,19 +194,32 @@ def _closest(hdr, u8, u16, f32, half, tid, x, y, ext):
     return _texel(hdr, u8, u16, f32, half, tid, ix, iy)
 
 
-@njit(**JIT_INLINE)            # inlined into tex_image_rows' loop of 8-bit Linear look-ups: no call left in it
-def _bilinear8(u8, base, W, H, C, x, y, ext):
-    """:func:`_bilinear` of a :func:`_plain8` texture (bytes from word base, W x H texels of C
-    channels): the same operations in the same order."""
+@njit(**JIT_INLINE)
+def _footprint(x, y, W, H):
+    """Bilinear footprint of (x, y) in a W x H texture: (ix0, iy0, tx, ty), the lower texel (not
+    yet wrapped) and the weights toward the next one (texel centres at half-integers)."""
     fx = x * W - 0.5
     fy = y * H - 0.5
     x0 = math.floor(fx)
     y0 = math.floor(fy)
-    tx = fx - x0
-    ty = fy - y0
-    ix0, iy0 = int(x0), int(y0)
+    return int(x0), int(y0), fx - x0, fy - y0
+
+
+@njit(**JIT_INLINE)
+def _blend4(a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3, d0, d1, d2, d3, tx, ty):
+    """Bilinear blend of the four RGBA texels a (ix0, iy0), b (ix1, iy0), c (ix0, iy1), d (ix1, iy1)."""
+    wa, wb, wc, wd = (1.0 - tx) * (1.0 - ty), tx * (1.0 - ty), (1.0 - tx) * ty, tx * ty
+    return (wa * a0 + wb * b0 + wc * c0 + wd * d0, wa * a1 + wb * b1 + wc * c1 + wd * d1,
+            wa * a2 + wb * b2 + wc * c2 + wd * d2, wa * a3 + wb * b3 + wc * c3 + wd * d3)
+
+
+@njit(**JIT_INLINE)            # inlined into tex_image_rows' loop of 8-bit Linear look-ups: no call left in it
+def _bilinear8(u8, base, W, H, C, x, y, ext):
+    """:func:`_bilinear` of a :func:`_plain8` texture (bytes from word base, W x H texels of C
+    channels): the same operations in the same order."""
+    ix0, iy0, tx, ty = _footprint(x, y, W, H)
     if ext == 0:
-        # Repeat: one (slow, integer) modulo per axis; the next texel wraps to 0 at the edge
+        # Repeat: one wrap per axis (a mask on power-of-two sizes); the next texel wraps to 0 at the edge
         ix0, iy0 = _wrap(ix0, W, ext), _wrap(iy0, H, ext)     # (ext, not a literal 0: one compiled _wrap)
         ix1 = ix0 + 1 if ix0 + 1 < W else 0
         iy1 = iy0 + 1 if iy0 + 1 < H else 0
@@ -217,9 +230,7 @@ def _bilinear8(u8, base, W, H, C, x, y, ext):
     b0, b1, b2, b3 = _texel8(u8, base, W, C, ix1, iy0)
     c0, c1, c2, c3 = _texel8(u8, base, W, C, ix0, iy1)
     d0, d1, d2, d3 = _texel8(u8, base, W, C, ix1, iy1)
-    wa, wb, wc, wd = (1.0 - tx) * (1.0 - ty), tx * (1.0 - ty), (1.0 - tx) * ty, tx * ty
-    return (wa * a0 + wb * b0 + wc * c0 + wd * d0, wa * a1 + wb * b1 + wc * c1 + wd * d1,
-            wa * a2 + wb * b2 + wc * c2 + wd * d2, wa * a3 + wb * b3 + wc * c3 + wd * d3)
+    return _blend4(a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3, d0, d1, d2, d3, tx, ty)
 
 
 @njit(**JIT)
@@ -227,22 +238,14 @@ def _bilinear(hdr, u8, u16, f32, half, tid, x, y, ext):
     if _plain8(hdr, tid):
         return _bilinear8(u8, hdr[tid, 0], hdr[tid, 1], hdr[tid, 2], hdr[tid, 3], x, y, ext)
     W, H = hdr[tid, 1], hdr[tid, 2]
-    fx = x * W - 0.5
-    fy = y * H - 0.5
-    x0 = math.floor(fx)
-    y0 = math.floor(fy)
-    tx = fx - x0
-    ty = fy - y0
-    ix0, iy0 = int(x0), int(y0)
+    ix0, iy0, tx, ty = _footprint(x, y, W, H)
     ix1, iy1 = _wrap(ix0 + 1, W, ext), _wrap(iy0 + 1, H, ext)
     ix0, iy0 = _wrap(ix0, W, ext), _wrap(iy0, H, ext)
     a0, a1, a2, a3 = _texel(hdr, u8, u16, f32, half, tid, ix0, iy0)
     b0, b1, b2, b3 = _texel(hdr, u8, u16, f32, half, tid, ix1, iy0)
     c0, c1, c2, c3 = _texel(hdr, u8, u16, f32, half, tid, ix0, iy1)
     d0, d1, d2, d3 = _texel(hdr, u8, u16, f32, half, tid, ix1, iy1)
-    wa, wb, wc, wd = (1.0 - tx) * (1.0 - ty), tx * (1.0 - ty), (1.0 - tx) * ty, tx * ty
-    return (wa * a0 + wb * b0 + wc * c0 + wd * d0, wa * a1 + wb * b1 + wc * c1 + wd * d1,
-            wa * a2 + wb * b2 + wc * c2 + wd * d2, wa * a3 + wb * b3 + wc * c3 + wd * d3)
+    return _blend4(a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3, d0, d1, d2, d3, tx, ty)
 
 
 @njit(**JIT)
