@@ -39,7 +39,7 @@ from .procedural import (brick_color, brick_texture, magic_texture, noise_textur
 from .texture import tex_image_rows
 from ..nodes.ops import OP
 
-__all__ = ["shade", "shade_rows", "shade_closures", "shade_closure_rows", "constant_closures", "closure_rows", "run_program", "hash_uniform",
+__all__ = ["shade", "shade_rows", "shade_closures", "shade_closure_rows", "constant_closures", "closure_rows", "hash_uniform",
            "max_slots"]
 
 # Opcodes as module constants (numba folds globals)
@@ -1307,20 +1307,6 @@ def _primary(C, r, b0, b1, b2, e0, e1, e2, metallic, transmission, rough, specul
 # The interpreter
 # ----------------------------------------------------------------------------
 @njit(**JIT)
-def run_program(prog, start, st, rows, C, G, A, X, seed):
-    """Evaluate the program at word ``start`` for the hits rows (n,) into their closure rows of C.
-
-    st (n_slots, >= n) float64 scratch.  The value section runs instruction by instruction over
-    the whole batch; then each hit walks the closure section to one closure, its Mix Shader
-    choices drawn from ``hash_uniform(seed, row)`` (rescaled at each choice, so nested mixes stay
-    independent).  The columns no closure instruction writes (C_PROGRAM, C_NS, C_BUMPED) are left
-    as they are (:func:`shade_closures` copies them from the material's constant row).
-    """
-    _constants(prog, start, st, rows.shape[0])
-    _run_batch(prog, start, st, rows, C, G, A, X, seed, C, -1)
-
-
-@njit(**JIT)
 def _constants(prog, start, st, n):
     """The program's constants into slots 0 .. n_const - 1 of the first n columns of st.  No
     instruction writes these slots: a material's batches fill them once (:func:`shade_closures`)."""
@@ -1331,11 +1317,17 @@ def _constants(prog, start, st, n):
             st[j, k] = v
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)          # one caller (_shade): inlined, so the interpreter is one compiled level less
 def _run_batch(prog, start, st, rows, C, G, A, X, seed, closures, cr):
-    """:func:`run_program` for a batch whose constants are in st already.  cr >= 0: each hit's row
-    first gets the columns no closure instruction writes (C_PROGRAM, C_NS, C_BUMPED) from row cr
-    of closures (the material's constant row), so that the row is whole without a copy of it."""
+    """Evaluate the program at word ``start`` for the hits rows (n,) into their closure rows of C,
+    for a batch whose constants are in st (n_slots, >= n) float64 already (:func:`_constants`).
+
+    The value section runs instruction by instruction over the whole batch; then each hit walks
+    the closure section to one closure, its Mix Shader choices drawn from
+    ``hash_uniform(seed, row)`` (rescaled at each choice, so nested mixes stay independent).
+    Each hit's row first gets the columns no closure instruction writes (C_PROGRAM, C_NS,
+    C_BUMPED) from row cr of closures (the material's constant row), so that the row is whole
+    without a copy of it."""
     n = rows.shape[0]
     n_const = int(prog[start + 1])
     closure_at = start + int(prog[start + 2])
@@ -1354,12 +1346,11 @@ def _run_batch(prog, start, st, rows, C, G, A, X, seed, closures, cr):
             _geometry_node(op, prog, pc, st, n, rows, G, A)
         elif op == _MAPPING:
             _mapping(prog, pc, st, n)
-        elif op == _TEX_IMAGE:
+        elif op == _TEX_IMAGE or op == _TEX_CHECKER or op == _TEX_GRADIENT:
             _texture_node(op, prog, pc, st, n, X)
-            pc += _LEN[op] + 2 * int(prog[pc + 8])          # then the UDIM tile table
-            continue
-        elif op == _TEX_CHECKER or op == _TEX_GRADIENT:
-            _texture_node(op, prog, pc, st, n, X)
+            if op == _TEX_IMAGE:
+                pc += _LEN[op] + 2 * int(prog[pc + 8])      # then the UDIM tile table
+                continue
         elif op >= _TEX_NOISE and op <= _TEX_WHITE_NOISE:
             _procedural_node(op, prog, pc, st, n)
         elif op == _RAMP:
@@ -1461,30 +1452,29 @@ assert C_NS == C_PROGRAM + 1 and C_BUMPED == C_NS + 3
 BATCH = 256          # hits interpreted together (the stack of a batch stays in the CPU's cache)
 
 
-@njit(**JIT)
-def shade_closures(mat, closures, prog, n_slots, G, A, X, seed, C):
+def shade_closures(mat, closures, prog, n_slots, G, A, X, seed, C) -> None:
     """C[r] = the closure of hit r (m,) on material mat[r] (-1 = miss: the inert row).
 
     closures (M + 1, N_CLOSURE) from ``closure.pack_materials``: the constant rows, with
     C_PROGRAM >= 0 where the material has a node program in prog; n_slots the largest slot count
     of any program; G, A, X as in the module docstring; seed: the bounce's Mix Shader seed.
     Hits are grouped by material (stable order) and each material's program runs over batches of
-    up to ``BATCH`` of its hits.
+    up to ``BATCH`` of its hits.  (A Python function: the compiled entry is :func:`_shade`, one
+    level for both entries, since every compiled level re-optimises and re-emits all it calls.)
     """
-    no_rows = np.empty(0, np.int64)
-    # compact False as a run-time bool: a literal would compile _shade once per literal
-    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, no_rows, no_rows.shape[0] > 0)
+    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, _NO_ROWS, False)
 
 
-@njit(**JIT)
-def shade_closure_rows(mat, closures, prog, n_slots, G, A, X, seed, C, crow):
+def shade_closure_rows(mat, closures, prog, n_slots, G, A, X, seed, C, crow) -> None:
     """:func:`shade_closures` with the closure of hit r in row crow[r] of C (m + M + 1, N_CLOSURE):
     the hits on materials with a program get their own row r, the others (constant materials,
     misses) row m + their material's row, where the material table is copied.  A 280-byte row
     is copied for no hit that has none of its own (a miss, a flat material): 8 bytes of crow
     instead (:func:`shade_rows`)."""
-    # compact True as a run-time bool: a literal would compile _shade once per literal
-    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, crow, crow.shape[0] >= 0)
+    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, crow, True)
+
+
+_NO_ROWS = np.empty(0, np.int64)
 
 
 @njit(**JIT)
