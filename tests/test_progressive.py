@@ -701,3 +701,23 @@ def test_partials_carry_their_working_space_and_do_not_mix_them(tmp_path):
     assert read_exr(tmp_path / "a.exr")["_metadata"].get("colorInteropID")
     with pytest.raises(StpmError, match="different working colour spaces"):
         merge([tmp_path / "a.exr", tmp_path / "b.exr"])
+
+
+def test_a_pass_builds_only_the_tree_its_regions_read(monkeypatch):
+    """A pass's maps get no k-nearest trees up front (TEMPORAL's time-slice trees went unread, about
+    half of a pass's tree building): the 4D tree its fixed regions read is built at the first look-up."""
+    import stpm_core.progressive as prog
+    built = []
+    real = prog.build_photon_maps
+
+    def spy(*a, **k):
+        maps = real(*a, **k)
+        built.append(maps)
+        return maps
+    monkeypatch.setattr(prog, "build_photon_maps", spy)
+    st = RenderSettings(**{**BASE, "photons_caustic": 3000, "samples": 1}, method="PROGRESSIVE", passes=2)
+    render(moving_caustic_scene((16, 12)), st)
+    assert len(built) == 2
+    for maps in built:
+        m = maps.maps["caustic"]
+        assert m.n > 0 and m._slices == {} and set(m._flat) == {4}
