@@ -245,10 +245,10 @@ def test_pilot_region_table_is_bounded_and_does_not_change_the_regions(estimator
         r, tau = small.initial_size("caustic", q, n)
         assert np.array_equal(r, r0) and (tau is None) == (tau0 is None)
         assert tau is None or np.array_equal(tau, tau0)
-        assert small._grids["caustic"]["keys"].size <= 4000
-    assert big._grids["caustic"]["keys"].size > 4000              # the small table did fill up
-    keys = big._grids["caustic"]["keys"]
-    assert np.all(np.diff(keys) > 0)                              # sorted, no duplicates (merged, not sorted)
+        assert small._grids["caustic"]["table"].count <= 4000
+    assert big._grids["caustic"]["table"].count > 4000            # the small table did fill up
+    keys = big._grids["caustic"]["table"].keys()
+    assert keys.size == big._grids["caustic"]["table"].count and np.all(np.diff(keys) > 0)   # no duplicates
 
 
 @pytest.mark.parametrize("estimator", ["STANDARD", "TEMPORAL", "KD4D"])

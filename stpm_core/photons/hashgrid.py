@@ -37,6 +37,9 @@ across an image (a bright caustic next to dark floor): with h the median, the tr
 answer in about the same time (grid / tree 0.72-1.3 per map), the build (a sort of (cell, time))
 costs 1-1.4x the tree's, and a uniform h is fragile: h = the 10th or 75th percentile of the radii
 made one map's queries 1.5-2.8x slower and another's 0.7x.  The kd-tree adapts to both.
+
+:class:`CellTable` is the same open-addressing table holding values per cell key: the pilot's
+regions per grid cell (:meth:`.progressive.Pilot.initial_size`), bounded to a number of cells.
 """
 from __future__ import annotations
 
@@ -44,7 +47,7 @@ import numpy as np
 
 from . import kdtree as _kdtree
 
-__all__ = ["AVAILABLE", "HashGrid", "cell_size", "AXIS_BITS"]
+__all__ = ["AVAILABLE", "HashGrid", "CellTable", "cell_size", "AXIS_BITS"]
 
 AXIS_BITS = 21                   # cells per axis: at most 2^21 (3 x 21 bits in one int64 key)
 _AXIS_MAX = (1 << AXIS_BITS) - 1
@@ -304,3 +307,72 @@ class HashGrid:
         out_phi, out_cnt = np.empty_like(phi), np.empty_like(cnt)
         out_phi[order], out_cnt[order] = phi, cnt
         return out_phi, out_cnt
+
+
+# ---------------------------------------------------------------------------
+# A bounded table of values per cell key (the pilot's regions per grid cell)
+# ---------------------------------------------------------------------------
+if AVAILABLE:
+    @_jit
+    def _table_get(keys, tkey, tr, ttau, out_have, out_r, out_tau):
+        """For each key (n,) >= 0: out_have True and its values if the table holds it."""
+        mask = tkey.shape[0] - 1
+        for i in range(keys.shape[0]):
+            slot = _find(keys[i], tkey, mask)
+            if slot >= 0:
+                out_have[i] = True
+                out_r[i] = tr[slot]
+                out_tau[i] = ttau[slot]
+            else:
+                out_have[i] = False
+
+    @_jit
+    def _table_put(keys, r, tau, tkey, tr, ttau, count, limit):
+        """Insert keys (n,) not yet held, while the table holds fewer than limit; returns the new count."""
+        mask = tkey.shape[0] - 1
+        for i in range(keys.shape[0]):
+            if count >= limit:
+                break
+            slot = _hash(keys[i], mask)
+            while tkey[slot] != -1 and tkey[slot] != keys[i]:
+                slot = (slot + 1) & mask
+            if tkey[slot] == -1:
+                tkey[slot] = keys[i]
+                tr[slot] = r[i]
+                ttau[slot] = tau[i]
+                count += 1
+        return count
+
+
+class CellTable:
+    """Values (r, tau) per non-negative int64 cell key, at most ``limit`` keys (then further keys are
+    not kept): open addressing in 2^ceil(log2 2 limit) slots, looked up and filled in compiled loops
+    (a sorted array merged per batch costs a copy of the table per batch)."""
+
+    def __init__(self, limit: int):
+        self.limit = int(limit)
+        slots = 1
+        while slots < 2 * max(self.limit, 1):
+            slots *= 2
+        self.tkey = np.full(slots, -1, np.int64)
+        self.r = np.zeros(slots)
+        self.tau = np.zeros(slots)
+        self.count = 0
+
+    def get(self, keys: np.ndarray):
+        """(have (n,) bool, r (n,), tau (n,)) for keys (n,) int64 (r, tau undefined where not had)."""
+        keys = np.ascontiguousarray(keys, dtype=np.int64)
+        have = np.zeros(keys.size, np.bool_)
+        r, tau = np.empty(keys.size), np.empty(keys.size)
+        _table_get(keys, self.tkey, self.r, self.tau, have, r, tau)
+        return have, r, tau
+
+    def put(self, keys: np.ndarray, r: np.ndarray, tau: np.ndarray) -> None:
+        """Keep keys (n,) int64 with their values, up to the table's limit."""
+        self.count = int(_table_put(np.ascontiguousarray(keys, dtype=np.int64), np.ascontiguousarray(r, np.float64),
+                                    np.ascontiguousarray(tau, np.float64), self.tkey, self.r, self.tau,
+                                    self.count, self.limit))
+
+    def keys(self) -> np.ndarray:
+        """The keys held, sorted."""
+        return np.sort(self.tkey[self.tkey >= 0])
