@@ -66,7 +66,7 @@ TIME_CELLS = 32               # ... and this many cells across the shutter (spac
 GRID_CELLS_MAX = 1 << 17      # cells a region table keeps (6 MiB); regions of cells beyond are computed, not kept
 _AXIS_BITS = 18               # grid cells per axis: 2^18 (keys: 3 x 18 bits + 7 bits of time)
 STREAM_PILOT = 0x9170         # the pilot's random stream (independent of every pass's)
-RANGE_LOOKUP = "kdtree"       # a pass's fixed-region look-ups: 'kdtree' or 'hashgrid' (hashgrid.py; the same sets, measured slower)
+RANGE_LOOKUP = "kdtree"       # a pass's fixed-region look-ups: 'kdtree' or 'hashgrid' (the same sets, measured slower)
 
 
 def kernel_dims(estimator: str) -> int:
