@@ -289,8 +289,9 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
         try:
             maps = None
             if with_photons:
+                # (no k-nearest trees: the pass's fixed regions build the one they read, ProgressiveMaps)
                 raw = build_photon_maps(scene, pset.replace(time_scale=s), caster, lights, time_override=stratum,
-                                        progress=lambda f, m: span(0.3 * f, m), cancel=cancel)
+                                        progress=lambda f, m: span(0.3 * f, m), cancel=cancel, build_trees=False)
                 t_lo, t_hi = scene.shutter.sample(np.array([u_lo, u_hi]))
                 maps = ProgressiveMaps(raw, pilot, pass_index=i, alpha=alpha, kernel=psettings.kernel,
                                        stratum=(t_lo, t_hi, u_hi - u_lo))

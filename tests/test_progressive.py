@@ -245,10 +245,10 @@ def test_pilot_region_table_is_bounded_and_does_not_change_the_regions(estimator
         r, tau = small.initial_size("caustic", q, n)
         assert np.array_equal(r, r0) and (tau is None) == (tau0 is None)
         assert tau is None or np.array_equal(tau, tau0)
-        assert small._grids["caustic"]["keys"].size <= 4000
-    assert big._grids["caustic"]["keys"].size > 4000              # the small table did fill up
-    keys = big._grids["caustic"]["keys"]
-    assert np.all(np.diff(keys) > 0)                              # sorted, no duplicates (merged, not sorted)
+        assert small._grids["caustic"]["table"].count <= 4000
+    assert big._grids["caustic"]["table"].count > 4000            # the small table did fill up
+    keys = big._grids["caustic"]["table"].keys()
+    assert keys.size == big._grids["caustic"]["table"].count and np.all(np.diff(keys) > 0)   # no duplicates
 
 
 @pytest.mark.parametrize("estimator", ["STANDARD", "TEMPORAL", "KD4D"])
@@ -701,3 +701,23 @@ def test_partials_carry_their_working_space_and_do_not_mix_them(tmp_path):
     assert read_exr(tmp_path / "a.exr")["_metadata"].get("colorInteropID")
     with pytest.raises(StpmError, match="different working colour spaces"):
         merge([tmp_path / "a.exr", tmp_path / "b.exr"])
+
+
+def test_a_pass_builds_only_the_tree_its_regions_read(monkeypatch):
+    """A pass's maps get no k-nearest trees up front (TEMPORAL's time-slice trees went unread, about
+    half of a pass's tree building): the 4D tree its fixed regions read is built at the first look-up."""
+    import stpm_core.progressive as prog
+    built = []
+    real = prog.build_photon_maps
+
+    def spy(*a, **k):
+        maps = real(*a, **k)
+        built.append(maps)
+        return maps
+    monkeypatch.setattr(prog, "build_photon_maps", spy)
+    st = RenderSettings(**{**BASE, "photons_caustic": 3000, "samples": 1}, method="PROGRESSIVE", passes=2)
+    render(moving_caustic_scene((16, 12)), st)
+    assert len(built) == 2
+    for maps in built:
+        m = maps.maps["caustic"]
+        assert m.n > 0 and m._slices == {} and set(m._flat) == {4}

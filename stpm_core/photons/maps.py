@@ -100,7 +100,7 @@ class PhotonMaps:
 
 
 def build_photon_maps(scene, settings, caster, lights, *, time_override=None, progress=None,
-                      cancel=None) -> PhotonMaps:
+                      cancel=None, build_trees: bool = True) -> PhotonMaps:
     """Trace ``settings.photons_caustic`` + ``settings.photons_global`` photons and build the maps.
 
     Parameters
@@ -113,6 +113,8 @@ def build_photon_maps(scene, settings, caster, lights, *, time_override=None, pr
         pass's time stratum).
     progress : progress(fraction, message) or None; cancel : () -> bool or None
         (raises RenderCancelled between batches).
+    build_trees : build the trees ``settings.estimator``'s k-nearest look-ups need now (False: a
+        progressive pass, whose fixed regions build their own structure on first use).
     """
     table = MaterialTable(scene.materials)
     s = float(settings.time_scale) if settings.time_scale > 0 else auto_time_scale(scene)
@@ -142,7 +144,7 @@ def build_photon_maps(scene, settings, caster, lights, *, time_override=None, pr
         "caustic": PhotonMap(rec_c, scene.shutter, time_scale=s, workers=workers, origin=origin),
         "global": PhotonMap(rec_g, scene.shutter, time_scale=s, workers=workers, origin=origin),
     }
-    for m in maps.values():
+    for m in maps.values() if build_trees else ():
         m.build(settings.estimator, k=settings.k_nearest, temporal_alpha=settings.temporal_alpha)
     if progress is not None:
         progress(1.0, "photon maps built")

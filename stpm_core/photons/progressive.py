@@ -49,6 +49,7 @@ import time as _time
 import numpy as np
 
 from ..sampling import rng_for
+from . import hashgrid as _hashgrid
 from .estimators import CONE_K, shutter_mass, slab_ball_volume
 from .kdtree import MODE_TEMPORAL
 from .maps import KINDS, build_photon_maps
@@ -62,9 +63,10 @@ CAP_SAMPLE = 4096             # pilot photons whose own radius sets the cap
 TEMPORAL_PILOT = 1.5          # TEMPORAL's pilot: spatial candidates per search as a multiple of PILOT_K (the paper's)
 GRID_FRACTION = 0.25          # pilot sizes are read on a grid of cells this x the pilot photons' median radius
 TIME_CELLS = 32               # ... and this many cells across the shutter (space-time kernels)
-GRID_CELLS_MAX = 1 << 17      # cells a region table keeps (3 MiB); regions of cells beyond are computed, not kept
+GRID_CELLS_MAX = 1 << 17      # cells a region table keeps (6 MiB); regions of cells beyond are computed, not kept
 _AXIS_BITS = 18               # grid cells per axis: 2^18 (keys: 3 x 18 bits + 7 bits of time)
 STREAM_PILOT = 0x9170         # the pilot's random stream (independent of every pass's)
+RANGE_LOOKUP = "kdtree"       # a pass's fixed-region look-ups: 'kdtree' or 'hashgrid' (the same sets, measured slower)
 
 
 def kernel_dims(estimator: str) -> int:
@@ -170,15 +172,14 @@ class Pilot:
         it = np.clip(np.floor(q[:, 3] / self.time_scale * nt), 0, nt - 1).astype(np.int64) if nt > 1 \
             else np.zeros(n, np.int64)
         keys = (((cells[:, 0] << _AXIS_BITS) | cells[:, 1]) << _AXIS_BITS | cells[:, 2]) << 7 | it
-        uk, inv = np.unique(keys, return_inverse=True)
         with self._lock:
-            known = grid["keys"]
-            pos = np.searchsorted(known, uk)
-            have = np.zeros(uk.size, bool) if known.size == 0 else \
-                (pos < known.size) & (known[np.minimum(pos, known.size - 1)] == uk)
-            new = uk[~have]
-            if new.size:
-                # the regions at the new cells' centres, merged into the sorted table
+            table = grid["table"]
+            have, r, tau = table.get(keys)
+            if not have.all():
+                # the regions at the new cells' centres, each once; kept while the table has room
+                # (a full table: these cells' regions are used, not kept -- the same values either way)
+                miss = ~have
+                new, inv = np.unique(keys[miss], return_inverse=True)
                 qc = np.empty((new.size, 4))
                 ci = np.stack([(new >> (7 + 2 * _AXIS_BITS)) & ((1 << _AXIS_BITS) - 1),
                                (new >> (7 + _AXIS_BITS)) & ((1 << _AXIS_BITS) - 1),
@@ -187,22 +188,9 @@ class Pilot:
                 qc[:, 3] = self.time_scale * ((new & 127) + 0.5) / nt if nt > 1 else self.time_scale * 0.5
                 r_new, tau_new = self.region_at(kind, qc)
                 tau_new = tau_new if tau_new is not None else np.zeros(new.size)
-                if known.size + new.size > GRID_CELLS_MAX:
-                    # a full table: these cells' regions are used, not kept (the same values either way)
-                    r_u, tau_u = np.empty(uk.size), np.empty(uk.size)
-                    if have.any():
-                        r_u[have], tau_u[have] = grid["r"][pos[have]], grid["tau"][pos[have]]
-                    r_u[~have], tau_u[~have] = r_new, tau_new
-                    return r_u[inv], (tau_u[inv] if grid["timed"] else None)
-                # (new is sorted and disjoint from the table: one merge, no sort of the whole table)
-                at = np.searchsorted(known, new)
-                grid["keys"] = np.insert(known, at, new)
-                grid["r"] = np.insert(grid["r"], at, r_new)
-                grid["tau"] = np.insert(grid["tau"], at, tau_new)
-                pos = np.searchsorted(grid["keys"], uk)
-            r = grid["r"][pos][inv]
-            tau = grid["tau"][pos][inv] if grid["timed"] else None
-        return r, tau
+                r[miss], tau[miss] = r_new[inv], tau_new[inv]
+                table.put(new, r_new, tau_new)
+        return r, (tau if grid["timed"] else None)
 
     def _grid(self, kind: str) -> dict:
         """The cache of regions on kind's grid (built empty on first use)."""
@@ -216,7 +204,7 @@ class Pilot:
         timed = self.estimator == "TEMPORAL" and not m.timeless
         nt = TIME_CELLS if self.estimator != "STANDARD" and not m.timeless else 1
         g = {"h": max(GRID_FRACTION * median, 1e-9), "lo": lo, "nt": nt, "timed": timed,
-             "keys": np.zeros(0, np.int64), "r": np.zeros(0), "tau": np.zeros(0)}
+             "table": _hashgrid.CellTable(GRID_CELLS_MAX)}
         with self._lock:
             return self._grids.setdefault(kind, g)
 
@@ -298,6 +286,23 @@ class ProgressiveMaps:
         self._photons_in = {kind: [0, 0] for kind in KINDS}     # photons inside regions, queries
         self._radius = {kind: [] for kind in KINDS}             # a sample of the radii used (for stats)
         self._lookup_s = 0.0
+        self._grids = {}                                        # kind -> HashGrid of the pass's photons
+        self._grid_lock = threading.Lock()
+
+    def _range_sum(self, kind, dims, q, ns, r, half, cone):
+        """(Phi (n, 3), count (n,)) of the pass's photons inside each region: on the pass's hash grid
+        (:mod:`.hashgrid`, built at the first look-up with cells of the median radius asked), or on
+        the kd-tree when ``RANGE_LOOKUP`` is 'kdtree' (the same sets; benchmarks compare the two)."""
+        m = self.maps.maps[kind]
+        if RANGE_LOOKUP != "hashgrid" or not _hashgrid.AVAILABLE:
+            return m.flat_tree(dims).range_sum(q, ns, r, half, cone, CONE_K, m.workers)
+        with self._grid_lock:
+            grid = self._grids.get(kind)
+            if grid is None:
+                extent = float(np.ptp(m.position, axis=0).max()) if m.n else 0.0
+                grid = self._grids[kind] = _hashgrid.HashGrid(m.records["position"], m.records["time"], m._packed,
+                                                              s=m.time_scale, h=_hashgrid.cell_size(r, extent))
+        return grid.range_sum(q, ns, r, half, cone, CONE_K, m.workers, dims=dims)
 
     def has(self, kind: str) -> bool:
         return self.maps.has(kind) and self.pilot.maps.maps[kind].n > PILOT_K
@@ -346,8 +351,7 @@ class ProgressiveMaps:
             r = r * c * w ** (1.0 / 3.0)                         # the 4D ball, unclipped
         # -- photons of this pass inside each region -----------------------------------------------
         q[:, :3] = p - m.origin
-        tree = m.flat_tree(3) if timeless else m.flat_tree(4)
-        Phi, cnt = tree.range_sum(q, ns, r, half, cone, CONE_K, m.workers)
+        Phi, cnt = self._range_sum(kind, 3 if timeless else 4, q, ns, r, half, cone)
         # -- normalise by the region's measure in the stratum (area x its share of the stratum's mass) --
         rr = np.maximum(r, 1e-12)
         if timeless:
