@@ -38,6 +38,10 @@ Measured against the reference after the Standard view transform (``bench_room.f
 * inside it: mean luminance ratio, and the correlation of the 8 x 8-block luminance means of
   the blocks at least half covered by the region (``*_caustic_blocks`` counts them), mean FLIP;
 * per surface (``bench_room.regions`` / ``region_stats``), printed and in ``regions.json``;
+* the caustic region by part (:func:`caustic_parts`: each connected part's ratio to the converged
+  crop, STPM's passes there and Cycles without refractive caustics), printed and in
+  ``caustic_parts.json``; with ``STPM_BENCH_SEEDS=1,2`` STPM is rendered again with those seeds and
+  scored inside the region (``stpm_seeds``: one seed's figures are one draw of a heavy-tailed estimate);
 * wall seconds of every render.
 
 Pictures in ``bench_out/product/``: ``stpm_final_vs_cycles1024.png`` (side by side),
@@ -50,6 +54,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import time
 from pathlib import Path
 
@@ -71,6 +76,11 @@ NOCAUSTIC_SPP = 256
 #: converged reference there
 CONVERGED_SPP = 16384
 CAUSTIC_REL, CAUSTIC_ABS = 0.25, 0.02
+#: environment variable: more STPM seeds (comma-separated, e.g. "1,2") rendered after the main one
+#: and scored inside the caustic region only (``stpm_seeds``): the region's figures are one draw of
+#: a heavy-tailed estimate (the light the table's rough lobe reflects of the sun through the glass
+#: is path traced from the camera), and one seed's mean moved by +-10 % (docs/blender.md)
+SEEDS_ENV = "STPM_BENCH_SEEDS"
 LUMA = room.LUMA
 #: the image files this scene reads (its reference's cache key; bench_room.TEXTURE_FILES)
 TEXTURE_FILES = ("planks.png", "planks_normal.png", "studio_sun.exr", "tiles16.png")
@@ -171,6 +181,43 @@ def masked_block_corr(test: np.ndarray, ref: np.ndarray, mask: np.ndarray, b: in
     return float(np.corrcoef(a, r)[0, 1]), int(cover.sum())
 
 
+def caustic_parts(passes: dict, conv: np.ndarray, nocaustic: np.ndarray, mask: np.ndarray,
+                   box: tuple[int, int, int, int]) -> list[dict]:
+    """Where the caustic region's error sits: one row per connected part of ``mask`` (8-connected),
+    largest first, against the converged crop ``conv`` ((y1 - y0, x1 - x0, 3) on ``box`` = (y0, y1,
+    x0, x1)).
+
+    Per part: its pixels and bounding box (full-image rows / columns), the converged luminance,
+    STPM's Combined over it (``ratio``), STPM's passes' mean luminance (``emit_direct`` = Emit +
+    Direct: the light path-traced from the camera, which includes what a rough lobe of the table
+    reflects of the sun seen through the glass; ``caustic`` and ``indirect``: the photon maps'), Cycles
+    without refractive caustics (``nocaustic``, 256 spp: the same light minus the table's diffuse
+    caustics) and ``share``: the part's fraction of the region's summed excess over the converged
+    luminance (signed).
+    """
+    from scipy.ndimage import label
+    y0, y1, x0, x1 = box
+    m = mask[y0:y1, x0:x1]
+    lum = lambda name: (passes[name][y0:y1, x0:x1, :3] @ LUMA) if name in passes else np.zeros(m.shape)
+    y_st, y_conv = lum("Combined"), conv @ LUMA
+    y_ed, y_c, y_i = lum("Emit") + lum("Direct"), lum("Caustic"), lum("Indirect")
+    y_nc = nocaustic[y0:y1, x0:x1] @ LUMA
+    excess = float((y_st - y_conv)[m].sum())
+    parts, n = label(m, structure=np.ones((3, 3), bool))
+    rows = []
+    for i in range(1, n + 1):
+        r = parts == i
+        ys, xs = np.nonzero(r)
+        c = max(float(y_conv[r].mean()), 1e-12)
+        rows.append({"px": int(r.sum()), "rows": [int(ys.min() + y0), int(ys.max() + y0)],
+                     "columns": [int(xs.min() + x0), int(xs.max() + x0)], "converged": c,
+                     "ratio": float(y_st[r].mean()) / c, "emit_direct": float(y_ed[r].mean()),
+                     "caustic": float(y_c[r].mean()), "indirect": float(y_i[r].mean()),
+                     "nocaustic": float(y_nc[r].mean()),
+                     "share": float((y_st - y_conv)[r].sum()) / excess if excess else float("nan")})
+    return sorted(rows, key=lambda row: -row["px"])
+
+
 def run() -> dict:
     try:
         import bpy  # noqa: F401
@@ -243,6 +290,32 @@ def run() -> dict:
             crop = img[y0:y1, x0:x1]
             out[f"{tag}_caustic_vs_converged_mean_ratio"] = float((crop @ LUMA)[cm].mean() / max(y_conv[cm].mean(), 1e-12))
             out[f"{tag}_caustic_vs_converged_block8_corr"] = masked_block_corr(crop, conv, cm)[0]
+        parts = caustic_parts(passes, conv, nc, caustic, (y0, y1, x0, x1))
+        (OUT / "caustic_parts.json").write_text(json.dumps(parts, indent=1))
+        for name, key in (("emit_direct", "Emit+Direct"), ("caustic", "Caustic"), ("indirect", "Indirect")):
+            out[f"stpm_caustic_{name}_lum"] = float(np.average([p[name] for p in parts], weights=[p["px"] for p in parts]))
+        out["nocaustic_caustic_lum"] = float((nc[y0:y1, x0:x1] @ LUMA)[cm].mean())
+        out["converged_caustic_lum"] = float(y_conv[cm].mean())
+        print("\nbench_product caustic region by part (luminance; ratio = STPM / converged; share = of the "
+              "region's excess):")
+        print(f"  {'rows':>9} {'columns':>9}{'px':>6}{'conv':>7}{'ratio':>7} | {'Emit+Direct':>11}{'Caustic':>8}"
+              f"{'Indir.':>7} | {'Cycles no-caustic':>17}{'share':>7}")
+        for p in parts:
+            print(f"  {p['rows'][0]:>4}-{p['rows'][1]:<4} {p['columns'][0]:>4}-{p['columns'][1]:<4}{p['px']:>6}"
+                  f"{p['converged']:>7.3f}{p['ratio']:>7.3f} | {p['emit_direct']:>11.3f}{p['caustic']:>8.3f}"
+                  f"{p['indirect']:>7.3f} | {p['nocaustic']:>17.3f}{p['share']:>7.2f}")
+        extra = [int(v) for v in os.environ.get(SEEDS_ENV, "").replace(" ", "").split(",") if v]
+        if extra:
+            seeds = [{"seed": "file", "mean": out["stpm_caustic_vs_converged_mean_ratio"],
+                      "corr": out["stpm_caustic_vs_converged_block8_corr"]}]
+            for seed in extra:
+                with _this_scene():
+                    img = room.stpm_final(seed=seed, warm=False)[0][y0:y1, x0:x1]
+                seeds.append({"seed": seed, "mean": float((img @ LUMA)[cm].mean() / max(y_conv[cm].mean(), 1e-12)),
+                              "corr": masked_block_corr(img, conv, cm)[0]})
+            out["stpm_seeds"] = seeds
+            out["stpm_seeds_mean_ratio"] = float(np.mean([v["mean"] for v in seeds]))
+            out["stpm_seeds_block8_corr"] = float(np.mean([v["corr"] for v in seeds]))
         write_png(OUT / "converged_caustic_crop.png",
                   np.concatenate([stpm[y0:y1, x0:x1], np.ones((y1 - y0, 4, 3)), conv], axis=1).astype(np.float32))
     if caustic.any():
