@@ -38,6 +38,10 @@ Measured against the reference after the Standard view transform (``bench_room.f
 * inside it: mean luminance ratio, and the correlation of the 8 x 8-block luminance means of
   the blocks at least half covered by the region (``*_caustic_blocks`` counts them), mean FLIP;
 * per surface (``bench_room.regions`` / ``region_stats``), printed and in ``regions.json``;
+* the caustic region by part (:func:`caustic_parts`: each connected part's ratio to the converged
+  crop, STPM's passes there and Cycles without refractive caustics), printed and in
+  ``caustic_parts.json``; with ``STPM_BENCH_SEEDS=1,2`` STPM is rendered again with those seeds and
+  scored inside the region (``stpm_seeds``: one seed's figures are one draw of a heavy-tailed estimate);
 * wall seconds of every render.
 
 Pictures in ``bench_out/product/``: ``stpm_final_vs_cycles1024.png`` (side by side),
@@ -50,6 +54,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import time
 from pathlib import Path
 
@@ -71,6 +76,13 @@ NOCAUSTIC_SPP = 256
 #: converged reference there
 CONVERGED_SPP = 16384
 CAUSTIC_REL, CAUSTIC_ABS = 0.25, 0.02
+#: environment variable: more STPM seeds (comma-separated, e.g. "1,2") rendered after the main one
+#: and scored inside the caustic region only (``stpm_seeds``): the region's figures are one draw of
+#: a heavy-tailed estimate (the table's varnish reflecting the sun through the glass is path traced
+#: from the camera: a few dozen bright samples), and one seed's mean moved by +-10 % (docs/blender.md)
+SEEDS_ENV = "STPM_BENCH_SEEDS"
+#: instants of the shutter at which the object-index render is repeated (shutter_cover)
+COVER_STEPS = 9
 LUMA = room.LUMA
 #: the image files this scene reads (its reference's cache key; bench_room.TEXTURE_FILES)
 TEXTURE_FILES = ("planks.png", "planks_normal.png", "studio_sun.exr", "tiles16.png")
@@ -147,6 +159,37 @@ def converged_crop(mask: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, i
     return rgb.astype(np.float32), box, seconds, False
 
 
+def shutter_cover(index: np.ndarray, n: int = COVER_STEPS) -> tuple[np.ndarray, bool]:
+    """((H, W) bool: pixels whose object differs from ``index`` at some instant of the shutter, was
+    it cached): Cycles' 1-sample object-index render (no motion blur, as the reference's) at ``n``
+    instants spread over the shutter.
+
+    The reference's index render shows the frame's instant only, so a pixel the moving glass sphere
+    passes in front of during the shutter counts as table; there the reference shows the sphere's
+    motion-blurred view (the sun seen in and through it, a streak of a few bright instants), which
+    is neither the table nor a caustic.  Cached beside the reference."""
+    with _this_scene():
+        d = CACHE / room._cache_key()
+    tag = f"cover_{n}.npy"
+    if (d / tag).exists():
+        return np.load(d / tag), True
+    cover = np.zeros(index.shape, bool)
+    with _this_scene():
+        for i in range(n):
+            scene = room._open()
+            r = scene.render
+            frame, shutter = scene.frame_current, r.motion_blur_shutter
+            start = {"START": 0.0, "END": -shutter}.get(r.motion_blur_position, -0.5 * shutter)
+            t = frame + start + shutter * i / (n - 1)
+            scene.frame_set(int(np.floor(t)), subframe=float(t - np.floor(t)))
+            idx, _ = room._cycles(scene, 1, OUT / "cover.exr", index_pass=True)
+            cover |= idx != index
+    (OUT / "cover.exr").unlink(missing_ok=True)
+    d.mkdir(parents=True, exist_ok=True)
+    np.save(d / tag, cover)
+    return cover, False
+
+
 def _box(y: np.ndarray, r: int = 2) -> np.ndarray:
     from scipy.ndimage import uniform_filter
     return uniform_filter(y, size=2 * r + 1, mode="nearest")
@@ -169,6 +212,43 @@ def masked_block_corr(test: np.ndarray, ref: np.ndarray, mask: np.ndarray, b: in
     if cover.sum() < 3 or np.std(a) == 0 or np.std(r) == 0:
         return float("nan"), int(cover.sum())
     return float(np.corrcoef(a, r)[0, 1]), int(cover.sum())
+
+
+def caustic_parts(passes: dict, conv: np.ndarray, nocaustic: np.ndarray, mask: np.ndarray,
+                   box: tuple[int, int, int, int]) -> list[dict]:
+    """Where the caustic region's error sits: one row per connected part of ``mask`` (8-connected),
+    largest first, against the converged crop ``conv`` ((y1 - y0, x1 - x0, 3) on ``box`` = (y0, y1,
+    x0, x1)).
+
+    Per part: its pixels and bounding box (full-image rows / columns), the converged luminance,
+    STPM's Combined over it (``ratio``), STPM's passes' mean luminance (``emit_direct`` = Emit +
+    Direct: the light path traced from the camera, which includes the table's varnish reflecting the
+    sun seen through the glass; ``caustic`` and ``indirect``: the photon maps'), Cycles
+    without refractive caustics (``nocaustic``, 256 spp: the same light minus the table's diffuse
+    caustics) and ``share``: the part's fraction of the region's summed excess over the converged
+    luminance (signed).
+    """
+    from scipy.ndimage import label
+    y0, y1, x0, x1 = box
+    m = mask[y0:y1, x0:x1]
+    lum = lambda name: (passes[name][y0:y1, x0:x1, :3] @ LUMA) if name in passes else np.zeros(m.shape)
+    y_st, y_conv = lum("Combined"), conv @ LUMA
+    y_ed, y_c, y_i = lum("Emit") + lum("Direct"), lum("Caustic"), lum("Indirect")
+    y_nc = nocaustic[y0:y1, x0:x1] @ LUMA
+    excess = float((y_st - y_conv)[m].sum())
+    parts, n = label(m, structure=np.ones((3, 3), bool))
+    rows = []
+    for i in range(1, n + 1):
+        r = parts == i
+        ys, xs = np.nonzero(r)
+        c = max(float(y_conv[r].mean()), 1e-12)
+        rows.append({"px": int(r.sum()), "rows": [int(ys.min() + y0), int(ys.max() + y0)],
+                     "columns": [int(xs.min() + x0), int(xs.max() + x0)], "converged": c,
+                     "ratio": float(y_st[r].mean()) / c, "emit_direct": float(y_ed[r].mean()),
+                     "caustic": float(y_c[r].mean()), "indirect": float(y_i[r].mean()),
+                     "nocaustic": float(y_nc[r].mean()),
+                     "share": float((y_st - y_conv)[r].sum()) / excess if excess else float("nan")})
+    return sorted(rows, key=lambda row: -row["px"])
 
 
 def run() -> dict:
@@ -243,6 +323,45 @@ def run() -> dict:
             crop = img[y0:y1, x0:x1]
             out[f"{tag}_caustic_vs_converged_mean_ratio"] = float((crop @ LUMA)[cm].mean() / max(y_conv[cm].mean(), 1e-12))
             out[f"{tag}_caustic_vs_converged_block8_corr"] = masked_block_corr(crop, conv, cm)[0]
+        # the same without the pixels the moving sphere passes in front of during the shutter (an
+        # extra figure: the region itself stays the issue's)
+        cover, out["cover_cached"] = shutter_cover(index)
+        cs = cm & ~cover[y0:y1, x0:x1]
+        out["caustic_px_moving_cover"] = int((cm & ~cs).sum())
+        for tag, img in (("stpm", stpm), ("cycles_eq", cyc), ("ref1024", ref)):
+            crop = img[y0:y1, x0:x1]
+            out[f"{tag}_caustic_static_vs_converged_mean_ratio"] = float((crop @ LUMA)[cs].mean() / max(y_conv[cs].mean(), 1e-12))
+            out[f"{tag}_caustic_static_vs_converged_block8_corr"] = masked_block_corr(crop, conv, cs)[0]
+        parts = caustic_parts(passes, conv, nc, caustic, (y0, y1, x0, x1))
+        (OUT / "caustic_parts.json").write_text(json.dumps(parts, indent=1))
+        for name, key in (("emit_direct", "Emit+Direct"), ("caustic", "Caustic"), ("indirect", "Indirect")):
+            out[f"stpm_caustic_{name}_lum"] = float(np.average([p[name] for p in parts], weights=[p["px"] for p in parts]))
+        out["nocaustic_caustic_lum"] = float((nc[y0:y1, x0:x1] @ LUMA)[cm].mean())
+        out["converged_caustic_lum"] = float(y_conv[cm].mean())
+        print("\nbench_product caustic region by part (luminance; ratio = STPM / converged; share = of the "
+              "region's excess):")
+        print(f"  {'rows':>9} {'columns':>9}{'px':>6}{'conv':>7}{'ratio':>7} | {'Emit+Direct':>11}{'Caustic':>8}"
+              f"{'Indir.':>7} | {'Cycles no-caustic':>17}{'share':>7}")
+        for p in parts:
+            print(f"  {p['rows'][0]:>4}-{p['rows'][1]:<4} {p['columns'][0]:>4}-{p['columns'][1]:<4}{p['px']:>6}"
+                  f"{p['converged']:>7.3f}{p['ratio']:>7.3f} | {p['emit_direct']:>11.3f}{p['caustic']:>8.3f}"
+                  f"{p['indirect']:>7.3f} | {p['nocaustic']:>17.3f}{p['share']:>7.2f}")
+        extra = [int(v) for v in os.environ.get(SEEDS_ENV, "").replace(" ", "").split(",") if v]
+        if extra:
+            imgs = {"file": stpm[y0:y1, x0:x1]}
+            for seed in extra:
+                with _this_scene():
+                    imgs[seed] = room.stpm_final(seed=seed, warm=False)[0][y0:y1, x0:x1]
+            seeds = []
+            for seed, img in imgs.items():
+                row = {"seed": seed}
+                for key, mk in (("", cm), ("static_", cs)):
+                    row[f"{key}mean"] = float((img @ LUMA)[mk].mean() / max(y_conv[mk].mean(), 1e-12))
+                    row[f"{key}corr"] = masked_block_corr(img, conv, mk)[0]
+                seeds.append(row)
+            out["stpm_seeds"] = seeds
+            for key in ("mean", "corr", "static_mean", "static_corr"):
+                out[f"stpm_seeds_{key}"] = float(np.mean([v[key] for v in seeds]))
         write_png(OUT / "converged_caustic_crop.png",
                   np.concatenate([stpm[y0:y1, x0:x1], np.ones((y1 - y0, 4, 3)), conv], axis=1).astype(np.float32))
     if caustic.any():

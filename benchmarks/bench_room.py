@@ -183,8 +183,11 @@ def object_names() -> list[str]:
     return sorted(o.name for o in bpy.context.scene.objects)
 
 
-def stpm_final() -> tuple[np.ndarray, dict, dict]:
-    """(linear RGB of STPM with the FINAL preset, passes, timings): the add-on's path."""
+def stpm_final(*, seed: int | None = None, warm: bool = True) -> tuple[np.ndarray, dict, dict]:
+    """(linear RGB of STPM with the FINAL preset, passes, timings): the add-on's path.
+
+    seed: the render's seed instead of the file's (another draw of the same estimate); warm: render
+    a small warm-up first (compiles the kernels outside the timed render)."""
     from addon import batch
     from addon.presets import PRESETS, apply_preset
     from stpm_core.render import render
@@ -200,9 +203,11 @@ def stpm_final() -> tuple[np.ndarray, dict, dict]:
     # the reference's diffuse bounces (12), not Cycles' default 4 the file's scene.stpm holds: the
     # numbers published from this benchmark were measured with photons bounded by max_depth alone
     settings["diffuse_bounces"] = CYCLES["diffuse_bounces"]
-    warm = dict(settings, samples=1, photons_global=2000, photons_caustic=2000)
+    if seed is not None:
+        settings["seed"] = int(seed)
     t0 = time.perf_counter()
-    render(core, RenderSettings.from_dict(warm))
+    if warm:
+        render(core, RenderSettings.from_dict(dict(settings, samples=1, photons_global=2000, photons_caustic=2000)))
     warm_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     res = render(core, RenderSettings.from_dict(settings))
