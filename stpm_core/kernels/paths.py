@@ -19,6 +19,7 @@ equations with these names):
 * :func:`denoising_rows` (with ``RenderSettings.denoise``) -- Cycles' denoising features of the
   bounce: Denoising Albedo and Normal at the first diffuse-like vertex, the feature throughput
   through specular-like ones (:func:`denoising_seen_add`: light shapes seen on the way);
+* :func:`light_strata` -- the uniforms of one light's samples, stratified over each pixel's samples;
 * :func:`nee_light` -- next-event estimation of one light at the shaded rows:
   the light samples (:func:`stpm_core.kernels.lights.sample_light_rows`, every light
   type), the BSDF (:func:`stpm_core.kernels.bsdf.bsdf_eval`), the unshadowed
@@ -53,7 +54,8 @@ from .closure import (C_BASE, C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROU
 from .lights import light_pdf, mesh_light_pdf, sample_light_rows, seen_light, world_nee_pdf
 from .sampling import dot, load_pose, offset_origin, pose_buffer, row3
 
-__all__ = ["camera_tile", "camera_rays", "classify_hits", "denoising_rows", "denoising_seen_add", "nee_light",
+__all__ = ["camera_tile", "camera_rays", "classify_hits", "denoising_rows", "denoising_seen_add", "light_strata",
+           "nee_light",
            "offset_rows", "nee_accumulate",
            "seen_lights_add", "photon_albedo", "photon_add", "specular_step", "scatter_add", "active_channels",
            "pixel_sums", "tile_finish"]
@@ -414,6 +416,51 @@ def denoising_seen_add(V, c_albedo, rows, idx, use_idx, beta, use_beta, first, f
 # ----------------------------------------------------------------------------
 # Next-event estimation
 # ----------------------------------------------------------------------------
+@njit(**_JIT)
+def light_strata(samples, S, keys, jit, U):
+    """Uniforms U (k, 2) of one light's samples at k shaded rows, stratified over each pixel's samples.
+
+    samples (k,) int64: the tile sample each row belongs to (pixel s // S, the pixel's sample
+    j = s % S; a sample has at most one row); keys (P, S): a pixel's uniforms for its permutation;
+    jit (k, 2): the jitter of each row.  As the film position of ``camera_tile`` (rows x cols grid,
+    rows = floor(sqrt(S)), cols = S // rows, the S - rows cols samples past the grid uniform), but
+    in cell pi_p(j), a random permutation of the pixel's samples (Fisher-Yates: from the identity,
+    for j = S - 1 down to 1 swap entries j and min(floor(keys[p, j] (j + 1)), j); keys[p, 0] is
+    unused), so the light's strata are decorrelated from the film's:
+
+        U[i] = ((c % cols + jit[i, 0]) / cols, (c // cols + jit[i, 1]) / rows),  c = pi_p(j) < rows cols
+        U[i] = jit[i]                                                          otherwise
+
+    Each U[i] is uniform on [0, 1)^2 (so every light sampler keeps its density), but a pixel's S
+    samples of the light cover the square evenly, as Cycles' Sobol samples do: on a smooth
+    integrand the pixel's variance falls much faster than 1 / S (docs/rendering.md, "Stratified
+    light samples").  Only the pixels some row belongs to are permuted.
+    """
+    rows = max(1, int(math.floor(math.sqrt(S))))
+    cols = max(1, S // rows)
+    m = rows * cols
+    P = keys.shape[0]
+    cell = np.full(P * S, -1, np.int64)              # pi_p(j) at p S + j, for the pixels met so far
+    for i in range(samples.shape[0]):
+        s = samples[i]
+        p = s // S
+        b = p * S
+        if cell[b] < 0:
+            # -- the pixel's permutation, first time one of its samples is met
+            for j in range(S):
+                cell[b + j] = j
+            for j in range(S - 1, 0, -1):
+                a = min(int(keys[p, j] * (j + 1)), j)
+                cell[b + j], cell[b + a] = cell[b + a], cell[b + j]
+        c = cell[s]
+        if c < m:
+            U[i, 0] = (c % cols + jit[i, 0]) / cols
+            U[i, 1] = (c // cols + jit[i, 1]) / rows
+        else:
+            U[i, 0] = jit[i, 0]
+            U[i, 1] = jit[i, 1]
+
+
 @njit(**_JIT)
 def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners, q, cdf, Le, env, T, U, EPS, mis,
               stop_coat, contrib, so, sd, stmax, live, S):

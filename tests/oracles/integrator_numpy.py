@@ -147,17 +147,37 @@ def _is_delta_light(light) -> bool:
     return light.type == "SUN" and float(light.angle) <= 0.0
 
 
-def _light_uniforms(light, n: int, rng: np.random.Generator, out: np.ndarray | None = None) -> np.ndarray:
-    """Uniforms (n, 2) for one light's samples, one block of the stream per light.
+def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Generator) -> np.ndarray:
+    """Uniforms (k, 2) for one light's samples at the k shaded rows whose tile samples are
+    ``samples`` (k,), one block of the stream per light; strata = (n, S): the tile's n samples,
+    S per pixel (consecutive).
 
-    Delta lights ignore them: their block is skipped (``skip_uniforms``) and
-    zeros are returned, the stream ending where drawing would leave it.
-    out: an (n, 2) buffer to draw into.
+    Keys (n / S, S) then jitters (k, 2) are drawn; each pixel's samples are permuted (Fisher-Yates
+    with the keys, all pixels at once) and sample j of pixel p takes cell pi_p(j) of the
+    floor(sqrt(S)) x (S // floor(sqrt(S))) grid, jittered (past the grid: the jitter alone).
+    Delta lights ignore them: their block is skipped (``skip_uniforms``) and zeros are returned,
+    the stream ending where drawing would leave it.
     """
+    n, S = strata
+    k = samples.size
     if _is_delta_light(light):
-        skip_uniforms(rng, 2 * n)
-        return np.zeros((n, 2)) if out is None else _fill(out, 0.0)
-    return rng.random((n, 2)) if out is None else rng.random(out=out)
+        skip_uniforms(rng, n + 2 * k)
+        return np.zeros((k, 2))
+    keys = rng.random((n // S, S))
+    jit = rng.random((k, 2))
+    perm = np.tile(np.arange(S), (n // S, 1))
+    pix = np.arange(n // S)
+    for j in range(S - 1, 0, -1):
+        a = np.minimum((keys[:, j] * (j + 1)).astype(np.int64), j)
+        perm[pix, j], perm[pix, a] = perm[pix, a], perm[pix, j].copy()
+    rows = max(1, int(np.floor(np.sqrt(S))))
+    cols = max(1, S // rows)
+    c = perm.ravel()[samples]
+    grid = c < rows * cols
+    u = jit.copy()
+    u[grid, 0] = (c[grid] % cols + jit[grid, 0]) / cols
+    u[grid, 1] = (c[grid] // cols + jit[grid, 1]) / rows
+    return u
 
 
 def _world_normals(light, ng: np.ndarray, wo: np.ndarray) -> np.ndarray | None:
@@ -171,8 +191,12 @@ def _fill(a: np.ndarray, value: float) -> np.ndarray:
     return a
 
 
-def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=(False, False)) -> np.ndarray:
+def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=(False, False), samples=None,
+            strata=None) -> np.ndarray:
     """Next-event estimate (n, 3): sum over lights of f(wo, wi) |cos(ns, wi)| L_i / p * V.
+
+    samples (n,): the tile sample of each point, strata = (tile samples, samples per pixel): the
+    lights' uniforms are stratified over each pixel's samples (``_light_uniforms``; None: none).
 
     eps (n,): each point's shadow-ray origin offset (``_eps_rows``).  mis: ((n,) bool, (n,) bool) the
     paths may go on through a rough reflection / a rough refraction after this (the glossy /
@@ -192,7 +216,8 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=(Fa
         if lights.power[li] <= 0.0:
             continue
         # Sample a point / direction on the light at each sample's time
-        u_l = _light_uniforms(lights.lights[li], n, rng)
+        u_l = _light_uniforms(lights.lights[li], np.arange(n) if samples is None else samples,
+                              (n, 1) if strata is None else strata, rng)
         wi, dist, weight = lights_numpy.sample_direct(lights, li, p, times, u_l,
                                                       normals=_world_normals(lights.lights[li], ng, wo))
         f = bsdf_eval(ctx.table, mat, wo, wi, ns, ng)
@@ -325,8 +350,11 @@ def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, coun
 
 def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.ndarray,
                 rng: np.random.Generator, stats: TraceStats, cam_pos: np.ndarray,
-                cam_axis: np.ndarray) -> dict[str, np.ndarray]:
+                cam_axis: np.ndarray, spp: int = 1) -> dict[str, np.ndarray]:
     """Radiance of the camera rays o, d (n, 3) at times (n,) split into passes.
+
+    spp: the samples of each pixel, consecutive in o, over which next-event estimation stratifies
+    each light's samples (``_light_uniforms``).
 
     tmax0 (n,) clips the camera rays; cam_pos, cam_axis (n, 3) are the camera
     position and unit view axis at each sample's time (for Depth).
@@ -460,8 +488,9 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
                 c = np.zeros((p.shape[0], 2), np.int32) if counts is None else counts
                 mis = ((bounce < ctx.max_depth) & (_rows(c[:, 0], sh) < ctx.glossy_bounces),
                        (bounce < ctx.max_depth) & (_rows(c[:, 1], sh) < ctx.transmission_bounces))
+                rows = np.arange(p.shape[0]) if sh is None else sh
                 add(L_direct, sh, _direct(ctx, p_s, ng_s, ns_s, wo_s, mat_s, t_s, _rows(eps, sh), rng, stats,
-                                          mis=mis))
+                                          mis=mis, samples=rows if idx is None else idx[rows], strata=(n, spp)))
             if ctx.maps is not None:
                 ns_f = _face_forward(ns_s, wo_s)
                 for kind, dst in (("caustic", L_caustic), ("global", L_indirect)):
@@ -566,6 +595,6 @@ def trace_image_numpy(scene, settings, caster, lights, maps=None, *, time_overri
             tmax0 = np.full(len(times), cam.clip_end - cam.clip_start)
         else:
             tmax0 = cam.clip_end / np.maximum(np.sum(d * axis, axis=1), 1e-12)
-        values = shade_paths(ctx, o, d, times, tmax0, rng, stats, pos, axis)
+        values = shade_paths(ctx, o, d, times, tmax0, rng, stats, pos, axis, spp=spp)
         film.add_window(tile_sums_numpy(film, x0, y0, gx.shape[1], gx.shape[0], values))
     return film.resolve(), stats
