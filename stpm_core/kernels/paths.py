@@ -416,42 +416,99 @@ def denoising_seen_add(V, c_albedo, rows, idx, use_idx, beta, use_beta, first, f
 # ----------------------------------------------------------------------------
 # Next-event estimation
 # ----------------------------------------------------------------------------
+# Irreducible polynomials over GF(2) of degree 2 .. 10 (bit i: the coefficient of x^i): GF(2^k) for
+# the orthogonal arrays of light_strata
+_GF2_POLY = np.array([0, 0, 0b111, 0b1011, 0b10011, 0b100101, 0b1000011, 0b10001001, 0b100011101, 0b1000010001,
+                      0b10000001001], np.int64)
+
+
+@njit(**_JIT)
+def _oa_field(s):
+    """How light_strata builds the orthogonal array of s levels: (1, polynomial) for s = 2^k, 2 <= k <=
+    10 (GF(2^k): + is XOR, alpha = x); (2, 0) for an odd prime s (integers mod s, alpha = 2); (0, 0)
+    for every other s (no such array: a random permutation of the cells instead)."""
+    k = 0
+    while (1 << k) < s:
+        k += 1
+    if (1 << k) == s and 2 <= k <= 10:
+        return 1, _GF2_POLY[k]
+    if s < 3 or s % 2 == 0:
+        return 0, 0
+    d = 3
+    while d * d <= s:
+        if s % d == 0:
+            return 0, 0
+        d += 2
+    return 2, 0
+
+
 @njit(**_JIT)
 def light_strata(samples, S, keys, jit, U):
     """Uniforms U (k, 2) of one light's samples at k shaded rows, stratified over each pixel's samples.
 
     samples (k,) int64: the tile sample each row belongs to (pixel s // S, the pixel's sample
-    j = s % S; a sample has at most one row); keys (P, S): a pixel's uniforms for its permutation;
-    jit (k, 2): the jitter of each row.  As the film position of ``camera_tile`` (rows x cols grid,
-    rows = floor(sqrt(S)), cols = S // rows, the S - rows cols samples past the grid uniform), but
-    in cell pi_p(j), a random permutation of the pixel's samples (Fisher-Yates: from the identity,
-    for j = S - 1 down to 1 swap entries j and min(floor(keys[p, j] (j + 1)), j); keys[p, 0] is
-    unused), so the light's strata are decorrelated from the film's:
+    j = s % S; a sample has at most one row); keys (P, S): a pixel's uniforms for its permutations;
+    jit (k, 2): the jitter of each row.  The light's square is cut as the film is by ``camera_tile``
+    (rows x cols grid, rows = floor(sqrt(S)), cols = S // rows; film sample j in cell (j % cols,
+    j // cols); the S - rows cols samples past the grid uniform), and sample j takes light cell
+    c_j = (lx, ly), jittered:
 
-        U[i] = ((c % cols + jit[i, 0]) / cols, (c // cols + jit[i, 1]) / rows),  c = pi_p(j) < rows cols
-        U[i] = jit[i]                                                          otherwise
+        U[i] = ((lx + jit[i, 0]) / cols, (ly + jit[i, 1]) / rows)     (past the grid: U[i] = jit[i])
 
-    Each U[i] is uniform on [0, 1)^2 (so every light sampler keeps its density), but a pixel's S
-    samples of the light cover the square evenly, as Cycles' Sobol samples do: on a smooth
-    integrand the pixel's variance falls much faster than 1 / S (docs/rendering.md, "Stratified
-    light samples").  Only the pixels some row belongs to are permuted.
+    * S = s^2 with s a power of two (4 .. 1024) or an odd prime: an orthogonal array of strength 2
+      (Bose 1938; Jarosz et al. 2019 for rendering): with the film cell (cx, cy), lx = sigma_x(cx +
+      cy), ly = sigma_y(cx + alpha cy) in the field of s elements, so each of the four coordinates
+      (cx, cy, lx, ly) against each other is an s x s Latin square: the light's strata are
+      stratified against the film's too (Cycles' Sobol samples are, in 4D), which the pixel's
+      variance feels where the light integral changes over the pixel.  sigma_x, sigma_y: random
+      permutations of the s levels per pixel (Fisher-Yates: from the identity, for t = s - 1 down
+      to 1 swap entries t and min(floor(keys[p, o + t] (t + 1)), t); o = 0 for sigma_x, s - 1 for
+      sigma_y), which keep the array's strata and make each light cell uniform whatever the film
+      cell;
+    * any other S: c_j = pi_p(j), a random permutation of the pixel's samples (Fisher-Yates as
+      above with keys[p, t], t = S - 1 .. 1; cell c = (c % cols, c // cols)).
+
+    keys[p, 0] is never used.  Each U[i] is uniform on [0, 1)^2 whatever the film position (so every
+    light sampler keeps its density), but a pixel's S samples of the light cover the square evenly,
+    as Cycles' Sobol samples do: on a smooth integrand the pixel's variance falls much faster than
+    1 / S (docs/rendering.md, "Stratified light samples").  Only the pixels some row belongs to
+    are permuted.
     """
     rows = max(1, int(math.floor(math.sqrt(S))))
     cols = max(1, S // rows)
     m = rows * cols
     P = keys.shape[0]
-    cell = np.full(P * S, -1, np.int64)              # pi_p(j) at p S + j, for the pixels met so far
+    kind, poly = _oa_field(rows) if rows == cols and m == S else (0, 0)
+    sig = np.empty(2 * cols, np.int64)                # sigma_x, sigma_y of the pixel being permuted
+    cell = np.full(P * S, -1, np.int64)               # c_j at p S + j, for the pixels met so far
     for i in range(samples.shape[0]):
         s = samples[i]
         p = s // S
         b = p * S
         if cell[b] < 0:
-            # -- the pixel's permutation, first time one of its samples is met
-            for j in range(S):
-                cell[b + j] = j
-            for j in range(S - 1, 0, -1):
-                a = min(int(keys[p, j] * (j + 1)), j)
-                cell[b + j], cell[b + a] = cell[b + a], cell[b + j]
+            # -- the pixel's light cells, first time one of its samples is met
+            if kind == 0:
+                for j in range(S):
+                    cell[b + j] = j
+                for j in range(S - 1, 0, -1):
+                    a = min(int(keys[p, j] * (j + 1)), j)
+                    cell[b + j], cell[b + a] = cell[b + a], cell[b + j]
+            else:
+                for h in range(2):
+                    o = h * (cols - 1)
+                    for t in range(cols):
+                        sig[h * cols + t] = t
+                    for t in range(cols - 1, 0, -1):
+                        a = min(int(keys[p, o + t] * (t + 1)), t)
+                        sig[h * cols + t], sig[h * cols + a] = sig[h * cols + a], sig[h * cols + t]
+                for j in range(S):
+                    cx, cy = j % cols, j // cols
+                    if kind == 1:
+                        acy = (cy << 1) ^ poly if (cy << 1) & cols else cy << 1     # alpha cy in GF(2^k)
+                        lx, ly = cx ^ cy, cx ^ acy
+                    else:
+                        lx, ly = (cx + cy) % cols, (cx + 2 * cy) % cols
+                    cell[b + j] = sig[cols + ly] * cols + sig[lx]
         c = cell[s]
         if c < m:
             U[i, 0] = (c % cols + jit[i, 0]) / cols

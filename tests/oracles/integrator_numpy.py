@@ -147,16 +147,42 @@ def _is_delta_light(light) -> bool:
     return light.type == "SUN" and float(light.angle) <= 0.0
 
 
+def _shuffle(keys: np.ndarray, n: int) -> np.ndarray:
+    """(P, n): a random permutation of range(n) per row, Fisher-Yates with keys (P, >= n): from the
+    identity, for t = n - 1 down to 1 swap entries t and min(floor(keys[:, t] (t + 1)), t)."""
+    perm = np.tile(np.arange(n), (keys.shape[0], 1))
+    pix = np.arange(keys.shape[0])
+    for t in range(n - 1, 0, -1):
+        a = np.minimum((keys[:, t] * (t + 1)).astype(np.int64), t)
+        perm[pix, t], perm[pix, a] = perm[pix, a], perm[pix, t].copy()
+    return perm
+
+
+def _gf_times_alpha(v: np.ndarray, s: int) -> np.ndarray | None:
+    """alpha v in the field of s elements (alpha = x in GF(2^k), 4 <= s = 2^k <= 1024; 2 mod an odd
+    prime s), or None when this s has no such field here."""
+    polys = {4: 0b111, 8: 0b1011, 16: 0b10011, 32: 0b100101, 64: 0b1000011, 128: 0b10001001,
+             256: 0b100011101, 512: 0b1000010001, 1024: 0b10000001001}
+    if s in polys:
+        w = 2 * v
+        return np.where(w >= s, w ^ polys[s], w)
+    if s >= 3 and s % 2 and all(s % d for d in range(3, int(s ** 0.5) + 1, 2)):
+        return (2 * v) % s
+    return None
+
+
 def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Generator) -> np.ndarray:
     """Uniforms (k, 2) for one light's samples at the k shaded rows whose tile samples are
     ``samples`` (k,), one block of the stream per light; strata = (n, S): the tile's n samples,
     S per pixel (consecutive).
 
-    Keys (n / S, S) then jitters (k, 2) are drawn; each pixel's samples are permuted (Fisher-Yates
-    with the keys, all pixels at once) and sample j of pixel p takes cell pi_p(j) of the
-    floor(sqrt(S)) x (S // floor(sqrt(S))) grid, jittered (past the grid: the jitter alone).
-    Delta lights ignore them: their block is skipped (``skip_uniforms``) and zeros are returned,
-    the stream ending where drawing would leave it.
+    Keys (n / S, S) then jitters (k, 2) are drawn; sample j of pixel p (film cell (j % cols,
+    j // cols) of the rows x cols grid, rows = floor(sqrt(S)), cols = S // rows) takes a light cell
+    of the same grid, jittered (past the grid: the jitter alone).  S = s^2 with a field of s
+    elements: the cell (sigma_x(cx + cy), sigma_y(cx + alpha cy)), an orthogonal array against the
+    film cell, sigma_x / sigma_y shuffled by keys[:, 0:s] / keys[:, s-1:2s-1]; any other S: cell
+    pi_p(j), the pixel's samples shuffled by its keys.  Delta lights ignore them: their block is
+    skipped (``skip_uniforms``) and zeros are returned, the stream ending where drawing would leave it.
     """
     n, S = strata
     k = samples.size
@@ -165,14 +191,19 @@ def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Ge
         return np.zeros((k, 2))
     keys = rng.random((n // S, S))
     jit = rng.random((k, 2))
-    perm = np.tile(np.arange(S), (n // S, 1))
-    pix = np.arange(n // S)
-    for j in range(S - 1, 0, -1):
-        a = np.minimum((keys[:, j] * (j + 1)).astype(np.int64), j)
-        perm[pix, j], perm[pix, a] = perm[pix, a], perm[pix, j].copy()
     rows = max(1, int(np.floor(np.sqrt(S))))
     cols = max(1, S // rows)
-    c = perm.ravel()[samples]
+    j = np.arange(S)
+    cx, cy = j % cols, j // cols
+    a_cy = _gf_times_alpha(cy, cols) if rows * cols == S and rows == cols else None
+    if a_cy is None:
+        c = _shuffle(keys, S).ravel()[samples]
+    else:
+        gf2 = cols & (cols - 1) == 0
+        lx, ly = (cx ^ cy, cx ^ a_cy) if gf2 else ((cx + cy) % cols, (cx + a_cy) % cols)
+        sx, sy = _shuffle(keys, cols), _shuffle(keys[:, cols - 1:], cols)
+        p, jj = samples // S, samples % S
+        c = sy[p, ly[jj]] * cols + sx[p, lx[jj]]
     grid = c < rows * cols
     u = jit.copy()
     u[grid, 0] = (c[grid] % cols + jit[grid, 0]) / cols
