@@ -442,18 +442,93 @@ def _oa_field(s):
     return 2, 0
 
 
+_M32 = 0xFFFFFFFF
+_ONE_BELOW = 1.0 - 2.0 ** -53                          # the largest double below 1
+
+
+@njit(**_JIT)
+def _reverse32(v):
+    """The 32 bits of v (0 <= v < 2^32) in reverse order."""
+    v = ((v & 0xAAAAAAAA) >> 1) | ((v & 0x55555555) << 1)
+    v = ((v & 0xCCCCCCCC) >> 2) | ((v & 0x33333333) << 2)
+    v = ((v & 0xF0F0F0F0) >> 4) | ((v & 0x0F0F0F0F) << 4)
+    v = ((v & 0xFF00FF00) >> 8) | ((v & 0x00FF00FF) << 8)
+    return ((v >> 16) | (v << 16)) & _M32
+
+
+@njit(**_JIT)
+def _hash32(x):
+    """A 32-bit integer hash (bijective: a uniform x gives a uniform hash)."""
+    x ^= x >> 16
+    x = (x * 0x7FEB352D) & _M32
+    x ^= x >> 15
+    x = (x * 0x846CA68B) & _M32
+    return x ^ (x >> 16)
+
+
+@njit(**_JIT)
+def _owen32(v, seed):
+    """v (a 32-bit fraction) under a nested uniform (Owen) scramble keyed by seed, hash-based (Burley 2020,
+    "Practical hash-based Owen scrambling", the Laine-Karras permutation of the reversed bits: each
+    step moves information from a digit only to the digits below it).  A uniform seed gives a uniform
+    result for any v; a (0, m, 2)-net stays one."""
+    x = (_reverse32(v) + seed) & _M32
+    x ^= (x * 0x6C50B47C) & _M32
+    x ^= (x * 0xB82F1E52) & _M32
+    x ^= (x * 0xC7AFE638) & _M32
+    x ^= (x * 0x8D22F6E6) & _M32
+    return _reverse32(x)
+
+
+@njit(**_JIT)
+def _sobol2(i):
+    """The second Sobol coordinate of index i, as a 32-bit fraction (generator: Pascal's matrix mod 2);
+    with the van der Corput first coordinate (reversed bits), a (0, 2)-sequence."""
+    y = 0
+    v = 1 << 31
+    while i:
+        if i & 1:
+            y ^= v
+        i >>= 1
+        v ^= v >> 1
+    return y
+
+
+# Irreducible polynomials over GF(2) of degree 2 .. 10 (bit i: the coefficient of x^i): GF(2^k) for
+# the orthogonal arrays of light_strata
+_GF2_POLY = np.array([0, 0, 0b111, 0b1011, 0b10011, 0b100101, 0b1000011, 0b10001001, 0b100011101, 0b1000010001,
+                      0b10000001001], np.int64)
+
+
+@njit(**_JIT)
+def _oa_field(s):
+    """How light_strata builds the orthogonal array of s levels: (1, polynomial) for s = 2^k, 2 <= k <=
+    10 (GF(2^k): + is XOR, alpha = x); (2, 0) for an odd prime s (integers mod s, alpha = 2); (0, 0)
+    for every other s (no such array: a random permutation of the cells instead)."""
+    k = 0
+    while (1 << k) < s:
+        k += 1
+    if (1 << k) == s and 2 <= k <= 10:
+        return 1, _GF2_POLY[k]
+    if s < 3 or s % 2 == 0:
+        return 0, 0
+    d = 3
+    while d * d <= s:
+        if s % d == 0:
+            return 0, 0
+        d += 2
+    return 2, 0
+
+
 @njit(**_JIT)
 def light_strata(samples, S, keys, jit, U):
     """Uniforms U (k, 2) of one light's samples at k shaded rows, stratified over each pixel's samples.
 
     samples (k,) int64: the tile sample each row belongs to (pixel s // S, the pixel's sample
-    j = s % S; a sample has at most one row); keys (P, S): a pixel's uniforms for its permutations;
-    jit (k, 2): the jitter of each row.  The light's square is cut as the film is by ``camera_tile``
-    (rows x cols grid, rows = floor(sqrt(S)), cols = S // rows; film sample j in cell (j % cols,
-    j // cols); the S - rows cols samples past the grid uniform), and sample j takes light cell
-    c_j = (lx, ly), jittered:
-
-        U[i] = ((lx + jit[i, 0]) / cols, (ly + jit[i, 1]) / rows)     (past the grid: U[i] = jit[i])
+    j = s % S; a sample has at most one row); keys (P, S): a pixel's uniforms for its permutations
+    and its scramble; jit (k, 2): each row's jitter.  The light's square is cut as the film is by
+    ``camera_tile`` (rows x cols grid, rows = floor(sqrt(S)), cols = S // rows; film sample j in
+    cell (j % cols, j // cols)), and sample j takes a light cell c_j = (lx, ly):
 
     * S = s^2 with s a power of two (4 .. 1024) or an odd prime: an orthogonal array of strength 2
       (Bose 1938; Jarosz et al. 2019 for rendering): with the film cell (cx, cy), lx = sigma_x(cx +
@@ -468,19 +543,34 @@ def light_strata(samples, S, keys, jit, U):
     * any other S: c_j = pi_p(j), a random permutation of the pixel's samples (Fisher-Yates as
       above with keys[p, t], t = S - 1 .. 1; cell c = (c % cols, c // cols)).
 
-    keys[p, 0] is never used.  Each U[i] is uniform on [0, 1)^2 whatever the film position (so every
-    light sampler keeps its density), but a pixel's S samples of the light cover the square evenly,
-    as Cycles' Sobol samples do: on a smooth integrand the pixel's variance falls much faster than
-    1 / S (docs/rendering.md, "Stratified light samples").  Only the pixels some row belongs to
-    are permuted.
+    The point in the cell: S a power of two: the pixel's S points of the (0, 2)-sequence
+    (``_reverse32``, ``_sobol2``) under an Owen scramble (:func:`_owen32`, seeds from keys[p, 0]),
+    a (0, m, 2)-net: sample j takes the net point that lies in cell c_j when S is a square (each
+    cell holds one), else point c_j, U[i] = (X + jit[i]) / 2^32 per axis (X the point's 32 bits);
+    this is what Cycles' samples are, and on a smooth light integral it beats a jittered cell by
+    far (the net is stratified in every 2^a x 2^b cut at once).  Any other S: uniform in the cell,
+    U[i] = ((lx + jit[i, 0]) / cols, (ly + jit[i, 1]) / rows) (the S - rows cols samples past the
+    grid: U[i] = jit[i]).
+
+    Each U[i] is uniform on [0, 1)^2 whatever the film position (so every light sampler keeps its
+    density: docs/rendering.md, "Stratified light samples"), but a pixel's S samples of the light
+    cover the square evenly.  Only the pixels some row belongs to are worked out.
     """
     rows = max(1, int(math.floor(math.sqrt(S))))
     cols = max(1, S // rows)
     m = rows * cols
     P = keys.shape[0]
-    kind, poly = _oa_field(rows) if rows == cols and m == S else (0, 0)
-    sig = np.empty(2 * cols, np.int64)                # sigma_x, sigma_y of the pixel being permuted
+    square = rows == cols and m == S
+    kind, poly = _oa_field(rows) if square else (0, 0)
+    net = S & (S - 1) == 0                            # a power of two: points of the scrambled net
+    k_cols = 0                                        # log2(cols) for a square power of two
+    while (1 << k_cols) < cols:
+        k_cols += 1
+    sig = np.empty(2 * cols, np.int64)                # sigma_x, sigma_y of the pixel being worked out
+    slot = np.empty(S, np.int64)                      # the net point in each cell (square nets)
     cell = np.full(P * S, -1, np.int64)               # c_j at p S + j, for the pixels met so far
+    NX = np.empty(P * S if net else 0, np.int64)      # the net point of each sample, 32-bit fractions
+    NY = np.empty(P * S if net else 0, np.int64)
     for i in range(samples.shape[0]):
         s = samples[i]
         p = s // S
@@ -509,6 +599,25 @@ def light_strata(samples, S, keys, jit, U):
                     else:
                         lx, ly = (cx + cy) % cols, (cx + 2 * cy) % cols
                     cell[b + j] = sig[cols + ly] * cols + sig[lx]
+            if net:
+                # -- the pixel's scrambled net; each sample's point (the one in its cell)
+                seed_x = _hash32(int(keys[p, 0] * 4294967296.0))
+                seed_y = _hash32(seed_x ^ 0x9E3779B9)
+                for t in range(S):
+                    slot[t] = t
+                if square:
+                    for t in range(S):
+                        X = _owen32(_reverse32(t), seed_x)
+                        Y = _owen32(_sobol2(t), seed_y)
+                        slot[(Y >> (32 - k_cols)) * cols + (X >> (32 - k_cols))] = t
+                for j in range(S):
+                    t = slot[cell[b + j]]
+                    NX[b + j] = _owen32(_reverse32(t), seed_x)
+                    NY[b + j] = _owen32(_sobol2(t), seed_y)
+        if net:
+            U[i, 0] = min((NX[s] + jit[i, 0]) / 4294967296.0, _ONE_BELOW)
+            U[i, 1] = min((NY[s] + jit[i, 1]) / 4294967296.0, _ONE_BELOW)
+            continue
         c = cell[s]
         if c < m:
             U[i, 0] = (c % cols + jit[i, 0]) / cols

@@ -171,6 +171,74 @@ def _gf_times_alpha(v: np.ndarray, s: int) -> np.ndarray | None:
     return None
 
 
+_M32 = np.uint64(0xFFFFFFFF)
+
+
+def _u32_mul(x: np.ndarray, c: int) -> np.ndarray:
+    return (x * np.uint64(c)) & _M32
+
+
+def _bits_reversed(v: np.ndarray) -> np.ndarray:
+    """(uint64) the 32 bits of v in reverse order, bit by bit."""
+    out = np.zeros_like(v)
+    for b in range(32):
+        out |= ((v >> np.uint64(b)) & np.uint64(1)) << np.uint64(31 - b)
+    return out
+
+
+def _hash(x: np.ndarray) -> np.ndarray:
+    x = x ^ (x >> np.uint64(16))
+    x = _u32_mul(x, 0x7FEB352D)
+    x = x ^ (x >> np.uint64(15))
+    x = _u32_mul(x, 0x846CA68B)
+    return x ^ (x >> np.uint64(16))
+
+
+def _owen(v: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """Burley's hash-based Owen scramble of 32-bit fractions v with seeds (broadcast)."""
+    x = (_bits_reversed(v) + seed) & _M32
+    for c in (0x6C50B47C, 0xB82F1E52, 0xC7AFE638, 0x8D22F6E6):
+        x = x ^ _u32_mul(x, c)
+    return _bits_reversed(x)
+
+
+def _sobol_second(i: np.ndarray) -> np.ndarray:
+    """Sobol's second coordinate of indices i as 32-bit fractions: digit d (weight 2^-d) is the parity of
+    sum_j C(j, d - 1) i_j, i_j the bits of i (Pascal's matrix; C(j, k) is odd iff k's bits are j's, Lucas)."""
+    y = np.zeros(i.shape, np.uint64)
+    for d in range(1, 33):
+        par = np.zeros(i.shape, np.uint64)
+        for j in range(32):
+            if (d - 1) & j == d - 1:
+                par ^= (i >> np.uint64(j)) & np.uint64(1)
+        y |= par << np.uint64(32 - d)
+    return y
+
+
+def _shuffle(keys: np.ndarray, n: int) -> np.ndarray:
+    """(P, n): a random permutation of range(n) per row, Fisher-Yates with keys (P, >= n): from the
+    identity, for t = n - 1 down to 1 swap entries t and min(floor(keys[:, t] (t + 1)), t)."""
+    perm = np.tile(np.arange(n), (keys.shape[0], 1))
+    pix = np.arange(keys.shape[0])
+    for t in range(n - 1, 0, -1):
+        a = np.minimum((keys[:, t] * (t + 1)).astype(np.int64), t)
+        perm[pix, t], perm[pix, a] = perm[pix, a], perm[pix, t].copy()
+    return perm
+
+
+def _gf_times_alpha(v: np.ndarray, s: int) -> np.ndarray | None:
+    """alpha v in the field of s elements (alpha = x in GF(2^k), 4 <= s = 2^k <= 1024; 2 mod an odd
+    prime s), or None when this s has no such field here."""
+    polys = {4: 0b111, 8: 0b1011, 16: 0b10011, 32: 0b100101, 64: 0b1000011, 128: 0b10001001,
+             256: 0b100011101, 512: 0b1000010001, 1024: 0b10000001001}
+    if s in polys:
+        w = 2 * v
+        return np.where(w >= s, w ^ polys[s], w)
+    if s >= 3 and s % 2 and all(s % d for d in range(3, int(s ** 0.5) + 1, 2)):
+        return (2 * v) % s
+    return None
+
+
 def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Generator) -> np.ndarray:
     """Uniforms (k, 2) for one light's samples at the k shaded rows whose tile samples are
     ``samples`` (k,), one block of the stream per light; strata = (n, S): the tile's n samples,
@@ -178,11 +246,13 @@ def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Ge
 
     Keys (n / S, S) then jitters (k, 2) are drawn; sample j of pixel p (film cell (j % cols,
     j // cols) of the rows x cols grid, rows = floor(sqrt(S)), cols = S // rows) takes a light cell
-    of the same grid, jittered (past the grid: the jitter alone).  S = s^2 with a field of s
-    elements: the cell (sigma_x(cx + cy), sigma_y(cx + alpha cy)), an orthogonal array against the
-    film cell, sigma_x / sigma_y shuffled by keys[:, 0:s] / keys[:, s-1:2s-1]; any other S: cell
-    pi_p(j), the pixel's samples shuffled by its keys.  Delta lights ignore them: their block is
-    skipped (``skip_uniforms``) and zeros are returned, the stream ending where drawing would leave it.
+    of the same grid.  S = s^2 with a field of s elements: the cell (sigma_x(cx + cy), sigma_y(cx +
+    alpha cy)), an orthogonal array against the film cell, sigma_x / sigma_y shuffled by
+    keys[:, 0:s] / keys[:, s-1:2s-1]; any other S: cell pi_p(j), the pixel's samples shuffled by its
+    keys.  S a power of two: the point is the pixel's Owen-scrambled (0, 2)-sequence point in that
+    cell (S square) or of that index, plus the jitter below its 32 bits; else the jittered cell (past
+    the grid: the jitter alone).  Delta lights ignore them: their block is skipped
+    (``skip_uniforms``) and zeros are returned, the stream ending where drawing would leave it.
     """
     n, S = strata
     k = samples.size
@@ -196,14 +266,30 @@ def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Ge
     j = np.arange(S)
     cx, cy = j % cols, j // cols
     a_cy = _gf_times_alpha(cy, cols) if rows * cols == S and rows == cols else None
+    p, jj = samples // S, samples % S
     if a_cy is None:
-        c = _shuffle(keys, S).ravel()[samples]
+        c = _shuffle(keys, S)[p, jj]
     else:
         gf2 = cols & (cols - 1) == 0
         lx, ly = (cx ^ cy, cx ^ a_cy) if gf2 else ((cx + cy) % cols, (cx + a_cy) % cols)
         sx, sy = _shuffle(keys, cols), _shuffle(keys[:, cols - 1:], cols)
-        p, jj = samples // S, samples % S
         c = sy[p, ly[jj]] * cols + sx[p, lx[jj]]
+    if S & (S - 1) == 0:
+        # the pixel's Owen-scrambled (0, 2)-sequence (a net of S points)
+        seed_x = _hash((keys[:, 0] * 4294967296.0).astype(np.uint64))[:, None]
+        seed_y = _hash(seed_x ^ np.uint64(0x9E3779B9))
+        t = np.arange(S, dtype=np.uint64)[None, :]
+        X, Y = _owen(_bits_reversed(t), seed_x), _owen(_sobol_second(t), seed_y)
+        if rows == cols:
+            bits = np.uint64(32 - int(np.log2(cols)))
+            slot = np.empty((n // S, S), np.int64)
+            cell_of = ((Y >> bits) * np.uint64(cols) + (X >> bits)).astype(np.int64)
+            slot[np.arange(n // S)[:, None], cell_of] = np.arange(S)[None, :]
+            c = slot[p, c]
+        u = np.empty((k, 2))
+        u[:, 0] = np.minimum((X[p, c].astype(np.float64) + jit[:, 0]) / 4294967296.0, 1.0 - 2.0 ** -53)
+        u[:, 1] = np.minimum((Y[p, c].astype(np.float64) + jit[:, 1]) / 4294967296.0, 1.0 - 2.0 ** -53)
+        return u
     grid = c < rows * cols
     u = jit.copy()
     u[grid, 0] = (c[grid] % cols + jit[grid, 0]) / cols
