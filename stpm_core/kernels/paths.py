@@ -568,6 +568,8 @@ def light_strata(samples, S, keys, jit, U):
         k_cols += 1
     sig = np.empty(2 * cols, np.int64)                # sigma_x, sigma_y of the pixel being worked out
     slot = np.empty(S, np.int64)                      # the net point in each cell (square nets)
+    TX = np.empty(S, np.int64)                        # the pixel's net points, 32-bit fractions
+    TY = np.empty(S, np.int64)
     cell = np.full(P * S, -1, np.int64)               # c_j at p S + j, for the pixels met so far
     NX = np.empty(P * S if net else 0, np.int64)      # the net point of each sample, 32-bit fractions
     NY = np.empty(P * S if net else 0, np.int64)
@@ -605,15 +607,15 @@ def light_strata(samples, S, keys, jit, U):
                 seed_y = _hash32(seed_x ^ 0x9E3779B9)
                 for t in range(S):
                     slot[t] = t
+                    TX[t] = _owen32(_reverse32(t), seed_x)
+                    TY[t] = _owen32(_sobol2(t), seed_y)
                 if square:
                     for t in range(S):
-                        X = _owen32(_reverse32(t), seed_x)
-                        Y = _owen32(_sobol2(t), seed_y)
-                        slot[(Y >> (32 - k_cols)) * cols + (X >> (32 - k_cols))] = t
+                        slot[(TY[t] >> (32 - k_cols)) * cols + (TX[t] >> (32 - k_cols))] = t
                 for j in range(S):
                     t = slot[cell[b + j]]
-                    NX[b + j] = _owen32(_reverse32(t), seed_x)
-                    NY[b + j] = _owen32(_sobol2(t), seed_y)
+                    NX[b + j] = TX[t]
+                    NY[b + j] = TY[t]
         if net:
             U[i, 0] = min((NX[s] + jit[i, 0]) / 4294967296.0, _ONE_BELOW)
             U[i, 1] = min((NY[s] + jit[i, 1]) / 4294967296.0, _ONE_BELOW)
