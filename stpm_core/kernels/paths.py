@@ -416,32 +416,6 @@ def denoising_seen_add(V, c_albedo, rows, idx, use_idx, beta, use_beta, first, f
 # ----------------------------------------------------------------------------
 # Next-event estimation
 # ----------------------------------------------------------------------------
-# Irreducible polynomials over GF(2) of degree 2 .. 10 (bit i: the coefficient of x^i): GF(2^k) for
-# the orthogonal arrays of light_strata
-_GF2_POLY = np.array([0, 0, 0b111, 0b1011, 0b10011, 0b100101, 0b1000011, 0b10001001, 0b100011101, 0b1000010001,
-                      0b10000001001], np.int64)
-
-
-@njit(**_JIT)
-def _oa_field(s):
-    """How light_strata builds the orthogonal array of s levels: (1, polynomial) for s = 2^k, 2 <= k <=
-    10 (GF(2^k): + is XOR, alpha = x); (2, 0) for an odd prime s (integers mod s, alpha = 2); (0, 0)
-    for every other s (no such array: a random permutation of the cells instead)."""
-    k = 0
-    while (1 << k) < s:
-        k += 1
-    if (1 << k) == s and 2 <= k <= 10:
-        return 1, _GF2_POLY[k]
-    if s < 3 or s % 2 == 0:
-        return 0, 0
-    d = 3
-    while d * d <= s:
-        if s % d == 0:
-            return 0, 0
-        d += 2
-    return 2, 0
-
-
 _M32 = 0xFFFFFFFF
 _ONE_BELOW = 1.0 - 2.0 ** -53                          # the largest double below 1
 
@@ -501,23 +475,15 @@ _GF2_POLY = np.array([0, 0, 0b111, 0b1011, 0b10011, 0b100101, 0b1000011, 0b10001
 
 
 @njit(**_JIT)
-def _oa_field(s):
-    """How light_strata builds the orthogonal array of s levels: (1, polynomial) for s = 2^k, 2 <= k <=
-    10 (GF(2^k): + is XOR, alpha = x); (2, 0) for an odd prime s (integers mod s, alpha = 2); (0, 0)
-    for every other s (no such array: a random permutation of the cells instead)."""
+def _oa_poly(S):
+    """The polynomial of GF(s) (s = 2^k, 2 <= k <= 10) when S = s^2: light_strata's orthogonal array
+    of s levels; 0 for every other S (no array: a random permutation instead)."""
     k = 0
-    while (1 << k) < s:
+    while (1 << (2 * k)) < S:
         k += 1
-    if (1 << k) == s and 2 <= k <= 10:
-        return 1, _GF2_POLY[k]
-    if s < 3 or s % 2 == 0:
-        return 0, 0
-    d = 3
-    while d * d <= s:
-        if s % d == 0:
-            return 0, 0
-        d += 2
-    return 2, 0
+    if (1 << (2 * k)) == S and 2 <= k <= 10:
+        return _GF2_POLY[k]
+    return 0
 
 
 @njit(**_JIT)
@@ -526,107 +492,84 @@ def light_strata(samples, S, keys, jit, U):
 
     samples (k,) int64: the tile sample each row belongs to (pixel s // S, the pixel's sample
     j = s % S; a sample has at most one row); keys (P, S): a pixel's uniforms for its permutations
-    and its scramble; jit (k, 2): each row's jitter.  The light's square is cut as the film is by
-    ``camera_tile`` (rows x cols grid, rows = floor(sqrt(S)), cols = S // rows; film sample j in
-    cell (j % cols, j // cols)), and sample j takes a light cell c_j = (lx, ly):
+    and its scramble; jit (k, 2): each row's jitter below the points' 32 bits.
 
-    * S = s^2 with s a power of two (4 .. 1024) or an odd prime: an orthogonal array of strength 2
-      (Bose 1938; Jarosz et al. 2019 for rendering): with the film cell (cx, cy), lx = sigma_x(cx +
-      cy), ly = sigma_y(cx + alpha cy) in the field of s elements, so each of the four coordinates
-      (cx, cy, lx, ly) against each other is an s x s Latin square: the light's strata are
-      stratified against the film's too (Cycles' Sobol samples are, in 4D), which the pixel's
-      variance feels where the light integral changes over the pixel.  sigma_x, sigma_y: random
+    A pixel's S points are the first S of the (0, 2)-sequence (``_reverse32``: van der Corput,
+    ``_sobol2``: Sobol's second coordinate) under a nested uniform (Owen) scramble,
+    :func:`_owen32`, seeded per pixel by keys[p, 0] (``_hash32``), as Cycles' samples are: S = 2^m
+    points form a (0, m, 2)-net (one point in every 2^a x 2^b cut, a + b = m), and on a smooth
+    light integral they beat jittered cells by far.  Sample j takes point t_j, U[i] = (X_t + jit[i])
+    / 2^32 per axis (X_t the point's 32 bits):
+
+    * S = s^2, s = 2^k (k = 2 .. 10): the point in light cell (lx, ly) of the s x s grid (the net
+      holds one in each), with lx = sigma_x(cx + cy), ly = sigma_y(cx + alpha cy) in GF(s) (+ is
+      XOR, alpha = x) from the film cell (cx, cy) = (j % s, j // s) of ``camera_tile``: an
+      orthogonal array of strength 2 (Bose 1938; Jarosz et al. 2019 for rendering), each of the
+      four coordinates (cx, cy, lx, ly) against each other an s x s Latin square, so the light's
+      points are stratified against the film's too (Cycles' are, in 4D).  sigma_x, sigma_y: random
       permutations of the s levels per pixel (Fisher-Yates: from the identity, for t = s - 1 down
       to 1 swap entries t and min(floor(keys[p, o + t] (t + 1)), t); o = 0 for sigma_x, s - 1 for
-      sigma_y), which keep the array's strata and make each light cell uniform whatever the film
-      cell;
-    * any other S: c_j = pi_p(j), a random permutation of the pixel's samples (Fisher-Yates as
-      above with keys[p, t], t = S - 1 .. 1; cell c = (c % cols, c // cols)).
+      sigma_y), which keep the array and make each light cell uniform whatever the film cell;
+    * any other S: t_j = pi_p(j), a random permutation of the pixel's samples (Fisher-Yates as
+      above with keys[p, t], t = S - 1 .. 1).
 
-    The point in the cell: S a power of two: the pixel's S points of the (0, 2)-sequence
-    (``_reverse32``, ``_sobol2``) under an Owen scramble (:func:`_owen32`, seeds from keys[p, 0]),
-    a (0, m, 2)-net: sample j takes the net point that lies in cell c_j when S is a square (each
-    cell holds one), else point c_j, U[i] = (X + jit[i]) / 2^32 per axis (X the point's 32 bits);
-    this is what Cycles' samples are, and on a smooth light integral it beats a jittered cell by
-    far (the net is stratified in every 2^a x 2^b cut at once).  Any other S: uniform in the cell,
-    U[i] = ((lx + jit[i, 0]) / cols, (ly + jit[i, 1]) / rows) (the S - rows cols samples past the
-    grid: U[i] = jit[i]).
-
-    Each U[i] is uniform on [0, 1)^2 whatever the film position (so every light sampler keeps its
-    density: docs/rendering.md, "Stratified light samples"), but a pixel's S samples of the light
-    cover the square evenly.  Only the pixels some row belongs to are worked out.
+    Each U[i] is uniform on [0, 1)^2 whatever the film position (the permutations are uniform, the
+    seed is added to each point's reversed bits): every light sampler keeps its density
+    (docs/rendering.md, "Stratified light samples").  Only the pixels some row belongs to are
+    worked out.
     """
-    rows = max(1, int(math.floor(math.sqrt(S))))
-    cols = max(1, S // rows)
-    m = rows * cols
+    poly = _oa_poly(S)
+    s = 1
+    while s * s < S:
+        s += 1
+    k_s = 0                                           # log2(s) with the array
+    while (1 << k_s) < s:
+        k_s += 1
     P = keys.shape[0]
-    square = rows == cols and m == S
-    kind, poly = _oa_field(rows) if square else (0, 0)
-    net = S & (S - 1) == 0                            # a power of two: points of the scrambled net
-    k_cols = 0                                        # log2(cols) for a square power of two
-    while (1 << k_cols) < cols:
-        k_cols += 1
-    sig = np.empty(2 * cols, np.int64)                # sigma_x, sigma_y of the pixel being worked out
-    slot = np.empty(S, np.int64)                      # the net point in each cell (square nets)
-    TX = np.empty(S, np.int64)                        # the pixel's net points, 32-bit fractions
+    sig = np.empty(2 * s, np.int64)                   # sigma_x, sigma_y of the pixel being worked out
+    slot = np.empty(S, np.int64)                      # the net point in each cell (with the array)
+    TX = np.empty(S, np.int64)                        # the pixel's points, 32-bit fractions
     TY = np.empty(S, np.int64)
-    cell = np.full(P * S, -1, np.int64)               # c_j at p S + j, for the pixels met so far
-    NX = np.empty(P * S if net else 0, np.int64)      # the net point of each sample, 32-bit fractions
-    NY = np.empty(P * S if net else 0, np.int64)
+    pt = np.full(P * S, -1, np.int64)                 # t_j at p S + j, for the pixels met so far
+    NX = np.empty(P * S, np.int64)                    # the point of each sample
+    NY = np.empty(P * S, np.int64)
     for i in range(samples.shape[0]):
-        s = samples[i]
-        p = s // S
+        q = samples[i]
+        p = q // S
         b = p * S
-        if cell[b] < 0:
-            # -- the pixel's light cells, first time one of its samples is met
-            if kind == 0:
+        if pt[b] < 0:
+            # -- the pixel's scrambled points
+            seed_x = _hash32(int(keys[p, 0] * 4294967296.0))
+            seed_y = _hash32(seed_x ^ 0x9E3779B9)
+            for t in range(S):
+                TX[t] = _owen32(_reverse32(t), seed_x)
+                TY[t] = _owen32(_sobol2(t), seed_y)
+            # -- each sample's point: by the orthogonal array's cell, or a permutation
+            if poly != 0:
+                for t in range(S):
+                    slot[(TY[t] >> (32 - k_s)) * s + (TX[t] >> (32 - k_s))] = t
+                for h in range(2):
+                    o = h * (s - 1)
+                    for t in range(s):
+                        sig[h * s + t] = t
+                    for t in range(s - 1, 0, -1):
+                        a = min(int(keys[p, o + t] * (t + 1)), t)
+                        sig[h * s + t], sig[h * s + a] = sig[h * s + a], sig[h * s + t]
                 for j in range(S):
-                    cell[b + j] = j
+                    cx, cy = j % s, j // s
+                    acy = (cy << 1) ^ poly if (cy << 1) & s else cy << 1      # alpha cy in GF(2^k)
+                    pt[b + j] = slot[sig[s + (cx ^ acy)] * s + sig[cx ^ cy]]
+            else:
+                for j in range(S):
+                    pt[b + j] = j
                 for j in range(S - 1, 0, -1):
                     a = min(int(keys[p, j] * (j + 1)), j)
-                    cell[b + j], cell[b + a] = cell[b + a], cell[b + j]
-            else:
-                for h in range(2):
-                    o = h * (cols - 1)
-                    for t in range(cols):
-                        sig[h * cols + t] = t
-                    for t in range(cols - 1, 0, -1):
-                        a = min(int(keys[p, o + t] * (t + 1)), t)
-                        sig[h * cols + t], sig[h * cols + a] = sig[h * cols + a], sig[h * cols + t]
-                for j in range(S):
-                    cx, cy = j % cols, j // cols
-                    if kind == 1:
-                        acy = (cy << 1) ^ poly if (cy << 1) & cols else cy << 1     # alpha cy in GF(2^k)
-                        lx, ly = cx ^ cy, cx ^ acy
-                    else:
-                        lx, ly = (cx + cy) % cols, (cx + 2 * cy) % cols
-                    cell[b + j] = sig[cols + ly] * cols + sig[lx]
-            if net:
-                # -- the pixel's scrambled net; each sample's point (the one in its cell)
-                seed_x = _hash32(int(keys[p, 0] * 4294967296.0))
-                seed_y = _hash32(seed_x ^ 0x9E3779B9)
-                for t in range(S):
-                    slot[t] = t
-                    TX[t] = _owen32(_reverse32(t), seed_x)
-                    TY[t] = _owen32(_sobol2(t), seed_y)
-                if square:
-                    for t in range(S):
-                        slot[(TY[t] >> (32 - k_cols)) * cols + (TX[t] >> (32 - k_cols))] = t
-                for j in range(S):
-                    t = slot[cell[b + j]]
-                    NX[b + j] = TX[t]
-                    NY[b + j] = TY[t]
-        if net:
-            U[i, 0] = min((NX[s] + jit[i, 0]) / 4294967296.0, _ONE_BELOW)
-            U[i, 1] = min((NY[s] + jit[i, 1]) / 4294967296.0, _ONE_BELOW)
-            continue
-        c = cell[s]
-        if c < m:
-            U[i, 0] = (c % cols + jit[i, 0]) / cols
-            U[i, 1] = (c // cols + jit[i, 1]) / rows
-        else:
-            U[i, 0] = jit[i, 0]
-            U[i, 1] = jit[i, 1]
+                    pt[b + j], pt[b + a] = pt[b + a], pt[b + j]
+            for j in range(S):
+                NX[b + j] = TX[pt[b + j]]
+                NY[b + j] = TY[pt[b + j]]
+        U[i, 0] = min((NX[q] + jit[i, 0]) / 4294967296.0, _ONE_BELOW)
+        U[i, 1] = min((NY[q] + jit[i, 1]) / 4294967296.0, _ONE_BELOW)
 
 
 @njit(**_JIT)

@@ -147,30 +147,6 @@ def _is_delta_light(light) -> bool:
     return light.type == "SUN" and float(light.angle) <= 0.0
 
 
-def _shuffle(keys: np.ndarray, n: int) -> np.ndarray:
-    """(P, n): a random permutation of range(n) per row, Fisher-Yates with keys (P, >= n): from the
-    identity, for t = n - 1 down to 1 swap entries t and min(floor(keys[:, t] (t + 1)), t)."""
-    perm = np.tile(np.arange(n), (keys.shape[0], 1))
-    pix = np.arange(keys.shape[0])
-    for t in range(n - 1, 0, -1):
-        a = np.minimum((keys[:, t] * (t + 1)).astype(np.int64), t)
-        perm[pix, t], perm[pix, a] = perm[pix, a], perm[pix, t].copy()
-    return perm
-
-
-def _gf_times_alpha(v: np.ndarray, s: int) -> np.ndarray | None:
-    """alpha v in the field of s elements (alpha = x in GF(2^k), 4 <= s = 2^k <= 1024; 2 mod an odd
-    prime s), or None when this s has no such field here."""
-    polys = {4: 0b111, 8: 0b1011, 16: 0b10011, 32: 0b100101, 64: 0b1000011, 128: 0b10001001,
-             256: 0b100011101, 512: 0b1000010001, 1024: 0b10000001001}
-    if s in polys:
-        w = 2 * v
-        return np.where(w >= s, w ^ polys[s], w)
-    if s >= 3 and s % 2 and all(s % d for d in range(3, int(s ** 0.5) + 1, 2)):
-        return (2 * v) % s
-    return None
-
-
 _M32 = np.uint64(0xFFFFFFFF)
 
 
@@ -226,17 +202,12 @@ def _shuffle(keys: np.ndarray, n: int) -> np.ndarray:
     return perm
 
 
-def _gf_times_alpha(v: np.ndarray, s: int) -> np.ndarray | None:
-    """alpha v in the field of s elements (alpha = x in GF(2^k), 4 <= s = 2^k <= 1024; 2 mod an odd
-    prime s), or None when this s has no such field here."""
+def _gf_times_alpha(v: np.ndarray, s: int) -> np.ndarray:
+    """alpha v in GF(s), s = 2^k (alpha = x; the field's polynomial from a table)."""
     polys = {4: 0b111, 8: 0b1011, 16: 0b10011, 32: 0b100101, 64: 0b1000011, 128: 0b10001001,
              256: 0b100011101, 512: 0b1000010001, 1024: 0b10000001001}
-    if s in polys:
-        w = 2 * v
-        return np.where(w >= s, w ^ polys[s], w)
-    if s >= 3 and s % 2 and all(s % d for d in range(3, int(s ** 0.5) + 1, 2)):
-        return (2 * v) % s
-    return None
+    w = 2 * v
+    return np.where(w >= s, w ^ polys[s], w)
 
 
 def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Generator) -> np.ndarray:
@@ -244,14 +215,12 @@ def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Ge
     ``samples`` (k,), one block of the stream per light; strata = (n, S): the tile's n samples,
     S per pixel (consecutive).
 
-    Keys (n / S, S) then jitters (k, 2) are drawn; sample j of pixel p (film cell (j % cols,
-    j // cols) of the rows x cols grid, rows = floor(sqrt(S)), cols = S // rows) takes a light cell
-    of the same grid.  S = s^2 with a field of s elements: the cell (sigma_x(cx + cy), sigma_y(cx +
-    alpha cy)), an orthogonal array against the film cell, sigma_x / sigma_y shuffled by
-    keys[:, 0:s] / keys[:, s-1:2s-1]; any other S: cell pi_p(j), the pixel's samples shuffled by its
-    keys.  S a power of two: the point is the pixel's Owen-scrambled (0, 2)-sequence point in that
-    cell (S square) or of that index, plus the jitter below its 32 bits; else the jittered cell (past
-    the grid: the jitter alone).  Delta lights ignore them: their block is skipped
+    Keys (n / S, S) then jitters (k, 2) are drawn.  A pixel's points: the first S of the
+    (0, 2)-sequence, Owen-scrambled with seeds from keys[:, 0].  S = s^2, s = 2^k >= 4: sample j
+    (film cell (j % s, j // s)) takes the point in light cell (sigma_x(cx ^ cy), sigma_y(cx ^ alpha
+    cy)), an orthogonal array against the film cell, sigma_x / sigma_y shuffled by keys[:, 0:s] /
+    keys[:, s-1:2s-1]; any other S: point pi_p(j), the pixel's samples shuffled by its keys.
+    U = (the point's 32 bits + jitter) / 2^32.  Delta lights ignore them: their block is skipped
     (``skip_uniforms``) and zeros are returned, the stream ending where drawing would leave it.
     """
     n, S = strata
@@ -261,39 +230,28 @@ def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Ge
         return np.zeros((k, 2))
     keys = rng.random((n // S, S))
     jit = rng.random((k, 2))
-    rows = max(1, int(np.floor(np.sqrt(S))))
-    cols = max(1, S // rows)
-    j = np.arange(S)
-    cx, cy = j % cols, j // cols
-    a_cy = _gf_times_alpha(cy, cols) if rows * cols == S and rows == cols else None
+    P = n // S
     p, jj = samples // S, samples % S
-    if a_cy is None:
-        c = _shuffle(keys, S)[p, jj]
+    # the pixels' Owen-scrambled (0, 2)-sequence points
+    seed_x = _hash((keys[:, 0] * 4294967296.0).astype(np.uint64))[:, None]
+    seed_y = _hash(seed_x ^ np.uint64(0x9E3779B9))
+    t = np.arange(S, dtype=np.uint64)[None, :]
+    X, Y = _owen(_bits_reversed(t), seed_x), _owen(_sobol_second(t), seed_y)
+    s = int(round(np.sqrt(S)))
+    if s * s == S and s >= 4 and s & (s - 1) == 0 and s <= 1024:
+        j = np.arange(S)
+        cx, cy = j % s, j // s
+        lx, ly = cx ^ cy, cx ^ _gf_times_alpha(cy, s)
+        sx, sy = _shuffle(keys, s), _shuffle(keys[:, s - 1:], s)
+        bits = np.uint64(32 - int(np.log2(s)))
+        slot = np.empty((P, S), np.int64)
+        slot[np.arange(P)[:, None], ((Y >> bits) * np.uint64(s) + (X >> bits)).astype(np.int64)] = np.arange(S)[None, :]
+        c = slot[p, sy[p, ly[jj]] * s + sx[p, lx[jj]]]
     else:
-        gf2 = cols & (cols - 1) == 0
-        lx, ly = (cx ^ cy, cx ^ a_cy) if gf2 else ((cx + cy) % cols, (cx + a_cy) % cols)
-        sx, sy = _shuffle(keys, cols), _shuffle(keys[:, cols - 1:], cols)
-        c = sy[p, ly[jj]] * cols + sx[p, lx[jj]]
-    if S & (S - 1) == 0:
-        # the pixel's Owen-scrambled (0, 2)-sequence (a net of S points)
-        seed_x = _hash((keys[:, 0] * 4294967296.0).astype(np.uint64))[:, None]
-        seed_y = _hash(seed_x ^ np.uint64(0x9E3779B9))
-        t = np.arange(S, dtype=np.uint64)[None, :]
-        X, Y = _owen(_bits_reversed(t), seed_x), _owen(_sobol_second(t), seed_y)
-        if rows == cols:
-            bits = np.uint64(32 - int(np.log2(cols)))
-            slot = np.empty((n // S, S), np.int64)
-            cell_of = ((Y >> bits) * np.uint64(cols) + (X >> bits)).astype(np.int64)
-            slot[np.arange(n // S)[:, None], cell_of] = np.arange(S)[None, :]
-            c = slot[p, c]
-        u = np.empty((k, 2))
-        u[:, 0] = np.minimum((X[p, c].astype(np.float64) + jit[:, 0]) / 4294967296.0, 1.0 - 2.0 ** -53)
-        u[:, 1] = np.minimum((Y[p, c].astype(np.float64) + jit[:, 1]) / 4294967296.0, 1.0 - 2.0 ** -53)
-        return u
-    grid = c < rows * cols
-    u = jit.copy()
-    u[grid, 0] = (c[grid] % cols + jit[grid, 0]) / cols
-    u[grid, 1] = (c[grid] // cols + jit[grid, 1]) / rows
+        c = _shuffle(keys, S)[p, jj]
+    u = np.empty((k, 2))
+    u[:, 0] = np.minimum((X[p, c].astype(np.float64) + jit[:, 0]) / 4294967296.0, 1.0 - 2.0 ** -53)
+    u[:, 1] = np.minimum((Y[p, c].astype(np.float64) + jit[:, 1]) / 4294967296.0, 1.0 - 2.0 ** -53)
     return u
 
 
