@@ -490,8 +490,8 @@ def _oa_poly(S):
 def light_strata(samples, S, keys, jit, U):
     """Uniforms U (k, 2) of one light's samples at k shaded rows, stratified over each pixel's samples.
 
-    samples (k,) int64: the tile sample each row belongs to (pixel s // S, the pixel's sample
-    j = s % S; a sample has at most one row); keys (P, S): a pixel's uniforms for its permutations
+    samples (k,) int64: the tile sample q each row belongs to (pixel p = q // S, the pixel's sample
+    j = q % S; a sample has at most one row); keys (P, S): a pixel's uniforms for its permutations
     and its scramble; jit (k, 2): each row's jitter below the points' 32 bits.
 
     A pixel's S points are the first S of the (0, 2)-sequence (``_reverse32``: van der Corput,
