@@ -96,17 +96,27 @@ def _is_delta_light(light) -> bool:
     return light.type == "SUN" and float(light.angle) <= 0.0
 
 
-def _light_uniforms(light, n: int, rng: np.random.Generator, out: np.ndarray) -> np.ndarray:
-    """Uniforms (n, 2) for one light's samples, one block of the stream per light, drawn into out.
+def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Generator, out: np.ndarray) -> np.ndarray:
+    """Uniforms (k, 2) for one light's samples at k shaded rows, one block of the stream per light,
+    written into out.
 
-    Delta lights ignore them: their block is skipped (``skip_uniforms``) and
-    zeros are returned, the stream ending where drawing would leave it.
+    samples (k,) int64: each row's sample in the tile; strata = (n, S): the tile's n samples, S
+    per pixel.  Drawn: the pixels' keys (n / S, S) (their permutations and scramble seed), then
+    jitters (k, 2); placed by ``kernels.paths.light_strata`` (each pixel's samples of the light
+    stratified).  Delta lights
+    ignore them: that block is skipped (``skip_uniforms``) and zeros are returned, the stream
+    ending where drawing would leave it.
     """
+    n, S = strata
+    k = samples.shape[0]
     if _is_delta_light(light):
-        skip_uniforms(rng, 2 * n)
+        skip_uniforms(rng, n + 2 * k)
         out[...] = 0.0
         return out
-    return rng.random(out=out)
+    keys = rng.random(out=_scratch("light_keys", (n // S, S)))
+    jit = rng.random(out=_scratch("light_jit", (k, 2)))
+    _K.light_strata(samples, S, keys, jit, out)
+    return out
 
 
 def _has_shape(light) -> bool:
@@ -198,14 +208,16 @@ def _first_pose(a: np.ndarray) -> np.ndarray:
 
 def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.ndarray, t_s: np.ndarray, rng,
             stats: TraceStats, dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool, mis: np.ndarray = None,
-            clamp: float = 0.0) -> bool:
+            clamp: float = 0.0, strata: tuple = None) -> bool:
     """Next-event estimation at the hit rows sh (k,) of ``hits`` (rays d, closures C, hit r's is row
     crow[r], ``kernels.svm.shade_rows``), added straight
     into dst (n, 3) (the Direct pass: dst[idx[row]] += beta[row] * contribution, light by light);
     returns whether any shadow ray was cast.  mis (k,) uint8: the paths of these rows may go on
     through their rough lobes (the world's samples are then weighed against them,
     ``kernels.paths.nee_light``; :func:`mis_rows`; None: none may);
-    clamp: each light sample's contribution at most this (0: off; Cycles' Clamp Direct / Indirect).
+    clamp: each light sample's contribution at most this (0: off; Cycles' Clamp Direct / Indirect);
+    strata: (n, S) the tile's sample count and samples per pixel (None: (k, 1), no strata), over
+    which the light's uniforms are stratified.
 
     Per light with power: its (k, 2) uniforms (``_light_uniforms``), ``kernels.paths.nee_light``
     (light sample + BSDF + shadow-ray set-up), the shadow rays at the rows' times, then
@@ -222,11 +234,15 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
     contrib = _scratch("contrib", (k, 3))
     S = _scratch("light_samples", (k, 8))
     E, E_avg = ctx.ggx
+    if strata is None:
+        samples, strata = np.arange(k), (k, 1)
+    else:
+        samples = np.take(idx_k, sh, out=_scratch("light_samples_of", (k,), np.int64)) if use_idx else sh
     for li in range(len(lights)):
         if lights.power[li] <= 0.0:
             continue
         light = lights.lights[li]
-        u = _light_uniforms(light, k, rng, _scratch("u_light", (k, 2)))
+        u = _light_uniforms(light, samples, strata, rng, _scratch("u_light", (k, 2)))
         prm, mesh = ctx.light_data[li]
         poses = light_poses(lights, li, t_s)
         m = _K.nee_light(sh, P, NG, NS, d, C, crow, E, E_avg, prm, poses, *mesh, t_s, u, EPS,
@@ -340,7 +356,7 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
 
 def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_axis,
                 V: np.ndarray | None = None, layout: dict | None = None,
-                touched: set | None = None, cam_R: np.ndarray | None = None) -> np.ndarray:
+                touched: set | None = None, cam_R: np.ndarray | None = None, spp: int = 1) -> np.ndarray:
     """Radiance of the camera rays o, d (n, 3) at times (n,) split into passes -> V (n, K).
 
     tmax0 (n,) clips the camera rays; cam_pos, cam_axis (k, 3) (k = 1 or n) are
@@ -368,8 +384,11 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     (and ``denoising_seen_add`` for light shapes), carried through ``specular_step``; cam_R (k, 3, 3)
     the camera's rotation at each sample's time for Cycles' camera-space normal (None: world space).
 
-    Random numbers per bounce: per light with power (k, 2) at the shaded rows
-    (skipped for delta lights), then (k', 3) for the delta lobes of the
+    spp: the samples of each pixel, consecutive in o (the tile's layout): next-event estimation
+    stratifies each light's samples over them (``kernels.paths.light_strata``; 1: none).
+
+    Random numbers per bounce: per light with power (n / spp, spp) permutation keys and (k, 2)
+    jitters at the shaded rows (skipped for delta lights), then (k', 3) for the delta lobes of the
     continuing rows and, from ``RR_START`` on, (k',) for Russian roulette.
     """
     n = o.shape[0]
@@ -467,7 +486,8 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         if n_sh:
             t_s = np.take(t, sh, out=_scratch("t_s", (n_sh,)))
             if len(ctx.lights) and _direct(ctx, sh, hits, d, C, crow, t_s, rng, stats, L_direct, idx_k, use_idx,
-                                           beta_k, use_beta, mis=mis_rows(ctx, bounce, counts, sh), clamp=clamp):
+                                           beta_k, use_beta, mis=mis_rows(ctx, bounce, counts, sh), clamp=clamp,
+                                           strata=(n, int(spp))):
                 touched.add("Direct")
             if ctx.maps is not None:
                 _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched)
@@ -643,7 +663,7 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
     layout = ctx.layout
     V = shade_paths(ctx, o, d, times, tmax0, rng, tstats, pos, axis,
                     V=_scratch("V", (n, max(b for _, b in layout.values()))), layout=layout, touched=touched,
-                    cam_R=R if ctx.features else None)
+                    cam_R=R if ctx.features else None, spp=S)
     # Image channel of every column of V; columns of passes nothing reached are left out
     chan, keep = [], []
     for name, (a, b) in layout.items():

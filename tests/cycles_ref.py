@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["render_cycles", "render_stpm", "block_ztest", "ZResult"]
+__all__ = ["render_cycles", "render_stpm", "block_ztest", "ZResult", "lit_variance_ratio"]
 
 
 def _read_exr_rgb(path) -> np.ndarray:
@@ -131,3 +131,14 @@ def render_cycles_paths(scene, tmp_path, samples: int = 64, seeds=(0, 1, 2, 3), 
     cy.caustics_reflective = cy.caustics_refractive = bool(caustics)
     cy.blur_glossy = float(blur_glossy)
     return _cycles_seeds(scene, tmp_path, seeds, "cycles_paths")
+
+
+def lit_variance_ratio(stpm: np.ndarray, cyc: np.ndarray, lit: float = 0.05) -> tuple[float, int]:
+    """(median over lit pixels of the per-pixel variance over seeds STPM / Cycles, lit pixel count) of
+    (K, H, W, 3) stacks (channel means).  Lit: Cycles' mean above ``lit`` times its 90th percentile
+    (an emitter the camera sees is far brighter than any wall, and has no noise)."""
+    s, c = stpm.mean(axis=-1), cyc.mean(axis=-1)
+    m = c.mean(axis=0)
+    sel = m > lit * np.percentile(m, 90)
+    ratio = s.var(axis=0, ddof=1)[sel] / np.maximum(c.var(axis=0, ddof=1)[sel], 1e-12)
+    return float(np.median(ratio)), int(sel.sum())

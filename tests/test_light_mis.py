@@ -179,7 +179,11 @@ def test_weighing_leaves_the_image_unbiased_and_cuts_its_noise():
     se = np.sqrt(A.var(0, ddof=1) / 6 + B.var(0, ddof=1) / 6 + (0.002 * B.mean(0)) ** 2 + 1e-12)
     z = (A.mean(0) - B.mean(0)) / se
     assert np.abs(z).max() < 5.0, np.round(z, 1)
-    assert abs(a.mean() / b.mean() - 1.0) < 0.03, (a.mean(), b.mean())
+    # the whole image's mean: next-event estimation alone through the near-mirror lobe has heavy tails
+    # (its image mean varies by 20 % from seed to seed), so the tolerance is its standard error
+    ma, mb = a.mean(axis=(1, 2)), b.mean(axis=(1, 2))
+    z_mean = (ma.mean() - mb.mean()) / np.sqrt(ma.var(ddof=1) / 6 + mb.var(ddof=1) / 6)
+    assert abs(z_mean) < 4.0, (ma.mean(), mb.mean(), z_mean)
     lit = b.mean(0) > 0.05 * b.mean(0).max()
     ratio = float(np.median(a.var(0, ddof=1)[lit] / np.maximum(b.var(0, ddof=1)[lit], 1e-12)))
     print(f"per-pixel variance, weighed / next-event estimation alone: {ratio:.3f} over {int(lit.sum())} px")

@@ -19,6 +19,7 @@ equations with these names):
 * :func:`denoising_rows` (with ``RenderSettings.denoise``) -- Cycles' denoising features of the
   bounce: Denoising Albedo and Normal at the first diffuse-like vertex, the feature throughput
   through specular-like ones (:func:`denoising_seen_add`: light shapes seen on the way);
+* :func:`light_strata` -- the uniforms of one light's samples, stratified over each pixel's samples;
 * :func:`nee_light` -- next-event estimation of one light at the shaded rows:
   the light samples (:func:`stpm_core.kernels.lights.sample_light_rows`, every light
   type), the BSDF (:func:`stpm_core.kernels.bsdf.bsdf_eval`), the unshadowed
@@ -53,7 +54,8 @@ from .closure import (C_BASE, C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROU
 from .lights import light_pdf, mesh_light_pdf, sample_light_rows, seen_light, world_nee_pdf
 from .sampling import dot, load_pose, offset_origin, pose_buffer, row3
 
-__all__ = ["camera_tile", "camera_rays", "classify_hits", "denoising_rows", "denoising_seen_add", "nee_light",
+__all__ = ["camera_tile", "camera_rays", "classify_hits", "denoising_rows", "denoising_seen_add", "light_strata",
+           "nee_light",
            "offset_rows", "nee_accumulate",
            "seen_lights_add", "photon_albedo", "photon_add", "specular_step", "scatter_add", "active_channels",
            "pixel_sums", "tile_finish"]
@@ -414,6 +416,162 @@ def denoising_seen_add(V, c_albedo, rows, idx, use_idx, beta, use_beta, first, f
 # ----------------------------------------------------------------------------
 # Next-event estimation
 # ----------------------------------------------------------------------------
+_M32 = 0xFFFFFFFF
+_ONE_BELOW = 1.0 - 2.0 ** -53                          # the largest double below 1
+
+
+@njit(**_JIT)
+def _reverse32(v):
+    """The 32 bits of v (0 <= v < 2^32) in reverse order."""
+    v = ((v & 0xAAAAAAAA) >> 1) | ((v & 0x55555555) << 1)
+    v = ((v & 0xCCCCCCCC) >> 2) | ((v & 0x33333333) << 2)
+    v = ((v & 0xF0F0F0F0) >> 4) | ((v & 0x0F0F0F0F) << 4)
+    v = ((v & 0xFF00FF00) >> 8) | ((v & 0x00FF00FF) << 8)
+    return ((v >> 16) | (v << 16)) & _M32
+
+
+@njit(**_JIT)
+def _hash32(x):
+    """A 32-bit integer hash (bijective: a uniform x gives a uniform hash)."""
+    x ^= x >> 16
+    x = (x * 0x7FEB352D) & _M32
+    x ^= x >> 15
+    x = (x * 0x846CA68B) & _M32
+    return x ^ (x >> 16)
+
+
+@njit(**_JIT)
+def _owen32(v, seed):
+    """v (a 32-bit fraction) under a nested uniform (Owen) scramble keyed by seed, hash-based (Burley 2020,
+    "Practical hash-based Owen scrambling", the Laine-Karras permutation of the reversed bits: each
+    step moves information from a digit only to the digits below it).  A uniform seed gives a uniform
+    result for any v; a (0, m, 2)-net stays one."""
+    x = (_reverse32(v) + seed) & _M32
+    x ^= (x * 0x6C50B47C) & _M32
+    x ^= (x * 0xB82F1E52) & _M32
+    x ^= (x * 0xC7AFE638) & _M32
+    x ^= (x * 0x8D22F6E6) & _M32
+    return _reverse32(x)
+
+
+@njit(**_JIT)
+def _sobol2(i):
+    """The second Sobol coordinate of index i, as a 32-bit fraction (generator: Pascal's matrix mod 2);
+    with the van der Corput first coordinate (reversed bits), a (0, 2)-sequence."""
+    y = 0
+    v = 1 << 31
+    while i:
+        if i & 1:
+            y ^= v
+        i >>= 1
+        v ^= v >> 1
+    return y
+
+
+# Irreducible polynomials over GF(2) of degree 2 .. 10 (bit i: the coefficient of x^i): GF(2^k) for
+# the orthogonal arrays of light_strata
+_GF2_POLY = np.array([0, 0, 0b111, 0b1011, 0b10011, 0b100101, 0b1000011, 0b10001001, 0b100011101, 0b1000010001,
+                      0b10000001001], np.int64)
+
+
+@njit(**_JIT)
+def _oa_poly(S):
+    """The polynomial of GF(s) (s = 2^k, 2 <= k <= 10) when S = s^2: light_strata's orthogonal array
+    of s levels; 0 for every other S (no array: a random permutation instead)."""
+    k = 0
+    while (1 << (2 * k)) < S:
+        k += 1
+    if (1 << (2 * k)) == S and 2 <= k <= 10:
+        return _GF2_POLY[k]
+    return 0
+
+
+@njit(**_JIT)
+def light_strata(samples, S, keys, jit, U):
+    """Uniforms U (k, 2) of one light's samples at k shaded rows, stratified over each pixel's samples.
+
+    samples (k,) int64: the tile sample q each row belongs to (pixel p = q // S, the pixel's sample
+    j = q % S; a sample has at most one row); keys (P, S): a pixel's uniforms for its permutations
+    and its scramble; jit (k, 2): each row's jitter below the points' 32 bits.
+
+    A pixel's S points are the first S of the (0, 2)-sequence (``_reverse32``: van der Corput,
+    ``_sobol2``: Sobol's second coordinate) under a nested uniform (Owen) scramble,
+    :func:`_owen32`, seeded per pixel by keys[p, 0] (``_hash32``), as Cycles' samples are: S = 2^m
+    points form a (0, m, 2)-net (one point in every 2^a x 2^b cut, a + b = m), and on a smooth
+    light integral they beat jittered cells by far.  Sample j takes point t_j, U[i] = (X_t + jit[i])
+    / 2^32 per axis (X_t the point's 32 bits):
+
+    * S = s^2, s = 2^k (k = 2 .. 10): the point in light cell (lx, ly) of the s x s grid (the net
+      holds one in each), with lx = sigma_x(cx + cy), ly = sigma_y(cx + alpha cy) in GF(s) (+ is
+      XOR, alpha = x) from the film cell (cx, cy) = (j % s, j // s) of ``camera_tile``: an
+      orthogonal array of strength 2 (Bose 1938; Jarosz et al. 2019 for rendering), each of the
+      four coordinates (cx, cy, lx, ly) against each other an s x s Latin square, so the light's
+      points are stratified against the film's too (Cycles' are, in 4D).  sigma_x, sigma_y: random
+      permutations of the s levels per pixel (Fisher-Yates: from the identity, for t = s - 1 down
+      to 1 swap entries t and min(floor(keys[p, o + t] (t + 1)), t); o = 0 for sigma_x, s - 1 for
+      sigma_y), which keep the array and make each light cell uniform whatever the film cell;
+    * any other S: t_j = pi_p(j), a random permutation of the pixel's samples (Fisher-Yates as
+      above with keys[p, t], t = S - 1 .. 1).
+
+    Each U[i] is uniform on [0, 1)^2 whatever the film position (the permutations are uniform, the
+    seed is added to each point's reversed bits): every light sampler keeps its density
+    (docs/rendering.md, "Stratified light samples").  Only the pixels some row belongs to are
+    worked out.
+    """
+    poly = _oa_poly(S)
+    s = 1
+    while s * s < S:
+        s += 1
+    k_s = 0                                           # log2(s) with the array
+    while (1 << k_s) < s:
+        k_s += 1
+    P = keys.shape[0]
+    sig = np.empty(2 * s, np.int64)                   # sigma_x, sigma_y of the pixel being worked out
+    slot = np.empty(S, np.int64)                      # the net point in each cell (with the array)
+    TX = np.empty(S, np.int64)                        # the pixel's points, 32-bit fractions
+    TY = np.empty(S, np.int64)
+    pt = np.full(P * S, -1, np.int64)                 # t_j at p S + j, for the pixels met so far
+    NX = np.empty(P * S, np.int64)                    # the point of each sample
+    NY = np.empty(P * S, np.int64)
+    for i in range(samples.shape[0]):
+        q = samples[i]
+        p = q // S
+        b = p * S
+        if pt[b] < 0:
+            # -- the pixel's scrambled points
+            seed_x = _hash32(int(keys[p, 0] * 4294967296.0))
+            seed_y = _hash32(seed_x ^ 0x9E3779B9)
+            for t in range(S):
+                TX[t] = _owen32(_reverse32(t), seed_x)
+                TY[t] = _owen32(_sobol2(t), seed_y)
+            # -- each sample's point: by the orthogonal array's cell, or a permutation
+            if poly != 0:
+                for t in range(S):
+                    slot[(TY[t] >> (32 - k_s)) * s + (TX[t] >> (32 - k_s))] = t
+                for h in range(2):
+                    o = h * (s - 1)
+                    for t in range(s):
+                        sig[h * s + t] = t
+                    for t in range(s - 1, 0, -1):
+                        a = min(int(keys[p, o + t] * (t + 1)), t)
+                        sig[h * s + t], sig[h * s + a] = sig[h * s + a], sig[h * s + t]
+                for j in range(S):
+                    cx, cy = j % s, j // s
+                    acy = (cy << 1) ^ poly if (cy << 1) & s else cy << 1      # alpha cy in GF(2^k)
+                    pt[b + j] = slot[sig[s + (cx ^ acy)] * s + sig[cx ^ cy]]
+            else:
+                for j in range(S):
+                    pt[b + j] = j
+                for j in range(S - 1, 0, -1):
+                    a = min(int(keys[p, j] * (j + 1)), j)
+                    pt[b + j], pt[b + a] = pt[b + a], pt[b + j]
+            for j in range(S):
+                NX[b + j] = TX[pt[b + j]]
+                NY[b + j] = TY[pt[b + j]]
+        U[i, 0] = min((NX[q] + jit[i, 0]) / 4294967296.0, _ONE_BELOW)
+        U[i, 1] = min((NY[q] + jit[i, 1]) / 4294967296.0, _ONE_BELOW)
+
+
 @njit(**_JIT)
 def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners, q, cdf, Le, env, T, U, EPS, mis,
               stop_coat, contrib, so, sd, stmax, live, S):

@@ -147,17 +147,112 @@ def _is_delta_light(light) -> bool:
     return light.type == "SUN" and float(light.angle) <= 0.0
 
 
-def _light_uniforms(light, n: int, rng: np.random.Generator, out: np.ndarray | None = None) -> np.ndarray:
-    """Uniforms (n, 2) for one light's samples, one block of the stream per light.
+_M32 = np.uint64(0xFFFFFFFF)
 
-    Delta lights ignore them: their block is skipped (``skip_uniforms``) and
-    zeros are returned, the stream ending where drawing would leave it.
-    out: an (n, 2) buffer to draw into.
+
+def _u32_mul(x: np.ndarray, c: int) -> np.ndarray:
+    return (x * np.uint64(c)) & _M32
+
+
+def _bits_reversed(v: np.ndarray) -> np.ndarray:
+    """(uint64) the 32 bits of v in reverse order, bit by bit."""
+    out = np.zeros_like(v)
+    for b in range(32):
+        out |= ((v >> np.uint64(b)) & np.uint64(1)) << np.uint64(31 - b)
+    return out
+
+
+def _hash(x: np.ndarray) -> np.ndarray:
+    x = x ^ (x >> np.uint64(16))
+    x = _u32_mul(x, 0x7FEB352D)
+    x = x ^ (x >> np.uint64(15))
+    x = _u32_mul(x, 0x846CA68B)
+    return x ^ (x >> np.uint64(16))
+
+
+def _owen(v: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """Burley's hash-based Owen scramble of 32-bit fractions v with seeds (broadcast)."""
+    x = (_bits_reversed(v) + seed) & _M32
+    for c in (0x6C50B47C, 0xB82F1E52, 0xC7AFE638, 0x8D22F6E6):
+        x = x ^ _u32_mul(x, c)
+    return _bits_reversed(x)
+
+
+def _sobol_second(i: np.ndarray) -> np.ndarray:
+    """Sobol's second coordinate of indices i as 32-bit fractions: digit d (weight 2^-d) is the parity of
+    sum_j C(j, d - 1) i_j, i_j the bits of i (Pascal's matrix; C(j, k) is odd iff k's bits are j's, Lucas)."""
+    y = np.zeros(i.shape, np.uint64)
+    for d in range(1, 33):
+        par = np.zeros(i.shape, np.uint64)
+        for j in range(32):
+            if (d - 1) & j == d - 1:
+                par ^= (i >> np.uint64(j)) & np.uint64(1)
+        y |= par << np.uint64(32 - d)
+    return y
+
+
+def _shuffle(keys: np.ndarray, n: int) -> np.ndarray:
+    """(P, n): a random permutation of range(n) per row, Fisher-Yates with keys (P, >= n): from the
+    identity, for t = n - 1 down to 1 swap entries t and min(floor(keys[:, t] (t + 1)), t)."""
+    perm = np.tile(np.arange(n), (keys.shape[0], 1))
+    pix = np.arange(keys.shape[0])
+    for t in range(n - 1, 0, -1):
+        a = np.minimum((keys[:, t] * (t + 1)).astype(np.int64), t)
+        perm[pix, t], perm[pix, a] = perm[pix, a], perm[pix, t].copy()
+    return perm
+
+
+def _gf_times_alpha(v: np.ndarray, s: int) -> np.ndarray:
+    """alpha v in GF(s), s = 2^k (alpha = x; the field's polynomial from a table)."""
+    polys = {4: 0b111, 8: 0b1011, 16: 0b10011, 32: 0b100101, 64: 0b1000011, 128: 0b10001001,
+             256: 0b100011101, 512: 0b1000010001, 1024: 0b10000001001}
+    w = 2 * v
+    return np.where(w >= s, w ^ polys[s], w)
+
+
+def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Generator) -> np.ndarray:
+    """Uniforms (k, 2) for one light's samples at the k shaded rows whose tile samples are
+    ``samples`` (k,), one block of the stream per light; strata = (n, S): the tile's n samples,
+    S per pixel (consecutive).
+
+    Keys (n / S, S) then jitters (k, 2) are drawn.  A pixel's points: the first S of the
+    (0, 2)-sequence, Owen-scrambled with seeds from keys[:, 0].  S = s^2, s = 2^k >= 4: sample j
+    (film cell (j % s, j // s)) takes the point in light cell (sigma_x(cx ^ cy), sigma_y(cx ^ alpha
+    cy)), an orthogonal array against the film cell, sigma_x / sigma_y shuffled by keys[:, 0:s] /
+    keys[:, s-1:2s-1]; any other S: point pi_p(j), the pixel's samples shuffled by its keys.
+    U = (the point's 32 bits + jitter) / 2^32.  Delta lights ignore them: their block is skipped
+    (``skip_uniforms``) and zeros are returned, the stream ending where drawing would leave it.
     """
+    n, S = strata
+    k = samples.size
     if _is_delta_light(light):
-        skip_uniforms(rng, 2 * n)
-        return np.zeros((n, 2)) if out is None else _fill(out, 0.0)
-    return rng.random((n, 2)) if out is None else rng.random(out=out)
+        skip_uniforms(rng, n + 2 * k)
+        return np.zeros((k, 2))
+    keys = rng.random((n // S, S))
+    jit = rng.random((k, 2))
+    P = n // S
+    p, jj = samples // S, samples % S
+    # the pixels' Owen-scrambled (0, 2)-sequence points
+    seed_x = _hash((keys[:, 0] * 4294967296.0).astype(np.uint64))[:, None]
+    seed_y = _hash(seed_x ^ np.uint64(0x9E3779B9))
+    t = np.arange(S, dtype=np.uint64)[None, :]
+    X, Y = _owen(_bits_reversed(t), seed_x), _owen(_sobol_second(t), seed_y)
+    s = int(round(np.sqrt(S)))
+    if s * s == S and s >= 4 and s & (s - 1) == 0 and s <= 1024:
+        j = np.arange(S)
+        cx, cy = j % s, j // s
+        lx, ly = cx ^ cy, cx ^ _gf_times_alpha(cy, s)
+        sx, sy = _shuffle(keys, s), _shuffle(keys[:, s - 1:], s)
+        bits = np.uint64(32 - int(np.log2(s)))
+        slot = np.empty((P, S), np.int64)
+        slot[np.arange(P)[:, None], ((Y >> bits) * np.uint64(s) + (X >> bits)).astype(np.int64)] = np.arange(S)[None, :]
+        c = slot[p, sy[p, ly[jj]] * s + sx[p, lx[jj]]]
+    else:
+        c = _shuffle(keys, S)[p, jj]
+    u = np.empty((k, 2))
+    u[:, 0] = np.minimum((X[p, c].astype(np.float64) + jit[:, 0]) / 4294967296.0, 1.0 - 2.0 ** -53)
+    u[:, 1] = np.minimum((Y[p, c].astype(np.float64) + jit[:, 1]) / 4294967296.0, 1.0 - 2.0 ** -53)
+    return u
 
 
 def _world_normals(light, ng: np.ndarray, wo: np.ndarray) -> np.ndarray | None:
@@ -171,8 +266,12 @@ def _fill(a: np.ndarray, value: float) -> np.ndarray:
     return a
 
 
-def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=(False, False)) -> np.ndarray:
+def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=(False, False), samples=None,
+            strata=None) -> np.ndarray:
     """Next-event estimate (n, 3): sum over lights of f(wo, wi) |cos(ns, wi)| L_i / p * V.
+
+    samples (n,): the tile sample of each point, strata = (tile samples, samples per pixel): the
+    lights' uniforms are stratified over each pixel's samples (``_light_uniforms``; None: none).
 
     eps (n,): each point's shadow-ray origin offset (``_eps_rows``).  mis: ((n,) bool, (n,) bool) the
     paths may go on through a rough reflection / a rough refraction after this (the glossy /
@@ -192,7 +291,8 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=(Fa
         if lights.power[li] <= 0.0:
             continue
         # Sample a point / direction on the light at each sample's time
-        u_l = _light_uniforms(lights.lights[li], n, rng)
+        u_l = _light_uniforms(lights.lights[li], np.arange(n) if samples is None else samples,
+                              (n, 1) if strata is None else strata, rng)
         wi, dist, weight = lights_numpy.sample_direct(lights, li, p, times, u_l,
                                                       normals=_world_normals(lights.lights[li], ng, wo))
         f = bsdf_eval(ctx.table, mat, wo, wi, ns, ng)
@@ -325,8 +425,11 @@ def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, coun
 
 def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.ndarray,
                 rng: np.random.Generator, stats: TraceStats, cam_pos: np.ndarray,
-                cam_axis: np.ndarray) -> dict[str, np.ndarray]:
+                cam_axis: np.ndarray, spp: int = 1) -> dict[str, np.ndarray]:
     """Radiance of the camera rays o, d (n, 3) at times (n,) split into passes.
+
+    spp: the samples of each pixel, consecutive in o, over which next-event estimation stratifies
+    each light's samples (``_light_uniforms``).
 
     tmax0 (n,) clips the camera rays; cam_pos, cam_axis (n, 3) are the camera
     position and unit view axis at each sample's time (for Depth).
@@ -460,8 +563,9 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
                 c = np.zeros((p.shape[0], 2), np.int32) if counts is None else counts
                 mis = ((bounce < ctx.max_depth) & (_rows(c[:, 0], sh) < ctx.glossy_bounces),
                        (bounce < ctx.max_depth) & (_rows(c[:, 1], sh) < ctx.transmission_bounces))
+                rows = np.arange(p.shape[0]) if sh is None else sh
                 add(L_direct, sh, _direct(ctx, p_s, ng_s, ns_s, wo_s, mat_s, t_s, _rows(eps, sh), rng, stats,
-                                          mis=mis))
+                                          mis=mis, samples=rows if idx is None else idx[rows], strata=(n, spp)))
             if ctx.maps is not None:
                 ns_f = _face_forward(ns_s, wo_s)
                 for kind, dst in (("caustic", L_caustic), ("global", L_indirect)):
@@ -566,6 +670,6 @@ def trace_image_numpy(scene, settings, caster, lights, maps=None, *, time_overri
             tmax0 = np.full(len(times), cam.clip_end - cam.clip_start)
         else:
             tmax0 = cam.clip_end / np.maximum(np.sum(d * axis, axis=1), 1e-12)
-        values = shade_paths(ctx, o, d, times, tmax0, rng, stats, pos, axis)
+        values = shade_paths(ctx, o, d, times, tmax0, rng, stats, pos, axis, spp=spp)
         film.add_window(tile_sums_numpy(film, x0, y0, gx.shape[1], gx.shape[0], values))
     return film.resolve(), stats
