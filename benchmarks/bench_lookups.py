@@ -10,10 +10,11 @@ look-ups against 15 s of photon tracing on a sunlit pool, FINAL preset).  Scenes
 Methods (``threads=1``: every CPU second is the calling thread's, ``time.thread_time``):
 
 * PROGRESSIVE with FINAL_PROGRESSIVE's pass (TEMPORAL, k = 20, 1 spp, 200k caustic + 100k global
-  photons per pass), PASSES passes, in three variants interleaved over ROUNDS rounds (minimum per
+  photons per pass), PASSES passes, in two variants interleaved over ROUNDS rounds (minimum per
   quantity reported: noise only adds time): ``before`` (each pass's maps built with the k-nearest
-  trees of TEMPORAL, as until 2026-12-06; regions read on the kd-tree), ``after`` (no trees up front:
-  the default now) and ``grid`` (regions read on the hash grid, ``photons/hashgrid.py``);
+  trees of TEMPORAL, as until 2026-12-06) and ``after`` (no trees up front: the default now); a
+  third, regions read on a uniform hash grid, measured 1.24-1.34x the tree's range-query time and
+  was removed (``photons/hashgrid.py``'s docstring);
 * PHOTON with FINAL's maps (TEMPORAL, k = 100, 2M caustic + 1M global photons), FINAL_SPP samples
   per pixel (FINAL has 64 at 320 x 240: 64x the queries, the same per-query cost).
 
@@ -22,9 +23,9 @@ s inside the caster during ``trace_image``: camera, bounce and shadow rays), ``c
 photon tracing's rays), ``lookup_over_cast`` (the issue's ratio) and ``lookup_over_cast_all``; for
 PROGRESSIVE the split of a look-up: ``pilot_s`` (the pilot region at each query:
 ``Pilot.initial_size``), ``range_s`` (the pass's photons in the regions, the structure's build
-included), ``other_s`` (normalisation and array traffic); ``build_s`` (every kd-tree and grid built
-in the render, the pilot's included: map building, not look-ups); ``after_over_before_build`` and
-``grid_over_tree_range`` / ``grid_over_tree_lookup`` (per round and of the minima).
+included), ``other_s`` (normalisation and array traffic); ``build_s`` (every kd-tree built in the
+render, the pilot's included: map building, not look-ups); ``after_over_before_build`` and
+``after_over_before_cpu`` (per round and of the minima).
 
     python -m benchmarks lookups          # about 2-3 minutes on 2 cores
 """
@@ -95,7 +96,7 @@ class _Meter:
         import stpm_core.progressive as prog
         import stpm_core.render as rnd
         from stpm_core.photons import maps, progressive
-        from stpm_core.photons import hashgrid, kdtree
+        from stpm_core.photons import kdtree
         self.t = {"cast_all_s": 0.0, "cast_s": 0.0, "lookup_s": 0.0, "pilot_s": 0.0, "range_s": 0.0, "build_s": 0.0,
                   "queries": 0}
         self._undo = []
@@ -144,7 +145,6 @@ class _Meter:
         patch(progressive.Pilot, "initial_size", counted("pilot_s"))
         patch(progressive.ProgressiveMaps, "_range_sum", counted("range_s"))
         patch(kdtree.FlatTree, "__init__", counted("build_s"))
-        patch(hashgrid.HashGrid, "__init__", counted("build_s"))
         if not build_trees:
             return
         def eager(f):
@@ -162,22 +162,17 @@ class _Meter:
         return t
 
 
-VARIANTS = {"before": ("kdtree", True), "after": ("kdtree", False), "grid": ("hashgrid", False)}
+VARIANTS = {"before": True, "after": False}          # build_trees
 
 
 def _measure(scene, settings, variant: str = "after") -> dict:
-    from stpm_core.photons import progressive
     from stpm_core.render import render
-    range_lookup, build_trees = VARIANTS[variant]
-    old = progressive.RANGE_LOOKUP
-    progressive.RANGE_LOOKUP = range_lookup
-    meter = _Meter(build_trees)
+    meter = _Meter(VARIANTS[variant])
     try:
         t0 = time.thread_time()
         render(scene, settings)
         cpu = time.thread_time() - t0
     finally:
-        progressive.RANGE_LOOKUP = old
         t = meter.close()
     t["cpu_s"] = cpu
     return t
@@ -193,7 +188,7 @@ def run(rounds: int = ROUNDS) -> dict:
         _measure(small, RenderSettings(**{**PROGRESSIVE, "passes": 2, "photons_caustic": 5000,
                                            "photons_global": 2000}), variant)
     _measure(small, RenderSettings(**{**FINAL, "photons_caustic": 20_000, "photons_global": 10_000}))
-    # -- PROGRESSIVE: the three variants, interleaved ---------------------------------------------------
+    # -- PROGRESSIVE: the variants, interleaved ---------------------------------------------------
     prog = {(s, v): [] for s in scenes for v in VARIANTS}
     for _ in range(rounds):
         for name, sc in scenes.items():
@@ -209,9 +204,7 @@ def run(rounds: int = ROUNDS) -> dict:
             out[f"{tag}_lookup_over_cast"] = out[f"{tag}_lookup_s"] / out[f"{tag}_cast_s"]
             out[f"{tag}_lookup_over_cast_all"] = out[f"{tag}_lookup_s"] / out[f"{tag}_cast_all_s"]
         ratios = (("after", "before", "build_s", "after_over_before_build"),
-                  ("after", "before", "cpu_s", "after_over_before_cpu"),
-                  ("grid", "after", "range_s", "grid_over_tree_range"),
-                  ("grid", "after", "lookup_s", "grid_over_tree_lookup"))
+                  ("after", "before", "cpu_s", "after_over_before_cpu"))
         for num, den, key, label in ratios:
             a, b = prog[(name, num)], prog[(name, den)]
             out[f"{name}_{label}_per_round"] = [round(x[key] / y[key], 3) for x, y in zip(a, b)]

@@ -66,7 +66,6 @@ TIME_CELLS = 32               # ... and this many cells across the shutter (spac
 GRID_CELLS_MAX = 1 << 17      # cells a region table keeps (6 MiB); regions of cells beyond are computed, not kept
 _AXIS_BITS = 18               # grid cells per axis: 2^18 (keys: 3 x 18 bits + 7 bits of time)
 STREAM_PILOT = 0x9170         # the pilot's random stream (independent of every pass's)
-RANGE_LOOKUP = "kdtree"       # a pass's fixed-region look-ups: 'kdtree' or 'hashgrid' (the same sets, measured slower)
 
 
 def kernel_dims(estimator: str) -> int:
@@ -286,23 +285,11 @@ class ProgressiveMaps:
         self._photons_in = {kind: [0, 0] for kind in KINDS}     # photons inside regions, queries
         self._radius = {kind: [] for kind in KINDS}             # a sample of the radii used (for stats)
         self._lookup_s = 0.0
-        self._grids = {}                                        # kind -> HashGrid of the pass's photons
-        self._grid_lock = threading.Lock()
 
     def _range_sum(self, kind, dims, q, ns, r, half, cone):
-        """(Phi (n, 3), count (n,)) of the pass's photons inside each region: on the pass's hash grid
-        (:mod:`.hashgrid`, built at the first look-up with cells of the median radius asked), or on
-        the kd-tree when ``RANGE_LOOKUP`` is 'kdtree' (the same sets; benchmarks compare the two)."""
+        """(Phi (n, 3), count (n,)) of the pass's photons inside each region (the kd-tree's range query)."""
         m = self.maps.maps[kind]
-        if RANGE_LOOKUP != "hashgrid" or not _hashgrid.AVAILABLE:
-            return m.flat_tree(dims).range_sum(q, ns, r, half, cone, CONE_K, m.workers)
-        with self._grid_lock:
-            grid = self._grids.get(kind)
-            if grid is None:
-                extent = float(np.ptp(m.position, axis=0).max()) if m.n else 0.0
-                grid = self._grids[kind] = _hashgrid.HashGrid(m.records["position"], m.records["time"], m._packed,
-                                                              s=m.time_scale, h=_hashgrid.cell_size(r, extent))
-        return grid.range_sum(q, ns, r, half, cone, CONE_K, m.workers, dims=dims)
+        return m.flat_tree(dims).range_sum(q, ns, r, half, cone, CONE_K, m.workers)
 
     def has(self, kind: str) -> bool:
         return self.maps.has(kind) and self.pilot.maps.maps[kind].n > PILOT_K
