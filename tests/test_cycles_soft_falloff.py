@@ -8,7 +8,8 @@ hit the sphere instead: its silhouette is wider than the disc's (solid angle lar
 of about 1 + x^2, x = r / d), and in that ring next-event estimation's density is 0, so camera paths leaving the
 rough lobe took it at full weight: +1.8 % on the metal, and single samples of the full radiance
 I / (pi r^2) in dark pixels, fireflies (``soft_falloff_scenes``: r = 0.3 at 1.5 m over roughness
-0.5; 64 samples, 4 seeds):
+0.5; 64 samples, 4 seeds; at 16 samples and 6 seeds, the artist review's count: 7 and 6 firefly
+pixels before, 0 now):
 
 | scene | metal mean / Cycles | block abs(z) max | metal variance / Cycles (summed) | firefly px |
 | --- | --- | --- | --- | --- |
@@ -43,10 +44,11 @@ NOISE_RATIO_MAX = 1.5
 
 def _fireflies(stpm, cyc):
     """Pixels (over all seeds) where one STPM render exceeds Cycles' pixel mean by 10 of Cycles' per-pixel
-    standard deviations and by 3 times that mean."""
+    standard deviations, 3 times that mean and 5 % of the 99th percentile of Cycles' image (near-black
+    pixels at the floor's far edge, a few thousandths off, are no fireflies)."""
     s, c = stpm.mean(axis=-1), cyc.mean(axis=-1)
     cm, cs = c.mean(axis=0), c.std(axis=0, ddof=1)
-    return int(np.sum(s > np.maximum(cm + 10.0 * cs, 3.0 * cm) + 1e-3))
+    return int(np.sum(s > np.maximum(np.maximum(cm + 10.0 * cs, 3.0 * cm), 0.05 * np.percentile(cm, 99))))
 
 
 @pytest.mark.parametrize("name", sorted(sfs.SCENES))
