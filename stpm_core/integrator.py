@@ -282,8 +282,9 @@ def _seen_lights(ctx, o, d, t, t_scene, first: bool, glossy=None, p_c=None):
     What camera rays and delta chains see of the lights themselves, as in Cycles: camera rays see
     light i only if Blender's Object > Visibility > Camera is on for it
     (``scene.metadata['light_visible_camera']``, off by default); AREA lights are one-sided
-    emitters of radiance color P / (pi A), POINT / SPOT spheres of radius r > 0 have radiance
-    I / (pi r^2), spot-masked (``kernels.lights.seen_light``).
+    emitters of radiance color P / (pi A), POINT / SPOT of radius r > 0 have radiance
+    I / (pi r^2), spot-masked, on the disc facing the ray's origin (soft falloff) or the sphere
+    (``kernels.lights.seen_light``).
     """
     L = Lw = None
     vis = ctx.light_visible_camera

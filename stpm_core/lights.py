@@ -7,7 +7,9 @@ code name is in docs/lights-and-materials.md):
   (the spot cone masks it, never rescales it).  Radius r > 0 makes a soft
   light of the same far-field intensity, emitting radiance
   ``L = I / (pi r^2)``; ``use_soft_falloff`` picks Cycles' two shapes:
-  on = a disk of radius r facing the shading point, off = a sphere.
+  on = a disk of radius r facing the point that looks at it (the shading
+  point for next-event estimation, the ray origin for a ray that hits it),
+  off = a sphere.
 * AREA of power P W: one-sided Lambertian emitter facing local -Z with
   radiance ``L = color * P / (pi A)`` (A in world units, object scale
   included, as Cycles does).  The emitting side follows the transform's -Z

@@ -5,7 +5,11 @@ estimation with the power heuristic, which needs the density p_l with which next
 draws that direction (docs/rendering.md, "Multiple importance sampling").  Checked here:
 
 * p_l integrates to 1 over the directions that reach the light (uniform directions, a light hit by
-  ``seen_light`` or, for a soft-falloff disc, p_l > 0), for every shape the samplers treat apart;
+  ``seen_light``), for every shape the samplers treat apart;
+* one light: what a ray from p hits (``seen_light``), what next-event estimation at p samples and
+  its density describe the same shape and radiance (soft falloff: the disc facing p, as Cycles;
+  until 2026-12-06 rays hit the sphere, whose wider silhouette (solid angle x (1 + x^2), x = r / d)
+  only the camera paths' lobes reached: a bias of +1.8 % on rough metal and fireflies);
 * the sampler's own weights agree with it: weight = L / p_l (area lights: L = color P / (pi A));
 * the kernel's p_l equals the numpy oracle's (``lights_numpy.nee_pdf``: the rectangle's solid angle
   from two triangles' (Van Oosterom and Strackee), not from the spherical-rectangle code);
@@ -73,12 +77,12 @@ def test_light_density_integrates_to_one_over_the_light(case):
         wi = _uniform_dirs(n, rng)
         pdf = np.empty(n)
         light_pdf_batch(prm, poses, P, wi, pdf)
+        L = np.empty((n, 3))
+        seen_batch(prm, poses, P, wi, np.full(n, np.inf), False, L)
+        hit = L[:, 0] > 0                    # soft falloff: the disc through the centre facing p
         if case == "soft":
-            hit = pdf > 0                    # the disc through the centre facing p
-        else:
-            L = np.empty((n, 3))
-            seen_batch(prm, poses, P, wi, np.full(n, np.inf), False, L)
-            hit = L[:, 0] > 0
+            # the shape a ray from p hits is the shape next-event estimation samples from p
+            assert np.array_equal(hit, pdf > 0), (p, int(np.sum(hit != (pdf > 0))))
         assert hit.sum() > 1000
         est = 4.0 * np.pi * np.where(hit, pdf, 0.0)
         mean, se = est.mean(), est.std() / np.sqrt(n)
@@ -135,6 +139,58 @@ def test_sampler_density_matches_its_weights_and_the_oracle(case):
         j, x = lights_numpy.mesh_triangle_of_sample(ls, li, u), p + dist[:, None] * wi
     ref = lights_numpy.nee_pdf(ls, li, p, wi, times, x=x, j=j)
     np.testing.assert_allclose(pdf[front], ref[front], rtol=1e-7)
+
+
+@pytest.mark.parametrize("case", ["point soft", "spot soft", "point sphere", "point soft, inside"])
+def test_rays_hit_the_shape_next_event_estimation_samples(case):
+    """From points p around the light: every direction next-event estimation draws hits the light's
+    shape with the radiance the sample carries (seen = weight x p_l), and uniform directions hit it
+    exactly where p_l > 0 (soft falloff: the disc facing p; the sphere: its cone)."""
+    rng = np.random.default_rng(5)
+    M = translate(0.1, 0.2, 1.5) @ _rot_x(0.4)
+    kw = dict(radius=0.3, use_soft_falloff="soft" in case, transform=MotionTransform.static(M))
+    if case.startswith("spot"):
+        light = Light(type="SPOT", power=120.0, spot_size=1.6, spot_blend=0.3, **kw)
+    else:
+        light = Light(type="POINT", power=80.0, **kw)
+    ls = _lights(light)
+    n = 20_000
+    if case.endswith("inside"):              # closer to the centre than the radius
+        v = _uniform_dirs(n, rng)
+        p = M[:3, 3] + v * rng.uniform(0.02, 0.29, (n, 1))
+    else:
+        p = rng.uniform(-2.0, 2.0, (n, 3)) * [1, 1, 0.5]
+    times = np.zeros(n)
+    S, _ = _pdf_samples(ls, 0, p, times, rng)
+    wi, w, pdf = np.ascontiguousarray(S[:, 0:3]), S[:, 4:7], S[:, 7]      # (C arrays: one compiled kernel)
+    prm, poses = kernel_light(ls, 0)[0], light_poses(ls, 0, np.zeros(1))
+    L = np.empty((n, 3))
+    seen_batch(prm, poses, p, wi, np.full(n, np.inf), False, L)
+    lit = w[:, 0] > 0
+    assert lit.sum() > n // 4
+    if "sphere" in case:
+        # directions at the cone's rim may round off the sphere: all but a few hit it
+        ok = lit & (L[:, 0] > 0)
+        assert ok.sum() > 0.999 * lit.sum(), (int(ok.sum()), int(lit.sum()))
+    else:
+        ok = lit
+    np.testing.assert_allclose(L[ok], w[ok] * pdf[ok, None], rtol=1e-9)
+    np.testing.assert_allclose(L[ok], lights_numpy.seen_lights_numpy(ls, p[ok], wi[ok], times[ok],
+                                                                     np.full(int(ok.sum()), np.inf)), rtol=1e-9)
+    if "sphere" in case:
+        return                               # (the sphere's density is 1 / Omega in every direction)
+    # uniform directions: a ray hits the disc exactly where next-event estimation can draw it
+    u = _uniform_dirs(n, rng)
+    pdf_u = np.empty(n)
+    light_pdf_batch(prm, poses, p, u, pdf_u)
+    seen_batch(prm, poses, p, u, np.full(n, np.inf), False, L)
+    hit = L[:, 0] > 0
+    sel = np.ones(n, bool)
+    if case.startswith("spot"):              # outside its cone a spot is black: nothing to see
+        axis = -M[:3, 2] / np.linalg.norm(M[:3, 2])
+        sel = lights_numpy.spot_attenuation(light, -u @ axis) > 0
+    assert np.array_equal(hit[sel], pdf_u[sel] > 0), int(np.sum(hit[sel] != (pdf_u[sel] > 0)))
+    assert hit[sel].sum() > 50
 
 
 def test_delta_lights_and_suns_have_no_density():

@@ -10,7 +10,8 @@ implementation it replaced is the test oracle ``tests/oracles/lights_numpy.py``)
   the light type is chosen once per call, outside the loop; the camera-path kernels
   (:mod:`.paths`) call it once per light and bounce;
 * :func:`seen_light` -- radiance of the light's shape hit by one ray (AREA lights, one-sided;
-  POINT / SPOT spheres of radius > 0), as ``integrator._seen_lights`` for one light;
+  POINT / SPOT of radius > 0: the sphere, or with soft falloff the disc facing the ray's origin),
+  as ``integrator._seen_lights`` for one light;
 * :func:`spherical_rect_sample` -- a point of a rectangle uniform in the solid angle it subtends;
 * :func:`light_pdf`, :func:`mesh_light_pdf`, :func:`world_nee_pdf` -- the solid-angle density with
   which :func:`sample_light_rows` draws a direction, for multiple importance sampling against
@@ -486,8 +487,10 @@ def seen_light(prm, M, o, d, t_scene, camera_ray):
     the ray's time (scale kept).
 
     AREA: one-sided (seen where d . n_emit < 0), radiance color P / (pi A).  POINT / SPOT of
-    radius r > 0: the sphere (also with soft falloff), seen from outside only, radiance
-    I / (pi r^2), spots masked by the cone about M's -Z (normalised).  Radius-0 lights, suns,
+    radius r > 0, radiance I / (pi r^2), spots masked by the cone about M's -Z (normalised) along
+    -d: with soft falloff the disc of radius r through the centre facing o (the disc
+    :func:`_sample_point` draws from o, so that hits, samples and :func:`light_pdf` describe one
+    light, as Cycles' ``point_light_intersect``), without it the sphere, seen from outside only.  Radius-0 lights, suns,
     meshes (the caster hits their triangles) and the world: 0; lights of power <= 0 or black
     colour: 0.  ``camera_ray`` is accepted for symmetry: Blender's camera-visibility flag is the
     caller's test.
@@ -511,14 +514,26 @@ def seen_light(prm, M, o, d, t_scene, camera_ray):
             return c0 * power / den, c1 * power / den, c2 * power / den
         return 0.0, 0.0, 0.0
     if (typ == T_POINT or typ == T_SPOT) and prm[P_RADIUS] > 0.0:
-        # -- sphere of radius r about M's translation
         r = prm[P_RADIUS]
         oc = sub(o, column(M, 3))
-        bq = dot(oc, d)
-        disc = bq * bq - (dot(oc, oc) - r * r)
-        s_hit = -bq - math.sqrt(max(disc, 0.0))
-        if not (disc > 0.0 and s_hit > 0.0 and s_hit < t_scene):
-            return 0.0, 0.0, 0.0
+        if prm[P_SOFT] != 0.0:
+            # -- soft falloff: the disc of radius r through the centre c facing the ray's origin o,
+            # the disc next-event estimation samples from o (Cycles' point_light_intersect)
+            to_o, d_c = normalize(oc)                       # light -> o
+            cos_q = -dot(d, to_o)
+            if not (d_c > 0.0 and cos_q > 0.0):
+                return 0.0, 0.0, 0.0
+            s_hit = d_c / cos_q
+            x = madd(oc, s_hit, d)                          # the crossing, from c
+            if not (edot(x, x) <= r * r and s_hit < t_scene):
+                return 0.0, 0.0, 0.0
+        else:
+            # -- sphere of radius r about M's translation
+            bq = dot(oc, d)
+            disc = bq * bq - (dot(oc, oc) - r * r)
+            s_hit = -bq - math.sqrt(max(disc, 0.0))
+            if not (disc > 0.0 and s_hit > 0.0 and s_hit < t_scene):
+                return 0.0, 0.0, 0.0
         den = np.pi * r * r
         L0 = c0 * power / (4.0 * np.pi) / den
         L1 = c1 * power / (4.0 * np.pi) / den

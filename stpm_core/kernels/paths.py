@@ -25,7 +25,7 @@ equations with these names):
   type), the BSDF (:func:`stpm_core.kernels.bsdf.bsdf_eval`), the unshadowed
   contribution and the shadow rays where it is positive; then
   :func:`nee_accumulate` adds the unblocked ones;
-* :func:`seen_lights_add` -- light shapes (area lights, spheres) hit by camera
+* :func:`seen_lights_add` -- light shapes (area lights, spheres, soft-falloff discs) hit by camera
   rays and delta chains;
 * :func:`photon_albedo` / :func:`photon_add` -- the diffuse albedo and the
   query rows of the photon-map look-ups, and rho / pi E added into a pass;

@@ -374,7 +374,8 @@ def seen_lights_numpy(lights, o: np.ndarray, d: np.ndarray, t: np.ndarray, t_sce
 
     Camera rays see light i only if ``visible_camera[i]``.  AREA lights are one-sided emitters
     facing their local -Z with radiance ``color P / (pi A)``; POINT / SPOT lights of radius r > 0
-    are spheres of radiance ``I / (pi r^2)`` (spots masked by their cone).  Radius-0 lights and
+    have radiance ``I / (pi r^2)`` (spots masked by their cone along -d): with ``use_soft_falloff``
+    on the disc of radius r through their centre facing the ray's origin (Cycles), else on the sphere.  Radius-0 lights and
     suns are not visible; meshes (their triangles are geometry) and the world neither.  only: the
     one light to look at (None: all).
     """
@@ -409,14 +410,24 @@ def seen_lights_numpy(lights, o: np.ndarray, d: np.ndarray, t: np.ndarray, t_sce
             seen = inside & (cos_d < 0) & (s_hit > 0) & (s_hit < t_scene) & (area > 0)
             L[seen] += color * light.power / (np.pi * area[seen, None])
         elif light.type in ("POINT", "SPOT") and light.radius > 0:
-            # Sphere of radius r around the light's position at each ray's time
             M = light.transform.at(t)
             oc = o - M[:, :3, 3]
             r = float(light.radius)
-            bq = np.sum(oc * d, axis=1)
-            disc = bq * bq - (np.sum(oc * oc, axis=1) - r * r)
-            s_hit = -bq - np.sqrt(np.maximum(disc, 0.0))
-            seen = (disc > 0) & (s_hit > 0) & (s_hit < t_scene)
+            if light.use_soft_falloff:
+                # Disc of radius r through the light's position, its normal toward the ray origin:
+                # the plane {x : (x - c) . oc = 0}, crossed at s = |oc|^2 / (-d . oc)
+                oo = np.sum(oc * oc, axis=1)
+                den = -np.sum(d * oc, axis=1)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    s_hit = oo / den
+                    x = oc + s_hit[:, None] * d
+                    seen = ((oo > 0) & (den > 0) & (np.sum(x * x, axis=1) <= r * r) & (s_hit < t_scene))
+            else:
+                # Sphere of radius r around the light's position at each ray's time
+                bq = np.sum(oc * d, axis=1)
+                disc = bq * bq - (np.sum(oc * oc, axis=1) - r * r)
+                s_hit = -bq - np.sqrt(np.maximum(disc, 0.0))
+                seen = (disc > 0) & (s_hit > 0) & (s_hit < t_scene)
             radiance = np.broadcast_to(color * light.power / (4 * np.pi) / (np.pi * r * r), (n, 3))
             if light.type == "SPOT":
                 with np.errstate(divide="ignore", invalid="ignore"):
