@@ -9,6 +9,8 @@
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -41,48 +43,54 @@ def _radius(x):
     return 0.05 + 0.05 * np.abs(np.sin(7 * x))
 
 
-def test_shared_queries_keep_to_their_group_reach_side_and_window():
+def test_shared_queries_keep_to_their_group_reach_side_and_slice():
     """A shared value comes from a representative of the same group, within f x the group pilot's
-    radius (the pilot: the group's earliest query, estimated alone), normals within acos(cos_n), the
-    time within f_t x the pilot's window half-width and inside the representative's own window."""
+    radius (the pilot: the group's first query, estimated alone, never shared), normals within
+    acos(cos_n), the time within f_t x the pilot's window half-width and in the representative's
+    time slice."""
     rng = np.random.default_rng(3)
     p, ns, t, group = _queries(rng)
     calls = []
+    tau = lambda x: 0.2 + 0.1 * np.abs(np.cos(5 * x))
+    lo_hi = lambda tq: (np.floor(tq * 3) / 3, np.floor(tq * 3) / 3 + 1 / 3)    # three time slices
 
     def estimate(pq, nq, tq):
-        # E identifies the query estimated; r and the window vary per query
+        # E identifies the query estimated; r and tau vary per query
         calls.append(pq.shape[0])
-        return np.stack([pq[:, 0], pq[:, 1], tq], 1), _radius(pq[:, 0]), tq - 0.3, np.minimum(tq + 0.2, 1.0)
+        return (np.stack([pq[:, 0], pq[:, 1], tq], 1), _radius(pq[:, 0]), tau(pq[:, 1])) + lo_hi(tq)
 
     f, f_t = 0.5, 0.8
     E, estimated = sharing.shared_estimate(estimate, p, ns, t, group, f=f, f_t=f_t, cos_n=0.9, rounds=16)
-    assert estimated == sum(calls) < 0.5 * len(p)
+    assert estimated == sum(calls) < 0.75 * len(p)
     key = {tuple(np.round(e, 12)): i for i, e in enumerate(np.stack([p[:, 0], p[:, 1], t], 1))}
-    pilot = {g: np.flatnonzero(group == g)[np.argmin(t[group == g])] for g in np.unique(group)}
+    P = sharing.SHARE_PILOTS
+    pilots = {g: np.flatnonzero(group == g)[:P] for g in np.unique(group)}    # first in sample order
     own = 0
     for i in range(len(p)):
         j = key[tuple(np.round(E[i], 12))]
         if j == i:
             own += 1
             continue
-        k = pilot[group[i]]
-        assert group[i] == group[j] and i != k and j != k         # a pilot neither shares nor takes
-        assert np.linalg.norm(p[i] - p[j]) <= f * _radius(p[k, 0]) + 1e-12
+        k = pilots[group[i]]
+        assert group[i] == group[j] and i not in k and j not in k   # a pilot neither shares nor takes
+        assert np.linalg.norm(p[i] - p[j]) <= f * _radius(p[k, 0]).min() + 1e-12
         assert ns[i] @ ns[j] >= 0.9
-        assert abs(t[i] - t[j]) <= f_t * max(0.3, min(t[k] + 0.2, 1.0) - t[k]) + 1e-12
-        assert t[j] - 0.3 <= t[i] <= min(t[j] + 0.2, 1.0)
+        assert abs(t[i] - t[j]) <= f_t * tau(p[k, 1]).min() + 1e-12
+        lo, hi = lo_hi(t[j])
+        assert lo <= t[i] <= hi
     assert own == estimated
 
 
 def test_sharing_with_f_0_estimates_every_query_and_an_unbounded_window_ignores_time():
     rng = np.random.default_rng(4)
     p, ns, t, group = _queries(rng, n=500)
-    exact = lambda pq, nq, tq: (pq.copy(), np.full(len(pq), 1.0), np.full(len(pq), -np.inf), np.full(len(pq), np.inf))
+    n_ = lambda pq, v: np.full(len(pq), v)
+    exact = lambda pq, nq, tq: (pq.copy(), n_(pq, 1.0), n_(pq, np.inf), n_(pq, -np.inf), n_(pq, np.inf))
     E, estimated = sharing.shared_estimate(exact, p, ns, t, group, f=0.0)
     assert estimated == len(p)                          # r f = 0: only identical points could share
     np.testing.assert_array_equal(E, p)
     E, estimated = sharing.shared_estimate(exact, p, ns, t, group, f=1.0)   # STANDARD-like: any time
-    assert estimated < 0.3 * len(p)
+    assert estimated <= (sharing.SHARE_PILOTS + 3) * 40
 
 
 # ----------------------------------------------------------------------------
@@ -99,23 +107,30 @@ def test_estimate_with_support_gives_the_same_irradiance_and_its_region(estimato
     q = np.c_[0.2 + 0.6 * rng.random((300, 2)), np.zeros(300)]
     ns, t = np.tile([0.0, 0.0, 1.0], (300, 1)), rng.random(300)
     E0 = m.estimate(q, ns, t, estimator=estimator, k=30)
-    E1, r, a, b = m.estimate(q, ns, t, estimator=estimator, k=30, support=True)
+    E1, r, tau, lo, hi = m.estimate(q, ns, t, estimator=estimator, k=30, support=True)
     np.testing.assert_array_equal(E0, E1)
     assert np.all(r > 0) and np.all(r < 0.2)
-    assert np.all(a <= t) and np.all(t <= b)
+    assert np.all(lo <= t) and np.all(t <= hi)
     if estimator == "STANDARD":
-        assert np.all(np.isinf(a)) and np.all(np.isinf(b))
+        assert np.all(np.isinf(tau)) and np.all(np.isinf(lo)) and np.all(np.isinf(hi))
     else:
-        assert np.all(b - a < 1.0) and np.all(a >= 0.0) and np.all(b <= 1.0)
+        assert np.all(tau > 0) and np.all(tau < 0.5) and np.all(lo >= 0.0) and np.all(hi <= 1.0)
+    if estimator == "TEMPORAL":                     # 60k photons, k = 30: time slices
+        assert np.all(hi - lo < 1.0)
 
 
 # ----------------------------------------------------------------------------
 # Renders: off is the unshared path; on within tolerance; fewer estimates
 # ----------------------------------------------------------------------------
 RES = (48, 32)
-BASE = dict(method="PHOTON", estimator="TEMPORAL", samples=16, photons_caustic=20_000, photons_global=0,
+BASE = dict(method="PHOTON", estimator="TEMPORAL", samples=32, photons_caustic=20_000, photons_global=0,
             k_nearest=30, effects="MANUAL", caustics=True, indirect=False, threads=1)
 SEEDS = (1, 2, 3, 4)
+
+
+@functools.lru_cache(maxsize=1)
+def _exact():
+    return analytic_moving_caustic(RES, sub=4, n_t=64, mirror=(0.0, 0.0))
 
 
 def _static(scene):
@@ -143,19 +158,20 @@ def test_sharing_off_is_the_unshared_path(monkeypatch):
     assert st2["photon_estimates"] == st2["photon_lookups"]
 
 
-@pytest.mark.parametrize("kind", ["static", "moving receiver"])
-def test_sharing_stays_within_its_tolerance_of_unshared(kind, monkeypatch):
-    """Over 4 seeds (photons and camera), the default f against f = 0 at 16 spp: the mean within 1 %,
-    no 8 x 8 block off by more than z = 4 (24 blocks), and the error against the exact image at
-    most 5 % above the unshared one's; the moving box's top (where a reuse across times farther than
-    the estimate's window would show) within 3 % of unshared.  And fewer estimates."""
-    f_on = sharing.SHARE_RADIUS_FRACTION
+@pytest.mark.parametrize("kind, f", [("static", None), ("moving receiver", None), ("moving receiver", 0.5)])
+def test_sharing_stays_within_its_tolerance_of_unshared(kind, f, monkeypatch):
+    """Over 4 seeds (photons and camera), f (None: the default) against f = 0 at 32 spp: the mean
+    within 0.5 %, no 8 x 8 block off by more than z = 4 (24 blocks, unpaired), the error against the
+    exact image at most 2 % above the unshared one's, and the moving box's path (where a reuse across
+    times farther apart than the estimates' windows would show) within 1 % of unshared.  Measured:
+    static -0.07 %, z 0.4; moving receiver -0.01 % / -0.02 % (f = 0.5), z <= 0.42, error ratio 1.000 /
+    1.004.  And fewer estimates in the render stats."""
+    f_on = sharing.SHARE_RADIUS_FRACTION if f is None else f
     assert f_on > 0
     scene = moving_caustic_scene(RES, mirror=(0.0, 0.0))
     if kind == "static":
         scene = _static(scene)
-    exact = analytic_moving_caustic(RES, sub=6, n_t=64 if kind == "static" else 128, mirror=(0.0, 0.0)) \
-        if kind != "static" else None
+    exact = None if kind == "static" else _exact()
     on, off = [], []
     for seed in SEEDS:
         a, st_on = _render(scene, f_on, seed, monkeypatch)
@@ -163,9 +179,9 @@ def test_sharing_stays_within_its_tolerance_of_unshared(kind, monkeypatch):
         on.append(a)
         off.append(b)
         assert st_on["photon_lookups"] == st_off["photon_lookups"] == st_off["photon_estimates"]
-        assert st_on["photon_estimates"] < (0.8 if kind == "static" else 1.0) * st_on["photon_lookups"]
+        assert st_on["photon_estimates"] < (0.9 if kind == "static" or f else 1.0) * st_on["photon_lookups"]
     on, off = np.stack(on), np.stack(off)
-    assert abs(on.mean() / off.mean() - 1.0) < 0.01, on.mean() / off.mean()
+    assert abs(on.mean() / off.mean() - 1.0) < 0.005, on.mean() / off.mean()
     blocks = lambda x: x[..., 0].reshape(len(SEEDS), 4, 8, 6, 8).mean(axis=(2, 4))
     Bon, Boff = blocks(on), blocks(off)
     se = np.sqrt((Bon.var(0, ddof=1) + Boff.var(0, ddof=1)) / len(SEEDS))
@@ -173,7 +189,7 @@ def test_sharing_stays_within_its_tolerance_of_unshared(kind, monkeypatch):
     assert np.abs(z).max() < 4.0, np.abs(z).max()
     if exact is not None:
         err = lambda x: np.sqrt(np.mean((x - exact[None, ..., :3]) ** 2))
-        assert err(on) < 1.05 * err(off), (err(on), err(off))
-        # the box top at mid-shutter, x in [-0.3, 0.3] around 0: pixels 17..30 (of 48) x 10..21 (of 32)
+        assert err(on) < 1.02 * err(off), (err(on), err(off))
+        # the strip the box top crosses (|y| < 0.3 m: rows 11..20 of 32) around the shade
         top = (slice(None), slice(11, 21), slice(18, 30))
-        assert abs(on[top].mean() / off[top].mean() - 1.0) < 0.03
+        assert abs(on[top].mean() / off[top].mean() - 1.0) < 0.01

@@ -344,18 +344,18 @@ class PhotonMap:
                  k: int = 50, kernel: str = "BOX", temporal_alpha: float = 0.0, support: bool = False):
         """Irradiance E (n, 3) W/m^2 at points p (n, 3), normals ns (n, 3), times t (n,).
 
-        support: also return the region each estimate read, ``(E, r, a, b)``: r (n,) m its spatial
-        radius (STANDARD r_k, TEMPORAL r_m, KD4D R_k) and [a, b] (n,) the shutter times its photons
-        may have (TEMPORAL [t - tau, t + tau] cut to the slice, KD4D [t - R/s, t + R/s] cut to the
-        shutter, STANDARD and timeless maps (-inf, inf): the estimate does not depend on t).  r = 0
-        where nothing was estimated (an empty map or slice).  What ``photons.sharing`` needs to
-        decide which other queries may reuse an estimate.
+        support: also return the region each estimate read, ``(E, r, tau, lo, hi)``, all (n,):
+        r (m) its spatial radius (STANDARD r_k, TEMPORAL r_m, KD4D R_k), tau its time half-width
+        (TEMPORAL tau, KD4D R / s; STANDARD and timeless maps inf: the estimate does not depend on
+        t), [lo, hi] the shutter times its photons come from (TEMPORAL's time slice, else [0, 1];
+        STANDARD (-inf, inf)).  r = 0 where nothing was estimated (an empty map or slice).  What
+        ``photons.sharing`` needs to decide which other queries may reuse an estimate.
         """
         p = np.asarray(p, dtype=np.float64).reshape(-1, 3) - self.origin  # into the records' frame
         n = p.shape[0]
         E = np.zeros((n, 3), dtype=np.float64)
         if self.n < 2 or n == 0:
-            return (E, np.zeros(n), np.full(n, -np.inf), np.full(n, np.inf)) if support else E
+            return (E, np.zeros(n), np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf)) if support else E
         ns = np.asarray(ns, dtype=np.float32).reshape(-1, 3)
         t = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
         estimator = estimator.upper()
@@ -382,7 +382,7 @@ class PhotonMap:
             E[:], r, tau, lo, hi = self._estimate_sliced(B, p, ns, t, k, m, kernel)
             self.stats["lookup_s"] += _time.perf_counter() - t0
             self.stats["lookup_count"] += n
-            return (E, r, np.maximum(t - tau, lo), np.minimum(t + tau, hi)) if support else E
+            return (E, r, tau, lo, hi) if support else E
         # -- search: Phi summed over the inner / selected photons, radius, time window ----------
         if self.backend == "numba":
             try:
@@ -397,13 +397,10 @@ class PhotonMap:
         self.stats["lookup_count"] += n
         if not support:
             return E
-        if estimator == "TEMPORAL":
-            a, b = np.maximum(t - tau, 0.0), np.minimum(t + tau, 1.0)
-        elif estimator == "KD4D":
-            a, b = np.maximum(t - r / self.time_scale, 0.0), np.minimum(t + r / self.time_scale, 1.0)
-        else:
-            a, b = np.full(n, -np.inf), np.full(n, np.inf)
-        return E, r, a, b
+        if estimator == "STANDARD":
+            return E, r, np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf)
+        half = tau if estimator == "TEMPORAL" else r / self.time_scale
+        return E, r, half, np.zeros(n), np.ones(n)
 
     # -- TEMPORAL on time slices ---------------------------------------------------------------------
     def _estimate_sliced(self, B, p, ns, t, k, m, kernel):

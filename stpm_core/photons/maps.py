@@ -56,7 +56,7 @@ class PhotonMaps:
         """Irradiance E (n, 3) W/m^2 at p (n, 3) on the ns (n, 3) side at shutter times t (n,).
 
         Zeros where the map is empty.  Keyword overrides default to the settings.  support: return
-        ``(E, r, a, b)``, the radius and time window each estimate read (``PhotonMap.estimate``).
+        ``(E, r, tau, lo, hi)``, the region each estimate read (``PhotonMap.estimate``).
         """
         if kind not in self.maps:
             raise ValueError(f"unknown photon map {kind!r} (expected one of {KINDS})")
