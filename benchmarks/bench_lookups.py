@@ -17,6 +17,11 @@ Methods (``threads=1``: every CPU second is the calling thread's, ``time.thread_
 * PHOTON with FINAL's maps (TEMPORAL, k = 100, 2M caustic + 1M global photons), FINAL_SPP samples
   per pixel (FINAL has 64 at 320 x 240: 64x the queries, the same per-query cost).
 
+* Sharing (:func:`run_sharing`, keys ``share_...``): FINAL's maps and 64 spp on 80 x 60 pixels of
+  FINAL's 320 x 240 size (lens x 4), look-ups shared within f x the pilots' radius for f = 0, 0.1,
+  0.25, 0.5 (0: unshared, today's path), interleaved per seed over 3 seeds: queries shared,
+  look-up CPU-s (estimates + the grouping) and the image error against unshared.
+
 Reported per scene and method: ``lookup_s`` (CPU s inside the maps' ``estimate``), ``cast_s`` (CPU
 s inside the caster during ``trace_image``: camera, bounce and shadow rays), ``cast_all_s`` (also
 photon tracing's rays), ``lookup_over_cast`` (the issue's ratio) and ``lookup_over_cast_all``; for
@@ -26,7 +31,7 @@ included), ``other_s`` (normalisation and array traffic); ``build_s`` (every kd-
 in the render, the pilot's included: map building, not look-ups); ``after_over_before_build`` and
 ``grid_over_tree_range`` / ``grid_over_tree_lookup`` (per round and of the minima).
 
-    python -m benchmarks lookups          # about 2-3 minutes on 2 cores
+    python -m benchmarks lookups          # about 6-7 minutes on 2 cores (sharing: about 4)
 """
 from __future__ import annotations
 
@@ -222,6 +227,8 @@ def run(rounds: int = ROUNDS) -> dict:
         for key in ("lookup_s", "cast_s", "cast_all_s", "queries", "lookup_over_cast", "lookup_over_cast_all"):
             out[f"{name}_final_{key}"] = t[key]
         out[f"{name}_final_us_per_query"] = 1e6 * t["lookup_s"] / max(t["queries"], 1)
+    # -- FINAL's maps with a pixel's look-ups shared (photons/sharing.py), fractions interleaved --------
+    out.update({f"share_{k}": v for k, v in run_sharing().items()})
     return out
 
 
