@@ -18,6 +18,11 @@ Methods (``threads=1``: every CPU second is the calling thread's, ``time.thread_
 * PHOTON with FINAL's maps (TEMPORAL, k = 100, 2M caustic + 1M global photons), FINAL_SPP samples
   per pixel (FINAL has 64 at 320 x 240: 64x the queries, the same per-query cost).
 
+* Sharing (:func:`run_sharing`, keys ``share_...``): FINAL's maps and 64 spp on 80 x 60 pixels of
+  FINAL's 320 x 240 size (lens x 4), look-ups shared within f x the pilots' radius for f = 0, 0.1,
+  0.25, 0.5 (0: unshared, today's path), interleaved per seed over 3 seeds: queries shared,
+  look-up CPU-s (estimates + the grouping) and the image error against unshared.
+
 Reported per scene and method: ``lookup_s`` (CPU s inside the maps' ``estimate``), ``cast_s`` (CPU
 s inside the caster during ``trace_image``: camera, bounce and shadow rays), ``cast_all_s`` (also
 photon tracing's rays), ``lookup_over_cast`` (the issue's ratio) and ``lookup_over_cast_all``; for
@@ -27,7 +32,7 @@ included), ``other_s`` (normalisation and array traffic); ``build_s`` (every kd-
 render, the pilot's included: map building, not look-ups); ``after_over_before_build`` and
 ``after_over_before_cpu`` (per round and of the minima).
 
-    python -m benchmarks lookups          # about 2-3 minutes on 2 cores
+    python -m benchmarks lookups          # about 6-7 minutes on 2 cores (sharing: about 4)
 """
 from __future__ import annotations
 
@@ -215,6 +220,127 @@ def run(rounds: int = ROUNDS) -> dict:
         for key in ("lookup_s", "cast_s", "cast_all_s", "queries", "lookup_over_cast", "lookup_over_cast_all"):
             out[f"{name}_final_{key}"] = t[key]
         out[f"{name}_final_us_per_query"] = 1e6 * t["lookup_s"] / max(t["queries"], 1)
+    # -- FINAL's maps with a pixel's look-ups shared (photons/sharing.py), fractions interleaved --------
+    out.update({f"share_{k}": v for k, v in run_sharing().items()})
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------
+# Sharing a pixel's look-ups (photons/sharing.py): FINAL's maps, queries shared, CPU-s and image error
+# ---------------------------------------------------------------------------------------------------
+SHARE_RESOLUTION = (80, 60)
+SHARE_ZOOM = 4.0                     # lens x 4: FINAL's 320 x 240 pixels, the image's central quarter (each axis)
+SHARE_SPP = 64                       # FINAL's samples per pixel
+SHARE_FRACTIONS = (0.0, 0.1, 0.25, 0.5)
+SHARE_SEEDS = (1, 2, 3)
+SHARE_BLOCK = 8
+
+
+def _final_maps(scene, settings):
+    """What ``render`` builds before tracing the image (PHOTON): caster, lights, table, maps."""
+    from stpm_core.bsdf import MaterialTable
+    from stpm_core.lights import LightSet
+    from stpm_core.photons import build_photon_maps
+    from stpm_core.plan import apply_plan, make_plan
+    from stpm_core.raycast import make_caster
+    caster = make_caster(scene)
+    lights = LightSet(scene)
+    ps = apply_plan(settings, make_plan(scene, settings, caster=caster, lights=lights))
+    return caster, lights, MaterialTable(scene.materials), build_photon_maps(scene, ps, caster, lights)
+
+
+def _trace_shared(scene, settings, built, f: float) -> tuple[np.ndarray, dict]:
+    """Caustic + Indirect (H, W, 3) of one image traced on ``built`` maps with SHARE_RADIUS_FRACTION = f,
+    and CPU seconds (this thread) inside the maps' estimate and in the sharing's own bookkeeping."""
+    from stpm_core.integrator import trace_image
+    from stpm_core.photons import maps as maps_mod, sharing
+    caster, lights, table, pmaps = built
+    t = {"estimate_s": 0.0, "share_s": 0.0}
+    old_f, old_est, old_share = sharing.SHARE_RADIUS_FRACTION, maps_mod.PhotonMaps.estimate, sharing.shared_estimate
+
+    def est(*a, **k):
+        t0 = time.thread_time()
+        try:
+            return old_est(*a, **k)
+        finally:
+            t["estimate_s"] += time.thread_time() - t0
+
+    def share(*a, **k):
+        t0, e0 = time.thread_time(), t["estimate_s"]
+        try:
+            return old_share(*a, **k)
+        finally:
+            t["share_s"] += time.thread_time() - t0 - (t["estimate_s"] - e0)
+
+    sharing.SHARE_RADIUS_FRACTION, maps_mod.PhotonMaps.estimate, sharing.shared_estimate = f, est, share
+    try:
+        passes, ts = trace_image(scene, settings, caster, lights, pmaps, table=table)
+    finally:
+        sharing.SHARE_RADIUS_FRACTION, maps_mod.PhotonMaps.estimate, sharing.shared_estimate = \
+            old_f, old_est, old_share
+    t["lookup_s"] = t["estimate_s"] + t["share_s"]
+    t["queries"], t["estimated"] = ts.photon_lookups, ts.photon_estimates
+    return passes["Caustic"][..., :3].astype(np.float64) + passes["Indirect"][..., :3], t
+
+
+def _blocks(img: np.ndarray, b: int = SHARE_BLOCK) -> np.ndarray:
+    """Luminance-free block means (H/b, W/b, 3)."""
+    H, W = img.shape[0] // b * b, img.shape[1] // b * b
+    return img[:H, :W].reshape(H // b, b, W // b, b, 3).mean(axis=(1, 3))
+
+
+def _zoomed(scene, zoom: float):
+    scene.camera.lens *= zoom
+    return scene
+
+
+def run_sharing(fractions=SHARE_FRACTIONS, seeds=SHARE_SEEDS, resolution=SHARE_RESOLUTION, spp=SHARE_SPP,
+                zoom=SHARE_ZOOM) -> dict:
+    """Per scene (demo, pool) and seed, FINAL's maps traced once (photons of that seed), then the image
+    traced with each sharing fraction f, fractions interleaved: queries shared, look-up CPU-s (estimate
+    + the grouping; minimum over seeds), and the error against the unshared image: ``rel_rmse_vs_unshared``
+    (same seed: same photons and camera samples; RMSE of Caustic + Indirect over its mean) next to
+    ``seed_to_seed_rel_rmse`` (two unshared seeds: the image's own noise); ``rel_bias`` (the mean's
+    shift); block z (8 x 8 pixel blocks: mean over seeds of shared minus unshared over the standard
+    error of the seeds' block means, as for two independent renders)."""
+    out: dict = {}
+    scenes = {"demo": _zoomed(demo_scene(resolution), zoom), "pool": _zoomed(pool_scene(resolution), zoom)}
+    for name, sc in scenes.items():
+        img, tm = {}, {}
+        for seed in seeds:
+            settings = RenderSettings(**{**FINAL, "samples": spp, "seed": seed})
+            built = _final_maps(sc, settings)
+            if seed == seeds[0]:
+                _trace_shared(sc, RenderSettings(**{**settings.__dict__, "samples": 2}), built, 0.1)  # warm-up
+            for f in fractions:
+                img[(f, seed)], tm[(f, seed)] = _trace_shared(sc, settings, built, f)
+        off = np.stack([img[(0.0, s)] for s in seeds])
+        scale = float(off.mean())
+        noise = [float(np.sqrt(np.mean((off[i] - off[i + 1]) ** 2))) / scale for i in range(len(seeds) - 1)]
+        out[f"{name}_seed_to_seed_rel_rmse"] = float(np.mean(noise))
+        cap = float(np.percentile(off, 99.5))                 # the same, on images clipped at the unshared
+        clip = lambda x: np.minimum(x, cap)                   # 99.5th percentile (fireflies left out)
+        out[f"{name}_seed_to_seed_rel_rmse_clipped"] = float(np.mean(
+            [np.sqrt(np.mean((clip(off[i]) - clip(off[i + 1])) ** 2)) / scale for i in range(len(seeds) - 1)]))
+        for f in fractions:
+            tag = f"{name}_f{f}"
+            runs = [tm[(f, s)] for s in seeds]
+            out[f"{tag}_queries"] = runs[0]["queries"]
+            out[f"{tag}_shared_fraction"] = 1.0 - runs[0]["estimated"] / max(runs[0]["queries"], 1)
+            for key in ("lookup_s", "estimate_s", "share_s"):
+                out[f"{tag}_{key}"] = min(r[key] for r in runs)
+            out[f"{tag}_lookup_over_unshared"] = out[f"{tag}_lookup_s"] / out[f"{name}_f{fractions[0]}_lookup_s"]
+            if f == 0.0:
+                continue
+            on = np.stack([img[(f, s)] for s in seeds])
+            out[f"{tag}_rel_rmse_vs_unshared"] = float(np.sqrt(np.mean((on - off) ** 2))) / scale
+            out[f"{tag}_rel_rmse_vs_unshared_clipped"] = float(np.sqrt(np.mean((clip(on) - clip(off)) ** 2))) / scale
+            out[f"{tag}_rel_bias"] = float((on - off).mean()) / scale
+            Bon, Boff = np.stack([_blocks(x) for x in on]), np.stack([_blocks(x) for x in off])
+            se = np.sqrt((Bon.var(0, ddof=1) + Boff.var(0, ddof=1)) / len(seeds))
+            z = (Bon.mean(0) - Boff.mean(0)) / np.maximum(se, 1e-12 * scale)
+            out[f"{tag}_block_z_max"] = float(np.abs(z).max())
+            out[f"{tag}_block_z_rms"] = float(np.sqrt(np.mean(z ** 2)))
     return out
 
 

@@ -47,6 +47,7 @@ from .kernels.light_params import light_params, light_poses, mesh_arrays
 from .world_light import constant_environment
 from .kernels.svm import shade_rows
 from .parallel import ordered_map, worker_count
+from .photons import sharing as _sharing
 from .raycast.geometry import GUARD_FRACTION, OFFSET_POS, instance_offsets, offset_lengths
 from .sampling import rng_for, skip_uniforms
 from .shading import hit_geometry, shading_data
@@ -70,7 +71,8 @@ class TraceStats:
     camera_rays: int = 0
     bounce_rays: int = 0
     shadow_rays: int = 0
-    photon_lookups: int = 0
+    photon_lookups: int = 0                  # photon-map queries (shading points x maps)
+    photon_estimates: int = 0                # of them estimated; the others shared one (photons.sharing)
     seconds: float = 0.0
     extra: dict = field(default_factory=dict)
 
@@ -80,6 +82,7 @@ class TraceStats:
         self.bounce_rays += other.bounce_rays
         self.shadow_rays += other.shadow_rays
         self.photon_lookups += other.photon_lookups
+        self.photon_estimates += other.photon_estimates
 
     @property
     def rays(self) -> int:
@@ -324,11 +327,13 @@ def _glossy_emission(ctx, gem: np.ndarray, hits, o, t: np.ndarray, C, crow, p_c,
 
 
 def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k, use_idx, beta_k, use_beta,
-                  touched):
+                  touched, spp: int = 1):
     """Caustic and Indirect at the hit rows sh (k,): rho_d / pi * E_kind(p, ns_f, t) added into the passes.
 
     rho_d and the query rows from ``kernels.paths.photon_albedo`` (once for both maps), the
     irradiance estimates from the photon maps (``PhotonMaps.estimate``), ``photon_add`` into dsts.
+    spp > 1 (samples of a pixel consecutive): the queries of one pixel on one instance share
+    estimates (``photons.sharing``, on while ``SHARE_RADIUS_FRACTION`` > 0 and the maps support it).
     """
     k = sh.size
     rho = _scratch("rho", (k, 3))
@@ -345,12 +350,24 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
         x0, y0, tw, S, W = _SCRATCH.tile
         p = samples // S
         extra["pixels"] = (y0 + p // tw) * W + x0 + p % tw
+    # Sharing: a pixel's queries on one instance reuse a representative's estimate (photons.sharing)
+    group = None
+    if spp > 1 and _sharing.SHARE_RADIUS_FRACTION > 0.0 and getattr(ctx.maps, "shares_lookups", False):
+        rows = sh[live[:n_q_rows]]
+        group = (idx_k[rows] if use_idx else rows) // spp * (ctx.n_instances + 1) + hits.instance[rows]
     for kind, name in (("caustic", "Caustic"), ("global", "Indirect")):
         if not ctx.map_kinds.get(kind, False):
             continue
-        E = np.ascontiguousarray(ctx.maps.estimate(kind, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows], **extra),
-                                 np.float64)
+        if group is None:
+            E = ctx.maps.estimate(kind, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows], **extra)
+            estimated = n_q_rows
+        else:
+            E, estimated = _sharing.shared_estimate(
+                lambda p, ns, t: ctx.maps.estimate(kind, p, ns, t, support=True),
+                p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows], group)
+        E = np.ascontiguousarray(E, np.float64)
         stats.photon_lookups += n_q_rows
+        stats.photon_estimates += estimated
         _K.photon_add(dsts[name], sh, live[:n_q_rows], rho, E, idx_k, use_idx, beta_k, use_beta, ctx.clamp_indirect)
         touched.add(name)
 
@@ -491,7 +508,8 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                                            strata=(n, int(spp))):
                 touched.add("Direct")
             if ctx.maps is not None:
-                _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched)
+                _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched,
+                              int(spp))
         if bounce == ctx.max_depth or n_spec == 0:
             break
         # -- Continue through delta and rough non-diffuse lobes (the diffuse lobe ends here) ---------
@@ -564,6 +582,7 @@ class _Context:
     zero_passes: tuple = ()                  # passes that stay 0 for every sample
     layout: dict = None                      # columns of a tile's per-sample matrix (_compact_layout)
     features: bool = False                   # RenderSettings.denoise: Denoising Albedo / Normal (kernels.paths.denoising_rows)
+    n_instances: int = 0                     # the scene's instances (a photon query's group is pixel x instance)
 
 
 def _mesh_emitters(scene, lights) -> dict:
@@ -723,6 +742,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     ctx.zero_passes = tuple(name for name, kind in (("Caustic", "caustic"), ("Indirect", "global"))
                             if maps is None or not ctx.map_kinds.get(kind, False))
     ctx.features = bool(getattr(settings, "denoise", False))
+    ctx.n_instances = len(scene.instances)
     ctx.layout = _compact_layout(ctx)
     film = Film(W, H, settings.filter_width, passes=PASSES + DENOISING_GUIDES if ctx.features else PASSES)
     cam = scene.camera

@@ -20,7 +20,7 @@ from kernel_scenes import kernel_scenes
 from oracles.integrator_numpy import trace_image_numpy
 from stpm_core.integrator import trace_image
 from stpm_core.lights import LightSet
-from stpm_core.photons import build_photon_maps
+from stpm_core.photons import build_photon_maps, sharing
 from stpm_core.raycast import make_caster
 
 SCENES = {name: (scene, settings) for name, scene, settings in kernel_scenes()
@@ -36,7 +36,9 @@ def _compare(a: np.ndarray, b: np.ndarray, name: str) -> None:
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))
-def test_kernels_match_the_numpy_tracer(name):
+def test_kernels_match_the_numpy_tracer(name, monkeypatch):
+    # the oracle estimates every query: compare with look-up sharing off (tests/test_sharing.py tests it)
+    monkeypatch.setattr(sharing, "SHARE_RADIUS_FRACTION", 0.0)
     scene, settings = SCENES[name]
     caster, lights = make_caster(scene), LightSet(scene)
     maps = None

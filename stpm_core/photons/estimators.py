@@ -341,13 +341,21 @@ class PhotonMap:
 
     # -- the estimate ---------------------------------------------------------
     def estimate(self, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str = "TEMPORAL",
-                 k: int = 50, kernel: str = "BOX", temporal_alpha: float = 0.0) -> np.ndarray:
-        """Irradiance E (n, 3) W/m^2 at points p (n, 3), normals ns (n, 3), times t (n,)."""
+                 k: int = 50, kernel: str = "BOX", temporal_alpha: float = 0.0, support: bool = False):
+        """Irradiance E (n, 3) W/m^2 at points p (n, 3), normals ns (n, 3), times t (n,).
+
+        support: also return the region each estimate read, ``(E, r, tau, lo, hi)``, all (n,):
+        r (m) its spatial radius (STANDARD r_k, TEMPORAL r_m, KD4D R_k), tau its time half-width
+        (TEMPORAL tau, KD4D R / s; STANDARD and timeless maps inf: the estimate does not depend on
+        t), [lo, hi] the shutter times its photons come from (TEMPORAL's time slice, else [0, 1];
+        STANDARD (-inf, inf)).  r = 0 where nothing was estimated (an empty map or slice).  What
+        ``photons.sharing`` needs to decide which other queries may reuse an estimate.
+        """
         p = np.asarray(p, dtype=np.float64).reshape(-1, 3) - self.origin  # into the records' frame
         n = p.shape[0]
         E = np.zeros((n, 3), dtype=np.float64)
         if self.n < 2 or n == 0:
-            return E
+            return (E, np.zeros(n), np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf)) if support else E
         ns = np.asarray(ns, dtype=np.float32).reshape(-1, 3)
         t = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
         estimator = estimator.upper()
@@ -371,10 +379,10 @@ class PhotonMap:
             self.stats["temporal_slices"] = B
         t0 = _time.perf_counter()
         if B > 1:
-            E[:] = self._estimate_sliced(B, p, ns, t, k, m, kernel)
+            E[:], r, tau, lo, hi = self._estimate_sliced(B, p, ns, t, k, m, kernel)
             self.stats["lookup_s"] += _time.perf_counter() - t0
             self.stats["lookup_count"] += n
-            return E
+            return (E, r, tau, lo, hi) if support else E
         # -- search: Phi summed over the inner / selected photons, radius, time window ----------
         if self.backend == "numba":
             try:
@@ -387,11 +395,17 @@ class PhotonMap:
         E[:] = self._normalise(estimator, Phi, r, tau, t, kernel)
         self.stats["lookup_s"] += _time.perf_counter() - t0
         self.stats["lookup_count"] += n
-        return E
+        if not support:
+            return E
+        if estimator == "STANDARD":
+            return E, r, np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf)
+        half = tau if estimator == "TEMPORAL" else r / self.time_scale
+        return E, r, half, np.zeros(n), np.ones(n)
 
     # -- TEMPORAL on time slices ---------------------------------------------------------------------
     def _estimate_sliced(self, B, p, ns, t, k, m, kernel):
-        """Consistent TEMPORAL: each query searches the slice holding its time (E (n, 3) W/m^2).
+        """Consistent TEMPORAL: each query searches the slice holding its time: (E (n, 3) W/m^2,
+        r_m (n,), tau (n,), and the slice [lo, hi] (n,) of each query).
 
         Within slice j = [a, b) the m candidates and the k nearest in time come from that slice's
         photons only, so the window is clipped to the slice: W = mass of [t - tau, t + tau] cut to
@@ -429,7 +443,7 @@ class PhotonMap:
                     qb = q[a:a + batch]
                     Phi[qb], r[qb], tau[qb] = self._temporal(p[qb], ns[qb], t[qb], kj, mj, kernel,
                                                              tree=tree, rows=rows)
-        return self._normalise("TEMPORAL", Phi, r, tau, t, kernel, lo=lo, hi=hi)
+        return self._normalise("TEMPORAL", Phi, r, tau, t, kernel, lo=lo, hi=hi), r, tau, lo, hi
 
     # -- normalisations (docs/photon-mapping.md, section 5) -------------------------------------------
     def _normalise(self, estimator, Phi, r, tau, t, kernel, lo=0.0, hi=1.0):

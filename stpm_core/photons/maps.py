@@ -44,15 +44,19 @@ class PhotonMaps:
         self.time_scale = float(time_scale)
         self._info = dict(info or {})
 
+    shares_lookups = True    # estimate(..., support=True) gives what photons.sharing needs
+
     def has(self, kind: str) -> bool:
         """Does the ``kind`` map hold any photon?"""
         return self.maps[kind].n > 0
 
     def estimate(self, kind: str, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str | None = None,
-                 k: int | None = None, kernel: str | None = None, temporal_alpha: float | None = None) -> np.ndarray:
+                 k: int | None = None, kernel: str | None = None, temporal_alpha: float | None = None,
+                 support: bool = False):
         """Irradiance E (n, 3) W/m^2 at p (n, 3) on the ns (n, 3) side at shutter times t (n,).
 
-        Zeros where the map is empty.  Keyword overrides default to the settings.
+        Zeros where the map is empty.  Keyword overrides default to the settings.  support: return
+        ``(E, r, tau, lo, hi)``, the region each estimate read (``PhotonMap.estimate``).
         """
         if kind not in self.maps:
             raise ValueError(f"unknown photon map {kind!r} (expected one of {KINDS})")
@@ -61,7 +65,8 @@ class PhotonMaps:
             estimator=estimator or self.estimator,
             k=self.k if k is None else int(k),
             kernel=(kernel or self.kernel).upper(),
-            temporal_alpha=self.temporal_alpha if temporal_alpha is None else float(temporal_alpha))
+            temporal_alpha=self.temporal_alpha if temporal_alpha is None else float(temporal_alpha),
+            support=support)
 
     @property
     def stats(self) -> dict:
