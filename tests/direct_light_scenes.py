@@ -26,6 +26,17 @@ def _diffuse(name, color=(0.8, 0.8, 0.8)):
     return mat
 
 
+def metal(name, roughness=0.5, color=(0.9, 0.9, 0.9)):
+    """A Principled BSDF metal (Metallic 1) of that roughness and base colour (also the soft-falloff
+    and glossy comparisons' metal)."""
+    mat = bpy.data.materials.new(name)
+    p = mat.node_tree.nodes["Principled BSDF"]
+    p.inputs["Base Color"].default_value = (*color, 1.0)
+    p.inputs["Metallic"].default_value = 1.0
+    p.inputs["Roughness"].default_value = roughness
+    return mat
+
+
 def _emission(name, strength, color=(1.0, 0.9, 0.7)):
     mat = bpy.data.materials.new(name)
     t = mat.node_tree

@@ -14,30 +14,12 @@ import math
 
 import bpy
 
+from direct_light_scenes import _diffuse, metal as _metal
 from test_addon_scenes import add_camera, add_light, add_mesh, fresh, set_world
 
 __all__ = ["SCENES", "build"]
 
 W, H = 64, 48
-
-
-def _diffuse(name, color=(0.8, 0.8, 0.8)):
-    mat = bpy.data.materials.new(name)
-    t = mat.node_tree
-    t.nodes.remove(t.nodes["Principled BSDF"])
-    df = t.nodes.new("ShaderNodeBsdfDiffuse")
-    df.inputs["Color"].default_value = (*color, 1.0)
-    t.links.new(df.outputs["BSDF"], t.nodes["Material Output"].inputs["Surface"])
-    return mat
-
-
-def _metal(name, roughness=0.5, color=(0.9, 0.9, 0.9)):
-    mat = bpy.data.materials.new(name)
-    p = mat.node_tree.nodes["Principled BSDF"]
-    p.inputs["Base Color"].default_value = (*color, 1.0)
-    p.inputs["Metallic"].default_value = 1.0
-    p.inputs["Roughness"].default_value = roughness
-    return mat
 
 
 def floor(w: int = W, h: int = H):

@@ -20,6 +20,7 @@ from test_addon_scenes import add_camera, add_light, add_mesh, fresh, set_world 
 from test_cycles_textures import _image_material, _pattern, _write_png  # noqa: E402
 from test_cycles_world import hdri_world, write_hdri  # noqa: E402
 from cycles_ref import block_ztest, render_cycles_paths, render_stpm  # noqa: E402
+from direct_light_scenes import metal  # noqa: E402
 
 W, H = 64, 48
 Z_MAX = 4.5
@@ -27,12 +28,7 @@ MEAN_TOL = 0.03
 
 
 def _metal(name, roughness, color=(0.9, 0.75, 0.55)):
-    mat = bpy.data.materials.new(name)
-    p = mat.node_tree.nodes["Principled BSDF"]
-    p.inputs["Base Color"].default_value = (*color, 1.0)
-    p.inputs["Metallic"].default_value = 1.0
-    p.inputs["Roughness"].default_value = roughness
-    return mat
+    return metal(name, roughness, color)
 
 
 def _compare(tmp_path, label, spp):
