@@ -106,9 +106,8 @@ def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Ge
     samples (k,) int64: each row's sample in the tile; strata = (n, S): the tile's n samples, S
     per pixel.  Drawn: the pixels' keys (n / S, S) (their permutations and scramble seed), then
     jitters (k, 2); placed by ``kernels.paths.light_strata`` (each pixel's samples of the light
-    stratified).  Delta lights
-    ignore them: that block is skipped (``skip_uniforms``) and zeros are returned, the stream
-    ending where drawing would leave it.
+    stratified).  Delta lights ignore them: that block is skipped (``skip_uniforms``) and zeros
+    are returned, the stream ending where drawing would leave it.
     """
     n, S = strata
     k = samples.shape[0]
