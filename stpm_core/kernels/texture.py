@@ -333,12 +333,7 @@ def tex_image_rows(hdr, u8, u16, f32, half, tid, interp, ext, unassociate, st, v
                     r, g, b, a = MISSING
                 else:
                     r, g, b, a = tex_lookup(hdr, u8, u16, f32, half, t, x, y, interp, ext, unassociate)
-            if cs >= 0:
-                st[cs, k] = r
-                st[cs + 1, k] = g
-                st[cs + 2, k] = b
-            if as_ >= 0:
-                st[as_, k] = a
+            _put(st, k, cs, as_, r, g, b, a)
         return
     srgb = hdr[tid, 5] == 1
     unassociate = unassociate and hdr[tid, 6] != 0
@@ -374,6 +369,12 @@ def _store(st, k, cs, as_, r, g, b, a, unassociate, srgb):
         r, g, b = r / a, g / a, b / a
     if srgb:
         r, g, b = srgb_eotf(r), srgb_eotf(g), srgb_eotf(b)
+    _put(st, k, cs, as_, r, g, b, a)
+
+
+@njit(**JIT_INLINE)            # (tex_image_rows' loops: no call left in them)
+def _put(st, k, cs, as_, r, g, b, a):
+    """Row k's colour into slots cs .. cs + 2 and its alpha into slot as_ (-1: not used)."""
     if cs >= 0:
         st[cs, k] = r
         st[cs + 1, k] = g
