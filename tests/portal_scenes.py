@@ -3,7 +3,7 @@
 The room is the box [-1, 1] x [-1, 1] x [0, 2] (walls of zero thickness, white diffuse); the wall
 x = +1 has a square opening y in [-0.4, 0.4], z in [0.8, 1.6] (the window); the portal is a
 0.8 x 0.8 AREA light filling it, shining into the room (-x).  Shared by tests/test_portals.py and
-benchmarks/portals.py.
+benchmarks/bench_portals.py.
 """
 from __future__ import annotations
 
