@@ -12,7 +12,7 @@ import numpy as np
 from stpm_core.motion import MotionTransform
 from stpm_core.scene import Light, Material, Mesh, World
 
-from scenes import make_scene, persp_camera, point_light
+from scenes import make_scene, persp_camera, point_light, sphere_mesh, translate
 
 __all__ = ["WINDOW", "room_mesh", "portal_light", "room_scene", "inside"]
 
@@ -58,14 +58,21 @@ def portal_light(shrink: float = 1.0) -> Light:
 
 
 def room_scene(*, portal: bool, world=(1.0, 1.0, 1.0), image=None, lamp: float = 0.0, resolution=(32, 24),
-               albedo: float = 0.7):
+               albedo: float = 0.7, metal_ball: float = 0.0, camera=None):
     """The room seen from inside (camera near the wall x = -1, looking at the window wall and the
     floor); constant world ``world`` or an environment image (H, W, 3); ``lamp`` > 0 adds a point
-    light of that power under the ceiling."""
+    light of that power under the ceiling; ``metal_ball`` > 0 a rough metal sphere of that roughness
+    on the floor (its reflection of the window is found by next-event estimation and by the
+    lobe's own samples, weighed by multiple importance sampling); camera: (eye, target, lens) to
+    look elsewhere."""
     lights = [point_light((-0.5, 0.3, 1.7), lamp)] if lamp > 0 else []
-    sc = make_scene([room_mesh()], [Material(base_color=np.full(3, albedo), specular=0.0, roughness=1.0)],
-                    persp_camera((-0.9, -0.6, 1.3), (1.0, 0.2, 0.7), lens=18.0), lights,
-                    world=world, resolution=resolution)
+    objects = [room_mesh()]
+    mats = [Material(base_color=np.full(3, albedo), specular=0.0, roughness=1.0)]
+    if metal_ball > 0:
+        objects.append((sphere_mesh(0.4, material=1, name="ball"), translate(0.1, 0.1, 0.4)))
+        mats.append(Material(base_color=np.full(3, 0.9), metallic=1.0, roughness=metal_ball))
+    cam = persp_camera(*(camera or ((-0.9, -0.6, 1.3), (1.0, 0.2, 0.7), 18.0)))
+    sc = make_scene(objects, mats, cam, lights, world=world, resolution=resolution)
     if image is not None:
         sc.world = World(color=np.ones(3), strength=1.0, image=np.ascontiguousarray(image, np.float32))
     if portal:
