@@ -62,6 +62,11 @@ STREAM_CAMERA = 0x5A3
 BATCH_SAMPLES = 65536
 # Bounces after which Russian roulette may end a specular chain.
 RR_START = 3
+#: Russian roulette of the continuations that DIFFUSE picks make for the rough lobes' part of f
+#: (``kernels.bsdf.bsdf_sample_cont``, ``kernels.paths.specular_step``): a path whose throughput is
+#: below CONT_RR goes on with probability throughput / CONT_RR (docs/rendering.md, "Continuation
+#: weights": 0.25 costs a default Principled wall at roughness 1 about 4 % more bounce rays)
+CONT_RR = 0.25
 
 
 @dataclass
@@ -524,7 +529,7 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         feat_n, dft_n = (np.empty(n_spec, np.uint8), np.empty((n_spec, 3))) if ctx.features else (_NO_FLAGS, _NO_ROWS3)
         t_spec = t[spec] if ctx.world_li >= 0 and not ctx.lights.lights[ctx.world_li].transform.is_static else t[:1]
         n_go = _K.specular_step(spec, idx_k, use_idx, beta_k, use_beta, hits.position, hits.ng, hits.ns, d, C, crow,
-                                E, E_avg, u, rr, u_rr, EPS, GUARD_FRACTION, ctx.stop_coat, ctx.env,
+                                E, E_avg, u, rr, u_rr, EPS, GUARD_FRACTION, ctx.stop_coat, CONT_RR, ctx.env,
                                 _world_poses(ctx, t_spec), ctx.world_li >= 0, counts_s, ctx.glossy_bounces,
                                 ctx.transmission_bounces, idx_n, beta_n, o_n, d_n, guard_n, glossy_n, world_w_n,
                                 pc_n, counts_n, ctx.features, feat_b, dft_b, feat_n, dft_n)
@@ -565,7 +570,7 @@ class _Context:
     env: tuple = None                        # the world's environment arrays (kernels.environment)
     env_camera: tuple = None                 # what camera rays see of it (World.camera_image, else env)
     world_li: int = -1                       # the world's light index, -1 when it does not shine
-    stop_coat: bool = False                  # camera paths end on a rough coat too (kernels.bsdf.bsdf_sample_path)
+    stop_coat: bool = False                  # camera paths carry no rough coat on (kernels.bsdf.bsdf_sample_cont)
     glossy_bounces: int = 4                  # RenderSettings.glossy_bounces / transmission_bounces
     transmission_bounces: int = 12
     transparent_max_bounces: int = 8         # RenderSettings.transparent_max_bounces: passes in a row (transparency)

@@ -16,11 +16,11 @@ from types import SimpleNamespace
 import numpy as np
 
 from oracles import lights_numpy
-from oracles.bsdf_numpy import bsdf_eval, bsdf_eval_cont, bsdf_sample_path, diffuse_albedo, emission, has_nondelta
+from oracles.bsdf_numpy import bsdf_eval, bsdf_eval_cont, bsdf_sample_cont, diffuse_albedo, emission, has_nondelta
 from stpm_core.bsdf import MaterialTable
 from stpm_core.camera import camera_to_world, image_plane
 from stpm_core.film import DEPTH_BACKGROUND, PASSES, Film, filter_offsets
-from stpm_core.integrator import RR_START, STREAM_CAMERA, BATCH_SAMPLES, TraceStats, _map_kinds
+from stpm_core.integrator import CONT_RR, RR_START, STREAM_CAMERA, BATCH_SAMPLES, TraceStats, _map_kinds
 from stpm_core.raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from stpm_core.sampling import rng_for, skip_uniforms
 
@@ -398,7 +398,7 @@ def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, coun
     u = rng.random((spec.size, 3))
     idx = spec if idx is None else idx[spec]
     beta = None if beta is None else beta[spec]
-    wi, weight, kind, p_c = bsdf_sample_path(ctx.table, mat, wo, ns, ng, u)
+    wi, weight, kind, p_c, u_w = bsdf_sample_cont(ctx.table, mat, wo, ns, ng, u)
     beta = weight if beta is None else beta * weight
     go = (kind != 0) & np.any(beta > 0.0, axis=1)
     # bounce budgets (Cycles' Glossy / Transmission bounces): a delta lobe within its own kind's, a
@@ -406,6 +406,12 @@ def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, coun
     trans = np.einsum("ij,ij->i", wi, _face_forward(ng, wo)) < 0.0
     gl_ok, tr_ok = counts[:, 0] < ctx.glossy_bounces, counts[:, 1] < ctx.transmission_bounces
     go &= np.where(trans, tr_ok, gl_ok)
+    # Russian roulette where a DIFFUSE pick carries the rough lobes' part (u_w >= 0): on at
+    # probability beta' / CONT_RR, then beta' / q
+    ru = go & (u_w >= 0.0)
+    q = np.where(ru, np.minimum(np.max(beta, axis=1) / CONT_RR, 1.0), 1.0)
+    go &= ~ru | (u_w < q)
+    beta = beta / np.where(q > 0, q, 1.0)[:, None]
     counts = counts + np.stack([~trans, trans], axis=1).astype(np.int32)
     if bounce + 1 >= RR_START:
         q = np.clip(np.max(beta, axis=1), 0.05, 1.0)
