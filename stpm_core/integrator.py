@@ -120,6 +120,17 @@ def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Ge
         skip_uniforms(rng, n + 2 * k)
         out[...] = 0.0
         return out
+    return strata_uniforms(samples, strata, rng, out)
+
+
+def strata_uniforms(samples: np.ndarray, strata: tuple, rng: np.random.Generator, out: np.ndarray) -> np.ndarray:
+    """Uniforms (k, 2) for k rows whose tile samples are samples (k,) int64, each pixel's samples
+    stratified against their film cells (``kernels.paths.light_strata``), written into out;
+    strata = (n, S): the tile's n samples, S per pixel.  Drawn: keys (n / S, S), then jitters
+    (k, 2).  A light's samples at a bounce (:func:`_light_uniforms`) and the directions of the
+    continuation lobes (``kernels.paths.specular_step``'s u1, u2) take one block each."""
+    n, S = strata
+    k = samples.shape[0]
     keys = rng.random(out=_scratch("light_keys", (n // S, S)))
     jit = rng.random(out=_scratch("light_jit", (k, 2)))
     _K.light_strata(samples, S, keys, jit, out)
@@ -518,6 +529,10 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
             break
         # -- Continue through delta and rough non-diffuse lobes (the diffuse lobe ends here) ---------
         u = rng.random((n_spec, 3))
+        # the lobes' directions (u1, u2): each pixel's samples stratified against the film, as
+        # the lights' (Cycles' Sobol dimensions); u0 (the lobe, the roulette) stays independent
+        samples = spec if idx is None else np.take(idx, spec)
+        u[:, 1:3] = strata_uniforms(samples, (n, int(spp)), rng, _scratch("dir_strata", (n_spec, 2)))
         rr = bounce + 1 >= RR_START
         u_rr = rng.random(n_spec) if rr else _NO_U
         EPS = offset_lengths(ctx.inst_offset, hits.instance[spec], hits.position[spec])

@@ -1,5 +1,5 @@
 """A default Principled wall (roughness 1, Specular IOR Level 0.5) beside a small light, over a
-rough metal floor (bpy).
+rough metal floor (bpy); and the floor itself (``floor_view``).
 
 The wall's rough dielectric coat is picked by under 2 % of the camera paths that hit it; what that
 lobe sees below is the floor's highlight of the light (tens of times the wall's radiance).  Built
@@ -52,6 +52,21 @@ def wall(kind: str = "POINT"):
         disc = add_light("AREA", "Disc", location=(0.0, 1.5, 1.2), energy=800.0, shape="DISK", size=0.6)
         disc.rotation_euler = (math.radians(90), 0, 0)
     add_camera(location=(0.0, -4.0, 2.2), rotation=(math.radians(90), 0, 0), lens=50)
+    return scene
+
+
+def floor_view(roughness: float = 0.5):
+    """The review's camera (looking down at the floor and the wall behind it) over the metal floor
+    of that roughness, with a point light of radius 0 (no light randomness: what noise the
+    floor's highlight has is the film's and the metal's samples)."""
+    scene = fresh()
+    scene.render.resolution_x, scene.render.resolution_y = W, H
+    set_world((0, 0, 0), 0.0)
+    add_mesh("plane", "Floor", material=metal("Floor", roughness=roughness, color=(0.8, 0.8, 0.8)), size=10.0)
+    add_mesh("plane", "Wall", location=(0.0, 4.0, 2.0), rotation=(math.radians(90), 0, 0),
+             material=_wall_material("Wall"), size=10.0)
+    add_light("POINT", "Bulb", location=(0.0, 1.5, 1.2), energy=200.0, shadow_soft_size=0.0)
+    add_camera(location=(0.0, -4.0, 1.5), rotation=(math.radians(80), 0, 0))
     return scene
 
 
