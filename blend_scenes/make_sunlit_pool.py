@@ -137,6 +137,7 @@ def build(path: Path) -> Path:
     camera((0.0, -3.3, 3.6), (45.0, 0.0, 0.0), lens=30.0)
     out = finish(scene, path, resolution=(320, 240), world=(0.05, 0.06, 0.08), motion_steps=5,
                  photons_caustic=1_000_000, photons_global=200_000)
+    scene.cycles.blur_glossy = 0.0                     # Filter Glossy blurs path-traced caustics: a sharp reference
     bpy.ops.file.make_paths_relative()                 # the textures travel with the .blend
     bpy.ops.wm.save_as_mainfile(filepath=str(path), compress=True)
     return out
