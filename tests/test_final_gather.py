@@ -4,7 +4,7 @@
   time: checked against a brute-force k-nearest STANDARD estimate in numpy;
 * the cache points are every 4th global photon, at the photon's own time;
 * a gather hit reads the nearest cache point in space-time on its own instance with a normal within
-  acos(0.9): checked against a brute-force search in numpy, on a scene with a moving box (so the
+  acos(0.9), within the cache's reach (the kd-tree search): checked against a brute-force search in numpy, on a scene with a moving box (so the
   time term decides);
 * with final gathering the global map holds first-hit photons (the gather vertices need the whole
   irradiance), without it none;
@@ -107,6 +107,7 @@ def test_gather_lookup_is_the_nearest_cache_point_in_space_time():
     live = np.flatnonzero(hits.hit)
     rows = np.arange(n)
     E = cache.lookup(rows, live, hits, d, t)
+    found = 0
     assert live.size > 1000 and np.any(hits.instance[live] == 1)
     for j, r in enumerate(live):
         g = hits.ng[r] * (-1.0 if hits.ng[r] @ d[r] > 0 else 1.0)
@@ -117,9 +118,12 @@ def test_gather_lookup_is_the_nearest_cache_point_in_space_time():
         c = np.flatnonzero(ok)
         d2 = ((cache.pos[c] - hits.position[r]) ** 2).sum(axis=1) + (cache.s * (cache.time[c] - t[r])) ** 2
         best = c[np.argmin(d2)]
-        if d2.min() > (7 * cache.h) ** 2:
-            continue                                               # beyond the searched rings: may miss
+        if d2.min() >= cache.reach ** 2:
+            assert np.all(E[j] == 0.0)                             # beyond the reach: a miss
+            continue
         np.testing.assert_array_equal(E[j], cache.E[best])
+        found += 1
+    assert found > 0.9 * live.size
 
 
 def test_progressive_refuses_final_gathering():
@@ -129,7 +133,7 @@ def test_progressive_refuses_final_gathering():
 
 def test_cache_of_an_empty_map_reads_zero():
     cache = IrradianceCache(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros((0, 3)),
-                            h=1.0, s=1.0)
+                            s=1.0)
     hits = SimpleNamespace(position=np.zeros((2, 3)), ng=np.zeros((2, 3)), instance=np.zeros(2, np.int64))
     E = cache.lookup(np.arange(2), np.arange(2), hits, np.zeros((2, 3)), np.zeros(2))
     assert np.all(E == 0.0)

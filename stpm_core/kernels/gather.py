@@ -9,8 +9,8 @@ instance with a normal within ``GATHER_NORMAL_COS``, and adds ``rho_d(y) / pi * 
 
 * :func:`gather_rays` -- the G rays of each queried vertex (origin, direction, time, parent
   sample, weight);
-* :func:`cache_lookup` -- the nearest cache point per gather hit (a uniform grid over the cache
-  points, cells searched ring by ring until no nearer point can remain).
+* :func:`cache_tree`, :func:`cache_lookup` -- the nearest cache point per gather hit (a balanced
+  kd-tree over the cache points in (x, y, z, s t), searched nearer child first within a bound).
 
 The cache itself (points, normals, instances, times, irradiance) is built by
 :mod:`stpm_core.photons.gather`.
@@ -22,11 +22,9 @@ import numpy as np
 from ..numba_probe import njit
 from .sampling import cosine_hemisphere, offset_origin, to_world
 
-__all__ = ["gather_rays", "cache_lookup", "GRID_BITS"]
+__all__ = ["gather_rays", "cache_tree", "tree_size", "cache_lookup", "LEAF"]
 
 _JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
-
-GRID_BITS = 21                          # bits per axis of a cell key (cells 0 .. 2^21 - 1)
 
 
 @njit(**_JIT)
@@ -75,75 +73,135 @@ def gather_rays(rows, live, P, NG, rho, n_q, t_q, idx, use_idx, beta, use_beta, 
     return n_go
 
 
-@njit(**_JIT)
-def _cell(x, lo, h):
-    """Cell index of coordinate x on an axis starting at lo with cells of side h (clipped to the key's range)."""
-    c = int(np.floor((x - lo) / h))
-    return min(max(c, 0), (1 << GRID_BITS) - 1)
+LEAF = 8                                # cache points per kd-tree leaf (at most)
 
 
 @njit(**_JIT)
-def cache_lookup(rows, live, P, NG, D, T, inst, cells, starts, cpos, ctime, cnorm, cinst, cE, lo, h, s, cos_min,
-                 max_ring, out):
+def _coord(X, T, s, i, a):
+    """Coordinate a of cache point i in (x, y, z, s t)."""
+    return s * T[i] if a == 3 else X[i, a]
+
+
+@njit(**_JIT)
+def cache_tree(X, T, s, perm, axis, split):
+    """Build a balanced kd-tree over the N cache points in (x, y, z, s t); returns the node count.
+
+    perm (N,) is reordered so node v's points are perm[lo_v:hi_v] (the root holds all; a node's
+    two children its two halves around mid = (lo + hi) // 2, in heap order 2 v + 1, 2 v + 2);
+    axis (M,) int64 and split (M,) the split axis and coordinate of each inner node (axis -1: a
+    leaf of at most LEAF points).  M = 2^(depth + 1) - 1 with 2^depth leaves (the caller sizes them
+    with :func:`tree_size`).  Each split sorts the node's points along its widest axis.
+    """
+    N = perm.shape[0]
+    M = axis.shape[0]
+    stack_v = np.empty(128, np.int64)
+    stack_lo = np.empty(128, np.int64)
+    stack_hi = np.empty(128, np.int64)
+    top = 0
+    stack_v[0], stack_lo[0], stack_hi[0] = 0, 0, N
+    top = 1
+    while top > 0:
+        top -= 1
+        v, lo, hi = stack_v[top], stack_lo[top], stack_hi[top]
+        if hi - lo <= LEAF or 2 * v + 2 >= M:
+            axis[v] = -1
+            continue
+        # the widest axis of the node's points
+        best_a, best_w = 0, -1.0
+        for a in range(4):
+            mn, mx = np.inf, -np.inf
+            for q in range(lo, hi):
+                c = _coord(X, T, s, perm[q], a)
+                mn = min(mn, c)
+                mx = max(mx, c)
+            if mx - mn > best_w:
+                best_a, best_w = a, mx - mn
+        key = np.empty(hi - lo)
+        for q in range(lo, hi):
+            key[q - lo] = _coord(X, T, s, perm[q], best_a)
+        order = np.argsort(key, kind="mergesort")
+        seg = perm[lo:hi].copy()
+        for q in range(hi - lo):
+            perm[lo + q] = seg[order[q]]
+        mid = (lo + hi) // 2
+        axis[v] = best_a
+        split[v] = key[order[mid - lo]]
+        stack_v[top], stack_lo[top], stack_hi[top] = 2 * v + 1, lo, mid
+        stack_v[top + 1], stack_lo[top + 1], stack_hi[top + 1] = 2 * v + 2, mid, hi
+        top += 2
+    return M
+
+
+@njit(**_JIT)
+def tree_size(N):
+    """Nodes M of :func:`cache_tree`'s heap for N points: leaves of at most LEAF points."""
+    leaves = 1
+    while leaves * LEAF < N:
+        leaves *= 2
+    return 2 * leaves - 1
+
+
+@njit(**_JIT)
+def cache_lookup(rows, live, P, NG, D, T, inst, perm, axis, split, cpos, ctime, cnorm, cinst, cE, s, cos_min,
+                 r2_max, out):
     """Irradiance (n, 3) W/m^2 of the nearest cache point of each gather hit, into out; returns misses.
 
     Query j is hit row r = rows[live[j]]: point P[r], geometric normal NG[r] turned toward the
     arriving ray (against D[r]), time T[r], instance inst[r].  Candidates: cache points with the
     same instance and a normal cnorm (N, 3) whose cosine with it is at least cos_min; the nearest
     in space-time, distance^2 = |x - x_c|^2 + (s (t - t_c))^2 (s: KD4D's time scale, scene units
-    per shutter).  out[j] = cE (N, 3) of that point, 0 where none lies within max_ring cells.
-
-    The grid: cells of side h from lo (3,); cells (C,) int64 the sorted keys of the occupied
-    cells (x | y << 21 | z << 42), starts (C + 1,) the first row of each in cpos / ctime / cnorm /
-    cinst / cE (the cache points sorted by cell).  Rings of cells at Chebyshev distance R = 0, 1,
-    ... around the query's cell are searched in turn; after ring R every point not yet seen lies
-    at least R h away in space, so the search stops once the best distance^2 is <= (R h)^2.
+    per shutter), searched on the kd-tree (perm, axis, split) of :func:`cache_tree` nearer child
+    first, a far child only while its splitting plane is nearer than the best so far.  out[j] =
+    cE (N, 3) of that point, 0 where none lies within distance^2 r2_max.
     """
     misses = 0
-    nb = 1 << GRID_BITS
+    N = perm.shape[0]
+    M = axis.shape[0]
+    stack_v = np.empty(256, np.int64)
+    stack_d = np.empty(256)
+    stack_lo = np.empty(256, np.int64)
+    stack_hi = np.empty(256, np.int64)
+    q = np.empty(4)
     for j in range(live.shape[0]):
         r = rows[live[j]]
-        p0, p1, p2 = P[r, 0], P[r, 1], P[r, 2]
+        q[0], q[1], q[2], q[3] = P[r, 0], P[r, 1], P[r, 2], s * T[r]
         g0, g1, g2 = NG[r, 0], NG[r, 1], NG[r, 2]
         if g0 * D[r, 0] + g1 * D[r, 1] + g2 * D[r, 2] > 0.0:
             g0, g1, g2 = -g0, -g1, -g2
-        tq = T[r]
         iq = inst[r]
-        cx, cy, cz = _cell(p0, lo[0], h), _cell(p1, lo[1], h), _cell(p2, lo[2], h)
-        best = np.inf
+        best = r2_max
         bi = -1
-        for R in range(max_ring + 1):
-            for dz in range(-R, R + 1):
-                z = cz + dz
-                if z < 0 or z >= nb:
+        stack_v[0], stack_d[0], stack_lo[0], stack_hi[0] = 0, 0.0, 0, N
+        top = 1
+        while top > 0:
+            top -= 1
+            if stack_d[top] >= best:
+                continue
+            v, lo, hi = stack_v[top], stack_lo[top], stack_hi[top]
+            while v < M and axis[v] >= 0:
+                # descend toward q, keep the far side for later
+                mid = (lo + hi) // 2
+                dlt = q[axis[v]] - split[v]
+                if dlt < 0.0:
+                    near, nlo, nhi, far, flo, fhi = 2 * v + 1, lo, mid, 2 * v + 2, mid, hi
+                else:
+                    near, nlo, nhi, far, flo, fhi = 2 * v + 2, mid, hi, 2 * v + 1, lo, mid
+                if dlt * dlt < best and top < 256:
+                    stack_v[top], stack_d[top], stack_lo[top], stack_hi[top] = far, dlt * dlt, flo, fhi
+                    top += 1
+                v, lo, hi = near, nlo, nhi
+            for k in range(lo, hi):
+                c = perm[k]
+                if cinst[c] != iq:
                     continue
-                for dy in range(-R, R + 1):
-                    y = cy + dy
-                    if y < 0 or y >= nb:
-                        continue
-                    inner = abs(dz) < R and abs(dy) < R
-                    dx = -R
-                    while dx <= R:
-                        x = cx + dx
-                        if x >= 0 and x < nb:
-                            key = np.int64(x) | (np.int64(y) << GRID_BITS) | (np.int64(z) << (2 * GRID_BITS))
-                            c = np.searchsorted(cells, key)
-                            if c < cells.shape[0] and cells[c] == key:
-                                for q in range(starts[c], starts[c + 1]):
-                                    if cinst[q] != iq:
-                                        continue
-                                    if cnorm[q, 0] * g0 + cnorm[q, 1] * g1 + cnorm[q, 2] * g2 < cos_min:
-                                        continue
-                                    e0, e1, e2 = cpos[q, 0] - p0, cpos[q, 1] - p1, cpos[q, 2] - p2
-                                    et = s * (ctime[q] - tq)
-                                    d2 = e0 * e0 + e1 * e1 + e2 * e2 + et * et
-                                    if d2 < best:
-                                        best = d2
-                                        bi = q
-                        # inside the shell only its two faces along x are new
-                        dx = dx + (2 * R if (inner and dx == -R and R > 0) else 1)
-            if bi >= 0 and best <= (R * h) * (R * h):
-                break
+                if cnorm[c, 0] * g0 + cnorm[c, 1] * g1 + cnorm[c, 2] * g2 < cos_min:
+                    continue
+                e0, e1, e2 = cpos[c, 0] - q[0], cpos[c, 1] - q[1], cpos[c, 2] - q[2]
+                et = s * ctime[c] - q[3]
+                d2 = e0 * e0 + e1 * e1 + e2 * e2 + et * et
+                if d2 < best:
+                    best = d2
+                    bi = c
         if bi < 0:
             out[j, 0], out[j, 1], out[j, 2] = 0.0, 0.0, 0.0
             misses += 1

@@ -13,7 +13,8 @@ the photon's incoming direction at t_i), and the irradiance
 read with the render's own space-time estimator (STANDARD / TEMPORAL / KD4D, k).  With final
 gathering the global map holds every photon stored at a non-delta surface within the diffuse
 bounce budget -- direct (first-hit) and caustic photons included (``trace_global_map``), so E_i
-is the whole irradiance at x_i.  A gather hit then reads ONE cache point (``kernels.gather.cache_lookup``).
+is the whole irradiance at x_i.  A gather hit then reads ONE cache point (``kernels.gather.cache_lookup``):
+the nearest in space-time on its instance with a normal within acos(``GATHER_NORMAL_COS``), within ``reach``.
 """
 from __future__ import annotations
 
@@ -24,45 +25,42 @@ import numpy as np
 from ..kernels import gather as _G
 from .record import oct_decode
 
-__all__ = ["IrradianceCache", "GATHER_STRIDE", "GATHER_NORMAL_COS", "GATHER_MAX_RING"]
+__all__ = ["IrradianceCache", "GATHER_STRIDE", "GATHER_NORMAL_COS", "GATHER_REACH"]
 
 GATHER_STRIDE = 4              # every 4th global photon is a cache point (Christensen's choice)
 GATHER_NORMAL_COS = 0.9        # a cache point serves a hit whose normal is within acos(0.9) = 26 deg of its own
-GATHER_MAX_RING = 6            # cells searched around a hit: rings 0 .. 6 (then E = 0: no photon near)
-GRID_CELL_FRACTION = 0.5       # grid cell side: this fraction of the median estimate radius r_k
+GATHER_REACH = 4.0             # a hit reads no cache point farther than 4 x the 95th percentile of the
+                               # estimates' radii r_k (then E = 0, counted in gather_misses)
 
 
 class IrradianceCache:
-    """Cache points (N of them) sorted by grid cell, and their irradiance.
+    """Cache points (N of them), their irradiance, and a kd-tree over them in (x, y, z, s t).
 
     Attributes
     ----------
     pos : (N, 3) float64 world positions (m); time : (N,) shutter times; normal : (N, 3) unit
     geometric normals on the side the photon arrived from; instance : (N,) int64; E : (N, 3)
-    W/m^2; cells : (C,) int64 occupied cell keys, sorted; starts : (C + 1,) int64 first point of
-    each; lo : (3,) grid origin; h : cell side (m); s : space-time scale (m per shutter);
-    stats : build seconds and counts.
+    W/m^2; s : space-time scale (m per shutter); reach : the largest distance a hit reads (m);
+    perm, axis, split : the kd-tree (``kernels.gather.cache_tree``); stats : build seconds and counts.
     """
 
-    def __init__(self, pos, time, normal, instance, E, *, h: float, s: float, stats: dict | None = None):
-        pos = np.asarray(pos, np.float64).reshape(-1, 3)
+    def __init__(self, pos, time, normal, instance, E, *, s: float, reach: float = np.inf, stats: dict | None = None):
+        self.pos = np.ascontiguousarray(np.asarray(pos, np.float64).reshape(-1, 3))
+        self.time = np.ascontiguousarray(np.asarray(time, np.float64).reshape(-1))
+        self.normal = np.ascontiguousarray(np.asarray(normal, np.float64).reshape(-1, 3))
+        self.instance = np.ascontiguousarray(np.asarray(instance, np.int64).reshape(-1))
+        self.E = np.ascontiguousarray(np.asarray(E, np.float64).reshape(-1, 3))
         self.s = float(s)
-        self.h = float(h) if h > 0 else 1.0
-        self.lo = pos.min(axis=0) - self.h if pos.shape[0] else np.zeros(3)
-        n_axis = 1 << _G.GRID_BITS
-        c = np.clip(np.floor((pos - self.lo) / self.h).astype(np.int64), 0, n_axis - 1)
-        key = c[:, 0] | (c[:, 1] << _G.GRID_BITS) | (c[:, 2] << (2 * _G.GRID_BITS))
-        order = np.argsort(key, kind="stable")
-        key = key[order]
-        self.pos = np.ascontiguousarray(pos[order])
-        self.time = np.ascontiguousarray(np.asarray(time, np.float64)[order])
-        self.normal = np.ascontiguousarray(np.asarray(normal, np.float64).reshape(-1, 3)[order])
-        self.instance = np.ascontiguousarray(np.asarray(instance, np.int64)[order])
-        self.E = np.ascontiguousarray(np.asarray(E, np.float64).reshape(-1, 3)[order])
-        self.cells, first = np.unique(key, return_index=True)
-        self.starts = np.append(first, key.size).astype(np.int64)
+        self.reach = float(reach)
+        N = self.pos.shape[0]
+        self.perm = np.arange(N, dtype=np.int64)
+        M = int(_G.tree_size(max(N, 1)))
+        self.axis = np.full(M, -1, np.int64)
+        self.split = np.zeros(M)
+        if N:
+            _G.cache_tree(self.pos, self.time, self.s, self.perm, self.axis, self.split)
         self.stats = dict(stats or {})
-        self.stats["gather_cache_points"] = int(self.pos.shape[0])
+        self.stats["gather_cache_points"] = int(N)
 
     @property
     def n(self) -> int:
@@ -96,14 +94,20 @@ class IrradianceCache:
         inst = np.asarray(hits.instance, np.int64)[ok]
         t1 = _time.perf_counter()
         # -- Irradiance at each point: the render's own space-time estimator ---------------------
+        reach = np.inf
         if p.shape[0]:
             E, r = maps.estimate("global", p, ns, t, support=True)[:2]
-            h = GRID_CELL_FRACTION * float(np.median(r[np.isfinite(r) & (r > 0)])) if np.any(r > 0) else 1.0
+            r = np.asarray(r, np.float64)
+            r = r[np.isfinite(r) & (r > 0)]
+            if r.size:
+                reach = GATHER_REACH * float(np.percentile(r, 95))
         else:
-            E, h = np.zeros((0, 3)), 1.0
-        stats = {"gather_normals_s": t1 - t0, "gather_estimate_s": _time.perf_counter() - t1,
-                 "gather_points_dropped": int((~ok).sum())}
-        return cls(p, t, ng, inst, E, h=h, s=maps.time_scale, stats=stats)
+            E = np.zeros((0, 3))
+        t2 = _time.perf_counter()
+        cache = cls(p, t, ng, inst, E, s=maps.time_scale, reach=reach)
+        cache.stats.update({"gather_normals_s": t1 - t0, "gather_estimate_s": t2 - t1,
+                            "gather_tree_s": _time.perf_counter() - t2, "gather_points_dropped": int((~ok).sum())})
+        return cache
 
     def lookup(self, rows: np.ndarray, live: np.ndarray, hits, d: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Irradiance (n, 3) W/m^2 at the gather hits rows[live] (n,) of ``hits`` (rays d (m, 3) at times t (m,))."""
@@ -111,9 +115,9 @@ class IrradianceCache:
         if self.n == 0:
             out[:] = 0.0
             return out
-        misses = _G.cache_lookup(rows, live, hits.position, hits.ng, d, t, hits.instance, self.cells, self.starts,
-                                 self.pos, self.time, self.normal, self.instance, self.E, self.lo, self.h, self.s,
-                                 GATHER_NORMAL_COS, GATHER_MAX_RING, out)
+        misses = _G.cache_lookup(rows, live, hits.position, hits.ng, d, t, hits.instance, self.perm, self.axis,
+                                 self.split, self.pos, self.time, self.normal, self.instance, self.E, self.s,
+                                 GATHER_NORMAL_COS, self.reach * self.reach, out)
         self.stats["gather_misses"] = self.stats.get("gather_misses", 0) + int(misses)
         return out
 
