@@ -386,6 +386,41 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
 
 # Gather rays traced at once (a chunk of a tile's queries times final_gather_samples)
 GATHER_BATCH = 1 << 17
+# Light samples per cache point for its direct irradiance (_cache_direct), and the random stream
+GATHER_DIRECT_SAMPLES = 4
+STREAM_GATHER_DIRECT = 0x6A7
+
+
+def _cache_direct(ctx, cache, seed: int) -> None:
+    """Add the direct irradiance at the final-gathering cache points (``photons.gather``), once.
+
+    Next-event estimation (:func:`_direct`, every light, shadow rays at the point's time t_i) at
+    each point x_i with a white Lambertian closure (f = 1 / pi) viewed along its shading normal:
+    E_direct = pi x the mean of ``GATHER_DIRECT_SAMPLES`` light samples (each light's samples
+    stratified over them).  Rows in chunks of ``BATCH_SAMPLES``.
+    """
+    from types import SimpleNamespace
+    from .scene import Material
+    n, S = cache.n, GATHER_DIRECT_SAMPLES
+    rng = rng_for(int(seed), STREAM_GATHER_DIRECT, 0, 0)
+    C = pack_materials([Material(base_color=np.ones(3), roughness=1.0)])
+    E_dir = np.zeros((n, 3))
+    step = max(S, BATCH_SAMPLES // S * S)
+    rows_all = np.repeat(np.arange(n), S)                 # the S samples of a point consecutive (strata)
+    for a in range(0, rows_all.size, step):
+        rows = rows_all[a:a + step]
+        k = rows.size
+        hits = SimpleNamespace(position=np.ascontiguousarray(cache.pos[rows]), ng=np.ascontiguousarray(cache.normal[rows]),
+                               ns=np.ascontiguousarray(cache.shading_normal[rows]),
+                               instance=np.ascontiguousarray(cache.instance[rows]))
+        d = -hits.ns                                      # viewed along the normal: wo = ns
+        dst = np.zeros((k, 3))
+        _direct(ctx, np.arange(k), hits, np.ascontiguousarray(d), C, np.zeros(k, np.int64),
+                np.ascontiguousarray(cache.time[rows]), rng, TraceStats(), dst, _NO_IDX, False, _NO_ROWS3, False,
+                strata=(k, S))
+        np.add.at(E_dir, rows, dst)
+    cache.add_direct(E_dir * (np.pi / S))
+
 
 
 def _final_gather(ctx, sh, hits, live, rho, p_q, n_q, t_q, idx_k, use_idx: bool, beta_k, use_beta: bool, dst,
@@ -850,6 +885,9 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     ctx.features = bool(getattr(settings, "denoise", False))
     ctx.n_instances = len(scene.instances)
     ctx.final_gather = int(getattr(settings, "final_gather_samples", 0)) if getattr(maps, "gather_cache", None) is not None else 0
+    if ctx.final_gather and maps.gather_cache.direct_pending:
+        # the cache's direct irradiance: next-event estimation at its points (photons.gather)
+        _cache_direct(ctx, maps.gather_cache, settings.seed)
     ctx.layout = _compact_layout(ctx)
     film = Film(W, H, settings.filter_width, passes=PASSES + DENOISING_GUIDES if ctx.features else PASSES)
     cam = scene.camera

@@ -8,12 +8,14 @@ so the chosen ones are spread evenly) becomes a cache point: its position x_i an
 photon's own), the surface's geometric normal and instance there (one short ray cast back along
 the photon's incoming direction at t_i), and the irradiance
 
-    E_i = PhotonMaps.estimate('global', x_i, n_i, t_i)         W / m^2
+    E_i = E_direct(x_i, t_i) + E_caustic(x_i, n_i, t_i) + E_global(x_i, n_i, t_i)        W / m^2
 
-read with the render's own space-time estimator (STANDARD / TEMPORAL / KD4D, k).  With final
-gathering the global map holds every photon stored at a non-delta surface within the diffuse
-bounce budget -- direct (first-hit) and caustic photons included (``trace_global_map``), so E_i
-is the whole irradiance at x_i.  A gather hit then reads ONE cache point (``kernels.gather.cache_lookup``):
+the last two read with the render's own space-time estimator (STANDARD / TEMPORAL / KD4D, k) from
+the caustic and global maps, the first by next-event estimation at (x_i, t_i) toward every light
+(``integrator._cache_direct``, with a white Lambertian closure), so E_i is the whole irradiance at
+x_i.  (Direct light from first-hit photons instead -- Jensen's global map -- leaked through
+zero-thickness walls: a point inside a room near an edge read the sunlit roof's photons across it,
+since a photon record has no normal to tell them apart.)  A gather hit then reads ONE cache point (``kernels.gather.cache_lookup``):
 the nearest in space-time on its instance with a normal within acos(``GATHER_NORMAL_COS``), within ``reach``.
 """
 from __future__ import annotations
@@ -62,17 +64,32 @@ class IrradianceCache:
         self.stats = dict(stats or {})
         self.stats["gather_cache_points"] = int(N)
 
+    direct_pending = False       # the direct irradiance is still to be added (add_direct)
+    shading_normal = None
+
+    def add_direct(self, E_direct: np.ndarray) -> None:
+        """Add the direct irradiance (N, 3) W/m^2 at the points (next-event estimation), once."""
+        self.E += np.asarray(E_direct, np.float64).reshape(self.E.shape)
+        self.direct_pending = False
+
     @property
     def n(self) -> int:
         return int(self.pos.shape[0])
 
     @classmethod
-    def build(cls, maps, caster, *, stride: int = GATHER_STRIDE, scene_extent: float = 1.0) -> "IrradianceCache":
+    def build(cls, maps, caster, *, stride: int = GATHER_STRIDE, scene_extent: float = 1.0,
+              caustics: bool = True) -> "IrradianceCache":
         """The cache of ``maps`` (a ``PhotonMaps`` whose global map holds every stored photon).
 
         caster: the scene's ray caster (a point's normal and instance: a ray from x_i + delta wi
         back along -wi at t_i, delta = 1e-4 scene_extent, reaches the surface the photon landed
         on; points whose ray misses are dropped).  scene_extent: the scene's diagonal (m).
+        caustics: add the caustic map's estimate (False when the diffuse budget leaves no caustic
+        photon readable at a gather vertex: ``diffuse_bounces`` < 2).
+
+        E holds the global and caustic maps' estimates; the direct part is added by the
+        integrator (:meth:`add_direct`, ``integrator._cache_direct``: next-event estimation at the
+        points, which needs the lights), before the first look-up.
         """
         t0 = _time.perf_counter()
         gm = maps.maps["global"]
@@ -97,6 +114,9 @@ class IrradianceCache:
         reach = np.inf
         if p.shape[0]:
             E, r = maps.estimate("global", p, ns, t, support=True)[:2]
+            E = np.array(E, np.float64)
+            if caustics and maps.has("caustic"):
+                E += maps.estimate("caustic", p, ns, t)
             r = np.asarray(r, np.float64)
             r = r[np.isfinite(r) & (r > 0)]
             if r.size:
@@ -105,6 +125,8 @@ class IrradianceCache:
             E = np.zeros((0, 3))
         t2 = _time.perf_counter()
         cache = cls(p, t, ng, inst, E, s=maps.time_scale, reach=reach)
+        cache.shading_normal = np.ascontiguousarray(ns)        # (N, 3) for next-event estimation (add_direct)
+        cache.direct_pending = True
         cache.stats.update({"gather_normals_s": t1 - t0, "gather_estimate_s": t2 - t1,
                             "gather_tree_s": _time.perf_counter() - t2, "gather_points_dropped": int((~ok).sum())})
         return cache

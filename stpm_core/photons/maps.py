@@ -73,6 +73,8 @@ class PhotonMaps:
     def stats(self) -> dict:
         """Photons stored per map, bytes per photon, tree build and look-up seconds, trace seconds."""
         st = dict(self._info)
+        if self.gather_cache is not None:
+            st.update(self.gather_cache.stats)          # final gathering: cache build and misses
         build = lookup = 0.0
         count = 0
         for kind, m in self.maps.items():
@@ -154,12 +156,13 @@ def build_photon_maps(scene, settings, caster, lights, *, time_override=None, pr
         m.build(settings.estimator, k=settings.k_nearest, temporal_alpha=settings.temporal_alpha)
     out = PhotonMaps(maps, estimator=settings.estimator, k=settings.k_nearest, kernel=settings.kernel,
                      temporal_alpha=settings.temporal_alpha, time_scale=s, info=info)
-    # -- Final gathering: irradiance precomputed at every 4th global photon (photons.gather) -------
+    # -- Final gathering: irradiance precomputed at every 4th global photon (photons.gather; its
+    #    direct part is added by the integrator, which has the lights) --------------------------
     if int(getattr(settings, "final_gather_samples", 0)) > 0 and maps["global"].n > 0:
         from .gather import IrradianceCache
         lo, hi = scene.bounds()
-        out.gather_cache = IrradianceCache.build(out, caster, scene_extent=float(np.linalg.norm(hi - lo)))
-        out._info.update(out.gather_cache.stats)
+        out.gather_cache = IrradianceCache.build(out, caster, scene_extent=float(np.linalg.norm(hi - lo)),
+                                                 caustics=int(settings.diffuse_bounces) >= 2)
     if progress is not None:
         progress(1.0, "photon maps built")
     return out

@@ -309,13 +309,13 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
                      progress=None, cancel=None, min_nondelta: int | None = None) -> tuple[np.ndarray, dict]:
     """Global map records and counts: ``settings.photons_global`` photons split over lights by power.
 
-    min_nondelta: diffuse bounces before a photon is stored; None: 1, or 0 with final gathering
-    (``settings.final_gather_samples`` > 0: the gather vertices read every photon, direct and
-    caustic ones included, through the precomputed irradiance, ``photons.gather``).
+    min_nondelta: diffuse bounces before a photon is stored (None: 1).  With final gathering
+    (``settings.final_gather_samples`` > 0) the photons are read at the gather vertices, one camera
+    bounce further: the diffuse budget counts it (``reader`` 2, ``kernels.photon_paths``).
     """
     gather = int(getattr(settings, "final_gather_samples", 0)) > 0
     if min_nondelta is None:
-        min_nondelta = 0 if gather else 1
+        min_nondelta = 1
     inst_offset = instance_offsets(scene)
     origin = photon_origin(scene)
     counts = split_counts(int(settings.photons_global), np.asarray(lights.power, dtype=np.float64))
