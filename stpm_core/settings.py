@@ -89,8 +89,8 @@ class RenderSettings:
         0, "int", "final gathering of the global photon map (Jensen's two-pass method with Christensen's "
         "precomputed irradiance): rays sampled from the diffuse lobe at the camera's first diffuse vertex, "
         "each reading the irradiance precomputed at every 4th global photon where it lands; 0 = off (the "
-        "camera vertex reads the global map directly: blotches, no extra rays). Method PHOTON and "
-        "ACCUMULATION; PROGRESSIVE refuses it", lo=0, hi=4096, label="Final Gather Samples",
+        "camera vertex reads the global map directly: blotches, no extra rays); off when diffuse_bounces < 2. "
+        "Method PHOTON and ACCUMULATION; PROGRESSIVE refuses it", lo=0, hi=4096, label="Final Gather Samples",
         flag="--final-gather-samples", metavar="N", ui={"soft_max": 64},
         help="final gathering rays per shading point (0: off, direct visualisation)")
     temporal_alpha: float = setting(

@@ -151,3 +151,13 @@ def test_cache_of_an_empty_map_reads_zero():
     hits = SimpleNamespace(position=np.zeros((2, 3)), ng=np.zeros((2, 3)), instance=np.zeros(2, np.int64))
     E = cache.lookup(np.arange(2), np.arange(2), hits, np.zeros((2, 3)), np.zeros(2))
     assert np.all(E == 0.0)
+
+
+def test_one_diffuse_bounce_reads_the_maps_directly():
+    """diffuse_bounces = 1: the gather vertex could read no photon, so gathering is off (no cache),
+    and the global map is the one the camera reads (the same records as without gathering)."""
+    scene = _scene()
+    on, _ = _maps(scene, diffuse_bounces=1)
+    off, _ = _maps(scene, diffuse_bounces=1, final_gather_samples=0)
+    assert on.gather_cache is None
+    np.testing.assert_array_equal(on.maps["global"].records, off.maps["global"].records)

@@ -158,11 +158,12 @@ def build_photon_maps(scene, settings, caster, lights, *, time_override=None, pr
                      temporal_alpha=settings.temporal_alpha, time_scale=s, info=info)
     # -- Final gathering: irradiance precomputed at every 4th global photon (photons.gather; its
     #    direct part is added by the integrator, which has the lights) --------------------------
-    if int(getattr(settings, "final_gather_samples", 0)) > 0 and maps["global"].n > 0:
+    if int(getattr(settings, "final_gather_samples", 0)) > 0 and int(settings.diffuse_bounces) >= 2 \
+            and maps["global"].n > 0:
         from .gather import IrradianceCache
         lo, hi = scene.bounds()
         out.gather_cache = IrradianceCache.build(out, caster, scene_extent=float(np.linalg.norm(hi - lo)),
-                                                 caustics=int(settings.diffuse_bounces) >= 2)
+                                                 caustics=True)
     if progress is not None:
         progress(1.0, "photon maps built")
     return out

@@ -311,9 +311,10 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
 
     min_nondelta: diffuse bounces before a photon is stored (None: 1).  With final gathering
     (``settings.final_gather_samples`` > 0) the photons are read at the gather vertices, one camera
-    bounce further: the diffuse budget counts it (``reader`` 2, ``kernels.photon_paths``).
+    bounce further: the diffuse budget counts it (``reader`` 2, ``kernels.photon_paths``); with
+    ``diffuse_bounces`` < 2 final gathering is off (the camera reads the map, reader 1).
     """
-    gather = int(getattr(settings, "final_gather_samples", 0)) > 0
+    gather = int(getattr(settings, "final_gather_samples", 0)) > 0 and int(settings.diffuse_bounces) >= 2
     if min_nondelta is None:
         min_nondelta = 1
     inst_offset = instance_offsets(scene)
