@@ -412,9 +412,9 @@ def _cache_direct(ctx, cache, seed: int) -> None:
         k = rows.size
         hits = SimpleNamespace(position=np.ascontiguousarray(cache.pos[rows]), ng=np.ascontiguousarray(cache.normal[rows]),
                                ns=np.ascontiguousarray(cache.shading_normal[rows]),
-                               instance=np.ascontiguousarray(cache.instance[rows]))
+                               instance=np.ascontiguousarray(cache.instance[rows], np.int32))   # as Hits
         d = -hits.ns                                      # viewed along the normal: wo = ns
-        dst = np.zeros((k, 3))
+        dst = np.zeros((k, 4))[:, :3]                     # a strided view, as a pass's columns of V
         _direct(ctx, np.arange(k), hits, np.ascontiguousarray(d), C, np.zeros(k, np.int64),
                 np.ascontiguousarray(cache.time[rows]), rng, TraceStats(), dst, _NO_IDX, False, _NO_ROWS3, False,
                 strata=(k, S))
