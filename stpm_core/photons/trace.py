@@ -306,17 +306,11 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
 
 
 def trace_global_map(scene, settings, caster, lights, table, *, time_override=None,
-                     progress=None, cancel=None, min_nondelta: int | None = None) -> tuple[np.ndarray, dict]:
-    """Global map records and counts: ``settings.photons_global`` photons split over lights by power.
-
-    min_nondelta: diffuse bounces before a photon is stored (None: 1).  With final gathering
-    (``settings.final_gather_samples`` > 0) the photons are read at the gather vertices, one camera
-    bounce further: the diffuse budget counts it (``reader`` 2, ``kernels.photon_paths``); with
-    ``diffuse_bounces`` < 2 final gathering is off (the camera reads the map, reader 1).
-    """
+                     progress=None, cancel=None, min_nondelta: int = 1) -> tuple[np.ndarray, dict]:
+    """Global map records and counts: ``settings.photons_global`` photons split over lights by power."""
+    # With final gathering the photons are read at the gather vertices, one camera bounce further:
+    # the diffuse budget counts it (reader 2, kernels.photon_paths; off when diffuse_bounces < 2)
     gather = int(getattr(settings, "final_gather_samples", 0)) > 0 and int(settings.diffuse_bounces) >= 2
-    if min_nondelta is None:
-        min_nondelta = 1
     inst_offset = instance_offsets(scene)
     origin = photon_origin(scene)
     counts = split_counts(int(settings.photons_global), np.asarray(lights.power, dtype=np.float64))
