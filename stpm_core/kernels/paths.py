@@ -891,7 +891,7 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, 
     """
     one_w = wposes.shape[0] == 1
     M = pose_buffer(wposes)                  # no views or tuple items per row (sampling.row3)
-    func, par = env[1], env[4]
+    func, par, portals = env[1], env[4], env[5]
     n_go = 0
     for j in range(spec.shape[0]):
         r = spec[j]
@@ -931,7 +931,7 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, 
             if world_mis:
                 if not one_w:
                     load_pose(wposes, j, M)
-                p_l = world_nee_pdf(func, par, M, g_f, (wi0, wi1, wi2))
+                p_l = world_nee_pdf(func, par, portals, M, (P[r, 0], P[r, 1], P[r, 2]), g_f, (wi0, wi1, wi2))
                 w_world = mis_weight(p_c, p_l)
         world_w_out[n_go] = w_world
         pc_out[n_go] = p_c if kind == PATH_GLOSSY else np.inf
