@@ -77,12 +77,6 @@ LEAF = 8                                # cache points per kd-tree leaf (at most
 
 
 @njit(**_JIT)
-def _coord(X, T, s, i, a):
-    """Coordinate a of cache point i in (x, y, z, s t)."""
-    return s * T[i] if a == 3 else X[i, a]
-
-
-@njit(**_JIT)
 def cache_tree(X, T, s, perm, axis, split):
     """Build a balanced kd-tree over the N cache points in (x, y, z, s t); returns the node count.
 
@@ -111,14 +105,16 @@ def cache_tree(X, T, s, perm, axis, split):
         for a in range(4):
             mn, mx = np.inf, -np.inf
             for q in range(lo, hi):
-                c = _coord(X, T, s, perm[q], a)
+                i = perm[q]
+                c = s * T[i] if a == 3 else X[i, a]      # coordinate a in (x, y, z, s t)
                 mn = min(mn, c)
                 mx = max(mx, c)
             if mx - mn > best_w:
                 best_a, best_w = a, mx - mn
         key = np.empty(hi - lo)
         for q in range(lo, hi):
-            key[q - lo] = _coord(X, T, s, perm[q], best_a)
+            i = perm[q]
+            key[q - lo] = s * T[i] if best_a == 3 else X[i, best_a]
         order = np.argsort(key, kind="mergesort")
         seg = perm[lo:hi].copy()
         for q in range(hi - lo):
