@@ -119,7 +119,7 @@ class STPM_RENDER_PT_sampling_viewport(_STPMPanel, bpy.types.Panel):
 
 class STPM_RENDER_PT_photons(_STPMPanel, bpy.types.Panel):
     bl_label = "Photons"
-    PROPS = ("photons_global", "photons_caustic", "k_nearest", "kernel")
+    PROPS = ("photons_global", "photons_caustic", "k_nearest", "kernel", "final_gather_samples")
 
 
 class STPM_RENDER_PT_method(_STPMPanel, bpy.types.Panel):
