@@ -518,7 +518,7 @@ def _final_gather(ctx, sh, hits, live, rho, p_q, n_q, t_q, idx_k, use_idx: bool,
             glossy_n, world_w_n, pc_n = np.empty(n_spec, np.uint8), np.empty(n_spec), np.empty(n_spec)
             counts_n = np.empty((n_spec, 2), np.int32)
             n_go = _K.specular_step(spec2, np.arange(m), True, w, True, gh.position, gh.ng, gh.ns, d, C, crow, E_tab, E_avg,
-                                    u, rr, u_rr, EPS2, GUARD_FRACTION, ctx.stop_coat, ctx.env, _IDENTITY_POSE, False,
+                                    u, rr, u_rr, EPS2, GUARD_FRACTION, ctx.stop_coat, CONT_RR, ctx.env, _IDENTITY_POSE, False,
                                     np.ascontiguousarray(counts[spec2]), ctx.glossy_bounces,
                                     ctx.transmission_bounces, idx_n, beta_n, o_n, d_n, guard_n, glossy_n, world_w_n,
                                     pc_n, counts_n, False, _NO_FLAGS, _NO_ROWS3, _NO_FLAGS, _NO_ROWS3)
