@@ -40,7 +40,7 @@ PRESET_ITEMS = (
     ("PREVIEW_PROGRESSIVE", "Preview Progressive",
      "Passes that sharpen for 20 seconds (a shrinking space-time kernel); stop it any time with Esc"),
     ("FINAL_PROGRESSIVE", "Final Progressive",
-     "Passes until the estimated noise is under 2 % (at most 1024 passes): converges instead of stopping at "
+     "Passes until the estimated noise is under 10 % (at most 1024 passes): converges instead of stopping at "
      "a kernel's blur"),
 )
 

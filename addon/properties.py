@@ -92,6 +92,41 @@ class STPM_SceneSettings(bpy.types.PropertyGroup):
         del bpy.types.Scene.stpm
 
 
+_PHOTON_WEIGHT_DOC = ("Share of the photons relative to the other lights and the world (photons are split "
+                      "in proportion to power times this weight; the image's expectation does not change, "
+                      "only where the noise goes). 0: no photons (no indirect light from it)")
+
+
+class STPM_LightSettings(bpy.types.PropertyGroup):
+    """STPM settings of one light (``light.stpm``)."""
+
+    photon_weight: FloatProperty(name="Photon Weight", default=1.0, min=0.0, max=1e6, soft_max=10.0,
+                                 description=_PHOTON_WEIGHT_DOC)
+
+    @classmethod
+    def register(cls) -> None:
+        bpy.types.Light.stpm = PointerProperty(type=cls, name="STPM", description="STPM light settings")
+
+    @classmethod
+    def unregister(cls) -> None:
+        del bpy.types.Light.stpm
+
+
+class STPM_WorldSettings(bpy.types.PropertyGroup):
+    """STPM settings of one world (``world.stpm``)."""
+
+    photon_weight: FloatProperty(name="Photon Weight", default=1.0, min=0.0, max=1e6, soft_max=10.0,
+                                 description=_PHOTON_WEIGHT_DOC)
+
+    @classmethod
+    def register(cls) -> None:
+        bpy.types.World.stpm = PointerProperty(type=cls, name="STPM", description="STPM world settings")
+
+    @classmethod
+    def unregister(cls) -> None:
+        del bpy.types.World.stpm
+
+
 def settings_dict(props) -> dict:
     """``scene.stpm`` -> plain dict of RenderSettings fields."""
     return {name: getattr(props, name) for name in SETTING_NAMES}
@@ -102,7 +137,7 @@ def settings_from_scene(scene):
     return RenderSettings.from_dict(settings_dict(scene.stpm))
 
 
-classes = (STPM_SceneSettings,)
+classes = (STPM_SceneSettings, STPM_LightSettings, STPM_WorldSettings)
 
 
 # Blender's helper: register in order, unregister in reverse

@@ -256,6 +256,54 @@ class STPM_OBJECT_PT_shadow_terminator(bpy.types.Panel):
         col.prop(context.object, "shadow_terminator_shading_offset", text="Shading Offset")
 
 
+class STPM_LIGHT_PT_photons(bpy.types.Panel):
+    """Light properties: the portal flag (Cycles' ``light.cycles.is_portal``) and the photon budget
+    (``light.stpm.photon_weight``)."""
+
+    bl_label = "STPM"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "data"
+    COMPAT_ENGINES = {"STPM"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES and getattr(context, "light", None) is not None
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        light = context.light
+        col = layout.column()
+        cyc = getattr(light, "cycles", None)
+        if light.type == "AREA" and cyc is not None and hasattr(cyc, "is_portal"):
+            col.prop(cyc, "is_portal", text="Portal")
+        sub = col.column()
+        sub.active = not (light.type == "AREA" and bool(getattr(cyc, "is_portal", False)))
+        sub.prop(light.stpm, "photon_weight")
+
+
+class STPM_WORLD_PT_photons(bpy.types.Panel):
+    """World properties: the world's photon budget (``world.stpm.photon_weight``)."""
+
+    bl_label = "STPM"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "world"
+    COMPAT_ENGINES = {"STPM"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES and getattr(context, "world", None) is not None
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.column().prop(context.world.stpm, "photon_weight")
+
+
 classes = (
     STPM_OT_apply_preset,
     STPM_OT_compute_plan,
@@ -268,6 +316,8 @@ classes = (
     STPM_RENDER_PT_effects,
     STPM_RENDER_PT_bake,
     STPM_RENDER_PT_denoising,
+    STPM_LIGHT_PT_photons,
+    STPM_WORLD_PT_photons,
     STPM_OBJECT_PT_shadow_terminator,
 )
 

@@ -328,6 +328,8 @@ class LightSet:
     n_scene_lights : how many of them are ``scene.lights``.
     power : (L,) float64 total emitted flux per light in W (mean over RGB), for
         splitting photons in proportion to power.
+    photon_weight : (L,) float64 >= 0, ``Light.photon_weight`` / ``World.photon_weight`` (1 for
+        mesh lights): photons are split in proportion to ``power * photon_weight``.
     scene_bounds : ((3,), (3,)) world bounds over the shutter (suns aim their
         photons at the sphere around it).
     """
@@ -343,11 +345,13 @@ class LightSet:
         if scene.world.shines:
             from .world_light import WorldLight
             self.lights.append(WorldLight(scene.world.radiance, self._scene_center, self._scene_radius,
-                                              world=scene.world))
+                                              world=scene.world, portals=getattr(scene, "portals", None)))
         # SPOT / SUN / AREA lights with no emitting direction at any key (zero Z scale,
         # zero area): they emit nothing, so flux 0 and no photon budget
         self._dead = [self._no_direction(i) for i in range(len(self.lights))]
         self.power = np.array([float(np.mean(self.flux(i))) for i in range(len(self.lights))])
+        # Photon budgets: each light's share relative to the others (mesh lights 1)
+        self.photon_weight = np.array([float(getattr(l, "photon_weight", 1.0)) for l in self.lights])
 
     def __len__(self) -> int:
         return len(self.lights)

@@ -224,6 +224,12 @@ class Light:
     shape : AREA 'SQUARE', 'RECTANGLE', 'DISK' or 'ELLIPSE'.
     size, size_y : AREA extent in scene units (size_y for RECTANGLE / ELLIPSE).
     angle : SUN angular diameter in radians.
+    photon_weight : >= 0, this light's share of the photons relative to the others (the add-on's
+        ``light.stpm.photon_weight``): photons are split between lights in proportion to
+        power x photon_weight, and each light's photons carry its flux divided by their number, so
+        the weight moves noise between lights and leaves the image's expectation unchanged
+        (docs/photon-mapping.md, "Photon budgets").  0: the light gets no photons (its indirect
+        light is then missing).
     """
 
     type: Literal["POINT", "SPOT", "AREA", "SUN"] = "POINT"
@@ -239,6 +245,7 @@ class Light:
     size_y: float = 1.0
     angle: float = 0.0
     name: str = "light"
+    photon_weight: float = 1.0
 
 
 @dataclass
@@ -340,6 +347,8 @@ class World:
         BSDF, alpha cut-outs: they keep Cycles' camera-ray flag); rays after a reflection,
         refraction or diffuse bounce, shadow / next-event rays, the world's light sampling and
         its photons all use ``image``.  The exporter bakes both from Cycles (addon/export/world.py).
+    photon_weight : >= 0, the world's share of the photons relative to the lights
+        (``world.stpm.photon_weight`` in the add-on; :attr:`Light.photon_weight`).
     """
 
     color: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -348,6 +357,7 @@ class World:
     mapping: MotionTransform = field(default_factory=MotionTransform.static)
     interpolation: str = "LINEAR"
     camera_image: np.ndarray | None = None
+    photon_weight: float = 1.0
 
     @property
     def radiance(self) -> np.ndarray:
@@ -388,6 +398,11 @@ class Scene:
     metadata : free-form strings (exporter version, warnings, source file).
     textures : images the materials' node graphs read (:class:`stpm_core.textures.Texture`),
         referred to by index (an Image Texture node's ``image`` property).
+    portals : Blender's light portals (AREA lights with Cycles' ``is_portal``) as AREA
+        :class:`Light` entries (shape, size, transform; power and colour unused): openings through
+        which the world lights the scene.  They emit nothing and are not seen; next-event
+        estimation of the world and world photons are aimed through them
+        (docs/lights-and-materials.md, "Light portals").
     """
 
     meshes: list[Mesh] = field(default_factory=list)
@@ -401,6 +416,7 @@ class Scene:
     frame: float = 1.0
     metadata: dict = field(default_factory=dict)
     textures: list = field(default_factory=list)
+    portals: list[Light] = field(default_factory=list)
 
     @property
     def has_motion(self) -> bool:
@@ -723,6 +739,7 @@ def validate_scene(scene: Scene) -> None:
         # size / size_y shape only AREA lights, but a negative or absurd one is refused on every type
         _check_range(f"{p}.size", l.size, 0.0, MAX_LIGHT_SIZE)
         _check_range(f"{p}.size_y", l.size_y, 0.0, MAX_LIGHT_SIZE)
+        _check_range(f"{p}.photon_weight", getattr(l, "photon_weight", 1.0), 0.0, 1e6)
         if l.type == "AREA":
             if l.shape not in ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE"):
                 raise SceneError(f"{p}.shape must be SQUARE, RECTANGLE, DISK or ELLIPSE, got {l.shape!r}")
@@ -749,6 +766,15 @@ def validate_scene(scene: Scene) -> None:
     _check_emission("world.color * strength", float(np.max(scene.world.color)) * float(scene.world.strength),
                     "W/(m^2 sr)")
     _check_world_image(scene.world)
+    _check_range("world.photon_weight", getattr(scene.world, "photon_weight", 1.0), 0.0, 1e6)
+    for pi, l in enumerate(getattr(scene, "portals", None) or ()):
+        p = f"portals[{pi}] ({l.name!r})"
+        if l.type != "AREA" or l.shape not in ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE"):
+            raise SceneError(f"{p} must be an AREA light (SQUARE, RECTANGLE, DISK or ELLIPSE), got {l.type} {l.shape}")
+        _check_range(f"{p}.size", l.size, 0.0, MAX_LIGHT_SIZE)
+        _check_range(f"{p}.size_y", l.size_y, 0.0, MAX_LIGHT_SIZE)
+        if not isinstance(l.transform, MotionTransform):
+            raise SceneError(f"{p}.transform must be a MotionTransform")
     w, h = scene.resolution
     if int(w) != w or int(h) != h or not (1 <= w <= 65536 and 1 <= h <= 65536):
         raise SceneError(f"resolution must be two integers in [1, 65536], got {scene.resolution}")

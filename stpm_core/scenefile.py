@@ -186,6 +186,12 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
     for i, light in enumerate(scene.lights):
         _put_transform(arrays, f"lights/{i}/transform", light.transform)
         lights.append(_fields_to_json(light, _LIGHT_FIELDS))
+        if float(getattr(light, "photon_weight", 1.0)) != 1.0:          # written only when set
+            lights[-1]["photon_weight"] = float(light.photon_weight)
+    portals = []
+    for i, portal in enumerate(getattr(scene, "portals", None) or ()):
+        _put_transform(arrays, f"portals/{i}/transform", portal.transform)
+        portals.append(_fields_to_json(portal, _LIGHT_FIELDS))
 
     # Shutter curve (optional)
     if scene.shutter.curve is not None:
@@ -215,6 +221,8 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
         "instances": instances,
         "metadata": metadata,
     }
+    if portals:
+        header["portals"] = portals
     if textures:
         header["textures"] = textures
     if settings is not None:
@@ -281,6 +289,8 @@ def _world_to_json(arrays: dict, world) -> dict:
     """The world's header entry; an environment image goes to ``world/image`` (H, W, 3) float32 and
     its mapping to ``world/mapping/times`` and ``world/mapping/matrices``."""
     d = _fields_to_json(world, _WORLD_FIELDS)
+    if float(getattr(world, "photon_weight", 1.0)) != 1.0:
+        d["photon_weight"] = float(world.photon_weight)
     if world.image is not None:
         d["has_image"] = True
         d["interpolation"] = str(world.interpolation)
@@ -296,6 +306,8 @@ def _world_from_json(f: "_Fields", arr: "_Arrays") -> World:
     """World from its header entry (``has_image``, ``interpolation``, ``has_camera_image`` optional:
     older files have none of them)."""
     fields = f.read(_WORLD_FIELDS)
+    if "photon_weight" in f.d:                       # optional (written when not 1)
+        fields["photon_weight"] = f.num("photon_weight")
     cam = None
     if "has_camera_image" in f.d and f.bool("has_camera_image"):
         cam = np.ascontiguousarray(arr.get("world/camera_image", "world.camera_image", kind="f", ndim=3, tail=(3,)),
@@ -855,8 +867,14 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
     lights = []
     for i, d in enumerate(h.list("lights")):
         f = _Fields(d, f"lights[{i}]")
-        lights.append(Light(**f.read(_LIGHT_FIELDS),
+        extra = {"photon_weight": f.num("photon_weight")} if "photon_weight" in f.d else {}
+        lights.append(Light(**f.read(_LIGHT_FIELDS), **extra,
                             transform=arr.transform(f"lights/{i}/transform", f"lights[{i}].transform")))
+    portals = []
+    for i, d in enumerate(h.list("portals") if "portals" in h.d else ()):   # optional (light portals)
+        f = _Fields(d, f"portals[{i}]")
+        portals.append(Light(**f.read(_LIGHT_FIELDS),
+                             transform=arr.transform(f"portals/{i}/transform", f"portals[{i}].transform")))
     world = _world_from_json(h.sub("world"), arr)
 
     # Shutter
@@ -878,7 +896,7 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
     scene = Scene(meshes=meshes, instances=instances, camera=cam, lights=lights,
                   materials=materials, world=world, shutter=shutter,
                   resolution=(res[0], res[1]), frame=h.num("frame"), metadata=metadata,
-                  textures=textures)
+                  textures=textures, portals=portals)
     validate_scene(scene)
     return scene
 

@@ -66,21 +66,53 @@ import numpy as np
 
 from .motion import MotionTransform
 
-__all__ = ["WorldLight", "environment_arrays", "constant_environment", "camera_environment", "MAP_RESOLUTION", "NEE_COS_FRACTION",
-           "PHOTON_UNIFORM_FRACTION"]
+__all__ = ["WorldLight", "environment_arrays", "constant_environment", "camera_environment", "portal_rows",
+           "MAP_RESOLUTION", "NEE_COS_FRACTION", "PHOTON_UNIFORM_FRACTION", "PORTAL_NEE_FRACTION", "PORTAL_PHOTON_FRACTION"]
 
 MAP_RESOLUTION = 1024            # columns of the distribution grid at most (rows: half), as Cycles' default
 NEE_COS_FRACTION = 0.3           # next-event samples drawn about the normal (the rest from the image)
 PHOTON_UNIFORM_FRACTION = 0.1    # world photons drawn uniformly over the sphere (the rest from the image)
+PORTAL_NEE_FRACTION = 0.5        # next-event samples drawn through the portals facing the point (if any)
+PORTAL_PHOTON_FRACTION = 0.8     # world photons aimed through the portals (the rest over the whole disc)
 
 
-def constant_environment(radiance) -> tuple:
-    """The kernels' ``env`` tuple of a constant world of radiance (3,) W m^-2 sr^-1."""
-    from .kernels.environment import E_L, N_ENV
+NO_PORTALS = np.zeros((0, 12))
+
+
+def portal_rows(portals) -> np.ndarray:
+    """The kernels' portal rows (K, 12) float64 (``kernels.environment``: corner, full edges e1, e2,
+    unit normal into the room) of light portals, :class:`~stpm_core.scene.Light` AREA entries
+    posed at mid-shutter (a portal only steers sampling: its pose need not follow its motion).
+    A disc / ellipse portal becomes its bounding rectangle (sampling through a larger opening
+    stays unbiased); a sheared pose keeps ex and the part of ey orthogonal to it; a portal with
+    no area or no facing side is left out."""
+    from .lights import area_light_normal
+    rows = []
+    for l in portals or ():
+        M = l.transform.at(np.array([0.5]))[0]
+        sx = float(l.size)
+        sy = float(l.size_y) if l.shape in ("RECTANGLE", "ELLIPSE") else sx
+        ex, ey = 0.5 * sx * M[:3, 0], 0.5 * sy * M[:3, 1]
+        ey = ey - ex * (ex @ ey) / max(float(ex @ ex), 1e-300)
+        n, A4 = area_light_normal(ex[None], ey[None], M[None, :3, 2])
+        if not (A4[0] > 0.0 and float(n[0] @ n[0]) > 0.5):
+            continue
+        c = M[:3, 3]
+        rows.append(np.concatenate([c - ex - ey, 2.0 * ex, 2.0 * ey, n[0]]))
+    return np.ascontiguousarray(np.array(rows, np.float64).reshape(-1, 12))
+
+
+def constant_environment(radiance, portals=None) -> tuple:
+    """The kernels' ``env`` tuple of a constant world of radiance (3,) W m^-2 sr^-1; portals: the
+    portal rows (K, 12) (:func:`portal_rows`; None: none)."""
+    from .kernels.environment import E_L, E_PORTAL_NEE, E_PORTAL_PHOTON, N_ENV
     par = np.zeros(N_ENV)
     par[E_L:E_L + 3] = np.asarray(radiance, np.float64).reshape(3)
+    portals = NO_PORTALS if portals is None else np.ascontiguousarray(portals, np.float64).reshape(-1, 12)
+    if portals.shape[0]:
+        par[E_PORTAL_NEE], par[E_PORTAL_PHOTON] = PORTAL_NEE_FRACTION, PORTAL_PHOTON_FRACTION
     img = np.asarray(radiance, np.float32).reshape(1, 1, 3).copy()
-    return img, np.ones((1, 1)), np.array([0.0, 1.0]), np.array([[0.0, 1.0]]), par
+    return img, np.ones((1, 1)), np.array([0.0, 1.0]), np.array([[0.0, 1.0]]), par, portals
 
 
 def _cell_edges(n: int, m: int) -> np.ndarray:
@@ -113,8 +145,9 @@ def _bilinear_cell_max(lum: np.ndarray, s: int) -> np.ndarray:
     return np.maximum(np.maximum(corner[:-1, :-1], corner[:-1, 1:]), np.maximum(corner[1:, :-1], corner[1:, 1:]))
 
 
-def environment_arrays(world) -> tuple:
-    """The kernels' ``env`` tuple (img, func, marg, cond, par) of a :class:`~stpm_core.scene.World`.
+def environment_arrays(world, portals=None) -> tuple:
+    """The kernels' ``env`` tuple (img, func, marg, cond, par, portals) of a :class:`~stpm_core.scene.World`
+    (portals: the rows of :func:`portal_rows`, None: none).
 
     img (H, W, 3) float32 = image * color * strength; func (Hd, Wd) float64 the cell weights
     (the distribution grid of the module docstring, times sin(theta) at the cell centres);
@@ -123,7 +156,7 @@ def environment_arrays(world) -> tuple:
     """
     from .kernels.environment import E_INTERP, E_L, E_MEAN, E_NEE_COS, E_PHOTON_UNIFORM, E_TEXTURED
     if world.image is None:
-        return constant_environment(world.radiance)
+        return constant_environment(world.radiance, portals)
     tint = np.asarray(world.color, np.float64) * float(world.strength)
     img = np.ascontiguousarray(world.image, np.float32) * tint.astype(np.float32)
     img = np.ascontiguousarray(img, np.float32)
@@ -151,14 +184,14 @@ def environment_arrays(world) -> tuple:
     safe = np.where(row_sum > 0, row_sum, 1.0)
     cond = np.where(row_sum[:, None] > 0, cond / safe[:, None], np.linspace(0.0, 1.0, Wd + 1)[None, :])
     cond[:, -1] = 1.0
-    par = np.zeros(8)
+    par = constant_environment(world.radiance, portals)[4]
     par[E_TEXTURED] = 1.0
     par[E_INTERP] = 0.0 if world.interpolation == "CLOSEST" else 1.0
     par[E_MEAN] = total / (Hd * Wd)
     par[E_NEE_COS] = NEE_COS_FRACTION if total > 0 else 1.0
     par[E_PHOTON_UNIFORM] = PHOTON_UNIFORM_FRACTION if total > 0 else 1.0
-    par[E_L:E_L + 3] = world.radiance
-    return img, func, np.ascontiguousarray(marg), np.ascontiguousarray(cond), par
+    return (img, func, np.ascontiguousarray(marg), np.ascontiguousarray(cond), par,
+            constant_environment(world.radiance, portals)[5])
 
 
 def camera_environment(world, env: tuple) -> tuple:
@@ -196,8 +229,10 @@ class WorldLight:
     use_soft_falloff = False
     name = "world"
 
-    def __init__(self, radiance, center, radius: float, world=None):
+    def __init__(self, radiance, center, radius: float, world=None, portals=None):
         self.color = np.asarray(radiance, np.float64).reshape(3)
+        self.portals = portal_rows(portals)
+        self.photon_weight = float(getattr(world, "photon_weight", 1.0)) if world is not None else 1.0
         self.center = np.asarray(center, np.float64).reshape(3)
         self.scene_radius = float(radius)
         image_world = world is not None and world.image is not None
@@ -214,7 +249,9 @@ class WorldLight:
     def env(self) -> tuple:
         """The kernels' environment arrays, packed on first use (the effects plan's world light never
         asks: it needs the flux only)."""
-        return environment_arrays(self._world) if self._world is not None else constant_environment(self.color)
+        if self._world is not None:
+            return environment_arrays(self._world, self.portals)
+        return constant_environment(self.color, self.portals)
 
     @cached_property
     def env_camera(self) -> tuple:

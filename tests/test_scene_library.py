@@ -25,6 +25,7 @@ EXPECTED = {
     "static_scene": (False, True, True, False),
     "textured_room": (True, True, True, False),
     "hdri_product": (True, True, True, True),
+    "sunlit_pool": (True, True, True, True),
 }
 KEYS = ("motion_blur", "caustics", "indirect", "time_dependent")
 

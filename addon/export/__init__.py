@@ -285,7 +285,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
             light_data[inst.object.original.name_full] = inst.object
 
     # 3. Assemble instances, deformation, lights and camera
-    instances, lights = [], []
+    instances, lights, portals = [], [], []
     light_seen: list[bool] = []  # Object > Visibility > Camera of each light (Blender's default: off)
     cam = None
     for key, r in records.items():
@@ -298,7 +298,9 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                                                   name=r.name, **r.terminator))
         elif r.kind == "LIGHT":
             obj = light_data.get(r.obj_name)
-            if obj is not None:
+            if obj is not None and light_export.is_portal(obj):
+                portals.append(light_export.export_light(obj, t, samples[key], warnings))
+            elif obj is not None:
                 lights.append(light_export.export_light(obj, t, samples[key], warnings))
                 light_seen.append(bool(getattr(obj, "visible_camera", True)))
         elif r.kind == "CAMERA" and cam is None and cam_obj is not None:
@@ -319,7 +321,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
     if abs(render.pixel_aspect_x - render.pixel_aspect_y) > 1e-6:
         warnings.append("non-square pixel aspect is ignored")
     out = scene_model.Scene(
-        meshes=meshes, instances=instances, camera=cam, lights=lights, materials=mats.materials,
+        meshes=meshes, instances=instances, camera=cam, lights=lights, portals=portals, materials=mats.materials,
         textures=mats.textures.textures,
         world=world,
         shutter=shutter,

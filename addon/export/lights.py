@@ -4,6 +4,11 @@ Power: ``energy * 2**exposure`` watts (sun: W/m^2), colour times the blackbody
 colour when ``use_temperature`` is on.  Area lights fold the object's scale
 into their size (as Cycles does); a non-normalised area light's power grows
 with its area.
+
+Light portals: an AREA light with Cycles' portal flag (``light.cycles.is_portal``) is not a
+light: it becomes one of ``Scene.portals`` (:func:`is_portal`), through which the world's light is
+sampled.  Photon budgets: ``light.stpm.photon_weight`` (addon/properties.py) is the light's
+``photon_weight``.
 """
 from __future__ import annotations
 
@@ -16,6 +21,13 @@ from .motion import transform_from_samples, without_scale
 def _area(shape: str, sx: float, sy: float) -> float:
     """Area (m^2) of an area light of extents sx, sy."""
     return np.pi / 4 * sx * sy if shape in ("DISK", "ELLIPSE") else sx * sy
+
+
+def is_portal(light_obj) -> bool:
+    """Is this light object a light portal (an AREA light with Cycles' ``is_portal``)?"""
+    lamp = light_obj.data
+    cyc = getattr(lamp, "cycles", None)
+    return lamp.type == "AREA" and bool(getattr(cyc, "is_portal", False))
 
 
 def export_light(light_obj, times, matrices, warnings: list) -> "scene_model.Light":
@@ -36,8 +48,10 @@ def export_light(light_obj, times, matrices, warnings: list) -> "scene_model.Lig
         warnings.append(f"light {light_obj.name!r}: Cast Shadow off is ignored (STPM lights always cast shadows)")
     M = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
     scale = np.linalg.norm(M[len(M) // 2, :3, :3], axis=0)  # object scale (x, y, z)
+    stpm = getattr(lamp, "stpm", None)
     kw = dict(type=lamp.type, color=color, power=max(power, 0.0),
-              transform=transform_from_samples(times, without_scale(M)), name=light_obj.name)
+              transform=transform_from_samples(times, without_scale(M)), name=light_obj.name,
+              photon_weight=float(getattr(stpm, "photon_weight", 1.0)))
     # Per-type shape parameters
     if lamp.type in ("POINT", "SPOT"):
         kw.update(radius=float(lamp.shadow_soft_size),

@@ -92,8 +92,12 @@ def export_world(world, warnings: list, times=None, mapping_keys=None, bakes="de
     A world the exporter does not read directly uses its Cycles bake (module docstring):
     ``bakes`` is a :class:`.bake.BakeResolver` (its cache folders and failures), "default" (the
     open file's cache folders) or None (baking off: the direct reading, warned).
+
+    The world's photon budget is ``world.stpm.photon_weight`` (addon/properties.py; 1 without it).
     """
-    return _export_world(world, warnings, times, mapping_keys, bakes)
+    out = _export_world(world, warnings, times, mapping_keys, bakes)
+    out.photon_weight = float(getattr(getattr(world, "stpm", None), "photon_weight", 1.0)) if world is not None else 1.0
+    return out
 
 
 def background_nodes(world):

@@ -58,9 +58,12 @@ Per-hit functions (compiled once; the kernels call them):
   proportional to an albedo estimate at wo) and the direction u1, u2 pick;
   weight = f_nd |cos| / pdf_nd for a non-delta lobe, throughput / p_j for a
   delta lobe, 0 for a failed sample;
-* :func:`bsdf_sample_path` -- the same choice for a path whose DIFFUSE lobe the photon
+* :func:`bsdf_sample_path` -- the same choice for a photon path whose DIFFUSE lobe the photon
   maps carry: stop on DIFFUSE, else continue (delta, or rough with the weight of the
   non-diffuse lobes alone);
+* :func:`bsdf_sample_cont` -- the same choice for a camera path: a delta lobe, or the rough
+  non-diffuse lobes' part of f at wi drawn by any non-delta lobe (DIFFUSE included), weighed by
+  one-sample multiple importance sampling over the lobes; :func:`bsdf_eval_cont` its f and density;
 * :func:`diffuse_albedo` -- w_base (1 - F_coat(|wo . ns|)) base_color, what
   multiplies photon irradiance;
 * :func:`denoising_features` -- Cycles' Denoising Albedo / Normal at a vertex: each lobe's albedo
@@ -94,7 +97,7 @@ from .closure import (C_ALPHA, C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_COAT, C_I
                       C_W_BASE, C_W_GLASS, C_W_METAL, closure_row)
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
-           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_eval_plain", "bsdf_eval_plain_w", "needs_bsdf_call", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
+           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_eval_plain", "bsdf_eval_plain_w", "needs_bsdf_call", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_sample_cont", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
            "fresnel_dielectric_fss", "coat_albedo", "glass_albedo", "glass_albedo_avg", "build_glass_table",
            "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch",
            "denoising_features", "DENOISE_ALPHA"]
@@ -879,8 +882,12 @@ def bsdf_eval_smooth(C, cr, wo, wi, ns, ng):
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
 def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
-    """(lobe, p_chosen, is_delta, wi) for the hit of :func:`_hit`: u0 picks the lobe by the CDF of
-    p_lobe, u1, u2 the direction (unit wi); p_chosen = 0 when the lobe has probability 0 (wi = 0)."""
+    """(lobe, p_chosen, is_delta, wi, u_res) for the hit of :func:`_hit`: u0 picks the lobe by the CDF
+    of p_lobe, u1, u2 the direction (unit wi); p_chosen = 0 when the lobe has probability 0 (wi = 0).
+    u_res: where u0 fell inside the chosen lobe's interval (and, rough glass, inside its reflect /
+    refract choice), rescaled to [0, 1): a uniform independent of the choice and of wi (Cycles
+    rescales its closure-pick uniform the same way), which :func:`bsdf_sample_cont` spends on
+    Russian roulette."""
     nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
     rough = C[cr, C_ROUGHNESS] > 0.0
     # -- Choose a lobe by the CDF of p_lobe
@@ -893,7 +900,11 @@ def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
     lobe = min(lobe, METAL_MS)
     p_chosen = p_lobe[lobe]
     if not p_chosen > 0:
-        return lobe, 0.0, False, (0.0, 0.0, 0.0)
+        return lobe, 0.0, False, (0.0, 0.0, 0.0), 0.0
+    lo = 0.0                                            # the chosen lobe's interval starts here
+    for k in range(lobe):
+        lo += p_lobe[k]
+    u_res = min(max((u0 - lo) / p_chosen, 0.0), 0.9999999999999999)
     is_refl = lobe == COAT or lobe == METAL or lobe == GLASS_R
     grough = rough and abs(C[cr, C_IOR] - 1.0) >= _ETA1   # rough refraction (ior 1: a delta, as Cycles)
     is_delta = (lobe == GLASS_T and not grough) or (is_refl and not rough)
@@ -912,18 +923,21 @@ def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
         t_mean = (C[cr, C_TINT_T] + C[cr, C_TINT_T + 1] + C[cr, C_TINT_T + 2]) / 3.0
         rt = F_g * r_mean + (1.0 - F_g) * t_mean
         if not rt > 0:
-            return lobe, 0.0, False, (0.0, 0.0, 0.0)
+            return lobe, 0.0, False, (0.0, 0.0, 0.0), 0.0
         us = min(max((u0 - (p_lobe[DIFFUSE] + p_lobe[COAT] + p_lobe[METAL])) / p_glass, 0.0), 1.0)
-        if us < F_g * r_mean / rt:
+        split = F_g * r_mean / rt
+        if us < split:
             lobe = GLASS_R
+            u_res = min(us / split, 0.9999999999999999)
             wi = _reflect(wo, hw)
         else:
+            u_res = min(max((us - split) / (1.0 - split), 0.0), 0.9999999999999999)
             lobe = GLASS_T
             eta = eta_glass
             cos_t = math.sqrt(max(0.0, 1.0 - (1.0 - wo_h * wo_h) / (eta * eta)))
             k = wo_h / eta - cos_t
             wi = (-wo[0] / eta + k * hw[0], -wo[1] / eta + k * hw[1], -wo[2] / eta + k * hw[2])
-        return lobe, p_glass, False, _normalized(wi, 1e-300)
+        return lobe, p_glass, False, _normalized(wi, 1e-300), u_res
     if lobe == DIFFUSE or lobe == METAL_MS:
         # Cosine hemisphere about ns
         t, b = basis(nsf)
@@ -944,7 +958,7 @@ def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
         cos_t = math.sqrt(max(0.0, 1.0 - (1.0 - co * co) / (eta * eta)))
         k = co / eta - cos_t
         wi = (-wo[0] / eta + k * nss[0], -wo[1] / eta + k * nss[1], -wo[2] / eta + k * nss[2])
-    return lobe, p_chosen, is_delta, _normalized(wi, 1e-300)
+    return lobe, p_chosen, is_delta, _normalized(wi, 1e-300), u_res
 
 
 @njit(**_JIT)
@@ -980,7 +994,7 @@ def _delta_weight(C, cr, hit, lobe, p_chosen, wi):
 def bsdf_sample_lobe(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
     """(wi0, wi1, wi2, w0, w1, w2, lobe): :func:`bsdf_sample` with the lobe chosen (-1: none)."""
     hit = _hit(C, cr, E, E_avg, wo, ns, ng)
-    lobe, p_chosen, is_delta, wi = _sample_lobe(C, cr, hit, wo, u0, u1, u2)
+    lobe, p_chosen, is_delta, wi, _ = _sample_lobe(C, cr, hit, wo, u0, u1, u2)
     if not p_chosen > 0:
         return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1
     wi0, wi1, wi2 = wi
@@ -1023,9 +1037,9 @@ PATH_STOP, PATH_DELTA, PATH_GLOSSY = 0, 1, 2
 
 @njit(**_JIT)
 def bsdf_sample_path(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2, stop_coat):
-    """(wi0, wi1, wi2, w0, w1, w2, kind, pdf): how a path continues from closure row C[cr] at wo
-    when the photon maps carry the light its DIFFUSE lobe reflects (docs/rendering.md, "Path
-    partition").
+    """(wi0, wi1, wi2, w0, w1, w2, kind, pdf): how a photon path continues from closure row C[cr]
+    at wo when the photon maps carry the light its DIFFUSE lobe reflects (docs/photon-mapping.md;
+    camera paths: :func:`bsdf_sample_cont`).
 
     The lobe and direction as :func:`bsdf_sample` (the same u0, u1, u2 give the same wi).  kind
     ``PATH_STOP``: the DIFFUSE lobe was chosen (with stop_coat also a rough COAT), or nothing
@@ -1036,7 +1050,7 @@ def bsdf_sample_path(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2, stop_coat):
     of f_g L cos: with what the stopping lobes' estimators carry, nothing is counted twice.
     """
     hit = _hit(C, cr, E, E_avg, wo, ns, ng)
-    lobe, p_chosen, is_delta, wi = _sample_lobe(C, cr, hit, wo, u0, u1, u2)
+    lobe, p_chosen, is_delta, wi, _ = _sample_lobe(C, cr, hit, wo, u0, u1, u2)
     wi0, wi1, wi2 = wi
     if not p_chosen > 0 or lobe == DIFFUSE:
         return wi0, wi1, wi2, 0.0, 0.0, 0.0, PATH_STOP, 0.0
@@ -1055,12 +1069,75 @@ def bsdf_sample_path(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2, stop_coat):
 
 
 @njit(**_JIT)
+def bsdf_sample_cont(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2, stop_coat):
+    """(wi0, wi1, wi2, w0, w1, w2, kind, pdf, u_rr): how a camera path goes on from closure row C[cr]
+    at wo (docs/rendering.md, "Path partition" and "Continuation weights").
+
+    The lobe and direction as :func:`bsdf_sample` (the same u0, u1, u2 give the same wi).  What
+    goes on is the light the continuation lobes reflect, f_c = the rough lobes other than DIFFUSE
+    (without a rough COAT when stop_coat; :func:`bsdf_eval_cont`), whichever non-delta lobe drew
+    wi: one-sample multiple importance sampling over the lobes (the balance heuristic, as Cycles
+    weighs a sampled closure against the others), weight = f_c |cos| / pdf_nd, pdf_nd = sum_j p_j
+    pdf_j(wi) over every non-delta lobe (DIFFUSE included), so that E[weight L] over all non-delta
+    choices is the integral of f_c L cos.  A DIFFUSE pick therefore goes on too, carrying the
+    glossy part of f at a cosine-drawn wi (the photon maps carry the diffuse part).  kind
+    ``PATH_STOP``: nothing to carry (no continuation lobe, f_c = 0 at wi, a sample on the wrong side
+    of the surface; weight 0, pdf 0); ``PATH_DELTA``: a delta lobe, weight throughput / p_lobe as
+    :func:`bsdf_sample` (pdf inf); ``PATH_GLOSSY``: the rest, pdf = pdf_nd (the density of the
+    direction, for multiple importance sampling against next-event estimation).  u_rr: where a
+    lobe that does not carry on (DIFFUSE; a rough COAT with stop_coat) drew wi, a uniform
+    independent of the choice and of wi (``_sample_lobe``'s u_res) for the Russian roulette of
+    ``paths.specular_step`` (these picks are most of the hits on a coated diffuse and carry small
+    weights); -1 (no roulette) where a continuation lobe drew it, whose paths went on before.
+
+    Why not :func:`bsdf_sample_path`'s weight f_c |cos| / (p_c pdf_c) on the continuation lobes'
+    own picks alone (what camera paths did until 2026-12-06): a rough coat over a diffuse base is
+    picked with its albedo's share, under 2 % on a default Principled BSDF at roughness 1, so one
+    hit in 50 carried the coat's whole reflection with a weight of up to 2.5 (the GGX sample does
+    not follow the Fresnel factor, 0.04 to 1 over the microfacets): fireflies where that lobe sees
+    something bright (issue 14).
+    """
+    hit = _hit(C, cr, E, E_avg, wo, ns, ng)
+    lobe, p_chosen, is_delta, wi, u_rr = _sample_lobe(C, cr, hit, wo, u0, u1, u2)
+    wi0, wi1, wi2 = wi
+    if not p_chosen > 0:
+        return wi0, wi1, wi2, 0.0, 0.0, 0.0, PATH_STOP, 0.0, u_rr
+    if is_delta:
+        t0, t1, t2 = _delta_weight(C, cr, hit, lobe, p_chosen, wi)
+        return wi0, wi1, wi2, t0, t1, t2, PATH_DELTA, np.inf, u_rr
+    if not C[cr, C_ROUGH_LOBE] > 0 or not _on_lobe_side(lobe, dot(wi, hit[1])):
+        return wi0, wi1, wi2, 0.0, 0.0, 0.0, PATH_STOP, 0.0, u_rr
+    coat_w = 0.0 if stop_coat else 1.0
+    f0, f1, f2, pdf = _glossy_add(C, cr, E, hit, wo, wi, 0.0, 0.0, 0.0, 0.0, coat_w)
+    if not (f0 > 0.0 or f1 > 0.0 or f2 > 0.0):
+        return wi0, wi1, wi2, 0.0, 0.0, 0.0, PATH_STOP, 0.0, u_rr
+    if stop_coat:
+        pdf = _eval_pdf_hit(C, cr, E, hit, wo, wi)[3]
+    else:
+        # the DIFFUSE lobe's share of the mixture density (as _eval_pdf_hit)
+        cos_d = dot(wi, hit[0])
+        if cos_d > 0 and dot(wi, hit[1]) > 0:
+            pdf += hit[13][DIFFUSE] * cos_d / _PI
+    if not pdf > 0:
+        return wi0, wi1, wi2, 0.0, 0.0, 0.0, PATH_STOP, 0.0, u_rr
+    r = abs(dot(wi, hit[0])) / pdf
+    if not (lobe == DIFFUSE or (stop_coat and lobe == COAT)):
+        u_rr = -1.0                                     # a continuation lobe's own pick: no roulette
+    return wi0, wi1, wi2, f0 * r, f1 * r, f2 * r, PATH_GLOSSY, pdf, u_rr
+
+
+@njit(**_JIT)
 def bsdf_eval_cont(C, cr, E, E_avg, wo, wi, ns, ng, stop_coat):
-    """(f0, f1, f2, pdf): f (1/sr) of the rough lobes through which :func:`bsdf_sample_path` goes
-    on (every non-delta lobe but DIFFUSE; without a rough COAT when stop_coat) and the density
-    pdf_g with which it returns wi through them (0 outside; for multiple importance sampling)."""
-    return _glossy_add(C, cr, E, _hit(C, cr, E, E_avg, wo, ns, ng), wo, wi, 0.0, 0.0, 0.0, 0.0,
-                       0.0 if stop_coat else 1.0)
+    """(f0, f1, f2, pdf): f (1/sr) of the rough lobes whose light camera paths carry on
+    (:func:`bsdf_sample_cont`: every non-delta lobe but DIFFUSE; without a rough COAT when
+    stop_coat) and the density pdf_nd with which :func:`bsdf_sample_cont` returns wi (every
+    non-delta lobe's, DIFFUSE included, as :func:`bsdf_eval_pdf`; for multiple importance
+    sampling; 0 where f is 0)."""
+    hit = _hit(C, cr, E, E_avg, wo, ns, ng)
+    f0, f1, f2, _ = _glossy_add(C, cr, E, hit, wo, wi, 0.0, 0.0, 0.0, 0.0, 0.0 if stop_coat else 1.0)
+    if not (f0 > 0.0 or f1 > 0.0 or f2 > 0.0):
+        return 0.0, 0.0, 0.0, 0.0
+    return f0, f1, f2, _eval_pdf_hit(C, cr, E, hit, wo, wi)[3]
 
 
 # ----------------------------------------------------------------------------

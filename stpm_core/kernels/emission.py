@@ -84,7 +84,8 @@ import numpy as np
 
 from ..numba_probe import njit
 from . import kernel_array
-from .environment import E_PHOTON_UNIFORM, E_TEXTURED, env_pdf, env_radiance, env_sample
+from .environment import (E_PHOTON_UNIFORM, E_PORTAL_PHOTON, E_TEXTURED, PT_E1, PT_E2, PT_N, PT_S, env_pdf,
+                          env_radiance, env_sample, portal_cross)
 from .light_params import (P_ANGLE, P_COLOR, P_COS_HALF, P_FLUX, P_POWER, P_RADIUS, P_SCENE_C, P_SCENE_R, P_SOFT,
                            P_SUN_R, P_TYPE, T_AREA, T_MESH, T_POINT, T_SPOT, T_SUN, T_WORLD, kernel_light,
                            light_poses)
@@ -178,6 +179,102 @@ def _world_photon(row, img, func, marg, cond, par, M, ce, R, n, u1, u2, i):
 
 
 @njit(**JIT)
+def _world_photon_portals(row, img, func, marg, cond, par, portals, M, ce, R, n, u1, u2, i):
+    """World photon i with light portals (``env``'s portal rows): a defensive mixture of two ways
+    to draw a photon's line (direction d, where it travels, and its crossing of the plane through
+    ce perpendicular to d), u1[i, 0] choosing the technique and reused inside it.
+
+    * with probability f = ``par[E_PORTAL_PHOTON]``, through a portal: portal j with probability
+      A_j / A_tot (its area), a uniform point x of it (u2[i]), and d (d . n_j > 0: into the room)
+      from ``p_d = b (d . n_j) / pi + (1 - b) (p_img(-d) + p_img(-d'))`` (b = 1 for a constant
+      world, else 1/2: cosine about the portal's normal, or the image distribution of the
+      direction the light comes from, mirrored in the portal's plane (d' = d - 2 (d . n_j) n_j)
+      when it would leave through the portal's back);
+    * otherwise :func:`_world_photon`'s: omega = -d from q (uniform, or mixed with the image
+      distribution), a uniform point of the disc of radius R.
+
+    In the measure of lines (solid angle of d times area across it) the two densities are
+    ``q(-d) / (pi R^2)`` (lines through the disc) and
+    ``sum_j [the line enters through portal j] p_d(d) / (A_tot (d . n_j))``; the photon carries
+    ``L(-d) / (p n)`` with p their mixture (f and 1 - f), so that the photons are unbiased
+    whichever technique drew them (docs/photon-mapping.md, "World photons through portals").
+    It starts 2R upstream of the plane through ce, as every world photon.
+    Returns origin, direction, power (3-tuples)."""
+    K = portals.shape[0]
+    textured = par[E_TEXTURED] != 0.0
+    f = par[E_PORTAL_PHOTON]
+    a = par[E_PHOTON_UNIFORM] if textured else 1.0
+    b = 0.5 if textured else 1.0
+    A_tot = 0.0
+    for j in range(K):
+        e1 = (portals[j, PT_E1], portals[j, PT_E1 + 1], portals[j, PT_E1 + 2])
+        e2 = (portals[j, PT_E2], portals[j, PT_E2 + 1], portals[j, PT_E2 + 2])
+        A_tot += math.sqrt(dot(e1, e1) * dot(e2, e2))
+    u0 = u1[i, 0]
+    if u0 < f and A_tot > 0.0:
+        # ---- through a portal: j by area, a uniform point x of it, d from p_d ----
+        x_a = u0 / f * A_tot
+        acc, pick, before, A_pick = 0.0, 0, 0.0, 1.0
+        for j in range(K):
+            e1 = (portals[j, PT_E1], portals[j, PT_E1 + 1], portals[j, PT_E1 + 2])
+            e2 = (portals[j, PT_E2], portals[j, PT_E2 + 1], portals[j, PT_E2 + 2])
+            A_j = math.sqrt(dot(e1, e1) * dot(e2, e2))
+            if A_j > 0.0:
+                pick, before, A_pick = j, acc, A_j
+                acc += A_j
+                if x_a < acc:
+                    break
+        s = min(max((x_a - before) / A_pick, 0.0), 1.0)
+        x = (portals[pick, PT_S] + u2[i, 0] * portals[pick, PT_E1] + u2[i, 1] * portals[pick, PT_E2],
+             portals[pick, PT_S + 1] + u2[i, 0] * portals[pick, PT_E1 + 1] + u2[i, 1] * portals[pick, PT_E2 + 1],
+             portals[pick, PT_S + 2] + u2[i, 0] * portals[pick, PT_E1 + 2] + u2[i, 1] * portals[pick, PT_E2 + 2])
+        nj = (portals[pick, PT_N], portals[pick, PT_N + 1], portals[pick, PT_N + 2])
+        if s < b:
+            d = to_world(cosine_hemisphere(s / b, u1[i, 1]), nj)
+        else:
+            w0, w1, w2, _ = env_sample(func, marg, cond, par, M, (s - b) / (1.0 - b), u1[i, 1])
+            d = (-w0, -w1, -w2)
+            dn = dot(d, nj)
+            if dn < 0.0:
+                d = madd(d, -2.0 * dn, nj)          # mirrored into the room: the line enters through the portal
+        # the line's crossing of the plane through ce perpendicular to d
+        xp = madd(x, -dot(sub(x, ce), d), d)
+    else:
+        # ---- over the whole disc ----
+        u0 = (u0 - f) / (1.0 - f) if A_tot > 0.0 else u0
+        if u0 < a:
+            w = uniform_sphere(u0 / a, u1[i, 1])
+        else:
+            w0, w1, w2, _ = env_sample(func, marg, cond, par, M, (u0 - a) / (1.0 - a), u1[i, 1])
+            w = (w0, w1, w2)
+        d = neg(w)
+        t, bb = basis(d)
+        xd, yd = concentric_disk(u2[i, 0], u2[i, 1])
+        xp = plane_point(ce, xd * R, t, yd * R, bb)
+    # ---- the density of this line under the mixture ----
+    w = neg(d)
+    p_img = env_pdf(func, par, M, w) if textured else 0.0
+    v = sub(xp, ce)
+    p_disc = (a * 0.25 / np.pi + (1.0 - a) * p_img) / (np.pi * R * R) if dot(v, v) <= R * R else 0.0
+    p_port = 0.0
+    if A_tot > 0.0:
+        for j in range(K):
+            cos_j = d[0] * portals[j, PT_N] + d[1] * portals[j, PT_N + 1] + d[2] * portals[j, PT_N + 2]
+            if cos_j > 0.0 and not math.isnan(portal_cross(portals, j, xp, d)):     # enters through portal j
+                p_d = b * cos_j / np.pi
+                if textured:
+                    # the image's direction, or its mirror image in the portal's plane
+                    nj = (portals[j, PT_N], portals[j, PT_N + 1], portals[j, PT_N + 2])
+                    p_d += (1.0 - b) * (p_img + env_pdf(func, par, M, neg(madd(d, -2.0 * cos_j, nj))))
+                p_port += p_d / (A_tot * cos_j)
+    pdf = (1.0 - f) * p_disc + f * p_port if A_tot > 0.0 else p_disc
+    L = env_radiance(img, par, M, w)
+    g = 1.0 / (pdf * n) if pdf > 0.0 else 0.0
+    o = sub(xp, scale(d, 2.0 * R))
+    return o, d, (g * L[0], g * L[1], g * L[2])
+
+
+@njit(**JIT)
 def _store(o_out, d_out, P_out, i, o, d, P):
     """Row i of the three outputs."""
     o_out[i, 0], o_out[i, 1], o_out[i, 2] = o
@@ -213,7 +310,8 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_s
     typ = int(row[P_TYPE])
     one_pose = poses.shape[0] == 1
     M = pose_buffer(poses)                   # refilled per photon only when the light moves (no views per photon)
-    img, func, marg, cond, par = env
+    img, func, marg, cond, par, portals = env
+    aim = portals.shape[0] > 0 and par[E_PORTAL_PHOTON] > 0.0       # WORLD photons through light portals
     one_time = times.shape[0] == 1
     cos_half = row[P_COS_HALF]
     omega_c = TWO_PI * (1.0 - cos_half)              # SPOT: the cone's solid angle
@@ -252,7 +350,10 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_s
         elif typ == T_SUN:
             oi, di, Pi = _sun_photon(row, cos_half, light_axis(M), scene_c, row[P_SUN_R], 2.0 * row[P_SCENE_R],
                                      n, u1, u2, i)
-        # ---- WORLD: every direction, through the scene's bounding sphere ----
+        # ---- WORLD: every direction, through the scene's bounding sphere (and the portals) ----
+        elif aim:
+            oi, di, Pi = _world_photon_portals(row, img, func, marg, cond, par, portals, M, scene_c, row[P_SCENE_R],
+                                               n, u1, u2, i)
         else:
             oi, di, Pi = _world_photon(row, img, func, marg, cond, par, M, scene_c, row[P_SCENE_R], n, u1, u2, i)
         _store(o, d, P, i, oi, di, Pi)
@@ -275,7 +376,7 @@ def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, env, times, cent
     typ = int(row[P_TYPE])
     one_pose = poses.shape[0] == 1
     M = pose_buffer(poses)                   # refilled per photon only when the light moves (no views per photon)
-    img, func, marg, cond, par = env
+    img, func, marg, cond, par = env[0], env[1], env[2], env[3], env[4]     # (aimed at a target: no portals)
     one_time = times.shape[0] == 1
     one_c = centers.shape[0] == 1
     scene_c, scene_r = vec3(row, P_SCENE_C), row[P_SCENE_R]

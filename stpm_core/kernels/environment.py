@@ -4,7 +4,7 @@ Blender's Environment Texture (equirectangular) as Cycles evaluates it, and a 2D
 piecewise-constant distribution over the image for next-event estimation and for world photons
 (docs/lights-and-materials.md, "World", has the equations with these names).
 
-The world reaches the kernels as one tuple ``env = (img, func, marg, cond, par)``
+The world reaches the kernels as one tuple ``env = (img, func, marg, cond, par, portals)``
 (:func:`stpm_core.world_light.environment_arrays` packs it); a kernel unpacks it once and hands
 the per-direction functions below the arrays they read (taking an array out of a tuple inside a
 per-row loop costs two atomic reference-count operations per row, ``sampling.row3``):
@@ -18,7 +18,15 @@ per-row loop costs two atomic reference-count operations per row, ``sampling.row
 * par (N_ENV,) float64: ``E_TEXTURED`` (0: a constant world of radiance ``E_L``), ``E_INTERP``
   (0 Closest, 1 Linear), ``E_MEAN`` (the mean of func over its cells), ``E_NEE_COS`` (the
   fraction of next-event samples drawn about the normal rather than from the image),
-  ``E_PHOTON_UNIFORM`` (the fraction of photon directions drawn uniformly), ``E_L`` (3).
+  ``E_PHOTON_UNIFORM`` (the fraction of photon directions drawn uniformly), ``E_L`` (3),
+  ``E_PORTAL_NEE`` (the fraction of next-event samples drawn through the portals, where some
+  portal faces the point), ``E_PORTAL_PHOTON`` (the fraction of world photons aimed through them);
+* portals (K, 12) float64: Blender's light portals (area lights with Cycles' ``is_portal``), one
+  rectangle per row: corner s (``PT_S``, 3), full edges e1, e2 (``PT_E1``, ``PT_E2``, orthogonal),
+  unit normal n (``PT_N``) pointing into the room (the area light's emitting side).  A portal
+  emits nothing and is not seen: it only says where the world's light comes in
+  (:func:`portal_cross`; the samplers are ``lights._sample_world_portals`` and
+  ``emission._world_photon_portals``).  (0, 12) without portals.
 
 The image's frame is turned by the world's mapping: M (4, 4) is the map-to-world rotation at
 the row's time (``WorldLight.transform``), so a world direction d looks up m = M^T d.  With
@@ -36,7 +44,8 @@ import numpy as np
 from ..numba_probe import njit
 from .sampling import JIT, JIT_INLINE, load_pose, pose_buffer, search_right
 
-__all__ = ["N_ENV", "E_TEXTURED", "E_INTERP", "E_MEAN", "E_NEE_COS", "E_PHOTON_UNIFORM", "E_L",
+__all__ = ["N_ENV", "E_TEXTURED", "E_INTERP", "E_MEAN", "E_NEE_COS", "E_PHOTON_UNIFORM", "E_L", "E_PORTAL_NEE",
+           "E_PORTAL_PHOTON", "PT_S", "PT_E1", "PT_E2", "PT_N", "N_PORTAL", "portal_cross", "portal_cross_batch",
            "env_radiance", "env_pdf", "env_sample", "env_lookup_batch", "env_pdf_batch", "env_sample_batch"]
 
 E_TEXTURED = 0
@@ -45,7 +54,11 @@ E_MEAN = 2
 E_NEE_COS = 3
 E_PHOTON_UNIFORM = 4
 E_L = 5
-N_ENV = 8
+E_PORTAL_NEE = 8
+E_PORTAL_PHOTON = 9
+N_ENV = 10
+PT_S, PT_E1, PT_E2, PT_N = 0, 3, 6, 9       # columns of a portal row
+N_PORTAL = 12
 
 _INV_2PI = 1.0 / (2.0 * np.pi)
 
@@ -154,6 +167,32 @@ def env_sample(func, marg, cond, par, M, u0, u1):
     return d[0], d[1], d[2], func[j, i] / (par[E_MEAN] * 2.0 * np.pi * np.pi * st)
 
 
+@njit(**JIT)
+def portal_cross(portals, j, o, d):
+    """Where the line o + s d (3-tuples, d not zero) crosses portal j's rectangle (``portals`` rows
+    of the module docstring): s (any sign; a ray from o crosses it where s > 0), or nan where the
+    line misses it (a line in the portal's plane misses it)."""
+    n = (portals[j, PT_N], portals[j, PT_N + 1], portals[j, PT_N + 2])
+    dn = d[0] * n[0] + d[1] * n[1] + d[2] * n[2]
+    if dn == 0.0:
+        return np.nan
+    w0, w1, w2 = portals[j, PT_S] - o[0], portals[j, PT_S + 1] - o[1], portals[j, PT_S + 2] - o[2]
+    s = (w0 * n[0] + w1 * n[1] + w2 * n[2]) / dn
+    # the crossing minus the corner, in the edges' coordinates (a, b in [0, 1] inside)
+    x0, x1, x2 = s * d[0] - w0, s * d[1] - w1, s * d[2] - w2
+    e1 = (portals[j, PT_E1], portals[j, PT_E1 + 1], portals[j, PT_E1 + 2])
+    e2 = (portals[j, PT_E2], portals[j, PT_E2 + 1], portals[j, PT_E2 + 2])
+    l1 = e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]
+    l2 = e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2]
+    if not (l1 > 0.0 and l2 > 0.0):
+        return np.nan
+    a = (x0 * e1[0] + x1 * e1[1] + x2 * e1[2]) / l1
+    b = (x0 * e2[0] + x1 * e2[1] + x2 * e2[2]) / l2
+    if 0.0 <= a <= 1.0 and 0.0 <= b <= 1.0:
+        return s
+    return np.nan
+
+
 # ----------------------------------------------------------------------------
 # Batch kernels (the integrator's misses, tests)
 # ----------------------------------------------------------------------------
@@ -196,3 +235,10 @@ def env_sample_batch(env, poses, u, d_out, pdf_out, pdf_again):
         d_out[i, 0], d_out[i, 1], d_out[i, 2] = d0, d1, d2
         pdf_out[i] = p
         pdf_again[i] = env_pdf(func, par, M, (d0, d1, d2))
+
+
+@njit(**JIT)
+def portal_cross_batch(portals, j, o, d, out):
+    """out[i] = :func:`portal_cross` of portal j for the lines o[i] + s d[i] (n, 3) (tests)."""
+    for i in range(o.shape[0]):
+        out[i] = portal_cross(portals, j, (o[i, 0], o[i, 1], o[i, 2]), (d[i, 0], d[i, 1], d[i, 2]))

@@ -43,13 +43,14 @@ import numpy as np
 from ..numba_probe import njit
 from .light_params import P_ANGLE, P_COLOR, P_DEAD, P_POWER, P_RADIUS, P_SOFT, P_TYPE, T_AREA, T_MESH, T_POINT, \
     T_SPOT, T_SUN, T_WORLD
-from .environment import E_NEE_COS, E_TEXTURED, env_pdf, env_radiance, env_sample
+from .environment import (E_NEE_COS, E_PORTAL_NEE, E_TEXTURED, PT_E1, PT_E2, PT_N, PT_S, env_pdf, env_radiance,
+                          env_sample, portal_cross)
 from .sampling import (JIT, TWO_PI, area_point, area_shape, axis_or_z, clip, column, concentric_disk,
                        cosine_hemisphere, cross, dot, edot, intensity, light_axis, load_pose, madd, mesh_choice, mesh_point, mesh_triangle, neg,
                        normalize, one_minus_cos_from_sin2, pose_buffer, row3, scale, sign, spot_attenuation, sub,
                        to_world, uniform_cone, uniform_sphere, unit, vec3)
 
-__all__ = ["sample_light_rows", "world_nee_pdf", "light_pdf", "mesh_light_pdf", "seen_light", "sample_direct_batch",
+__all__ = ["sample_light_rows", "world_nee_pdf", "world_nee_pdf_batch", "light_pdf", "mesh_light_pdf", "seen_light", "sample_direct_batch",
            "sample_pdf_batch", "light_pdf_batch", "seen_batch", "spherical_rect_sample",
            "spherical_rect_batch"]
 
@@ -284,18 +285,99 @@ def _sample_env(img, func, marg, cond, par, M, n, u0, u1):
 
 
 @njit(**JIT)
-def world_nee_pdf(func, par, M, n, wi):
+def _portal_solid_angle(portals, j, p):
+    """Solid angle (sr) portal j (``kernels.environment``'s rows) subtends from p, where p lies on
+    its room side ((p - corner) . n > 0); 0 elsewhere (Cycles samples a portal only from there)."""
+    s = (portals[j, PT_S], portals[j, PT_S + 1], portals[j, PT_S + 2])
+    nrm = (portals[j, PT_N], portals[j, PT_N + 1], portals[j, PT_N + 2])
+    if not (p[0] - s[0]) * nrm[0] + (p[1] - s[1]) * nrm[1] + (p[2] - s[2]) * nrm[2] > 0.0:
+        return 0.0
+    e1 = (portals[j, PT_E1], portals[j, PT_E1 + 1], portals[j, PT_E1 + 2])
+    e2 = (portals[j, PT_E2], portals[j, PT_E2 + 1], portals[j, PT_E2 + 2])
+    return spherical_rect_sample(p, s, e1, e2, 0.5, 0.5)[1]
+
+
+@njit(**JIT)
+def world_nee_pdf(func, par, portals, M, p, n, wi):
     """Solid-angle density (1/sr) with which next-event estimation draws wi toward the WORLD from
-    a point whose geometric normal turned toward the viewer is n (zero: no normal): cos / pi
+    the point p whose geometric normal turned toward the viewer is n (zero: no normal): cos / pi
     about n (uniform 1 / (4 pi) without one) for a constant world, the mixture of
     :func:`_sample_env` for an environment image (func, par of its env arrays, M its
-    map-to-world rotation)."""
+    map-to-world rotation); with portals (``env``'s portal rows) facing p, the mixture
+    ``g n_cross(wi) / S_tot + (1 - g) p_base(wi)`` of :func:`_sample_world_portals`."""
     no_n = n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0
     p_a = 0.25 / np.pi if no_n else max(wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2], 0.0) / np.pi
     if par[E_TEXTURED] == 0.0:
-        return p_a
-    c = par[E_NEE_COS]
-    return c * p_a + (1.0 - c) * env_pdf(func, par, M, wi)
+        base = p_a
+    else:
+        c = par[E_NEE_COS]
+        base = c * p_a + (1.0 - c) * env_pdf(func, par, M, wi)
+    if portals.shape[0] == 0 or par[E_PORTAL_NEE] <= 0.0:
+        return base
+    # Portals facing p: their total solid angle, and how many of them wi passes through
+    S_tot = 0.0
+    hits = 0
+    for j in range(portals.shape[0]):
+        S_j = _portal_solid_angle(portals, j, p)
+        if S_j > 0.0:
+            S_tot += S_j
+            if portal_cross(portals, j, p, wi) > 0.0:
+                hits += 1
+    if not S_tot > 0.0:
+        return base
+    g = par[E_PORTAL_NEE]
+    return g * hits / S_tot + (1.0 - g) * base
+
+
+@njit(**JIT)
+def _sample_world_portals(img, func, marg, cond, par, portals, M, p, n, u0, u1):
+    """WORLD (constant or an environment image) with light portals, from p with geometric normal n
+    (turned toward the viewer; zero: none).  With probability g = ``par[E_PORTAL_NEE]`` (where
+    some portal faces p, else 0) a portal j chosen in proportion to the solid angle S_j it
+    subtends from p (:func:`_portal_solid_angle`) and a direction uniform in that solid angle
+    (:func:`spherical_rect_sample`); otherwise the sampler without portals (:func:`_sample_world`,
+    :func:`_sample_env`), u0 choosing the technique and reused inside it.  The density of the
+    mixture, ``g n_cross(wi) / S_tot + (1 - g) p_base(wi)`` (n_cross the facing portals wi passes
+    through: overlapping portals add up), is :func:`world_nee_pdf`'s; weight L(wi) / pdf.
+    Returns (wi0, wi1, wi2, inf, w0, w1, w2, pdf)."""
+    S_tot = 0.0
+    for j in range(portals.shape[0]):
+        S_tot += _portal_solid_angle(portals, j, p)
+    g = par[E_PORTAL_NEE] if S_tot > 0.0 else 0.0
+    no_n = n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0
+    if u0 < g:
+        # -- through a portal, chosen by solid angle
+        x = u0 / g * S_tot
+        acc = 0.0
+        pick, S_pick, before = -1, 0.0, 0.0
+        for j in range(portals.shape[0]):
+            S_j = _portal_solid_angle(portals, j, p)
+            if S_j > 0.0:
+                pick, S_pick, before = j, S_j, acc
+                acc += S_j
+                if x < acc:
+                    break
+        u = min(max((x - before) / S_pick, 0.0), 1.0)
+        s = (portals[pick, PT_S], portals[pick, PT_S + 1], portals[pick, PT_S + 2])
+        e1 = (portals[pick, PT_E1], portals[pick, PT_E1 + 1], portals[pick, PT_E1 + 2])
+        e2 = (portals[pick, PT_E2], portals[pick, PT_E2 + 1], portals[pick, PT_E2 + 2])
+        q, _ = spherical_rect_sample(p, s, e1, e2, u, u1)
+        wi, _ = normalize(sub(q, p))
+    else:
+        # -- the world's own sampler: cosine (or uniform) and, for an image, its distribution
+        u0 = (u0 - g) / (1.0 - g) if g > 0.0 else u0
+        c = par[E_NEE_COS] if par[E_TEXTURED] != 0.0 else 1.0
+        if u0 < c:
+            u0 = u0 / c
+            wi = uniform_sphere(u0, u1) if no_n else to_world(cosine_hemisphere(u0, u1), n)
+        else:
+            d0, d1, d2, _ = env_sample(func, marg, cond, par, M, (u0 - c) / (1.0 - c), u1)
+            wi = (d0, d1, d2)
+    pdf = world_nee_pdf(func, par, portals, M, p, n, wi)
+    if not pdf > 0.0:
+        return wi[0], wi[1], wi[2], np.inf, 0.0, 0.0, 0.0, 0.0
+    L = env_radiance(img, par, M, wi)
+    return wi[0], wi[1], wi[2], np.inf, L[0] / pdf, L[1] / pdf, L[2] / pdf, pdf
 
 
 @njit(**JIT)
@@ -390,7 +472,7 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
     static one; WORLD: identity); steps (K,), corners (K, F, 3, 3), q, cdf (F,), Le (F, 3): a MESH
     light's triangles (``light_params.mesh_arrays``; empty for other lights); env: the WORLD's
     environment (``kernels.environment``; an image world samples it, :func:`_sample_env`, with
-    poses its mapping).  NG, D (m, 3): the rows' geometric normals and ray directions, read by
+    poses its mapping; with light portals :func:`_sample_world_portals`).  NG, D (m, 3): the rows' geometric normals and ray directions, read by
     WORLD only (cosine sampling about ng turned toward wo = -d; a zero ng: uniform sphere).  rows (n,) into P, NG, D; T (n,), U (n, 2), S (n, 8).
 
     wi: unit direction from p toward the light sample; dist: its distance (inf for SUN / WORLD;
@@ -411,7 +493,7 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
     one = poses.shape[0] == 1
     n = rows.shape[0]
     M = pose_buffer(poses)
-    img, func, marg, cond, par = env
+    img, func, marg, cond, par, portals = env
     # Column 7 (written in the same loop): the density the world's samples were drawn with
     # (multiple importance sampling against camera paths that go on through rough lobes); inf
     # for every other light, which next-event estimation handles alone
@@ -453,20 +535,28 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
                 S[k, 7] = mesh_light_pdf(M, steps, corners, q, j, T[k], p, x)
             else:
                 S[k, 7] = np.inf
+    elif typ == T_WORLD and portals.shape[0] > 0:
+        for k in range(n):
+            if not one:
+                load_pose(poses, k, M)
+            nk = _toward(NG, D, rows[k])
+            r = _sample_world_portals(img, func, marg, cond, par, portals, M, row3(P, rows[k]), nk, U[k, 0], U[k, 1])
+            S[k, 0], S[k, 1], S[k, 2], S[k, 3] = r[0], r[1], r[2], r[3]
+            S[k, 4], S[k, 5], S[k, 6], S[k, 7] = r[4], r[5], r[6], r[7]
     elif typ == T_WORLD and par[E_TEXTURED] != 0.0:
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
             nk = _toward(NG, D, rows[k])
             _put(S, k, _sample_env(img, func, marg, cond, par, M, nk, U[k, 0], U[k, 1]))
-            S[k, 7] = world_nee_pdf(func, par, M, nk, (S[k, 0], S[k, 1], S[k, 2]))
+            S[k, 7] = world_nee_pdf(func, par, portals, M, row3(P, rows[k]), nk, (S[k, 0], S[k, 1], S[k, 2]))
     elif typ == T_WORLD:
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
             nk = _toward(NG, D, rows[k])
             _put(S, k, _sample_world(prm, nk, U[k, 0], U[k, 1]))
-            S[k, 7] = world_nee_pdf(func, par, M, nk, (S[k, 0], S[k, 1], S[k, 2]))
+            S[k, 7] = world_nee_pdf(func, par, portals, M, row3(P, rows[k]), nk, (S[k, 0], S[k, 1], S[k, 2]))
     else:
         for k in range(n):
             _put(S, k, (0.0, 0.0, 1.0, np.inf, 0.0, 0.0, 0.0))     # (no other type codes)
@@ -577,6 +667,20 @@ def sample_pdf_batch(prm, poses, steps, corners, q, cdf, Le, env, p, times, u, n
     want_pdf = p.shape[0] >= 0    # True as a run-time bool (one compiled sample_light_rows)
     sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, np.arange(p.shape[0]), p, normals, -normals,
                       times, u, S_out, want_pdf)
+
+
+@njit(**JIT)
+def world_nee_pdf_batch(env, poses, p, n, wi, out):
+    """out[i] = :func:`world_nee_pdf` from points p[i] with normals n[i] (zero: none) toward unit
+    directions wi[i] (n, 3 each) for the world's env tuple; poses (k, 4, 4) its mapping, k = 1 or
+    one per row (tests)."""
+    func, par, portals = env[1], env[4], env[5]
+    one = poses.shape[0] == 1
+    M = pose_buffer(poses)
+    for i in range(p.shape[0]):
+        if not one:
+            load_pose(poses, i, M)
+        out[i] = world_nee_pdf(func, par, portals, M, row3(p, i), row3(n, i), row3(wi, i))
 
 
 @njit(**JIT)

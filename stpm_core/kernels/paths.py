@@ -30,7 +30,7 @@ equations with these names):
 * :func:`photon_albedo` / :func:`photon_add` -- the diffuse albedo and the
   query rows of the photon-map look-ups, and rho / pi E added into a pass;
 * :func:`specular_step` -- continue through delta and rough non-diffuse lobes: BSDF sample
-  (``bsdf_sample_path``), throughput, Russian roulette, offset origins of the next rays;
+  (``bsdf_sample_cont``), throughput, Russian roulette, offset origins of the next rays;
 * :func:`scatter_add`, :func:`active_channels`, :func:`pixel_sums`,
   :func:`tile_finish` -- per-sample passes and per-pixel sums of one tile.
 
@@ -48,7 +48,7 @@ import numpy as np
 
 from ..numba_probe import njit
 from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_eval_plain_w, bsdf_eval_smooth,
-                   bsdf_sample_path, denoising_features, diffuse_albedo, needs_bsdf_call)
+                   bsdf_sample_cont, denoising_features, diffuse_albedo, needs_bsdf_call)
 from .environment import env_radiance
 from .closure import (C_BASE, C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, C_W_BASE, closure_row)
 from .lights import light_pdf, mesh_light_pdf, sample_light_rows, seen_light, world_nee_pdf
@@ -604,7 +604,8 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
     :func:`specular_step`, and pick up the light where they reach it: the world where they escape,
     an AREA light or a POINT / SPOT sphere seen along the ray, :func:`seen_lights_add`, an
     emitting triangle of a MESH light they hit, :func:`mesh_emission_mis`): the part f_c of f those
-    lobes sample with density p_c (``bsdf_eval_cont``, stop_coat as the continuation) is weighed
+    lobes carry, sampled with density p_c (``bsdf_eval_cont``: every non-delta lobe's, one-sample
+    multiple importance sampling; stop_coat as the continuation) is weighed
     by the power heuristic p_l^2 / (p_l^2 + p_c^2) (:func:`mis_weight`), p_l = S[k, 7] the light's own density
     (``sample_light_rows`` with want_pdf, set when any row has mis), and the paths that reach
     the light by p_c / (p_l + p_c) (docs/rendering.md, "Multiple importance sampling").  Delta
@@ -1011,15 +1012,19 @@ def photon_add(dst, rows, live, rho, E, idx, use_idx, beta, use_beta, clamp):
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
 def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, E_avg, U, rr, U_rr, EPS, guard_fraction,
-                  stop_coat, env, wposes, world_mis, counts, max_glossy, max_transmission, idx_out, beta_out, o_out,
+                  stop_coat, tau, env, wposes, world_mis, counts, max_glossy, max_transmission, idx_out, beta_out, o_out,
                   d_out, guard_out, glossy_out, world_w_out, pc_out, counts_out, use_feat, feat, dft, feat_out, dft_out):
     """Continue the hit rows spec (k,) through their delta and rough non-diffuse lobes; returns how
     many paths go on.
 
-    Per row j (hit r = spec[j]): (wi, weight, kind) = ``bsdf_sample_path``(C[crow[r]],
-    wo = -D[r], U[j], stop_coat): the DIFFUSE lobe (which the photon maps carry) stops the path,
-    a delta lobe or a rough one continues it (docs/rendering.md, "Path partition"); beta' = beta[r] *
-    weight (weight alone when not use_beta).  The path goes on if some beta' > 0, and, when rr
+    Per row j (hit r = spec[j]): (wi, weight, kind, p_c, u_w) = ``bsdf_sample_cont``(C[crow[r]],
+    wo = -D[r], U[j], stop_coat): a delta lobe continues the path, and so does any non-delta pick
+    with the rough lobes' part of f (one-sample multiple importance sampling over the lobes; the
+    DIFFUSE lobe's own light is the photon maps', docs/rendering.md, "Path partition" and
+    "Continuation weights"); beta' = beta[r] * weight (weight alone when not use_beta).  The path
+    goes on if some beta' > 0; where a DIFFUSE pick drew wi (u_w >= 0) only if u_w < q = min(max
+    beta' / tau, 1), then beta' /= q (Russian roulette: such picks are most hits of a coated
+    diffuse, with small weights; tau = ``integrator.CONT_RR``); and, when rr
     (Russian roulette from ``integrator.RR_START`` bounces on), if U_rr[j] < q =
     clip(max beta', 0.05, 1), then beta' /= q.  For those: idx_out = the sample (idx[r], or r),
     beta_out = beta', the next ray from p offset by EPS[j] along ng to wi's side (o_out, d_out =
@@ -1045,14 +1050,15 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, 
     """
     one_w = wposes.shape[0] == 1
     M = pose_buffer(wposes)                  # no views or tuple items per row (sampling.row3)
-    func, par = env[1], env[4]
+    func, par, portals = env[1], env[4], env[5]
     n_go = 0
     for j in range(spec.shape[0]):
         r = spec[j]
         wo = (-D[r, 0], -D[r, 1], -D[r, 2])
         g = (NG[r, 0], NG[r, 1], NG[r, 2])
-        wi0, wi1, wi2, w0, w1, w2, kind, p_c = bsdf_sample_path(C, crow[r], E, E_avg, wo, (NS[r, 0], NS[r, 1], NS[r, 2]),
-                                                                g, U[j, 0], U[j, 1], U[j, 2], stop_coat)
+        wi0, wi1, wi2, w0, w1, w2, kind, p_c, u_w = bsdf_sample_cont(C, crow[r], E, E_avg, wo,
+                                                                     (NS[r, 0], NS[r, 1], NS[r, 2]), g, U[j, 0], U[j, 1],
+                                                                     U[j, 2], stop_coat)
         if use_beta:
             b0, b1, b2 = beta[r, 0] * w0, beta[r, 1] * w1, beta[r, 2] * w2
         else:
@@ -1065,6 +1071,13 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, 
             go = go and n_tr < max_transmission
         else:
             go = go and n_gl < max_glossy
+        if go and u_w >= 0.0:
+            # Russian roulette where a DIFFUSE pick carries the rough lobes' part of f (small
+            # weights on most hits of a coated diffuse): a path whose beta' is below tau goes on
+            # with probability beta' / tau and then carries tau
+            q = min(max(b0, max(b1, b2)) / tau, 1.0)
+            go = u_w < q
+            b0, b1, b2 = b0 / q, b1 / q, b2 / q
         if rr:
             q = min(max(max(b0, max(b1, b2)), 0.05), 1.0)
             go = go and U_rr[j] < q
@@ -1085,7 +1098,7 @@ def specular_step(spec, idx, use_idx, beta, use_beta, P, NG, NS, D, C, crow, E, 
             if world_mis:
                 if not one_w:
                     load_pose(wposes, j, M)
-                p_l = world_nee_pdf(func, par, M, g_f, (wi0, wi1, wi2))
+                p_l = world_nee_pdf(func, par, portals, M, (P[r, 0], P[r, 1], P[r, 2]), g_f, (wi0, wi1, wi2))
                 w_world = mis_weight(p_c, p_l)
         world_w_out[n_go] = w_world
         pc_out[n_go] = p_c if kind == PATH_GLOSSY else np.inf

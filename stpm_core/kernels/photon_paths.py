@@ -25,6 +25,13 @@ docs/photon-mapping.md ("Tracing") has the equations:
 * **Russian roulette by albedo**: the photon survives with
   q = min(1, max_c weight_c) and its power becomes Phi weight / q, so stored
   powers stay even; caustic paths go on only through delta and glossy lobes;
+* **refraction**: a photon crossing a dielectric interface (wi and wo on opposite sides of ng
+  through a closure with a glass lobe) has its power scaled by (n_i / n_t)^2 = 1 / eta^2
+  (eta = ior entering, 1 / ior leaving, the closures' convention).  The camera side, as Cycles,
+  carries no eta^2 at a refraction; the photons then must (Veach 1997, section 5.2: the adjoint
+  of a refracting BSDF differs by it), so an estimate read in water seen from the air above is
+  rho E / (pi n^2) as Cycles renders it.  A photon that enters and leaves a closed glass
+  object gets 1 / eta^2 and eta^2: no change;
 * **spawn**: the next ray starts at p offset by EPS along ng to wi's side,
   with its own self-intersection guard ``guard_fraction`` x EPS.
 """
@@ -32,7 +39,7 @@ from __future__ import annotations
 
 from ..numba_probe import njit
 from .bsdf import COAT, DIFFUSE, PATH_STOP, bsdf_sample_lobe, bsdf_sample_path
-from .closure import C_NONDELTA, C_ROUGHNESS
+from .closure import C_IOR, C_NONDELTA, C_ROUGHNESS, C_W_GLASS
 from .sampling import offset_origin
 
 __all__ = ["photon_bounce"]
@@ -101,6 +108,13 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
         if not alive:
             continue
         qq = q if q > 0.0 else 1.0
+        # -- Refraction: power x (n_i / n_t)^2 = 1 / eta^2, the eta^2 the camera side leaves out ------
+        # (module docstring); entering (wo on ng's side): eta = ior, leaving: 1 / ior
+        go = wo[0] * g[0] + wo[1] * g[1] + wo[2] * g[2]
+        gi = wi0 * g[0] + wi1 * g[1] + wi2 * g[2]
+        if go * gi < 0.0 and C[j, C_W_GLASS] > 0.0:
+            ior = C[j, C_IOR]
+            qq = qq * (ior * ior if go > 0.0 else 1.0 / (ior * ior))      # Phi w / qq below
         # -- Spawn the continuation ray, offset off the surface --------------------------------
         e = EPS[j]
         o_next[n_next, 0], o_next[n_next, 1], o_next[n_next, 2] = offset_origin((P[r, 0], P[r, 1], P[r, 2]), g, e,

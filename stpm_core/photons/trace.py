@@ -254,8 +254,8 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
                       progress=None, cancel=None) -> tuple[np.ndarray, dict]:
     """Caustic map records and counts: ``settings.photons_caustic`` photons aimed at specular instances.
 
-    Photons are split over (light, target) pairs by power x solid angle of the
-    target's bounding sphere (suns: power x (r_target / r_scene)^2); the split
+    Photons are split over (light, target) pairs by power x photon weight x solid angle of the
+    target's bounding sphere (suns: power x weight x (r_target / r_scene)^2); the split
     only moves variance around, the power weighting of ``emit_toward`` keeps
     every pair unbiased.
     """
@@ -264,7 +264,7 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
     origin = photon_origin(scene)
     pairs, weights = [], []
     for li, light in enumerate(lights.lights):
-        P = float(lights.power[li])
+        P = float(lights.power[li]) * float(lights.photon_weight[li])
         if P <= 0.0:
             continue
         pos = light.transform.at(0.5)[:3, 3]
@@ -296,15 +296,22 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing caustic photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
-    return recs, {"photons_emitted_caustic": int(counts.sum()), "caustic_targets": len(targets)}
+    per_light = np.zeros(len(lights.lights), np.int64)
+    for (li, _, _, _), n_pair in zip(pairs, counts):
+        per_light[li] += int(n_pair)
+    return recs, {"photons_emitted_caustic": int(counts.sum()), "caustic_targets": len(targets),
+                  "photons_emitted_caustic_per_light": [int(x) for x in per_light]}
 
 
 def trace_global_map(scene, settings, caster, lights, table, *, time_override=None,
                      progress=None, cancel=None, min_nondelta: int = 1) -> tuple[np.ndarray, dict]:
-    """Global map records and counts: ``settings.photons_global`` photons split over lights by power."""
+    """Global map records and counts: ``settings.photons_global`` photons split over lights by power x
+    photon weight (``LightSet.photon_weight``: each light's photons carry its flux divided by their
+    number, so the weights move noise between lights and leave the estimate unbiased)."""
     inst_offset = instance_offsets(scene)
     origin = photon_origin(scene)
-    counts = split_counts(int(settings.photons_global), np.asarray(lights.power, dtype=np.float64))
+    counts = split_counts(int(settings.photons_global),
+                          np.asarray(lights.power, dtype=np.float64) * np.asarray(lights.photon_weight, np.float64))
     shading = shading_data(scene, table.closures)
     jobs = [(li, b0, min(BATCH, int(n_light) - b0), int(n_light)) for li, n_light in enumerate(counts)
             for b0 in range(0, int(n_light), BATCH)]
@@ -325,4 +332,5 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing global photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
-    return recs, {"photons_emitted_global": int(counts.sum())}
+    return recs, {"photons_emitted_global": int(counts.sum()),
+                  "photons_emitted_global_per_light": [int(x) for x in counts]}

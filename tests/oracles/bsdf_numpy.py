@@ -524,15 +524,51 @@ def bsdf_sample_path(table: MaterialTable, mat, wo, ns, ng, u, stop_coat: bool =
     return wi, weight, kind, pdf_out
 
 
+def bsdf_sample_cont(table: MaterialTable, mat, wo, ns, ng, u, stop_coat: bool = False):
+    """How a camera path goes on: (wi, weight, kind, pdf, u_rr), kind 0 = stop, 1 = a delta lobe
+    (weight as :func:`bsdf_sample`), 2 = the continuation lobes' part f_c (the rough lobes but
+    DIFFUSE, and the rough COAT with stop_coat) at wi drawn by any non-delta lobe, weight f_c |cos|
+    / pdf_nd (one-sample MIS over every non-delta lobe), pdf = pdf_nd; u_rr the uniform for the
+    roulette of DIFFUSE (and, with stop_coat, rough COAT) picks, -1 on the others (the kernel:
+    ``kernels.bsdf.bsdf_sample_cont``)."""
+    wi, weight, is_delta, lobe, u_res = bsdf_sample_lobe(table, mat, wo, ns, ng, u, residual=True)
+    mat = np.asarray(mat)
+    n = wi.shape[0]
+    ok = lobe >= 0
+    kind = np.where(ok & is_delta, 1, 0)
+    weight = np.where((kind == 1)[:, None], weight, 0.0)
+    pdf_out = np.where(kind == 1, np.inf, 0.0)
+    u_rr = np.where(ok, u_res, 0.0)
+    g = np.nonzero(ok & ~is_delta & table.rough_lobe[mat])[0]
+    if g.size:
+        h = _Hit(table, mat[g], np.asarray(wo, float)[g], np.asarray(ns, float)[g], np.asarray(ng, float)[g])
+        f, _ = _eval_pdf(h, wi[g], diffuse=False, coat=0.0 if stop_coat else 1.0)
+        _, pdf = _eval_pdf(h, wi[g])
+        go = _on_lobe_side(lobe[g], _dot(wi[g], h.ng)) & np.any(f > 0, axis=1) & (pdf > 0)
+        cos_i = np.abs(_dot(wi[g], h.ns))
+        weight[g] = np.where(go[:, None], f * (cos_i / np.maximum(pdf, 1e-300))[:, None], 0.0)
+        pdf_out[g] = np.where(go, pdf, 0.0)
+        kind[g] = np.where(go, 2, 0)
+        own = ~((lobe[g] == DIFFUSE) | ((lobe[g] == COAT) & stop_coat))
+        u_rr[g] = np.where(go & own, -1.0, u_rr[g])
+    return wi, weight, kind, pdf_out, u_rr
+
+
 def bsdf_eval_cont(table: MaterialTable, mat, wo, wi, ns, ng, stop_coat: bool = False):
-    """(f (n, 3), pdf (n,)) of the rough lobes :func:`bsdf_sample_path` goes on through (every
-    non-delta lobe but DIFFUSE; the rough COAT unless stop_coat)."""
+    """(f (n, 3), pdf (n,)): f of the rough lobes whose light camera paths carry on (every
+    non-delta lobe but DIFFUSE; the rough COAT unless stop_coat) and the density pdf_nd with which
+    :func:`bsdf_sample_cont` draws wi (every non-delta lobe's; 0 where f is 0)."""
     h = _Hit(table, mat, np.asarray(wo, float), np.asarray(ns, float), np.asarray(ng, float))
-    return _eval_pdf(h, np.asarray(wi, float), diffuse=False, coat=0.0 if stop_coat else 1.0)
+    wi = np.asarray(wi, float)
+    f, _ = _eval_pdf(h, wi, diffuse=False, coat=0.0 if stop_coat else 1.0)
+    _, pdf = _eval_pdf(h, wi)
+    return f, np.where(np.any(f > 0, axis=1), pdf, 0.0)
 
 
-def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
-    """:func:`bsdf_sample` and the lobe chosen (n,) (-1 where the lobe had probability 0)."""
+def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u, residual: bool = False):
+    """:func:`bsdf_sample` and the lobe chosen (n,) (-1 where the lobe had probability 0); with
+    residual also u_res (n,): where u0 fell inside the chosen lobe's interval (rough glass: inside
+    its reflect / refract share), rescaled to [0, 1) (the kernel's ``_sample_lobe``)."""
     h = _Hit(table, mat, wo, ns, ng)
     u = np.asarray(u, float)
     n = u.shape[0]
@@ -542,6 +578,8 @@ def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
     lobe = np.minimum(np.sum(u[:, 0:1] >= cdf, axis=1), METAL_MS)
     p_chosen = h.p_lobe[rows, lobe]
     ok = p_chosen > 0
+    lo = np.where(lobe > 0, cdf[rows, np.maximum(lobe - 1, 0)], 0.0)
+    u_res = np.where(ok, np.clip((u[:, 0] - lo) / np.where(ok, p_chosen, 1.0), 0.0, _BELOW_ONE), 0.0)
     wi = np.zeros((n, 3))
     weight = np.zeros((n, 3))
     # Rough glass: a visible normal, then reflect or refract through it, chosen per microfacet by
@@ -562,7 +600,10 @@ def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
         rt = refl_w + (1.0 - F) * h.tint[i].mean(axis=1)
         pl = h.p_lobe[i]
         us = np.clip((u[i, 0] - (pl[:, DIFFUSE] + pl[:, COAT] + pl[:, METAL])) / (pl[:, GLASS_R] + pl[:, GLASS_T]), 0, 1)
-        refl = us < refl_w / np.where(rt > 0, rt, 1.0)
+        split = refl_w / np.where(rt > 0, rt, 1.0)
+        refl = us < split
+        u_res[i] = np.where(refl, np.minimum(us / np.where(refl, split, 1.0), _BELOW_ONE),
+                            np.clip((us - split) / np.where(refl, 1.0, 1.0 - split), 0.0, _BELOW_ONE))
         cos_t = np.sqrt(np.maximum(0.0, 1.0 - (1.0 - wo_h * wo_h) / (eta * eta)))
         refr = -wo_i / eta[:, None] + (wo_h / eta - cos_t)[:, None] * hw
         wi[i] = np.where(refl[:, None], _reflect(wo_i, hw), refr)
@@ -624,7 +665,12 @@ def bsdf_sample_lobe(table: MaterialTable, mat, wo, ns, ng, u):
         cos_i = np.abs(_dot(wi[i], hs.ns))
         keep = (pdf > 0) & _on_lobe_side(lobe[i], _dot(wi[i], hs.ng))
         weight[i] = np.where(keep[:, None], f * (cos_i / np.maximum(pdf, 1e-300))[:, None], 0.0)
+    if residual:
+        return wi, weight, is_delta, np.where(ok, lobe, -1), np.where(ok, u_res, 0.0)
     return wi, weight, is_delta, np.where(ok, lobe, -1)
+
+
+_BELOW_ONE = 0.9999999999999999     # the largest float64 below 1 (the kernel's clip of u_res)
 
 
 def _on_lobe_side(lobe: np.ndarray, side: np.ndarray) -> np.ndarray:

@@ -16,11 +16,11 @@ from types import SimpleNamespace
 import numpy as np
 
 from oracles import lights_numpy
-from oracles.bsdf_numpy import bsdf_eval, bsdf_eval_cont, bsdf_sample_path, diffuse_albedo, emission, has_nondelta
+from oracles.bsdf_numpy import bsdf_eval, bsdf_eval_cont, bsdf_sample_cont, diffuse_albedo, emission, has_nondelta
 from stpm_core.bsdf import MaterialTable
 from stpm_core.camera import camera_to_world, image_plane
 from stpm_core.film import DEPTH_BACKGROUND, PASSES, Film, filter_offsets
-from stpm_core.integrator import RR_START, STREAM_CAMERA, BATCH_SAMPLES, TraceStats, _map_kinds
+from stpm_core.integrator import CONT_RR, RR_START, STREAM_CAMERA, BATCH_SAMPLES, TraceStats, _map_kinds
 from stpm_core.raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from stpm_core.sampling import rng_for, skip_uniforms
 
@@ -228,6 +228,14 @@ def _light_uniforms(light, samples: np.ndarray, strata: tuple, rng: np.random.Ge
     if _is_delta_light(light):
         skip_uniforms(rng, n + 2 * k)
         return np.zeros((k, 2))
+    return _strata_uniforms(samples, strata, rng)
+
+
+def _strata_uniforms(samples: np.ndarray, strata: tuple, rng: np.random.Generator) -> np.ndarray:
+    """:func:`_light_uniforms` of a non-delta light: keys (n / S, S) then jitters (k, 2) drawn, the
+    pixels' points placed (also the continuation lobes' directions, ``_specular_step``)."""
+    n, S = strata
+    k = samples.size
     keys = rng.random((n // S, S))
     jit = rng.random((k, 2))
     P = n // S
@@ -384,7 +392,7 @@ def _cast_bounce(ctx, o, d, times, idx, tmax, m: int, bounce: int, stats: TraceS
     return t, hits
 
 
-def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, counts):
+def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, counts, strata):
     """Continue the rows spec (k,) through their delta and rough non-diffuse lobes: (idx, beta,
     wi, go, glossy) of those rows.
 
@@ -392,13 +400,14 @@ def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, coun
     throughput) are narrowed to them and beta takes the lobe's weight (``bsdf_sample_path``: the
     DIFFUSE lobe stops the path, the photon maps carry it); go (k,) keeps the rows that went on
     with some throughput left and (from RR_START on) survived Russian roulette, beta / q; glossy
-    (k,) marks those that left a rough lobe.  Random numbers: (k, 3) for the lobes, then (k,) for
-    the roulette.
+    (k,) marks those that left a rough lobe.  Random numbers: (k, 3) for the lobes, the
+    directions' strata (:func:`_strata_uniforms`, replacing u[:, 1:3]), then (k,) for the roulette.
     """
     u = rng.random((spec.size, 3))
     idx = spec if idx is None else idx[spec]
+    u[:, 1:3] = _strata_uniforms(idx, strata, rng)     # the directions: stratified per pixel (strata = (n, S))
     beta = None if beta is None else beta[spec]
-    wi, weight, kind, p_c = bsdf_sample_path(ctx.table, mat, wo, ns, ng, u)
+    wi, weight, kind, p_c, u_w = bsdf_sample_cont(ctx.table, mat, wo, ns, ng, u)
     beta = weight if beta is None else beta * weight
     go = (kind != 0) & np.any(beta > 0.0, axis=1)
     # bounce budgets (Cycles' Glossy / Transmission bounces): a delta lobe within its own kind's, a
@@ -406,6 +415,12 @@ def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, coun
     trans = np.einsum("ij,ij->i", wi, _face_forward(ng, wo)) < 0.0
     gl_ok, tr_ok = counts[:, 0] < ctx.glossy_bounces, counts[:, 1] < ctx.transmission_bounces
     go &= np.where(trans, tr_ok, gl_ok)
+    # Russian roulette where a DIFFUSE pick carries the rough lobes' part (u_w >= 0): on at
+    # probability beta' / CONT_RR, then beta' / q
+    ru = go & (u_w >= 0.0)
+    q = np.where(ru, np.minimum(np.max(beta, axis=1) / CONT_RR, 1.0), 1.0)
+    go &= ~ru | (u_w < q)
+    beta = beta / np.where(q > 0, q, 1.0)[:, None]
     counts = counts + np.stack([~trans, trans], axis=1).astype(np.int32)
     if bounce + 1 >= RR_START:
         q = np.clip(np.max(beta, axis=1), 0.05, 1.0)
@@ -582,7 +597,7 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
         p, ng, eps = p[spec], ng[spec], eps[spec]
         counts = np.zeros((spec.size, 2), np.int32) if counts is None else counts[spec]
         idx, beta, wi, go, gl, ww, counts, pc = _specular_step(ctx, rng, spec, idx, beta, mat[spec], wo[spec],
-                                                               ns[spec], ng, bounce, counts)
+                                                               ns[spec], ng, bounce, counts, (n, spp))
         idx, beta, glossy, world_w, counts, p_cont = idx[go], beta[go], gl[go], ww[go], counts[go], pc[go]
         if not glossy.any():
             glossy = world_w = p_cont = None

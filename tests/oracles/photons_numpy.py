@@ -99,6 +99,12 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         if mode == "caustic":
             alive &= spec_b
         Phi = Phi * weight / np.where(q > 0, q, 1.0)[:, None]
+        # A refraction scales power by (n_i / n_t)^2: wi and wo on opposite sides of ng through glass
+        mi = np.where(mat < 0, table.size, mat)
+        cos_o = np.sum(wo * ng, axis=1)
+        crossed = (cos_o * np.sum(wi * ng, axis=1) < 0.0) & (table.w_glass[mi] > 0.0)
+        n_ratio = np.where(cos_o > 0.0, 1.0 / table.ior[mi], table.ior[mi])          # n_i / n_t
+        Phi = np.where(crossed[:, None], Phi * (n_ratio ** 2)[:, None], Phi)
         n_diffuse = n_diffuse + (diffuse_lobe & ((n_delta + n_nondelta) > 0))   # not at the first hit
         alive &= n_diffuse + 1 <= budget
         n_delta = n_delta + spec_b                       # delta or glossy bounces
