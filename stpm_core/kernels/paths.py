@@ -791,7 +791,7 @@ def terminator_rows(rows, prim, Vs, T, Ns, M, BU, BV, cut, freq, TERM):
     one = M.shape[0] == 1
     for k in range(rows.shape[0]):
         r = rows[k]
-        hf, hb, n = smooth_surface_heights(Vs, T, Ns, prim[r], BU[r], BV[r])
+        hf, hb, n = smooth_surface_heights(Vs, T, Ns, np.int64(prim[r]), BU[r], BV[r])   # (one signature)
         m = 0 if one else k
         TERM[r, 0] = M[m, 0, 0] * n[0] + M[m, 0, 1] * n[1] + M[m, 0, 2] * n[2]
         TERM[r, 1] = M[m, 1, 0] * n[0] + M[m, 1, 1] * n[1] + M[m, 1, 2] * n[2]
