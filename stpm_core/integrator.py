@@ -32,7 +32,7 @@ cannot be weighted by a glossy lobe without incoming directions).
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace as _replace
 
 import numpy as np
 
@@ -162,6 +162,7 @@ _NO_IDX = np.zeros(0, np.int64)
 _NO_U = np.zeros(0)
 _NO_ROWS3 = np.zeros((0, 3))
 _NO_FLAGS = np.zeros(0, np.uint8)
+_NO_TERM = np.zeros((1, 7))              # no shadow-terminator data (kernels.paths.nee_light, use_term False)
 
 
 def _compact_layout(ctx) -> dict[str, tuple[int, int]]:
@@ -253,6 +254,7 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
     P, NG, NS = hits.position, hits.ng, hits.ns
     EPS = _scratch("eps", (P.shape[0],))
     _K.offset_rows(sh, ctx.inst_offset, hits.instance, P, OFFSET_POS, EPS)   # shadow-ray offsets of the shaded rows
+    TERM = _terminator(ctx, sh, hits, t_s) if ctx.term_any else _NO_TERM
     so, sd = _scratch("so", (k, 3)), _scratch("sd", (k, 3))
     stmax, live = _scratch("stmax", (k,)), _scratch("live", (k,), np.int64)
     contrib = _scratch("contrib", (k, 3))
@@ -269,7 +271,8 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
         u = _light_uniforms(light, samples, strata, rng, _scratch("u_light", (k, 2)))
         prm, mesh = ctx.light_data[li]
         poses = light_poses(lights, li, t_s)
-        m = _K.nee_light(sh, P, NG, NS, d, C, crow, E, E_avg, prm, poses, *mesh, t_s, u, EPS,
+        m = _K.nee_light(sh, P, NG, NS, d, C, crow, E, E_avg, prm, poses, *mesh, t_s, u, EPS, TERM,
+                         ctx.term_any,
                          _no_mis(k) if mis is None else mis, ctx.stop_coat, contrib, so, sd, stmax, live, S)
         if m == 0:
             continue
@@ -295,6 +298,66 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
         _K.nee_accumulate(dst, sh, idx_k, use_idx, beta_k, use_beta, contrib, lv,
                           np.ascontiguousarray(blocked, np.bool_), float(clamp))
     return cast_any
+
+
+def terminator_settings(scene) -> tuple[np.ndarray, np.ndarray]:
+    """Per instance (n_instances,): the shadow-terminator cutoff (``Instance.shadow_terminator_
+    geometry_offset`` where the mesh has smooth normals and does not deform -- STPM shades deforming
+    meshes flat --, else 0) and the shading offset's frequency multiplier 1 / (1 - s / 2) (s =
+    ``shadow_terminator_shading_offset``; 1: off), as Cycles' ``scene/object.cpp`` stores them."""
+    n = len(scene.instances)
+    cut, freq = np.zeros(n), np.ones(n)
+    for i, inst in enumerate(scene.instances):
+        mesh = scene.meshes[inst.mesh]
+        if mesh.normals is not None and not mesh.is_deforming:
+            cut[i] = float(getattr(inst, "shadow_terminator_geometry_offset", 0.1))
+        so = float(getattr(inst, "shadow_terminator_shading_offset", 0.0))
+        freq[i] = 1.0 / (1.0 - 0.5 * so) if so < 2.0 else 1.0       # Cycles: a multiplier <= 1 is off
+    return cut, freq
+
+
+def _term_mesh(ctx, mi: int) -> tuple:
+    """(vertices (V, 3) float32, triangles (F, 3) int32, corner normals (F, 3, 3) float32) of mesh
+    mi, contiguous, kept per render (``kernels.paths.terminator_rows`` reads them per hit)."""
+    kept = ctx.term_meshes.get(mi)
+    if kept is None:
+        m = ctx.scene.meshes[mi]
+        kept = (np.ascontiguousarray(m.vertices, np.float32).reshape(-1, 3),
+                np.ascontiguousarray(m.triangles, np.int32), np.ascontiguousarray(m.normals, np.float32))
+        ctx.term_meshes[mi] = kept
+    return kept
+
+
+def _terminator(ctx, sh: np.ndarray, hits, t_s: np.ndarray) -> np.ndarray:
+    """TERM (m, 7) of ``kernels.paths.nee_light`` for the shaded rows sh (k,) (times t_s (k,)): each
+    row's cutoff 0 and frequency multiplier 1, then per instance with a cutoff > 0
+    ``kernels.paths.terminator_rows`` of its rows (its mesh as :func:`_term_mesh` keeps it, its
+    linear part at the rows' times); an instance with only a shading offset gets its multiplier."""
+    TERM = _scratch("term", (hits.t.shape[0], 7))
+    TERM[sh, 5] = 0.0
+    TERM[sh, 6] = 1.0
+    inst = hits.instance[sh]
+    scene = ctx.scene
+    for i in np.unique(inst):
+        i = int(i)
+        cut, fm = ctx.term_cut[i], ctx.term_freq[i]
+        if not (cut > 0.0 or fm > 1.0):
+            continue
+        sel = np.flatnonzero(inst == i)
+        rows = np.ascontiguousarray(sh[sel], np.int64)
+        if not cut > 0.0:
+            TERM[rows, 6] = fm
+            continue
+        Vs, T, Ns = _term_mesh(ctx, scene.instances[i].mesh)
+        tr = scene.instances[i].transform
+        if tr.is_static:
+            M = np.ascontiguousarray(np.asarray(tr.matrices[0], np.float64)[None, :3, :3])
+        else:
+            M = np.ascontiguousarray(np.asarray(tr.at(np.asarray(t_s, np.float64)[sel]), np.float64)[:, :3, :3])
+        _K.terminator_rows(rows, np.ascontiguousarray(hits.prim, np.int32), Vs, T, Ns, M,
+                           np.ascontiguousarray(hits.u, np.float64), np.ascontiguousarray(hits.v, np.float64),
+                           float(cut), float(fm), TERM)
+    return TERM
 
 
 def _seen_lights(ctx, o, d, t, t_scene, first: bool, glossy=None, p_c=None):
@@ -420,6 +483,9 @@ def _cache_direct(ctx, cache, seed: int) -> None:
     from .scene import Material
     n, S = cache.n, GATHER_DIRECT_SAMPLES
     rng = rng_for(int(seed), STREAM_GATHER_DIRECT, 0, 0)
+    # cache points are photon hits, without the triangle coordinates the shadow-terminator lift
+    # needs (``_terminator``): their shadow rays start at the point itself
+    ctx = _replace(ctx, term_any=False)
     C = pack_materials([Material(base_color=np.ones(3), roughness=1.0)])
     E_dir = np.zeros((n, 3))
     step = max(S, BATCH_SAMPLES // S * S)
@@ -745,6 +811,10 @@ class _Context:
     features: bool = False                   # RenderSettings.denoise: Denoising Albedo / Normal (kernels.paths.denoising_rows)
     n_instances: int = 0                     # the scene's instances (a photon query's group is pixel x instance)
     final_gather: int = 0                    # RenderSettings.final_gather_samples (0: the global map read directly)
+    term_cut: np.ndarray = None              # (n_instances,) shadow-terminator cutoff, 0: off (terminator_settings)
+    term_freq: np.ndarray = None             # (n_instances,) shading offset's frequency multiplier, 1: off
+    term_any: bool = False                   # some instance has either (next-event estimation reads TERM)
+    term_meshes: dict = field(default_factory=dict)   # mesh -> its arrays for terminator_rows (_term_mesh)
 
 
 def _mesh_emitters(scene, lights) -> dict:
@@ -891,6 +961,8 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                    transmission_bounces=int(settings.transmission_bounces),
                    transparent_max_bounces=int(settings.transparent_max_bounces))
     ctx.shading = shading_data(scene, closures)
+    ctx.term_cut, ctx.term_freq = terminator_settings(scene)
+    ctx.term_any = bool(np.any(ctx.term_cut > 0.0) or np.any(ctx.term_freq > 1.0))
     ctx.light_data = [(light_params(lights, li), mesh_arrays(lights, li)) for li in range(len(lights))]
     ctx.world_li = next((li for li, l in enumerate(lights.lights) if l.type == "WORLD"), -1)
     ctx.env = (lights.lights[ctx.world_li].env if ctx.world_li >= 0

@@ -134,3 +134,21 @@ def test_panels_draw_every_setting():
     panel.layout = _RecordingLayout(log)
     ui.STPM_RENDER_PT_method.draw(panel, context)
     assert "accumulation_steps" in log
+
+
+def test_object_panel_shows_the_shadow_terminator_settings():
+    """Object > Shadow Terminator (STPM only): Blender's object settings the renderer reads
+    (docs/rendering.md, "Shadow terminator"), for geometry objects only."""
+    from types import SimpleNamespace
+    from addon import ui
+    fresh()
+    bpy.ops.mesh.primitive_uv_sphere_add()
+    obj = bpy.context.object
+    cls = ui.STPM_OBJECT_PT_shadow_terminator
+    assert cls.poll(SimpleNamespace(engine="STPM", object=obj))
+    assert not cls.poll(SimpleNamespace(engine="CYCLES", object=obj))
+    assert not cls.poll(SimpleNamespace(engine="STPM", object=bpy.context.scene.camera))
+    log = []
+    panel = SimpleNamespace(layout=SimpleNamespace(column=lambda **_: _RecordingLayout(log)))
+    cls.draw(panel, SimpleNamespace(object=obj))
+    assert log == ["shadow_terminator_geometry_offset", "shadow_terminator_shading_offset"]
