@@ -119,7 +119,7 @@ class STPM_RENDER_PT_sampling_viewport(_STPMPanel, bpy.types.Panel):
 
 class STPM_RENDER_PT_photons(_STPMPanel, bpy.types.Panel):
     bl_label = "Photons"
-    PROPS = ("photons_global", "photons_caustic", "k_nearest", "kernel")
+    PROPS = ("photons_global", "photons_caustic", "k_nearest", "kernel", "final_gather_samples")
 
 
 class STPM_RENDER_PT_method(_STPMPanel, bpy.types.Panel):
@@ -230,6 +230,32 @@ class STPM_RENDER_PT_denoising(_STPMPanel, bpy.types.Panel):
         col.label(text="Passes: Denoising Albedo, Denoising Normal, Noisy Image")
 
 
+class STPM_OBJECT_PT_shadow_terminator(bpy.types.Panel):
+    """Object > Shadow Terminator: Blender's own object settings Cycles reads (and STPM: docs/rendering.md,
+    "Shadow terminator"), shown while STPM is the engine (Cycles' panel is for Cycles only)."""
+
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "object"
+    bl_label = "Shadow Terminator"
+    bl_options = {"DEFAULT_CLOSED"}
+    COMPAT_ENGINES = {"STPM"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = getattr(context, "object", None)
+        return context.engine in cls.COMPAT_ENGINES and obj is not None and obj.type in {"MESH", "CURVE", "SURFACE",
+                                                                                           "FONT", "META"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column()
+        col.prop(context.object, "shadow_terminator_geometry_offset", text="Geometry Offset")
+        col.prop(context.object, "shadow_terminator_shading_offset", text="Shading Offset")
+
+
 class STPM_LIGHT_PT_photons(bpy.types.Panel):
     """Light properties: the portal flag (Cycles' ``light.cycles.is_portal``) and the photon budget
     (``light.stpm.photon_weight``)."""
@@ -292,6 +318,7 @@ classes = (
     STPM_RENDER_PT_denoising,
     STPM_LIGHT_PT_photons,
     STPM_WORLD_PT_photons,
+    STPM_OBJECT_PT_shadow_terminator,
 )
 
 

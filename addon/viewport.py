@@ -91,13 +91,14 @@ def viewport_settings(base, passes: int, time_limit: float):
     """The viewport's RenderSettings from the scene's ``base``: PROGRESSIVE, 1 camera sample per
     pixel per pass, per pass ``photons_* / samples`` photons (F12's photons per camera sample),
     stopping after ``passes`` passes (0 = no limit) or ``time_limit`` seconds (0 = none); no noise
-    threshold, pass offset or denoising passes."""
+    threshold, pass offset or denoising passes; no final gathering (PROGRESSIVE has none: the
+    viewport shows the global map read directly)."""
     def per_sample(n: int) -> int:
         return 0 if n <= 0 else max(1, int(round(n / max(1, base.samples))))
     return base.replace(method="PROGRESSIVE", samples=1, photons_global=per_sample(base.photons_global),
                         photons_caustic=per_sample(base.photons_caustic),
                         passes=int(passes) if passes > 0 else _UNLIMITED_PASSES, time_limit=float(time_limit),
-                        noise_threshold=0.0, pass_offset=0, denoise=False)
+                        noise_threshold=0.0, pass_offset=0, denoise=False, final_gather_samples=0)
 
 
 def first_pass_size(width: int, height: int, pixels: int = FIRST_PASS_PIXELS) -> tuple[int, int]:

@@ -183,11 +183,13 @@ def object_names() -> list[str]:
     return sorted(o.name for o in bpy.context.scene.objects)
 
 
-def stpm_final(*, seed: int | None = None, warm: bool = True) -> tuple[np.ndarray, dict, dict]:
+def stpm_final(*, seed: int | None = None, warm: bool = True, overrides: dict | None = None
+               ) -> tuple[np.ndarray, dict, dict]:
     """(linear RGB of STPM with the FINAL preset, passes, timings): the add-on's path.
 
     seed: the render's seed instead of the file's (another draw of the same estimate); warm: render
-    a small warm-up first (compiles the kernels outside the timed render)."""
+    a small warm-up first (compiles the kernels outside the timed render); overrides: settings
+    changed after the preset (``bench_gather``: final gathering, samples)."""
     from addon import batch
     from addon.presets import PRESETS, apply_preset
     from stpm_core.render import render
@@ -205,6 +207,7 @@ def stpm_final(*, seed: int | None = None, warm: bool = True) -> tuple[np.ndarra
     settings["diffuse_bounces"] = CYCLES["diffuse_bounces"]
     if seed is not None:
         settings["seed"] = int(seed)
+    settings.update(overrides or {})
     t0 = time.perf_counter()
     if warm:
         render(core, RenderSettings.from_dict(dict(settings, samples=1, photons_global=2000, photons_caustic=2000)))
@@ -216,7 +219,8 @@ def stpm_final(*, seed: int | None = None, warm: bool = True) -> tuple[np.ndarra
     timings = {"export_s": export_s, "render_s": render_s, "warmup_s": warm_s,
                "photon_trace_s": st.get("photon_trace_s"), "photon_map_build_s": st.get("photon_map_build_s"),
                "estimator": st.get("estimator"), "photons_global": st.get("photons_global"),
-               "photons_caustic": st.get("photons_caustic"), "warnings": list(core.metadata.get("warnings", []))
+               "photons_caustic": st.get("photons_caustic"), "gather_rays": st.get("gather_rays", 0),
+               "photon_stats": st.get("photon_stats", {}), "warnings": list(core.metadata.get("warnings", []))
                + list(res.warnings)}
     passes = {k: np.asarray(v, np.float32) for k, v in res.passes.items()}
     return np.asarray(res.passes["Combined"][..., :3], np.float64), passes, timings

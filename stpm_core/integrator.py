@@ -32,7 +32,7 @@ cannot be weighted by a glossy lobe without incoming directions).
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace as _replace
 
 import numpy as np
 
@@ -40,6 +40,7 @@ from . import kernels as _kernels
 from .kernels import kernel_array
 from .camera import camera_to_world, image_plane
 from .film import BH_INVERSE_CDF, DENOISING_GUIDES, DEPTH_BACKGROUND, PASSES, Film
+from .kernels import gather as _G
 from .kernels import paths as _K
 from .kernels.bsdf import ggx_albedo_tables
 from .kernels.closure import N_CLOSURE, pack_materials
@@ -79,6 +80,8 @@ class TraceStats:
     shadow_rays: int = 0
     photon_lookups: int = 0                  # photon-map queries (shading points x maps)
     photon_estimates: int = 0                # of them estimated; the others shared one (photons.sharing)
+    gather_rays: int = 0                     # final gathering's rays (all bounces)
+    gather_lookups: int = 0                  # final gathering's reads of the precomputed irradiance
     seconds: float = 0.0
     extra: dict = field(default_factory=dict)
 
@@ -89,10 +92,12 @@ class TraceStats:
         self.shadow_rays += other.shadow_rays
         self.photon_lookups += other.photon_lookups
         self.photon_estimates += other.photon_estimates
+        self.gather_rays += other.gather_rays
+        self.gather_lookups += other.gather_lookups
 
     @property
     def rays(self) -> int:
-        return self.camera_rays + self.bounce_rays + self.shadow_rays
+        return self.camera_rays + self.bounce_rays + self.shadow_rays + self.gather_rays
 
 
 # ----------------------------------------------------------------------------
@@ -157,6 +162,7 @@ _NO_IDX = np.zeros(0, np.int64)
 _NO_U = np.zeros(0)
 _NO_ROWS3 = np.zeros((0, 3))
 _NO_FLAGS = np.zeros(0, np.uint8)
+_NO_TERM = np.zeros((1, 7))              # no shadow-terminator data (kernels.paths.nee_light, use_term False)
 
 
 def _compact_layout(ctx) -> dict[str, tuple[int, int]]:
@@ -248,6 +254,7 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
     P, NG, NS = hits.position, hits.ng, hits.ns
     EPS = _scratch("eps", (P.shape[0],))
     _K.offset_rows(sh, ctx.inst_offset, hits.instance, P, OFFSET_POS, EPS)   # shadow-ray offsets of the shaded rows
+    TERM = _terminator(ctx, sh, hits, t_s) if ctx.term_any else _NO_TERM
     so, sd = _scratch("so", (k, 3)), _scratch("sd", (k, 3))
     stmax, live = _scratch("stmax", (k,)), _scratch("live", (k,), np.int64)
     contrib = _scratch("contrib", (k, 3))
@@ -264,7 +271,8 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
         u = _light_uniforms(light, samples, strata, rng, _scratch("u_light", (k, 2)))
         prm, mesh = ctx.light_data[li]
         poses = light_poses(lights, li, t_s)
-        m = _K.nee_light(sh, P, NG, NS, d, C, crow, E, E_avg, prm, poses, *mesh, t_s, u, EPS,
+        m = _K.nee_light(sh, P, NG, NS, d, C, crow, E, E_avg, prm, poses, *mesh, t_s, u, EPS, TERM,
+                         ctx.term_any,
                          _no_mis(k) if mis is None else mis, ctx.stop_coat, contrib, so, sd, stmax, live, S)
         if m == 0:
             continue
@@ -290,6 +298,66 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
         _K.nee_accumulate(dst, sh, idx_k, use_idx, beta_k, use_beta, contrib, lv,
                           np.ascontiguousarray(blocked, np.bool_), float(clamp))
     return cast_any
+
+
+def terminator_settings(scene) -> tuple[np.ndarray, np.ndarray]:
+    """Per instance (n_instances,): the shadow-terminator cutoff (``Instance.shadow_terminator_
+    geometry_offset`` where the mesh has smooth normals and does not deform -- STPM shades deforming
+    meshes flat --, else 0) and the shading offset's frequency multiplier 1 / (1 - s / 2) (s =
+    ``shadow_terminator_shading_offset``; 1: off), as Cycles' ``scene/object.cpp`` stores them."""
+    n = len(scene.instances)
+    cut, freq = np.zeros(n), np.ones(n)
+    for i, inst in enumerate(scene.instances):
+        mesh = scene.meshes[inst.mesh]
+        if mesh.normals is not None and not mesh.is_deforming:
+            cut[i] = float(getattr(inst, "shadow_terminator_geometry_offset", 0.1))
+        so = float(getattr(inst, "shadow_terminator_shading_offset", 0.0))
+        freq[i] = 1.0 / (1.0 - 0.5 * so) if so < 2.0 else 1.0       # Cycles: a multiplier <= 1 is off
+    return cut, freq
+
+
+def _term_mesh(ctx, mi: int) -> tuple:
+    """(vertices (V, 3) float32, triangles (F, 3) int32, corner normals (F, 3, 3) float32) of mesh
+    mi, contiguous, kept per render (``kernels.paths.terminator_rows`` reads them per hit)."""
+    kept = ctx.term_meshes.get(mi)
+    if kept is None:
+        m = ctx.scene.meshes[mi]
+        kept = (np.ascontiguousarray(m.vertices, np.float32).reshape(-1, 3),
+                np.ascontiguousarray(m.triangles, np.int32), np.ascontiguousarray(m.normals, np.float32))
+        ctx.term_meshes[mi] = kept
+    return kept
+
+
+def _terminator(ctx, sh: np.ndarray, hits, t_s: np.ndarray) -> np.ndarray:
+    """TERM (m, 7) of ``kernels.paths.nee_light`` for the shaded rows sh (k,) (times t_s (k,)): each
+    row's cutoff 0 and frequency multiplier 1, then per instance with a cutoff > 0
+    ``kernels.paths.terminator_rows`` of its rows (its mesh as :func:`_term_mesh` keeps it, its
+    linear part at the rows' times); an instance with only a shading offset gets its multiplier."""
+    TERM = _scratch("term", (hits.t.shape[0], 7))
+    TERM[sh, 5] = 0.0
+    TERM[sh, 6] = 1.0
+    inst = hits.instance[sh]
+    scene = ctx.scene
+    for i in np.unique(inst):
+        i = int(i)
+        cut, fm = ctx.term_cut[i], ctx.term_freq[i]
+        if not (cut > 0.0 or fm > 1.0):
+            continue
+        sel = np.flatnonzero(inst == i)
+        rows = np.ascontiguousarray(sh[sel], np.int64)
+        if not cut > 0.0:
+            TERM[rows, 6] = fm
+            continue
+        Vs, T, Ns = _term_mesh(ctx, scene.instances[i].mesh)
+        tr = scene.instances[i].transform
+        if tr.is_static:
+            M = np.ascontiguousarray(np.asarray(tr.matrices[0], np.float64)[None, :3, :3])
+        else:
+            M = np.ascontiguousarray(np.asarray(tr.at(np.asarray(t_s, np.float64)[sel]), np.float64)[:, :3, :3])
+        _K.terminator_rows(rows, np.ascontiguousarray(hits.prim, np.int32), Vs, T, Ns, M,
+                           np.ascontiguousarray(hits.u, np.float64), np.ascontiguousarray(hits.v, np.float64),
+                           float(cut), float(fm), TERM)
+    return TERM
 
 
 def _seen_lights(ctx, o, d, t, t_scene, first: bool, glossy=None, p_c=None):
@@ -343,13 +411,15 @@ def _glossy_emission(ctx, gem: np.ndarray, hits, o, t: np.ndarray, C, crow, p_c,
 
 
 def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k, use_idx, beta_k, use_beta,
-                  touched, spp: int = 1):
+                  touched, spp: int = 1, rng=None):
     """Caustic and Indirect at the hit rows sh (k,): rho_d / pi * E_kind(p, ns_f, t) added into the passes.
 
     rho_d and the query rows from ``kernels.paths.photon_albedo`` (once for both maps), the
     irradiance estimates from the photon maps (``PhotonMaps.estimate``), ``photon_add`` into dsts.
     spp > 1 (samples of a pixel consecutive): the queries of one pixel on one instance share
     estimates (``photons.sharing``, on while ``SHARE_RADIUS_FRACTION`` > 0 and the maps support it).
+    With final gathering (``ctx.final_gather`` > 0) Indirect is :func:`_final_gather`'s instead
+    (rng: its random numbers).
     """
     k = sh.size
     rho = _scratch("rho", (k, 3))
@@ -374,6 +444,12 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
     for kind, name in (("caustic", "Caustic"), ("global", "Indirect")):
         if not ctx.map_kinds.get(kind, False):
             continue
+        if kind == "global" and ctx.final_gather > 0:
+            # final gathering: rays from the diffuse lobe read the precomputed irradiance where they land
+            _final_gather(ctx, sh, hits, live[:n_q_rows], rho, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows],
+                          idx_k, use_idx, beta_k, use_beta, dsts[name], stats, rng)
+            touched.add(name)
+            continue
         if group is None:
             E = ctx.maps.estimate(kind, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows], **extra)
             estimated = n_q_rows
@@ -386,6 +462,137 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
         stats.photon_estimates += estimated
         _K.photon_add(dsts[name], sh, live[:n_q_rows], rho, E, idx_k, use_idx, beta_k, use_beta, ctx.clamp_indirect)
         touched.add(name)
+
+
+# Gather rays traced at once (a chunk of a tile's queries times final_gather_samples)
+GATHER_BATCH = 1 << 17
+# Light samples per cache point for its direct irradiance (_cache_direct), and the random stream
+GATHER_DIRECT_SAMPLES = 4
+STREAM_GATHER_DIRECT = 0x6A7
+
+
+def _cache_direct(ctx, cache, seed: int) -> None:
+    """Add the direct irradiance at the final-gathering cache points (``photons.gather``), once.
+
+    Next-event estimation (:func:`_direct`, every light, shadow rays at the point's time t_i) at
+    each point x_i with a white Lambertian closure (f = 1 / pi) viewed along its shading normal:
+    E_direct = pi x the mean of ``GATHER_DIRECT_SAMPLES`` light samples (each light's samples
+    stratified over them).  Rows in chunks of ``BATCH_SAMPLES``.
+    """
+    from types import SimpleNamespace
+    from .scene import Material
+    n, S = cache.n, GATHER_DIRECT_SAMPLES
+    rng = rng_for(int(seed), STREAM_GATHER_DIRECT, 0, 0)
+    # cache points are photon hits, without the triangle coordinates the shadow-terminator lift
+    # needs (``_terminator``): their shadow rays start at the point itself
+    ctx = _replace(ctx, term_any=False)
+    C = pack_materials([Material(base_color=np.ones(3), roughness=1.0)])
+    E_dir = np.zeros((n, 3))
+    step = max(S, BATCH_SAMPLES // S * S)
+    rows_all = np.repeat(np.arange(n), S)                 # the S samples of a point consecutive (strata)
+    for a in range(0, rows_all.size, step):
+        rows = rows_all[a:a + step]
+        k = rows.size
+        hits = SimpleNamespace(position=np.ascontiguousarray(cache.pos[rows]), ng=np.ascontiguousarray(cache.normal[rows]),
+                               ns=np.ascontiguousarray(cache.shading_normal[rows]),
+                               instance=np.ascontiguousarray(cache.instance[rows], np.int32))   # as Hits
+        d = -hits.ns                                      # viewed along the normal: wo = ns
+        dst = np.zeros((k, 4))[:, :3]                     # a strided view, as a pass's columns of V
+        _direct(ctx, np.arange(k), hits, np.ascontiguousarray(d), C, np.zeros(k, np.int64),
+                np.ascontiguousarray(cache.time[rows]), rng, TraceStats(), dst, _NO_IDX, False, _NO_ROWS3, False,
+                strata=(k, S))
+        np.add.at(E_dir, rows, dst)
+    cache.add_direct(E_dir * (np.pi / S))
+
+
+
+def _final_gather(ctx, sh, hits, live, rho, p_q, n_q, t_q, idx_k, use_idx: bool, beta_k, use_beta: bool, dst,
+                  stats: TraceStats, rng) -> None:
+    """Indirect by final gathering at the queried rows sh[live] (n,) of ``hits``, added into dst.
+
+    docs/photon-mapping.md, "Final gathering": G = ``ctx.final_gather`` rays per query, cosine-
+    sampled about n_q (n, 3) at the query's time t_q (n,) (``kernels.gather.gather_rays``; weight
+    beta rho / G).  Each ray is followed through delta and rough lobes (``kernels.paths.specular_step``,
+    at most ``ctx.max_depth`` bounces, within the glossy / transmission budgets); at every hit with a
+    non-delta lobe it adds rho_d(y) / pi * E(y), E the nearest cache point's precomputed irradiance
+    (``photons.gather.IrradianceCache``).  Emission, lights and the world seen by gather rays are not
+    added: the light that reaches x straight from a light is next-event estimation's at x, and after
+    delta / rough vertices only it is the caustic map's (L (S|G)+ D x).
+    """
+    cache = ctx.maps.gather_cache
+    G = int(ctx.final_gather)
+    if cache is None or live.size == 0:
+        return
+    clamp = ctx.clamp_indirect / G if ctx.clamp_indirect > 0 else 0.0     # each ray is 1 / G of the estimate
+    E_tab, E_avg = ctx.ggx
+    sd = ctx.shading
+    step = max(1, GATHER_BATCH // G)
+    for a in range(0, live.size, step):
+        lv = np.ascontiguousarray(live[a:a + step])
+        nq = lv.size
+        rows = sh[lv]
+        EPS = offset_lengths(ctx.inst_offset, hits.instance[rows], hits.position[rows])
+        U = rng.random((nq * G, 2))
+        m = nq * G
+        o, d = np.empty((m, 3)), np.empty((m, 3))
+        t, parent, w, guard = np.empty(m), np.empty(m, np.int64), np.empty((m, 3)), np.empty(m)
+        m = _G.gather_rays(sh, lv, hits.position, hits.ng, rho, np.ascontiguousarray(n_q[a:a + step]),
+                           np.ascontiguousarray(t_q[a:a + step]), idx_k, use_idx, beta_k, use_beta, G, U, EPS,
+                           GUARD_FRACTION, o, d, t, parent, w, guard)
+        o, d, t, parent, w, guard = o[:m], d[:m], t[:m], parent[:m], w[:m], guard[:m]
+        counts = np.zeros((m, 2), np.int32)
+        for bounce in range(ctx.max_depth):
+            if m == 0:
+                break
+            # -- Cast the gather rays and shade their hits ------------------------------------
+            gh = ctx.caster.intersect(o, d, t, None, guard=guard)
+            stats.gather_rays += m
+            crow = np.empty(m, np.int64)
+            C = shade_rows(sd, gh.material, hit_geometry(gh, d, sd=sd, times=t) if sd.uses_programs else None,
+                           int(rng.integers(1 << 62)) if sd.uses_mix else 0,
+                           np.empty((m + sd.closures.shape[0], N_CLOSURE)), crow)
+            if sd.transparent:
+                w = pass_through(ctx.caster, sd, ctx.inst_offset, gh, d, t, C, w, rng, limit=ctx.transparent_max_bounces)
+            # -- Which hits read the cache, which go on (emission and the world: not gathered) ------
+            sh2, spec2, gem2 = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m, np.int64)
+            _, n_sh, n_spec, _, _ = _K.classify_hits(
+                gh.t, C, crow, ctx.env, _IDENTITY_POSE, d, False, _NO_IDX, False, _NO_ROWS3, False, _NO_FLAGS, _NO_U,
+                False, np.zeros((m, 3)), 0, False, 0, 0, 0.0, gh.position, gh.ns, _NO_ROWS3, _NO_ROWS3,
+                _NO_U, sh2, spec2, gem2, 0.0)
+            # -- rho_d(y) / pi * E(y) from the nearest cache point -----------------------------
+            if n_sh:
+                sh2 = sh2[:n_sh]
+                rho2 = np.empty((n_sh, 3))
+                p2, n2, t2 = np.empty((n_sh, 3)), np.empty((n_sh, 3)), np.empty(n_sh)
+                live2 = np.empty(n_sh, np.int64)
+                n_live = _K.photon_albedo(sh2, gh.position, gh.ns, d, C, crow, E_tab, t[sh2], rho2, p2, n2, t2, live2)
+                if n_live:
+                    live2 = live2[:n_live]
+                    E2 = cache.lookup(sh2, live2, gh, d, t)
+                    stats.gather_lookups += n_live
+                    _K.photon_add(dst, sh2, live2, rho2, E2, parent, True, w, True, clamp)
+            if n_spec == 0 or bounce + 1 == ctx.max_depth:
+                break
+            # -- Go on through delta and rough lobes -------------------------------------------
+            spec2 = spec2[:n_spec]
+            u = rng.random((n_spec, 3))
+            rr = bounce + 1 >= RR_START
+            u_rr = rng.random(n_spec) if rr else _NO_U
+            EPS2 = offset_lengths(ctx.inst_offset, gh.instance[spec2], gh.position[spec2])
+            idx_n, beta_n = np.empty(n_spec, np.int64), np.empty((n_spec, 3))
+            o_n, d_n, guard_n = np.empty((n_spec, 3)), np.empty((n_spec, 3)), np.empty(n_spec)
+            glossy_n, world_w_n, pc_n = np.empty(n_spec, np.uint8), np.empty(n_spec), np.empty(n_spec)
+            counts_n = np.empty((n_spec, 2), np.int32)
+            n_go = _K.specular_step(spec2, np.arange(m), True, w, True, gh.position, gh.ng, gh.ns, d, C, crow, E_tab, E_avg,
+                                    u, rr, u_rr, EPS2, GUARD_FRACTION, ctx.stop_coat, CONT_RR, ctx.env, _IDENTITY_POSE, False,
+                                    np.ascontiguousarray(counts[spec2]), ctx.glossy_bounces,
+                                    ctx.transmission_bounces, idx_n, beta_n, o_n, d_n, guard_n, glossy_n, world_w_n,
+                                    pc_n, counts_n, False, _NO_FLAGS, _NO_ROWS3, _NO_FLAGS, _NO_ROWS3)
+            # (idx = the rows themselves: idx_n is each continuing ray's row, whose sample and time it keeps)
+            m = n_go
+            go = idx_n[:m]
+            parent, t = parent[go], t[go]
+            w, o, d, guard, counts = beta_n[:m], o_n[:m], d_n[:m], guard_n[:m], counts_n[:m]
 
 
 def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_axis,
@@ -525,7 +732,7 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                 touched.add("Direct")
             if ctx.maps is not None:
                 _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched,
-                              int(spp))
+                              int(spp), rng=rng)
         if bounce == ctx.max_depth or n_spec == 0:
             break
         # -- Continue through delta lobes, or with the rough non-diffuse lobes' part of f ------------
@@ -603,6 +810,11 @@ class _Context:
     layout: dict = None                      # columns of a tile's per-sample matrix (_compact_layout)
     features: bool = False                   # RenderSettings.denoise: Denoising Albedo / Normal (kernels.paths.denoising_rows)
     n_instances: int = 0                     # the scene's instances (a photon query's group is pixel x instance)
+    final_gather: int = 0                    # RenderSettings.final_gather_samples (0: the global map read directly)
+    term_cut: np.ndarray = None              # (n_instances,) shadow-terminator cutoff, 0: off (terminator_settings)
+    term_freq: np.ndarray = None             # (n_instances,) shading offset's frequency multiplier, 1: off
+    term_any: bool = False                   # some instance has either (next-event estimation reads TERM)
+    term_meshes: dict = field(default_factory=dict)   # mesh -> its arrays for terminator_rows (_term_mesh)
 
 
 def _mesh_emitters(scene, lights) -> dict:
@@ -749,6 +961,8 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                    transmission_bounces=int(settings.transmission_bounces),
                    transparent_max_bounces=int(settings.transparent_max_bounces))
     ctx.shading = shading_data(scene, closures)
+    ctx.term_cut, ctx.term_freq = terminator_settings(scene)
+    ctx.term_any = bool(np.any(ctx.term_cut > 0.0) or np.any(ctx.term_freq > 1.0))
     ctx.light_data = [(light_params(lights, li), mesh_arrays(lights, li)) for li in range(len(lights))]
     ctx.world_li = next((li for li, l in enumerate(lights.lights) if l.type == "WORLD"), -1)
     ctx.env = (lights.lights[ctx.world_li].env if ctx.world_li >= 0
@@ -763,6 +977,10 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                             if maps is None or not ctx.map_kinds.get(kind, False))
     ctx.features = bool(getattr(settings, "denoise", False))
     ctx.n_instances = len(scene.instances)
+    ctx.final_gather = int(getattr(settings, "final_gather_samples", 0)) if getattr(maps, "gather_cache", None) is not None else 0
+    if ctx.final_gather and maps.gather_cache.direct_pending:
+        # the cache's direct irradiance: next-event estimation at its points (photons.gather)
+        _cache_direct(ctx, maps.gather_cache, settings.seed)
     ctx.layout = _compact_layout(ctx)
     film = Film(W, H, settings.filter_width, passes=PASSES + DENOISING_GUIDES if ctx.features else PASSES)
     cam = scene.camera

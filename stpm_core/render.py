@@ -259,6 +259,8 @@ def _render(scene, settings, *, progress=None, cancel=None, on_pass=None, schedu
         "rays_per_s": float(rays / render_s) if render_s > 0 else 0.0,
         "photon_lookups": int(sum(ts.photon_lookups for ts in trace_stats)),
         "photon_estimates": int(sum(ts.photon_estimates for ts in trace_stats)),
+        "gather_rays": int(sum(ts.gather_rays for ts in trace_stats)),
+        "gather_lookups": int(sum(ts.gather_lookups for ts in trace_stats)),
         "photons_caustic": int(total("caustic_photons") or total("photons_caustic")),
         "photons_global": int(total("global_photons") or total("photons_global")),
         "photon_stats": (map_stats[-1] if map_stats else {}) if progressive is not None

@@ -159,11 +159,20 @@ class Mesh:
 
 @dataclass
 class Instance:
-    """A placement of a mesh: ``mesh`` index into ``Scene.meshes`` and its motion."""
+    """A placement of a mesh: ``mesh`` index into ``Scene.meshes`` and its motion.
+
+    shadow_terminator_geometry_offset, shadow_terminator_shading_offset: Blender's object settings
+    of those names (Object > Shading in Cycles; defaults 0.1 and 0.0): shadow rays leaving the
+    object's smooth-shaded triangles start lifted toward the smooth surface within the cutoff, and
+    the shading offset pushes the terminator toward the light (docs/rendering.md, "Shadow
+    terminator").  Both finite and >= 0 (Blender's range; its sliders stop at 1).
+    """
 
     mesh: int
     transform: MotionTransform = field(default_factory=MotionTransform.static)
     name: str = "object"
+    shadow_terminator_geometry_offset: float = 0.1
+    shadow_terminator_shading_offset: float = 0.0
 
 
 @dataclass
@@ -696,6 +705,10 @@ def validate_scene(scene: Scene) -> None:
             raise SceneError(f"instances[{ii}] ({inst.name!r}).mesh index {inst.mesh} out of range [0, {len(scene.meshes)})")
         if not isinstance(inst.transform, MotionTransform):
             raise SceneError(f"instances[{ii}].transform must be a MotionTransform")
+        for key in ("shadow_terminator_geometry_offset", "shadow_terminator_shading_offset"):
+            v = getattr(inst, key, 0.0)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or not 0.0 <= float(v) < np.inf:
+                raise SceneError(f"instances[{ii}] ({inst.name!r}).{key} must be a finite number >= 0, got {v!r:.40}")
     c = scene.camera
     if c.type not in ("PERSP", "ORTHO"):
         raise SceneError(f"camera.type must be 'PERSP' or 'ORTHO', got {c.type!r}")

@@ -178,7 +178,9 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
     instances = []
     for i, inst in enumerate(scene.instances):
         _put_transform(arrays, f"instances/{i}/transform", inst.transform)
-        instances.append({"name": str(inst.name), "mesh": int(inst.mesh)})
+        instances.append({"name": str(inst.name), "mesh": int(inst.mesh),
+                          "shadow_terminator_geometry_offset": float(inst.shadow_terminator_geometry_offset),
+                          "shadow_terminator_shading_offset": float(inst.shadow_terminator_shading_offset)})
     _put_transform(arrays, "camera/transform", scene.camera.transform)
     lights = []
     for i, light in enumerate(scene.lights):
@@ -852,8 +854,12 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
         mesh = f.int("mesh", 0, max(len(meshes) - 1, 0))
         if not meshes:
             raise SceneError(f"instances[{i}].mesh refers to a mesh but the scene has none")
+        # Blender's defaults where a file written before these settings has none
+        terminator = {key: f.num(key) if key in d else default for key, default in
+                      (("shadow_terminator_geometry_offset", 0.1), ("shadow_terminator_shading_offset", 0.0))}
         instances.append(Instance(mesh=mesh, name=f.str("name"),
-                                  transform=arr.transform(f"instances/{i}/transform", f"instances[{i}].transform")))
+                                  transform=arr.transform(f"instances/{i}/transform", f"instances[{i}].transform"),
+                                  **terminator))
 
     # Camera, lights, world
     cam = Camera(**h.sub("camera").read(_CAMERA_FIELDS),

@@ -85,6 +85,14 @@ class RenderSettings:
     k_nearest: int = setting(
         50, "int", "photons per radiance estimate (k)", lo=1, hi=100_000, label="Nearest Photons", flag="--k",
         metavar="K", ui={"soft_max": 500})
+    final_gather_samples: int = setting(
+        0, "int", "final gathering of the global photon map (Jensen's two-pass method with Christensen's "
+        "precomputed irradiance): rays sampled from the diffuse lobe at the camera's first diffuse vertex, "
+        "each reading the irradiance precomputed at every 4th global photon where it lands; 0 = off (the "
+        "camera vertex reads the global map directly: blotches, no extra rays); off when diffuse_bounces < 2. "
+        "Method PHOTON and ACCUMULATION; PROGRESSIVE refuses it", lo=0, hi=4096, label="Final Gather Samples",
+        flag="--final-gather-samples", metavar="N", ui={"soft_max": 64},
+        help="final gathering rays per shading point (0: off, direct visualisation)")
     temporal_alpha: float = setting(
         0.0, "float", "TEMPORAL's candidates per estimate as a multiple of k; 0 = automatic and consistent, "
         "1.5 = the paper's", lo=0.0, hi=1e6, gap=1.0, rule="0 (automatic) or >= 1",
@@ -180,6 +188,9 @@ class RenderSettings:
         if self.method == "PROGRESSIVE" and self.passes == 0 and self.time_limit == 0.0 \
                 and self.noise_threshold == 0.0:
             raise SettingsError(_PROGRESSIVE_NEEDS_A_STOP)
+        if self.method == "PROGRESSIVE" and self.final_gather_samples > 0:
+            raise SettingsError("final_gather_samples works with method PHOTON or ACCUMULATION, not PROGRESSIVE "
+                                "(its passes have no fixed global map to precompute irradiance on); set it to 0")
         if self.method == "PROGRESSIVE" and not is_round_end(self.pass_offset):
             ends = ", ".join(str(n) for n in round_ends_near(self.pass_offset, 2))
             raise SettingsError(f"pass_offset {self.pass_offset} is inside a round of time strata; passes are "

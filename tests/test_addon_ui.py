@@ -100,7 +100,8 @@ def test_panels_draw_every_setting():
     assert drawn["STPM_RENDER_PT_sampling"] == ["samples", "seed", "max_depth", "diffuse_bounces", "glossy_bounces",
                                                 "transmission_bounces", "transparent_max_bounces", "filter_width",
                                                 "threads", "clamp_direct", "clamp_indirect"]
-    assert drawn["STPM_RENDER_PT_photons"] == ["photons_global", "photons_caustic", "k_nearest", "kernel"]
+    assert drawn["STPM_RENDER_PT_photons"] == ["photons_global", "photons_caustic", "k_nearest", "kernel",
+                                               "final_gather_samples"]
     assert {"method", "estimator", "temporal_alpha", "time_scale", "stpm.compare"} <= set(drawn["STPM_RENDER_PT_method"])
     assert {"motion_blur_position", "motion_steps", "motion_blur_shutter_curve"} <= set(drawn["STPM_RENDER_PT_motion_blur"])
     assert {"effects", "caustics", "indirect"} <= set(drawn["STPM_RENDER_PT_effects"])
@@ -133,3 +134,21 @@ def test_panels_draw_every_setting():
     panel.layout = _RecordingLayout(log)
     ui.STPM_RENDER_PT_method.draw(panel, context)
     assert "accumulation_steps" in log
+
+
+def test_object_panel_shows_the_shadow_terminator_settings():
+    """Object > Shadow Terminator (STPM only): Blender's object settings the renderer reads
+    (docs/rendering.md, "Shadow terminator"), for geometry objects only."""
+    from types import SimpleNamespace
+    from addon import ui
+    fresh()
+    bpy.ops.mesh.primitive_uv_sphere_add()
+    obj = bpy.context.object
+    cls = ui.STPM_OBJECT_PT_shadow_terminator
+    assert cls.poll(SimpleNamespace(engine="STPM", object=obj))
+    assert not cls.poll(SimpleNamespace(engine="CYCLES", object=obj))
+    assert not cls.poll(SimpleNamespace(engine="STPM", object=bpy.context.scene.camera))
+    log = []
+    panel = SimpleNamespace(layout=SimpleNamespace(column=lambda **_: _RecordingLayout(log)))
+    cls.draw(panel, SimpleNamespace(object=obj))
+    assert log == ["shadow_terminator_geometry_offset", "shadow_terminator_shading_offset"]

@@ -64,7 +64,8 @@ def _new_scenes():
     cam = persp_camera((0.3, -5.0, 3.0), (0, 0, 0.3), lens=28.0)
     yield make_scene(objs, mats, cam, lights, world=(0.02, 0.02, 0.03), resolution=(19, 11),
                      shutter=Shutter(3.0, 3.25)), RenderSettings(samples=1, photons_caustic=3000, photons_global=2000,
-                                                                 k_nearest=8, seed=99, threads=2, estimator="KD4D")
+                                                                 k_nearest=8, seed=99, threads=2, estimator="KD4D",
+                                                                 final_gather_samples=3)
     yield make_scene(objs[:3], mats[:4], cam, lights[1:], resolution=(13, 17), metadata={"film_transparent": True},
                      shutter=Shutter(1.0, 1.0)), RenderSettings(samples=3, photons_caustic=0, photons_global=1500,
                                                                 k_nearest=5, seed=1, threads=1, filter_width=0.0)

@@ -67,12 +67,20 @@ def _hidden_instancer_child(inst) -> bool:
 class _Record:
     """What step 1 learnt about one instance (before motion is known)."""
 
-    __slots__ = ("kind", "name", "obj_name", "matrix", "mesh", "use_motion", "use_deform", "is_instance")
+    __slots__ = ("kind", "name", "obj_name", "matrix", "mesh", "use_motion", "use_deform", "is_instance", "terminator")
 
     def __init__(self, kind, name, obj_name, matrix, *, mesh=-1, use_motion=True, use_deform=True,
-                 is_instance=False):
+                 is_instance=False, terminator=None):
         self.kind, self.name, self.obj_name, self.matrix = kind, name, obj_name, matrix
         self.mesh, self.use_motion, self.use_deform, self.is_instance = mesh, use_motion, use_deform, is_instance
+        self.terminator = terminator or {}     # the object's shadow_terminator_* settings (Instance fields)
+
+
+def _terminator_settings(obj) -> dict:
+    """The object's shadow-terminator settings (Blender's Object properties, which Cycles reads;
+    Blender's defaults 0.1 and 0.0 where a build has none), as :class:`stpm_core.scene.Instance` fields."""
+    return {key: max(float(getattr(obj, key, default)), 0.0) for key, default in
+            (("shadow_terminator_geometry_offset", 0.1), ("shadow_terminator_shading_offset", 0.0))}
 
 
 def _slot_materials(obj) -> list:
@@ -227,7 +235,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
         records[key] = _Record("MESH", obj.name if not inst.is_instance else f"{obj.name}@{inst.parent.name}",
                                obj.original.name_full, M, mesh=mesh_cache[data_key], use_motion=use_mb,
                                use_deform=use_deform and not inst.is_instance and obj.type == "MESH",
-                               is_instance=inst.is_instance)
+                               is_instance=inst.is_instance, terminator=_terminator_settings(obj))
     _warn_holdout_collections(getattr(depsgraph, "view_layer", None), warnings)
     if cam_matrix is None and cam_obj is not None:  # a camera hidden from render still defines the view
         cam_eval = cam_obj.evaluated_get(depsgraph)
@@ -287,7 +295,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
             if r.use_motion and key in shapes and len(shapes[key]) == len(times):
                 _attach_deformation(meshes[r.mesh], shapes[key], times, r.name, warnings)
             instances.append(scene_model.Instance(mesh=r.mesh, transform=motion.transform_from_samples(t, samples[key]),
-                                                  name=r.name))
+                                                  name=r.name, **r.terminator))
         elif r.kind == "LIGHT":
             obj = light_data.get(r.obj_name)
             if obj is not None and light_export.is_portal(obj):

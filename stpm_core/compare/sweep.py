@@ -241,7 +241,7 @@ def plan_runs(settings, *, photon_budgets=DEFAULT_PHOTON_BUDGETS,
     if P:
         form = settings.estimator if settings.estimator in ("TEMPORAL", "KD4D") else "TEMPORAL"
         stops = dict(pass_offset=0, time_limit=0.0, noise_threshold=0.0)
-        st = settings.replace(method="PROGRESSIVE", estimator=form, passes=P, **stops)
+        st = settings.replace(method="PROGRESSIVE", estimator=form, passes=P, final_gather_samples=0, **stops)
         runs.append(Run(label=f"PROGRESSIVE {form} {P} passes", method="PROGRESSIVE", settings=st, cost=float(P)))
         n_sppm = P * int(settings.samples)
         st = settings.replace(method="PHOTON", estimator="STANDARD", passes=n_sppm, **stops)

@@ -36,9 +36,11 @@ normal that disagrees with its face keeps disagreeing), and wo on ng's side is e
 ior), else leaving (eta = 1 / ior): a mesh with flipped normals is glass seen from inside.  The
 specular lobes (coat, metal, glass) use ``nss``, ns raised toward ng wherever it differs from ng
 (smooth or custom normals, Normal inputs: ``ensure_valid_specular_reflection``) and are 0 when
-wo is below it (Cycles' microfacet closures: no lobe for wo under N).  A reflection lobe is 0
-unless wi is above both ng and its normal, a refraction unless wi is below ng (and, rough, below
-nss); a sampled reflection below ng or refraction above it has weight 0.  Rough glass samples one
+wo is below it (Cycles' microfacet closures: no lobe for wo under N).  A glossy reflection lobe
+is 0 unless wi is above both ng and its normal, a refraction unless wi is below ng (and, rough,
+below nss); the DIFFUSE lobe is evaluated wherever wi is above ns, also below the face, where the
+shadow ray decides (:func:`diffuse_side`, as Cycles); a sampled reflection below ng or refraction
+above it has weight 0.  Rough glass samples one
 visible normal h and reflects or refracts through it, the choice per microfacet as Cycles
 (F(wo.h) mean(tint_r) against (1 - F) mean(tint_t)) inside the glass lobes' joint probability.
 
@@ -148,6 +150,22 @@ def _oriented(wo, ns, ng):
     entering = dot(wo, ng) >= 0.0
     s = 1.0 if entering else -1.0
     return (ns[0] * s, ns[1] * s, ns[2] * s), (ng[0] * s, ng[1] * s, ng[2] * s), entering
+
+
+def diffuse_side():
+    """Documentation only: which side of a surface the DIFFUSE lobe lights.
+
+    As Cycles' BSDFs (``bsdf_diffuse_eval``: max(N . wi, 0) / pi; its ``bump_shadowing_term``:
+    "the BSDF evaluation functions allow for light leaking through the actual geometry and only
+    check that the directions are in the correct hemisphere w.r.t. the shading normal"), the
+    DIFFUSE lobe is evaluated wherever wi lies above the facing shading normal nsf, also where wi
+    is below the face (ngf . wi < 0: the band of a smooth-shaded mesh next to its shadow
+    terminator).  There the shadow ray decides: it leaves from below the face
+    (``sampling.offset_origin``) and a closed mesh blocks it, unless the object's
+    ``shadow_terminator_geometry_offset`` lifts its origin onto the smooth surface
+    (``paths.terminator_origin``; docs/rendering.md, "Shadow terminator").  A Normal input's
+    bumped normal is held back by ``bump_shadowing`` (wi on the other side of the smooth normal:
+    0).  The glossy lobes keep the face's side (reflection above ngf, refraction below)."""
 
 
 @njit(**_JIT)
@@ -694,10 +712,10 @@ def _eval_pdf_hit(C, cr, E, hit, wo, wi):
     w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
     b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
     cos_i = dot(wi, ns)
-    above_ng = dot(wi, ng) > 0
-    # -- DIFFUSE: base / pi under the coat's Fresnel at wo
+    # -- DIFFUSE: base / pi under the coat's Fresnel at wo, wherever wi is above the shading
+    #    normal (not the face: :func:`diffuse_side`)
     f0 = f1 = f2 = pdf = 0.0
-    if cos_i > 0 and above_ng:
+    if cos_i > 0:
         d = w_base * (1.0 - F_coat) * bump_shadowing(C, cr, wi, ns, ng)
         f0 = d * b0 / _PI
         f1 = d * b1 / _PI
@@ -820,8 +838,8 @@ def needs_bsdf_call(C, cr):
 @njit(**_JIT)
 def bsdf_eval_plain(C, cr, wo, wi, ns, ng):
     """(f0, f1, f2) of a closure that is a bare diffuse lobe (no rough lobe, no coat, no replaced
-    normal: ``not needs_bsdf_call(C, cr)``): w_base base_color / pi where wi lies above both the
-    facing shading and geometric normals, else 0.  :func:`bsdf_eval_smooth` of such a closure, bit
+    normal: ``not needs_bsdf_call(C, cr)``): w_base base_color / pi where wi lies above the facing
+    shading normal, else 0 (:func:`diffuse_side`).  :func:`bsdf_eval_smooth` of such a closure, bit
     for bit; small enough that LLVM inlines it, so a loop calling it contains no call (a call
     makes the loop save and reload its floating-point values around it, on every row)."""
     return bsdf_eval_plain_w(C[cr, C_W_BASE], C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2], wo, wi, ns, ng)
@@ -833,7 +851,7 @@ def bsdf_eval_plain_w(w_base, b0, b1, b2, wo, wi, ns, ng):
     read from the row earlier (``paths.nee_light`` reads each row once)."""
     nsf, ngf, _ = _oriented(wo, ns, ng)
     scale = 0.0
-    if dot(wi, nsf) > 0 and dot(wi, ngf) > 0:
+    if dot(wi, nsf) > 0:             # (not ngf: the shadow ray decides, :func:`diffuse_side`)
         scale = w_base
     return (scale * b0 * _INV_PI, scale * b1 * _INV_PI, scale * b2 * _INV_PI)
 
@@ -848,7 +866,7 @@ def bsdf_eval_smooth(C, cr, wo, wi, ns, ng):
         return bsdf_eval_plain(C, cr, wo, wi, ns, ng)
     nsf, ngf, _ = _oriented(wo, ns, ng)
     scale = 0.0
-    if dot(wi, nsf) > 0 and dot(wi, ngf) > 0:
+    if dot(wi, nsf) > 0:             # (not ngf: the shadow ray decides, :func:`diffuse_side`)
         scale = C[cr, C_W_BASE] * bump_shadowing(C, cr, wi, nsf, ngf)
         if C[cr, C_COAT] > 0:
             nc = nsf

@@ -49,7 +49,7 @@ _JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
 @njit(**_JIT)
 def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, n_diffuse, caustic, min_nondelta,
-                  max_diffuse, last, U, U_rr, EPS, guard_fraction, store, o_next, d_next, Phi_next, T_next, nd_next,
+                  max_diffuse, reader, last, U, U_rr, EPS, guard_fraction, store, o_next, d_next, Phi_next, T_next, nd_next,
                   nn_next, ndf_next, guard_next):
     """One bounce of the photons whose rays hit: rows (k,) index the bounce's hit arrays.
 
@@ -58,7 +58,10 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
     each kept photon (row j of these belongs to hit rows[j]); C (k, N_CLOSURE)
     the closures of its hit.  caustic: the caustic map's rules (else global with
     ``min_nondelta``).  max_diffuse: Cycles' diffuse bounce budget (module docstring; the
-    caller passes a large number for none).  last: the final bounce (store only; U, U_rr unused).
+    caller passes a large number for none).  reader: the diffuse bounces the camera path makes to
+    read a photon that is not at its first hit (1: the camera vertex that reads the map; 2 with final
+    gathering, whose gather vertex reads it after the camera vertex's diffuse bounce; a photon at
+    its first hit is direct light there, read for 1).  last: the final bounce (store only; U, U_rr unused).
     U (k, 3), U_rr (k,) uniforms for the BSDF sample and the roulette; EPS (k,)
     origin offsets (scene units).
 
@@ -72,7 +75,8 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
         r = rows[j]
         nondelta = C[j, C_NONDELTA] > 0.0
         # -- Store the photon (a camera vertex reading it makes one more diffuse bounce) ----------
-        readable = n_diffuse[j] + 1 <= max_diffuse
+        first = n_delta[j] == 0 and n_nondelta[j] == 0
+        readable = n_diffuse[j] + (1 if first else reader) <= max_diffuse
         if nondelta and readable and ((caustic and n_delta[j] >= 1)
                                       or (not caustic and n_nondelta[j] >= min_nondelta)):
             store[n_store] = j
@@ -101,9 +105,8 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
         if caustic:
             alive = alive and spec_bounce
         # Cycles' diffuse bounces: the DIFFUSE lobe's, but at the first hit (next-event estimation's light)
-        first = n_delta[j] == 0 and n_nondelta[j] == 0
         nd = n_diffuse[j] + (1 if (diffuse_lobe and not first) else 0)
-        if nd + 1 > max_diffuse:
+        if nd + reader > max_diffuse:
             alive = False                                # no camera vertex may read it any more
         if not alive:
             continue

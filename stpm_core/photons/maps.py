@@ -45,6 +45,7 @@ class PhotonMaps:
         self._info = dict(info or {})
 
     shares_lookups = True    # estimate(..., support=True) gives what photons.sharing needs
+    gather_cache = None      # photons.gather.IrradianceCache with final gathering (else None)
 
     def has(self, kind: str) -> bool:
         """Does the ``kind`` map hold any photon?"""
@@ -72,6 +73,8 @@ class PhotonMaps:
     def stats(self) -> dict:
         """Photons stored per map, bytes per photon, tree build and look-up seconds, trace seconds."""
         st = dict(self._info)
+        if self.gather_cache is not None:
+            st.update(self.gather_cache.stats)          # final gathering: cache build and misses
         build = lookup = 0.0
         count = 0
         for kind, m in self.maps.items():
@@ -151,7 +154,16 @@ def build_photon_maps(scene, settings, caster, lights, *, time_override=None, pr
     }
     for m in maps.values() if build_trees else ():
         m.build(settings.estimator, k=settings.k_nearest, temporal_alpha=settings.temporal_alpha)
+    out = PhotonMaps(maps, estimator=settings.estimator, k=settings.k_nearest, kernel=settings.kernel,
+                     temporal_alpha=settings.temporal_alpha, time_scale=s, info=info)
+    # -- Final gathering: irradiance precomputed at every 4th global photon (photons.gather; its
+    #    direct part is added by the integrator, which has the lights) --------------------------
+    if int(getattr(settings, "final_gather_samples", 0)) > 0 and int(settings.diffuse_bounces) >= 2 \
+            and maps["global"].n > 0:
+        from .gather import IrradianceCache
+        lo, hi = scene.bounds()
+        out.gather_cache = IrradianceCache.build(out, caster, scene_extent=float(np.linalg.norm(hi - lo)),
+                                                 caustics=True)
     if progress is not None:
         progress(1.0, "photon maps built")
-    return PhotonMaps(maps, estimator=settings.estimator, k=settings.k_nearest, kernel=settings.kernel,
-                      temporal_alpha=settings.temporal_alpha, time_scale=s, info=info)
+    return out

@@ -120,7 +120,7 @@ def _times(scene, n: int, rng, time_override) -> np.ndarray:
 def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, inst_offset: np.ndarray,
                        target_instance: int | None = None, min_nondelta: int = 1,
                        origin: np.ndarray | None = None, shading=None, diffuse_bounces: int | None = None,
-                       transparent_bounces: int = TRANSPARENT_MAX_BOUNCES) -> np.ndarray:
+                       transparent_bounces: int = TRANSPARENT_MAX_BOUNCES, reader: int = 1) -> np.ndarray:
     """Trace photon paths and return the stored records.
 
     Parameters
@@ -136,6 +136,9 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     diffuse_bounces : Cycles' diffuse bounce budget (``RenderSettings.diffuse_bounces``): a photon
         is stored only where a camera vertex reading it makes at most this many diffuse bounces on
         the whole path, and stops where none could (``kernels.photon_paths``); None: no budget.
+    reader : diffuse bounces the camera path makes to read a photon stored after its first hit: 1
+        (the camera vertex reads the map) or 2 (final gathering: a gather vertex reads it after the
+        camera vertex's own diffuse bounce); a first-hit photon counts 1 (direct light there).
     transparent_bounces : transparent surfaces passed in a row before one absorbs the photon
         (``RenderSettings.transparent_max_bounces``).
     inst_offset : (n_instances,) per-object part of the ray-origin offset along the geometric
@@ -201,7 +204,9 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
             # the irradiance there whatever this photon's pick (camera paths weigh by their own
             # pick), so a photon whose pick scatters nothing here (transparency, emission, a delta
             # lobe) is stored as well, by the map's path rule
-            rule = ((n_delta >= 1) if caustic else (n_nondelta >= min_nondelta)) & (n_diffuse + 1 <= max_diffuse)
+            first = (n_delta == 0) & (n_nondelta == 0)
+            rule = (((n_delta >= 1) if caustic else (n_nondelta >= min_nondelta))
+                    & (n_diffuse + np.where(first, 1, int(reader)) <= max_diffuse))
             extra = np.flatnonzero(sd.store_mask[hits.material[idx]]
                                    & (C[:, C_NONDELTA] <= 0.0) & rule)
             if extra.size:
@@ -219,7 +224,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         t_n, g_n = np.empty(k), np.empty(k)
         nd_n, nn_n, ndf_n = np.empty(k, np.int32), np.empty(k, np.int32), np.empty(k, np.int32)
         n_store, n_next = photon_bounce(idx, hits.position, hits.ng, hits.ns, d, C, E, E_avg, Phi, t, n_delta,
-                                        n_nondelta, n_diffuse, caustic, int(min_nondelta), max_diffuse, last, U, U_rr,
+                                        n_nondelta, n_diffuse, caustic, int(min_nondelta), max_diffuse, int(reader), last,
+                                        U, U_rr,
                                         EPS, GUARD_FRACTION, store, o_n, d_n, Phi_n, t_n, nd_n, nn_n, ndf_n, g_n)
         # -- Store the photons --------------------------------------------------------------
         if n_store:
@@ -308,6 +314,9 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
     """Global map records and counts: ``settings.photons_global`` photons split over lights by power x
     photon weight (``LightSet.photon_weight``: each light's photons carry its flux divided by their
     number, so the weights move noise between lights and leave the estimate unbiased)."""
+    # With final gathering the photons are read at the gather vertices, one camera bounce further:
+    # the diffuse budget counts it (reader 2, kernels.photon_paths; off when diffuse_bounces < 2)
+    gather = int(getattr(settings, "final_gather_samples", 0)) > 0 and int(settings.diffuse_bounces) >= 2
     inst_offset = instance_offsets(scene)
     origin = photon_origin(scene)
     counts = split_counts(int(settings.photons_global),
@@ -328,7 +337,7 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
         return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global",
                                   max_depth=settings.max_depth, inst_offset=inst_offset, min_nondelta=min_nondelta,
                                   shading=shading, diffuse_bounces=settings.diffuse_bounces,
-                                  transparent_bounces=settings.transparent_max_bounces)
+                                  transparent_bounces=settings.transparent_max_bounces, reader=2 if gather else 1)
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing global photons")
     recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)

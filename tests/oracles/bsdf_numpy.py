@@ -16,7 +16,9 @@ Fresnel weight is F tint_r, and rough glass reflects with probability F mean(tin
 mean(tint_r) + (1 - F) mean(tint_t)) (Cycles' ``FresnelDielectricTint``, bsdf_microfacet.h).  Normals as they come, as Cycles and the kernels (issue 14, item 5): ``ns``
 turns with ``ng`` (the back-face flip) instead of onto ``ng``'s side, and the specular lobes use
 ``nss``, ``ns`` raised by ``ensure_valid_specular_reflection`` where it differs from ``ng``, and
-vanish where ``wo`` is below it.
+vanish where ``wo`` is below it.  Since the shadow-terminator change (issue 14, deliverable 5) the
+DIFFUSE lobe is evaluated wherever ``wi`` is above ``ns``, also below the face (Cycles'
+``bsdf_diffuse_eval``; the shadow ray decides there).
 """
 from __future__ import annotations
 
@@ -364,7 +366,7 @@ def _eval_pdf(h: _Hit, wi: np.ndarray, diffuse: bool = True, coat: float = 1.0):
     f = np.zeros((n, 3))
     pdf = np.zeros(n)
     cos_i = _dot(wi, h.ns)
-    above = (cos_i > 0) & (_dot(wi, h.ng) > 0)
+    above = cos_i > 0            # DIFFUSE: above ns, also below the face (the shadow ray decides, as Cycles)
     # DIFFUSE: base / pi under the coat's Fresnel at wo
     if diffuse:
         f += np.where(above, h.w_base * (1.0 - h.F_coat), 0.0)[:, None] * h.base / np.pi
@@ -451,7 +453,7 @@ def bsdf_eval(table: MaterialTable, mat, wo, wi, ns, ng) -> np.ndarray:
     # Rows without a rough lobe: the diffuse lobe under a smooth coat's Fresnel
     ns_f, ng_f, _ = _oriented(wo, ns, ng)
     cos_i = _dot(wi, ns_f)
-    above = (cos_i > 0) & (_dot(wi, ng_f) > 0)
+    above = cos_i > 0            # (not ng_f: the shadow ray decides, as Cycles)
     scale = np.where(above, table.w_base[m], 0.0)
     c = np.nonzero(table.coat[m] & above)[0]
     if c.size:

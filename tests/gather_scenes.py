@@ -1,0 +1,45 @@
+"""A small Cornell-like box for the final-gathering tests (built with bpy, exported by the add-on).
+
+Open toward the camera: floor, ceiling and back wall white (0.7), left wall red, right wall green,
+a white block on the floor; a point light (radius 0.05 m, 200 W) 0.5 m under the ceiling; black world.
+Most of what the walls show away from the light's direct reach is indirect light (colour bleeding
+on the floor and the block), the case final gathering is for.
+"""
+from __future__ import annotations
+
+import math
+
+import bpy
+
+from test_addon_scenes import add_camera, add_light, add_mesh, fresh, set_world
+
+
+def _diffuse(name: str, rgb):
+    mat = bpy.data.materials.new(name)
+    tree = mat.node_tree
+    for n in list(tree.nodes):
+        if n.bl_idname != "ShaderNodeOutputMaterial":
+            tree.nodes.remove(n)
+    out = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    d = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    d.inputs["Color"].default_value = (*rgb, 1.0)
+    tree.links.new(d.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def cornell(width: int = 48, height: int = 36, light_z: float = 1.5, light_radius: float = 0.05):
+    """The box (2 m cube, floor at z = 0) and its camera; returns the bpy scene."""
+    scene = fresh()
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    white, red, green = _diffuse("White", (0.7, 0.7, 0.7)), _diffuse("Red", (0.7, 0.1, 0.1)), \
+        _diffuse("Green", (0.1, 0.7, 0.1))
+    add_mesh("plane", "Floor", (0, 0, 0), white, size=2)
+    add_mesh("plane", "Ceiling", (0, 0, 2), white, size=2, rotation=(math.pi, 0, 0))
+    add_mesh("plane", "Back", (0, 1, 1), white, size=2, rotation=(math.pi / 2, 0, 0))
+    add_mesh("plane", "Left", (-1, 0, 1), red, size=2, rotation=(0, math.pi / 2, 0))
+    add_mesh("plane", "Right", (1, 0, 1), green, size=2, rotation=(0, -math.pi / 2, 0))
+    add_mesh("cube", "Block", (0.3, 0.3, 0.35), white, size=0.7)
+    add_light("POINT", "Lamp", (0, 0, light_z), energy=200.0, shadow_soft_size=light_radius)
+    set_world((0.0, 0.0, 0.0), 0.0)
+    add_camera((0, -3.3, 1.0), (math.radians(90), 0, 0), lens=35.0)
+    return scene
