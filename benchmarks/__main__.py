@@ -15,6 +15,11 @@ flip-evaluator (both installed by ``build.py``); its first run renders the Cycle
 against Cycles at 1024 spp, inside and outside the glass caustics) needs the same; its first run renders two
 Cycles references (about 7 min on 2 cores) into ``bench_out/cache/product/``, later runs take about 5 min.
 ``python -m benchmarks product`` runs it alone.
+
+``bench_pool`` (issue 16's sunlit pool, ``blend_scenes/sunlit_pool.blend``: STPM PROGRESSIVE's time to the
+caustic quality of Cycles' shadow caustics (MNEE) at 128 samples, both against a converged Cycles path trace)
+renders its reference once (32768 spp at 96 x 72: about 11-45 min on 2 cores, by load) into
+``bench_out/cache/pool/``; later runs take about 3 min.  ``python -m benchmarks pool`` runs it alone.
 """
 from __future__ import annotations
 
