@@ -18,7 +18,10 @@ The rules (docs/effects.md has them with what each one saves):
   light reaches a diffuse surface (a probe of 2048 photons per light over its
   whole emission) and that light can bounce onto a diffuse surface again: at
   least two diffuse objects, or one diffuse mesh that can see itself
-  (non-convex: a room, a bowl; a plane or a convex solid cannot).
+  (non-convex: a room, a bowl; a plane or a convex solid cannot), or specular
+  surfaces that send a lone diffuse object's light back onto it (L D S+ D: a
+  floor under a glass or water plane): the probe's photons traced on as the
+  global map's return at least ``PROBE_RETURN_MIN`` of the emitted power.
 * **time_dependent** -- photon-mapped light must carry time: something other
   than the camera moves (objects, deformation, lights) while the shutter is
   open, and a photon map is built.  A camera pan over a static scene is motion
@@ -54,6 +57,8 @@ EFFECT_KEYS = ("motion_blur", "caustics", "indirect", "time_dependent")
 PROBE_PHOTONS_AIMED = 512    # probe photons per (light, specular object) pair
 PROBE_PHOTONS_AIMED_RETRY = 4096   # second round when the first stored no caustic photon
 PROBE_PHOTONS_LIGHT = 2048   # probe photons per light over its whole emission
+PROBE_RETURN_DEPTH = 4       # bounces the probe follows for light sent back by specular surfaces
+PROBE_RETURN_MIN = 0.005     # returned power (global-map photons' over emitted) that calls for indirect light
 STREAM_PLAN = 0x91A7         # rng stream of the probe (independent of the render's streams)
 _MAX_CONVEXITY_WORK = 4_000_000   # faces x vertices examined by the self-visibility test
 _MESH_FACTS_MAX = 4096             # per-mesh answers remembered across plans (LRU-less: cleared when full)
@@ -220,7 +225,8 @@ def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[i
     max_depth = int(getattr(settings, "max_depth", 8)) if settings is not None else 8
     table = MaterialTable(scene.materials)
     inst_offset = instance_offsets(scene)
-    out = {"reach_specular": {}, "lit_diffuse": set(), "caustic_stored": 0, "aimed": 0, "emitted": 0}
+    out = {"reach_specular": {}, "lit_diffuse": set(), "caustic_stored": 0, "aimed": 0, "emitted": 0,
+           "return_power": 0.0, "emitted_power": 0.0}
     # -- Aimed photons: does each light reach each specular object, and a diffuse one after it?
     #    A second, larger round only when the first one found no caustic path at all.
     for rnd, n in enumerate((PROBE_PHOTONS_AIMED, PROBE_PHOTONS_AIMED_RETRY)):
@@ -242,6 +248,18 @@ def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[i
         inst = hits.instance[hits.hit]
         inside = np.sum(d[live][hits.hit] * hits.ng[hits.hit], axis=1) > 0.0
         shut = np.isin(inst, np.fromiter(closed_inst, int, len(closed_inst))) & inside
+        if spec_targets:
+            # light a specular surface sends back onto diffuse geometry after a diffuse bounce
+            # (L D S+ D: a floor under a glass or water plane): the global map's photons, of the
+            # paths not shut inside a closed object at their first hit
+            go = np.ones(int(live.sum()), bool)
+            go[np.flatnonzero(hits.hit)[shut]] = False
+            idx = np.flatnonzero(live)[go]
+            recs = trace_photon_paths(caster, table, o[idx], d[idx], Phi[idx], t[idx], rng, mode="global",
+                                      max_depth=min(max_depth, PROBE_RETURN_DEPTH), inst_offset=inst_offset,
+                                      shading=shading_data(scene, table.closures))
+            out["return_power"] += float(np.sum(recs["power"], dtype=np.float64))
+            out["emitted_power"] += float(np.sum(Phi[live], dtype=np.float64))
         out["lit_diffuse"].update(int(i) for i in np.unique(inst[~shut]) if int(i) in diffuse_inst)
     return out
 
@@ -372,7 +390,8 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
         reach = {li: s for li, s in pr["reach_specular"].items() if s}
         lit_diffuse = pr["lit_diffuse"]
         probe_info = {"photons_aimed": pr["aimed"], "photons_emitted": pr["emitted"],
-                      "caustic_photons_stored": pr["caustic_stored"]}
+                      "caustic_photons_stored": pr["caustic_stored"],
+                      "returned_power_fraction": pr["return_power"] / max(pr["emitted_power"], 1e-300)}
 
     # -- Caustics: light -> specular -> diffuse ------------------------------------------
     reached_spec = sorted({i for s in reach.values() for i in s})
@@ -400,11 +419,19 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
     # -- Indirect: diffuse -> diffuse ------------------------------------------------------
     self_refl = [i for i in diff_inst if per_mesh(self_reflecting, i)]
     lit = sorted(lit_diffuse)
-    auto_indirect = bool(lit) and (len(diff_inst) >= 2 or any(i in self_refl for i in lit))
-    if auto_indirect:
+    returned = probe_info["returned_power_fraction"] if probe_info is not None else 0.0
+    geometric = bool(lit) and (len(diff_inst) >= 2 or any(i in self_refl for i in lit))
+    # (the probe's global-map photons: light that came back onto diffuse geometry after a diffuse
+    # bounce, e.g. through a glass or water plane and back off its underside)
+    auto_indirect = geometric or (bool(diff_inst) and returned >= PROBE_RETURN_MIN)
+    if geometric:
         why = (f"{len(diff_inst)} diffuse objects" if len(diff_inst) >= 2
                else f"{_names(inst_names[i] for i in lit if i in self_refl)[:2]} can see itself")
         reasons.append(f"indirect: light reaches diffuse {_names(inst_names[i] for i in lit)[:4]} and {why}")
+    elif auto_indirect:
+        reasons.append(f"indirect: specular {_names(inst_names[i] for i in spec_inst)[:2]} send light back onto "
+                       f"diffuse {_names(inst_names[i] for i in diff_inst)[:2]} (L D S+ D; probe: "
+                       f"{100 * returned:.1f} % of the emitted power came back)")
     elif not diff_inst:
         reasons.append("indirect: off (no diffuse surface)")
     elif not emitting:

@@ -9,7 +9,8 @@ import pytest
 from scenes import (box_mesh, make_scene, moving, ortho_camera_down, persp_camera, plane_mesh, point_light,
                     sphere_mesh, translate)
 from stpm_core.motion import MotionTransform
-from stpm_core.plan import EFFECT_KEYS, apply_plan, format_plan, make_plan, plan_summary, self_reflecting
+from stpm_core.plan import (EFFECT_KEYS, PROBE_RETURN_MIN, apply_plan, format_plan, make_plan, plan_summary,
+                             self_reflecting)
 from stpm_core.scene import Light, Material, Mesh
 from stpm_core.settings import RenderSettings
 from stpm_core.shutter import Shutter
@@ -157,6 +158,19 @@ def test_one_room_mesh_is_enough_for_indirect():
                             camera=persp_camera((0, -1.5, 0), (0, 0, 0))))
     assert plan["indirect"] and plan["details"]["self_reflecting_objects"] == ["room"]
     assert not plan["caustics"]
+
+
+def test_a_floor_under_a_glass_plane_gets_its_returned_light():
+    """One convex diffuse floor under a glass (water) plane: the plane's underside reflects a large
+    share of the floor's light back onto it (total internal reflection: L D S+ D), so indirect light
+    is on; a glass ball over the same floor returns almost nothing and stays off.  An artist review
+    measured a floor under water 31 % dark on AUTO before this rule."""
+    plan = make_plan(_scene([plane_mesh(6.0, name="floor"), plane_mesh(8.0, z=1.0, material=GLASS, name="water")]))
+    frac = plan["details"]["probe"]["returned_power_fraction"]
+    assert plan["indirect"] and frac >= PROBE_RETURN_MIN, (frac, plan["reasons"])
+    assert any("L D S+ D" in r for r in plan["reasons"])
+    ball = make_plan(_glass_over_floor())
+    assert not ball["indirect"] and ball["details"]["probe"]["returned_power_fraction"] < 0.1 * PROBE_RETURN_MIN
 
 
 # ----------------------------------------------------------------------------
