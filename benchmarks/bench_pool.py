@@ -176,14 +176,9 @@ def score(rgb: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> dict:
 
 
 def run() -> dict:
-    try:
-        import bpy  # noqa: F401
-    except ImportError:
-        return {"skipped": "bpy not importable: pip install bpy==5.0.1 (build.py installs it)"}
-    try:
-        import flip_evaluator  # noqa: F401
-    except ImportError:
-        return {"skipped": "flip_evaluator not importable: pip install flip-evaluator==1.7"}
+    missing = room.missing_requirements()
+    if missing is not None:
+        return missing
     OUT.mkdir(parents=True, exist_ok=True)
     ref, index, ref_s, cached = reference()
     with _this_scene():

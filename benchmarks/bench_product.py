@@ -252,14 +252,9 @@ def caustic_parts(passes: dict, conv: np.ndarray, nocaustic: np.ndarray, mask: n
 
 
 def run() -> dict:
-    try:
-        import bpy  # noqa: F401
-    except ImportError:
-        return {"skipped": "bpy not importable: pip install bpy==5.0.1 (build.py installs it)"}
-    try:
-        import flip_evaluator  # noqa: F401
-    except ImportError:
-        return {"skipped": "flip_evaluator not importable: pip install flip-evaluator==1.7"}
+    missing = room.missing_requirements()
+    if missing is not None:
+        return missing
     if not BLEND.exists():
         return {"skipped": f"{BLEND.name} missing: .venv/bin/python blend_scenes/make_hdri_product.py"}
     from stpm_core.compare.metrics import diverging_colors, signed_relative_error

@@ -333,7 +333,9 @@ def _write_display(path: Path, disp: np.ndarray) -> None:
 
 
 # ----------------------------------------------------------------------------------------------
-def run() -> dict:
+def missing_requirements() -> dict | None:
+    """{"skipped": why} when bpy or flip-evaluator cannot be imported (the Cycles comparisons need
+    both; build.py installs them), else None."""
     try:
         import bpy  # noqa: F401
     except ImportError:
@@ -342,6 +344,13 @@ def run() -> dict:
         import flip_evaluator  # noqa: F401
     except ImportError:
         return {"skipped": "flip_evaluator not importable: pip install flip-evaluator==1.7"}
+    return None
+
+
+def run() -> dict:
+    missing = missing_requirements()
+    if missing is not None:
+        return missing
     from stpm_core.compare.metrics import diverging_colors, signed_relative_error
     from stpm_core.imageio import write_png
     OUT.mkdir(parents=True, exist_ok=True)
