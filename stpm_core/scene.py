@@ -585,8 +585,14 @@ def scene_warnings(scene: Scene) -> list[str]:
     Transforms are checked at their keys and halfway between them.  A
     mirroring (negative) scale is not a warning: it turns SPOT, SUN and AREA
     lights alike, as in Cycles.  The renderer appends these to its warnings.
+
+    Light portals (``scene.portals``) that cannot do anything are named too: one with no area or
+    no emitting side (``world_light.portal_rows`` leaves it out), and one whose emitting side
+    (local -Z, into the room) faces away from the camera at mid-shutter.  A portal steers world
+    samples only from points on that side (as Cycles'), so a portal placed backwards in a
+    window silently stops helping; rotating it 180 degrees about X fixes it.
     """
-    out = []
+    out = _portal_warnings(scene)
     for li, l in enumerate(scene.lights):
         tr = l.transform
         if l.type not in ("SPOT", "SUN", "AREA") or not isinstance(tr, MotionTransform):
@@ -612,6 +618,28 @@ def scene_warnings(scene: Scene) -> list[str]:
             if np.any(np.abs(np.sum(g * z, axis=1)) < 1e-9):
                 out.append(f"{who}: its -Z axis lies in the light's plane (sheared transform): "
                            f"the light emits nothing")
+    return out
+
+
+def _portal_warnings(scene: Scene) -> list[str]:
+    """:func:`scene_warnings`' lines for light portals (one per portal at most)."""
+    from .world_light import portal_rows
+    portals = list(getattr(scene, "portals", None) or ())
+    if not portals:
+        return []
+    out = []
+    cam = np.asarray(scene.camera.transform.at(np.array([0.5]))[0], np.float64)[:3, 3]
+    for l in portals:
+        who = f"light portal {l.name!r}"
+        rows = portal_rows([l]) if isinstance(l.transform, MotionTransform) else np.zeros((0, 12))
+        if rows.shape[0] == 0:
+            out.append(f"{who}: it has no area or no emitting side: it is ignored")
+            continue
+        corner, e1, e2, n = rows[0, :3], rows[0, 3:6], rows[0, 6:9], rows[0, 9:12]
+        if float((cam - (corner + 0.5 * e1 + 0.5 * e2)) @ n) <= 0.0:
+            out.append(f"{who}: its emitting side (-Z) faces away from the camera; a portal guides world light "
+                       f"only to points on that side, so it does nothing for the room the camera sees if "
+                       f"the room is behind it (rotate it 180 degrees about its X axis)")
     return out
 
 

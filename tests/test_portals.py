@@ -23,6 +23,7 @@ from stpm_core.lights import LightSet
 from stpm_core.render import render
 from stpm_core.scenefile import load_scene, save_scene
 from stpm_core.settings import RenderSettings
+from stpm_core.motion import MotionTransform
 from stpm_core.world_light import PORTAL_NEE_FRACTION
 
 from portal_scenes import WINDOW, inside, portal_light, room_scene
@@ -260,3 +261,22 @@ def test_portals_and_weights_survive_the_scene_file(tmp_path):
     save_scene(plain, tmp_path / "plain.stpm")
     back = load_scene(tmp_path / "plain.stpm")
     assert back.portals == [] and back.world.photon_weight == 1.0
+
+
+def test_backwards_or_empty_portal_is_named_in_the_warnings():
+    """A portal whose emitting side faces away from the camera (placed backwards in the window)
+    or that has no area does nothing: the render's warnings say so; a correct one is silent."""
+    from stpm_core.scene import scene_warnings
+    sc = room_scene(portal=True)
+    assert not [w for w in scene_warnings(sc) if "portal" in w]
+    back = portal_light()
+    M = back.transform.at(np.array([0.5]))[0].copy()
+    M[:3, 1] *= -1.0                  # rotated 180 degrees about X: -Z now points out of the window
+    M[:3, 2] *= -1.0
+    back.transform = MotionTransform.static(M)
+    sc.portals = [back]
+    w = [x for x in scene_warnings(sc) if "portal" in x]
+    assert len(w) == 1 and "faces away from the camera" in w[0] and "'portal'" in w[0]
+    sc.portals = [portal_light(shrink=0.0)]
+    w = [x for x in scene_warnings(sc) if "portal" in x]
+    assert len(w) == 1 and "ignored" in w[0]
