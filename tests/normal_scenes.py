@@ -19,6 +19,10 @@ all in the image.  The cases:
   False) and every edge sharp: Blender's viewport shades it flat, Cycles 5.0 smooth;
 * ``free_face``: a face-domain ``custom_normal`` attribute (tipped 27 degrees up), sides smooth.
 
+``build(case, normal_map=True)`` adds a tangent-space Normal Map of a constant colour (the normal
+tipped 45 degrees toward the tangent) and turns the UV map 45 degrees, so that the tangents climb
+the sides (:func:`_normal_map`).
+
 ``show_normals()`` swaps the cylinder's material for an emission of 0.5 + 0.5 N (N: the Geometry
 node's shading normal), which turns a Cycles render into its shading normals.
 
@@ -124,9 +128,26 @@ def show_normals():
     t.links.new(em.outputs[0], t.nodes["Material Output"].inputs["Surface"])
 
 
-def build(case: str, w: int = W, h: int = H, fill: str = "NGON"):
+def _normal_map(obj):
+    """Turn the UV map of ``obj`` 45 degrees ((u, v) -> (u + v, v - u)) and give its diffuse
+    material a tangent-space Normal Map of the constant colour (0.85, 0.5, 0.85): tangent-space
+    normal (0.7, 0, 0.7), 45 degrees toward the tangent."""
+    me = obj.data
+    uv = np.empty(len(me.loops) * 2, np.float32)
+    me.uv_layers.active.uv.foreach_get("vector", uv)
+    u, v = uv[0::2].copy(), uv[1::2].copy()
+    uv[0::2], uv[1::2] = u + v, v - u
+    me.uv_layers.active.uv.foreach_set("vector", uv)
+    t = me.materials[0].node_tree
+    nm = t.nodes.new("ShaderNodeNormalMap")
+    nm.inputs["Color"].default_value = (0.85, 0.5, 0.85, 1.0)
+    diffuse = next(n for n in t.nodes if n.type == "BSDF_DIFFUSE")
+    t.links.new(nm.outputs["Normal"], diffuse.inputs["Normal"])
+
+
+def build(case: str, w: int = W, h: int = H, fill: str = "NGON", normal_map: bool = False):
     """The scene of ``case`` (see the module docstring); returns bpy.context.scene.  fill: the caps
-    (``end_fill_type``: "NGON", or "TRIFAN" for triangle fans)."""
+    (``end_fill_type``: "NGON", or "TRIFAN" for triangle fans); normal_map: :func:`_normal_map`."""
     scene = fresh()
     scene.render.resolution_x, scene.render.resolution_y = w, h
     set_world((0, 0, 0), 0.0)
@@ -135,6 +156,8 @@ def build(case: str, w: int = W, h: int = H, fill: str = "NGON"):
     cyl = bpy.context.object
     cyl.data.materials.append(_diffuse("Grey"))
     _normals(case, cyl)
+    if normal_map:
+        _normal_map(cyl)
     add_light("POINT", "Key", location=(-3.0, -5.0, 3.0), energy=1000.0, shadow_soft_size=0.0)
     add_camera(location=(0.0, -6.0, 3.5), rotation=(math.radians(60), 0, 0), lens=60)
     return scene

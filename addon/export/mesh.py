@@ -228,6 +228,10 @@ def tangent_arrays(me, loops: np.ndarray, names: list, tri: np.ndarray, uv_layer
             layer = tmp.uv_layers.new(name=name)
             layer.uv.foreach_set("vector", np.ascontiguousarray(uv_layers[name], np.float32).reshape(-1))
             if normals is not None:
+                # Smooth faces first: corners of one vertex with equal normals then share one fan and
+                # decode to one custom normal, so MikkTSpace welds them (on flat faces each corner
+                # decodes on its own, bits apart, and the tangents came out per triangle: facets)
+                tmp.shade_smooth()
                 tmp.normals_split_custom_set(np.asarray(normals, np.float32).reshape(-1, 3).tolist())
             tmp.calc_tangents(uvmap=name)
             tt = np.empty(F * 9, dtype=np.float32)
