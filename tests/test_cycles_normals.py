@@ -33,11 +33,13 @@ ratio STPM / Cycles:
 | caps_flat_sharp, all_smooth, all_flat, auto_smooth, smooth_by_angle, sharp_seam, custom | 0.003-0.006 / 0.02-0.06 | the same |
 
 With a tangent-space Normal Map (``test_normal_map_matches_cycles``), block |z| max, mean ratio,
-before -> after: caps_flat 719, 1.551 -> 1.84, 1.002 (16-gon or fan caps alike); all_smooth with
-16-gon caps 71.5, 1.018 -> 1.73, 1.001 (an older bug: the n-gon tangent path's flat copy, see the
-test).
+before -> after: caps_flat 719, 1.551 -> 1.84, 1.002 (16-gon or fan caps alike); free_point (fan
+caps) 896, 1.054 -> 1.87, 1.002; all_edges_sharp (fan caps) 799, 1.459 -> 1.73, 1.001;
+all_smooth with 16-gon caps 71.5, 1.018 -> 1.73, 1.001 (an older bug: the n-gon tangent path's
+flat copy, see the test).  The old export fails 13 of these 26 tests (the four tangent
+orthogonality checks pass there: its tangents matched its own, wrong, normals).
 
-About 1 s per case here (21 tests in 14 s on an idle machine).
+About 1 s per case here (26 tests in 24 s on a machine shared with other jobs).
 """
 from __future__ import annotations
 
@@ -111,7 +113,8 @@ def test_tangents_follow_the_exported_normals():
     assert tn.max() < 1e-3, tn.max()
 
 
-@pytest.mark.parametrize("case,fill", [("caps_flat", "NGON"), ("caps_flat", "TRIFAN"), ("all_smooth", "NGON")])
+@pytest.mark.parametrize("case,fill", [("caps_flat", "NGON"), ("caps_flat", "TRIFAN"), ("all_smooth", "NGON"),
+                                       ("free_point", "TRIFAN"), ("all_edges_sharp", "TRIFAN")])
 def test_normal_map_matches_cycles(case, fill, tmp_path):
     """A tangent-space Normal Map on the cylinder (``normal_scenes._normal_map``), direct light.
     Meshes with n-gons get their tangents from a copy of the loop triangles carrying the shading
@@ -125,3 +128,17 @@ def test_normal_map_matches_cycles(case, fill, tmp_path):
     print(f"{case} {fill} normal map: {r.summary()}")
     assert r.z_abs_max < Z_MAX, (r.summary(), np.round(r.z, 1))
     assert abs(r.mean_ratio - 1.0) < MEAN_TOL, r.summary()
+
+
+@pytest.mark.parametrize("case", ["free_point", "free_face", "all_edges_sharp"])
+def test_tangents_follow_the_exported_normals_point_and_face(case):
+    """The same for meshes Blender and Cycles both call POINT or FACE, whose corner normals
+    (Blender's) still differ from the shading normals Cycles renders: a point-domain custom normal
+    on flat caps, smooth-flagged faces of a FACE mesh (fan caps: no n-gon path)."""
+    from addon.export.mesh import mesh_arrays
+    ns.build(case, fill="TRIFAN", normal_map=True)
+    me = bpy.data.objects["Cylinder"].evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    arr = mesh_arrays(me, tangent_maps=("",))
+    T = next(iter(arr["tangents"].values()))[..., :3]
+    tn = np.abs(np.sum(T * arr["normals"], axis=-1))
+    assert tn.max() < 1e-3, tn.max()

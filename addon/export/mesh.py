@@ -76,14 +76,20 @@ def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
     vertices = vertex_positions(me)
     domain = cycles_normals_domain(me) if F else "FACE"
     normals = shading_normals(me, tris, tri.reshape(F, 3), loops, vertices, domain)
-    # Blender's own tangents follow its corner normals; where Cycles' normals are others (a
-    # partly flat mesh, :func:`cycles_normals_domain`), they come from a copy carrying Cycles' ones
-    own_normals = normals is not None and domain != me.normals_domain
     uv_layers, uv_render = uv_arrays(me, loops)
     names = [uv_render if n == "" else n for n in tangent_maps]
     names = [n for n in dict.fromkeys(names) if n in uv_layers]
-    tangents = (tangent_arrays(me, loops, names, tri.reshape(F, 3), uv_layers, normals, warn, copy=own_normals)
-                if names and F else {})
+    tangents = {}
+    if names and F:
+        # Blender's own tangents follow its corner normals; where Cycles' normals are others (not
+        # a CORNER mesh, and some face flat or marked smooth against the domain), they come from a
+        # copy carrying Cycles' ones
+        own = False
+        if normals is not None and domain != "CORNER":
+            cn = np.empty(len(me.loops) * 3, dtype=np.float32)
+            me.corner_normals.foreach_get("vector", cn)
+            own = bool(np.abs(cn.reshape(-1, 3)[loops].reshape(F, 3, 3) - normals).max() > 1e-5)
+        tangents = tangent_arrays(me, loops, names, tri.reshape(F, 3), uv_layers, normals, warn, copy=own)
     color_layers, color_render = color_arrays(me, loops, color_maps) if color_maps else ({}, None)
     return {"vertices": vertices, "triangles": tri.reshape(F, 3),
             "slots": slots, "normals": normals, "uv_layers": uv_layers, "uv_render": uv_render,
@@ -149,10 +155,12 @@ def shading_normals(me, tris, tri: np.ndarray, loops: np.ndarray, vertices: np.n
     me.vertex_normals.foreach_get("vector", vn)
     normals = vn.reshape(-1, 3)[tri].astype(np.float32)
     if not smooth.all():
-        V = np.asarray(vertices, np.float64)[tri[~smooth]]
+        flat = np.flatnonzero(~smooth)
+        V = np.asarray(vertices, np.float64)[tri[flat]]
         ng = np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0])
-        ng /= np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
-        normals[~smooth] = ng[:, None, :].astype(np.float32)
+        length = np.linalg.norm(ng, axis=1)
+        ok = length > 0.0               # a degenerate triangle (never hit) keeps the vertex normals
+        normals[flat[ok]] = (ng[ok] / length[ok, None])[:, None, :].astype(np.float32)
     return np.ascontiguousarray(normals)
 
 
