@@ -53,8 +53,8 @@ def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
     vertices : (V, 3) float32 object space;
     triangles : (F, 3) int32 vertex indices;
     slots : (F,) int32 material slot index of each triangle;
-    normals : (F, 3, 3) float32 corner normals when any face is smooth or the mesh has custom
-        normals (Blender 4.1+ applies those to flat faces too, and so does Cycles), else None;
+    normals : (F, 3, 3) float32 object-space unit shading normals at each triangle's corners, the
+        ones Cycles renders (:func:`shading_normals`), or None when every triangle is flat;
     uv_layers : {name: (F, 3, 2) float32} every UV map's (u, v) at each triangle corner, in the
         corner order of ``triangles`` (see :func:`uv_arrays`);
     uv_render : the render-active UV map's name, or None without UV maps;
@@ -66,37 +66,102 @@ def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
     me.calc_loop_triangles()
     tris = me.loop_triangles
     F = len(tris)
-    # Loop triangles: vertex indices, material slots, smooth flags
+    # Loop triangles: vertex indices, corners, material slots
     tri = np.empty(F * 3, dtype=np.int32)
     tris.foreach_get("vertices", tri)
-    slots = np.empty(F, dtype=np.int32)
-    tris.foreach_get("material_index", slots)
-    smooth = np.zeros(F, dtype=bool)
-    if F:
-        tris.foreach_get("use_smooth", smooth)
-    # Corner normals: Blender already gives flat faces their face normal here, or their custom
-    # normals: those count on flat faces too (the corner domain; Cycles renders them), so a mesh
-    # with custom normals exports them even where no face is smooth
-    normals = None
     loops = np.empty(F * 3, dtype=np.int32)
     tris.foreach_get("loops", loops)
-    if smooth.any() or getattr(me, "normals_domain", "") == "CORNER":
-        cn = np.empty(len(me.loops) * 3, dtype=np.float32)
-        if hasattr(me, "corner_normals"):
-            me.corner_normals.foreach_get("vector", cn)
-            normals = cn.reshape(-1, 3)[loops].reshape(F, 3, 3)
-        else:  # Blender < 4.1
-            sn = np.empty(F * 9, dtype=np.float32)
-            tris.foreach_get("split_normals", sn)
-            normals = sn.reshape(F, 3, 3)
+    slots = np.empty(F, dtype=np.int32)
+    tris.foreach_get("material_index", slots)
+    vertices = vertex_positions(me)
+    domain = cycles_normals_domain(me) if F else "FACE"
+    normals = shading_normals(me, tris, tri.reshape(F, 3), loops, vertices, domain)
     uv_layers, uv_render = uv_arrays(me, loops)
     names = [uv_render if n == "" else n for n in tangent_maps]
     names = [n for n in dict.fromkeys(names) if n in uv_layers]
-    tangents = tangent_arrays(me, loops, names, tri.reshape(F, 3), uv_layers, normals, warn) if names and F else {}
+    tangents = {}
+    if names and F:
+        # Blender's own tangents follow its corner normals; where Cycles' normals are others (not
+        # a CORNER mesh, and some face flat or marked smooth against the domain), they come from a
+        # copy carrying Cycles' ones
+        own = False
+        if normals is not None and domain != "CORNER":
+            cn = np.empty(len(me.loops) * 3, dtype=np.float32)
+            me.corner_normals.foreach_get("vector", cn)
+            own = bool(np.abs(cn.reshape(-1, 3)[loops].reshape(F, 3, 3) - normals).max() > 1e-5)
+        tangents = tangent_arrays(me, loops, names, tri.reshape(F, 3), uv_layers, normals, warn, copy=own)
     color_layers, color_render = color_arrays(me, loops, color_maps) if color_maps else ({}, None)
-    return {"vertices": vertex_positions(me), "triangles": tri.reshape(F, 3),
+    return {"vertices": vertices, "triangles": tri.reshape(F, 3),
             "slots": slots, "normals": normals, "uv_layers": uv_layers, "uv_render": uv_render,
             "tangents": tangents, "color_layers": color_layers, "color_render": color_render}
+
+
+def cycles_normals_domain(me) -> str:
+    """The domain of the normals Cycles renders ``me`` with: "POINT", "FACE" or "CORNER".
+
+    Cycles asks Blender for ``Mesh::normals_domain(support_sharp_face=true)`` (Blender 5.0,
+    ``intern/cycles/blender/mesh.cc``): it honours the ``sharp_face`` flag (Shade Flat) per
+    triangle itself, so a mesh whose faces are partly flat but which has no sharp edge and no
+    custom normals is "POINT" to Cycles -- vertex normals, averaged over *all* faces around each
+    vertex (flat ones too) -- where Python's ``Mesh.normals_domain`` (support_sharp_face=false)
+    says "CORNER" (normals split at the flat faces).  Otherwise the two agree: custom normals
+    give their domain (split normals: CORNER), all faces flat or all edges sharp FACE, all smooth
+    without sharp edges POINT, the rest CORNER."""
+    domain = me.normals_domain
+    if domain != "CORNER" or me.has_custom_normals or me.attributes.get("custom_normal") is not None:
+        return domain
+    sharp_edge = me.attributes.get("sharp_edge")
+    if sharp_edge is not None and len(sharp_edge.data):
+        flags = np.empty(len(sharp_edge.data), dtype=bool)
+        sharp_edge.data.foreach_get("value", flags)
+        if flags.any():
+            return domain
+    return "POINT"          # partly flat faces, no sharp edge, no custom normals
+
+
+def shading_normals(me, tris, tri: np.ndarray, loops: np.ndarray, vertices: np.ndarray, domain: str):
+    """(F, 3, 3) float32 object-space shading normals at the corners of the loop triangles ``tris``
+    (vertex indices ``tri`` (F, 3), loop indices ``loops`` (3 F,), ``vertices`` (V, 3)) as Cycles
+    renders them, or None when every triangle is flat (the renderer then uses the faces);
+    ``domain``: :func:`cycles_normals_domain` of ``me``.
+
+    As ``intern/cycles/blender/mesh.cc`` (Blender 5.0) exports a mesh, by
+    :func:`cycles_normals_domain`:
+    CORNER -- Cycles splits the mesh at the corners whose normals differ and interpolates the
+    corner normals on every triangle (``Mesh.corner_normals``: a flat face's corners carry its
+    face normal, custom split normals count on flat faces too);
+    POINT / FACE -- each triangle is smooth unless its face is flat (``sharp_face``; without that
+    attribute: smooth in POINT, flat in FACE); a smooth triangle interpolates the vertex
+    normals ``Mesh.vertex_normals`` (angle-weighted averages of all faces around the vertex,
+    flat faces included: a cylinder with flat caps gets side normals tipped 42 degrees toward the
+    caps at the rims; or a point-domain ``custom_normal``), a flat triangle has its geometric
+    normal N_g = (V1 - V0) x (V2 - V0) / |...| at all three corners."""
+    F = tri.shape[0]
+    if F == 0:
+        return None
+    if domain == "CORNER":
+        cn = np.empty(len(me.loops) * 3, dtype=np.float32)
+        me.corner_normals.foreach_get("vector", cn)
+        return np.ascontiguousarray(cn.reshape(-1, 3)[loops].reshape(F, 3, 3))
+    # POINT / FACE: Cycles' per-triangle smooth flag, vertex normals on the smooth ones
+    if me.attributes.get("sharp_face") is not None:
+        smooth = np.empty(F, dtype=bool)
+        tris.foreach_get("use_smooth", smooth)
+    else:
+        smooth = np.full(F, domain != "FACE")
+    if not smooth.any():
+        return None
+    vn = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    me.vertex_normals.foreach_get("vector", vn)
+    normals = vn.reshape(-1, 3)[tri].astype(np.float32)
+    if not smooth.all():
+        flat = np.flatnonzero(~smooth)
+        V = np.asarray(vertices, np.float64)[tri[flat]]
+        ng = np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0])
+        length = np.linalg.norm(ng, axis=1)
+        ok = length > 0.0               # a degenerate triangle (never hit) keeps the vertex normals
+        normals[flat[ok]] = (ng[ok] / length[ok, None])[:, None, :].astype(np.float32)
+    return np.ascontiguousarray(normals)
 
 
 def color_arrays(me, loops: np.ndarray, names) -> tuple:
@@ -134,13 +199,17 @@ def color_arrays(me, loops: np.ndarray, names) -> tuple:
     return out, (render if render in out else None)
 
 
-def tangent_arrays(me, loops: np.ndarray, names: list, tri: np.ndarray, uv_layers: dict, normals, warn=None) -> dict:
+def tangent_arrays(me, loops: np.ndarray, names: list, tri: np.ndarray, uv_layers: dict, normals, warn=None,
+                   copy: bool = False) -> dict:
     """MikkTSpace tangents of the UV maps ``names``: {name: (F, 3, 4) float32}, per loop-triangle
     corner the object-space tangent (x, y, z) and the bitangent sign (+-1), as
     ``Mesh.calc_tangents`` computes them.
 
     Blender computes tangents for triangles and quads only; a mesh with n-gons gets them from a
-    temporary copy made of its loop triangles (same corners, UVs and corner normals).
+    temporary copy made of its loop triangles (same corners, UVs and corner normals).  So does a
+    mesh whose shading ``normals`` (F, 3, 3) are not Blender's corner normals (``copy``): MikkTSpace
+    makes each tangent orthogonal to the normal it is given, and Cycles gives it the normals it
+    renders.
     """
     import bpy
     F = tri.shape[0]
@@ -151,8 +220,8 @@ def tangent_arrays(me, loops: np.ndarray, names: list, tri: np.ndarray, uv_layer
     has_ngons = any(p.loop_total > 4 for p in me.polygons) if len(me.polygons) < 100_000 else None
     for name in names:
         try:
-            if has_ngons:
-                raise RuntimeError("n-gons")
+            if has_ngons or copy:
+                raise RuntimeError("n-gons, or Cycles' own normals")
             me.calc_tangents(uvmap=name)
             me.loops.foreach_get("tangent", t)
             me.loops.foreach_get("bitangent_sign", sign)
@@ -167,6 +236,10 @@ def tangent_arrays(me, loops: np.ndarray, names: list, tri: np.ndarray, uv_layer
             layer = tmp.uv_layers.new(name=name)
             layer.uv.foreach_set("vector", np.ascontiguousarray(uv_layers[name], np.float32).reshape(-1))
             if normals is not None:
+                # Smooth faces first: corners of one vertex with equal normals then share one fan and
+                # decode to one custom normal, so MikkTSpace welds them (on flat faces each corner
+                # decodes on its own, bits apart, and the tangents came out per triangle: facets)
+                tmp.shade_smooth()
                 tmp.normals_split_custom_set(np.asarray(normals, np.float32).reshape(-1, 3).tolist())
             tmp.calc_tangents(uvmap=name)
             tt = np.empty(F * 9, dtype=np.float32)
