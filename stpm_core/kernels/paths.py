@@ -834,7 +834,7 @@ def band_nee_weight(p_l, cos_s, g, d, wi):
     """Cycles' weight of a light sample below the face but above the shading normal (the band next
     to a smooth mesh's terminator): p_l^2 / (p_l^2 + p_b^2), p_b = cos_s / pi the diffuse lobe's
     density at wi (cos_s = |ns . wi|), p_l the light's (``sample_light_rows``); 1 above the face
-    (g turned toward the viewer, d the arriving ray) and for delta lights and suns (p_l = inf).
+    (g turned toward the viewer, d the arriving ray) and for delta lights and suns of angle 0 (p_l = inf).
 
     Cycles weighs next-event estimation against the BSDF's own samples with the density its
     ``bsdf_eval`` returns, which counts the band, while ``bsdf_diffuse_sample`` never returns a
