@@ -373,7 +373,7 @@ def _seen_lights(ctx, o, d, t, t_scene, first: bool, glossy=None, p_c=None):
     (``scene.metadata['light_visible_camera']``, off by default); AREA lights are one-sided
     emitters of radiance color P / (pi A), POINT / SPOT of radius r > 0 have radiance
     I / (pi r^2), spot-masked, on the disc facing the ray's origin (soft falloff) or the sphere,
-    a SUN of angle > 0 radiance color S / Omega in its cone where the ray escapes (t_scene inf;
+    a SUN of angle > 0 radiance color S / (pi sin^2(angle / 2)) in its cone where the ray escapes (t_scene inf;
     ``kernels.lights.seen_light``).
     """
     L = Lw = None

@@ -4,8 +4,8 @@ A plane at z = 0 (20 m square) under a SUN of angular diameter 5 degrees, 20 deg
 horizon straight ahead of the camera; the camera 1 m above the plane looks down by the same 20
 degrees, so the mirror direction of the image centre points at the sun's centre.  Black world: the
 only light is the sun.  Cycles' rays that leave the plane's lobe and escape within the sun's cone
-see its radiance S / (pi sin^2(angle / 2)) (its ``distant_light_intersect``), STPM's since
-2026-12-06 S / Omega, Omega = 2 pi (1 - cos(angle / 2)) (0.05 % apart at 5 degrees).
+see its radiance S / (pi sin^2(angle / 2)) (its ``distant_light_intersect``), STPM's too since
+2026-12-06.
 
 * ``water``: Principled BSDF, Transmission 1, IOR 1.33, Roughness 0 (a delta reflection and
   refraction; the refracted rays escape downward and see nothing);

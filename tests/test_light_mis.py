@@ -136,7 +136,7 @@ def test_sampler_density_matches_its_weights_and_the_oracle(case):
     elif light.type == "MESH":
         L = np.asarray(light.Le)[lights_numpy.mesh_triangle_of_sample(ls, li, u), 0]
     elif light.type == "SUN":
-        L = np.asarray(light.color, float)[0] * light.power / (2 * np.pi * (1 - np.cos(0.5 * light.angle)))
+        L = np.asarray(light.color, float)[0] * light.power / (np.pi * np.sin(0.5 * light.angle) ** 2)   # Cycles' radiance
     else:
         L = np.asarray(light.color, float)[0] * light.power / (4 * np.pi) / (np.pi * 0.3 ** 2)
     np.testing.assert_allclose(w[front, 0] * pdf[front], np.broadcast_to(L, (n,))[front], rtol=1e-9)

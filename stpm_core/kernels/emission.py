@@ -125,9 +125,10 @@ def _point_origin(row, c, d, u2, i):
 def _sun_photon(row, cos_half, Z, ce, R, back, n, u1, u2, i):
     """Sun photon i through a disc of radius R perpendicular to Z (unit or zero), ``back`` upstream of ce.
 
-    The sun's radiance is S / Omega in its cone, so points uniform on the disc (u2[i], pdf
+    The sun's radiance is S norm / Omega in its cone (``sampling.sun_cone``: norm = 2 / (1 +
+    cos_half), Cycles' normalisation, 1 at angle 0), so points uniform on the disc (u2[i], pdf
     1 / (pi R^2)) and directions -Z (angle 0) or uniform in the cone of cosine cos_half about -Z
-    (u1[i], pdf 1 / Omega) carry color * S * pi R^2 * cos_t / n (0 for a zero Z).
+    (u1[i], pdf 1 / Omega) carry color * S * norm * pi R^2 * cos_t / n (0 for a zero Z).
     Returns origin, direction, power (3-tuples).
     """
     Z, ok = axis_or_z(Z)
@@ -141,7 +142,7 @@ def _sun_photon(row, cos_half, Z, ce, R, back, n, u1, u2, i):
         d = neg(Z)
         cos_t = 1.0
     g = np.pi * R * R * cos_t * ok / n
-    S = row[P_POWER]
+    S = row[P_POWER] * (2.0 / (1.0 + cos_half))
     return o, d, (row[P_COLOR] * S * g, row[P_COLOR + 1] * S * g, row[P_COLOR + 2] * S * g)
 
 

@@ -47,11 +47,11 @@ from .light_params import P_ANGLE, P_COLOR, P_DEAD, P_POWER, P_RADIUS, P_SOFT, P
 from .environment import (E_NEE_COS, E_PORTAL_NEE, E_TEXTURED, PT_E1, PT_E2, PT_N, PT_S, env_pdf, env_radiance,
                           env_sample, portal_cross)
 from .sampling import (JIT, TWO_PI, area_point, area_shape, axis_or_z, clip, column, concentric_disk,
-                       cosine_hemisphere, cross, dot, edot, intensity, light_axis, load_pose, madd, mesh_choice, mesh_point, mesh_triangle, neg,
+                       cosine_hemisphere, cross, dot, edot, intensity, light_axis, load_pose, madd, mesh_choice, mesh_point, mesh_triangle, neg, sun_cone,
                        normalize, one_minus_cos_from_sin2, pose_buffer, row3, scale, sign, spot_attenuation, sub,
                        to_world, uniform_cone, uniform_sphere, unit, vec3)
 
-__all__ = ["sample_light_rows", "sun_solid_angle", "world_nee_pdf", "world_nee_pdf_batch", "light_pdf", "mesh_light_pdf", "seen_light", "sample_direct_batch",
+__all__ = ["sample_light_rows", "world_nee_pdf", "world_nee_pdf_batch", "light_pdf", "mesh_light_pdf", "seen_light", "sample_direct_batch",
            "sample_pdf_batch", "light_pdf_batch", "seen_batch", "spherical_rect_sample",
            "spherical_rect_batch"]
 
@@ -220,25 +220,18 @@ def _sample_area(prm, M, p, u0, u1):
 
 
 @njit(**JIT)
-def sun_solid_angle(prm):
-    """(cos_half, Omega) of a SUN of angular diameter ``angle`` > 0: cos_half = cos(angle / 2) and
-    Omega = 2 pi (1 - cos_half) sr, the cone :func:`_sample_sun` draws from uniformly (density
-    1 / Omega) and :func:`seen_light` shows with radiance color S / Omega."""
-    cos_half = math.cos(0.5 * prm[P_ANGLE])
-    return cos_half, TWO_PI * (1.0 - cos_half)
-
-
-@njit(**JIT)
 def _sample_sun(prm, M, u0, u1):
     """SUN of strength S: toward its unit Z axis, uniform in the cone of angular diameter
-    ``angle`` (radiance S / Omega, pdf 1 / Omega, :func:`sun_solid_angle`): weight color S,
-    distance inf.  A zero Z scale has no direction: +Z stands in and the weight is 0."""
+    ``angle`` (radiance color S norm / Omega = color S / (pi sin^2(angle / 2)), pdf 1 / Omega,
+    ``sampling.sun_cone``): weight color S norm, norm = 2 / (1 + cos(angle / 2)) (1 at angle 0:
+    the facing irradiance is S, as in Cycles), distance inf.  A zero Z scale has no direction: +Z
+    stands in and the weight is 0."""
     Z, ok = axis_or_z(light_axis(M))
     angle = prm[P_ANGLE]
-    wi = to_world(uniform_cone(u0, u1, math.cos(0.5 * angle)), Z) if angle > 0.0 else Z
-    power = prm[P_POWER]
-    return (wi[0], wi[1], wi[2], np.inf, prm[P_COLOR] * power * ok, prm[P_COLOR + 1] * power * ok,
-            prm[P_COLOR + 2] * power * ok)
+    cos_half, _, norm = sun_cone(prm)
+    wi = to_world(uniform_cone(u0, u1, cos_half), Z) if angle > 0.0 else Z
+    power = prm[P_POWER] * norm * ok
+    return (wi[0], wi[1], wi[2], np.inf, prm[P_COLOR] * power, prm[P_COLOR + 1] * power, prm[P_COLOR + 2] * power)
 
 
 @njit(**JIT)
@@ -405,7 +398,7 @@ def light_pdf(prm, M, p, wi):
       outside (1 / (4 pi) from inside).
 
     * SUN of angle > 0: 1 / Omega inside its cone (``wi . Z >= cos(angle / 2)``, the cone
-      :func:`seen_light` shows), 0 outside (:func:`sun_solid_angle`).
+      :func:`seen_light` shows), 0 outside (``sampling.sun_cone``).
 
     inf for every other light (delta lights and suns of angle 0: next-event estimation alone
     counts them) and where wi cannot reach the light's front (the sample then weighs nothing)."""
@@ -413,7 +406,7 @@ def light_pdf(prm, M, p, wi):
     if typ == T_SUN:
         if not prm[P_ANGLE] > 0.0:
             return np.inf
-        cos_half, omega = sun_solid_angle(prm)
+        cos_half, omega, _ = sun_cone(prm)
         Z, _ = axis_or_z(light_axis(M))
         return 1.0 / omega if dot(wi, Z) >= cos_half else 0.0
     if typ == T_AREA:
@@ -500,7 +493,7 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
     drawn, for multiple importance sampling, written in the same loop: the WORLD's
     (:func:`world_nee_pdf`) always; with want_pdf also an AREA's, a POINT / SPOT sphere's
     (:func:`light_pdf`), a MESH light's (:func:`mesh_light_pdf`) and a SUN's of angle > 0 (1 / Omega,
-    :func:`sun_solid_angle`); inf otherwise (delta lights and suns of angle 0 always).  The light type is chosen once, outside the loops: each loop body is one
+    ``sampling.sun_cone``); inf otherwise (delta lights and suns of angle 0 always).  The light type is chosen once, outside the loops: each loop body is one
     sampler, with no branch or call it does not need (a POINT / SPOT of radius 0 has a loop of
     its own, :func:`_sample_point_delta`, which LLVM inlines: a loop with a call in it saves and
     reloads its floating-point values around the call on every row).  The loops
@@ -539,7 +532,7 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
     elif typ == T_SUN:
         # a sun of angle > 0 is seen by rays that escape within its cone (seen_light): density
         # 1 / Omega for multiple importance sampling; a sun of angle 0 is a direction only (inf)
-        p_sun = 1.0 / sun_solid_angle(prm)[1] if want_pdf and prm[P_ANGLE] > 0.0 else np.inf
+        p_sun = 1.0 / sun_cone(prm)[1] if want_pdf and prm[P_ANGLE] > 0.0 else np.inf
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
@@ -609,8 +602,8 @@ def seen_light(prm, M, o, d, t_scene, camera_ray):
 
     SUN of angle > 0 (Cycles' ``distant_light_intersect``): seen by a ray that escapes the scene
     (t_scene = inf) within its cone, ``d . Z >= cos(angle / 2)`` (Z: M's unit Z axis, toward the
-    sun), with radiance color S / Omega (:func:`sun_solid_angle`): next-event estimation's weight
-    color S times its density 1 / Omega.
+    sun), with radiance color S norm / Omega = color S / (pi sin^2(angle / 2)) (Cycles'; ``sampling.sun_cone``):
+    next-event estimation's weight color S norm times its density 1 / Omega.
     """
     typ = int(prm[P_TYPE])
     power = prm[P_POWER]
@@ -622,10 +615,10 @@ def seen_light(prm, M, o, d, t_scene, camera_ray):
         if not prm[P_ANGLE] > 0.0 or t_scene < np.inf:
             return 0.0, 0.0, 0.0
         Z, ok = axis_or_z(light_axis(M))
-        cos_half, omega = sun_solid_angle(prm)
+        cos_half, omega, norm = sun_cone(prm)
         if ok == 0.0 or dot(d, Z) < cos_half:
             return 0.0, 0.0, 0.0
-        k = power / omega
+        k = power * norm / omega
         return c0 * k, c1 * k, c2 * k
     if typ == T_AREA:
         # -- the light's plane; local coordinates of the crossing

@@ -350,7 +350,8 @@ def sample_area(lights, li, p, times, u):
 def sample_sun(lights, li, p, times, u):
     """SUN: direction +Z of the light (toward the sun); cone of angular diameter ``angle``.
 
-    Radiance S / Omega uniform in the cone, pdf 1 / Omega -> weight = color * S.
+    Radiance S / (pi sin^2(angle / 2)) uniform in the cone (Cycles' normalisation: a facing surface
+    receives S), pdf 1 / Omega -> weight = color * S * 2 / (1 + cos(angle / 2)).
     """
     l = lights.lights[li]
     _, _, _, Z = lights._frame(li, times)
@@ -360,7 +361,8 @@ def sample_sun(lights, li, p, times, u):
         wi = _local_to_world(uniform_cone(u, np.cos(0.5 * l.angle)), np.broadcast_to(Z, (n, 3)))
     else:
         wi = np.broadcast_to(Z, (n, 3)).copy()
-    weight = np.broadcast_to(np.asarray(l.color, float) * float(l.power), (n, 3)) * ok[:, None]
+    norm = 2.0 / (1.0 + np.cos(0.5 * l.angle))       # Omega / (pi sin^2(angle / 2)); 1 at angle 0
+    weight = np.broadcast_to(np.asarray(l.color, float) * (float(l.power) * norm), (n, 3)) * ok[:, None]
     return wi, np.full(n, np.inf), weight
 
 
@@ -376,8 +378,8 @@ def seen_lights_numpy(lights, o: np.ndarray, d: np.ndarray, t: np.ndarray, t_sce
     facing their local -Z with radiance ``color P / (pi A)``; POINT / SPOT lights of radius r > 0
     have radiance ``I / (pi r^2)`` (spots masked by their cone along -d): with ``use_soft_falloff``
     on the disc of radius r through their centre facing the ray's origin (Cycles), else on the sphere.  A SUN of
-    angle > 0 has radiance ``color S / Omega``, Omega = 2 pi (1 - cos(angle / 2)), along rays that
-    escape (t_scene = inf) within its cone (:func:`sky_radiance`).  Radius-0 lights and suns of
+    angle > 0 has radiance ``color S / (pi sin^2(angle / 2))`` (Cycles') along rays that escape
+    (t_scene = inf) within its cone (:func:`sky_radiance`).  Radius-0 lights and suns of
     angle 0 are not visible; meshes (their triangles are geometry) and the world neither.  only:
     the one light to look at (None: all).
     """
@@ -517,7 +519,8 @@ def hit_one(lights, li, o, d, times):
 
 
 def sky_radiance(lights, d: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """Radiance (n, 3) of suns with angle > 0 seen along escaping rays d (n, 3): color S / Omega inside their cone."""
+    """Radiance (n, 3) of suns with angle > 0 seen along escaping rays d (n, 3): color S / (pi sin^2(angle / 2))
+    inside their cone."""
     d = np.asarray(d, float)
     n = d.shape[0]
     times = np.broadcast_to(np.atleast_1d(np.asarray(times, float)), (n,))
@@ -530,18 +533,16 @@ def sky_radiance(lights, d: np.ndarray, times: np.ndarray) -> np.ndarray:
 
 def _sun_seen(lights, li: int, d: np.ndarray, times: np.ndarray) -> np.ndarray:
     """Radiance (n, 3) of SUN li along the unit directions d (n, 3) of escaping rays at times (n,):
-    color S / Omega where d . Z >= cos(angle / 2) (Z its unit axis toward the sun; none for a zero
-    Z scale), Omega = 2 pi (1 - cos(angle / 2)); 0 for angle 0, no power or black colour."""
+    color S / (pi sin^2(angle / 2)) (Cycles' normalisation) where d . Z >= cos(angle / 2) (Z its
+    unit axis toward the sun; none for a zero Z scale); 0 for angle 0, no power or black colour."""
     l = lights.lights[li]
     n = d.shape[0]
     color = np.asarray(l.color, float)
     if l.angle <= 0.0 or l.power <= 0 or not np.any(color > 0) or n == 0:
         return np.zeros((n, 3))
     Z, ok = _axis_or_z(lights._frame(li, np.broadcast_to(np.atleast_1d(np.asarray(times, float)), (n,)))[3])
-    cos_half = np.cos(0.5 * l.angle)
-    omega = 2.0 * np.pi * (1.0 - cos_half)
-    inside = (np.sum(d * Z, axis=-1) >= cos_half) & (ok > 0)
-    return inside[:, None] * (color * float(l.power) / omega)[None, :]
+    inside = (np.sum(d * Z, axis=-1) >= np.cos(0.5 * l.angle)) & (ok > 0)
+    return inside[:, None] * (color * float(l.power) / (np.pi * np.sin(0.5 * l.angle) ** 2))[None, :]
 
 
 # ---------------------------------------------------------------------------
