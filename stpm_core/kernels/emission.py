@@ -92,7 +92,7 @@ from .light_params import (P_ANGLE, P_COLOR, P_COS_HALF, P_FLUX, P_POWER, P_RADI
 from .sampling import (JIT, TWO_PI, add, area_point, area_shape, axis_or_z, basis, column,
                        concentric_disk, cosine_hemisphere, dot, edot, intensity, light_axis, load_pose, madd,
                        mesh_point, neg, normalize, one_minus_cos_from_sin2, plane_point, pose_buffer, row3, scale,
-                       spot_attenuation, sub, to_world, uniform_cone, uniform_sphere, vec3)
+                       spot_attenuation, sub, sun_cone, to_world, uniform_cone, uniform_sphere, vec3)
 
 __all__ = ["emit_photons", "emit_toward_photons", "emit", "emit_toward"]
 
@@ -142,7 +142,7 @@ def _sun_photon(row, cos_half, Z, ce, R, back, n, u1, u2, i):
         d = neg(Z)
         cos_t = 1.0
     g = np.pi * R * R * cos_t * ok / n
-    S = row[P_POWER] * (2.0 / (1.0 + cos_half))
+    S = row[P_POWER] * sun_cone(row)[2]
     return o, d, (row[P_COLOR] * S * g, row[P_COLOR + 1] * S * g, row[P_COLOR + 2] * S * g)
 
 
