@@ -144,8 +144,10 @@ def strata_uniforms(samples: np.ndarray, strata: tuple, rng: np.random.Generator
 
 
 def _has_shape(light) -> bool:
-    """Can a ray hit the light itself (an AREA light, a POINT / SPOT sphere of radius > 0)?"""
-    return light.type == "AREA" or (light.type in ("POINT", "SPOT") and float(light.radius) > 0.0)
+    """Can a ray hit the light itself (an AREA light, a POINT / SPOT sphere of radius > 0, the cone of a
+    SUN of angle > 0 for rays that escape the scene)?"""
+    return (light.type == "AREA" or (light.type in ("POINT", "SPOT") and float(light.radius) > 0.0)
+            or (light.type == "SUN" and float(light.angle) > 0.0))
 
 
 # ----------------------------------------------------------------------------
@@ -370,8 +372,9 @@ def _seen_lights(ctx, o, d, t, t_scene, first: bool, glossy=None, p_c=None):
     light i only if Blender's Object > Visibility > Camera is on for it
     (``scene.metadata['light_visible_camera']``, off by default); AREA lights are one-sided
     emitters of radiance color P / (pi A), POINT / SPOT of radius r > 0 have radiance
-    I / (pi r^2), spot-masked, on the disc facing the ray's origin (soft falloff) or the sphere
-    (``kernels.lights.seen_light``).
+    I / (pi r^2), spot-masked, on the disc facing the ray's origin (soft falloff) or the sphere,
+    a SUN of angle > 0 radiance color S / (pi sin^2(angle / 2)) in its cone where the ray escapes (t_scene inf;
+    ``kernels.lights.seen_light``).
     """
     L = Lw = None
     vis = ctx.light_visible_camera
@@ -803,7 +806,7 @@ class _Context:
     shading: object = None                   # shading.ShadingData: node programs, textures, mesh attributes
     ggx: tuple = None                        # (E (32, 32), E_avg (32,)) GGX albedo tables (kernels.bsdf)
     light_data: list = None                  # per light: (parameter row, mesh arrays) (kernels.light_params)
-    shaped_lights: tuple = ()                # lights a ray can hit (AREA, POINT / SPOT of radius > 0) with power
+    shaped_lights: tuple = ()                # lights a ray can hit (AREA, POINT / SPOT of radius > 0, SUN of angle > 0) with power
     mesh_emitters: dict = None               # MESH light index -> (instance, (F,) int64 prim -> its triangle j or -1)
     light_visible_camera: list = None        # per light: seen by camera rays (Blender's visible_camera)
     zero_passes: tuple = ()                  # passes that stay 0 for every sample

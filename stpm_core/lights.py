@@ -403,13 +403,10 @@ class LightSet:
             return self.intensity(li) * _spot_solid_angle(l)
         if l.type == "AREA":
             return color * float(l.power)
-        # SUN: irradiance S through the disc (mean cos over the cone for angle > 0)
+        # SUN: irradiance S through the disc (Cycles' normalisation: its radiance S / (pi sin^2(angle / 2))
+        # gives a facing surface exactly S, for every angle)
         R = self._sun_disc_radius(li)
-        return color * float(l.power) * np.pi * R * R * self._sun_mean_cos(li)
-
-    def _sun_mean_cos(self, li: int) -> float:
-        """Mean cosine to the axis over the sun's cone: (1 + cos_half) / 2."""
-        return 0.5 * (1.0 + np.cos(0.5 * self.lights[li].angle))
+        return color * float(l.power) * np.pi * R * R
 
     def _frame(self, li: int, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Light pose at times (n,): position (n, 3), unit X, Y, Z axes (n, 3) each (scale removed).

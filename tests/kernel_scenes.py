@@ -112,9 +112,9 @@ def kernel_scenes(resolution=(24, 18)):
         Light(type="AREA", power=150.0, shape="ELLIPSE", size=1.2, size_y=0.4, color=np.array([1.0, 0.6, 0.3]),
               transform=MotionTransform.static(look_at((0.0, 2.0, 2.0), (0.0, 0.0, 0.0))))],
         shutter=blur), base))
-    # -- Sun with an angle, plus the world; a transparent film ---------------------------------
+    # -- Sun with an angle (0.5 rad: its cone seen in the mirror, glass and metal), plus the world; a transparent film
     out.append(("sun_world", scene([
-        Light(type="SUN", power=3.0, angle=0.1, transform=MotionTransform.static(look_at((1, -1, 2), (0, 0, 0))))],
+        Light(type="SUN", power=3.0, angle=0.5, transform=MotionTransform.static(look_at((1, -1, 2), (0, 0, 0))))],
         world=(0.05, 0.06, 0.08), metadata={"film_transparent": True}), base))
     # -- Emissive meshes: static and deforming ------------------------------------------------
     out.append(("mesh_lights", scene([], extra=[(_emitter_mesh(False), translate(-1.0, 0.0, 0.0)),

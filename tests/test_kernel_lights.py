@@ -357,7 +357,7 @@ def _seen_scene():
         Light(type="SPOT", power=90.0, radius=0.4, spot_size=1.0, spot_blend=0.0,
               transform=_moving((1.0, -1.5, 1.5), (1.3, -1.2, 1.4), scale=(1.0, 1.0, 0.5))),
         Light(type="POINT", power=60.0, radius=0.0, transform=_static((0.0, 1.5, 1.0))),     # not visible
-        Light(type="SUN", power=2.0, angle=0.2, transform=_static((0, 0, 5))),                # not visible
+        Light(type="SUN", power=2.0, angle=0.2, transform=_static((0, 0, 5))),                # seen where rays escape
         Light(type="AREA", shape="DISK", size=1.0, power=0.0, transform=_static((0.0, 0.0, 3.0))),   # power 0
         Light(type="AREA", shape="SQUARE", size=0.7, power=50.0, transform=_static((0, 0, 1.0), scale=(0, 1, 1))),
     ]

@@ -59,11 +59,14 @@ def _uniform_dirs(n, rng):
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
-@pytest.mark.parametrize("case", ["rectangle", "disk", "ellipse", "sphere", "soft"])
+@pytest.mark.parametrize("case", ["rectangle", "disk", "ellipse", "sphere", "soft", "sun"])
 def test_light_density_integrates_to_one_over_the_light(case):
     M = translate(0.2, -0.1, 1.3) @ _rot_x(0.5)
     if case in AREA:
         light = Light(type="AREA", power=100.0, transform=MotionTransform.static(M), **AREA[case])
+    elif case == "sun":
+        # a 30-degree disc at infinity: escaping rays (t_scene = inf) inside its cone see it
+        light = Light(type="SUN", power=3.0, angle=np.radians(30.0), transform=MotionTransform.static(M))
     else:
         light = Light(type="POINT", power=100.0, radius=0.4, use_soft_falloff=case == "soft",
                       transform=MotionTransform.static(M))
@@ -80,7 +83,7 @@ def test_light_density_integrates_to_one_over_the_light(case):
         L = np.empty((n, 3))
         seen_batch(prm, poses, P, wi, np.full(n, np.inf), False, L)
         hit = L[:, 0] > 0                    # soft falloff: the disc through the centre facing p
-        if case == "soft":
+        if case in ("soft", "sun"):
             # the shape a ray from p hits is the shape next-event estimation samples from p
             assert np.array_equal(hit, pdf > 0), (p, int(np.sum(hit != (pdf > 0))))
         assert hit.sum() > 1000
@@ -98,7 +101,7 @@ def _pdf_samples(ls, li, p, times, rng):
     return S, u
 
 
-@pytest.mark.parametrize("case", ["rectangle", "disk", "sphere", "soft", "mesh", "moving rectangle"])
+@pytest.mark.parametrize("case", ["rectangle", "disk", "sphere", "soft", "mesh", "moving rectangle", "sun"])
 def test_sampler_density_matches_its_weights_and_the_oracle(case):
     rng = np.random.default_rng(2)
     M = translate(0.1, 0.2, 1.5) @ _rot_x(0.3)
@@ -112,6 +115,8 @@ def test_sampler_density_matches_its_weights_and_the_oracle(case):
         ls = _lights(Light(type="AREA", power=80.0, transform=tr, **AREA["rectangle"]))
     elif case in AREA:
         ls = _lights(Light(type="AREA", power=80.0, transform=MotionTransform.static(M), **AREA[case]))
+    elif case == "sun":
+        ls = _lights(Light(type="SUN", power=80.0, angle=np.radians(5.0), transform=MotionTransform.static(M)))
     else:
         ls = _lights(Light(type="POINT", power=80.0, radius=0.3, use_soft_falloff=case == "soft",
                            transform=MotionTransform.static(M)))
@@ -130,6 +135,8 @@ def test_sampler_density_matches_its_weights_and_the_oracle(case):
         L = np.asarray(light.color, float)[0] * light.power / (np.pi * A)
     elif light.type == "MESH":
         L = np.asarray(light.Le)[lights_numpy.mesh_triangle_of_sample(ls, li, u), 0]
+    elif light.type == "SUN":
+        L = np.asarray(light.color, float)[0] * light.power / (np.pi * np.sin(0.5 * light.angle) ** 2)   # Cycles' radiance
     else:
         L = np.asarray(light.color, float)[0] * light.power / (4 * np.pi) / (np.pi * 0.3 ** 2)
     np.testing.assert_allclose(w[front, 0] * pdf[front], np.broadcast_to(L, (n,))[front], rtol=1e-9)
@@ -141,16 +148,19 @@ def test_sampler_density_matches_its_weights_and_the_oracle(case):
     np.testing.assert_allclose(pdf[front], ref[front], rtol=1e-7)
 
 
-@pytest.mark.parametrize("case", ["point soft", "spot soft", "point sphere", "point soft, inside"])
+@pytest.mark.parametrize("case", ["point soft", "spot soft", "point sphere", "point soft, inside", "sun"])
 def test_rays_hit_the_shape_next_event_estimation_samples(case):
     """From points p around the light: every direction next-event estimation draws hits the light's
     shape with the radiance the sample carries (seen = weight x p_l), and uniform directions hit it
-    exactly where p_l > 0 (soft falloff: the disc facing p; the sphere: its cone)."""
+    exactly where p_l > 0 (soft falloff: the disc facing p; the sphere: its cone; a sun of angle > 0:
+    its cone, for rays that escape)."""
     rng = np.random.default_rng(5)
     M = translate(0.1, 0.2, 1.5) @ _rot_x(0.4)
     kw = dict(radius=0.3, use_soft_falloff="soft" in case, transform=MotionTransform.static(M))
     if case.startswith("spot"):
         light = Light(type="SPOT", power=120.0, spot_size=1.6, spot_blend=0.3, **kw)
+    elif case == "sun":
+        light = Light(type="SUN", power=3.0, angle=np.radians(40.0), transform=kw["transform"])
     else:
         light = Light(type="POINT", power=80.0, **kw)
     ls = _lights(light)
@@ -193,9 +203,9 @@ def test_rays_hit_the_shape_next_event_estimation_samples(case):
     assert hit[sel].sum() > 50
 
 
-def test_delta_lights_and_suns_have_no_density():
+def test_delta_lights_and_suns_of_angle_zero_have_no_density():
     ls = _lights(Light(type="POINT", power=10.0, radius=0.0, transform=MotionTransform.static(translate(0, 0, 2))),
-                 Light(type="SUN", power=2.0, angle=0.1, transform=MotionTransform.static(np.eye(4))))
+                 Light(type="SUN", power=2.0, angle=0.0, transform=MotionTransform.static(np.eye(4))))
     rng = np.random.default_rng(3)
     p = rng.normal(size=(50, 3))
     for li in range(2):

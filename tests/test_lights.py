@@ -133,10 +133,13 @@ def test_sun_irradiance_and_angle():
     assert np.all(np.isinf(dist))
     assert np.allclose(wi, tilt[:, 2])
     assert np.isclose(E[0], S * np.cos(0.5))
-    # Cone of angular diameter 10 deg: facing irradiance S * E[cos] = S (1 + cos 5deg) / 2
+    # Cone of angular diameter 10 deg: facing irradiance exactly S, as Cycles (radiance
+    # S / (pi sin^2 5deg); until 2026-12-06 S / Omega, which gave S (1 + cos 5deg) / 2, 0.19 % less:
+    # measured with bpy under a 30-degree sun, Cycles' white plane 0.7640 = rho S / pi, STPM's 1.7 % darker)
     E2, se2, wi2, _ = _irradiance(ls, 1, [0, 0, 0], [0, 0, 1])
     assert wi2[:, 2].min() >= np.cos(np.radians(5)) - 1e-12
-    assert abs(E2[0] - S * 0.5 * (1 + np.cos(np.radians(5)))) < 4 * se2[0] + 1e-12
+    assert abs(E2[0] - S) < 4 * se2[0] + 1e-12
+    assert se2[0] < 0.25 * S * 0.5 * (1 - np.cos(np.radians(5)))    # the test tells S from S (1 + cos) / 2
 
 
 def _rect_center_irradiance(L, a, b, h):

@@ -92,7 +92,7 @@ from .light_params import (P_ANGLE, P_COLOR, P_COS_HALF, P_FLUX, P_POWER, P_RADI
 from .sampling import (JIT, TWO_PI, add, area_point, area_shape, axis_or_z, basis, column,
                        concentric_disk, cosine_hemisphere, dot, edot, intensity, light_axis, load_pose, madd,
                        mesh_point, neg, normalize, one_minus_cos_from_sin2, plane_point, pose_buffer, row3, scale,
-                       spot_attenuation, sub, to_world, uniform_cone, uniform_sphere, vec3)
+                       spot_attenuation, sub, sun_cone, to_world, uniform_cone, uniform_sphere, vec3)
 
 __all__ = ["emit_photons", "emit_toward_photons", "emit", "emit_toward"]
 
@@ -125,9 +125,10 @@ def _point_origin(row, c, d, u2, i):
 def _sun_photon(row, cos_half, Z, ce, R, back, n, u1, u2, i):
     """Sun photon i through a disc of radius R perpendicular to Z (unit or zero), ``back`` upstream of ce.
 
-    The sun's radiance is S / Omega in its cone, so points uniform on the disc (u2[i], pdf
+    The sun's radiance is S norm / Omega in its cone (``sampling.sun_cone``: norm = 2 / (1 +
+    cos_half), Cycles' normalisation, 1 at angle 0), so points uniform on the disc (u2[i], pdf
     1 / (pi R^2)) and directions -Z (angle 0) or uniform in the cone of cosine cos_half about -Z
-    (u1[i], pdf 1 / Omega) carry color * S * pi R^2 * cos_t / n (0 for a zero Z).
+    (u1[i], pdf 1 / Omega) carry color * S * norm * pi R^2 * cos_t / n (0 for a zero Z).
     Returns origin, direction, power (3-tuples).
     """
     Z, ok = axis_or_z(Z)
@@ -141,7 +142,7 @@ def _sun_photon(row, cos_half, Z, ce, R, back, n, u1, u2, i):
         d = neg(Z)
         cos_t = 1.0
     g = np.pi * R * R * cos_t * ok / n
-    S = row[P_POWER]
+    S = row[P_POWER] * sun_cone(row)[2]
     return o, d, (row[P_COLOR] * S * g, row[P_COLOR + 1] * S * g, row[P_COLOR + 2] * S * g)
 
 

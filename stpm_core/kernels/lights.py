@@ -10,7 +10,8 @@ implementation it replaced is the test oracle ``tests/oracles/lights_numpy.py``)
   the light type is chosen once per call, outside the loop; the camera-path kernels
   (:mod:`.paths`) call it once per light and bounce;
 * :func:`seen_light` -- radiance of the light's shape hit by one ray (AREA lights, one-sided;
-  POINT / SPOT of radius > 0: the sphere, or with soft falloff the disc facing the ray's origin),
+  POINT / SPOT of radius > 0: the sphere, or with soft falloff the disc facing the ray's origin;
+  a SUN of angle > 0: its cone, seen by rays that escape the scene),
   as ``integrator._seen_lights`` for one light;
 * :func:`spherical_rect_sample` -- a point of a rectangle uniform in the solid angle it subtends;
 * :func:`light_pdf`, :func:`mesh_light_pdf`, :func:`world_nee_pdf` -- the solid-angle density with
@@ -46,7 +47,7 @@ from .light_params import P_ANGLE, P_COLOR, P_DEAD, P_POWER, P_RADIUS, P_SOFT, P
 from .environment import (E_NEE_COS, E_PORTAL_NEE, E_TEXTURED, PT_E1, PT_E2, PT_N, PT_S, env_pdf, env_radiance,
                           env_sample, portal_cross)
 from .sampling import (JIT, TWO_PI, area_point, area_shape, axis_or_z, clip, column, concentric_disk,
-                       cosine_hemisphere, cross, dot, edot, intensity, light_axis, load_pose, madd, mesh_choice, mesh_point, mesh_triangle, neg,
+                       cosine_hemisphere, cross, dot, edot, intensity, light_axis, load_pose, madd, mesh_choice, mesh_point, mesh_triangle, neg, sun_cone,
                        normalize, one_minus_cos_from_sin2, pose_buffer, row3, scale, sign, spot_attenuation, sub,
                        to_world, uniform_cone, uniform_sphere, unit, vec3)
 
@@ -221,14 +222,16 @@ def _sample_area(prm, M, p, u0, u1):
 @njit(**JIT)
 def _sample_sun(prm, M, u0, u1):
     """SUN of strength S: toward its unit Z axis, uniform in the cone of angular diameter
-    ``angle`` (radiance S / Omega, pdf 1 / Omega): weight color S, distance inf.
-    A zero Z scale has no direction: +Z stands in and the weight is 0."""
+    ``angle`` (radiance color S norm / Omega = color S / (pi sin^2(angle / 2)), pdf 1 / Omega,
+    ``sampling.sun_cone``): weight color S norm, norm = 2 / (1 + cos(angle / 2)) (1 at angle 0:
+    the facing irradiance is S, as in Cycles), distance inf.  A zero Z scale has no direction: +Z
+    stands in and the weight is 0."""
     Z, ok = axis_or_z(light_axis(M))
     angle = prm[P_ANGLE]
-    wi = to_world(uniform_cone(u0, u1, math.cos(0.5 * angle)), Z) if angle > 0.0 else Z
-    power = prm[P_POWER]
-    return (wi[0], wi[1], wi[2], np.inf, prm[P_COLOR] * power * ok, prm[P_COLOR + 1] * power * ok,
-            prm[P_COLOR + 2] * power * ok)
+    cos_half, _, norm = sun_cone(prm)
+    wi = to_world(uniform_cone(u0, u1, cos_half), Z) if angle > 0.0 else Z
+    power = prm[P_POWER] * norm * ok
+    return (wi[0], wi[1], wi[2], np.inf, prm[P_COLOR] * power, prm[P_COLOR + 1] * power, prm[P_COLOR + 2] * power)
 
 
 @njit(**JIT)
@@ -394,9 +397,18 @@ def light_pdf(prm, M, p, wi):
     * POINT / SPOT sphere: 1 / Omega, Omega = 2 pi (1 - cos theta_max) the cone it subtends from
       outside (1 / (4 pi) from inside).
 
-    inf for every other light (delta lights and suns: next-event estimation alone counts them)
-    and where wi cannot reach the light's front (the sample then weighs nothing)."""
+    * SUN of angle > 0: 1 / Omega inside its cone (``wi . Z >= cos(angle / 2)``, the cone
+      :func:`seen_light` shows), 0 outside (``sampling.sun_cone``).
+
+    inf for every other light (delta lights and suns of angle 0: next-event estimation alone
+    counts them) and where wi cannot reach the light's front (the sample then weighs nothing)."""
     typ = int(prm[P_TYPE])
+    if typ == T_SUN:
+        if not prm[P_ANGLE] > 0.0:
+            return np.inf
+        cos_half, omega, _ = sun_cone(prm)
+        Z, _ = axis_or_z(light_axis(M))
+        return 1.0 / omega if dot(wi, Z) >= cos_half else 0.0
     if typ == T_AREA:
         c, ex, ey, A, n_emit, disk = area_shape(prm, M)
         if not disk:
@@ -480,8 +492,8 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
     (behind an area light, outside a spot, a dead light).  S[k, 7]: the density with which wi was
     drawn, for multiple importance sampling, written in the same loop: the WORLD's
     (:func:`world_nee_pdf`) always; with want_pdf also an AREA's, a POINT / SPOT sphere's
-    (:func:`light_pdf`) and a MESH light's (:func:`mesh_light_pdf`); inf otherwise (delta lights
-    and suns always).  The light type is chosen once, outside the loops: each loop body is one
+    (:func:`light_pdf`), a MESH light's (:func:`mesh_light_pdf`) and a SUN's of angle > 0 (1 / Omega,
+    ``sampling.sun_cone``); inf otherwise (delta lights and suns of angle 0 always).  The light type is chosen once, outside the loops: each loop body is one
     sampler, with no branch or call it does not need (a POINT / SPOT of radius 0 has a loop of
     its own, :func:`_sample_point_delta`, which LLVM inlines: a loop with a call in it saves and
     reloads its floating-point values around the call on every row).  The loops
@@ -494,9 +506,9 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
     n = rows.shape[0]
     M = pose_buffer(poses)
     img, func, marg, cond, par, portals = env
-    # Column 7 (written in the same loop): the density the world's samples were drawn with
-    # (multiple importance sampling against camera paths that go on through rough lobes); inf
-    # for every other light, which next-event estimation handles alone
+    # Column 7 (written in the same loop): the density the samples were drawn with (multiple
+    # importance sampling against camera paths that go on through rough lobes); inf for delta
+    # lights, which next-event estimation handles alone
     if (typ == T_POINT or typ == T_SPOT) and prm[P_RADIUS] <= 0.0:
         for k in range(n):
             if not one:
@@ -518,11 +530,14 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
             _put(S, k, _sample_area(prm, M, p, U[k, 0], U[k, 1]))
             S[k, 7] = light_pdf(prm, M, p, (S[k, 0], S[k, 1], S[k, 2])) if want_pdf else np.inf
     elif typ == T_SUN:
+        # a sun of angle > 0 is seen by rays that escape within its cone (seen_light): density
+        # 1 / Omega for multiple importance sampling; a sun of angle 0 is a direction only (inf)
+        p_sun = 1.0 / sun_cone(prm)[1] if want_pdf and prm[P_ANGLE] > 0.0 else np.inf
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
             _put(S, k, _sample_sun(prm, M, U[k, 0], U[k, 1]))
-            S[k, 7] = np.inf
+            S[k, 7] = p_sun
     elif typ == T_MESH:
         for k in range(n):
             if not one:
@@ -580,16 +595,31 @@ def seen_light(prm, M, o, d, t_scene, camera_ray):
     radius r > 0, radiance I / (pi r^2), spots masked by the cone about M's -Z (normalised) along
     -d: with soft falloff the disc of radius r through the centre facing o (the disc
     :func:`_sample_point` draws from o, so that hits, samples and :func:`light_pdf` describe one
-    light, as Cycles' ``point_light_intersect``), without it the sphere, seen from outside only.  Radius-0 lights, suns,
-    meshes (the caster hits their triangles) and the world: 0; lights of power <= 0 or black
+    light, as Cycles' ``point_light_intersect``), without it the sphere, seen from outside only.  Radius-0 lights,
+    suns of angle 0, meshes (the caster hits their triangles) and the world: 0; lights of power <= 0 or black
     colour: 0.  ``camera_ray`` is accepted for symmetry: Blender's camera-visibility flag is the
     caller's test.
+
+    SUN of angle > 0 (Cycles' ``distant_light_intersect``): seen by a ray that escapes the scene
+    (t_scene = inf) within its cone, ``d . Z >= cos(angle / 2)`` (Z: M's unit Z axis, toward the
+    sun), with radiance color S norm / Omega = color S / (pi sin^2(angle / 2)) (Cycles'; ``sampling.sun_cone``):
+    next-event estimation's weight color S norm times its density 1 / Omega.
     """
     typ = int(prm[P_TYPE])
     power = prm[P_POWER]
     c0, c1, c2 = vec3(prm, P_COLOR)
     if power <= 0.0 or not (c0 > 0.0 or c1 > 0.0 or c2 > 0.0):
         return 0.0, 0.0, 0.0
+    if typ == T_SUN:
+        # -- a disc at infinity: rays that escape inside its cone
+        if not prm[P_ANGLE] > 0.0 or t_scene < np.inf:
+            return 0.0, 0.0, 0.0
+        Z, ok = axis_or_z(light_axis(M))
+        cos_half, omega, norm = sun_cone(prm)
+        if ok == 0.0 or dot(d, Z) < cos_half:
+            return 0.0, 0.0, 0.0
+        k = power * norm / omega
+        return c0 * k, c1 * k, c2 * k
     if typ == T_AREA:
         # -- the light's plane; local coordinates of the crossing
         c, ex, ey, area, n_emit, disk = area_shape(prm, M)

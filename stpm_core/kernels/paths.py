@@ -25,8 +25,8 @@ equations with these names):
   type), the BSDF (:func:`stpm_core.kernels.bsdf.bsdf_eval`), the unshadowed
   contribution and the shadow rays where it is positive; then
   :func:`nee_accumulate` adds the unblocked ones;
-* :func:`seen_lights_add` -- light shapes (area lights, spheres, soft-falloff discs) hit by camera
-  rays and delta chains;
+* :func:`seen_lights_add` -- light shapes (area lights, spheres, soft-falloff discs, the cones of
+  suns of angle > 0 where rays escape) hit by camera rays and by rays leaving delta or rough lobes;
 * :func:`photon_albedo` / :func:`photon_add` -- the diffuse albedo and the
   query rows of the photon-map look-ups, and rho / pi E added into a pass;
 * :func:`specular_step` -- continue through delta and rough non-diffuse lobes: BSDF sample
@@ -602,14 +602,14 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
     Rows k with ``mis[k]`` (uint8 bits: 1 a path may go on from them through a rough reflection, 2
     through a rough refraction, ``integrator.mis_rows``; the bit of wi's side counts: camera paths go on from them through their rough lobes,
     :func:`specular_step`, and pick up the light where they reach it: the world where they escape,
-    an AREA light or a POINT / SPOT sphere seen along the ray, :func:`seen_lights_add`, an
+    an AREA light, a POINT / SPOT sphere or a SUN's cone seen along the ray, :func:`seen_lights_add`, an
     emitting triangle of a MESH light they hit, :func:`mesh_emission_mis`): the part f_c of f those
     lobes carry, sampled with density p_c (``bsdf_eval_cont``: every non-delta lobe's, one-sample
     multiple importance sampling; stop_coat as the continuation) is weighed
     by the power heuristic p_l^2 / (p_l^2 + p_c^2) (:func:`mis_weight`), p_l = S[k, 7] the light's own density
     (``sample_light_rows`` with want_pdf, set when any row has mis), and the paths that reach
     the light by p_c / (p_l + p_c) (docs/rendering.md, "Multiple importance sampling").  Delta
-    lights and suns (p_l = inf) keep f whole: the paths do not see them.
+    lights and suns of angle 0 (p_l = inf) keep f whole: the paths do not see them.
 
     Three loops, each with only the code its rows need (a loop that contains a call, even one it
     never takes, saves and reloads its floating-point values around it and runs up to twice
@@ -834,7 +834,7 @@ def band_nee_weight(p_l, cos_s, g, d, wi):
     """Cycles' weight of a light sample below the face but above the shading normal (the band next
     to a smooth mesh's terminator): p_l^2 / (p_l^2 + p_b^2), p_b = cos_s / pi the diffuse lobe's
     density at wi (cos_s = |ns . wi|), p_l the light's (``sample_light_rows``); 1 above the face
-    (g turned toward the viewer, d the arriving ray) and for delta lights and suns (p_l = inf).
+    (g turned toward the viewer, d the arriving ray) and for delta lights and suns of angle 0 (p_l = inf).
 
     Cycles weighs next-event estimation against the BSDF's own samples with the density its
     ``bsdf_eval`` returns, which counts the band, while ``bsdf_diffuse_sample`` never returns a

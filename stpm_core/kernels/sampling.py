@@ -45,12 +45,12 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .light_params import P_COLOR, P_COS_HALF, P_POWER, P_SHAPE, P_SIZE, P_SIZE_Y, P_SMOOTH, S_DISK, S_ELLIPSE
+from .light_params import P_ANGLE, P_COLOR, P_COS_HALF, P_POWER, P_SHAPE, P_SIZE, P_SIZE_Y, P_SMOOTH, S_DISK, S_ELLIPSE
 
 __all__ = ["JIT", "JIT_INLINE", "TWO_PI", "INV_4PI", "dot", "edot", "cross", "normalize", "unit", "column",
            "vec3", "row3", "pose_buffer", "load_pose", "sub", "add", "neg", "scale", "madd", "plane_point", "clip", "sign", "basis", "to_world",
            "concentric_disk", "cosine_hemisphere", "uniform_sphere", "uniform_cone", "axis_or_z",
-           "one_minus_cos_from_sin2", "light_axis", "intensity", "spot_attenuation", "area_shape", "area_point",
+           "one_minus_cos_from_sin2", "sun_cone", "light_axis", "intensity", "spot_attenuation", "area_shape", "area_point",
            "search_right", "mesh_point", "mesh_triangle", "mesh_choice", "mesh_choices"]
 
 JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -270,6 +270,18 @@ def one_minus_cos_from_sin2(sin2):
     """1 - sqrt(1 - sin^2) without cancellation for small angles (sin^2 clipped to [0, 1])."""
     sin2 = clip(sin2, 0.0, 1.0)
     return sin2 / (1.0 + math.sqrt(1.0 - sin2))
+
+
+@njit(**JIT)
+def sun_cone(prm):
+    """(cos_half, Omega, norm) of a SUN of angular diameter ``angle`` (its parameter row prm):
+    cos_half = cos(angle / 2); Omega = 2 pi (1 - cos_half) sr, the cone next-event estimation and
+    photons draw directions from uniformly (density 1 / Omega); norm = 2 / (1 + cos_half) =
+    Omega / (pi sin^2(angle / 2)), Cycles' normalisation (its ``Light::area`` of a sun, pi
+    sin^2(angle / 2)): the sun's radiance is color S norm / Omega = color S / (pi sin^2(angle / 2)),
+    so a surface facing it receives exactly S.  Angle 0: cos_half = 1, Omega = 0, norm = 1."""
+    cos_half = math.cos(0.5 * prm[P_ANGLE])
+    return cos_half, TWO_PI * (1.0 - cos_half), 2.0 / (1.0 + cos_half)
 
 
 # ----------------------------------------------------------------------------

@@ -115,7 +115,8 @@ def sun_photons(lights, li, n, Z, center, R, back, u, rng):
     else:
         dirs = -Z.copy()
         cos_t = np.ones(n)
-    power = (np.asarray(l.color, float) * float(l.power))[None, :] * (np.pi * R * R * cos_t * ok / n)[:, None]
+    norm = 2.0 / (1.0 + np.cos(0.5 * l.angle))       # radiance S / (pi sin^2(angle / 2)) (Cycles'), 1 at angle 0
+    power = (np.asarray(l.color, float) * (float(l.power) * norm))[None, :] * (np.pi * R * R * cos_t * ok / n)[:, None]
     return origins, dirs, power
 
 

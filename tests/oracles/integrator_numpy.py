@@ -503,10 +503,11 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
 
         # -- Lights seen through delta lobes (before the next surface) -------------------------
         # Cycles' defaults: lights are invisible to camera rays (visible_camera off) and
-        # visible to glossy / transmission rays, i.e. in mirrors and through glass.
+        # visible to glossy / transmission rays, i.e. in mirrors and through glass; a sun of
+        # angle > 0 where the ray escapes (t_scene = inf)
         if ctx.visible_lights:
             for li in range(len(ctx.lights)):
-                if ctx.lights.lights[li].type not in ("AREA", "POINT", "SPOT"):
+                if ctx.lights.lights[li].type not in ("AREA", "POINT", "SPOT", "SUN"):
                     continue                  # meshes: their triangles are hit (below); the world: misses
                 val = _seen_lights(ctx.lights, o, d, t, hits.t, camera_ray=(bounce == 0),
                                    visible_camera=ctx.light_visible_camera, only=li)
@@ -667,7 +668,8 @@ def trace_image_numpy(scene, settings, caster, lights, maps=None, *, time_overri
                 J[prim] = jj
             ctx.mesh_emitters[li] = (l.instance, J)
     ctx.light_visible_camera = [bool(v) for v in (scene.metadata.get("light_visible_camera") or [])]
-    ctx.visible_lights = any(l.type == "AREA" or (l.type in ("POINT", "SPOT") and l.radius > 0) for l in lights.lights)
+    ctx.visible_lights = any(l.type == "AREA" or (l.type in ("POINT", "SPOT") and l.radius > 0)
+                             or (l.type == "SUN" and l.angle > 0) for l in lights.lights)
     film = Film(W, H, settings.filter_width)
     cam = scene.camera
     side = int(np.clip(np.sqrt(BATCH_SAMPLES / spp), 1, 64))

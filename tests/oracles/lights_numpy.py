@@ -350,7 +350,8 @@ def sample_area(lights, li, p, times, u):
 def sample_sun(lights, li, p, times, u):
     """SUN: direction +Z of the light (toward the sun); cone of angular diameter ``angle``.
 
-    Radiance S / Omega uniform in the cone, pdf 1 / Omega -> weight = color * S.
+    Radiance S / (pi sin^2(angle / 2)) uniform in the cone (Cycles' normalisation: a facing surface
+    receives S), pdf 1 / Omega -> weight = color * S * 2 / (1 + cos(angle / 2)).
     """
     l = lights.lights[li]
     _, _, _, Z = lights._frame(li, times)
@@ -360,7 +361,8 @@ def sample_sun(lights, li, p, times, u):
         wi = _local_to_world(uniform_cone(u, np.cos(0.5 * l.angle)), np.broadcast_to(Z, (n, 3)))
     else:
         wi = np.broadcast_to(Z, (n, 3)).copy()
-    weight = np.broadcast_to(np.asarray(l.color, float) * float(l.power), (n, 3)) * ok[:, None]
+    norm = 2.0 / (1.0 + np.cos(0.5 * l.angle))       # Omega / (pi sin^2(angle / 2)); 1 at angle 0
+    weight = np.broadcast_to(np.asarray(l.color, float) * (float(l.power) * norm), (n, 3)) * ok[:, None]
     return wi, np.full(n, np.inf), weight
 
 
@@ -375,9 +377,11 @@ def seen_lights_numpy(lights, o: np.ndarray, d: np.ndarray, t: np.ndarray, t_sce
     Camera rays see light i only if ``visible_camera[i]``.  AREA lights are one-sided emitters
     facing their local -Z with radiance ``color P / (pi A)``; POINT / SPOT lights of radius r > 0
     have radiance ``I / (pi r^2)`` (spots masked by their cone along -d): with ``use_soft_falloff``
-    on the disc of radius r through their centre facing the ray's origin (Cycles), else on the sphere.  Radius-0 lights and
-    suns are not visible; meshes (their triangles are geometry) and the world neither.  only: the
-    one light to look at (None: all).
+    on the disc of radius r through their centre facing the ray's origin (Cycles), else on the sphere.  A SUN of
+    angle > 0 has radiance ``color S / (pi sin^2(angle / 2))`` (Cycles') along rays that escape
+    (t_scene = inf) within its cone (:func:`sky_radiance`).  Radius-0 lights and suns of
+    angle 0 are not visible; meshes (their triangles are geometry) and the world neither.  only:
+    the one light to look at (None: all).
     """
     n = o.shape[0]
     L = np.zeros((n, 3))
@@ -391,7 +395,10 @@ def seen_lights_numpy(lights, o: np.ndarray, d: np.ndarray, t: np.ndarray, t_sce
             continue
         if camera_ray and not (visible_camera is not None and li < len(visible_camera) and visible_camera[li]):
             continue
-        if light.type == "AREA":
+        if light.type == "SUN":
+            escaped = ~(np.asarray(t_scene, float) < np.inf)
+            L[escaped] += _sun_seen(lights, li, d[escaped], t[escaped])
+        elif light.type == "AREA":
             # Plane of the light at each ray's time; local coordinates of the crossing
             M = light.transform.at(t)
             sy = light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size
@@ -512,20 +519,30 @@ def hit_one(lights, li, o, d, times):
 
 
 def sky_radiance(lights, d: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """Radiance (n, 3) of suns with angle > 0 seen along escaping rays d (n, 3): color S / Omega inside their cone."""
+    """Radiance (n, 3) of suns with angle > 0 seen along escaping rays d (n, 3): color S / (pi sin^2(angle / 2))
+    inside their cone."""
     d = np.asarray(d, float)
     n = d.shape[0]
     times = np.broadcast_to(np.atleast_1d(np.asarray(times, float)), (n,))
     L = np.zeros((n, 3))
     for li, l in enumerate(lights.lights):
-        if l.type != "SUN" or l.angle <= 0.0:
-            continue
-        _, _, _, Z = lights._frame(li, times)
-        cos_half = np.cos(0.5 * l.angle)
-        omega = 2.0 * np.pi * (1.0 - cos_half)
-        inside = np.sum(d * Z, axis=-1) >= cos_half
-        L += inside[:, None] * (np.asarray(l.color, float) * float(l.power) / omega)[None, :]
+        if l.type == "SUN":
+            L += _sun_seen(lights, li, d, times)
     return L
+
+
+def _sun_seen(lights, li: int, d: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Radiance (n, 3) of SUN li along the unit directions d (n, 3) of escaping rays at times (n,):
+    color S / (pi sin^2(angle / 2)) (Cycles' normalisation) where d . Z >= cos(angle / 2) (Z its
+    unit axis toward the sun; none for a zero Z scale); 0 for angle 0, no power or black colour."""
+    l = lights.lights[li]
+    n = d.shape[0]
+    color = np.asarray(l.color, float)
+    if l.angle <= 0.0 or l.power <= 0 or not np.any(color > 0) or n == 0:
+        return np.zeros((n, 3))
+    Z, ok = _axis_or_z(lights._frame(li, np.broadcast_to(np.atleast_1d(np.asarray(times, float)), (n,)))[3])
+    inside = (np.sum(d * Z, axis=-1) >= np.cos(0.5 * l.angle)) & (ok > 0)
+    return inside[:, None] * (color * float(l.power) / (np.pi * np.sin(0.5 * l.angle) ** 2))[None, :]
 
 
 # ---------------------------------------------------------------------------
@@ -552,7 +569,8 @@ def nee_pdf(lights, li: int, p: np.ndarray, wi: np.ndarray, times: np.ndarray, x
     along wi (inf where wi meets its back); POINT / SPOT with soft falloff: t^2 / (cos pi r^2) where
     wi crosses the disc of radius r through the centre facing p, else 0; sphere: 1 / (2 pi (1 -
     cos theta_max)) (1 / (4 pi) from inside); MESH: q_j |x - p|^2 / (A_j |cos_l|) for the point x
-    (n, 3) of its triangles j (n,); delta lights and suns: inf.
+    (n, 3) of its triangles j (n,); SUN of angle > 0: 1 / Omega inside its cone (wi . Z >=
+    cos(angle / 2)), 0 outside; delta lights and suns of angle 0: inf.
     """
     l = lights.lights[li]
     n = p.shape[0]
@@ -590,6 +608,11 @@ def nee_pdf(lights, li: int, p: np.ndarray, wi: np.ndarray, times: np.ndarray, x
             sin2 = (r / np.maximum(d, r)) ** 2
             one_minus_cos = sin2 / (1.0 + np.sqrt(1.0 - sin2))       # 1 - cos theta_max, without cancellation
             out = np.where(d <= r, 1.0 / (4.0 * np.pi), 1.0 / (2.0 * np.pi * one_minus_cos))
+    elif l.type == "SUN" and l.angle > 0:
+        Z, _ = _axis_or_z(lights._frame(li, np.ascontiguousarray(times))[3])
+        cos_half = np.cos(0.5 * l.angle)
+        inside = np.einsum("ij,ij->i", wi, Z) >= cos_half
+        out = np.where(inside, 1.0 / (2.0 * np.pi * (1.0 - cos_half)), 0.0)
     elif l.type == "MESH":
         C = mesh_corners(l, j, times)
         cr = np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0])

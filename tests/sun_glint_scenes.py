@@ -1,0 +1,78 @@
+"""A sun's glint in water, chrome and rough metal (bpy), for ``tests/test_cycles_sun_glint.py``.
+
+A plane at z = 0 (20 m square) under a SUN of angular diameter 5 degrees, 20 degrees above the
+horizon straight ahead of the camera; the camera 1 m above the plane looks down by the same 20
+degrees, so the mirror direction of the image centre points at the sun's centre.  Black world: the
+only light is the sun.  Cycles' rays that leave the plane's lobe and escape within the sun's cone
+see its radiance S / (pi sin^2(angle / 2)) (its ``distant_light_intersect``), STPM's too since
+2026-12-06.
+
+* ``water``: Principled BSDF, Transmission 1, IOR 1.33, Roughness 0 (a delta reflection and
+  refraction; the refracted rays escape downward and see nothing);
+* ``chrome``: Principled BSDF, Metallic 1, Roughness 0, base colour 0.9 (a delta reflection);
+* ``rough_metal``, ``glossy_metal``: the same metal at Roughness 0.25 and 0.1: its lobe reaches
+  the sun and next-event estimation samples it; both are kept, weighed by the power heuristic
+  (at 0.1 next-event estimation alone is the noisier of the two).
+"""
+from __future__ import annotations
+
+import math
+
+import bpy
+
+from direct_light_scenes import metal
+from test_addon_scenes import add_camera, add_light, add_mesh, fresh, set_world
+
+__all__ = ["SCENES", "build", "SUN_ANGLE", "SUN_STRENGTH", "ELEVATION"]
+
+W, H = 64, 48
+SUN_ANGLE = math.radians(5.0)         # angular diameter
+SUN_STRENGTH = 3.0                     # W/m^2
+ELEVATION = math.radians(20.0)         # the sun above the horizon; the camera looks down as much
+
+
+def _water(name="Water"):
+    mat = bpy.data.materials.new(name)
+    p = mat.node_tree.nodes["Principled BSDF"]
+    p.inputs["Base Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    p.inputs["Transmission Weight"].default_value = 1.0
+    p.inputs["IOR"].default_value = 1.33
+    p.inputs["Roughness"].default_value = 0.0
+    return mat
+
+
+def _plane(make_material):
+    """The plane (its material from make_material(), called after the factory reset), the camera,
+    the sun; black world."""
+    scene = fresh()
+    material = make_material()
+    scene.render.resolution_x, scene.render.resolution_y = W, H
+    set_world((0, 0, 0), 0.0)
+    add_mesh("plane", "Plane", location=(0.0, 6.0, 0.0), material=material, size=20.0)
+    add_camera(location=(0.0, -2.0, 1.0), rotation=(math.pi / 2 - ELEVATION, 0, 0), lens=80)
+    sun = add_light("SUN", "Sun", location=(0.0, 5.0, 5.0), energy=SUN_STRENGTH, angle=SUN_ANGLE)
+    sun.rotation_euler = (-(math.pi / 2 - ELEVATION), 0, 0)   # its +Z (toward the sun): (0, cos e, sin e)
+    return scene
+
+
+def water():
+    return _plane(_water)
+
+
+def chrome():
+    return _plane(lambda: metal("Chrome", roughness=0.0))
+
+
+def rough_metal():
+    return _plane(lambda: metal("Rough", roughness=0.25))
+
+
+def glossy_metal():
+    return _plane(lambda: metal("Glossy", roughness=0.1))
+
+
+SCENES = {"water": water, "chrome": chrome, "rough_metal": rough_metal, "glossy_metal": glossy_metal}
+
+
+def build(name: str):
+    return SCENES[name]()
