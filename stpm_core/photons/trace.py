@@ -120,7 +120,8 @@ def _times(scene, n: int, rng, time_override) -> np.ndarray:
 def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, inst_offset: np.ndarray,
                        target_instance: int | None = None, min_nondelta: int = 1,
                        origin: np.ndarray | None = None, shading=None, diffuse_bounces: int | None = None,
-                       transparent_bounces: int = TRANSPARENT_MAX_BOUNCES, reader: int = 1) -> np.ndarray:
+                       transparent_bounces: int = TRANSPARENT_MAX_BOUNCES, reader: int = 1,
+                       s_lit: np.ndarray | None = None) -> np.ndarray:
     """Trace photon paths and return the stored records.
 
     Parameters
@@ -146,6 +147,9 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     origin : (3,) world point stored positions are relative to (record.photon_origin).
     shading : ``shading.ShadingData`` of the scene (node programs, textures, mesh attributes);
         None: every hit reads its material's constant closure row.
+    s_lit : (n,) distances from the origins below which a photon's first hit receives nothing
+        (``LightSet.emit(..., with_s_lit=True)``: a soft-falloff light's photons); such photons
+        are dropped.  None: every first hit counts.
 
     Returns
     -------
@@ -170,6 +174,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     # Photons with no power carry nothing
     live = np.any(Phi > 0.0, axis=1)
     o, d, Phi, t = o[live], d[live], Phi[live], t[live]
+    s_lit = None if s_lit is None else np.asarray(s_lit, dtype=np.float64)[live]
     n_delta = np.zeros(o.shape[0], dtype=np.int32)      # delta bounces so far
     n_nondelta = np.zeros(o.shape[0], dtype=np.int32)   # non-delta bounces so far
     n_diffuse = np.zeros(o.shape[0], dtype=np.int32)    # diffuse bounces as Cycles counts them
@@ -184,6 +189,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         keep = hits.hit
         if caustic and depth == 0 and target_instance is not None:
             keep &= hits.instance == target_instance     # this target's cone owns only its own first hits
+        if depth == 0 and s_lit is not None:
+            keep &= hits.t >= s_lit                       # a soft-falloff light's disc does not reach them
         idx = np.nonzero(keep)[0]
         k = idx.size
         if k == 0:
@@ -293,9 +300,9 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
         li, ii, c, r = pairs[pi]
         rng = rng_for(settings.seed, STREAM_CAUSTIC, pi, b0 // BATCH)
         t = _times(scene, n, rng, time_override)
-        o, d, Phi = lights.emit_toward(li, n, t, rng, c, r)
+        o, d, Phi, s_lit = lights.emit_toward(li, n, t, rng, c, r, with_s_lit=True)
         Phi = Phi * (n / float(n_pair))                  # this batch's share of the pair's photons
-        return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="caustic",
+        return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="caustic", s_lit=s_lit,
                                   max_depth=settings.max_depth, inst_offset=inst_offset, target_instance=ii,
                                   shading=shading, diffuse_bounces=settings.diffuse_bounces,
                                   transparent_bounces=settings.transparent_max_bounces)
@@ -332,9 +339,9 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
         t = _times(scene, n, rng, time_override)
         # Each light's emit() spreads its flux over the photons it is given: scale
         # to this batch's share of the light's photons.
-        o, d, Phi = lights.emit(li, n, t, rng)
+        o, d, Phi, s_lit = lights.emit(li, n, t, rng, with_s_lit=True)
         Phi = Phi * (n / float(n_light))
-        return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global",
+        return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global", s_lit=s_lit,
                                   max_depth=settings.max_depth, inst_offset=inst_offset, min_nondelta=min_nondelta,
                                   shading=shading, diffuse_bounces=settings.diffuse_bounces,
                                   transparent_bounces=settings.transparent_max_bounces, reader=2 if gather else 1)
