@@ -506,7 +506,7 @@ class LightSet:
     # Photon emission
     # -----------------------------------------------------------------------
 
-    def emit(self, li: int, n: int, times: np.ndarray, rng: np.random.Generator):
+    def emit(self, li: int, n: int, times: np.ndarray, rng: np.random.Generator, *, with_s_lit: bool = False):
         """Emit n photons from light li over its whole emission (the kernel
         :func:`stpm_core.kernels.emission.emit_photons`).
 
@@ -514,12 +514,14 @@ class LightSet:
         Returns origins (n, 3), unit dirs (n, 3), power (n, 3) W per photon;
         E[sum of power] = :meth:`flux` (exactly, for POINT and AREA).
         Points and spots with a radius emit from their sphere / disc, so
-        caustics get the same soft edges as shadows.
+        caustics get the same soft edges as shadows.  ``with_s_lit``: also return s_lit (n,), the
+        distance from each origin below which the photon's first hit receives nothing (soft
+        falloff; a tracer must drop those photons, :func:`stpm_core.kernels.emission.emit`).
         """
-        return _emission.emit(self, li, n, times, rng)
+        return _emission.emit(self, li, n, times, rng, with_s_lit=with_s_lit)
 
     def emit_toward(self, li: int, n: int, times: np.ndarray, rng: np.random.Generator,
-                    centers: np.ndarray, radius: float):
+                    centers: np.ndarray, radius: float, *, with_s_lit: bool = False):
         """Emit n photons aimed at a sphere (centers (n, 3) or (3,), radius) only (the kernel
         :func:`stpm_core.kernels.emission.emit_toward_photons`).
 
@@ -531,6 +533,6 @@ class LightSet:
         :meth:`emit`'s distribution.  Suns and the world emit from a disc
         covering the sphere, started outside the whole scene.
 
-        Returns origins (n, 3), unit dirs (n, 3), power (n, 3).
+        Returns origins (n, 3), unit dirs (n, 3), power (n, 3)[, s_lit (n,) as :meth:`emit`].
         """
-        return _emission.emit_toward(self, li, n, times, rng, centers, radius)
+        return _emission.emit_toward(self, li, n, times, rng, centers, radius, with_s_lit=with_s_lit)

@@ -21,7 +21,8 @@ matrices, k = 1 (static: every photon reads matrix 0) or n (one per photon); the
 ``Le`` (F, 3) (empty for other lights); ``env`` the world's environment (``kernels.environment``;
 black for other lights); ``times`` (1,) or (n,) normalised shutter times.
 Outputs, written in place: ``o``, ``d``, ``P`` (n, 3): origins (scene units), unit directions,
-power per photon (W).
+power per photon (W); ``s_lit`` (n,): the distance from o below which the photon's first hit
+receives nothing (scene units; 0 but for soft-falloff POINT / SPOT lights of radius > 0).
 
 Notation below: c the light's position (pose column 3), Z its unit Z axis (the light shines along
 -Z), I = color * power / (4 pi) W/sr its intensity, Phi = ``LightSet.flux`` (``P_FLUX``).
@@ -35,7 +36,10 @@ Emission over the whole light (:func:`emit_photons`)
   leaves +Z as the cone axis (and the mask then decides).
 * POINT / SPOT of radius r > 0: the same direction and power, the origin a uniform point of the
   disc of radius r perpendicular to the direction (``concentric_disk``) through c (soft falloff
-  on) or pushed onto the sphere's front (off): :func:`_point_origin`.
+  on) or pushed onto the sphere's front (off): :func:`_point_origin`.  Soft falloff also sets
+  ``s_lit = b^2 / sqrt(r^2 - b^2)`` (b the origin's distance from c): a first hit nearer than
+  that lies outside the disc of radius r facing it, so the tracer drops the photon; the photons
+  then give next-event estimation's ``I cos / (r^2 + D^2)``, not the sphere's ``I cos / D^2``.
 * AREA: origin uniform on the shape (``area_point``: square / rectangle from 2u - 1, disc /
   ellipse from ``concentric_disk``, times the half-extent vectors ex, ey), direction cosine-weighted
   about the emitting normal (``cosine_hemisphere``); power ``Phi / n`` = color * P / n (0 where
@@ -102,23 +106,35 @@ __all__ = ["emit_photons", "emit_toward_photons", "emit", "emit_toward"]
 # ----------------------------------------------------------------------------
 @njit(**JIT)
 def _point_origin(row, c, d, u2, i):
-    """Origin of a photon leaving a POINT / SPOT light (centre c) along unit d.
+    """Origin of a photon leaving a POINT / SPOT light (centre c) along unit d, and the distance
+    ``s_lit`` from it below which its first hit receives nothing.
 
     A Lambertian sphere of radiance L seen from direction d is a uniformly bright disc of radius
     r perpendicular to d: radius 0, c; radius r > 0, c plus r times a uniform point of the unit
-    disc (u2[i]) in the plane perpendicular to d (soft falloff: Cycles' disc facing the
-    receiver), without soft falloff moved along d onto the sphere's front.
+    disc (u2[i]) in the plane perpendicular to d, at distance b from c; without soft falloff moved
+    along d onto the sphere's front (s_lit = 0).
+
+    Soft falloff (Cycles' disc of radius r through c facing each receiver): a point p at distance
+    s along the photon's line (D^2 = s^2 + b^2 from c) sees this line's radiance only where the
+    line crosses the disc facing p, tan(alpha) = b / s <= r / D, i.e. s >= s_lit =
+    b^2 / sqrt(r^2 - b^2).  The photon's power holds only for a first hit at s >= s_lit (the
+    tracer drops the others), so its lines reproduce that light's radiance I / (pi r^2) in the
+    cone of half-angle atan(r / D) about every point -- next-event estimation's
+    ``I cos_q / t^2`` over the disc, E = I cos / (r^2 + D^2) on an unshadowed plane -- where
+    without the cut they would be the sphere's (asin(r / D), E = I cos / D^2).
     """
     r = row[P_RADIUS]
     if r <= 0.0:
-        return c
+        return c, 0.0
     x, y = concentric_disk(u2[i, 0], u2[i, 1])
     x, y = x * r, y * r
     t, b = basis(d)
     o = plane_point(c, x, t, y, b)
+    b2 = x * x + y * y
     if row[P_SOFT] == 0.0:
-        o = madd(o, math.sqrt(max(r * r - (x * x + y * y), 0.0)), d)
-    return o
+        return madd(o, math.sqrt(max(r * r - b2, 0.0)), d), 0.0
+    rest = r * r - b2
+    return o, (b2 / math.sqrt(rest) if rest > 0.0 else np.inf)
 
 
 @njit(**JIT)
@@ -287,7 +303,7 @@ def _store(o_out, d_out, P_out, i, o, d, P):
 # Emission over the whole light
 # ----------------------------------------------------------------------------
 @njit(**JIT)
-def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_side, o, d, P):
+def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_side, o, d, P, s_lit):
     """n = o.shape[0] photons of one light over its whole emission, as ``LightSet.emit``.
 
     row, poses, steps, corners, q, cdf, Le, times: see the module docstring.  The uniforms, in
@@ -305,7 +321,9 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_s
     WORLD       direction                       point of the disc
     ==========  ==============================  ============================
 
-    Writes o, d, P (n, 3): origins, unit directions, power per photon (W).
+    Writes o, d, P (n, 3): origins, unit directions, power per photon (W), and s_lit (n,): the
+    distance (scene units) from o below which the photon's first hit receives nothing (0 but for
+    a POINT / SPOT of radius > 0 with soft falloff, :func:`_point_origin`).
     """
     n = o.shape[0]
     typ = int(row[P_TYPE])
@@ -322,6 +340,7 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_s
     for i in range(n):
         if not one_pose:
             load_pose(poses, i, M)
+        s_lit[i] = 0.0                           # (a soft-falloff POINT / SPOT of radius > 0 sets its own)
         # ---- POINT / SPOT: uniform sphere / cone, origin on the light's disc or sphere ----
         if typ == T_POINT or typ == T_SPOT:
             if typ == T_POINT:
@@ -332,7 +351,8 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_s
                 axis, _ = axis_or_z(down)
                 di = to_world(uniform_cone(u1[i, 0], u1[i, 1], cos_half), axis)
                 Pi = scale(intensity(row), spot_attenuation(row, dot(di, down)) * omega_c / n)
-            oi = _point_origin(row, column(M, 3), di, u2, i)
+            oi, s_i = _point_origin(row, column(M, 3), di, u2, i)
+            s_lit[i] = s_i
         # ---- MESH: triangle by q_j, uniform point, random side, cosine direction ----
         elif typ == T_MESH:
             oi, nrm, A, j, qj = mesh_point(M, steps, corners, q, cdf, times[0 if one_time else i],
@@ -364,14 +384,15 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_s
 # Emission toward a sphere
 # ----------------------------------------------------------------------------
 @njit(**JIT)
-def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, env, times, centers, radius, u1, u2, o, d, P):
+def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, env, times, centers, radius, u1, u2, o, d, P,
+                        s_lit):
     """n = o.shape[0] photons of one light aimed at spheres (centers (1 or n, 3), radius), as ``LightSet.emit_toward``.
 
     row, poses, steps, corners, q, cdf, Le, times: see the module docstring.  Uniforms in the
     numpy code's order: u1 (n, 2) (the direction in the cone toward the target; WORLD: the
     direction), then u2 (n, 2) (AREA / MESH: the emission point; POINT / SPOT: the point of the
     disc, (0, 2) allowed for radius 0; SUN / WORLD: the point of the disc).
-    Writes o, d, P (n, 3): origins, unit directions, power per photon (W).
+    Writes o, d, P (n, 3) and s_lit (n,) as :func:`emit_photons`.
     """
     n = o.shape[0]
     typ = int(row[P_TYPE])
@@ -390,6 +411,7 @@ def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, env, times, cent
     for i in range(n):
         if not one_pose:
             load_pose(poses, i, M)
+        s_lit[i] = 0.0                           # (a soft-falloff POINT / SPOT of radius > 0 sets its own)
         x = row3(centers, 0 if one_c else i)
         # ---- SUN / WORLD: a disc upstream, starting outside the whole scene ----
         if typ == T_WORLD or typ == T_SUN:
@@ -440,7 +462,8 @@ def emit_toward_photons(row, poses, steps, corners, q, cdf, Le, env, times, cent
         else:
             att = spot_attenuation(row, dot(di, down)) if typ == T_SPOT else 1.0
             Pi = scale(intensity(row), att * omega / n)
-            oi = _point_origin(row, oi, di, u2, i)
+            oi, s_i = _point_origin(row, oi, di, u2, i)
+            s_lit[i] = s_i
         _store(o, d, P, i, oi, di, Pi)
 
 
@@ -474,36 +497,41 @@ def _textured(light, U, o, d, times, P) -> None:
         P *= light.point_emission(U, o, -d, times)
 
 
-def emit(lights, li: int, n: int, times: np.ndarray, rng: np.random.Generator):
+def emit(lights, li: int, n: int, times: np.ndarray, rng: np.random.Generator, *, with_s_lit: bool = False):
     """n photons of light li of the LightSet ``lights`` over its whole emission (``LightSet.emit``).
 
     times : (n,) (or (1,) / scalar: one time for all) normalised shutter times.
     rng : draws exactly the numbers the numpy code drew, in its order and shapes.
-    Returns origins (n, 3), unit directions (n, 3), power (n, 3) W per photon.
+    with_s_lit : also return s_lit (n,), the distance from each origin below which the photon's
+        first hit receives nothing (soft falloff, :func:`_point_origin`; 0 elsewhere).  A tracer
+        must drop those photons: with them a soft-falloff light's photons carry its sphere's near
+        field, up to 1 + r^2 / D^2 times next-event estimation's at distance D.
+    Returns origins (n, 3), unit directions (n, 3), power (n, 3) W per photon[, s_lit (n,)].
     """
     n = int(n)
-    o, d, P = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    o, d, P, s_lit = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
     if n > 0:
         (u1, u_side, u2), inputs = _prepare(lights, li, n, times, rng, side=True)
-        emit_photons(*inputs, u1, u2, u_side, o, d, P)
+        emit_photons(*inputs, u1, u2, u_side, o, d, P, s_lit)
         _textured(lights.lights[li], u1, o, d, inputs[-1], P)
-    return o, d, P
+    return (o, d, P, s_lit) if with_s_lit else (o, d, P)
 
 
 def emit_toward(lights, li: int, n: int, times: np.ndarray, rng: np.random.Generator,
-                centers: np.ndarray, radius: float):
+                centers: np.ndarray, radius: float, *, with_s_lit: bool = False):
     """n photons of light li aimed at a sphere (centers (n, 3) or (3,), radius) (``LightSet.emit_toward``).
 
     times : (n,) (or (1,) / scalar) normalised shutter times.
     rng : draws exactly the numbers the numpy code drew, in its order and shapes.
-    Returns origins (n, 3), unit directions (n, 3), power (n, 3) W per photon.
+    with_s_lit : also return s_lit (n,) as :func:`emit`.
+    Returns origins (n, 3), unit directions (n, 3), power (n, 3) W per photon[, s_lit (n,)].
     """
     n = int(n)
-    o, d, P = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    o, d, P, s_lit = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
     if n > 0:
         centers = np.asarray(centers, np.float64)
         centers = kernel_array(centers.reshape(1, 3) if centers.ndim == 1 else np.broadcast_to(centers, (n, 3)))
         (u1, _, u2), inputs = _prepare(lights, li, n, times, rng, side=False)
-        emit_toward_photons(*inputs, centers, float(radius), u1, u2, o, d, P)
+        emit_toward_photons(*inputs, centers, float(radius), u1, u2, o, d, P, s_lit)
         _textured(lights.lights[li], u2, o, d, inputs[-1], P)
-    return o, d, P
+    return (o, d, P, s_lit) if with_s_lit else (o, d, P)

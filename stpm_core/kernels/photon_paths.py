@@ -48,9 +48,9 @@ _JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
 
 @njit(**_JIT)
-def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, n_diffuse, caustic, min_nondelta,
-                  max_diffuse, reader, last, U, U_rr, EPS, guard_fraction, store, o_next, d_next, Phi_next, T_next, nd_next,
-                  nn_next, ndf_next, guard_next):
+def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, n_diffuse, n_lobe, caustic, min_nondelta,
+                  max_diffuse, reader, split_coat, last, U, U_rr, EPS, guard_fraction, store, o_next, d_next, Phi_next,
+                  T_next, nd_next, nn_next, ndf_next, nl_next, guard_next):
     """One bounce of the photons whose rays hit: rows (k,) index the bounce's hit arrays.
 
     P, NG, NS (m, 3) hit points and normals; D (k, 3), Phi (k, 3) W, T (k,),
@@ -65,9 +65,15 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
     U (k, 3), U_rr (k,) uniforms for the BSDF sample and the roulette; EPS (k,)
     origin offsets (scene units).
 
-    Writes the j of the photons to store into ``store`` and the surviving
-    photons' next rays and state into the ``*_next`` arrays; returns
-    (n_store, n_next).
+    n_lobe (k,) int32: the photon's bounces off the DIFFUSE lobe so far (its first hit's included).
+    split_coat (global photons with final gathering): a photon stored with no DIFFUSE-lobe bounce
+    behind it (its non-delta bounces all rough coats: L (S|G|C)* C (S|G|C)* D) is written as
+    ``-1 - j`` in ``store``: those paths reach the vertex through no diffuse vertex, so with
+    final gathering a camera vertex reads them, from the caustic map (docs/photon-mapping.md,
+    "The path partition with final gathering"); the other photons as ``j``.
+
+    Writes the photons to store into ``store`` (j, or -1 - j as above) and the surviving
+    photons' next rays and state into the ``*_next`` arrays; returns (n_store, n_next).
     """
     n_store = 0
     n_next = 0
@@ -79,7 +85,7 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
         readable = n_diffuse[j] + (1 if first else reader) <= max_diffuse
         if nondelta and readable and ((caustic and n_delta[j] >= 1)
                                       or (not caustic and n_nondelta[j] >= min_nondelta)):
-            store[n_store] = j
+            store[n_store] = -1 - j if (split_coat and not caustic and n_lobe[j] == 0) else j
             n_store += 1
         if last:
             continue
@@ -130,6 +136,7 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
         nd_next[n_next] = n_delta[j] + (1 if spec_bounce else 0)
         nn_next[n_next] = n_nondelta[j] + (1 if diffuse_bounce else 0)
         ndf_next[n_next] = nd
+        nl_next[n_next] = n_lobe[j] + (1 if diffuse_lobe else 0)
         guard_next[n_next] = guard_fraction * e
         n_next += 1
     return n_store, n_next

@@ -138,8 +138,15 @@ def build_photon_maps(scene, settings, caster, lights, *, time_override=None, pr
     split = n_c / max(n_c + n_g, 1)
     rec_c, ic = trace_caustic_map(scene, settings, caster, lights, table, time_override=time_override,
                                   progress=span(0.0, 0.9 * split), cancel=cancel)
+    # With final gathering, the global photons that made no DIFFUSE-lobe bounce (only rough coats:
+    # L (S|G|C)* C (S|G|C)* D) go to the caustic map, which camera vertices read; gather rays do not
+    # bring those paths to the camera vertex (docs/photon-mapping.md, "The path partition with final
+    # gathering")
+    coat: list = []
     rec_g, ig = trace_global_map(scene, settings, caster, lights, table, time_override=time_override,
-                                 progress=span(0.9 * split, 0.9), cancel=cancel)
+                                 progress=span(0.9 * split, 0.9), cancel=cancel, coat_paths=coat)
+    if coat and coat[0].shape[0]:
+        rec_c = np.concatenate([rec_c, coat[0]])
     info.update(ic)
     info.update(ig)
     info["photon_trace_s"] = _time.perf_counter() - t0

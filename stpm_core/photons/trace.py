@@ -16,7 +16,10 @@ Two maps (docs/photon-mapping.md, "Tracing"):
 * global map -- photons from :meth:`LightSet.emit` over the whole emission,
   stored at non-delta surfaces after >= 1 non-delta bounce.  Direct light is
   next-event estimation's job and L S+ D belongs to the caustic map, so the
-  camera reads the global map directly at its first diffuse vertex.
+  camera reads the global map directly at its first diffuse vertex.  With final
+  gathering (which reads the global map only at gather vertices) the photons stored
+  with no DIFFUSE-lobe bounce behind them (only rough coats: L (S|G|C)* C (S|G|C)* D)
+  go to the caustic map instead (``coat_paths``), which the camera vertex reads.
 
 Both follow ``settings.diffuse_bounces`` as Cycles counts diffuse bounces: the camera vertex
 reading a photon makes one, each of the photon's bounces off a DIFFUSE lobe another, except one
@@ -120,7 +123,8 @@ def _times(scene, n: int, rng, time_override) -> np.ndarray:
 def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth: int, inst_offset: np.ndarray,
                        target_instance: int | None = None, min_nondelta: int = 1,
                        origin: np.ndarray | None = None, shading=None, diffuse_bounces: int | None = None,
-                       transparent_bounces: int = TRANSPARENT_MAX_BOUNCES, reader: int = 1) -> np.ndarray:
+                       transparent_bounces: int = TRANSPARENT_MAX_BOUNCES, reader: int = 1,
+                       s_lit: np.ndarray | None = None, coat_paths: list | None = None) -> np.ndarray:
     """Trace photon paths and return the stored records.
 
     Parameters
@@ -146,6 +150,13 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     origin : (3,) world point stored positions are relative to (record.photon_origin).
     shading : ``shading.ShadingData`` of the scene (node programs, textures, mesh attributes);
         None: every hit reads its material's constant closure row.
+    s_lit : (n,) distances from the origins below which a photon's first hit receives nothing
+        (``LightSet.emit(..., with_s_lit=True)``: a soft-falloff light's photons); such photons
+        are dropped.  None: every first hit counts.
+    coat_paths : a list (global mode): the records of photons stored with no DIFFUSE-lobe bounce
+        behind them (their non-delta bounces all rough coats) are appended to it instead of
+        returned; with final gathering they belong to the caustic map (a camera vertex reads them:
+        docs/photon-mapping.md, "The path partition with final gathering").  None: all returned.
 
     Returns
     -------
@@ -170,9 +181,12 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     # Photons with no power carry nothing
     live = np.any(Phi > 0.0, axis=1)
     o, d, Phi, t = o[live], d[live], Phi[live], t[live]
+    s_lit = None if s_lit is None else np.asarray(s_lit, dtype=np.float64)[live]
     n_delta = np.zeros(o.shape[0], dtype=np.int32)      # delta bounces so far
     n_nondelta = np.zeros(o.shape[0], dtype=np.int32)   # non-delta bounces so far
     n_diffuse = np.zeros(o.shape[0], dtype=np.int32)    # diffuse bounces as Cycles counts them
+    n_lobe = np.zeros(o.shape[0], dtype=np.int32)       # bounces off the DIFFUSE lobe (the first hit's too)
+    split_coat = coat_paths is not None and not caustic
     max_diffuse = _NO_BUDGET if diffuse_bounces is None else int(diffuse_bounces)
     stored = []
     guard = None                                         # emitted rays: the caster's own guard
@@ -184,12 +198,14 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         keep = hits.hit
         if caustic and depth == 0 and target_instance is not None:
             keep &= hits.instance == target_instance     # this target's cone owns only its own first hits
+        if depth == 0 and s_lit is not None:
+            keep &= hits.t >= s_lit                       # a soft-falloff light's disc does not reach them
         idx = np.nonzero(keep)[0]
         k = idx.size
         if k == 0:
             break
         d, Phi, t = np.ascontiguousarray(d[idx]), np.ascontiguousarray(Phi[idx]), t[idx]
-        n_delta, n_nondelta, n_diffuse = n_delta[idx], n_nondelta[idx], n_diffuse[idx]
+        n_delta, n_nondelta, n_diffuse, n_lobe = n_delta[idx], n_nondelta[idx], n_diffuse[idx], n_lobe[idx]
         C = np.empty((k, N_CLOSURE))
         sd = shading if shading is not None else constant_shading(closures)
         if sd.uses_programs:
@@ -210,7 +226,10 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
             extra = np.flatnonzero(sd.store_mask[hits.material[idx]]
                                    & (C[:, C_NONDELTA] <= 0.0) & rule)
             if extra.size:
-                stored.append(make_records(hits.position[idx[extra]], -d[extra], Phi[extra], t[extra], origin))
+                coat = split_coat & (n_lobe[extra] == 0)
+                for part, out in ((extra[~coat], stored), (extra[coat], coat_paths)):
+                    if part.size:
+                        out.append(make_records(hits.position[idx[part]], -d[part], Phi[part], t[part], origin))
         if sd.transparent:
             # transparent hits: the photon goes on behind, its power tinted (not a bounce)
             Phi = pass_through(caster, sd, inst_offset, hits, d, t, C, Phi, rng, at=idx, limit=transparent_bounces)
@@ -223,18 +242,21 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         o_n, d_n, Phi_n = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
         t_n, g_n = np.empty(k), np.empty(k)
         nd_n, nn_n, ndf_n = np.empty(k, np.int32), np.empty(k, np.int32), np.empty(k, np.int32)
+        nl_n = np.empty(k, np.int32)
         n_store, n_next = photon_bounce(idx, hits.position, hits.ng, hits.ns, d, C, E, E_avg, Phi, t, n_delta,
-                                        n_nondelta, n_diffuse, caustic, int(min_nondelta), max_diffuse, int(reader), last,
-                                        U, U_rr,
-                                        EPS, GUARD_FRACTION, store, o_n, d_n, Phi_n, t_n, nd_n, nn_n, ndf_n, g_n)
-        # -- Store the photons --------------------------------------------------------------
+                                        n_nondelta, n_diffuse, n_lobe, caustic, int(min_nondelta), max_diffuse,
+                                        int(reader), split_coat, last, U, U_rr, EPS, GUARD_FRACTION, store, o_n, d_n,
+                                        Phi_n, t_n, nd_n, nn_n, ndf_n, nl_n, g_n)
+        # -- Store the photons (store: j, or -1 - j for coat_paths) ------------------------------
         if n_store:
             s = store[:n_store]
-            stored.append(make_records(hits.position[idx[s]], -d[s], Phi[s], t[s], origin))
+            for part, out in ((s[s >= 0], stored), (-1 - s[s < 0], coat_paths)):
+                if part.size:
+                    out.append(make_records(hits.position[idx[part]], -d[part], Phi[part], t[part], origin))
         if last:
             break
         o, d, Phi, t, guard = o_n[:n_next], d_n[:n_next], Phi_n[:n_next], t_n[:n_next], g_n[:n_next]
-        n_delta, n_nondelta, n_diffuse = nd_n[:n_next], nn_n[:n_next], ndf_n[:n_next]
+        n_delta, n_nondelta, n_diffuse, n_lobe = nd_n[:n_next], nn_n[:n_next], ndf_n[:n_next], nl_n[:n_next]
     if not stored:
         return np.empty(0, dtype=PHOTON_DTYPE)
     return np.concatenate(stored)
@@ -293,9 +315,9 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
         li, ii, c, r = pairs[pi]
         rng = rng_for(settings.seed, STREAM_CAUSTIC, pi, b0 // BATCH)
         t = _times(scene, n, rng, time_override)
-        o, d, Phi = lights.emit_toward(li, n, t, rng, c, r)
+        o, d, Phi, s_lit = lights.emit_toward(li, n, t, rng, c, r, with_s_lit=True)
         Phi = Phi * (n / float(n_pair))                  # this batch's share of the pair's photons
-        return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="caustic",
+        return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="caustic", s_lit=s_lit,
                                   max_depth=settings.max_depth, inst_offset=inst_offset, target_instance=ii,
                                   shading=shading, diffuse_bounces=settings.diffuse_bounces,
                                   transparent_bounces=settings.transparent_max_bounces)
@@ -310,13 +332,21 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
 
 
 def trace_global_map(scene, settings, caster, lights, table, *, time_override=None,
-                     progress=None, cancel=None, min_nondelta: int = 1) -> tuple[np.ndarray, dict]:
+                     progress=None, cancel=None, min_nondelta: int = 1,
+                     coat_paths: list | None = None) -> tuple[np.ndarray, dict]:
     """Global map records and counts: ``settings.photons_global`` photons split over lights by power x
     photon weight (``LightSet.photon_weight``: each light's photons carry its flux divided by their
-    number, so the weights move noise between lights and leave the estimate unbiased)."""
+    number, so the weights move noise between lights and leave the estimate unbiased).
+
+    coat_paths : with final gathering, a list that receives (as one records array, appended) the
+    photons stored with no DIFFUSE-lobe bounce behind them (L (S|G|C)* C (S|G|C)* D, C a rough
+    coat): they are not in the returned records; the caller puts them into the caustic map, which
+    camera vertices read (:func:`trace_photon_paths`).  Without final gathering (or None) every
+    photon is returned."""
     # With final gathering the photons are read at the gather vertices, one camera bounce further:
     # the diffuse budget counts it (reader 2, kernels.photon_paths; off when diffuse_bounces < 2)
     gather = int(getattr(settings, "final_gather_samples", 0)) > 0 and int(settings.diffuse_bounces) >= 2
+    split = gather and coat_paths is not None
     inst_offset = instance_offsets(scene)
     origin = photon_origin(scene)
     counts = split_counts(int(settings.photons_global),
@@ -325,21 +355,29 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
     jobs = [(li, b0, min(BATCH, int(n_light) - b0), int(n_light)) for li, n_light in enumerate(counts)
             for b0 in range(0, int(n_light), BATCH)]
 
-    def trace_batch(j: int) -> np.ndarray:
-        """Records of batch j: a pure function of (seed, light, batch), so threads do not change them."""
+    def trace_batch(j: int) -> tuple[np.ndarray, list]:
+        """Records of batch j (and its coat-path records): a pure function of (seed, light, batch),
+        so threads do not change them."""
         li, b0, n, n_light = jobs[j]
         rng = rng_for(settings.seed, STREAM_GLOBAL, li, b0 // BATCH)
         t = _times(scene, n, rng, time_override)
         # Each light's emit() spreads its flux over the photons it is given: scale
         # to this batch's share of the light's photons.
-        o, d, Phi = lights.emit(li, n, t, rng)
+        o, d, Phi, s_lit = lights.emit(li, n, t, rng, with_s_lit=True)
         Phi = Phi * (n / float(n_light))
-        return trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global",
+        coat: list | None = [] if split else None
+        recs = trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global", s_lit=s_lit,
                                   max_depth=settings.max_depth, inst_offset=inst_offset, min_nondelta=min_nondelta,
                                   shading=shading, diffuse_bounces=settings.diffuse_bounces,
-                                  transparent_bounces=settings.transparent_max_bounces, reader=2 if gather else 1)
+                                  transparent_bounces=settings.transparent_max_bounces, reader=2 if gather else 1,
+                                  coat_paths=coat)
+        return recs, coat or []
 
     out = _run_batches(trace_batch, jobs, settings, progress, cancel, "tracing global photons")
-    recs = np.concatenate(out) if out else np.empty(0, dtype=PHOTON_DTYPE)
+    recs = np.concatenate([r for r, _ in out]) if out else np.empty(0, dtype=PHOTON_DTYPE)
+    coat = [c for _, cs in out for c in cs]
+    if split:
+        coat_paths.append(np.concatenate(coat) if coat else np.empty(0, dtype=PHOTON_DTYPE))
     return recs, {"photons_emitted_global": int(counts.sum()),
-                  "photons_emitted_global_per_light": [int(x) for x in counts]}
+                  "photons_emitted_global_per_light": [int(x) for x in counts],
+                  "photons_global_coat_paths": int(sum(c.shape[0] for c in coat))}
