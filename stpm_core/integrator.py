@@ -49,7 +49,7 @@ from .world_light import constant_environment
 from .kernels.svm import shade_rows
 from .parallel import ordered_map, worker_count
 from .photons import sharing as _sharing
-from .raycast.geometry import GUARD_FRACTION, OFFSET_POS, instance_offsets, offset_lengths
+from .raycast.geometry import GUARD_FRACTION, OFFSET_POS, instance_offsets, offset_lengths, segment_of
 from .sampling import rng_for, skip_uniforms
 from .shading import hit_geometry, shading_data
 from .transparency import pass_through, shadow_transmittance
@@ -304,14 +304,14 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
 
 def terminator_settings(scene) -> tuple[np.ndarray, np.ndarray]:
     """Per instance (n_instances,): the shadow-terminator cutoff (``Instance.shadow_terminator_
-    geometry_offset`` where the mesh has smooth normals and does not deform -- STPM shades deforming
-    meshes flat --, else 0) and the shading offset's frequency multiplier 1 / (1 - s / 2) (s =
-    ``shadow_terminator_shading_offset``; 1: off), as Cycles' ``scene/object.cpp`` stores them."""
+    geometry_offset`` where the mesh has smooth normals, deforming or not, else 0) and the shading
+    offset's frequency multiplier 1 / (1 - s / 2) (s = ``shadow_terminator_shading_offset``; 1: off),
+    as Cycles' ``scene/object.cpp`` stores them."""
     n = len(scene.instances)
     cut, freq = np.zeros(n), np.ones(n)
     for i, inst in enumerate(scene.instances):
         mesh = scene.meshes[inst.mesh]
-        if mesh.normals is not None and not mesh.is_deforming:
+        if mesh.normals is not None:
             cut[i] = float(getattr(inst, "shadow_terminator_geometry_offset", 0.1))
         so = float(getattr(inst, "shadow_terminator_shading_offset", 0.0))
         freq[i] = 1.0 / (1.0 - 0.5 * so) if so < 2.0 else 1.0       # Cycles: a multiplier <= 1 is off
@@ -319,13 +319,20 @@ def terminator_settings(scene) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _term_mesh(ctx, mi: int) -> tuple:
-    """(vertices (V, 3) float32, triangles (F, 3) int32, corner normals (F, 3, 3) float32) of mesh
-    mi, contiguous, kept per render (``kernels.paths.terminator_rows`` reads them per hit)."""
+    """(vertices (K, V, 3) float32, triangles (F, 3) int32, corner normals (K, F, 3, 3) float32,
+    vertex times (K,) float64 or None) of mesh mi at its K vertex steps (K = 1: rigid), contiguous,
+    kept per render (``kernels.paths.terminator_rows`` reads them per hit)."""
     kept = ctx.term_meshes.get(mi)
     if kept is None:
         m = ctx.scene.meshes[mi]
-        kept = (np.ascontiguousarray(m.vertices, np.float32).reshape(-1, 3),
-                np.ascontiguousarray(m.triangles, np.int32), np.ascontiguousarray(m.normals, np.float32))
+        V = np.asarray(m.vertices, np.float32)
+        deforming = m.is_deforming
+        V = V if deforming else V.reshape(-1, 3)[None]
+        N = m.normal_keys
+        if N.shape[0] != V.shape[0]:                    # one set of normals shared by every step
+            N = np.repeat(N[:1], V.shape[0], axis=0)
+        kept = (np.ascontiguousarray(V), np.ascontiguousarray(m.triangles, np.int32),
+                np.ascontiguousarray(N, np.float32), np.asarray(m.vertex_times, np.float64) if deforming else None)
         ctx.term_meshes[mi] = kept
     return kept
 
@@ -350,13 +357,18 @@ def _terminator(ctx, sh: np.ndarray, hits, t_s: np.ndarray) -> np.ndarray:
         if not cut > 0.0:
             TERM[rows, 6] = fm
             continue
-        Vs, T, Ns = _term_mesh(ctx, scene.instances[i].mesh)
+        Vs, T, Ns, vt = _term_mesh(ctx, scene.instances[i].mesh)
+        if vt is None:
+            seg, frac = np.zeros(sel.size, np.int64), np.zeros(sel.size)
+        else:                                           # each row's vertex step at its time
+            seg, frac = segment_of(vt, np.asarray(t_s, np.float64)[sel])
+            seg, frac = np.ascontiguousarray(seg, np.int64), np.ascontiguousarray(frac, np.float64)
         tr = scene.instances[i].transform
         if tr.is_static:
             M = np.ascontiguousarray(np.asarray(tr.matrices[0], np.float64)[None, :3, :3])
         else:
             M = np.ascontiguousarray(np.asarray(tr.at(np.asarray(t_s, np.float64)[sel]), np.float64)[:, :3, :3])
-        _K.terminator_rows(rows, np.ascontiguousarray(hits.prim, np.int32), Vs, T, Ns, M,
+        _K.terminator_rows(rows, np.ascontiguousarray(hits.prim, np.int32), Vs, T, Ns, seg, frac, M,
                            np.ascontiguousarray(hits.u, np.float64), np.ascontiguousarray(hits.v, np.float64),
                            float(cut), float(fm), TERM)
     return TERM

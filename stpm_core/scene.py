@@ -35,9 +35,11 @@ __all__ = [
     "validate_scene", "scene_warnings", "SCENE_FORMAT_VERSION", "MAX_EMISSION", "check_tiles",
 ]
 
-SCENE_FORMAT_VERSION = 3          # 2 (2026-12-01): material graphs, textures, UV maps, tangents
+SCENE_FORMAT_VERSION = 4          # 2 (2026-12-01): material graphs, textures, UV maps, tangents
                                   # 3 (2026-12-07): UDIM tile tables, metadata.working_space (written
                                   # only by files that use them: others stay 2)
+                                  # 4 (2026-12-06): per-step normals (K, F, 3, 3) of deforming meshes
+                                  # (written only by files that have them)
 
 #: Largest emission :func:`validate_scene` accepts (docs/scene-format.md, "Limits"):
 #: light ``power * max(color)`` (W, or W/m^2 for a sun), material ``emission``
@@ -70,7 +72,11 @@ class Mesh:
         meshes only (``None`` for a rigid mesh).  Positions are linear between
         steps and clamped outside.
     normals : (F, 3, 3) float32 per-corner shading normals (object space) or
-        ``None`` for flat shading.  Deforming meshes shade flat.
+        ``None`` for flat shading.  A deforming mesh may carry them per vertex step,
+        (K, F, 3, 3) float32 at ``vertex_times`` (Cycles' ``ATTR_STD_MOTION_VERTEX_NORMAL``):
+        like positions, linear between steps and clamped outside, then blended across
+        the triangle and normalised (:meth:`normals_at`); (F, 3, 3) on a deforming mesh
+        holds the same normals at every step.  Cost: 36 bytes per triangle per step.
     name : str, for messages.
     uv_layers : UV maps by name, each (F, 3, 2) float32 per-corner (u, v) in the
         corner order of ``triangles`` (Blender's loop triangles); {} = no UVs.
@@ -155,6 +161,26 @@ class Mesh:
         i = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2))
         a = float(np.clip((t - times[i]) / (times[i + 1] - times[i]), 0.0, 1.0))
         return (1 - a) * self.vertices[i] + a * self.vertices[i + 1]
+
+    @property
+    def normal_keys(self) -> np.ndarray | None:
+        """Corner normals per vertex step (K, F, 3, 3) float32 (K = 1 for a rigid mesh or
+        normals shared by every step), or None for flat shading."""
+        if self.normals is None:
+            return None
+        n = np.asarray(self.normals, np.float32)
+        return n if n.ndim == 4 else n[None]
+
+    def normals_at(self, t: float) -> np.ndarray | None:
+        """Object-space corner normals (F, 3, 3) at normalised time t (scalar), not normalised:
+        linear between the steps of ``vertex_times`` like :meth:`vertices_at`; None if flat."""
+        N = self.normal_keys
+        if N is None or N.shape[0] == 1:
+            return None if N is None else N[0]
+        times = np.asarray(self.vertex_times)
+        i = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2))
+        a = float(np.clip((t - times[i]) / (times[i + 1] - times[i]), 0.0, 1.0))
+        return (1 - a) * N[i] + a * N[i + 1]
 
 
 @dataclass
@@ -698,8 +724,11 @@ def validate_scene(scene: Scene) -> None:
                 raise SceneError(f"{p}.vertex_times must be strictly increasing")
         if m.normals is not None:
             n = _check_finite(f"{p}.normals", m.normals)
-            if n.shape != (tri.shape[0], 3, 3):
-                raise SceneError(f"{p}.normals must have shape ({tri.shape[0]}, 3, 3), got {n.shape}")
+            # (F, 3, 3), or one set per vertex step (K, F, 3, 3) on a deforming mesh
+            steps = v.shape[0] if v.ndim == 3 and v.shape[0] > 1 else 0
+            if n.shape != (tri.shape[0], 3, 3) and not (steps and n.shape == (steps, tri.shape[0], 3, 3)):
+                per_step = f" or ({steps}, {tri.shape[0]}, 3, 3) (one per vertex step)" if steps else ""
+                raise SceneError(f"{p}.normals must have shape ({tri.shape[0]}, 3, 3){per_step}, got {n.shape}")
         for attr, width in (("uv_layers", 2), ("tangents", 4), ("color_layers", 4)):
             layers = getattr(m, attr, None) or {}
             if not isinstance(layers, dict):

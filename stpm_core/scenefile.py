@@ -30,7 +30,9 @@ name in meshes[i].color_render.  These keys are optional: a file without them lo
 graphs, textures, UVs, tangents or colour attributes.  A UDIM Image Texture holds its tile table
 in its node's ``props["tiles"]`` ([tile, texture index] pairs, one texture per tile), and
 ``metadata.working_space`` names the scene's working colour space; a file using either is
-written as version 3 (:func:`_version_needed`), every other one as version 2.
+written as version 3 (:func:`_version_needed`), every other one as version 2.  A deforming
+mesh's ``normals`` may be (K, F, 3, 3), one (F, 3, 3) set per vertex step; a file with such
+normals is written as version 4.
 
 Loading
 -------
@@ -231,12 +233,14 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
 
 
 def _version_needed(scene: Scene, materials: list) -> int:
-    """The lowest format version that reads this scene as written: 3 when it uses UDIM tile tables
-    or a working space other than Linear Rec.709 (a version-2 reader would render the first tile
-    only, or the colours unconverted: it must refuse the file instead), else 2."""
+    """The lowest format version that reads this scene as written: 4 when a deforming mesh has
+    normals per vertex step (K, F, 3, 3); else 3 when it uses UDIM tile tables or a working space
+    other than Linear Rec.709 (a version-2 reader would render the first tile only, or the colours
+    unconverted: it must refuse the file instead); else 2."""
     udim = any("tiles" in n.get("props", {}) for m in materials for n in m.get("graph", {}).get("nodes", {}).values())
     working = str(scene.metadata.get("working_space", "REC709")).upper() != "REC709"
-    return 3 if udim or working else 2
+    keyed = any(m.normals is not None and np.ndim(m.normals) == 4 for m in scene.meshes)
+    return 4 if keyed else 3 if udim or working else 2
 
 
 def _put_corner_layers(arrays: dict, p: str, m: Mesh, where: str, attr: str, sub: str, width: int,
@@ -828,7 +832,11 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
             vt = None
         tri = arr.get(f"{p}/triangles", f"{a}.triangles", kind="i", ndim=2, tail=(3,))
         mid = arr.get(f"{p}/material_ids", f"{a}.material_ids", kind="i", ndim=1)
-        N = arr.get(f"{p}/normals", f"{a}.normals", kind="f", ndim=3, tail=(3, 3)) if has_normals else None
+        N = None
+        if has_normals:
+            # (F, 3, 3), or (K, F, 3, 3) per vertex step of a deforming mesh (format version 4)
+            keyed = has_times and np.ndim(arr.data.get(f"{p}/normals")) == 4
+            N = arr.get(f"{p}/normals", f"{a}.normals", kind="f", ndim=4 if keyed else 3, tail=(3, 3))
         if np.abs(V).max(initial=0.0) > 1e15:
             raise SceneError(f"{a}.vertices has coordinates beyond 1e15")
         # Range-check integer arrays before narrowing them to int32

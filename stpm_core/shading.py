@@ -95,8 +95,10 @@ def scene_attributes(scene, uv_layers: list, color_layers: list | None = None) -
     corner_uv (N, 3, 2) float32; corner_obj (T, 3, 3) float32 (first shape of a deforming mesh);
     gen_lo, gen_inv (M, 3): Generated = (p_obj - gen_lo) * gen_inv, Blender's automatic texture
     space (the bounding box; an axis of zero extent gets half-size 1, as Blender sets it);
-    corner_nrm (T, 3, 3) float32 object-space corner normals (``Mesh.normals``; flat meshes: the
-    face normal at each corner); tan_off (M, L) int64 and corner_tan (N', 3, 4) float32 the
+    corner_nrm (T, 3, 3) float32 object-space corner normals (``Mesh.normals``; a deforming mesh's at
+    the frame's shutter time, ``Mesh.normals_at``, as Cycles' Normal Map reads the static vertex
+    normals and the add-on exports tangents at the frame; flat meshes: the face normal at each
+    corner); tan_off (M, L) int64 and corner_tan (N', 3, 4) float32 the
     per-corner tangents and signs of each (mesh, layer) (``Mesh.tangents``), -1 = none;
     col_off (M, Lc) int64 and corner_col (N'', 3, 4) float32 the per-corner RGBA of each colour
     layer name of ``color_layers`` ("" = the mesh's render-active colour attribute): the mesh's
@@ -106,6 +108,9 @@ def scene_attributes(scene, uv_layers: list, color_layers: list | None = None) -
     meshes = scene.meshes
     M = len(meshes)
     L = max(len(uv_layers), 1)
+    sh = getattr(scene, "shutter", None)
+    span = float(sh.close - sh.open) if sh is not None else 0.0
+    u_frame = float(np.clip((float(getattr(scene, "frame", 0.0)) - sh.open) / span, 0.0, 1.0)) if span > 0 else 0.5
     inst_mesh = np.array([inst.mesh for inst in scene.instances] or [0], np.int64)
     mesh_tri0 = np.zeros(max(M, 1), np.int64)
     uv_off = np.full((max(M, 1), L), -1, np.int64)
@@ -121,8 +126,9 @@ def scene_attributes(scene, uv_layers: list, color_layers: list | None = None) -
         mesh_tri0[i] = n_tri
         corners = V[F] if F.size else np.zeros((0, 3, 3), np.float32)
         objs.append(corners)
-        if m.normals is not None and not m.is_deforming:
-            nrms.append(np.asarray(m.normals, np.float32).reshape(F.shape[0], 3, 3))
+        if m.normals is not None:
+            # a deforming mesh: its normals at the frame (Cycles reads its static vertex normals)
+            nrms.append(np.asarray(m.normals_at(u_frame), np.float32).reshape(F.shape[0], 3, 3))
         else:
             fn = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]).astype(np.float64)
             fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30)

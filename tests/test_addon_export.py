@@ -110,7 +110,7 @@ def test_deformation_is_sampled_per_step():
     assert mesh.is_deforming and warnings == []
     np.testing.assert_allclose(mesh.vertex_times, [0, 0.5, 1])
     np.testing.assert_allclose(mesh.vertices[:, :, 2], np.array([[0.25], [0.5], [0.75]]).repeat(4, 1), atol=1e-6)
-    assert mesh.normals is None  # deforming meshes shade flat
+    assert mesh.normals is None  # a flat plane (smooth deforming meshes: test_cycles_deforming_normals)
     assert _instance(out, "Cloth").transform.is_static
 
 

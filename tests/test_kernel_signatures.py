@@ -46,6 +46,19 @@ def _dispatchers() -> dict:
     return out
 
 
+def _deforming_sphere():
+    """A smooth sphere squashed across the shutter: positions and normals per step (the shadow
+    terminator's keyed arrays, ``paths.terminator_rows``)."""
+    m = sphere_mesh(0.35, 6, 12, material=0)
+    V = np.asarray(m.vertices, np.float32)
+    m.vertices = np.stack([V, V * np.float32([1.3, 1.0, 0.6])])
+    m.vertex_times = np.array([0.0, 1.0])
+    N = np.asarray(m.normals, np.float32)
+    N1 = N * np.float32([1 / 1.3, 1.0, 1 / 0.6])
+    m.normals = np.stack([N, N1 / np.linalg.norm(N1, axis=-1, keepdims=True)]).astype(np.float32)
+    return m
+
+
 def _new_scenes():
     rng = np.random.default_rng(12)
     mats = [Material(base_color=rng.random(3), roughness=float(r), metallic=float(m), transmission=float(t),
@@ -55,7 +68,8 @@ def _new_scenes():
     objs = [plane_mesh(6.0), (sphere_mesh(0.4, 6, 12, material=3), moving((0, 0, 0.5), (0.3, 0.2, 0.6))),
             (box_mesh(material=1), translate(1.2, 0.0, 0.5)), (box_mesh(material=2), translate(-1.2, 0.3, 0.4)),
             (box_mesh((-0.1, -0.1, 0), (0.1, 0.1, 0.1), material=5), translate(0.0, 1.2, 1.5)),
-            (sphere_mesh(0.3, 6, 12, material=4), translate(0.5, -1.0, 0.3))]
+            (sphere_mesh(0.3, 6, 12, material=4), translate(0.5, -1.0, 0.3)),
+            (_deforming_sphere(), translate(-0.6, -1.2, 0.4))]
     lights = [Light(type="SPOT", power=400.0, spot_size=0.6, spot_blend=0.2, radius=0.05,
                     transform=MotionTransform.static(look_at((1, -2, 3), (0, 0, 0)))),
               Light(type="AREA", shape="ELLIPSE", size=0.7, size_y=0.3, power=90.0,

@@ -94,7 +94,8 @@ def test_terminator_origin_matches_numpy_oracle():
     for cut in (0.1, 0.35):
         TERM = np.zeros((n, 7))
         rows = np.arange(n, dtype=np.int64)
-        K.terminator_rows(rows, np.arange(n, dtype=np.int32), Vs, T, Ns, M[None].copy(), u, v, cut, 1.0, TERM)
+        K.terminator_rows(rows, np.arange(n, dtype=np.int32), Vs[None].copy(), T, Ns[None].copy(), np.zeros(n, np.int64),
+                          np.zeros(n), M[None].copy(), u, v, cut, 1.0, TERM)
         got = np.array([K.terminator_origin(TERM, r, tuple(p[r]), tuple(ns[r]), tuple(ng[r]), tuple(d[r]),
                                             tuple(wi[r])) for r in range(n)])
         want = oracle.shadow_ray_origin(p, ns, ng, d, wi, Vw, Nw, u, v, cut)

@@ -248,6 +248,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
     world_keys: list = []            # the world's Mapping rotation per step, when animated
     samples = {k: [r.matrix] for k, r in records.items()}
     shapes: dict = {}
+    step_normals: dict = {}          # key -> [(triangles, normals)] per step of smooth deforming meshes
     if not shutter.is_instant:
         times = motion.step_times(steps)
         samples = {k: [] for k in records}
@@ -267,7 +268,10 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                     seen.add(key)
                     samples[key].append(np.array(inst.matrix_world, dtype=np.float64))
                     if key in shapes:
-                        shapes[key].append(mesh_export.vertex_positions(inst.object.data))
+                        me = inst.object.data
+                        shapes[key].append(mesh_export.vertex_positions(me))
+                        if meshes[records[key].mesh].normals is not None:     # smooth: normals per step
+                            step_normals.setdefault(key, []).append(mesh_export.step_normals(me))
                 if ("", cam_name, ()) in samples and ("", cam_name, ()) not in seen:
                     cam_eval = scene.camera.evaluated_get(depsgraph)
                     samples[("", cam_name, ())].append(np.array(cam_eval.matrix_world, dtype=np.float64))
@@ -293,7 +297,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
         t = times if K == len(times) else np.array([0.5])
         if r.kind == "MESH":
             if r.use_motion and key in shapes and len(shapes[key]) == len(times):
-                _attach_deformation(meshes[r.mesh], shapes[key], times, r.name, warnings)
+                _attach_deformation(meshes[r.mesh], shapes[key], times, r.name, warnings, step_normals.get(key))
             instances.append(scene_model.Instance(mesh=r.mesh, transform=motion.transform_from_samples(t, samples[key]),
                                                   name=r.name, **r.terminator))
         elif r.kind == "LIGHT":
@@ -390,8 +394,14 @@ def _warn_hair_particles(obj, warnings: list) -> None:
                                  f"are not rendered (strand hair is not supported)")
 
 
-def _attach_deformation(mesh, shapes: list, times: np.ndarray, name: str, warnings: list) -> None:
-    """Turn a rigid mesh into a deforming one when its vertices move across the steps."""
+def _attach_deformation(mesh, shapes: list, times: np.ndarray, name: str, warnings: list,
+                        normals: list | None = None) -> None:
+    """Turn a rigid mesh into a deforming one when its vertices move across the steps.
+
+    normals: per step (triangles (F, 3), shading normals (F, 3, 3) or None) of a smooth mesh
+    (``mesh_export.step_normals``): the mesh gets normals (K, F, 3, 3), one set per step as Cycles
+    stores them (36 bytes per triangle per step); steps whose loop triangles are not the frame's
+    (an n-gon triangulated otherwise) keep the frame's normals, with a warning."""
     V = mesh.vertices.shape[0]
     if any(s.shape[0] != V for s in shapes):
         warnings.append(f"object {name!r}: vertex count changes during the shutter; "
@@ -403,4 +413,17 @@ def _attach_deformation(mesh, shapes: list, times: np.ndarray, name: str, warnin
         return  # rigid: nothing deforms
     mesh.vertices = stack
     mesh.vertex_times = np.asarray(times, dtype=np.float64)
-    mesh.normals = None  # deforming meshes shade flat (scene model)
+    if mesh.normals is None:
+        return
+    frame = np.asarray(mesh.normals, np.float32)
+    if normals is None or len(normals) != len(shapes):
+        normals = [(None, None)] * len(shapes)
+    keyed, changed = [], False
+    for tri, n in normals:
+        ok = n is not None and tri is not None and np.array_equal(tri, mesh.triangles)
+        changed |= not ok
+        keyed.append(np.asarray(n, np.float32) if ok else frame)
+    if changed:
+        warnings.append(f"object {name!r}: its shading normals could not be read at every motion step; "
+                        f"the frame's normals are used at those steps")
+    mesh.normals = np.ascontiguousarray(np.stack(keyed))

@@ -96,6 +96,23 @@ def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
             "tangents": tangents, "color_layers": color_layers, "color_render": color_render}
 
 
+def step_normals(me) -> tuple:
+    """(triangles (F, 3) int32, shading normals (F, 3, 3) float32 or None) of the evaluated mesh
+    ``me`` at one motion step: the normals Cycles stores per step of a deforming mesh
+    (``ATTR_STD_MOTION_VERTEX_NORMAL``), by the rules of :func:`mesh_arrays`
+    (:func:`cycles_normals_domain`, :func:`shading_normals`) on this step's shape.  The triangles
+    let the caller check the step's loop triangles are the frame's."""
+    me.calc_loop_triangles()
+    tris = me.loop_triangles
+    F = len(tris)
+    tri = np.empty(F * 3, dtype=np.int32)
+    tris.foreach_get("vertices", tri)
+    loops = np.empty(F * 3, dtype=np.int32)
+    tris.foreach_get("loops", loops)
+    domain = cycles_normals_domain(me) if F else "FACE"
+    return tri.reshape(F, 3), shading_normals(me, tris, tri.reshape(F, 3), loops, vertex_positions(me), domain)
+
+
 def cycles_normals_domain(me) -> str:
     """The domain of the normals Cycles renders ``me`` with: "POINT", "FACE" or "CORNER".
 

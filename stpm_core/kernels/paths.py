@@ -751,6 +751,33 @@ def smooth_surface_heights(Vs, T, Ns, f, u, v):
     NA = (np.float64(Ns[f, 0, 0]), np.float64(Ns[f, 0, 1]), np.float64(Ns[f, 0, 2]))
     NB = (np.float64(Ns[f, 1, 0]), np.float64(Ns[f, 1, 1]), np.float64(Ns[f, 1, 2]))
     NC = (np.float64(Ns[f, 2, 0]), np.float64(Ns[f, 2, 1]), np.float64(Ns[f, 2, 2]))
+    return corner_heights(A, B, Cc, NA, NB, NC, u, v)
+
+
+@njit(**_JIT)
+def _vertex_at(Vs, s, a, i):
+    """Vertex i (3-tuple, float64) of Vs (K, V, 3) at step s + fraction a (K = 1: step 0)."""
+    x0, x1, x2 = np.float64(Vs[s, i, 0]), np.float64(Vs[s, i, 1]), np.float64(Vs[s, i, 2])
+    if Vs.shape[0] == 1:
+        return x0, x1, x2
+    return (x0 + a * (np.float64(Vs[s + 1, i, 0]) - x0), x1 + a * (np.float64(Vs[s + 1, i, 1]) - x1),
+            x2 + a * (np.float64(Vs[s + 1, i, 2]) - x2))
+
+
+@njit(**_JIT)
+def _normal_at(Ns, s, a, f, j):
+    """Corner j's normal (3-tuple, float64) of triangle f of Ns (K, F, 3, 3) at step s + fraction a."""
+    x0, x1, x2 = np.float64(Ns[s, f, j, 0]), np.float64(Ns[s, f, j, 1]), np.float64(Ns[s, f, j, 2])
+    if Ns.shape[0] == 1:
+        return x0, x1, x2
+    return (x0 + a * (np.float64(Ns[s + 1, f, j, 0]) - x0), x1 + a * (np.float64(Ns[s + 1, f, j, 1]) - x1),
+            x2 + a * (np.float64(Ns[s + 1, f, j, 2]) - x2))
+
+
+@njit(**_JIT)
+def corner_heights(A, B, Cc, NA, NB, NC, u, v):
+    """:func:`smooth_surface_heights` of the triangle with corners A, B, Cc and corner normals NA,
+    NB, NC (3-tuples, float64, one space) at barycentrics u, v."""
     w0 = 1.0 - u - v
     w1, w2 = u, v
     P = (w0 * A[0] + w1 * B[0] + w2 * Cc[0], w0 * A[1] + w1 * B[1] + w2 * Cc[1], w0 * A[2] + w1 * B[2] + w2 * Cc[2])
@@ -779,19 +806,30 @@ def smooth_surface_heights(Vs, T, Ns, f, u, v):
 
 
 @njit(**_JIT)
-def terminator_rows(rows, prim, Vs, T, Ns, M, BU, BV, cut, freq, TERM):
+def terminator_rows(rows, prim, Vs, T, Ns, SEG, AL, M, BU, BV, cut, freq, TERM):
     """TERM[r] (7,) of hit rows r = rows[k] on one object's smooth-shaded triangles prim[r]: (n_w (3),
     h_front, h_back, cutoff, frequency multiplier), read by :func:`nee_light`.
 
-    Vs, T, Ns: the object's mesh (object space, :func:`smooth_surface_heights`); M (k or 1, 3, 3)
-    the object-to-world linear part at the hits' times; BU, BV (m,) the hits' barycentrics; cut
-    the object's ``shadow_terminator_geometry_offset``, freq its shading offset's frequency
-    multiplier 1 / (1 - s / 2).  The heights in object space, n_w = M n (Cycles'
-    ``object_dir_transform``): the lift n_w h is the object-space lift n h carried to world space."""
+    Vs (K, V, 3) float32, T (F, 3) int32, Ns (K, F, 3, 3) float32: the object's mesh in object
+    space at its K vertex steps (K = 1: rigid); SEG (k,) int64 and AL (k,) float64 each row's step
+    and fraction into it (:func:`stpm_core.raycast.geometry.segment_of` of the hit time): corners
+    and corner normals are interpolated linearly between the steps, as the ray caster does them,
+    before :func:`corner_heights`.  M (k or 1, 3, 3) the object-to-world linear part at the hits'
+    times; BU, BV (m,) the hits' barycentrics; cut the object's ``shadow_terminator_geometry_offset``,
+    freq its shading offset's frequency multiplier 1 / (1 - s / 2).  The heights in object space,
+    n_w = M n (Cycles' ``object_dir_transform``): the lift n_w h is the object-space lift n h carried
+    to world space."""
     one = M.shape[0] == 1
     for k in range(rows.shape[0]):
         r = rows[k]
-        hf, hb, n = smooth_surface_heights(Vs, T, Ns, np.int64(prim[r]), BU[r], BV[r])   # (one signature)
+        f = np.int64(prim[r])
+        s, a = np.int64(SEG[k]), np.float64(AL[k])
+        A = _vertex_at(Vs, s, a, np.int64(T[f, 0]))
+        B = _vertex_at(Vs, s, a, np.int64(T[f, 1]))
+        Cc = _vertex_at(Vs, s, a, np.int64(T[f, 2]))
+        hf, hb, n = corner_heights(A, B, Cc, _normal_at(Ns, s, a, f, np.int64(0)),
+                                   _normal_at(Ns, s, a, f, np.int64(1)), _normal_at(Ns, s, a, f, np.int64(2)),
+                                   BU[r], BV[r])
         m = 0 if one else k
         TERM[r, 0] = M[m, 0, 0] * n[0] + M[m, 0, 1] * n[1] + M[m, 0, 2] * n[2]
         TERM[r, 1] = M[m, 1, 0] * n[0] + M[m, 1, 1] * n[1] + M[m, 1, 2] * n[2]

@@ -22,7 +22,7 @@ import numpy as np
 
 __all__ = [
     "TMIN_REL", "ray_triangle", "cross", "world_to_object", "triangles_at",
-    "InstanceShading", "scene_scale", "tmin_of", "ray_guard", "segment_of",
+    "InstanceShading", "normals_at", "scene_scale", "tmin_of", "ray_guard", "segment_of",
     "swept_bounds", "apply_affine", "apply_linear", "MotionKeys", "normal_matrix",
     "OFFSET_REL", "OFFSET_POS", "GUARD_FRACTION", "instance_offsets", "offset_lengths",
 ]
@@ -305,6 +305,16 @@ def triangles_at(mesh, prim: np.ndarray, times: np.ndarray, V: np.ndarray | None
     return P0 + a[:, None, None] * (P1 - P0)
 
 
+def normals_at(mesh, N: np.ndarray, prim: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Object-space corner normals (n, 3, 3) float64 of triangles ``prim`` (n,) at times (n,) of a
+    deforming mesh with normals per vertex step N (K, F, 3, 3) (float32 or float64): linear between
+    the steps of ``mesh.vertex_times`` (clamped outside), as :func:`triangles_at` does positions;
+    not normalised."""
+    i, a = segment_of(np.asarray(mesh.vertex_times, dtype=np.float64), times)
+    N0, N1 = N[i, prim].astype(np.float64), N[i + 1, prim].astype(np.float64)
+    return N0 + a[:, None, None] * (N1 - N0)
+
+
 def _normalize(n: np.ndarray) -> np.ndarray:
     L = np.sqrt(_dot(n, n))
     return n / np.where(L > 0, L, 1.0)[..., None]
@@ -316,7 +326,9 @@ class InstanceShading:
     Normals map object -> world with the inverse transpose of the transform at
     the ray's time.  The object-space winding decides ``ng``'s side, so a
     mirrored (negative-scale) object keeps its outside (Blender's convention).
-    Deforming meshes shade flat (``ns = ng``), per :class:`stpm_core.scene.Mesh`.
+    A deforming mesh's corner normals (per vertex step, :attr:`stpm_core.scene.Mesh.normal_keys`)
+    are interpolated to the ray's time like its positions (:func:`normals_at`), then blended
+    across the triangle and normalised.
     """
 
     def __init__(self, mesh, transform):
@@ -328,9 +340,13 @@ class InstanceShading:
         self.N_static = None
         if transform is not None and transform.is_static:
             self.N_static = normal_matrix(transform.matrices[0, :3, :3])[None]
-        self.normals = None
-        if mesh.normals is not None and not mesh.is_deforming:
-            self.normals = np.asarray(mesh.normals, dtype=np.float64)
+        # Corner normals: (F, 3, 3) shared by every time, or (K, F, 3, 3) per vertex step
+        self.normals = self.normal_steps = None
+        keys = mesh.normal_keys
+        if keys is not None and mesh.is_deforming and keys.shape[0] > 1:
+            self.normal_steps = np.ascontiguousarray(keys, dtype=np.float32)   # 36 B per triangle per step
+        elif keys is not None:
+            self.normals = np.asarray(keys[0], dtype=np.float64)
 
     def shade(self, prim, u, v, times, A=None):
         """Normals and material for hits (n,) -> ng (n, 3), ns (n, 3), material (n,).
@@ -347,10 +363,11 @@ class InstanceShading:
         P = triangles_at(self.mesh, prim, times, self.V)
         n_obj = cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
         ng = _normalize(apply_linear(AT, n_obj))
-        if self.normals is None:
+        if self.normals is None and self.normal_steps is None:
             ns = ng.copy()
         else:
-            N = self.normals[prim]
+            N = self.normals[prim] if self.normal_steps is None else \
+                normals_at(self.mesh, self.normal_steps, prim, times)
             n_s = (1 - u - v)[:, None] * N[:, 0] + u[:, None] * N[:, 1] + v[:, None] * N[:, 2]
             ns = _normalize(apply_linear(AT, n_s))
             bad = ~np.any(ns != 0, axis=1)
