@@ -378,3 +378,33 @@ def test_records_relative_to_an_origin_keep_precision_far_from_the_world_origin(
 
     world = PhotonMap(make_records(pos, wi, power, t), BOX, time_scale=1.0, backend=backend)
     assert np.unique(world.position, axis=0).shape[0] <= 8   # the quantisation this guards against
+
+
+def test_histogram_selection_and_buffer_cut_are_exact():
+    # The search's buffer cut (kdtree._cut) and TEMPORAL's time selection (kdtree._kth_smallest)
+    # find the nth smallest with a histogram instead of a quickselect: the same value as a sort,
+    # on keys with ties, zeros, one bucket holding nearly all (an outlier) and all keys equal
+    pytest.importorskip("numba")
+    from stpm_core.photons import kdtree
+    if not kdtree.AVAILABLE:
+        pytest.skip("numba disabled")
+    rng = np.random.default_rng(31)
+    cases = [rng.random(150), rng.exponential(1.0, 75), np.floor(rng.random(120) * 7) / 7,
+             np.zeros(40), np.full(33, 0.25), np.r_[rng.random(90) * 1e-6, 1e6], np.r_[rng.random(10), 0.0, 0.0],
+             rng.random(3), np.r_[np.full(60, 0.5), rng.random(20)]]
+    for key in cases:
+        n = key.size
+        hist, bucket, sub = np.empty(max(n // 2, 1), np.int64), np.empty(n, np.int64), np.empty(n)
+        for nth in sorted({0, 1, n // 3, n // 2, n - 2, n - 1} - {-1}):
+            k0 = key.copy()
+            assert kdtree._kth_smallest(k0, n, nth, hist, bucket, sub) == np.sort(key)[nth]
+            assert np.array_equal(k0, key)                      # keys not reordered
+        # cut a buffer of n entries to its kq nearest: the kq smallest keys (with their rows and
+        # time distances) in the first kq slots, the kq-th in the last of them
+        for kq in sorted({1, 2, n // 2, n - 1} - {0}):
+            bd, bi, bx = key.copy(), np.arange(n, dtype=np.int64), key * 3.0 + 1.0
+            kdtree._cut(bd, bi, bx, n, kq, np.empty(kq, np.int64), np.empty(n, np.int64), np.empty(n),
+                        np.empty(n, np.int64))
+            assert np.array_equal(np.sort(bd[:kq]), np.sort(key)[:kq]) and bd[kq - 1] == np.sort(key)[kq - 1]
+            assert np.array_equal(bd[:kq], key[bi[:kq]]) and np.array_equal(bx[:kq], key[bi[:kq]] * 3.0 + 1.0)
+            assert np.unique(bi[:kq]).size == kq
