@@ -39,10 +39,12 @@ makes pruning more conservative), a node's two children in one 64-byte line.
 Search (:func:`_knn`): best-first (nodes in increasing box distance, the
 nearer child followed at once, the farther queued), so only leaves that
 reach the final kq-th ball are scanned.  Nearer photons are appended to a
-buffer of 2 kq and cut back to the kq nearest by quickselect when it fills
-(O(1) per photon where a heap costs O(log kq); TEMPORAL with a large fixed alpha keeps hundreds).
-Warm start: the previous query's kq nearest lie within r_prev + |q - q_prev|
-of q, so that radius already bounds the search from its first node.
+buffer of 2 kq (with their time distances, TEMPORAL's) and cut back to the kq
+nearest when it fills (O(1) per photon where a heap costs O(log kq); TEMPORAL with
+a large fixed alpha keeps hundreds); the cut and TEMPORAL's time selection find
+their nth smallest by a histogram (:func:`_kth_smallest`), not a quickselect.
+Warm start: the previous query's kq nearest are kq photons within the farthest
+of them from q, so that distance already bounds the search from its first node.
 
 Queries are processed in Morton order, so consecutive queries are neighbours
 (warm start, tree nodes in cache).  An exact candidate cache (photons within
@@ -73,7 +75,7 @@ from ..numba_probe import probe
 __all__ = ["AVAILABLE", "LEAF_SIZE", "MODE_STANDARD", "MODE_TEMPORAL", "MODE_KD4D", "FlatTree", "run_chunks",
            "disable"]
 
-LEAF_SIZE = 16           # at most this many photons per leaf (2^L leaves of 8..16; 12..32 measured within 10 %)
+LEAF_SIZE = 32           # at most this many photons per leaf (2^L leaves of 16..32; docs/photon-mapping.md, section 5b)
 MODE_STANDARD, MODE_TEMPORAL, MODE_KD4D = 0, 1, 2
 _CHUNK_MIN = 2048        # fewer queries than this per thread are not split
 
@@ -296,8 +298,9 @@ if AVAILABLE:
         Keys go to hist.shape[0] equal buckets over [0, max key] (bucket[:n] their bucket, hist the
         counts); the bucket where the running count passes nth holds the answer, found by
         quickselect among its few keys (copied to sub).  Exact: the bucket index is monotone in
-        the key.  Measured 5-8x cheaper than a quickselect over all n keys carrying two more
-        arrays (its partition branches are unpredictable): docs/photon-mapping.md, section 7.
+        the key.  Replaces a quickselect over all n keys (carrying two more arrays), whose
+        partition branches are unpredictable: that was about a quarter of a TEMPORAL look-up
+        (docs/photon-mapping.md, section 7).
         hist (nb,) int64, bucket (>= n,) int64, sub (>= n,) float64 scratch.
         """
         kmax = 0.0
@@ -571,7 +574,8 @@ if AVAILABLE:
         """Distance (n,) to the kq-th nearest photon of each query q (n, 4), at most sqrt(cap2).
 
         The search is bounded by cap2 (squared, m^2): where fewer than kq photons lie nearer, the
-        answer is the cap, found without visiting anything beyond it.  Warm-started like _lookup.
+        answer is the cap, found without visiting anything beyond it.  Warm-started from the
+        previous radius: the previous query's kq nearest lie within r_prev + |q - q_prev|.
         """
         bd = np.empty(2 * kq)
         bi = np.empty(2 * kq, np.int64)
