@@ -11,7 +11,8 @@
   scattered queries and for a render's density of queries (16 samples per
   pixel footprint); both cores; best of 3 interleaved rounds;
 * the TEMPORAL / STANDARD and KD4D / STANDARD cost ratios, per look-up and
-  per render (render_s of the traced scene, same photons and k, each backend);
+  per render (render_s of the traced scene, same photons and k, each backend;
+  and the image pass's CPU seconds with one thread, :func:`bench_render_cpu`);
 * relative error of the mean irradiance on the moving box top against the
   analytic answer, for the synthetic 1M map and the traced scene.
 
@@ -197,9 +198,69 @@ def bench_render_cost(resolution=(128, 128), samples=8, n_caustic=400_000, round
     return out
 
 
+def bench_render_cpu(resolution=(128, 128), samples=8, n_caustic=400_000, rounds=3) -> dict:
+    """CPU seconds of :func:`bench_render_cost`'s render with ``threads=1``, per estimator (numba).
+
+    ``image_cpu_s``: the image pass (``trace_image``), ``lookup_cpu_s``: the maps' ``estimate``
+    calls inside it, both ``time.thread_time`` of the one rendering thread, so other jobs on a
+    shared machine slow them less than they do the wall-clock ``render_s`` (which moved by 2x
+    between rounds at load 6-8).  After an untimed warm-up render of each, renders interleaved
+    over the estimators, ``rounds`` times; the minimum of each counts.
+    """
+    import stpm_core.render as render_mod
+    from stpm_core.photons.estimators import PhotonMap
+    scene = _traced_scene()
+    scene.resolution = resolution
+    scene.camera.ortho_scale = 4.0
+    out = {"resolution": list(resolution), "samples": samples, "photons_caustic": n_caustic, "rounds": rounds,
+           "load_avg_1min": os.getloadavg()[0]}
+    cpu = {"image": 0.0, "lookup": 0.0}
+    trace_image, estimate = render_mod.trace_image, PhotonMap.estimate
+
+    def timed_trace_image(*a, **kw):
+        t0 = time.thread_time()
+        try:
+            return trace_image(*a, **kw)
+        finally:
+            cpu["image"] += time.thread_time() - t0
+
+    def timed_estimate(self, *a, **kw):
+        t0 = time.thread_time()
+        try:
+            return estimate(self, *a, **kw)
+        finally:
+            cpu["lookup"] += time.thread_time() - t0
+
+    _set_backend("numba")
+    # warm-up (untimed): the first render of a process also loads every kernel, which would
+    # count against whichever estimator comes first
+    small = _traced_scene()
+    small.resolution = (16, 16)
+    small.camera.ortho_scale = 4.0
+    for est in ("STANDARD", "TEMPORAL", "KD4D"):
+        render_mod.render(small, RenderSettings(samples=1, photons_caustic=20_000, photons_global=0, estimator=est,
+                                                threads=1))
+    render_mod.trace_image, PhotonMap.estimate = timed_trace_image, timed_estimate
+    try:
+        for _ in range(rounds):
+            for est in ("STANDARD", "TEMPORAL", "KD4D"):
+                cpu["image"] = cpu["lookup"] = 0.0
+                render_mod.render(scene, RenderSettings(samples=samples, photons_caustic=n_caustic, photons_global=0,
+                                                        estimator=est, threads=1))
+                for key in ("image", "lookup"):
+                    name = f"{est}_{key}_cpu_s"
+                    out[name] = min(out.get(name, np.inf), cpu[key])
+    finally:
+        render_mod.trace_image, PhotonMap.estimate = trace_image, estimate
+    for est in ("TEMPORAL", "KD4D"):
+        out[f"{est}_image_cpu_vs_STANDARD"] = out[f"{est}_image_cpu_s"] / out["STANDARD_image_cpu_s"]
+        out[f"{est}_lookup_cpu_vs_STANDARD"] = out[f"{est}_lookup_cpu_s"] / out["STANDARD_lookup_cpu_s"]
+    return out
+
+
 def run() -> dict:
     return {"tracing": bench_tracing(), "lookups_1M": bench_lookups(), "traced_errors": bench_traced_errors(),
-            "render_cost": bench_render_cost()}
+            "render_cost": bench_render_cost(), "render_cpu": bench_render_cpu()}
 
 
 if __name__ == "__main__":

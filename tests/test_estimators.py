@@ -378,3 +378,70 @@ def test_records_relative_to_an_origin_keep_precision_far_from_the_world_origin(
 
     world = PhotonMap(make_records(pos, wi, power, t), BOX, time_scale=1.0, backend=backend)
     assert np.unique(world.position, axis=0).shape[0] <= 8   # the quantisation this guards against
+
+
+def test_histogram_selection_and_buffer_cut_are_exact():
+    # The search's buffer cut (kdtree._cut) and TEMPORAL's time selection (kdtree._kth_smallest)
+    # find the nth smallest with a histogram instead of a quickselect: the same value as a sort,
+    # on keys with ties, zeros, one bucket holding nearly all (an outlier) and all keys equal
+    pytest.importorskip("numba")
+    from stpm_core.photons import kdtree
+    if not kdtree.AVAILABLE:
+        pytest.skip("numba disabled")
+    rng = np.random.default_rng(31)
+    cases = [rng.random(150), rng.exponential(1.0, 75), np.floor(rng.random(120) * 7) / 7,
+             np.zeros(40), np.full(33, 0.25), np.r_[rng.random(90) * 1e-6, 1e6], np.r_[rng.random(10), 0.0, 0.0],
+             rng.random(3), np.r_[np.full(60, 0.5), rng.random(20)]]
+    for key in cases:
+        n = key.size
+        hist, bucket, sub = np.empty(max(n // 2, 1), np.int64), np.empty(n, np.int64), np.empty(n)
+        for nth in sorted({0, 1, n // 3, n // 2, n - 2, n - 1} - {-1}):
+            k0 = key.copy()
+            assert kdtree._kth_smallest(k0, n, nth, hist, bucket, sub) == np.sort(key)[nth]
+            assert np.array_equal(k0, key)                      # keys not reordered
+        # cut a buffer of n entries to its kq nearest: the kq smallest keys (with their rows and
+        # time distances) in the first kq slots, the kq-th in the last of them
+        for kq in sorted({1, 2, n // 2, n - 1} - {0}):
+            bd, bi, bx = key.copy(), np.arange(n, dtype=np.int64), key * 3.0 + 1.0
+            kdtree._cut(bd, bi, bx, n, kq, np.empty(kq, np.int64), np.empty(n, np.int64), np.empty(n),
+                        np.empty(n, np.int64))
+            assert np.array_equal(np.sort(bd[:kq]), np.sort(key)[:kq]) and bd[kq - 1] == np.sort(key)[kq - 1]
+            assert np.array_equal(bd[:kq], key[bi[:kq]]) and np.array_equal(bx[:kq], key[bi[:kq]] * 3.0 + 1.0)
+            assert np.unique(bi[:kq]).size == kq
+
+
+def test_numba_temporal_with_exact_time_ties_keeps_k_minus_1_photons_of_a_valid_window():
+    # Photons of one path share a time, so a global map has exact time ties. With times on a
+    # coarse grid, ties at the k-th time distance are common: the window tau is still exactly
+    # scipy's (a value, whichever tied photon is its k-th), and the sum takes every candidate
+    # nearer in time than tau plus some of those at exactly tau, k - 1 in all
+    pytest.importorskip("numba")
+    from stpm_core.photons import kdtree
+    if not kdtree.AVAILABLE:
+        pytest.skip("numba disabled")
+    rng = np.random.default_rng(32)
+    N, m, k = 20_000, 30, 12
+    pos = rng.uniform(-1, 1, (N, 3))
+    pos[:, 2] = 0.0
+    t = np.floor(rng.random(N) * 16) / 16                       # 16 distinct times
+    Phi = np.repeat(rng.integers(1, 1000, N)[:, None], 3, axis=1) * 2.0 ** -20   # exact in float32 and in sums
+    mp = PhotonMap(make_records(pos, np.tile(UP, (N, 1)), Phi, t), BOX, time_scale=0.7, backend="numba")
+    q = np.column_stack([rng.uniform(-0.9, 0.9, (3000, 2)), np.zeros(3000), rng.random(3000)])
+    phi, r, tau = mp.flat_tree(3).lookup(kdtree.MODE_TEMPORAL, q, np.tile(UP, (3000, 1)), m, k, False, 1.1, 1)
+    d, idx = mp.tree3().query(q[:, :3], m)
+    assert np.array_equal(r, d[:, -1])
+    dt = np.abs(mp.time[idx[:, :-1]] - q[:, 3:4])
+    assert np.array_equal(tau, np.sort(dt, axis=1)[:, k - 1])
+    P = mp.power[idx[:, :-1], 0].astype(np.float64)
+    below, at = dt < tau[:, None], dt == tau[:, None]
+    n_ties = k - 1 - below.sum(1)                               # photons at tau the sum must take
+    lo = (P * below).sum(1)
+    assert ((n_ties > 0) & (at.sum(1) > n_ties)).mean() > 0.3   # ties that need a choice are common
+    # the sum is lo plus exactly n_ties of the photons at tau: between the smallest and largest choice
+    P_at = np.where(at, P, np.nan)
+    srt = np.sort(P_at, axis=1)                                 # ascending, NaN last
+    smallest = lo + np.array([srt[i, :n].sum() for i, n in enumerate(n_ties)])
+    largest = lo + np.array([np.sort(P_at[i][at[i]])[::-1][:n].sum() for i, n in enumerate(n_ties)])
+    assert np.all(phi[:, 0] >= smallest * (1 - 1e-12)) and np.all(phi[:, 0] <= largest * (1 + 1e-12))
+    # and it is a sum of whole photons (integer power units)
+    assert np.array_equal(np.round(phi[:, 0] * 2.0 ** 20), phi[:, 0] * 2.0 ** 20)

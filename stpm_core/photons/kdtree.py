@@ -39,10 +39,12 @@ makes pruning more conservative), a node's two children in one 64-byte line.
 Search (:func:`_knn`): best-first (nodes in increasing box distance, the
 nearer child followed at once, the farther queued), so only leaves that
 reach the final kq-th ball are scanned.  Nearer photons are appended to a
-buffer of 2 kq and cut back to the kq nearest by quickselect when it fills
-(O(1) per photon where a heap costs O(log kq); TEMPORAL with a large fixed alpha keeps hundreds).
-Warm start: the previous query's kq nearest lie within r_prev + |q - q_prev|
-of q, so that radius already bounds the search from its first node.
+buffer of 2 kq (with their time distances, TEMPORAL's) and cut back to the kq
+nearest when it fills (O(1) per photon where a heap costs O(log kq); TEMPORAL with
+a large fixed alpha keeps hundreds); the cut and TEMPORAL's time selection find
+their nth smallest by a histogram (:func:`_kth_smallest`), not a quickselect.
+Warm start: the previous query's kq nearest are kq photons within the farthest
+of them from q, so that distance already bounds the search from its first node.
 
 Queries are processed in Morton order, so consecutive queries are neighbours
 (warm start, tree nodes in cache).  An exact candidate cache (photons within
@@ -73,7 +75,7 @@ from ..numba_probe import probe
 __all__ = ["AVAILABLE", "LEAF_SIZE", "MODE_STANDARD", "MODE_TEMPORAL", "MODE_KD4D", "FlatTree", "run_chunks",
            "disable"]
 
-LEAF_SIZE = 16           # at most this many photons per leaf (2^L leaves of 8..16; 12..32 measured within 10 %)
+LEAF_SIZE = 32           # at most this many photons per leaf (2^L leaves of 16..32; docs/photon-mapping.md, section 5b)
 MODE_STANDARD, MODE_TEMPORAL, MODE_KD4D = 0, 1, 2
 _CHUNK_MIN = 2048        # fewer queries than this per thread are not split
 
@@ -261,8 +263,8 @@ if AVAILABLE:
         return acc
 
     @_jit
-    def _select(key, aux, idx, lo, hi, nth):
-        """Quickselect key[lo:hi] (carrying aux, idx): key[nth] is the nth smallest, no larger key left of it."""
+    def _select(key, lo, hi, nth):
+        """Quickselect key[lo:hi] in place: key[nth] is the nth smallest, no larger key left of it."""
         while hi - lo > 1:
             a, b, c = key[lo], key[(lo + hi) // 2], key[hi - 1]
             if a > b:
@@ -280,8 +282,6 @@ if AVAILABLE:
                     j -= 1
                 if i <= j:
                     key[i], key[j] = key[j], key[i]
-                    aux[i], aux[j] = aux[j], aux[i]
-                    idx[i], idx[j] = idx[j], idx[i]
                     i += 1
                     j -= 1
             if nth <= j:
@@ -292,16 +292,94 @@ if AVAILABLE:
                 return
 
     @_jit
-    def _knn(P, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist, bound0):
+    def _kth_smallest(key, n, nth, hist, bucket, sub):
+        """The nth smallest (0-based) of key[:n] (keys >= 0), found by a histogram; key is not reordered.
+
+        Keys go to hist.shape[0] equal buckets over [0, max key] (bucket[:n] their bucket, hist the
+        counts); the bucket where the running count passes nth holds the answer, found by
+        quickselect among its few keys (copied to sub).  Exact: the bucket index is monotone in
+        the key.  Replaces a quickselect over all n keys (carrying two more arrays), whose
+        partition branches are unpredictable: that was about a quarter of a TEMPORAL look-up
+        (docs/photon-mapping.md, section 7).
+        hist (nb,) int64, bucket (>= n,) int64, sub (>= n,) float64 scratch.
+        """
+        kmax = 0.0
+        for a in range(n):
+            if key[a] > kmax:
+                kmax = key[a]
+        if kmax == 0.0:
+            return 0.0
+        nb = hist.shape[0]
+        scale = nb / kmax
+        for b in range(nb):
+            hist[b] = 0
+        for a in range(n):
+            v = key[a] * scale
+            b = int(v) if v < nb else nb - 1       # (the max, and a NaN, to the last bucket)
+            bucket[a] = b
+            hist[b] += 1
+        cum = 0
+        b = 0
+        while cum + hist[b] <= nth:
+            cum += hist[b]
+            b += 1
+        m = 0
+        for a in range(n):
+            if bucket[a] == b:
+                sub[m] = key[a]
+                m += 1
+        _select(sub, 0, m, nth - cum)
+        return sub[nth - cum]
+
+    @_jit
+    def _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti):
+        """Keep the kq nearest of the search buffer's cnt entries (bd, bi, bx) in its first kq slots.
+
+        bd[kq - 1] is then the kq-th squared distance and the others no larger; the entries kept
+        keep their buffer order (a stable compaction: no unpredictable swaps), those at exactly
+        the kq-th distance after them.  hist, bucket, sub, ti: scratch (:func:`_kth_smallest`;
+        sub and ti of >= cnt entries).
+        """
+        thr = _kth_smallest(bd, cnt, kq - 1, hist, bucket, sub)
+        # entries at exactly thr (at least one: the kq-th itself), copied out before the compaction
+        nt = 0
+        for a in range(cnt):
+            if bd[a] == thr:
+                ti[nt] = a
+                nt += 1
+        nt = min(nt, kq)
+        for b in range(nt):
+            a = ti[b]
+            sub[b] = bx[a]
+            ti[b] = bi[a]
+        # those strictly nearer to the front, in buffer order (always copy, advance when kept)
+        w = 0
+        for a in range(cnt):
+            d = bd[a]
+            bd[w] = d
+            bi[w] = bi[a]
+            bx[w] = bx[a]
+            w += 1 if d < thr else 0
+        b = 0
+        while w < kq:
+            bd[w] = thr
+            bi[w] = ti[b]
+            bx[w] = sub[b]
+            w += 1
+            b += 1
+
+    @_jit
+    def _knn(P, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti):
         """Best-first kq-nearest search.  On return bd[:kq] / bi[:kq] hold the squared distances and
-        rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther, in any order).
+        rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther), and bx[:kq] their time
+        distances |t_j - q[3]| (shutter units; TEMPORAL's, meaningless for KD4D's s t).
 
         Nodes are visited in increasing bounding-box distance (min-heap qnode / qdist, scratch of at
         least the node count + 1), so the search stops at the first node beyond the current kq-th
         distance: it scans only the leaves that reach the final ball.  Photons nearer than the
-        current bound are appended to the buffer bd / bi (capacity 2 kq); a full buffer is cut back
-        to its kq nearest by quickselect, which also tightens the bound (O(1) per photon, where a
-        kq-heap costs O(log kq)).  bx is scratch carried along.
+        current bound are appended to the buffer bd / bi / bx (capacity 2 kq); a full buffer is cut
+        back to its kq nearest by :func:`_cut`, which also tightens the bound (O(1) per photon, where
+        a kq-heap costs O(log kq)).  hist, bucket, sub, ti: _cut's scratch (sub, ti of 2 kq).
 
         bound0: a squared distance known to hold at least kq photons strictly inside (inf if
         none is known); the search then prunes from its first node.  Returns False if fewer
@@ -321,7 +399,7 @@ if AVAILABLE:
             if dist >= bound:
                 # the buffer's bound may be loose: cut it to the exact kq-th first
                 if cnt > kq:
-                    _select(bd, bx, bi, 0, cnt, kq - 1)
+                    _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
                     cnt = kq
                     bound = bd[kq - 1]
                 if dist >= bound:
@@ -380,20 +458,30 @@ if AVAILABLE:
                 if d2 < bound:
                     bd[cnt] = d2
                     bi[cnt] = j
+                    bx[cnt] = abs(np.float64(P[j, 3]) - q3)
                     cnt += 1
                     if cnt == cap:
-                        _select(bd, bx, bi, 0, cnt, kq - 1)
+                        _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
                         cnt = kq
                         bound = bd[kq - 1]
             if bound == np.inf and cnt >= kq:
-                _select(bd, bx, bi, 0, cnt, kq - 1)
+                _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
                 cnt = kq
                 bound = bd[kq - 1]
         if cnt < kq:
             return False
-        # the kq nearest to the front, the kq-th at kq - 1 (also when exactly kq were kept
-        # below a warm-start bound and never cut)
-        _select(bd, bx, bi, 0, cnt, kq - 1)
+        if cnt > kq:
+            _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
+        else:
+            # exactly kq kept below a warm-start bound and never cut: the kq-th (the largest) to
+            # slot kq - 1
+            am = 0
+            for a in range(1, kq):
+                if bd[a] > bd[am]:
+                    am = a
+            bd[am], bd[kq - 1] = bd[kq - 1], bd[am]
+            bi[am], bi[kq - 1] = bi[kq - 1], bi[am]
+            bx[am], bx[kq - 1] = bx[kq - 1], bx[am]
         return True
 
     @_jit
@@ -409,44 +497,48 @@ if AVAILABLE:
         bd = np.empty(2 * kq)
         bi = np.empty(2 * kq, np.int64)
         bx = np.empty(2 * kq)
-        tk = np.empty(2 * kq)
-        tx = np.empty(2 * kq)
+        sub = np.empty(2 * kq)
         ti = np.empty(2 * kq, np.int64)
+        bucket = np.empty(2 * kq, np.int64)
+        hist = np.empty(kq, np.int64)
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
-        r_prev = np.inf
         n = q.shape[0]
         for i in range(n):
             q0, q1, q2, q3 = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
             # -- the kq nearest by a tree search, warm-started: the previous query's kq nearest
-            # lie within r_prev + |q - q_prev|
+            # (still in bi[:kq]) are kq photons within the farthest of them from q
             qq[0], qq[1], qq[2], qq[3] = q0, q1, q2, q3
             bound0 = np.inf
             if i > 0:
-                e0, e1, e2, e3 = q0 - q[i - 1, 0], q1 - q[i - 1, 1], q2 - q[i - 1, 2], q3 - q[i - 1, 3]
-                dp = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0))
-                bound0 = ((r_prev + dp) * (1.0 + 1e-9)) ** 2
-            if not _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0):
-                _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, np.inf)
+                far2 = 0.0
+                for a in range(kq):
+                    j = bi[a]
+                    e0 = np.float64(P[j, 0]) - q0
+                    e1 = np.float64(P[j, 1]) - q1
+                    e2 = np.float64(P[j, 2]) - q2
+                    d2 = e0 * e0 + e1 * e1 + e2 * e2
+                    if D == 4:
+                        e3 = s * np.float64(P[j, 3]) - q3
+                        d2 += e3 * e3
+                    far2 = max(far2, d2)
+                bound0 = far2 * (1.0 + 1e-9)           # (slack: the farthest itself strictly inside)
+            if not _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti):
+                _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, np.inf, hist, bucket, sub, ti)
             # slot kq - 1 = the kq-th neighbour (fixes the radius); slots 0 .. kq - 2 are inner
             r = np.sqrt(bd[kq - 1])
             out_r[i] = r
-            r_prev = r
             n_sel = kq - 1
             tau = np.inf
             ties = 0
             if mode == MODE_TEMPORAL:
                 # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau.
-                # Select on a copy (bx, bd, bi keep their order); the sum below then takes every
-                # candidate nearer in time than tau, plus as many at exactly tau as make k - 1.
+                # bx holds their time distances (from the search; bx, bd, bi keep their order);
+                # the sum below then takes every candidate nearer in time than tau, plus as many
+                # at exactly tau as make k - 1.
                 n_less = 0
-                for a in range(kq - 1):
-                    dt = abs(np.float64(P[bi[a], 3]) - q3)
-                    bx[a] = dt
-                    tk[a] = dt
-                _select(tk, tx, ti, 0, kq - 1, k - 1)      # tx, ti: scratch carried along
-                tau = tk[k - 1]
+                tau = _kth_smallest(bx, kq - 1, k - 1, hist, bucket, sub)
                 for a in range(kq - 1):
                     if bx[a] < tau:
                         n_less += 1
@@ -482,11 +574,16 @@ if AVAILABLE:
         """Distance (n,) to the kq-th nearest photon of each query q (n, 4), at most sqrt(cap2).
 
         The search is bounded by cap2 (squared, m^2): where fewer than kq photons lie nearer, the
-        answer is the cap, found without visiting anything beyond it.  Warm-started like _lookup.
+        answer is the cap, found without visiting anything beyond it.  Warm-started from the
+        previous radius: the previous query's kq nearest lie within r_prev + |q - q_prev|.
         """
         bd = np.empty(2 * kq)
         bi = np.empty(2 * kq, np.int64)
         bx = np.empty(2 * kq)
+        sub = np.empty(2 * kq)
+        ti = np.empty(2 * kq, np.int64)
+        bucket = np.empty(2 * kq, np.int64)
+        hist = np.empty(kq, np.int64)
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
@@ -498,9 +595,9 @@ if AVAILABLE:
                 e0, e1, e2, e3 = qq[0] - q[i - 1, 0], qq[1] - q[i - 1, 1], qq[2] - q[i - 1, 2], qq[3] - q[i - 1, 3]
                 dp = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0))
                 bound0 = min(cap2, ((r_prev + dp) * (1.0 + 1e-9)) ** 2)
-            found = _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0)
+            found = _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti)
             if not found and bound0 < cap2:
-                found = _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, cap2)
+                found = _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, cap2, hist, bucket, sub, ti)
             if found:
                 r = np.sqrt(bd[kq - 1])
                 out_r[i] = r
