@@ -248,6 +248,11 @@ class STPMRenderEngine(bpy.types.RenderEngine):
         prog = (getattr(result, "stats", {}) or {}).get("progressive")
         if prog:
             self.report({"INFO"}, "STPM progressive: " + _core.sub("progressive").summary(prog))
+        adaptive = (getattr(result, "stats", {}) or {}).get("adaptive")
+        if adaptive:
+            # adaptive sampling (Sampling > Noise Threshold): the samples the pixels took
+            self.report({"INFO"}, f"STPM adaptive sampling: {adaptive['samples_mean']:.1f} samples per pixel on "
+                                  f"average ({adaptive['samples_min']}-{adaptive['samples_max']})")
         if len(views) > 1:
             text = (f"stereoscopy / multiview is not supported: every view ({', '.join(views)}) gets the same "
                     f"mono image from the scene camera")
@@ -263,7 +268,8 @@ class STPMRenderEngine(bpy.types.RenderEngine):
         self.stpm_stats = stats
         LAST_RENDER.clear()
         LAST_RENDER.update(stats=stats, warnings=list(self.stpm_warnings), passes=written, scene=stpm_scene, plan=plan)
-        self.update_stats("STPM", f"Done in {stats['wall_s']:.1f} s (export {export_s:.2f} s)")
+        mean_spp = f", {adaptive['samples_mean']:.1f} samples per pixel" if adaptive else ""
+        self.update_stats("STPM", f"Done in {stats['wall_s']:.1f} s (export {export_s:.2f} s{mean_spp})")
 
     # Rendered viewport: addon/viewport.py does the work (ViewportSession), these only delegate
     def view_update(self, context, depsgraph):

@@ -942,11 +942,14 @@ def _shade_samples(ctx, cam, resolution, px, py, times, S, rng, tstats):
 
 
 def adaptive_on(settings, time_override=None, maps=None) -> bool:
-    """Does trace_image sample adaptively?  With ``use_adaptive_sampling`` and a threshold > 0, for the
+    """Does trace_image sample adaptively?  With ``use_adaptive_sampling``, a threshold > 0 and more
+    samples than the minimum (else there is one round: the fixed render, bit for bit), for the
     whole shutter (not an accumulation still or a progressive pass: ``time_override``), unless the
     maps keep per-pixel statistics (compare's SPPM baseline)."""
-    return (bool(getattr(settings, "use_adaptive_sampling", False))
-            and float(getattr(settings, "adaptive_threshold", 0.0)) > 0.0
+    from .adaptive import min_samples
+    thr = float(getattr(settings, "adaptive_threshold", 0.0))
+    return (bool(getattr(settings, "use_adaptive_sampling", False)) and thr > 0.0
+            and int(settings.samples) > min_samples(thr, int(getattr(settings, "adaptive_min_samples", 0)))
             and time_override is None and not getattr(maps, "per_pixel", False))
 
 

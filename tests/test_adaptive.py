@@ -146,3 +146,10 @@ def test_only_photon_method_samples_adaptively():
     assert adaptive_on(st) and not adaptive_on(st, 0.5) and not adaptive_on(st, (0.0, 0.5))
     assert not adaptive_on(_settings(use_adaptive_sampling=True, adaptive_threshold=0.0))
     assert not adaptive_on(_settings(use_adaptive_sampling=False))
+    # no more samples than the minimum: one round, the fixed render bit for bit
+    st = _settings(use_adaptive_sampling=True, samples=16)
+    assert not adaptive_on(st)
+    scene = _scene()
+    a = render(scene, st).passes
+    b = render(scene, st.replace(use_adaptive_sampling=False)).passes
+    assert "Sample Count" not in a and np.array_equal(a["Combined"], b["Combined"])
