@@ -106,7 +106,7 @@ def write_passes(engine, passes: dict, width: int, height: int, layer_name: str 
     """
     x0, y0, w, h = region if region is not None else (0, 0, width, height)
     images = {}
-    for name, _channels, _ids in _core.passes_table(denoise=True):      # every pass the result holds
+    for name, _channels, _ids in _core.passes_table(denoise=True, adaptive=True):   # every pass the result holds
         img = passes.get(name)
         if img is not None:
             img = np.asarray(img, dtype=np.float32).reshape(height, width, -1)[::-1]  # bottom-up
@@ -157,8 +157,10 @@ class STPMRenderEngine(bpy.types.RenderEngine):
 
     # Render passes: the one table
     def update_render_passes(self, scene=None, renderlayer=None):
-        denoise = bool(getattr(getattr(scene, "stpm", None), "denoise", False))
-        for name, channels, ids in _core.passes_table(denoise):
+        props = getattr(scene, "stpm", None)
+        denoise = bool(getattr(props, "denoise", False))
+        adaptive = bool(getattr(props, "use_adaptive_sampling", False))
+        for name, channels, ids in _core.passes_table(denoise, adaptive):
             self.register_pass(scene, renderlayer, name, channels, ids, pass_type(ids))
 
     # Final render and previews

@@ -26,7 +26,7 @@ import numpy as np
 
 from .kernels import paths as _K
 
-__all__ = ["PASSES", "PASS_NAMES", "DENOISING_GUIDES", "DENOISING_PASSES", "ALL_PASSES", "passes_for",
+__all__ = ["PASSES", "PASS_NAMES", "DENOISING_GUIDES", "DENOISING_PASSES", "ADAPTIVE_PASSES", "ALL_PASSES", "passes_for",
            "pass_channels", "blackman_harris", "filter_offsets", "BH_INVERSE_CDF", "Film"]
 
 # Render passes: (name, channel count, channel ids) -- Blender's names and order.
@@ -48,13 +48,17 @@ DENOISING_GUIDES: tuple[tuple[str, int, str], ...] = (
     ("Denoising Normal", 3, "XYZ"),
 )
 DENOISING_PASSES: tuple[tuple[str, int, str], ...] = DENOISING_GUIDES + (("Noisy Image", 4, "RGBA"),)
+# With adaptive sampling (RenderSettings.use_adaptive_sampling): each pixel's samples (as Cycles'
+# Sample Count debug pass; integrator._trace_adaptive)
+ADAPTIVE_PASSES: tuple[tuple[str, int, str], ...] = (("Sample Count", 1, "X"),)
 # Every pass STPM can write, in the order it writes them
-ALL_PASSES: tuple[tuple[str, int, str], ...] = PASSES + DENOISING_PASSES
+ALL_PASSES: tuple[tuple[str, int, str], ...] = PASSES + DENOISING_PASSES + ADAPTIVE_PASSES
 
 
-def passes_for(denoise: bool = False) -> tuple:
-    """The passes a render writes: :data:`PASSES`, plus :data:`DENOISING_PASSES` with ``denoise``."""
-    return PASSES + DENOISING_PASSES if denoise else PASSES
+def passes_for(denoise: bool = False, adaptive: bool = False) -> tuple:
+    """The passes a render writes: :data:`PASSES`, plus :data:`DENOISING_PASSES` with ``denoise``,
+    plus :data:`ADAPTIVE_PASSES` with ``adaptive`` (a render that sampled adaptively)."""
+    return PASSES + (DENOISING_PASSES if denoise else ()) + (ADAPTIVE_PASSES if adaptive else ())
 
 # Depth written where a camera ray escapes (Blender writes 1e10 for the background).
 DEPTH_BACKGROUND = 1.0e10

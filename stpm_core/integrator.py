@@ -1146,4 +1146,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     passes = film.resolve()
     if ctx.features:
         passes["Noisy Image"] = passes["Combined"]       # Cycles' name for the raw image beside the denoised one
+    if getattr(settings, "use_adaptive_sampling", False) and time_override is None:
+        # adaptive sampling asked for, one round (samples <= the minimum): every pixel took them all
+        passes["Sample Count"] = np.full((H, W, 1), float(spp), np.float32)
     return passes, stats

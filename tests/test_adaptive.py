@@ -152,4 +152,5 @@ def test_only_photon_method_samples_adaptively():
     scene = _scene()
     a = render(scene, st).passes
     b = render(scene, st.replace(use_adaptive_sampling=False)).passes
-    assert "Sample Count" not in a and np.array_equal(a["Combined"], b["Combined"])
+    assert np.array_equal(a["Combined"], b["Combined"])
+    assert np.all(a["Sample Count"] == 16) and "Sample Count" not in b
