@@ -140,6 +140,14 @@ def test_converged_pixels_stop_and_noisy_ones_take_more(renders):
     assert st["camera_rays"] == int(n[0].sum()) < fixed[0].stats["camera_rays"]
 
 
+def test_same_seed_same_image_whatever_the_threads():
+    scene = _scene()
+    a = render(scene, _settings(use_adaptive_sampling=True, threads=1)).passes
+    b = render(scene, _settings(use_adaptive_sampling=True, threads=2)).passes
+    for name in ("Combined", "Sample Count", "Direct", "Depth"):
+        assert np.array_equal(a[name], b[name]), name
+
+
 def test_only_photon_method_samples_adaptively():
     from stpm_core.integrator import adaptive_on
     st = _settings(use_adaptive_sampling=True)
