@@ -77,7 +77,7 @@ class RenderSettings:
         label="Samples", flag="--samples", metavar="S", ui={"soft_max": 1024})
     use_adaptive_sampling: bool = setting(
         False, "bool", "as Cycles' Noise Threshold check box: method PHOTON traces the first samples of every "
-        "pixel, then rounds of 16 only for the pixels whose estimated error is above adaptive_threshold, up to "
+        "pixel, then rounds of 64 only for the pixels whose estimated error is above adaptive_threshold, up to "
         "samples (docs/rendering.md, \"Adaptive sampling\"); ACCUMULATION and PROGRESSIVE ignore it",
         label="Adaptive Sampling", flag="--adaptive-sampling", metavar="on|off",
         help="adaptive sampling on or off (method photon; samples is then the most a pixel takes)")

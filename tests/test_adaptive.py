@@ -51,7 +51,8 @@ def test_cycles_automatic_min_samples_and_rounds():
     # Cycles' table (intern/cycles/scene/integrator.cpp): 0.1 -> 32, 0.01 -> 64, 0.001 -> 128
     assert [A.min_samples(t, 0) for t in (0.1, 0.01, 0.001)] == [32, 64, 128]
     assert A.min_samples(0.01, 2) == 4 and A.min_samples(0.01, 100) == 100
-    assert A.schedule(100, 64) == [(0, 64), (64, 16), (80, 16), (96, 4)]
+    assert A.schedule(100, 64, 16) == [(0, 64), (64, 16), (80, 16), (96, 4)]
+    assert A.schedule(200, 64) == [(0, 64), (64, 64), (128, 64), (192, 8)]
     assert A.schedule(32, 64) == [(0, 32)]
 
 
