@@ -53,11 +53,12 @@ MotionTransform = sub("motion").MotionTransform
 Shutter = sub("shutter").Shutter
 
 
-def passes_table(denoise: bool = False) -> tuple:
+def passes_table(denoise: bool = False, adaptive: bool = False) -> tuple:
     """The one table of render passes ``(name, channels, channel_ids)``: ``stpm_core.film.PASSES``
     (re-exported as ``stpm_core.render.PASSES``), with ``denoise`` plus the denoising passes
-    (``film.passes_for``: Denoising Albedo, Denoising Normal, Noisy Image)."""
-    return tuple(sub("film").passes_for(bool(denoise)))
+    (``film.passes_for``: Denoising Albedo, Denoising Normal, Noisy Image), with ``adaptive`` plus
+    Sample Count (adaptive sampling)."""
+    return tuple(sub("film").passes_for(bool(denoise), bool(adaptive)))
 
 
 def render_function():

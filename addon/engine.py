@@ -106,7 +106,7 @@ def write_passes(engine, passes: dict, width: int, height: int, layer_name: str 
     """
     x0, y0, w, h = region if region is not None else (0, 0, width, height)
     images = {}
-    for name, _channels, _ids in _core.passes_table(denoise=True):      # every pass the result holds
+    for name, _channels, _ids in _core.passes_table(denoise=True, adaptive=True):   # every pass the result holds
         img = passes.get(name)
         if img is not None:
             img = np.asarray(img, dtype=np.float32).reshape(height, width, -1)[::-1]  # bottom-up
@@ -157,8 +157,10 @@ class STPMRenderEngine(bpy.types.RenderEngine):
 
     # Render passes: the one table
     def update_render_passes(self, scene=None, renderlayer=None):
-        denoise = bool(getattr(getattr(scene, "stpm", None), "denoise", False))
-        for name, channels, ids in _core.passes_table(denoise):
+        props = getattr(scene, "stpm", None)
+        denoise = bool(getattr(props, "denoise", False))
+        adaptive = bool(getattr(props, "use_adaptive_sampling", False))
+        for name, channels, ids in _core.passes_table(denoise, adaptive):
             self.register_pass(scene, renderlayer, name, channels, ids, pass_type(ids))
 
     # Final render and previews
@@ -248,6 +250,11 @@ class STPMRenderEngine(bpy.types.RenderEngine):
         prog = (getattr(result, "stats", {}) or {}).get("progressive")
         if prog:
             self.report({"INFO"}, "STPM progressive: " + _core.sub("progressive").summary(prog))
+        adaptive = (getattr(result, "stats", {}) or {}).get("adaptive")
+        if adaptive:
+            # adaptive sampling (Sampling > Noise Threshold): the samples the pixels took
+            self.report({"INFO"}, f"STPM adaptive sampling: {adaptive['samples_mean']:.1f} samples per pixel on "
+                                  f"average ({adaptive['samples_min']}-{adaptive['samples_max']})")
         if len(views) > 1:
             text = (f"stereoscopy / multiview is not supported: every view ({', '.join(views)}) gets the same "
                     f"mono image from the scene camera")
@@ -263,7 +270,8 @@ class STPMRenderEngine(bpy.types.RenderEngine):
         self.stpm_stats = stats
         LAST_RENDER.clear()
         LAST_RENDER.update(stats=stats, warnings=list(self.stpm_warnings), passes=written, scene=stpm_scene, plan=plan)
-        self.update_stats("STPM", f"Done in {stats['wall_s']:.1f} s (export {export_s:.2f} s)")
+        mean_spp = f", {adaptive['samples_mean']:.1f} samples per pixel" if adaptive else ""
+        self.update_stats("STPM", f"Done in {stats['wall_s']:.1f} s (export {export_s:.2f} s{mean_spp})")
 
     # Rendered viewport: addon/viewport.py does the work (ViewportSession), these only delegate
     def view_update(self, context, depsgraph):

@@ -11,6 +11,8 @@ samples: :func:`addon.viewport.viewport_settings` turns them into ``passes`` / `
 """
 from __future__ import annotations
 
+import struct
+
 import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
@@ -127,9 +129,24 @@ class STPM_WorldSettings(bpy.types.PropertyGroup):
         del bpy.types.World.stpm
 
 
+def _typed_float(v: float) -> float:
+    """A FloatProperty's value (single precision) as the decimal the artist typed: the shortest one
+    with the same float32 (0.01 is held as 0.009999999776; the core gets 0.01, its default)."""
+    f = struct.unpack("f", struct.pack("f", v))[0]
+    for digits in range(1, 10):
+        d = float(f"{f:.{digits}g}")
+        if struct.unpack("f", struct.pack("f", d))[0] == f:
+            return d
+    return f
+
+
+_FLOAT_SETTINGS = frozenset(spec.name for spec in RenderSettings.SPECS if spec.kind == "float")
+
+
 def settings_dict(props) -> dict:
-    """``scene.stpm`` -> plain dict of RenderSettings fields."""
-    return {name: getattr(props, name) for name in SETTING_NAMES}
+    """``scene.stpm`` -> plain dict of RenderSettings fields (floats as typed: :func:`_typed_float`)."""
+    return {name: _typed_float(getattr(props, name)) if name in _FLOAT_SETTINGS else getattr(props, name)
+            for name in SETTING_NAMES}
 
 
 def settings_from_scene(scene):

@@ -117,6 +117,27 @@ class STPM_RENDER_PT_sampling_viewport(_STPMPanel, bpy.types.Panel):
         col.prop(context.scene.stpm, "preview_time_limit", text="Time Limit")
 
 
+class STPM_RENDER_PT_sampling_adaptive(_STPMPanel, bpy.types.Panel):
+    """Adaptive sampling (as Cycles' Sampling > Render > Noise Threshold): method PHOTON gives more
+    samples, up to Samples, to the pixels whose estimated error is above the threshold."""
+
+    bl_label = "Noise Threshold"
+    bl_parent_id = "STPM_RENDER_PT_sampling"
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.stpm, "use_adaptive_sampling", text="")
+
+    def draw(self, context):
+        props = context.scene.stpm
+        col = self._column()
+        col.active = props.use_adaptive_sampling and props.method == "PHOTON"
+        col.prop(props, "adaptive_threshold", text="Noise Threshold")
+        col.prop(props, "samples", text="Max Samples")
+        col.prop(props, "adaptive_min_samples", text="Min Samples")
+        if props.method != "PHOTON":
+            col.label(text="Method Photon only (Progressive: Estimator & Method > Noise Threshold)", icon="INFO")
+
+
 class STPM_RENDER_PT_photons(_STPMPanel, bpy.types.Panel):
     bl_label = "Photons"
     PROPS = ("photons_global", "photons_caustic", "k_nearest", "kernel", "final_gather_samples")
@@ -310,6 +331,7 @@ classes = (
     STPM_MT_presets,
     STPM_RENDER_PT_sampling,
     STPM_RENDER_PT_sampling_viewport,
+    STPM_RENDER_PT_sampling_adaptive,
     STPM_RENDER_PT_photons,
     STPM_RENDER_PT_method,
     STPM_RENDER_PT_motion_blur,

@@ -428,6 +428,10 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
         if stats.get("progressive") and not args.quiet:
             from .progressive import summary
             print(f"{label}progressive: {summary(stats['progressive'])}", file=sys.stderr)
+        if stats.get("adaptive") and not args.quiet:
+            a = stats["adaptive"]
+            print(f"{label}adaptive sampling: {a['samples_mean']:.1f} samples per pixel on average "
+                  f"({a['samples_min']}-{a['samples_max']}, threshold {a['threshold']:g})", file=sys.stderr)
         print(f"wrote {safe_text(out_exr)}" + (" (partial result: join with stpm merge)" if partial else ""))
         print(f"wrote {safe_text(out_png)}")
         if stats_path is not None:

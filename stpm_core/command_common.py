@@ -111,6 +111,16 @@ def _lower_choice(*allowed):
     return conv
 
 
+def _on_off(text: str) -> bool:
+    """A boolean option's value: on / off (also true / false, yes / no, 1 / 0)."""
+    t = text.strip().lower()
+    if t in ("on", "true", "yes", "1"):
+        return True
+    if t in ("off", "false", "no", "0"):
+        return False
+    raise argparse.ArgumentTypeError(f"must be on or off, got {text!r}")
+
+
 def _option_type(spec):
     """argparse type of a settings option: the kind's syntax (the range is checked by the schema, exit 1)."""
     if spec.kind == "enum":
@@ -119,6 +129,8 @@ def _option_type(spec):
         return int
     if spec.kind == "float":
         return finite_float
+    if spec.kind == "bool":
+        return _on_off
     raise ValueError(f"setting {spec.name!r} of kind {spec.kind!r} has no command-line form")
 
 

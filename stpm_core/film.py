@@ -26,7 +26,7 @@ import numpy as np
 
 from .kernels import paths as _K
 
-__all__ = ["PASSES", "PASS_NAMES", "DENOISING_GUIDES", "DENOISING_PASSES", "ALL_PASSES", "passes_for",
+__all__ = ["PASSES", "PASS_NAMES", "DENOISING_GUIDES", "DENOISING_PASSES", "ADAPTIVE_PASSES", "ALL_PASSES", "passes_for",
            "pass_channels", "blackman_harris", "filter_offsets", "BH_INVERSE_CDF", "Film"]
 
 # Render passes: (name, channel count, channel ids) -- Blender's names and order.
@@ -48,13 +48,17 @@ DENOISING_GUIDES: tuple[tuple[str, int, str], ...] = (
     ("Denoising Normal", 3, "XYZ"),
 )
 DENOISING_PASSES: tuple[tuple[str, int, str], ...] = DENOISING_GUIDES + (("Noisy Image", 4, "RGBA"),)
+# With adaptive sampling (RenderSettings.use_adaptive_sampling): each pixel's samples (as Cycles'
+# Sample Count debug pass; integrator._trace_adaptive)
+ADAPTIVE_PASSES: tuple[tuple[str, int, str], ...] = (("Sample Count", 1, "X"),)
 # Every pass STPM can write, in the order it writes them
-ALL_PASSES: tuple[tuple[str, int, str], ...] = PASSES + DENOISING_PASSES
+ALL_PASSES: tuple[tuple[str, int, str], ...] = PASSES + DENOISING_PASSES + ADAPTIVE_PASSES
 
 
-def passes_for(denoise: bool = False) -> tuple:
-    """The passes a render writes: :data:`PASSES`, plus :data:`DENOISING_PASSES` with ``denoise``."""
-    return PASSES + DENOISING_PASSES if denoise else PASSES
+def passes_for(denoise: bool = False, adaptive: bool = False) -> tuple:
+    """The passes a render writes: :data:`PASSES`, plus :data:`DENOISING_PASSES` with ``denoise``,
+    plus :data:`ADAPTIVE_PASSES` with ``adaptive`` (a render that sampled adaptively)."""
+    return PASSES + (DENOISING_PASSES if denoise else ()) + (ADAPTIVE_PASSES if adaptive else ())
 
 # Depth written where a camera ray escapes (Blender writes 1e10 for the background).
 DEPTH_BACKGROUND = 1.0e10
@@ -261,12 +265,47 @@ class Film:
         # Image channels: the sums, Combined RGB from its parts (in Emit, Direct, Indirect,
         # Caustic order, float64), Combined alpha from the sample count
         summed = chan[act]
-        comb = np.array([int(np.flatnonzero(summed == c0)[0]) for c0 in
-                         (self._first_channel(name) for name in ("Emit", "Direct", "Indirect", "Caustic"))
-                         if combined_is_sum and np.any(summed == c0)], np.int64)
+        comb = self._combined_columns(summed, combined_is_sum)
         w = np.empty((yb - y0, xb - x0, C + 1), np.float32)
         _K.tile_finish(win, 0, yb - y0, 0, xb - x0, np.ascontiguousarray(summed), comb, bool(alpha_one), w)
         return (y0, yb, x0, xb), [(0, C)], w
+
+    def _combined_columns(self, summed: np.ndarray, combined_is_sum: bool) -> np.ndarray:
+        """Positions in summed (the image channels summed) of the first channel of Emit, Direct,
+        Indirect and Caustic (those summed), whose sums add up to Combined RGB (``tile_finish``)."""
+        return np.array([int(np.flatnonzero(summed == c0)[0]) for c0 in
+                         (self._first_channel(name) for name in ("Emit", "Direct", "Indirect", "Caustic"))
+                         if combined_is_sum and np.any(summed == c0)], np.int64)
+
+    def pixel_sums_matrix(self, S: int, V: np.ndarray, channels: np.ndarray, columns: np.ndarray,
+                          alpha_one: bool = False) -> np.ndarray:
+        """Sums of the samples of k = n / S pixels anywhere in the image (adaptive sampling's rounds):
+        V (n, m) float64, each pixel's S samples consecutive; channels (m,) each column's image
+        channel, columns the columns to sum; Combined RGB from its parts (``combined_is_sum`` of
+        :meth:`tile_sums_matrix`), alpha from the count with alpha_one.  Returns (k, C + 1) float32
+        (last column: the sample count) for :meth:`add_pixels`.  Touches no film state."""
+        k = V.shape[0] // int(S)
+        C = self.n_channels
+        chan = np.asarray(channels, np.int64)
+        act = np.asarray(columns, np.int64)
+        win = _window_buffer((1, k, act.size + 1))
+        _K.pixel_sums(k, 1, int(S), np.ascontiguousarray(V, np.float64), act, win)
+        summed = np.ascontiguousarray(chan[act])
+        w = np.empty((1, k, C + 1), np.float32)
+        _K.tile_finish(win, 0, 1, 0, k, summed, self._combined_columns(summed, True), bool(alpha_one), w)
+        return w[0]
+
+    def add_pixels(self, pixels: np.ndarray, w: np.ndarray) -> None:
+        """Add per-pixel sums w (k, C + 1) from :meth:`pixel_sums_matrix` to the pixels (k,) int64
+        (row-major indices y * width + x, each at most once)."""
+        C = self.n_channels
+        self._sum[pixels] += w[:, :C]
+        self._wsum[pixels] += w[:, C]
+
+    def combined_sums(self) -> tuple[np.ndarray, np.ndarray]:
+        """(Combined RGB sums (H * W, 3) float32, sample counts (H * W,) float32): adaptive sampling's I, N."""
+        c0 = self._first_channel("Combined")
+        return self._sum[:, c0:c0 + 3], self._wsum
 
     def _first_channel(self, name: str) -> int:
         """First image channel of pass ``name`` in the film's pass order."""

@@ -58,6 +58,8 @@ __all__ = ["TraceStats", "trace_image", "shade_paths"]
 
 # Random streams (second entry of rng_for(seed, ...)): one per purpose.
 STREAM_CAMERA = 0x5A3
+STREAM_PATTERN = 0xAD5                   # adaptive sampling: a round's camera samples, per tile
+ADAPTIVE_STREAM = 0xADA                  # adaptive sampling: a round's batches (under STREAM_CAMERA)
 # Samples traced together in one wavefront batch (tile pixels x spp): large
 # batches amortise Python overhead; the caster cuts them into embree-sized chunks.
 BATCH_SAMPLES = 65536
@@ -917,6 +919,21 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
         times = np.full(n, float(time_override))
     else:
         times = shutter.sample(xi if with_time else np.zeros(n))
+    _SCRATCH.tile = (x0, y0, tw, S, int(resolution[0]))     # a sample's pixel, for per-pixel maps
+    V, chan, keep = _shade_samples(ctx, cam, resolution, px, py, times, S, rng, tstats)
+    return film.tile_sums_matrix(x0, y0, tw, th, V, combined_is_sum=True,
+                                  alpha_one=not ctx.film_transparent, channels=np.asarray(chan),
+                                  columns=np.flatnonzero(keep)), tstats
+
+
+def _shade_samples(ctx, cam, resolution, px, py, times, S, rng, tstats):
+    """Camera rays through film positions px, py (n,) at times (n,), shaded: (V, chan, keep).
+
+    The samples are laid out as pixels of S consecutive samples.  V (n, m) float64 (a reused
+    buffer: valid until this thread's next call) holds the layout's columns (``ctx.layout``),
+    chan (m,) each column's image channel, keep (m,) bool the columns some sample reached.
+    """
+    n = px.shape[0]
     R, pos = camera_to_world(cam, times[:1] if cam.transform.is_static else times)
     R = kernel_array(R[:1] if cam.transform.is_static else R)
     pos = kernel_array(pos[:1] if cam.transform.is_static else pos)
@@ -925,7 +942,6 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
     _K.camera_rays(px, py, int(resolution[0]), int(resolution[1]), float(half_w), float(half_h), float(cx),
                    float(cy), R, pos, cam.type == "ORTHO", float(cam.clip_start), float(cam.clip_end), o, d, tmax0)
     axis = np.ascontiguousarray(-R[:, :, 2])
-    _SCRATCH.tile = (x0, y0, tw, S, int(resolution[0]))     # a sample's pixel, for per-pixel maps
     touched: set = set()
     layout = ctx.layout
     V = shade_paths(ctx, o, d, times, tmax0, rng, tstats, pos, axis,
@@ -937,9 +953,121 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
         c0 = _COL["Combined"][0] + 3 if name == "Alpha" else _COL[name][0]
         chan.extend(range(c0, c0 + b - a))
         keep.extend([name not in ("Emit", "Direct", "Indirect", "Caustic") or name in touched] * (b - a))
-    return film.tile_sums_matrix(x0, y0, tw, th, V, combined_is_sum=True,
-                                  alpha_one=not ctx.film_transparent, channels=np.asarray(chan),
-                                  columns=np.flatnonzero(keep)), tstats
+    return V, chan, np.asarray(keep, bool)
+
+
+def adaptive_on(settings, time_override=None, maps=None) -> bool:
+    """Does trace_image sample adaptively?  With ``use_adaptive_sampling``, a threshold > 0 and more
+    samples than the minimum (else there is one round: the fixed render, bit for bit), for the
+    whole shutter (not an accumulation still or a progressive pass: ``time_override``), unless the
+    maps keep per-pixel statistics (compare's SPPM baseline)."""
+    from .adaptive import min_samples
+    thr = float(getattr(settings, "adaptive_threshold", 0.0))
+    return (bool(getattr(settings, "use_adaptive_sampling", False)) and thr > 0.0
+            and int(settings.samples) > min_samples(thr, int(getattr(settings, "adaptive_min_samples", 0)))
+            and time_override is None and not getattr(maps, "per_pixel", False))
+
+
+def _round_pattern(settings, scene, film, stream, tile, r, B, active):
+    """The camera samples of round r in one tile (x0, y0, tw, th): film positions px, py and shutter
+    numbers xi (k B,) of the tile's pixels with active (th, tw) True, B per pixel, and their row-major
+    image indices (k,).
+
+    The uniforms are drawn for every pixel of the tile from the stream (seed, STREAM_PATTERN,
+    stream, tile index, r) and placed by ``camera_tile`` (B-sample strata), then the active pixels'
+    rows are kept: a pixel's samples in a round do not depend on which other pixels take part."""
+    ti, (x0, y0, tw, th) = tile
+    P = tw * th
+    W = int(scene.resolution[0])
+    rng = rng_for(settings.seed, STREAM_PATTERN, stream, ti, r)
+    jit = rng.random((P, B, 2))
+    with_time = not scene.shutter.is_instant
+    if with_time:
+        perm_u, time_u = rng.random((P, B)), rng.random((P, B))
+    else:
+        perm_u = time_u = np.zeros((P, 0))
+    n = P * B
+    px, py, xi = np.empty(n), np.empty(n), np.zeros(n)
+    _K.camera_tile(x0, y0, tw, th, B, jit, perm_u, time_u, with_time, film.radius, BH_INVERSE_CDF, px, py, xi)
+    p = np.flatnonzero(active.ravel())
+    rows = (p[:, None] * B + np.arange(B)).ravel()
+    pix = (y0 + p // tw) * W + x0 + p % tw
+    return px[rows], py[rows], xi[rows], pix
+
+
+def _trace_adaptive(ctx, film, scene, settings, stream, stats, progress, cancel, progress_span) -> np.ndarray:
+    """Adaptive sampling into film (docs/rendering.md, "Adaptive sampling"; :mod:`stpm_core.adaptive`):
+    returns each pixel's sample count (H * W,) float64.
+
+    Rounds (``adaptive.schedule``): round r gives sample indices first .. first + B - 1 to every pixel
+    that needs samples (all in round 0), its camera samples from :func:`_round_pattern`; the round's
+    pixels are traced in batches of about BATCH_SAMPLES samples (whole pixels, tile by tile), each on
+    the random stream (seed, STREAM_CAMERA, stream, ADAPTIVE_STREAM, r, batch), in batch order
+    into the film.  Each batch also sums twice its samples of odd index (the half buffer A); after the
+    round ``adaptive.pixel_error`` and ``adaptive.need_samples`` choose the next round's pixels.
+    """
+    from . import adaptive as _A
+
+    W, H = (int(scene.resolution[0]), int(scene.resolution[1]))
+    spp = int(settings.samples)
+    thr = float(settings.adaptive_threshold)
+    n_min = _A.min_samples(thr, int(settings.adaptive_min_samples))
+    rounds = _A.schedule(spp, n_min)
+    side = int(np.clip(np.sqrt(BATCH_SAMPLES / rounds[0][1]), 1, 64))
+    tiles = [(x0, y0, min(side, W - x0), min(side, H - y0)) for y0 in range(0, H, side) for x0 in range(0, W, side)]
+    half = np.zeros((H * W, 3))               # A: twice the Combined RGB sums of the samples of odd index
+    need = np.ones((H, W), bool)              # the pixels that take the next round
+    f0, f1 = progress_span
+    traced = 0
+    for r, (first, B) in enumerate(rounds):
+        # -- The round's camera samples, tile by tile --------------------------------------------
+        parts = [_round_pattern(settings, scene, film, stream, (ti, t), r, B, need[t[1]:t[1] + t[3], t[0]:t[0] + t[2]])
+                 for ti, t in enumerate(tiles) if need[t[1]:t[1] + t[3], t[0]:t[0] + t[2]].any()]
+        if not parts:
+            break
+        PX, PY, XI, PIX = (np.concatenate([q[i] for q in parts]) for i in range(4))
+        per = max(1, BATCH_SAMPLES // B)       # pixels per batch
+        n_batch = (PIX.size + per - 1) // per
+        odd = ((first + np.arange(B)) % 2 == 1)
+
+        def trace_batch(bi: int, r=r, B=B, PX=PX, PY=PY, XI=XI, PIX=PIX, per=per, odd=odd):
+            """Batch bi of the round: (its pixels, their sums (k, C + 1), their A (k, 3), TraceStats)."""
+            a, b = bi * per, min((bi + 1) * per, PIX.size)
+            rows = slice(a * B, b * B)
+            rng = rng_for(settings.seed, STREAM_CAMERA, stream, ADAPTIVE_STREAM, r, bi)
+            times = scene.shutter.sample(XI[rows])
+            ts = TraceStats()
+            V, chan, keep = _shade_samples(ctx, scene.camera, (W, H), np.ascontiguousarray(PX[rows]),
+                                           np.ascontiguousarray(PY[rows]), times, B, rng, ts)
+            w = film.pixel_sums_matrix(B, V, np.asarray(chan), np.flatnonzero(keep),
+                                       alpha_one=not ctx.film_transparent)
+            # Combined RGB of each sample (its parts' sum, as the film's), twice summed over odd indices
+            comb = np.zeros((V.shape[0], 3))
+            for name in ("Emit", "Direct", "Indirect", "Caustic"):
+                if name in ctx.layout and keep[ctx.layout[name][0]]:
+                    c0 = ctx.layout[name][0]
+                    comb += V[:, c0:c0 + 3]
+            A = 2.0 * comb.reshape(b - a, B, 3)[:, odd].sum(axis=1)
+            return PIX[a:b], w, A, ts
+
+        for bi, (pix, w, A, ts) in enumerate(ordered_map(trace_batch, n_batch, worker_count(settings), cancel)):
+            film.add_pixels(pix, w)
+            half[pix] += A
+            stats.merge(ts)
+            if progress is not None:
+                progress(f0 + (f1 - f0) * (r + (bi + 1) / n_batch) / len(rounds),
+                         f"adaptive round {r + 1}/{len(rounds)}: {PIX.size} pixels, batch {bi + 1}/{n_batch}")
+        traced += PIX.size * B
+        # -- Which pixels go on: the error of each, the unconverged set dilated by one pixel ---------
+        I, N = film.combined_sums()
+        need = _A.need_samples(_A.pixel_error(I, half, N).reshape(H, W), thr)
+    counts = film.combined_sums()[1].astype(np.float64)
+    stats.extra["adaptive"] = {
+        "threshold": thr, "min_samples": int(n_min), "max_samples": spp, "rounds": len(rounds),
+        "samples_mean": float(counts.mean()), "samples_min": int(counts.min()), "samples_max": int(counts.max()),
+        "samples_traced": int(traced),
+    }
+    return counts
 
 
 def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_override: float | None = None,
@@ -1000,6 +1128,16 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     film = Film(W, H, settings.filter_width, passes=PASSES + DENOISING_GUIDES if ctx.features else PASSES)
     cam = scene.camera
 
+    if adaptive_on(settings, time_override, maps):
+        # -- Adaptive sampling: rounds of samples for the pixels not yet converged -----------------
+        counts = _trace_adaptive(ctx, film, scene, settings, stream, stats, progress, cancel, progress_span)
+        stats.seconds = _time.perf_counter() - t_start
+        passes = film.resolve()
+        passes["Sample Count"] = counts.reshape(H, W, 1).astype(np.float32)
+        if ctx.features:
+            passes["Noisy Image"] = passes["Combined"]
+        return passes, stats
+
     # Tiles: square blocks of about BATCH_SAMPLES samples
     side = int(np.clip(np.sqrt(BATCH_SAMPLES / spp), 1, 64))
     tiles = [(x0, y0) for y0 in range(0, H, side) for x0 in range(0, W, side)]
@@ -1023,4 +1161,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     passes = film.resolve()
     if ctx.features:
         passes["Noisy Image"] = passes["Combined"]       # Cycles' name for the raw image beside the denoised one
+    if getattr(settings, "use_adaptive_sampling", False) and time_override is None:
+        # adaptive sampling asked for, one round (samples <= the minimum): every pixel took them all
+        passes["Sample Count"] = np.full((H, W, 1), float(spp), np.float32)
     return passes, stats

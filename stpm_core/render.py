@@ -275,6 +275,11 @@ def _render(scene, settings, *, progress=None, cancel=None, on_pass=None, schedu
     }
     if progressive is not None:
         stats["progressive"] = progressive
+    adaptive = [ts.extra["adaptive"] for ts in trace_stats if "adaptive" in ts.extra]
+    if adaptive:
+        # adaptive sampling (integrator._trace_adaptive): the samples pixels took, mean / min / max
+        stats["adaptive"] = adaptive[0]
+        stats["samples_mean"] = adaptive[0]["samples_mean"]
     stats = _plain(stats)
     if progress is not None:
         progress(1.0, "done")

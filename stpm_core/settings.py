@@ -75,6 +75,22 @@ class RenderSettings:
     samples: int = setting(
         16, "int", "camera samples per pixel, each at its own time in the shutter", lo=1, hi=1 << 16,
         label="Samples", flag="--samples", metavar="S", ui={"soft_max": 1024})
+    use_adaptive_sampling: bool = setting(
+        False, "bool", "as Cycles' Noise Threshold check box: method PHOTON traces the first samples of every "
+        "pixel, then rounds of 64 only for the pixels whose estimated error is above adaptive_threshold, up to "
+        "samples (docs/rendering.md, \"Adaptive sampling\"); ACCUMULATION and PROGRESSIVE ignore it",
+        label="Adaptive Sampling", flag="--adaptive-sampling", metavar="on|off",
+        help="adaptive sampling on or off (method photon; samples is then the most a pixel takes)")
+    adaptive_threshold: float = setting(
+        0.01, "float", "as Cycles' Noise Threshold: a pixel stops when its estimated error |I - A| / sqrt(I) "
+        "(Cycles' measure, times Cycles' 5) falls below it; 0 = adaptive sampling off", lo=0.0, hi=1.0,
+        label="Noise Threshold", flag="--adaptive-threshold", metavar="T", ui={"precision": 4, "soft_max": 0.1},
+        help="adaptive sampling's per-pixel noise threshold")
+    adaptive_min_samples: int = setting(
+        0, "int", "as Cycles' Min Samples: the samples every pixel takes before its first check; 0 = automatic "
+        "(Cycles': ceil(16 / threshold^0.3), 64 at 0.01)", lo=0, hi=1 << 16, label="Min Samples",
+        flag="--adaptive-min-samples", metavar="N", ui={"soft_max": 4096},
+        help="adaptive sampling's samples before the first check (0: automatic)")
     photons_global: int = setting(
         200_000, "int", "photons emitted for the global (indirect) map", lo=0, hi=1 << 31,
         label="Global Photons", flag="--photons-global", metavar="N", ui={"soft_max": 10_000_000})

@@ -98,6 +98,35 @@ def test_render_writes_every_pass_with_blender_channel_names(tmp_path):
     assert LAST_RENDER["stats"]["export_s"] >= 0 and LAST_RENDER["stats"]["resolution"] in ([32, 24], (32, 24))
 
 
+def test_adaptive_sampling_writes_the_sample_count_pass(tmp_path):
+    """Sampling > Noise Threshold on: Blender's result gets a Sample Count pass (each pixel's samples,
+    between the minimum and Samples), the render stats the mean."""
+    bpy.ops.wm.open_mainfile(filepath=str(DEMO))
+    scene = bpy.context.scene
+    _tiny(scene, samples=12)
+    scene.stpm.use_adaptive_sampling, scene.stpm.adaptive_min_samples = True, 4
+    scene.stpm.adaptive_threshold = 0.05
+    scene.render.filepath = str(tmp_path / "a.exr")
+    scene.render.use_file_extension = False
+    batch._set_format(scene.render.image_settings, "EXR")
+    LAST_RENDER.clear()
+    bpy.ops.render.render(write_still=True)
+    assert "Sample Count" in LAST_RENDER["passes"]
+    inp = oiio.ImageInput.open(str(tmp_path / "a.exr"))
+    n, sub = None, 0
+    while inp.seek_subimage(sub, 0):
+        spec = inp.spec()
+        px = inp.read_image(sub, 0, 0, spec.nchannels, "float").reshape(spec.height, spec.width, spec.nchannels)
+        if "ViewLayer.Sample Count.X" in spec.channelnames:
+            n = px[..., list(spec.channelnames).index("ViewLayer.Sample Count.X")]
+        sub += 1
+    inp.close()
+    assert n is not None and n.shape == (24, 32)
+    st = LAST_RENDER["stats"]
+    assert n.min() >= 4 and n.max() <= 12 and abs(float(n.mean()) - st["samples_mean"]) < 1e-3
+    assert st["adaptive"]["min_samples"] == 4
+
+
 def test_cancel_stops_the_render(monkeypatch):
     bpy.ops.wm.open_mainfile(filepath=str(DEMO))
     scene = bpy.context.scene

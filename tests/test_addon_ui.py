@@ -126,6 +126,14 @@ def test_panels_draw_every_setting():
     ui.STPM_RENDER_PT_sampling_viewport.draw(panel, context)
     assert log == ["preview_passes", "preview_time_limit"]
     assert ui.STPM_RENDER_PT_sampling_viewport.bl_parent_id == "STPM_RENDER_PT_sampling"
+    log = []                                        # Sampling > Noise Threshold: the toggle in its header
+    panel = type("Drawn", (ui._STPMPanel,), {})()
+    panel.layout = _RecordingLayout(log)
+    ui.STPM_RENDER_PT_sampling_adaptive.draw_header(panel, context)
+    ui.STPM_RENDER_PT_sampling_adaptive.draw(panel, context)
+    assert log == ["use_adaptive_sampling", "adaptive_threshold", "samples", "adaptive_min_samples"]
+    assert ui.STPM_RENDER_PT_sampling_adaptive.bl_parent_id == "STPM_RENDER_PT_sampling"
+    drawn["STPM_RENDER_PT_sampling_adaptive"] = log
     scene.stpm.method = "ACCUMULATION"
     shown = {n for log in drawn.values() for n in log} | {"accumulation_steps"}
     assert set(SETTING_NAMES) - shown == set(), set(SETTING_NAMES) - shown

@@ -86,6 +86,21 @@ def test_options_override_file_settings(tiny, tmp_path):
     assert read_exr(out)["Combined"].shape == (3, 5, 4)
 
 
+def test_adaptive_sampling_options(tiny, tmp_path):
+    """--adaptive-sampling on: the stats' samples_mean, the EXR's Sample Count pass (each pixel's samples)."""
+    out, stats = tmp_path / "a.exr", tmp_path / "a.json"
+    r = stpm("render", tiny, "-o", out, "--stats", stats, "--samples", 12, "--adaptive-sampling", "on",
+             "--adaptive-threshold", 0.05, "--adaptive-min-samples", 4, "--photons-caustic", 1000,
+             "--photons-global", 0)
+    assert r.returncode == 0, r.stderr
+    assert "adaptive sampling:" in r.stderr
+    s = json.loads(stats.read_text())
+    assert s["settings"]["use_adaptive_sampling"] is True and s["settings"]["adaptive_min_samples"] == 4
+    assert 4 <= s["samples_mean"] <= 12 and s["adaptive"]["min_samples"] == 4
+    n = read_exr(out)["Sample Count"]
+    assert n.min() >= 4 and n.max() <= 12 and abs(float(n.mean()) - s["samples_mean"]) < 1e-3
+
+
 def test_default_output_and_same_seed_same_image(tiny, rendered):
     """No --output: the EXR lands next to the scene; the same seed gives the same image bit for bit."""
     r = stpm("render", tiny, "--frame", "1", "-q")
@@ -141,6 +156,8 @@ BAD = [
     ("bad sample count", ["render", "{tiny}", "--samples", "0"], "--samples must"),
     ("non-numeric samples", ["render", "{tiny}", "--samples", "many"], "--samples"),
     ("unknown estimator", ["render", "{tiny}", "--estimator", "magic"], "--estimator"),
+    ("adaptive sampling not on or off", ["render", "{tiny}", "--adaptive-sampling", "maybe"], "--adaptive-sampling"),
+    ("adaptive threshold above 1", ["render", "{tiny}", "--adaptive-threshold", "2"], "--adaptive-threshold"),
     ("unknown method", ["render", "{tiny}", "--method", "raytrace"], "--method"),
     ("bad temporal alpha", ["render", "{tiny}", "--temporal-alpha", "0.5"], "--temporal-alpha"),
     ("negative photons", ["render", "{tiny}", "--photons-caustic", "-1"], "--photons-caustic"),
