@@ -632,8 +632,9 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     stratifies each light's samples over them (``kernels.paths.light_strata``; 1: none).
 
     Random numbers per bounce: per light with power (n / spp, spp) permutation keys and (k, 2)
-    jitters at the shaded rows (skipped for delta lights), then (k', 3) for the delta lobes of the
-    continuing rows and, from ``RR_START`` on, (k',) for Russian roulette.
+    jitters at the shaded rows (skipped for delta lights), then two such blocks (keys, then (k', 2)
+    jitters) for the lobes of the k' continuing rows, the directions' (u1, u2) and the pick's (u0,
+    its first column), and, from ``RR_START`` on, (k',) for Russian roulette.
     """
     n = o.shape[0]
     full = layout is None
@@ -739,11 +740,14 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         if bounce == ctx.max_depth or n_spec == 0:
             break
         # -- Continue through delta lobes, or with the rough non-diffuse lobes' part of f ------------
-        u = rng.random((n_spec, 3))
-        # the lobes' directions (u1, u2): each pixel's samples stratified against the film, as
-        # the lights' (Cycles' Sobol dimensions); u0 (the lobe, the roulette) stays independent
+        # the lobes' uniforms, each pixel's samples stratified against the film as the lights'
+        # (Cycles' Sobol dimensions): the directions (u1, u2) one block, then the pick u0 (which
+        # lobe, a smooth dielectric's reflect or refract, and the roulette of its remainder) the
+        # first column of another
+        u = _scratch("u_cont", (n_spec, 3))
         samples = spec if idx is None else np.take(idx, spec)
         u[:, 1:3] = strata_uniforms(samples, (n, int(spp)), rng, _scratch("dir_strata", (n_spec, 2)))
+        u[:, 0] = strata_uniforms(samples, (n, int(spp)), rng, _scratch("pick_strata", (n_spec, 2)))[:, 0]
         rr = bounce + 1 >= RR_START
         u_rr = rng.random(n_spec) if rr else _NO_U
         EPS = offset_lengths(ctx.inst_offset, hits.instance[spec], hits.position[spec])
