@@ -645,9 +645,13 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     spp: the samples of each pixel, consecutive in o (the tile's layout): next-event estimation
     stratifies each light's samples over them (``kernels.paths.light_strata``; 1: none).
 
-    Random numbers per bounce: per light with power (n / spp, spp) permutation keys and (k, 2)
-    jitters at the shaded rows (skipped for delta lights), then (k', 3) for the delta lobes of the
-    continuing rows and, from ``RR_START`` on, (k',) for Russian roulette.
+    Random numbers per bounce: with node programs that choose a closure per hit (Mix / Add
+    Shader, Alpha), keys (n / spp, spp) and (m, 2) jitters for those choices (each pixel's
+    stratified, ``svm.shade_rows``' U), then the node programs' seed; per light with power
+    (n / spp, spp) permutation keys and (k, 2)
+    jitters at the shaded rows (skipped for delta lights), then two such blocks (keys, then (k', 2)
+    jitters) for the lobes of the k' continuing rows, the directions' (u1, u2) and the pick's (u0,
+    its first column), and, from ``RR_START`` on, (k',) for Russian roulette.
     """
     n = o.shape[0]
     full = layout is None
@@ -690,9 +694,16 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         sd = ctx.shading
         # room for a row per hit and the material table after them (shade_rows: hits without a
         # program of their own, misses among them, point into the table)
+        # Mix Shader / Alpha choices: each pixel's samples stratified (as the lobe picks), one
+        # block per bounce, its first column
+        u_mix = None
+        if sd.uses_mix and sd.uses_programs:
+            rows = np.arange(m) if idx is None else idx
+            u_mix = np.ascontiguousarray(strata_uniforms(rows, (n, int(spp)), rng,
+                                                         _scratch("mix_strata", (m, 2)))[:, 0])
         C = shade_rows(sd, hits.material, hit_geometry(hits, d, sd=sd, times=t) if sd.uses_programs else None,
                        int(rng.integers(1 << 62)) if sd.uses_mix else 0,
-                       _scratch("closure", (m + sd.closures.shape[0], N_CLOSURE)), crow)
+                       _scratch("closure", (m + sd.closures.shape[0], N_CLOSURE)), crow, u_mix)
         if sd.transparent:
             # transparent hits (cut-outs, Transparent BSDF): the rays go on to what lies behind
             beta = pass_through(ctx.caster, sd, ctx.inst_offset, hits, d, t, C, beta, rng, tmax=tmax,
@@ -753,11 +764,14 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         if bounce == ctx.max_depth or n_spec == 0:
             break
         # -- Continue through delta lobes, or with the rough non-diffuse lobes' part of f ------------
-        u = rng.random((n_spec, 3))
-        # the lobes' directions (u1, u2): each pixel's samples stratified against the film, as
-        # the lights' (Cycles' Sobol dimensions); u0 (the lobe, the roulette) stays independent
+        # the lobes' uniforms, each pixel's samples stratified against the film as the lights'
+        # (Cycles' Sobol dimensions): the directions (u1, u2) one block, then the pick u0 (which
+        # lobe, a smooth dielectric's reflect or refract, and the roulette of its remainder) the
+        # first column of another
+        u = _scratch("u_cont", (n_spec, 3))
         samples = spec if idx is None else np.take(idx, spec)
         u[:, 1:3] = strata_uniforms(samples, (n, int(spp)), rng, _scratch("dir_strata", (n_spec, 2)))
+        u[:, 0] = strata_uniforms(samples, (n, int(spp)), rng, _scratch("pick_strata", (n_spec, 2)))[:, 0]
         rr = bounce + 1 >= RR_START
         u_rr = rng.random(n_spec) if rr else _NO_U
         EPS = offset_lengths(ctx.inst_offset, hits.instance[spec], hits.position[spec])

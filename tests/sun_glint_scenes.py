@@ -12,7 +12,10 @@ see its radiance S / (pi sin^2(angle / 2)) (its ``distant_light_intersect``), ST
 * ``chrome``: Principled BSDF, Metallic 1, Roughness 0, base colour 0.9 (a delta reflection);
 * ``rough_metal``, ``glossy_metal``: the same metal at Roughness 0.25 and 0.1: its lobe reaches
   the sun and next-event estimation samples it; both are kept, weighed by the power heuristic
-  (at 0.1 next-event estimation alone is the noisier of the two).
+  (at 0.1 next-event estimation alone is the noisier of the two);
+* ``mixed_chrome``: a Mix Shader, Fac 0.5 from a (flat) Checker texture so that it is a per-hit
+  choice (a constant Fac blends the two shaders' parameters at export), of the chrome and a dark
+  Diffuse BSDF (0.1): half the hits mirror the sun.
 """
 from __future__ import annotations
 
@@ -55,12 +58,31 @@ def _plane(make_material):
     return scene
 
 
+def _mixed_chrome(name="MixedChrome"):
+    mat = metal(name, roughness=0.0)
+    t = mat.node_tree
+    out, p = t.nodes["Material Output"], t.nodes["Principled BSDF"]
+    mix, ck = t.nodes.new("ShaderNodeMixShader"), t.nodes.new("ShaderNodeTexChecker")
+    ck.inputs["Color1"].default_value = ck.inputs["Color2"].default_value = (0.5, 0.5, 0.5, 1.0)
+    df = t.nodes.new("ShaderNodeBsdfDiffuse")
+    df.inputs["Color"].default_value = (0.1, 0.1, 0.1, 1.0)
+    t.links.new(ck.outputs["Color"], mix.inputs["Fac"])
+    t.links.new(df.outputs["BSDF"], mix.inputs[1])
+    t.links.new(p.outputs["BSDF"], mix.inputs[2])
+    t.links.new(mix.outputs["Shader"], out.inputs["Surface"])
+    return mat
+
+
 def water():
     return _plane(_water)
 
 
 def chrome():
     return _plane(lambda: metal("Chrome", roughness=0.0))
+
+
+def mixed_chrome():
+    return _plane(_mixed_chrome)
 
 
 def rough_metal():
@@ -71,7 +93,8 @@ def glossy_metal():
     return _plane(lambda: metal("Glossy", roughness=0.1))
 
 
-SCENES = {"water": water, "chrome": chrome, "rough_metal": rough_metal, "glossy_metal": glossy_metal}
+SCENES = {"water": water, "chrome": chrome, "rough_metal": rough_metal, "glossy_metal": glossy_metal,
+          "mixed_chrome": mixed_chrome}
 
 
 def build(name: str):

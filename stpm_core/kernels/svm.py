@@ -1318,13 +1318,14 @@ def _constants(prog, start, st, n):
 
 
 @njit(**JIT_INLINE)          # one caller (_shade): inlined, so the interpreter is one compiled level less
-def _run_batch(prog, start, st, rows, C, G, A, X, seed, closures, cr):
+def _run_batch(prog, start, st, rows, C, G, A, X, seed, U, closures, cr):
     """Evaluate the program at word ``start`` for the hits rows (n,) into their closure rows of C,
     for a batch whose constants are in st (n_slots, >= n) float64 already (:func:`_constants`).
 
     The value section runs instruction by instruction over the whole batch; then each hit walks
-    the closure section to one closure, its Mix Shader choices drawn from
-    ``hash_uniform(seed, row)`` (rescaled at each choice, so nested mixes stay independent).
+    the closure section to one closure, its Mix Shader choices drawn from U[row] (U (m,): the
+    camera paths' per-pixel stratified uniforms), or ``hash_uniform(seed, row)`` when U is empty
+    (rescaled at each choice, so nested mixes stay independent).
     Each hit's row first gets the columns no closure instruction writes (C_PROGRAM, C_NS,
     C_BUMPED) from row cr of closures (the material's constant row), so that the row is whole
     without a copy of it."""
@@ -1360,11 +1361,11 @@ def _run_batch(prog, start, st, rows, C, G, A, X, seed, closures, cr):
             pc += _curves(prog, pc, st, n)
             continue
         pc += _LEN[op]
-    _closures(prog, start, closure_at, st, rows, C, G[1], G[2], G[3], seed, closures, cr)
+    _closures(prog, start, closure_at, st, rows, C, G[1], G[2], G[3], seed, U, closures, cr)
 
 
 @njit(**JIT)
-def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, closures, cr):
+def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, U, closures, cr):
     """The closure section of :func:`_run_batch`: each hit rows[k] walks it to one closure (NG, NS,
     D: the hits' normals and directions, for a Normal input)."""
     n = rows.shape[0]
@@ -1373,14 +1374,14 @@ def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, closures, c
         if cr >= 0:
             for c in range(C_PROGRAM, C_BUMPED + 1):
                 C[r, c] = closures[cr, c]
-        u = -1.0                       # the hit's uniform, drawn at its first choice (hash_uniform)
+        u = -1.0                       # the hit's uniform, drawn at its first choice (U[r] or hash_uniform)
         q = closure_at
         w = 1.0
         while True:
             op = int(prog[q])
             if op == _MIX_SHADER:
                 if u < 0.0:
-                    u = hash_uniform(seed, r)
+                    u = U[r] if U.shape[0] > 0 else hash_uniform(seed, r)
                 f = _clamp01(st[int(prog[q + 1]), k])
                 if u < f:
                     u = u / f
@@ -1391,7 +1392,7 @@ def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, closures, c
                 continue
             if op == _ADD_SHADER:
                 if u < 0.0:
-                    u = hash_uniform(seed, r)
+                    u = U[r] if U.shape[0] > 0 else hash_uniform(seed, r)
                 w *= 2.0
                 if u < 0.5:
                     u = 2.0 * u
@@ -1409,7 +1410,7 @@ def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, closures, c
                 if a < 1.0:
                     # Alpha: Cycles' mix of a Transparent BSDF (1 - alpha) and the BSDF (alpha)
                     if u < 0.0:
-                        u = hash_uniform(seed, r)
+                        u = U[r] if U.shape[0] > 0 else hash_uniform(seed, r)
                     if u >= a:
                         _transparent(C, r, w, w, w)
                         break
@@ -1452,33 +1453,35 @@ assert C_NS == C_PROGRAM + 1 and C_BUMPED == C_NS + 3
 BATCH = 256          # hits interpreted together (the stack of a batch stays in the CPU's cache)
 
 
-def shade_closures(mat, closures, prog, n_slots, G, A, X, seed, C) -> None:
+def shade_closures(mat, closures, prog, n_slots, G, A, X, seed, C, U=None) -> None:
     """C[r] = the closure of hit r (m,) on material mat[r] (-1 = miss: the inert row).
 
     closures (M + 1, N_CLOSURE) from ``closure.pack_materials``: the constant rows, with
     C_PROGRAM >= 0 where the material has a node program in prog; n_slots the largest slot count
-    of any program; G, A, X as in the module docstring; seed: the bounce's Mix Shader seed.
+    of any program; G, A, X as in the module docstring; seed: the bounce's Mix Shader seed; U
+    (m,) float64 or None: hit r's Mix Shader / Alpha uniform (``hash_uniform(seed, r)`` if None).
     Hits are grouped by material (stable order) and each material's program runs over batches of
     up to ``BATCH`` of its hits.  (A Python function: the compiled entry is :func:`_shade`, one
     level for both entries, since every compiled level re-optimises and re-emits all it calls.)
     """
-    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, _NO_ROWS, False)
+    _shade(mat, closures, prog, n_slots, G, A, X, seed, _NO_U if U is None else U, C, _NO_ROWS, False)
 
 
-def shade_closure_rows(mat, closures, prog, n_slots, G, A, X, seed, C, crow) -> None:
+def shade_closure_rows(mat, closures, prog, n_slots, G, A, X, seed, C, crow, U=None) -> None:
     """:func:`shade_closures` with the closure of hit r in row crow[r] of C (m + M + 1, N_CLOSURE):
     the hits on materials with a program get their own row r, the others (constant materials,
     misses) row m + their material's row, where the material table is copied.  A 280-byte row
     is copied for no hit that has none of its own (a miss, a flat material): 8 bytes of crow
     instead (:func:`shade_rows`)."""
-    _shade(mat, closures, prog, n_slots, G, A, X, seed, C, crow, True)
+    _shade(mat, closures, prog, n_slots, G, A, X, seed, _NO_U if U is None else U, C, crow, True)
 
 
 _NO_ROWS = np.empty(0, np.int64)
+_NO_U = np.empty(0, np.float64)
 
 
 @njit(**JIT)
-def _shade(mat, closures, prog, n_slots, G, A, X, seed, C, crow, compact):
+def _shade(mat, closures, prog, n_slots, G, A, X, seed, U, C, crow, compact):
     """:func:`shade_closures` (compact False) and :func:`shade_closure_rows` (compact True).
 
     Rows on materials with a program are not copied from the constant row first: the program
@@ -1524,7 +1527,7 @@ def _shade(mat, closures, prog, n_slots, G, A, X, seed, C, crow, compact):
             start = int(closures[cr, C_PROGRAM])
             _constants(prog, start, st, min(BATCH, j - i))      # once per material: no slot overwrites them
             for b in range(i, j, BATCH):
-                _run_batch(prog, start, st, order[b:min(b + BATCH, j)], C, G, A, X, seed, closures, cr)
+                _run_batch(prog, start, st, order[b:min(b + BATCH, j)], C, G, A, X, seed, U, closures, cr)
 
 
 @njit(**JIT)
@@ -1537,12 +1540,12 @@ def constant_closures(mat, closures, C):
             C[r, k] = closures[cr, k]
 
 
-def shade(sd, mat, G, seed, C) -> None:
+def shade(sd, mat, G, seed, C, U=None) -> None:
     """The closures C (m, N_CLOSURE) of hits with materials mat (m,) and geometry G for a
     ``shading.ShadingData`` sd: :func:`shade_closures` when the scene has node programs, else
-    :func:`constant_closures`."""
+    :func:`constant_closures`; U (m,) or None: the hits' Mix Shader uniforms (:func:`shade_closures`)."""
     if sd.uses_programs:
-        shade_closures(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, seed, C)
+        shade_closures(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, seed, C, U)
     else:
         constant_closures(mat, sd.closures, C)
 
@@ -1561,7 +1564,7 @@ def _identity_rows(crow):
         crow[r] = r
 
 
-def shade_rows(sd, mat, G, seed, C, crow) -> np.ndarray:
+def shade_rows(sd, mat, G, seed, C, crow, U=None) -> np.ndarray:
     """The closures of hits with materials mat (m,) and geometry G for a ``shading.ShadingData`` sd,
     as rows of an array: returns the array and fills crow (m,) int64 with the row of each hit.
 
@@ -1576,15 +1579,17 @@ def shade_rows(sd, mat, G, seed, C, crow) -> np.ndarray:
     m + M + 1 rows), only the hits on materials with a program get a row of their own, the
     others point into that copy of the table (:func:`shade_closure_rows`); the returned array is
     C.  Transparent materials need a row per hit (``transparency.pass_through`` rewrites them):
-    then C[:m] is filled and returned, crow[r] = r."""
+    then C[:m] is filled and returned, crow[r] = r.  U (m,) float64 or None: hit r's uniform for
+    its Mix Shader and Alpha choices (camera paths: each pixel's stratified, ``integrator``), else
+    ``hash_uniform(seed, r)``."""
     m = mat.shape[0]
     if sd.transparent or (sd.uses_programs and C.shape[0] < m + sd.closures.shape[0]):
         C = C[:m]
-        shade(sd, mat, G, seed, C)
+        shade(sd, mat, G, seed, C, U)
         _identity_rows(crow)
         return C
     if sd.uses_programs:
-        shade_closure_rows(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, seed, C, crow)
+        shade_closure_rows(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, seed, C, crow, U)
         return C
     closure_rows(mat, sd.closures, crow)
     return sd.closures

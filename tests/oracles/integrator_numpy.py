@@ -400,12 +400,14 @@ def _specular_step(ctx, rng, spec, idx, beta, mat, wo, ns, ng, bounce: int, coun
     throughput) are narrowed to them and beta takes the lobe's weight (``bsdf_sample_path``: the
     DIFFUSE lobe stops the path, the photon maps carry it); go (k,) keeps the rows that went on
     with some throughput left and (from RR_START on) survived Russian roulette, beta / q; glossy
-    (k,) marks those that left a rough lobe.  Random numbers: (k, 3) for the lobes, the
-    directions' strata (:func:`_strata_uniforms`, replacing u[:, 1:3]), then (k,) for the roulette.
+    (k,) marks those that left a rough lobe.  Random numbers: the directions' strata
+    (:func:`_strata_uniforms`, u[:, 1:3]), the lobe pick's (another block's first column, u[:, 0]),
+    then (k,) for the roulette.
     """
-    u = rng.random((spec.size, 3))
+    u = np.empty((spec.size, 3))
     idx = spec if idx is None else idx[spec]
     u[:, 1:3] = _strata_uniforms(idx, strata, rng)     # the directions: stratified per pixel (strata = (n, S))
+    u[:, 0] = _strata_uniforms(idx, strata, rng)[:, 0]  # the lobe's pick: the same, another block
     beta = None if beta is None else beta[spec]
     wi, weight, kind, p_c, u_w = bsdf_sample_cont(ctx.table, mat, wo, ns, ng, u)
     beta = weight if beta is None else beta * weight
