@@ -13,9 +13,12 @@ see its radiance S / (pi sin^2(angle / 2)) (its ``distant_light_intersect``), ST
 * ``rough_metal``, ``glossy_metal``: the same metal at Roughness 0.25 and 0.1: its lobe reaches
   the sun and next-event estimation samples it; both are kept, weighed by the power heuristic
   (at 0.1 next-event estimation alone is the noisier of the two);
-* ``mixed_chrome``: a Mix Shader, Fac 0.5 from a (flat) Checker texture so that it is a per-hit
-  choice (a constant Fac blends the two shaders' parameters at export), of the chrome and a dark
+* ``mixed_chrome``: a Mix Shader, Fac 0.5 from a (flat) Checker texture (a per-hit choice; until
+  2026-12-06 a constant Fac blended the two shaders' parameters at export), of the chrome and a dark
   Diffuse BSDF (0.1): half the hits mirror the sun.
+* ``mixed_chrome_const`` (not in ``SCENES``; ``tests/test_cycles_mix_shader.py``): the same Mix
+  Shader with a constant Fac 0.5 (until 2026-12-06 exported as one Principled with every
+  parameter blended: roughness 0.5, metallic 0.5, a broad highlight where Cycles has the glint).
 """
 from __future__ import annotations
 
@@ -58,15 +61,19 @@ def _plane(make_material):
     return scene
 
 
-def _mixed_chrome(name="MixedChrome"):
+def _mixed_chrome(name="MixedChrome", textured=True):
     mat = metal(name, roughness=0.0)
     t = mat.node_tree
     out, p = t.nodes["Material Output"], t.nodes["Principled BSDF"]
-    mix, ck = t.nodes.new("ShaderNodeMixShader"), t.nodes.new("ShaderNodeTexChecker")
-    ck.inputs["Color1"].default_value = ck.inputs["Color2"].default_value = (0.5, 0.5, 0.5, 1.0)
+    mix = t.nodes.new("ShaderNodeMixShader")
     df = t.nodes.new("ShaderNodeBsdfDiffuse")
     df.inputs["Color"].default_value = (0.1, 0.1, 0.1, 1.0)
-    t.links.new(ck.outputs["Color"], mix.inputs["Fac"])
+    if textured:
+        ck = t.nodes.new("ShaderNodeTexChecker")
+        ck.inputs["Color1"].default_value = ck.inputs["Color2"].default_value = (0.5, 0.5, 0.5, 1.0)
+        t.links.new(ck.outputs["Color"], mix.inputs["Fac"])
+    else:
+        mix.inputs["Fac"].default_value = 0.5
     t.links.new(df.outputs["BSDF"], mix.inputs[1])
     t.links.new(p.outputs["BSDF"], mix.inputs[2])
     t.links.new(mix.outputs["Shader"], out.inputs["Surface"])
@@ -83,6 +90,10 @@ def chrome():
 
 def mixed_chrome():
     return _plane(_mixed_chrome)
+
+
+def mixed_chrome_const():
+    return _plane(lambda: _mixed_chrome("MixedChromeConst", textured=False))
 
 
 def rough_metal():

@@ -277,9 +277,38 @@ def test_mix_image_and_unsupported_nodes_warn_and_approximate():
     assert M["Mix"].reflection_tint is None
     text = "\n".join(warnings)
     # The image is rendered from its texels (the material carries its node graph), not as the
-    # mean colour: no mean-colour warning; the constant Mix Shader and the Toon BSDF still warn
+    # mean colour: no mean-colour warning; the Toon BSDF still warns
     assert M["Textured"].graph is not None and out.textures
-    assert "Mix Shader" in text and "ShaderNodeBsdfToon" in text and "mean colour" not in text
+    assert "ShaderNodeBsdfToon" in text and "mean colour" not in text
+    # A constant-Fac Mix Shader of two different closures is two closures, as Cycles (the graph's
+    # per-hit choice; the constants above are only representative): nothing approximated, no warning
+    assert M["Mix"].graph is not None and M["GlassMix"].graph is not None
+    assert "Mix Shader" not in text
+
+
+def test_a_mix_of_two_diffuse_colours_stays_one_exact_constant_closure():
+    """Two Diffuse BSDFs differing only in colour: the blend of their colours is exactly their closure
+    mix (Lambertian is linear in albedo): one constant closure, no graph, no warning; a different
+    Roughness on one side makes it two closures."""
+    fresh()
+    add_camera()
+    mat, mix = node_material("TwoDiffuse", "ShaderNodeMixShader", Fac=0.3)
+    tree = mat.node_tree
+    a, b = tree.nodes.new("ShaderNodeBsdfDiffuse"), tree.nodes.new("ShaderNodeBsdfDiffuse")
+    a.inputs["Color"].default_value = (0.8, 0.1, 0.1, 1)
+    b.inputs["Color"].default_value = (0.1, 0.2, 0.8, 1)
+    tree.links.new(a.outputs[0], mix.inputs[1])
+    tree.links.new(b.outputs[0], mix.inputs[2])
+    add_mesh("cube", "TwoDiffuse", material=mat)
+    out, warnings = export_now()
+    (m,) = out.materials
+    assert m.graph is None
+    np.testing.assert_allclose(m.base_color, 0.7 * np.array([0.8, 0.1, 0.1]) + 0.3 * np.array([0.1, 0.2, 0.8]),
+                               atol=1e-6)
+    assert not [w for w in warnings if "Mix Shader" in w]
+    b.inputs["Roughness"].default_value = 0.5
+    out, warnings = export_now()
+    assert out.materials[0].graph is not None
 
 
 def test_instances_share_one_mesh_and_smooth_normals_follow_the_surface():

@@ -12,7 +12,11 @@ Glossy BSDF        Color, Roughness (metallic 1)
 Glass BSDF         Color (also its refraction and reflection tints, as Cycles:
                    ``Material.reflection_tint``), Roughness, IOR (transmission 1)
 Emission           Color * Strength (radiance, W m^-2 sr^-1, as in Cycles)
-Mix Shader         every parameter blended by Fac (approximate: warned)
+Mix Shader         Diffuse BSDFs differing only in colour, and Emissions: colours
+                   and emission blended by Fac (exact); any other mix:
+                   the representative constants blend every parameter and the
+                   material carries its graph, which renders the two closures
+                   weighted by Fac as Cycles (one chosen per hit)
 Image Texture      on a colour input: the image's mean linear colour
 =================  ==============================================================
 
@@ -181,6 +185,17 @@ def _tint_r(p: dict) -> np.ndarray:
     """The reflection tint (3,) of parameters p: theirs, else white (a Principled BSDF's)."""
     t = p.get("reflection_tint")
     return np.clip(np.ones(3) if t is None else np.asarray(t, dtype=np.float64), 0.0, 1.0)
+
+
+def _blend_is_exact(a: dict, b: dict) -> bool:
+    """Is blending parameters a and b by a Mix Shader's Fac exactly the mix of their closures?
+    True for two Lambertian-plus-emission closures with the same scalars (Diffuse BSDFs, Emissions):
+    both are linear in base colour and emission.  Any specular, metallic or transmissive side is not (roughness, metallic, IOR blends change the lobe's shape)."""
+    if any(p.get("transmission_tint") is not None or p.get("reflection_tint") is not None for p in (a, b)):
+        return False
+    if any(float(p[k]) != 0.0 for p in (a, b) for k in ("metallic", "transmission", "specular")):
+        return False
+    return all(float(a[k]) == float(b[k]) for k in ("roughness", "ior"))
 
 
 class MaterialExporter:
@@ -573,11 +588,14 @@ class MaterialExporter:
                            emission=self._color(node, "Color", (1, 1, 1)) * self._value(node, "Strength", 1.0))
         if kind == "ShaderNodeMixShader":
             fac = float(np.clip(self._value(node, "Fac", 0.5), 0.0, 1.0))
-            self._warn("Mix Shader approximated by blending the two shaders' parameters", graph_carries=True)
             sides = []
             for sock in (node.inputs[1], node.inputs[2]):
                 sides.append(self._shader(self._follow(sock.links[0]), depth + 1) if sock.is_linked
                              else _params(base_color=np.zeros(3)))
+            if not _blend_is_exact(sides[0], sides[1]):
+                # the material carries its graph (nodes.graph_needed), which renders the two weighted
+                # closures; only without one (it could not be built or compiled, warned) is this blend rendered
+                self._warn("Mix Shader approximated by blending the two shaders' parameters", graph_carries=True)
             mixed = {k: (1 - fac) * np.asarray(sides[0][k], float) + fac * np.asarray(sides[1][k], float)
                      for k in FIELDS}
             if any(sd.get("transmission_tint") is not None for sd in sides):

@@ -369,6 +369,40 @@ def reached_nodes(graph: ShaderGraph, supported=None) -> list:
 
 
 _GRAPH_ONLY_SHADERS = ("ShaderNodeBsdfTransparent", "ShaderNodeAddShader")   # no constant closure for them
+# Shaders whose closure is linear in their colour inputs: a Mix Shader of Diffuse BSDFs (all with
+# the same other inputs) and Emissions is exactly one Diffuse of the Fac-blended colour plus the
+# Fac-blended emission (Lambertian albedo and emitted radiance Color * Strength are linear)
+_LINEAR_COLOUR_SHADERS = {"ShaderNodeBsdfDiffuse": ("Color",), "ShaderNodeEmission": ("Color", "Strength")}
+_EMISSION_ONLY = ("emission",)        # a signature compatible with any other
+
+
+def _blend_signature(graph: ShaderGraph, link, depth: int = 0):
+    """The Diffuse BSDFs' non-colour inputs (``_EMISSION_ONLY`` for Emissions alone) of a shader
+    link whose Mix Shaders all blend exactly (every leaf a Diffuse BSDF or an Emission, the Diffuse
+    ones with the same non-colour inputs); None otherwise (a Mix Shader there must stay two weighted
+    closures)."""
+    node = graph.nodes.get(link.node) if isinstance(link, Link) else None
+    if node is None or depth > 32:
+        return None
+    if node.type == "ShaderNodeMixShader":
+        a = _blend_signature(graph, node.inputs.get("Shader"), depth + 1)
+        b = _blend_signature(graph, node.inputs.get("Shader_001"), depth + 1)
+        if a is None or b is None:
+            return None
+        if a == _EMISSION_ONLY or a == b:
+            return b
+        return a if b == _EMISSION_ONLY else None
+    if node.type == "ShaderNodeEmission":
+        return _EMISSION_ONLY
+    colours = _LINEAR_COLOUR_SHADERS.get(node.type)
+    if colours is None:
+        return None
+    return tuple(sorted((k, repr(v)) for k, v in node.inputs.items() if k not in colours))
+
+
+def mix_is_exact_blend(graph: ShaderGraph, name: str) -> bool:
+    """Is Mix Shader ``name`` exactly the parameter blend the constant path makes of it?"""
+    return _blend_signature(graph, Link(name, "Shader")) is not None
 
 
 def graph_needed(graph: ShaderGraph, builder: GraphBuilder) -> bool:
@@ -377,8 +411,12 @@ def graph_needed(graph: ShaderGraph, builder: GraphBuilder) -> bool:
     True when a value node the interpreter evaluates, other than Value / RGB, feeds the surface
     (a texture, a Math node, a Normal Map, ...), or the surface's nodes or values pass through
     a node group or a muted node, or the tree has a Transparent BSDF, an Add Shader or a
-    Principled BSDF with Alpha < 1 (chosen per hit).  Plain shader trees (Principled, Diffuse, Glossy, Glass,
-    Emission, Mix Shader with constant or Value / RGB inputs) keep the constant path, and so do
+    Principled BSDF with Alpha < 1 (chosen per hit), or a Mix Shader that is not exactly a
+    blend of its inputs' colours (:func:`mix_is_exact_blend`: Cycles evaluates it as two weighted
+    closures, whatever its Fac; blending e.g. a Diffuse and a mirror's roughness and metallic
+    would turn a sharp glint into a broad highlight).  Plain shader trees (Principled, Diffuse,
+    Glossy, Glass, Emission, a Mix Shader of Diffuse BSDFs differing only in colour and Emissions,
+    with constant or Value / RGB inputs) keep the constant path, and so do
     trees whose only links come from nodes the interpreter does not support either (a Noise
     texture, a Bump node: both paths use the input's own value; the constant path warns).
     """
@@ -392,6 +430,8 @@ def graph_needed(graph: ShaderGraph, builder: GraphBuilder) -> bool:
             return True
         if node.type in _GRAPH_ONLY_SHADERS:
             return True
+        if node.type == "ShaderNodeMixShader" and not mix_is_exact_blend(graph, name):
+            return True            # two weighted closures, as Cycles: one chosen per hit by Fac
         alpha = node.inputs.get("Alpha", 1.0) if node.type == "ShaderNodeBsdfPrincipled" else 1.0
         if isinstance(alpha, Link) or (isinstance(alpha, (int, float)) and alpha < 1.0):
             return True            # transparency: the closure is chosen per hit
