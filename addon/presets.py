@@ -37,7 +37,7 @@ PRESETS: dict[str, dict] = {
 
 PRESET_ITEMS = (
     ("PREVIEW", "Preview", "Fast and noisy: look development"),
-    ("FINAL", "Final", "Many photons and samples: final frames"),
+    ("FINAL", "Final", "Many photons; 32 to 256 samples per pixel, more where the noise is (adaptive): final frames"),
     ("PREVIEW_PROGRESSIVE", "Preview Progressive",
      "Passes that sharpen for 20 seconds (a shrinking space-time kernel); stop it any time with Esc"),
     ("FINAL_PROGRESSIVE", "Final Progressive",
