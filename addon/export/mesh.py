@@ -63,14 +63,9 @@ def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
     color_layers : {name: (F, 3, 4) float32} linear RGBA of each requested colour attribute that
         exists (see :func:`color_arrays`); color_render: the render-active one's name or None.
     """
-    me.calc_loop_triangles()
-    tris = me.loop_triangles
+    tris, tri, loops = _loop_triangles(me)
     F = len(tris)
-    # Loop triangles: vertex indices, corners, material slots
-    tri = np.empty(F * 3, dtype=np.int32)
-    tris.foreach_get("vertices", tri)
-    loops = np.empty(F * 3, dtype=np.int32)
-    tris.foreach_get("loops", loops)
+    # Loop triangles' material slots
     slots = np.empty(F, dtype=np.int32)
     tris.foreach_get("material_index", slots)
     vertices = vertex_positions(me)
@@ -96,19 +91,26 @@ def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
             "tangents": tangents, "color_layers": color_layers, "color_render": color_render}
 
 
+def _loop_triangles(me) -> tuple:
+    """(me.loop_triangles, their vertex indices (3 F,) int32, their corners (3 F,) int32) of the
+    evaluated mesh ``me``, recomputed first."""
+    me.calc_loop_triangles()
+    tris = me.loop_triangles
+    tri = np.empty(len(tris) * 3, dtype=np.int32)
+    tris.foreach_get("vertices", tri)
+    loops = np.empty(len(tris) * 3, dtype=np.int32)
+    tris.foreach_get("loops", loops)
+    return tris, tri, loops
+
+
 def step_normals(me) -> tuple:
     """(triangles (F, 3) int32, shading normals (F, 3, 3) float32 or None) of the evaluated mesh
     ``me`` at one motion step: the normals Cycles stores per step of a deforming mesh
     (``ATTR_STD_MOTION_VERTEX_NORMAL``), by the rules of :func:`mesh_arrays`
     (:func:`cycles_normals_domain`, :func:`shading_normals`) on this step's shape.  The triangles
     let the caller check the step's loop triangles are the frame's."""
-    me.calc_loop_triangles()
-    tris = me.loop_triangles
+    tris, tri, loops = _loop_triangles(me)
     F = len(tris)
-    tri = np.empty(F * 3, dtype=np.int32)
-    tris.foreach_get("vertices", tri)
-    loops = np.empty(F * 3, dtype=np.int32)
-    tris.foreach_get("loops", loops)
     domain = cycles_normals_domain(me) if F else "FACE"
     return tri.reshape(F, 3), shading_normals(me, tris, tri.reshape(F, 3), loops, vertex_positions(me), domain)
 

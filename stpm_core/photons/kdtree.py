@@ -133,6 +133,18 @@ if AVAILABLE:
         return np.float64(P[j, d])
 
     @_jit
+    def _dist2(P, j, q0, q1, q2, q3, D, s):
+        """Squared distance in float64 from row j of P (N, 4) float32 to the query (q0, q1, q2, q3):
+        over x, y, z, and for D = 4 also the scaled time s * t."""
+        e0 = np.float64(P[j, 0]) - q0
+        e1 = np.float64(P[j, 1]) - q1
+        e2 = np.float64(P[j, 2]) - q2
+        d2 = e0 * e0 + e1 * e1 + e2 * e2
+        if D == 4:
+            e3 = s * np.float64(P[j, 3]) - q3
+            d2 += e3 * e3
+        return d2
+    @_jit
     def _split_rows(P, perm, lo, hi, nth, dim, s):
         """Quickselect rows lo..hi-1 of P (and perm) so row nth holds the nth smallest coordinate dim.
 
@@ -448,13 +460,7 @@ if AVAILABLE:
             # scan the leaf's contiguous rows
             leaf = node - first_leaf
             for j in range((leaf * N) // n_leaves, ((leaf + 1) * N) // n_leaves):
-                e0 = np.float64(P[j, 0]) - q0
-                e1 = np.float64(P[j, 1]) - q1
-                e2 = np.float64(P[j, 2]) - q2
-                d2 = e0 * e0 + e1 * e1 + e2 * e2
-                if D == 4:
-                    e3 = s * np.float64(P[j, 3]) - q3
-                    d2 += e3 * e3
+                d2 = _dist2(P, j, q0, q1, q2, q3, D, s)
                 if d2 < bound:
                     bd[cnt] = d2
                     bi[cnt] = j
@@ -515,13 +521,7 @@ if AVAILABLE:
                 far2 = 0.0
                 for a in range(kq):
                     j = bi[a]
-                    e0 = np.float64(P[j, 0]) - q0
-                    e1 = np.float64(P[j, 1]) - q1
-                    e2 = np.float64(P[j, 2]) - q2
-                    d2 = e0 * e0 + e1 * e1 + e2 * e2
-                    if D == 4:
-                        e3 = s * np.float64(P[j, 3]) - q3
-                        d2 += e3 * e3
+                    d2 = _dist2(P, j, q0, q1, q2, q3, D, s)
                     far2 = max(far2, d2)
                 bound0 = far2 * (1.0 + 1e-9)           # (slack: the farthest itself strictly inside)
             if not _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti):
