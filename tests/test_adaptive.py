@@ -65,12 +65,59 @@ def test_error_is_cycles_measure_and_unconverged_pixels_spread_to_neighbours():
     # bright pixels (sum I / N >= 1) divide by the intensity itself, as Cycles 4+ does
     e = A.pixel_error(np.array([[32.0, 32.0, 32.0]]), np.array([[30.0, 32.0, 34.0]]), np.array([16.0]))
     assert e[0] == pytest.approx((4.0 / 16.0) / (1e-4 + 6.0))
+    # (threshold 0.01: THRESHOLD_SCALE * 0.01 = 0.05) an error between 1 and OUTLIER_FACTOR times it
+    # spreads to the 3 x 3 box (Cycles' filter_x / filter_y) ...
     err = np.zeros((5, 6))
-    err[2, 3] = 1.0
+    err[2, 3] = 0.07
     need = A.need_samples(err, 0.01)
     expect = np.zeros((5, 6), bool)
     expect[1:4, 2:5] = True
     assert np.array_equal(need, expect)
+    assert not A.need_samples(err * 0.7, 0.01).any()
+    # ... one of OUTLIER_FACTOR times it or more (a rare bright path drawn) to the 7 x 7 box
+    err = np.zeros((12, 13))
+    err[5, 4] = 2.0 * 0.05
+    expect = np.zeros((12, 13), bool)
+    expect[2:9, 1:8] = True
+    assert np.array_equal(A.need_samples(err, 0.01), expect)
+
+
+def _replay_rounds(seed: int, guard: bool, H: int = 32, W: int = 32, p: float = 1e-3, bright: float = 100.0,
+                   base: float = 0.3) -> tuple[float, float]:
+    """(image mean / true mean, mean samples per pixel): the adaptive rounds (adaptive.schedule,
+    pixel_error, need_samples; threshold 0.05, 32 to 256 samples) on pixels whose samples are
+    ``base`` plus, with probability p, ``bright`` (a rare bright path: the product shot's sun seen
+    through glass), each pixel the mean of its own samples; guard False: Cycles' rule alone
+    (OUTLIER_FACTOR infinite)."""
+    rng = np.random.default_rng(seed)
+    I, half, N = np.zeros((H * W, 3)), np.zeros((H * W, 3)), np.zeros(H * W)
+    need = np.ones((H, W), bool)
+    saved = A.OUTLIER_FACTOR
+    if not guard:
+        A.OUTLIER_FACTOR = np.inf
+    try:
+        for first, B in A.schedule(256, 32):
+            pix = np.flatnonzero(need.ravel())
+            L = base + bright * (rng.random((pix.size, B)) < p)
+            odd = (first + np.arange(B)) % 2 == 1
+            I[pix] += L.sum(axis=1)[:, None]
+            half[pix] += 2.0 * L[:, odd].sum(axis=1)[:, None]
+            N[pix] += B
+            need = A.need_samples(A.pixel_error(I, half, N).reshape(H, W), 0.05)
+    finally:
+        A.OUTLIER_FACTOR = saved
+    return float((I[:, 0] / N).mean() / (base + bright * p)), float(N.mean())
+
+
+def test_rare_bright_samples_do_not_stop_their_neighbours_low():
+    # A pixel that has not drawn the rare bright sample looks converged (its halves agree) and stops:
+    # Cycles' rule alone reads such a region about 14 % low (0.85-0.87 over these seeds); the
+    # neighbourhood guard keeps the pixels around a bright draw sampling: 0.97-1.01
+    old = np.array([_replay_rounds(s, False) for s in range(4)])
+    new = np.array([_replay_rounds(s, True) for s in range(4)])
+    assert old[:, 0].mean() < 0.92, old
+    assert abs(new[:, 0].mean() - 1.0) < 0.05, new
+    assert new[:, 1].mean() < 256
 
 
 def test_a_pixels_samples_do_not_depend_on_the_others():
@@ -128,9 +175,11 @@ def test_converged_pixels_stop_and_noisy_ones_take_more(renders):
     n = np.stack([r.passes["Sample Count"][..., 0] for r in adapt])
     spot = np.stack([r.passes["Direct"] for r in fixed]).mean(axis=(0, 3))
     sun_only = spot <= spot.min() * 1.0001            # pixels the spot does not reach: no noise
-    assert sun_only.sum() > 50
-    # (the unconverged set's 1-pixel dilation may reach a sun-only pixel next to the spot's light)
-    assert np.median(n[:, sun_only]) == 16 and n[:, sun_only].mean() < 24
+    # (the unconverged set's dilation, 1 pixel and OUTLIER_RADIUS around a pixel of twice the
+    # threshold's error, reaches sun-only pixels near the spot's light: judged beyond that reach)
+    far = sun_only & ~A._box_any(~sun_only, A.OUTLIER_RADIUS)
+    assert far.sum() > 50
+    assert np.median(n[:, far]) == 16 and n[:, far].mean() < 20
     lit = spot > spot.min() + 0.2 * (spot.max() - spot.min())
     assert n[:, lit].mean() > 4 * 16
     assert n.max() == 128 and n.min() == 16
