@@ -42,7 +42,7 @@ THRESHOLD_SCALE = 5.0
 #: error of at least OUTLIER_FACTOR times the threshold: the rare-bright-path guard (docs/rendering.md,
 #: "Adaptive sampling").  On the product shot's caustic region (offline replay of the recorded rounds,
 #: seeds 0 and 1, threshold 0.05, 32-256 samples) Cycles' rule alone read the region's mean 0.80, with
-#: this guard (r 3, factor 2) 0.95 for 1.2 x the pixels in the second round; a plain 5 x 5 or 7 x 7 max
+#: this guard (r 3, factor 2) 0.945 for 1.17 x the pixels in the second round; a plain 5 x 5 or 7 x 7 max
 #: of e read 0.90 / 0.98 for 1.8 x / 2.3 x them
 OUTLIER_RADIUS = 3
 OUTLIER_FACTOR = 2.0
