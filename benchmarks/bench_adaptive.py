@@ -50,6 +50,7 @@ def run() -> dict:
     ref = np.asarray(ref, np.float64)
     nc = np.asarray(bp.no_refractive_caustics()[0], np.float64)
     with bp._this_scene():
+        room._open()                        # object_names reads the open file's scene
         names = room.object_names()
     caustic = bp.caustic_mask(ref, nc, index == names.index("Table") + 1)
     outside = ~caustic
