@@ -18,6 +18,7 @@ import math
 
 import bpy
 
+import normal_scenes
 from direct_light_scenes import _diffuse
 from test_addon_scenes import add_camera, add_light, fresh, linear_keys, set_world
 
@@ -54,13 +55,4 @@ def build(w: int = W, h: int = H):
 
 def show_normals():
     """Make the sphere emit 0.5 + 0.5 N (Geometry > Normal, world space), nothing else."""
-    mat = bpy.data.objects["Blob"].data.materials[0]
-    t = mat.node_tree
-    geo = t.nodes.new("ShaderNodeNewGeometry")
-    vm = t.nodes.new("ShaderNodeVectorMath")
-    vm.operation = "MULTIPLY_ADD"
-    vm.inputs[1].default_value = vm.inputs[2].default_value = (0.5, 0.5, 0.5)
-    em = t.nodes.new("ShaderNodeEmission")
-    t.links.new(geo.outputs["Normal"], vm.inputs[0])
-    t.links.new(vm.outputs[0], em.inputs["Color"])
-    t.links.new(em.outputs[0], t.nodes["Material Output"].inputs["Surface"])
+    normal_scenes.show_normals("Blob")

@@ -114,9 +114,10 @@ def _normals(case: str, obj):
     me.update()
 
 
-def show_normals():
-    """Make the cylinder emit 0.5 + 0.5 N (Geometry > Normal, world space), nothing else."""
-    mat = bpy.data.objects["Cylinder"].data.materials[0]
+def show_normals(name: str = "Cylinder"):
+    """Make object ``name`` (the cylinder) emit 0.5 + 0.5 N (Geometry > Normal, world space),
+    nothing else (its first material is rewired)."""
+    mat = bpy.data.objects[name].data.materials[0]
     t = mat.node_tree
     geo = t.nodes.new("ShaderNodeNewGeometry")
     vm = t.nodes.new("ShaderNodeVectorMath")
