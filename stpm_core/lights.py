@@ -506,7 +506,8 @@ class LightSet:
     # Photon emission
     # -----------------------------------------------------------------------
 
-    def emit(self, li: int, n: int, times: np.ndarray, rng: np.random.Generator, *, with_s_lit: bool = False):
+    def emit(self, li: int, n: int, times: np.ndarray, rng: np.random.Generator, *, with_s_lit: bool = False,
+             guide=None):
         """Emit n photons from light li over its whole emission (the kernel
         :func:`stpm_core.kernels.emission.emit_photons`).
 
@@ -517,8 +518,10 @@ class LightSet:
         caustics get the same soft edges as shadows.  ``with_s_lit``: also return s_lit (n,), the
         distance from each origin below which the photon's first hit receives nothing (soft
         falloff; a tracer must drop those photons, :func:`stpm_core.kernels.emission.emit`).
+        ``guide``: an ``photons.guide.EmissionGuide`` of this light (guided emission, each power
+        divided by the guide's density), or None.
         """
-        return _emission.emit(self, li, n, times, rng, with_s_lit=with_s_lit)
+        return _emission.emit(self, li, n, times, rng, with_s_lit=with_s_lit, guide=guide)
 
     def emit_toward(self, li: int, n: int, times: np.ndarray, rng: np.random.Generator,
                     centers: np.ndarray, radius: float, *, with_s_lit: bool = False):

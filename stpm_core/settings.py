@@ -98,6 +98,12 @@ class RenderSettings:
         200_000, "int", "caustic photons, emitted toward the specular objects for the caustic map",
         lo=0, hi=1 << 31, label="Caustic Photons", flag="--photons-caustic", metavar="N",
         ui={"soft_max": 10_000_000})
+    photon_guiding: bool = setting(
+        False, "bool", "emit the global map's photons where the camera looks: a camera pilot marks the cells of "
+        "each light's emission that light seen surfaces directly; 80 % of the photons come from marked cells, 20 % "
+        "uniform, powers divided by the mixture's density (docs/photon-mapping.md, \"Emission guided by direct "
+        "visibility\")", label="Photon Guiding", flag="--photon-guiding", metavar="on|off",
+        help="guide the global photons to what the camera sees (direct-visibility pilot) on or off")
     k_nearest: int = setting(
         50, "int", "photons per radiance estimate (k)", lo=1, hi=100_000, label="Nearest Photons", flag="--k",
         metavar="K", ui={"soft_max": 500})

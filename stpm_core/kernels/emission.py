@@ -88,6 +88,7 @@ import numpy as np
 
 from ..numba_probe import njit
 from . import kernel_array
+from .guide import guide_warp
 from .environment import (E_PHOTON_UNIFORM, E_PORTAL_PHOTON, E_TEXTURED, PT_E1, PT_E2, PT_N, PT_S, env_pdf,
                           env_radiance, env_sample, portal_cross)
 from .light_params import (P_ANGLE, P_COLOR, P_COS_HALF, P_FLUX, P_POWER, P_RADIUS, P_SCENE_C, P_SCENE_R, P_SOFT,
@@ -497,7 +498,8 @@ def _textured(light, U, o, d, times, P) -> None:
         P *= light.point_emission(U, o, -d, times)
 
 
-def emit(lights, li: int, n: int, times: np.ndarray, rng: np.random.Generator, *, with_s_lit: bool = False):
+def emit(lights, li: int, n: int, times: np.ndarray, rng: np.random.Generator, *, with_s_lit: bool = False,
+         guide=None):
     """n photons of light li of the LightSet ``lights`` over its whole emission (``LightSet.emit``).
 
     times : (n,) (or (1,) / scalar: one time for all) normalised shutter times.
@@ -506,14 +508,28 @@ def emit(lights, li: int, n: int, times: np.ndarray, rng: np.random.Generator, *
         first hit receives nothing (soft falloff, :func:`_point_origin`; 0 elsewhere).  A tracer
         must drop those photons: with them a soft-falloff light's photons carry its sphere's near
         field, up to 1 + r^2 / D^2 times next-event estimation's at distance D.
+    guide : ``photons.guide.EmissionGuide`` of this light, or None (uniform emission): its columns
+        of (u1_0, u1_1, u2_0, u2_1) are redrawn from the guide's mixture (one more uniform per
+        photon from rng, after the others, picks the technique; ``kernels.guide.guide_warp``) and
+        each power is divided by the mixture's density there.  None leaves the stream unchanged.
     Returns origins (n, 3), unit directions (n, 3), power (n, 3) W per photon[, s_lit (n,)].
     """
     n = int(n)
     o, d, P, s_lit = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
     if n > 0:
         (u1, u_side, u2), inputs = _prepare(lights, li, n, times, rng, side=True)
+        w = None
+        if guide is not None:
+            w = np.empty(n)
+            U = (u1, u2)
+            V = np.ascontiguousarray(np.stack([U[c // 2][:, c % 2] for c in guide.cols], axis=1))
+            guide_warp(V, int(guide.res), guide.mask, guide.marked, float(guide.g), rng.random(n), w)
+            for k, c in enumerate(guide.cols):
+                U[c // 2][:, c % 2] = V[:, k]
         emit_photons(*inputs, u1, u2, u_side, o, d, P, s_lit)
         _textured(lights.lights[li], u1, o, d, inputs[-1], P)
+        if w is not None:
+            P *= w[:, None]
     return (o, d, P, s_lit) if with_s_lit else (o, d, P)
 
 

@@ -35,6 +35,8 @@ power (stored powers stay even, which keeps the density estimate's variance low)
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from .. import kernels as _kernels
@@ -47,6 +49,7 @@ from ..raycast.geometry import GUARD_FRACTION, instance_offsets, offset_lengths
 from ..sampling import rng_for, stratified_1d
 from ..shading import constant_shading, hit_geometry, shading_data
 from ..transparency import TRANSPARENT_MAX_BOUNCES, pass_through
+from . import guide as _guide
 from .record import make_records, photon_origin, PHOTON_DTYPE
 
 __all__ = ["specular_targets", "split_counts", "trace_photon_paths", "trace_caustic_map", "trace_global_map"]
@@ -354,6 +357,19 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
     shading = shading_data(scene, table.closures)
     jobs = [(li, b0, min(BATCH, int(n_light) - b0), int(n_light)) for li, n_light in enumerate(counts)
             for b0 in range(0, int(n_light), BATCH)]
+    # -- The camera pilot (what the camera sees: --stats) and, with photon_guiding, the guides -------
+    guiding = bool(getattr(settings, "photon_guiding", False))
+    guides, marks, cells, pilot_s = [None] * len(lights.lights), [0] * len(lights.lights), None, 0.0
+    if int(counts.sum()) > 0:
+        t0 = time.perf_counter()
+        rng_g = rng_for(settings.seed, _guide.STREAM_GUIDE)
+        pilot = _guide.camera_pilot(scene, caster, table, shading=shading, inst_offset=inst_offset, origin=origin,
+                                    rng=rng_g, time_override=time_override)
+        cells = _guide.visible_cells(pilot)
+        if guiding:
+            guides, marks = _guide.build_guides(pilot, caster, lights, rng_g,
+                                                scale=2.0 * float(scene.bounding_sphere()[1]))
+        pilot_s = time.perf_counter() - t0
 
     def trace_batch(j: int) -> tuple[np.ndarray, list]:
         """Records of batch j (and its coat-path records): a pure function of (seed, light, batch),
@@ -363,7 +379,7 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
         t = _times(scene, n, rng, time_override)
         # Each light's emit() spreads its flux over the photons it is given: scale
         # to this batch's share of the light's photons.
-        o, d, Phi, s_lit = lights.emit(li, n, t, rng, with_s_lit=True)
+        o, d, Phi, s_lit = lights.emit(li, n, t, rng, with_s_lit=True, guide=guides[li])
         Phi = Phi * (n / float(n_light))
         coat: list | None = [] if split else None
         recs = trace_photon_paths(caster, table, o, d, Phi, t, rng, origin=origin, mode="global", s_lit=s_lit,
@@ -378,6 +394,20 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
     coat = [c for _, cs in out for c in cs]
     if split:
         coat_paths.append(np.concatenate(coat) if coat else np.empty(0, dtype=PHOTON_DTYPE))
-    return recs, {"photons_emitted_global": int(counts.sum()),
-                  "photons_emitted_global_per_light": [int(x) for x in counts],
-                  "photons_global_coat_paths": int(sum(c.shape[0] for c in coat))}
+    info = {"photons_emitted_global": int(counts.sum()),
+            "photons_emitted_global_per_light": [int(x) for x in counts],
+            "photons_global_coat_paths": int(sum(c.shape[0] for c in coat)),
+            "photons_stored_global": int(recs.shape[0]),
+            "photon_guiding": guiding, "guide_pilot_s": pilot_s}
+    if cells is not None:
+        # photons stored on camera-visible surfaces (the pilot's voxels: photons.guide.VisibleCells)
+        on = cells.contains(recs["position"].astype(np.float64) + origin)
+        info["photons_stored_visible_global"] = int(np.count_nonzero(on))
+        info["photons_stored_visible_global_fraction"] = (info["photons_stored_visible_global"]
+                                                          / max(int(counts.sum()), 1))
+    if guiding:
+        info["guide_marks_per_light"] = [int(x) for x in marks]
+        info["guide_marked_cells_per_light"] = [0.0 if g is None else float(g.marked_fraction) for g in guides]
+        info["photons_guided_global_per_light"] = [0 if g is None else int(round(g.g * int(c)))
+                                                   for g, c in zip(guides, counts)]
+    return recs, info

@@ -1,0 +1,218 @@
+"""Photon emission guided by direct visibility (docs/photon-mapping.md, "Emission guided by direct
+visibility"; setting ``photon_guiding``).
+
+1. **Camera pilot** (:func:`camera_pilot`): ``PILOT_RAYS`` jittered primary rays, each at its own
+   stratified shutter time, followed through delta and glossy lobes (a mirror, clear glass) to the
+   first surface with a non-delta lobe, as the camera paths read the maps there: the points the
+   camera sees, with the direction back toward the camera and the time.
+2. **Marks** (:func:`build_guides`): from each seen point, ``LIGHT_SAMPLES`` photons of each light
+   that would reach it straight from the light (``kernels.guide.guide_marks``: the inverse of
+   the light's emission warps), each with a shadow ray at the point's time; an unoccluded one
+   marks the cell of the light's emission domain that photon comes from (``GRID`` cells per
+   guided uniform column, :data:`COLUMNS`).  Every marked cell also marks its neighbours (one
+   cell each way in every column).
+3. **Emission** (``kernels.emission.emit(..., guide=)``): the uniforms of a photon come from
+   ``pdf(u) = g N_c / M [cell(u) marked] + (1 - g)`` (g = ``GUIDED_SHARE``, M marked cells of
+   N_c) and its power is divided by pdf (``kernels.guide.guide_warp``): unbiased for any marks,
+   and every photon drawn in a marked cell carries the same power, so the photons that light a
+   seen surface directly (and what they store after bouncing there) keep equal powers.
+
+A light with no marked cell (nothing the camera sees is lit by it directly), a MESH light, and a
+textured or portal-lit world emit uniformly (guide None).  The pilot's random stream is
+``rng_for(seed, STREAM_GUIDE)``: the same seed builds the same guide on every machine and thread
+count.  :class:`VisibleCells` (voxels of the seen points) counts the photons stored on
+camera-visible surfaces for ``--stats``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..camera import generate_rays
+from ..kernels.guide import guide_marks
+from ..kernels.light_params import kernel_light, light_poses
+from ..kernels.environment import E_PORTAL_PHOTON, E_TEXTURED
+from ..sampling import rng_for
+from .record import oct_decode
+
+__all__ = ["EmissionGuide", "VisibleCells", "CameraPilot", "camera_pilot", "build_guides", "visible_cells",
+           "GUIDED_SHARE", "GRID", "COLUMNS", "PILOT_RAYS", "LIGHT_SAMPLES"]
+
+GUIDED_SHARE = 0.8            # g: the guided share of a light's photons (issue 16: >= 20 % unguided)
+PILOT_RAYS = 4096             # camera pilot rays
+PILOT_DEPTH = 4               # delta / glossy bounces the pilot follows
+STREAM_GUIDE = 0x6D1D         # the pilot's random stream
+CELLS = 64                    # voxels along the diagonal of the seen points (VisibleCells, stats only)
+#: guided uniform columns of (u1_0, u1_1, u2_0, u2_1) per light type and cells per column
+COLUMNS = {"POINT": (0, 1), "SPOT": (0, 1), "SUN": (2, 3), "AREA": (0, 1, 2, 3), "WORLD": (0, 1, 2, 3)}
+#: cells per column tried, coarse to fine: the finest whose marked cells hold MIN_MARKS marks each on average
+GRID = {"POINT": (16, 32, 64, 128, 256), "SPOT": (16, 32, 64, 128, 256), "SUN": (16, 32, 64, 128, 256),
+        "AREA": (4, 8, 16), "WORLD": (4, 8, 16)}
+MIN_MARKS = 4
+LIGHT_SAMPLES = {"POINT": 1, "SPOT": 1, "SUN": 2, "AREA": 8, "WORLD": 32}    # marking photons per seen point
+
+
+@dataclass(frozen=True)
+class EmissionGuide:
+    """One light's guide: the guided columns ``cols`` of (u1_0, u1_1, u2_0, u2_1), ``res`` cells
+    per column, ``mask`` (res^D,) uint8 (1 = marked), ``marked`` (M,) int64 sorted marked cells,
+    ``g`` the guided share."""
+    cols: tuple
+    res: int
+    mask: np.ndarray
+    marked: np.ndarray
+    g: float = GUIDED_SHARE
+
+    @property
+    def marked_fraction(self) -> float:
+        return self.marked.size / self.mask.size
+
+    def pdf(self, V: np.ndarray) -> np.ndarray:
+        """(n,) the mixture density at guided columns V (n, D) (numpy; tests and stats)."""
+        V = np.asarray(V, np.float64)
+        c = np.zeros(V.shape[0], np.int64)
+        for k in range(V.shape[1]):
+            c = c * self.res + np.minimum((V[:, k] * self.res).astype(np.int64), self.res - 1)
+        return (1.0 - self.g) + self.g * self.mask.size / self.marked.size * self.mask[c]
+
+
+@dataclass(frozen=True)
+class CameraPilot:
+    """What the camera sees: ``points`` (m, 3) world, ``wi`` (m, 3) unit toward the camera (along
+    the path), ``times`` (m,) normalised shutter times."""
+    points: np.ndarray
+    wi: np.ndarray
+    times: np.ndarray
+
+
+@dataclass(frozen=True)
+class VisibleCells:
+    """Voxels near what the camera sees: ``keys`` (K,) sorted int64 (each seen point's voxel and
+    its 26 neighbours), the grid's corner ``lo`` (3,) and voxel size ``h`` (scene units)."""
+    keys: np.ndarray
+    lo: np.ndarray
+    h: float
+
+    def contains(self, p: np.ndarray) -> np.ndarray:
+        """(m,) bool: world points p (m, 3) in a visible voxel."""
+        p = np.asarray(p, np.float64)
+        if p.shape[0] == 0 or self.keys.size == 0:
+            return np.zeros(p.shape[0], bool)
+        v = np.floor((p - self.lo) / self.h)
+        ok = np.all((v >= 0.0) & (v < (1 << 20)), axis=1)
+        k = _key(np.where(ok[:, None], v, 0.0).astype(np.int64))
+        i = np.minimum(np.searchsorted(self.keys, k), self.keys.size - 1)
+        return ok & (self.keys[i] == k)
+
+
+def _key(v: np.ndarray) -> np.ndarray:
+    return (v[:, 0] << 40) | (v[:, 1] << 20) | v[:, 2]
+
+
+def visible_cells(pilot: CameraPilot) -> VisibleCells:
+    """The voxels (and their neighbours) of the pilot's seen points; voxel size: the diagonal of
+    the points' 1st-99th percentile box over ``CELLS``."""
+    p = pilot.points
+    if p.shape[0] == 0:
+        return VisibleCells(np.empty(0, np.int64), np.zeros(3), 1.0)
+    a, b = np.percentile(p, 1.0, axis=0), np.percentile(p, 99.0, axis=0)
+    h = max(float(np.linalg.norm(b - a)) / CELLS, 1e-6)
+    lo = p.min(axis=0) - 2.0 * h
+    h = max(h, float(np.max(p.max(axis=0) - lo)) / ((1 << 20) - 4))
+    v = np.floor((p - lo) / h).astype(np.int64)
+    off = np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1]), -1).reshape(-1, 3)
+    allv = np.unique((v[:, None, :] + off[None]).reshape(-1, 3), axis=0)
+    return VisibleCells(np.unique(_key(allv)), lo, h)
+
+
+def camera_pilot(scene, caster, table, *, shading, inst_offset, origin, rng, rays: int = PILOT_RAYS,
+                 time_override=None) -> CameraPilot:
+    """The points the camera sees (module docstring, step 1).  Primary rays on a jittered grid,
+    stratified times (or the still's ``time_override``); the first hits with a non-delta lobe,
+    and, through delta / glossy lobes (``trace_photon_paths``'s caustic rules), the first such
+    surface behind a mirror or clear glass."""
+    from .trace import _times, trace_photon_paths
+    W, H = (int(v) for v in scene.resolution)
+    nx = max(int(round(np.sqrt(rays * W / max(H, 1)))), 1)
+    ny = max(rays // nx, 1)
+    ix, iy = np.meshgrid(np.arange(nx), np.arange(ny))
+    px = (ix.ravel() + rng.random(ix.size)) * (W / nx)
+    py = (iy.ravel() + rng.random(ix.size)) * (H / ny)
+    t = _times(scene, ix.size, rng, time_override)[rng.permutation(ix.size)]
+    o, d = generate_rays(scene.camera, (W, H), px, py, t)
+    one = np.ones((ix.size, 3))
+    kw = dict(origin=origin, inst_offset=inst_offset, shading=shading, diffuse_bounces=None)
+    first = trace_photon_paths(caster, table, o, d, one, t, rng, mode="global", min_nondelta=0, max_depth=0, **kw)
+    behind = trace_photon_paths(caster, table, o, d, one, t, rng, mode="caustic", max_depth=PILOT_DEPTH, **kw)
+    rec = np.concatenate([first, behind])
+    return CameraPilot(rec["position"].astype(np.float64) + origin, oct_decode(rec["wi_oct"]).astype(np.float64),
+                       rec["time"].astype(np.float64))
+
+
+def _guidable(lights, li: int) -> bool:
+    light = lights.lights[li]
+    if light.type not in COLUMNS:
+        return False
+    if light.type == "WORLD":
+        par, portals = kernel_light(lights, li)[7][4], kernel_light(lights, li)[7][5]
+        if par[E_TEXTURED] != 0.0 or (portals.shape[0] > 0 and par[E_PORTAL_PHOTON] > 0.0):
+            return False                     # an image's own distribution / the portals guide it
+    return True
+
+
+def _dilate(cells: np.ndarray, res: int, D: int) -> np.ndarray:
+    """Sorted flat cells (M,) and their neighbours one cell each way in every column."""
+    coords = np.stack(np.unravel_index(cells, (res,) * D), -1)
+    off = np.stack(np.meshgrid(*([[-1, 0, 1]] * D), indexing="ij"), -1).reshape(-1, D)
+    allc = (coords[:, None, :] + off[None]).reshape(-1, D)
+    allc = allc[np.all((allc >= 0) & (allc < res), axis=1)]
+    return np.unique(np.ravel_multi_index(tuple(allc.T), (res,) * D))
+
+
+def build_guides(pilot: CameraPilot, caster, lights, rng, *, scale: float) -> tuple[list, list]:
+    """(guides, marks): per light of ``lights`` an :class:`EmissionGuide` or None (module
+    docstring, step 2), and the number of unoccluded marking photons of each.  scale: the scene's
+    diagonal (the seen points move 1e-4 x scale toward the camera before their shadow rays)."""
+    guides, marks = [], []
+    m = pilot.points.shape[0]
+    for li, light in enumerate(lights.lights):
+        if m == 0 or float(lights.power[li]) <= 0.0 or not _guidable(lights, li):
+            guides.append(None)
+            marks.append(0)
+            continue
+        S = LIGHT_SAMPLES[light.type]
+        P = np.ascontiguousarray(np.repeat(pilot.points, S, axis=0))
+        R = np.ascontiguousarray(P + (1e-4 * scale) * np.repeat(pilot.wi, S, axis=0))
+        T = np.repeat(pilot.times, S)
+        U = rng.random((P.shape[0], 4))
+        row = kernel_light(lights, li)[0]
+        poses = light_poses(lights, li, T)
+        uu, o_sh, d_sh = np.empty((P.shape[0], 4)), np.zeros((P.shape[0], 3)), np.zeros((P.shape[0], 3))
+        tmax, ok = np.zeros(P.shape[0]), np.zeros(P.shape[0], np.uint8)
+        guide_marks(row, poses, P, R, U, uu, o_sh, d_sh, tmax, ok)
+        sel = np.flatnonzero(ok)
+        lit = np.zeros(P.shape[0], bool)
+        if sel.size:
+            lit[sel] = ~caster.occluded(o_sh[sel], d_sh[sel], T[sel], tmax[sel] * (1.0 - 1e-6))
+        cols = COLUMNS[light.type]
+        D = len(cols)
+        if not lit.any():
+            guides.append(None)
+            marks.append(0)
+            continue
+        # the finest grid whose marked cells hold MIN_MARKS marks each on average (fewer: holes)
+        for res in GRID[light.type]:
+            c = np.minimum((uu[lit][:, cols] * res).astype(np.int64), res - 1)
+            found = np.unique(np.ravel_multi_index(tuple(c.T), (res,) * D))
+            if res == GRID[light.type][0] or lit.sum() >= MIN_MARKS * found.size:
+                best = res, found
+            else:
+                break
+        res, found = best
+        cells = _dilate(found, res, D)
+        mask = np.zeros(res ** D, np.uint8)
+        mask[cells] = 1
+        marks.append(int(lit.sum()))
+        guides.append(None if cells.size == mask.size else EmissionGuide(cols, res, mask, cells))
+    return guides, marks
