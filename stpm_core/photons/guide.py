@@ -41,15 +41,16 @@ __all__ = ["EmissionGuide", "VisibleCells", "CameraPilot", "camera_pilot", "buil
 
 GUIDED_SHARE = 0.8            # g: the guided share of a light's photons (issue 16: >= 20 % unguided)
 PILOT_RAYS = 4096             # camera pilot rays
+BOUNCE_RAYS = 4              # rays from each seen point to the points it sees
 PILOT_DEPTH = 4               # delta / glossy bounces the pilot follows
 STREAM_GUIDE = 0x6D1D         # the pilot's random stream
-CELLS = 64                    # voxels along the diagonal of the seen points (VisibleCells, stats only)
+CELLS = 128                   # voxels along the diagonal of the seen points (VisibleCells, stats only)
 #: guided uniform columns of (u1_0, u1_1, u2_0, u2_1) per light type and cells per column
 COLUMNS = {"POINT": (0, 1), "SPOT": (0, 1), "SUN": (2, 3), "AREA": (0, 1, 2, 3), "WORLD": (0, 1, 2, 3)}
 #: cells per column tried, coarse to fine: the finest whose marked cells hold MIN_MARKS marks each on average
 GRID = {"POINT": (16, 32, 64, 128, 256), "SPOT": (16, 32, 64, 128, 256), "SUN": (16, 32, 64, 128, 256),
         "AREA": (4, 8, 16), "WORLD": (4, 8, 16)}
-MIN_MARKS = 4
+MIN_MARKS = 16
 LIGHT_SAMPLES = {"POINT": 1, "SPOT": 1, "SUN": 2, "AREA": 8, "WORLD": 32}    # marking photons per seen point
 
 
@@ -150,6 +151,26 @@ def camera_pilot(scene, caster, table, *, shading, inst_offset, origin, rng, ray
                        rec["time"].astype(np.float64))
 
 
+def bounce_points(pilot: CameraPilot, caster, rng, *, scale: float) -> CameraPilot:
+    """The points the seen points see (module docstring, step 2): from each seen point (moved
+    1e-4 x scale toward the camera) one ray in a uniform direction of the sphere at the point's
+    time; its first hit, with the direction back along the ray.  (Directions into the surface
+    hit it next to the seen point itself.)  Photons stored on seen surfaces at their second hit
+    bounced first at such points."""
+    if pilot.points.shape[0] == 0:
+        return pilot
+    pilot = CameraPilot(*(np.repeat(a, BOUNCE_RAYS, axis=0) for a in (pilot.points, pilot.wi, pilot.times)))
+    m = pilot.points.shape[0]
+    u = rng.random((m, 2))
+    z = 1.0 - 2.0 * u[:, 0]
+    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    d = np.column_stack([r * np.cos(2.0 * np.pi * u[:, 1]), r * np.sin(2.0 * np.pi * u[:, 1]), z])
+    o = pilot.points + (1e-4 * scale) * pilot.wi
+    hits = caster.intersect(o, d, pilot.times)
+    h = hits.hit
+    return CameraPilot(np.asarray(hits.position[h], np.float64), -d[h], pilot.times[h])
+
+
 def _guidable(lights, li: int) -> bool:
     light = lights.lights[li]
     if light.type not in COLUMNS:
@@ -170,12 +191,24 @@ def _dilate(cells: np.ndarray, res: int, D: int) -> np.ndarray:
     return np.unique(np.ravel_multi_index(tuple(allc.T), (res,) * D))
 
 
+def _refine(cells: np.ndarray, res: int, fine: int, D: int) -> np.ndarray:
+    """Flat cells (M,) of a res^D grid as the cells of the fine^D grid they hold (fine = res 2^j)."""
+    k = fine // res
+    coords = np.stack(np.unravel_index(cells, (res,) * D), -1) * k
+    sub = np.stack(np.meshgrid(*([np.arange(k)] * D), indexing="ij"), -1).reshape(-1, D)
+    allc = (coords[:, None, :] + sub[None]).reshape(-1, D)
+    return np.ravel_multi_index(tuple(allc.T), (fine,) * D)
+
+
 def build_guides(pilot: CameraPilot, caster, lights, rng, *, scale: float) -> tuple[list, list]:
     """(guides, marks): per light of ``lights`` an :class:`EmissionGuide` or None (module
     docstring, step 2), and the number of unoccluded marking photons of each.  scale: the scene's
     diagonal (the seen points move 1e-4 x scale toward the camera before their shadow rays)."""
     guides, marks = [], []
-    m = pilot.points.shape[0]
+    seen = bounce_points(pilot, caster, rng, scale=scale)      # (rows after the first m0 points)
+    pilot = CameraPilot(np.concatenate([pilot.points, seen.points]), np.concatenate([pilot.wi, seen.wi]),
+                        np.concatenate([pilot.times, seen.times]))
+    m, m0 = pilot.points.shape[0], pilot.points.shape[0] - seen.points.shape[0]
     for li, light in enumerate(lights.lights):
         if m == 0 or float(lights.power[li]) <= 0.0 or not _guidable(lights, li):
             guides.append(None)
@@ -201,16 +234,24 @@ def build_guides(pilot: CameraPilot, caster, lights, rng, *, scale: float) -> tu
             guides.append(None)
             marks.append(0)
             continue
-        # the finest grid whose marked cells hold MIN_MARKS marks each on average (fewer: holes)
-        for res in GRID[light.type]:
-            c = np.minimum((uu[lit][:, cols] * res).astype(np.int64), res - 1)
-            found = np.unique(np.ravel_multi_index(tuple(c.T), (res,) * D))
-            if res == GRID[light.type][0] or lit.sum() >= MIN_MARKS * found.size:
-                best = res, found
-            else:
-                break
-        res, found = best
-        cells = _dilate(found, res, D)
+        # Each set of marks (the seen points' own, those of the points they see) on the finest grid
+        # whose marked cells hold MIN_MARKS marks each on average (fewer: holes between the marks),
+        # dilated there and refined to the finer of the two grids (every grid a power of two)
+        grids = GRID[light.type]
+        parts = []
+        for part in (lit & (np.arange(P.shape[0]) < S * m0), lit & (np.arange(P.shape[0]) >= S * m0)):
+            if not part.any():
+                continue
+            for res in grids:
+                c = np.minimum((uu[part][:, cols] * res).astype(np.int64), res - 1)
+                found = np.unique(np.ravel_multi_index(tuple(c.T), (res,) * D))
+                if res == grids[0] or part.sum() >= MIN_MARKS * found.size:
+                    best = res, found
+                else:
+                    break
+            parts.append((best[0], _dilate(best[1], best[0], D)))
+        res = max(r for r, _ in parts)
+        cells = np.unique(np.concatenate([_refine(c, r, res, D) for r, c in parts]))
         mask = np.zeros(res ** D, np.uint8)
         mask[cells] = 1
         marks.append(int(lit.sum()))

@@ -1,0 +1,141 @@
+"""Guided emission (issue 16, item 1; setting ``photon_guiding``): photons stored on camera-visible
+surfaces, image agreement and noise, guided against unguided.
+
+Scenes (``tests/guide_scenes.py``, ``tests/test_compare.py``):
+
+* ``room``: a closed 4 x 4 x 3 m room lit by a sun through a 2 x 1.6 m window in one wall, a 40 m
+  ground outside (most of the sun's photons land there), the camera inside, 96 x 72;
+* ``room_point``: the same room (2 x 1.6 m window, 8 m ground) lit by a point lamp outside, 96 x 72;
+* ``moving_receiver``: a point light under a mirror, a box sliding through the caustic
+  (``moving_receiver_scene``), 48 x 32.
+
+Each scene is rendered with ``photon_guiding`` off and on, interleaved (off, on, off, on, ...)
+over seeds ``STPM_GUIDING_SEEDS`` (default 6), method PHOTON (the default) and PROGRESSIVE.
+Reported per scene and method:
+
+* ``*_visible_fraction``: photons stored on camera-visible surfaces (``photon_stats``'s
+  ``photons_stored_visible_global_fraction``, what ``--stats`` writes) over photons emitted;
+  ``visible_gain``: guided over unguided (issue 16's target: >= 50 % in the room, >= 5x);
+* ``*_s``: mean wall seconds per render (``guide_pilot_s`` the pilot's share);
+* ``mean_ratio``: guided over unguided image mean (all seeds); ``block_z_max``: the largest |z|
+  of 8 x 8 block means (``tests/cycles_ref.block_ztest``, 1 % floor); ``indirect_mean_ratio`` the
+  same for the Indirect pass;
+* ``var_ratio`` (``indirect_var_ratio``): guided over unguided per-pixel variance across seeds of
+  Combined (Indirect), at equal photon count; ``*_equal_time`` those ratios times the time ratio
+  (below 1: guiding wins at equal time);
+* ``*_rmse``: root mean square error of single renders against a reference (unguided, method
+  PHOTON, ``REF_FACTOR`` x the photons, seeds 100 and 101 averaged), relative to the reference's
+  mean; ``mse_ratio`` guided over unguided, ``mse_ratio_equal_time`` times the time ratio.  This
+  counts the density estimate's blur (unguided images with few photons in view are smooth and
+  wrong), which the variance across seeds does not.
+
+Pictures: ``bench_out/guiding/<scene>_<method>.png`` (left unguided, right guided; one row per
+seed and the mean last, exposure x4).
+
+    python -m benchmarks guiding       # about 5-10 min on 2 cores
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SEEDS = range(int(os.environ.get("STPM_GUIDING_SEEDS", 6)))
+REF_FACTOR = 16
+
+
+def _scenes():
+    sys.path.insert(0, str(ROOT / "tests"))
+    from guide_scenes import window_room
+    from test_compare import moving_receiver_scene
+    return {"room": window_room((96, 72), ground=40.0),
+            "room_point": window_room((96, 72), light="POINT"),
+            "moving_receiver": moving_receiver_scene((48, 32))}
+
+
+def _settings(name: str, method: str):
+    from stpm_core.settings import RenderSettings
+    if name == "moving_receiver":
+        st = RenderSettings(samples=4, photons_global=100_000, photons_caustic=20_000, k_nearest=30)
+    else:
+        st = RenderSettings(samples=4, photons_global=200_000, photons_caustic=0, k_nearest=30)
+    if method == "PROGRESSIVE":
+        st = st.replace(method="PROGRESSIVE", passes=2, samples=2,
+                        photons_global=st.photons_global // 2, photons_caustic=st.photons_caustic // 2)
+    return st
+
+
+def run() -> dict:
+    from stpm_core.render import render
+    scenes = _scenes()
+    from cycles_ref import block_ztest
+    from stpm_core.compare.report_html import png_bytes
+    outdir = ROOT / "bench_out" / "guiding"
+    outdir.mkdir(parents=True, exist_ok=True)
+    render(scenes["moving_receiver"], _settings("moving_receiver", "PHOTON").replace(
+        photons_global=1000, photons_caustic=100, photon_guiding=True))          # warm-up (kernels)
+    out = {}
+    for name, scene in scenes.items():
+        st_ref = _settings(name, "PHOTON")
+        st_ref = st_ref.replace(photons_global=REF_FACTOR * st_ref.photons_global,
+                                photons_caustic=REF_FACTOR * st_ref.photons_caustic, samples=16)
+        ref = np.mean([render(scene, st_ref.replace(seed=s)).passes["Combined"][..., :3].astype(np.float64)
+                       for s in (100, 101)], axis=0)
+        for method in ("PHOTON", "PROGRESSIVE"):
+            st = _settings(name, method)
+            ims = {False: [], True: []}
+            ind = {False: [], True: []}
+            frac = {False: [], True: []}
+            sec = {False: [], True: []}
+            pilot = []
+            for seed in SEEDS:
+                for g in (False, True):                  # interleaved: load changes hit both alike
+                    t0 = time.perf_counter()
+                    r = render(scene, st.replace(seed=seed, photon_guiding=g))
+                    sec[g].append(time.perf_counter() - t0)
+                    ps = r.stats["photon_stats"]
+                    frac[g].append(ps.get("photons_stored_visible_global_fraction", 0.0))
+                    if g:
+                        pilot.append(ps.get("guide_pilot_s", 0.0))
+                    ims[g].append(r.passes["Combined"][..., :3].astype(np.float64))
+                    ind[g].append(r.passes["Indirect"][..., :3].astype(np.float64))
+            a, b = np.array(ims[False]), np.array(ims[True])
+            ia, ib = np.array(ind[False]), np.array(ind[True])
+            key = f"{name}_{method.lower()}"
+            res = {"unguided_visible_fraction": float(np.mean(frac[False])),
+                   "guided_visible_fraction": float(np.mean(frac[True])),
+                   "unguided_s": float(np.mean(sec[False])), "guided_s": float(np.mean(sec[True])),
+                   "guide_pilot_s": float(np.mean(pilot))}
+            res["visible_gain"] = res["guided_visible_fraction"] / max(res["unguided_visible_fraction"], 1e-12)
+            z = block_ztest(b, a, block=8, floor=0.01)
+            res["mean_ratio"] = float(z.mean_ratio)
+            res["block_z_max"] = float(np.max(np.abs(z.z)))
+            res["indirect_mean_ratio"] = float(ib.mean() / max(ia.mean(), 1e-30))
+            res["indirect_block_z_max"] = float(np.max(np.abs(block_ztest(ib, ia, block=8, floor=0.01).z)))
+            tr = res["guided_s"] / res["unguided_s"]
+            res["var_ratio"] = float(b.var(0, ddof=1).mean() / max(a.var(0, ddof=1).mean(), 1e-30))
+            res["indirect_var_ratio"] = float(ib.var(0, ddof=1).mean() / max(ia.var(0, ddof=1).mean(), 1e-30))
+            res["var_ratio_equal_time"] = res["var_ratio"] * tr
+            mse = {k: float(np.mean((x - ref[None]) ** 2)) for k, x in (("unguided", a), ("guided", b))}
+            for k in mse:
+                res[f"{k}_rmse"] = float(np.sqrt(mse[k]) / max(ref.mean(), 1e-30))
+            res["mse_ratio"] = mse["guided"] / max(mse["unguided"], 1e-30)
+            res["mse_ratio_equal_time"] = res["mse_ratio"] * tr
+            res["indirect_var_ratio_equal_time"] = res["indirect_var_ratio"] * tr
+            for k, v in res.items():
+                out[f"{key}_{k}"] = v
+            tm = lambda x: (np.clip(4.0 * x, 0.0, 1.0) ** (1 / 2.2) * 255).astype(np.uint8)   # noqa: E731
+            rows = [np.concatenate([tm(a[i]), tm(b[i])], 1) for i in range(a.shape[0])]
+            rows.append(np.concatenate([tm(a.mean(0)), tm(b.mean(0))], 1))
+            (outdir / f"{key}.png").write_bytes(png_bytes(np.concatenate(rows, 0)))
+            print(key, {k: round(v, 4) for k, v in res.items()}, flush=True)
+    return out
+
+
+if __name__ == "__main__":
+    for k, v in run().items():
+        print(k, v)
