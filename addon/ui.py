@@ -140,7 +140,7 @@ class STPM_RENDER_PT_sampling_adaptive(_STPMPanel, bpy.types.Panel):
 
 class STPM_RENDER_PT_photons(_STPMPanel, bpy.types.Panel):
     bl_label = "Photons"
-    PROPS = ("photons_global", "photons_caustic", "k_nearest", "kernel", "final_gather_samples")
+    PROPS = ("photons_global", "photons_caustic", "k_nearest", "kernel", "final_gather_samples", "photon_guiding")
 
 
 class STPM_RENDER_PT_method(_STPMPanel, bpy.types.Panel):

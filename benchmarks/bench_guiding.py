@@ -37,6 +37,7 @@ seed and the mean last, exposure x4).
 from __future__ import annotations
 
 import os
+os.environ.setdefault("STPM_VISIBLE_STATS", "1")
 import sys
 import time
 from pathlib import Path

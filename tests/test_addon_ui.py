@@ -101,7 +101,7 @@ def test_panels_draw_every_setting():
                                                 "transmission_bounces", "transparent_max_bounces", "filter_width",
                                                 "threads", "clamp_direct", "clamp_indirect"]
     assert drawn["STPM_RENDER_PT_photons"] == ["photons_global", "photons_caustic", "k_nearest", "kernel",
-                                               "final_gather_samples"]
+                                               "final_gather_samples", "photon_guiding"]
     assert {"method", "estimator", "temporal_alpha", "time_scale", "stpm.compare"} <= set(drawn["STPM_RENDER_PT_method"])
     assert {"motion_blur_position", "motion_steps", "motion_blur_shutter_curve"} <= set(drawn["STPM_RENDER_PT_motion_blur"])
     assert {"effects", "caustics", "indirect"} <= set(drawn["STPM_RENDER_PT_effects"])

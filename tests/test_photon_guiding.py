@@ -210,7 +210,8 @@ def _renders(scene, settings, seeds):
 
 
 @pytest.mark.parametrize("case", ["window_room", "moving_receiver"])
-def test_guided_emission_matches_unguided(case):
+def test_guided_emission_matches_unguided(case, monkeypatch):
+    monkeypatch.setenv(G.VISIBLE_STATS_ENV, "1")                 # the unguided renders count them too
     if case == "window_room":
         scene = window_room((24, 18))
         st = RenderSettings(samples=2, photons_global=20_000, photons_caustic=0, k_nearest=20)

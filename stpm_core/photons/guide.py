@@ -5,12 +5,18 @@ visibility"; setting ``photon_guiding``).
    stratified shutter time, followed through delta and glossy lobes (a mirror, clear glass) to the
    first surface with a non-delta lobe, as the camera paths read the maps there: the points the
    camera sees, with the direction back toward the camera and the time.
-2. **Marks** (:func:`build_guides`): from each seen point, ``LIGHT_SAMPLES`` photons of each light
-   that would reach it straight from the light (``kernels.guide.guide_marks``: the inverse of
-   the light's emission warps), each with a shadow ray at the point's time; an unoccluded one
-   marks the cell of the light's emission domain that photon comes from (``GRID`` cells per
-   guided uniform column, :data:`COLUMNS`).  Every marked cell also marks its neighbours (one
-   cell each way in every column).
+2. **Marks** (:func:`build_guides`): the seen points and the points they see
+   (:func:`bounce_points`: ``BOUNCE_RAYS`` rays in uniform directions from each seen point; a
+   photon stored on a seen surface at its second hit bounced first at such a point).  From each,
+   ``LIGHT_SAMPLES`` photons of each light that would reach it straight from the light
+   (``kernels.guide.guide_marks``: the inverse of the light's emission warps), each with a
+   shadow ray at the point's time; an unoccluded one marks the cell of the light's emission
+   domain that photon comes from (cells of a grid over the guided uniform columns,
+   :data:`COLUMNS`).  Each of the two sets of marks picks its own grid from :data:`GRID`, the
+   finest on which its marked cells hold ``MIN_MARKS`` marks each on average (a finer grid would
+   leave holes between the marks, and a hole's photons are the heavy ones), marks the
+   neighbours of every marked cell (one cell each way in every column), and the two are joined
+   on the finer grid.
 3. **Emission** (``kernels.emission.emit(..., guide=)``): the uniforms of a photon come from
    ``pdf(u) = g N_c / M [cell(u) marked] + (1 - g)`` (g = ``GUIDED_SHARE``, M marked cells of
    N_c) and its power is divided by pdf (``kernels.guide.guide_warp``): unbiased for any marks,
@@ -21,7 +27,8 @@ A light with no marked cell (nothing the camera sees is lit by it directly), a M
 textured or portal-lit world emit uniformly (guide None).  The pilot's random stream is
 ``rng_for(seed, STREAM_GUIDE)``: the same seed builds the same guide on every machine and thread
 count.  :class:`VisibleCells` (voxels of the seen points) counts the photons stored on
-camera-visible surfaces for ``--stats``.
+camera-visible surfaces for ``--stats`` (the pilot runs with ``photon_guiding``, or for the stats
+alone where the environment variable ``STPM_VISIBLE_STATS`` is set: about 0.1-0.3 s a render).
 """
 from __future__ import annotations
 
@@ -39,6 +46,7 @@ from .record import oct_decode
 __all__ = ["EmissionGuide", "VisibleCells", "CameraPilot", "camera_pilot", "build_guides", "visible_cells",
            "GUIDED_SHARE", "GRID", "COLUMNS", "PILOT_RAYS", "LIGHT_SAMPLES"]
 
+VISIBLE_STATS_ENV = "STPM_VISIBLE_STATS"   # set (not 0): run the camera pilot for the stats without guiding too
 GUIDED_SHARE = 0.8            # g: the guided share of a light's photons (issue 16: >= 20 % unguided)
 PILOT_RAYS = 4096             # camera pilot rays
 BOUNCE_RAYS = 4              # rays from each seen point to the points it sees

@@ -35,6 +35,7 @@ power (stored powers stay even, which keeps the density estimate's variance low)
 """
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -360,7 +361,8 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
     # -- The camera pilot (what the camera sees: --stats) and, with photon_guiding, the guides -------
     guiding = bool(getattr(settings, "photon_guiding", False))
     guides, marks, cells, pilot_s = [None] * len(lights.lights), [0] * len(lights.lights), None, 0.0
-    if int(counts.sum()) > 0:
+    count_visible = guiding or os.environ.get(_guide.VISIBLE_STATS_ENV, "") not in ("", "0")
+    if int(counts.sum()) > 0 and count_visible:
         t0 = time.perf_counter()
         rng_g = rng_for(settings.seed, _guide.STREAM_GUIDE)
         pilot = _guide.camera_pilot(scene, caster, table, shading=shading, inst_offset=inst_offset, origin=origin,
