@@ -27,10 +27,11 @@ Reported per scene and method:
   PHOTON, ``REF_FACTOR`` x the photons, seeds 100 and 101 averaged), relative to the reference's
   mean; ``mse_ratio`` guided over unguided, ``mse_ratio_equal_time`` times the time ratio.  This
   counts the density estimate's blur (unguided images with few photons in view are smooth and
-  wrong), which the variance across seeds does not.
+  wrong), which the variance across seeds does not; ``*_ref_mean_ratio`` image means over the
+  reference's.
 
 Pictures: ``bench_out/guiding/<scene>_<method>.png`` (left unguided, right guided; one row per
-seed and the mean last, exposure x4).
+seed and the mean last, exposure x4), the images in ``<scene>_<method>.npz``.
 
     python -m benchmarks guiding       # about 5-10 min on 2 cores
 """
@@ -126,6 +127,9 @@ def run() -> dict:
                 res[f"{k}_rmse"] = float(np.sqrt(mse[k]) / max(ref.mean(), 1e-30))
             res["mse_ratio"] = mse["guided"] / max(mse["unguided"], 1e-30)
             res["mse_ratio_equal_time"] = res["mse_ratio"] * tr
+            res["unguided_ref_mean_ratio"] = float(a.mean() / max(ref.mean(), 1e-30))
+            res["guided_ref_mean_ratio"] = float(b.mean() / max(ref.mean(), 1e-30))
+            np.savez_compressed(outdir / f"{key}.npz", unguided=a, guided=b, reference=ref)
             res["indirect_var_ratio_equal_time"] = res["indirect_var_ratio"] * tr
             for k, v in res.items():
                 out[f"{key}_{k}"] = v

@@ -59,6 +59,7 @@ COLUMNS = {"POINT": (0, 1), "SPOT": (0, 1), "SUN": (2, 3), "AREA": (0, 1, 2, 3),
 GRID = {"POINT": (16, 32, 64, 128, 256), "SPOT": (16, 32, 64, 128, 256), "SUN": (16, 32, 64, 128, 256),
         "AREA": (4, 8, 16), "WORLD": (4, 8, 16)}
 MIN_MARKS = 16
+BOUNCE_MARKS = 4              # the seen points' points: MIN_MARKS x this (they spread wider, thinner)
 LIGHT_SAMPLES = {"POINT": 1, "SPOT": 1, "SUN": 2, "AREA": 8, "WORLD": 32}    # marking photons per seen point
 
 
@@ -247,13 +248,14 @@ def build_guides(pilot: CameraPilot, caster, lights, rng, *, scale: float) -> tu
         # dilated there and refined to the finer of the two grids (every grid a power of two)
         grids = GRID[light.type]
         parts = []
-        for part in (lit & (np.arange(P.shape[0]) < S * m0), lit & (np.arange(P.shape[0]) >= S * m0)):
+        for part, need in ((lit & (np.arange(P.shape[0]) < S * m0), MIN_MARKS),
+                           (lit & (np.arange(P.shape[0]) >= S * m0), MIN_MARKS * BOUNCE_MARKS)):
             if not part.any():
                 continue
             for res in grids:
                 c = np.minimum((uu[part][:, cols] * res).astype(np.int64), res - 1)
                 found = np.unique(np.ravel_multi_index(tuple(c.T), (res,) * D))
-                if res == grids[0] or part.sum() >= MIN_MARKS * found.size:
+                if res == grids[0] or part.sum() >= need * found.size:
                     best = res, found
                 else:
                     break
