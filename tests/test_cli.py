@@ -86,6 +86,26 @@ def test_options_override_file_settings(tiny, tmp_path):
     assert read_exr(out)["Combined"].shape == (3, 5, 4)
 
 
+def test_photon_guiding_option_and_its_stats(tmp_path):
+    """--photon-guiding on: the stats' photon_stats count the global photons stored on camera-visible
+    surfaces and say what the guide marked (docs/photon-mapping.md, "Emission guided by direct visibility");
+    a room lit by a sun through a window (tests/guide_scenes.py)."""
+    from guide_scenes import window_room
+    room = save_scene(window_room((8, 6)), tmp_path / "room.stpm", settings=RenderSettings(samples=1, k_nearest=8))
+    out, stats = tmp_path / "g.exr", tmp_path / "g.json"
+    r = stpm("render", room, "-o", out, "--stats", stats, "-q", "--photon-guiding", "on",
+             "--photons-caustic", 0, "--photons-global", 3000)
+    assert r.returncode == 0, r.stderr
+    s = json.loads(stats.read_text())
+    ps = s["photon_stats"]
+    assert s["settings"]["photon_guiding"] is True and ps["photon_guiding"] is True
+    assert 0 <= ps["photons_stored_visible_global"] <= ps["photons_stored_global"]
+    assert ps["photons_stored_visible_global_fraction"] == ps["photons_stored_visible_global"] / 3000
+    n = len(ps["photons_emitted_global_per_light"])
+    assert len(ps["guide_marked_cells_per_light"]) == len(ps["photons_guided_global_per_light"]) == n
+    assert 0.0 < ps["guide_marked_cells_per_light"][0] < 0.5 and ps["photons_guided_global_per_light"][0] == 2400
+
+
 def test_adaptive_sampling_options(tiny, tmp_path):
     """--adaptive-sampling on: the stats' samples_mean, the EXR's Sample Count pass (each pixel's samples)."""
     out, stats = tmp_path / "a.exr", tmp_path / "a.json"
