@@ -182,6 +182,15 @@ def test_guides_are_deterministic_and_threads_do_not_change_the_map():
     assert np.array_equal(r1, r2)
     assert i1["guide_marked_cells_per_light"] == i2["guide_marked_cells_per_light"]
     assert 0.0 < i1["guide_marked_cells_per_light"][0] < 0.5
+    # one guide per render: a later pass (another seed, a time stratum) reads it without a pilot,
+    # and another process (a pass chunk on another machine: a new LightSet) builds the same
+    r3, i3 = trace_global_map(scene, st.replace(seed=9), caster, lights, table, time_override=(0.5, 0.75))
+    assert i3["guide_pilot_s"] == 0.0 and i3["guide_marked_cells_per_light"] == i1["guide_marked_cells_per_light"]
+    other = LightSet(scene)
+    r4, i4 = trace_global_map(scene, st, caster, other, table)
+    assert i4["guide_pilot_s"] > 0.0 and np.array_equal(r4, r1)
+    g1, g4 = lights._photon_guides[(None, True)][1][0], other._photon_guides[(None, True)][1][0]
+    assert np.array_equal(g1.mask, g4.mask)
 
 
 def test_no_light_on_what_the_camera_sees_falls_back_to_uniform():

@@ -25,13 +25,14 @@ visibility"; setting ``photon_guiding``).
 
 A light with no marked cell (nothing the camera sees is lit by it directly), a MESH light, and a
 textured or portal-lit world emit uniformly (guide None).  The pilot's random stream is
-``rng_for(seed, STREAM_GUIDE)``: the same seed builds the same guide on every machine and thread
-count.  :class:`VisibleCells` (voxels of the seen points) counts the photons stored on
+``rng_for(0, STREAM_GUIDE)`` and the guides are built once per render (:func:`guides_for`): every
+progressive pass and every pass chunk on any machine or thread count reads the same guides.  :class:`VisibleCells` (voxels of the seen points) counts the photons stored on
 camera-visible surfaces for ``--stats`` (the pilot runs with ``photon_guiding``, or for the stats
 alone where the environment variable ``STPM_VISIBLE_STATS`` is set: about 0.1-0.3 s a render).
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +44,8 @@ from ..kernels.environment import E_PORTAL_PHOTON, E_TEXTURED
 from ..sampling import rng_for
 from .record import oct_decode
 
-__all__ = ["EmissionGuide", "VisibleCells", "CameraPilot", "camera_pilot", "build_guides", "visible_cells",
+__all__ = ["EmissionGuide", "VisibleCells", "CameraPilot", "camera_pilot", "build_guides", "guides_for",
+           "visible_cells",
            "GUIDED_SHARE", "GRID", "COLUMNS", "PILOT_RAYS", "LIGHT_SAMPLES"]
 
 VISIBLE_STATS_ENV = "STPM_VISIBLE_STATS"   # set (not 0): run the camera pilot for the stats without guiding too
@@ -267,3 +269,30 @@ def build_guides(pilot: CameraPilot, caster, lights, rng, *, scale: float) -> tu
         marks.append(int(lit.sum()))
         guides.append(None if cells.size == mask.size else EmissionGuide(cols, res, mask, cells))
     return guides, marks
+
+
+def guides_for(scene, caster, lights, table, *, shading, inst_offset, origin, time_override, guiding: bool):
+    """(cells, guides, marks, seconds) of a render: the :class:`VisibleCells` of the camera pilot,
+    with ``guiding`` the guides and marks of :func:`build_guides` (else None per light and 0), and
+    the seconds it took (0 when cached).
+
+    Built once per LightSet (one render) and kept on it: every progressive pass, whatever its
+    seed or time stratum, reads the same guides (the pilot spans the whole shutter); an
+    accumulation still (a number ``time_override``) gets its own at its instant.  The pilot's
+    stream is ``rng_for(0, STREAM_GUIDE)``, so every pass chunk, on any machine, builds the same."""
+    instant = time_override if (time_override is not None and not isinstance(time_override, tuple)) else None
+    key = (None if instant is None else float(instant), bool(guiding))
+    cache = lights.__dict__.setdefault("_photon_guides", {})
+    if key in cache:
+        return cache[key] + (0.0,)
+    t0 = time.perf_counter()
+    rng = rng_for(0, STREAM_GUIDE)
+    pilot = camera_pilot(scene, caster, table, shading=shading, inst_offset=inst_offset, origin=origin, rng=rng,
+                         time_override=instant)
+    cells = visible_cells(pilot)
+    n = len(lights.lights)
+    guides, marks = [None] * n, [0] * n
+    if guiding:
+        guides, marks = build_guides(pilot, caster, lights, rng, scale=2.0 * float(scene.bounding_sphere()[1]))
+    cache[key] = (cells, guides, marks)
+    return cells, guides, marks, time.perf_counter() - t0

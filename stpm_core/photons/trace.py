@@ -36,7 +36,6 @@ power (stored powers stay even, which keeps the density estimate's variance low)
 from __future__ import annotations
 
 import os
-import time
 
 import numpy as np
 
@@ -363,15 +362,9 @@ def trace_global_map(scene, settings, caster, lights, table, *, time_override=No
     guides, marks, cells, pilot_s = [None] * len(lights.lights), [0] * len(lights.lights), None, 0.0
     count_visible = guiding or os.environ.get(_guide.VISIBLE_STATS_ENV, "") not in ("", "0")
     if int(counts.sum()) > 0 and count_visible:
-        t0 = time.perf_counter()
-        rng_g = rng_for(settings.seed, _guide.STREAM_GUIDE)
-        pilot = _guide.camera_pilot(scene, caster, table, shading=shading, inst_offset=inst_offset, origin=origin,
-                                    rng=rng_g, time_override=time_override)
-        cells = _guide.visible_cells(pilot)
-        if guiding:
-            guides, marks = _guide.build_guides(pilot, caster, lights, rng_g,
-                                                scale=2.0 * float(scene.bounding_sphere()[1]))
-        pilot_s = time.perf_counter() - t0
+        cells, guides, marks, pilot_s = _guide.guides_for(scene, caster, lights, table, shading=shading,
+                                                          inst_offset=inst_offset, origin=origin,
+                                                          time_override=time_override, guiding=guiding)
 
     def trace_batch(j: int) -> tuple[np.ndarray, list]:
         """Records of batch j (and its coat-path records): a pure function of (seed, light, batch),
