@@ -90,6 +90,11 @@ class Mesh:
         what Color Attribute and Attribute nodes read; {} = none.
     color_render : name of the render-active colour attribute (a Color Attribute node with no
         name reads it), or None.
+    orco : (V, 3) float32 undeformed object-space positions (Blender's ``CD_ORCO``: a shape-keyed
+        or modifier-deformed mesh's positions before deformation), what Texture Coordinate >
+        Generated reads (normalised by their bounding box, Blender's automatic texture space), so
+        the texture sticks to the surface as it deforms (Cycles' ``ATTR_STD_GENERATED``); None =
+        the vertices (a deforming mesh: at the frame's shutter time, as Cycles without an orco).
     """
 
     vertices: np.ndarray
@@ -103,6 +108,7 @@ class Mesh:
     tangents: dict = field(default_factory=dict)
     color_layers: dict = field(default_factory=dict)
     color_render: str | None = None
+    orco: np.ndarray | None = None
 
     @property
     def is_deforming(self) -> bool:
@@ -729,6 +735,10 @@ def validate_scene(scene: Scene) -> None:
             if n.shape != (tri.shape[0], 3, 3) and not (steps and n.shape == (steps, tri.shape[0], 3, 3)):
                 per_step = f" or ({steps}, {tri.shape[0]}, 3, 3) (one per vertex step)" if steps else ""
                 raise SceneError(f"{p}.normals must have shape ({tri.shape[0]}, 3, 3){per_step}, got {n.shape}")
+        if getattr(m, "orco", None) is not None:
+            o = _check_finite(f"{p}.orco", m.orco)
+            if o.shape != (v.shape[-2], 3):
+                raise SceneError(f"{p}.orco must have shape ({v.shape[-2]}, 3), got {o.shape}")
         for attr, width in (("uv_layers", 2), ("tangents", 4), ("color_layers", 4)):
             layers = getattr(m, attr, None) or {}
             if not isinstance(layers, dict):

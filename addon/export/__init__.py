@@ -226,7 +226,8 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                                                name=obj.name, uv_layers=arr["uv_layers"],
                                                uv_render=arr["uv_render"], tangents=arr["tangents"],
                                                color_layers=arr["color_layers"],
-                                               color_render=arr["color_render"]))
+                                               color_render=arr["color_render"],
+                                               orco=mesh_export.orco_positions(obj, arr["vertices"])))
                 mesh_cache[data_key] = len(meshes) - 1
                 if cache is not None:
                     cache.keep_mesh(kept_key, None if inst.is_instance else obj.original.name_full, meshes[-1])
