@@ -623,8 +623,11 @@ def scene_warnings(scene: Scene) -> list[str]:
     (local -Z, into the room) faces away from the camera at mid-shutter.  A portal steers world
     samples only from points on that side (as Cycles'), so a portal placed backwards in a
     window silently stops helping; rotating it 180 degrees about X fixes it.
+
+    A light with some Ray Visibility switch (Diffuse, Glossy, Transmission) off is named with what
+    STPM does not honour of it (:func:`light_visibility`).
     """
-    out = _portal_warnings(scene)
+    out = _portal_warnings(scene) + _light_visibility_warnings(scene)
     for li, l in enumerate(scene.lights):
         tr = l.transform
         if l.type not in ("SPOT", "SUN", "AREA") or not isinstance(tr, MotionTransform):
@@ -650,6 +653,49 @@ def scene_warnings(scene: Scene) -> list[str]:
             if np.any(np.abs(np.sum(g * z, axis=1)) < 1e-9):
                 out.append(f"{who}: its -Z axis lies in the light's plane (sheared transform): "
                            f"the light emits nothing")
+    return out
+
+
+LIGHT_VISIBILITY_KEYS = (("light_visible_diffuse", 1, "Diffuse"), ("light_visible_glossy", 2, "Glossy"),
+                         ("light_visible_transmission", 4, "Transmission"))
+
+
+def light_visibility(scene: Scene) -> np.ndarray:
+    """(L,) uint8 per scene light: the ray kinds that see it (Blender's Object > Visibility > Ray
+    Visibility of the light, ``scene.metadata['light_visible_diffuse' / '_glossy' /
+    '_transmission']``): bit 1 diffuse, 2 glossy, 4 transmission; 7 (all) where unset.
+
+    Honoured in next-event estimation, lobe by lobe, as Cycles' ``SHADER_EXCLUDE_*`` leaves the
+    closures of a hidden kind out of a light sample's BSDF (``kernels.bsdf.bsdf_eval_lobes``: the
+    diffuse lobe; the reflection lobes -- coat, metal, glass reflection -- as glossy; glass
+    refraction as transmission).  A light with any of them off is not seen by rays leaving a
+    surface (next-event estimation carries it whole, without multiple importance sampling), so
+    mirror and glass reflections of its shape are missing; photons ignore the switches
+    (:func:`scene_warnings` says both)."""
+    vis = np.full(len(scene.lights), 7, np.uint8)
+    meta = getattr(scene, "metadata", None) or {}
+    for key, bit, _name in LIGHT_VISIBILITY_KEYS:
+        for li, v in enumerate(list(meta.get(key) or [])[:len(scene.lights)]):
+            if not v:
+                vis[li] &= np.uint8(7 - bit)
+    return vis
+
+
+def _light_visibility_warnings(scene: Scene) -> list[str]:
+    """:func:`scene_warnings`' lines for lights with Ray Visibility switches off."""
+    out = []
+    for li, v in enumerate(light_visibility(scene)):
+        if v == 7:
+            continue
+        l = scene.lights[li]
+        off = ", ".join(name for _key, bit, name in LIGHT_VISIBILITY_KEYS if not v & bit)
+        shaped = (l.type == "AREA" or (l.type in ("POINT", "SPOT") and float(getattr(l, "radius", 0.0)) > 0)
+                  or (l.type == "SUN" and float(getattr(l, "angle", 0.0)) > 0))
+        text = (f"light {l.name!r}: Ray Visibility {off} off is honoured in direct light only: its photons "
+                f"(caustic and global maps) ignore it")
+        if shaped and v != 0:
+            text += "; its shape is not seen in mirror or glass reflections"
+        out.append(text)
     return out
 
 

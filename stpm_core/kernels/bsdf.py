@@ -97,7 +97,7 @@ from .closure import (C_ALPHA, C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_COAT, C_I
                       C_W_BASE, C_W_GLASS, C_W_METAL, closure_row)
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
-           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_smooth", "bsdf_eval_plain", "bsdf_eval_plain_w", "needs_bsdf_call", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_sample_cont", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
+           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_lobes", "bsdf_eval_smooth", "bsdf_eval_plain", "bsdf_eval_plain_w", "needs_bsdf_call", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_sample_cont", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
            "fresnel_dielectric_fss", "coat_albedo", "glass_albedo", "glass_albedo_avg", "build_glass_table",
            "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch",
            "denoising_features", "DENOISE_ALPHA"]
@@ -816,6 +816,54 @@ def bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, ng):
     """(f0, f1, f2, pdf): f (1/sr) of the non-delta lobes of closure row C[cr] at (wo, wi) and the
     mixture solid-angle pdf with which :func:`bsdf_sample` returns wi through them."""
     return _eval_pdf_hit(C, cr, E, _hit(C, cr, E, E_avg, wo, ns, ng), wo, wi)
+
+
+@njit(**_JIT)
+def _glass_reflection(C, cr, hit, wo, wi):
+    """(f0, f1, f2): the rough GLASS_R term of :func:`_glossy_add` alone at wi (0 unless wi is on the
+    reflection side), for the hit of :func:`_hit`."""
+    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
+    w_glass = C[cr, C_W_GLASS]
+    cos_is = dot(wi, nss)
+    if not (C[cr, C_ROUGH_LOBE] > 0 and cos_o > 0 and w_glass > 0 and cos_is > 0 and dot(wi, ng) > 0):
+        return 0.0, 0.0, 0.0
+    Ns = (C[cr, C_NS], C[cr, C_NS + 1], C[cr, C_NS + 2]) if C[cr, C_BUMPED] > 0 else ns
+    if dot(Ns, wi) * dot(Ns, nss) * cos_is < 0.0:
+        return 0.0, 0.0, 0.0
+    cos_oe = max(cos_o, _EPS)
+    hv = _normalized((wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]), 1e-300)
+    wo_h = min(max(dot(wo, hv), 0.0), 1.0)
+    D = _ggx_D(dot(hv, nss), alpha)
+    G2 = 1.0 / (1.0 + _ggx_lambda(cos_o, alpha) + _ggx_lambda(cos_is, alpha))
+    sg = w_glass * fresnel_dielectric(wo_h, eta_glass) * D * G2 / max(4.0 * cos_oe * max(abs(dot(wi, ns)), _EPS),
+                                                                       1e-300)
+    return sg * C[cr, C_TINT_R] * k_glass[0], sg * C[cr, C_TINT_R + 1] * k_glass[1], sg * C[cr, C_TINT_R + 2] * k_glass[2]
+
+
+@njit(**_JIT)
+def bsdf_eval_lobes(C, cr, E, E_avg, wo, wi, ns, ng, vis):
+    """(f0, f1, f2): :func:`bsdf_eval_pdf`'s f restricted to the closures a light is visible to
+    (Blender's Object > Visibility > Ray Visibility of the light; Cycles' ``SHADER_EXCLUDE_*``
+    leaves a hidden kind's closures out of a light sample's BSDF).  vis bits: 1 diffuse (the
+    DIFFUSE lobe), 2 glossy (the rough COAT and METAL lobes), 4 transmission.  The glass lobes
+    (GLASS_R and GLASS_T: one glass closure in Cycles, a Glass BSDF's or a Principled BSDF's
+    transmission) are left out only when both glossy and transmission are hidden, as Cycles 5.0
+    renders it (measured: a rough glass pane lit from behind keeps its light with either off)."""
+    hit = _hit(C, cr, E, E_avg, wo, ns, ng)
+    f0, f1, f2, _ = _eval_pdf_hit(C, cr, E, hit, wo, wi)
+    d0 = d1 = d2 = 0.0
+    if dot(wi, hit[0]) > 0:
+        d = C[cr, C_W_BASE] * (1.0 - hit[6]) * bump_shadowing(C, cr, wi, hit[0], hit[1]) / _PI
+        d0, d1, d2 = d * C[cr, C_BASE], d * C[cr, C_BASE + 1], d * C[cr, C_BASE + 2]
+    if dot(wi, hit[1]) > 0:                      # reflection: coat + metal + glass reflection
+        g0, g1, g2 = _glass_reflection(C, cr, hit, wo, wi)
+    else:                                        # refraction: the glass lobe alone
+        g0, g1, g2 = f0 - d0, f1 - d1, f2 - d2
+    kd = 1.0 if vis & 1 else 0.0
+    ks = 1.0 if vis & 2 else 0.0
+    kg = 1.0 if vis & 6 else 0.0
+    return (kd * d0 + ks * (f0 - d0 - g0) + kg * g0, kd * d1 + ks * (f1 - d1 - g1) + kg * g1,
+            kd * d2 + ks * (f2 - d2 - g2) + kg * g2)
 
 
 @njit(**_JIT)
