@@ -309,6 +309,9 @@ class Material:
         None (the default, also :meth:`glass`, whose reflection is thus untinted) = white, a
         Principled BSDF's (Cycles' specular tint, white by default); a Glass BSDF's is its colour
         (Cycles' svm/closure.h), which the exporter sets.
+    constant_fresnel : bool: the metal lobe reflects ``base_color`` at every angle (Cycles 5.0's
+        Glossy BSDF has no Fresnel; the exporter sets it for a Glossy BSDF), not Schlick's
+        F0 + (1 - F0)(1 - cos)^5 with F0 = ``base_color`` (a Principled BSDF's metal, the default).
     name : str.
     graph : the material's shader-node graph (:class:`stpm_core.nodes.ShaderGraph`)
         or None.  With a graph, every hit evaluates it (``kernels.svm``); the
@@ -327,6 +330,7 @@ class Material:
     graph: object = None
     transmission_tint: np.ndarray | None = None
     reflection_tint: np.ndarray | None = None
+    constant_fresnel: bool = False
 
     @classmethod
     def diffuse(cls, color=(0.8, 0.8, 0.8), name: str = "diffuse") -> "Material":

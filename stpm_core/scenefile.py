@@ -175,6 +175,8 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
         for tint_name in ("transmission_tint", "reflection_tint"):      # written only when set
             if getattr(m, tint_name, None) is not None:
                 d[tint_name] = _scalar_to_json("vec3", getattr(m, tint_name))
+        if getattr(m, "constant_fresnel", False):                       # written only when set
+            d["constant_fresnel"] = True
         if getattr(m, "graph", None) is not None:
             d["graph"] = _graph_to_json(m.graph, f"materials[{i}] ({m.name!r}).graph", len(textures))
         materials.append(d)
@@ -815,6 +817,8 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
         for tint_name in ("transmission_tint", "reflection_tint"):      # absent or null: None
             if f.d.get(tint_name) is not None:
                 setattr(m, tint_name, f.vec3(tint_name))
+        if f.d.get("constant_fresnel") is not None:                      # absent: Schlick
+            m.constant_fresnel = f.bool("constant_fresnel")
         if f.d.get("graph") is not None:
             m.graph = _graph_from_json(f.d["graph"], f"materials[{i}].graph", len(textures))
         materials.append(m)

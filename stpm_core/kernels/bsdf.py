@@ -94,7 +94,7 @@ import numpy as np
 from ..numba_probe import njit
 from .sampling import JIT_INLINE, basis, cosine_hemisphere, dot
 from .closure import (C_ALPHA, C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_COAT, C_IOR, C_NS, C_ROUGH_LOBE, C_ROUGHNESS, C_SPECULAR,
-                      C_W_BASE, C_W_GLASS, C_W_METAL, closure_row)
+                      C_W_BASE, C_W_GLASS, C_W_METAL, C_METAL_CONST, closure_row)
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
            "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_lobes", "bsdf_eval_smooth", "bsdf_eval_plain", "bsdf_eval_plain_w", "needs_bsdf_call", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_sample_cont", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
@@ -224,9 +224,13 @@ def fresnel_dielectric_fss(eta):
 
 @njit(**_JIT)
 def _fresnel_schlick(C, cr, cos):
-    """Schlick(F0 = base colour of closure row C[cr], cos) = F0 + (1 - F0)(1 - cos)^5, an RGB tuple."""
-    m = math.pow(min(max(1.0 - cos, 0.0), 1.0), 5.0)       # (numpy's ** 5 is pow; x*x*x*x*x rounds differently)
+    """The METAL lobe's Fresnel, an RGB tuple: Schlick(F0 = base colour of closure row C[cr], cos) =
+    F0 + (1 - F0)(1 - cos)^5 (a Principled BSDF's metal), or the base colour at every angle where
+    ``C_METAL_CONST`` (a Glossy BSDF: Cycles 5.0 sets up no Fresnel for it, its colour weighs the lobe)."""
     b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
+    if C[cr, C_METAL_CONST] > 0:
+        return (b0, b1, b2)
+    m = math.pow(min(max(1.0 - cos, 0.0), 1.0), 5.0)       # (numpy's ** 5 is pow; x*x*x*x*x rounds differently)
     return (b0 + (1.0 - b0) * m, b1 + (1.0 - b1) * m, b2 + (1.0 - b2) * m)
 
 
@@ -631,9 +635,15 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
         e_avg = ggx_albedo_avg(E_avg, alpha)
         ms_Eo = ggx_albedo(E, cos_oc, alpha)
         b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
-        ms_scale = (_coat_compensation(ms_Eo, e_avg, b0 + (1.0 - b0) / 21.0),
-                    _coat_compensation(ms_Eo, e_avg, b1 + (1.0 - b1) / 21.0),
-                    _coat_compensation(ms_Eo, e_avg, b2 + (1.0 - b2) / 21.0))
+        if C[cr, C_METAL_CONST] > 0:
+            # a constant Fresnel (Glossy BSDF): F_ss is the colour itself (Cycles'
+            # bsdf_microfacet_setup_fresnel_constant)
+            ms_scale = (_coat_compensation(ms_Eo, e_avg, b0), _coat_compensation(ms_Eo, e_avg, b1),
+                        _coat_compensation(ms_Eo, e_avg, b2))
+        else:
+            ms_scale = (_coat_compensation(ms_Eo, e_avg, b0 + (1.0 - b0) / 21.0),
+                        _coat_compensation(ms_Eo, e_avg, b1 + (1.0 - b1) / 21.0),
+                        _coat_compensation(ms_Eo, e_avg, b2 + (1.0 - b2) / 21.0))
     # Rough COAT: the energy single scattering loses, returned as Cycles does for its dielectric
     # layer (microfacet_ggx_preserve_energy): f_ss (1 + F_ms (1 - E(mu_o)) / E(mu_o)),
     # F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg)), F_ss = specular Fss_diel(ior)

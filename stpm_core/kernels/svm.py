@@ -35,7 +35,7 @@ import numpy as np
 
 from ..numba_probe import njit
 from .closure import (C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
-                      C_TRANSMISSION, closure_row, finish_closure_at)
+                      C_TRANSMISSION, C_METAL_CONST, closure_row, finish_closure_at)
 from .sampling import JIT, JIT_INLINE
 
 from .procedural import (brick_color, brick_texture, magic_texture, noise_texture, voronoi_texture, wave_texture,
@@ -1294,6 +1294,8 @@ def _closure(op, prog, pc, st, k, C, r, w):
     C[r, C_TINT_T + 2] = w * b2
     C[r, C_TRANSPARENT] = C[r, C_TRANSPARENT + 1] = C[r, C_TRANSPARENT + 2] = 0.0
     C[r, C_PASS] = 0.0
+    # Cycles 5.0's Glossy BSDF has no Fresnel: its colour at every angle (Principled: Schlick)
+    C[r, C_METAL_CONST] = 1.0 if op == _BSDF_GLOSSY else 0.0
 
 
 @njit(**JIT_INLINE)            # (inlined: no call left in the closure loop)
