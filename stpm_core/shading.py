@@ -183,8 +183,10 @@ def scene_attributes(scene, uv_layers: list, color_layers: list | None = None) -
     inst_obj = np.zeros((max(len(scene.instances), 1), 4, 4))
     for k, inst in enumerate(scene.instances):
         if meshes[inst.mesh].is_deforming:
-            inst_obj[k] = np.linalg.inv(np.asarray(inst.transform.at(u_frame), np.float64))
-            inst_obj[k, 3] = (0.0, 0.0, 0.0, 1.0)
+            M = np.asarray(inst.transform.at(u_frame), np.float64)
+            if abs(np.linalg.det(M[:3, :3])) > 1e-300:       # (a zero scale: corner_obj, as other meshes)
+                inst_obj[k] = np.linalg.inv(M)
+                inst_obj[k, 3] = (0.0, 0.0, 0.0, 1.0)
     return (inst_mesh, mesh_tri0, uv_off, np.ascontiguousarray(corner_uv), np.ascontiguousarray(corner_obj),
             gen_lo, gen_inv, np.ascontiguousarray(corner_nrm), tan_off, np.ascontiguousarray(corner_tan),
             col_off, corner_col, inst_obj, gen_tri0,
