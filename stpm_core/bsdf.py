@@ -44,6 +44,7 @@ import numpy as np
 from .kernels import bsdf as _k
 from .kernels import kernel_array
 from .kernels.closure import C_EMIT, C_NONDELTA, pack_materials
+from .nodes.graph import shader_lobes
 
 __all__ = ["MaterialTable", "bsdf_eval", "bsdf_pdf", "bsdf_sample", "diffuse_albedo",
            "has_nondelta", "emission"]
@@ -56,6 +57,8 @@ class MaterialTable:
     glass reflection tint), metallic, transmission, roughness, specular,
     ior (M,), emission (M, 3), alpha = roughness^2 (M,), and the lobe weights
     w_base, w_metal, w_glass (M,).  Index -1 (a miss) reads as black, no lobes.
+    ``graph_caustic`` (M + 1,) bool: the material's node graph can pick a lobe the caustic tracer
+    follows in some hit (:func:`stpm_core.nodes.shader_lobes`), whatever its blended constants say.
     ``closures`` (M + 1, N_CLOSURE): the same numbers as closure rows, what the BSDF kernels read.
     """
 
@@ -95,6 +98,12 @@ class MaterialTable:
                                                   | ((self.w_base > 0) & (self.specular > 0)))
         self.nondelta = ((self.w_base > 0) & (self.base_color.max(axis=1) > 0)) | self.rough_lobe
         self.coat = (self.w_base > 0) & (self.specular > 0)
+        # Node graphs: can some hit pick a lobe the caustic tracer follows (nodes.shader_lobes)?
+        # The constants above are the graph's blend and can hide one (a Mix Shader's smooth coat)
+        self.graph_caustic = np.zeros(M + 1, dtype=bool)
+        for i, m in enumerate(mats):
+            if getattr(m, "graph", None) is not None:
+                self.graph_caustic[i] = shader_lobes(m.graph)[0]
         self.closures = pack_materials(mats)
 
     def __len__(self) -> int:

@@ -51,6 +51,7 @@ from .parallel import ordered_map, worker_count
 from .photons import sharing as _sharing
 from .raycast.geometry import GUARD_FRACTION, OFFSET_POS, instance_offsets, offset_lengths, segment_of
 from .sampling import rng_for, skip_uniforms
+from .scene import light_visibility
 from .shading import hit_geometry, shading_data
 from .transparency import pass_through, shadow_transmittance
 
@@ -235,6 +236,13 @@ def _first_pose(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
+def _light_vis(ctx, li: int) -> int:
+    """Light li's Ray Visibility bits (1 diffuse, 2 glossy, 4 transmission; 7 = all, lights past
+    the exported ones: the world, mesh lights)."""
+    vis = ctx.light_vis
+    return int(vis[li]) if vis is not None and li < len(vis) else 7
+
+
 def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.ndarray, t_s: np.ndarray, rng,
             stats: TraceStats, dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool, mis: np.ndarray = None,
             clamp: float = 0.0, strata: tuple = None) -> bool:
@@ -271,13 +279,17 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
     for li in range(len(lights)):
         if lights.power[li] <= 0.0:
             continue
+        vis = _light_vis(ctx, li)
+        if vis == 0:
+            continue                     # Ray Visibility: no diffuse, glossy or transmission ray sees it
         light = lights.lights[li]
         u = _light_uniforms(light, samples, strata, rng, _scratch("u_light", (k, 2)))
         prm, mesh = ctx.light_data[li]
         poses = light_poses(lights, li, t_s)
         m = _K.nee_light(sh, P, NG, NS, d, C, crow, E, E_avg, prm, poses, *mesh, t_s, u, EPS, TERM,
                          ctx.term_any,
-                         _no_mis(k) if mis is None else mis, ctx.stop_coat, contrib, so, sd, stmax, live, S)
+                         _no_mis(k) if mis is None or vis != 7 else mis, ctx.stop_coat, contrib, so, sd, stmax, live,
+                         S, vis)
         if m == 0:
             continue
         if getattr(light, "textured", False):
@@ -396,6 +408,8 @@ def _seen_lights(ctx, o, d, t, t_scene, first: bool, glossy=None, p_c=None):
     for li in ctx.shaped_lights:
         if first and not (li < len(vis) and vis[li]):
             continue
+        if not first and _light_vis(ctx, li) != 7:
+            continue          # a light hidden from some ray kind: next-event estimation carries it whole
         if L is None:
             L, Lw = np.zeros((o.shape[0], 3)), np.zeros((o.shape[0], 3))
         _K.seen_lights_add(ctx.light_data[li][0], light_poses(ctx.lights, li, t), o, d, t_scene, first, L, Lw,
@@ -837,6 +851,7 @@ class _Context:
     shaped_lights: tuple = ()                # lights a ray can hit (AREA, POINT / SPOT of radius > 0, SUN of angle > 0) with power
     mesh_emitters: dict = None               # MESH light index -> (instance, (F,) int64 prim -> its triangle j or -1)
     light_visible_camera: list = None        # per light: seen by camera rays (Blender's visible_camera)
+    light_vis: np.ndarray = None             # (L,) uint8 per exported light: 1 diffuse | 2 glossy | 4 transmission (_light_vis)
     zero_passes: tuple = ()                  # passes that stay 0 for every sample
     layout: dict = None                      # columns of a tile's per-sample matrix (_compact_layout)
     features: bool = False                   # RenderSettings.denoise: Denoising Albedo / Normal (kernels.paths.denoising_rows)
@@ -1129,6 +1144,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                               if _has_shape(l) and l.power > 0 and np.any(np.asarray(l.color, float) > 0))
     ctx.mesh_emitters = _mesh_emitters(scene, lights)
     ctx.light_visible_camera = [bool(v) for v in (scene.metadata.get("light_visible_camera") or [])]
+    ctx.light_vis = light_visibility(scene)
     # Passes no sample can reach: photon passes without that map (the film sums skip them)
     ctx.zero_passes = tuple(name for name, kind in (("Caustic", "caustic"), ("Indirect", "global"))
                             if maps is None or not ctx.map_kinds.get(kind, False))

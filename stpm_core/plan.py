@@ -46,6 +46,7 @@ import numpy as np
 
 from .shading import shading_data
 from .bsdf import MaterialTable
+from .nodes.graph import shader_lobes
 from .photons.trace import trace_photon_paths
 from .raycast.geometry import instance_offsets
 from .sampling import rng_for, stratified_1d
@@ -91,6 +92,11 @@ def _material_kinds(scene) -> tuple[np.ndarray, np.ndarray]:
     any glass, any metal (smooth: a mirror; rough: glossy caustics), a smooth coat over a base.
     Diffuse = a Lambertian base with a non-black colour (where photon
     irradiance becomes radiance).
+
+    A material with a node graph also counts each lobe some hit can pick
+    (:func:`stpm_core.nodes.shader_lobes`): its constants are the blend of a Mix Shader's
+    branches, whose roughness hides a smooth coat and whose textured Fac (socket value 0 or 1)
+    hides a whole branch.
     """
     delta, diffuse = [], []
     for m in scene.materials:
@@ -98,8 +104,9 @@ def _material_kinds(scene) -> tuple[np.ndarray, np.ndarray]:
         w_glass = (1.0 - w_metal) * float(m.transmission)
         w_base = (1.0 - w_metal) * (1.0 - float(m.transmission))
         smooth = float(m.roughness) == 0.0
-        delta.append(w_glass > 0 or w_metal > 0 or (smooth and w_base > 0 and m.specular > 0))
-        diffuse.append(w_base > 0 and bool(np.any(np.asarray(m.base_color, float) > 0)))
+        g_caustic, g_diffuse = shader_lobes(m.graph) if getattr(m, "graph", None) is not None else (False, False)
+        delta.append(w_glass > 0 or w_metal > 0 or (smooth and w_base > 0 and m.specular > 0) or g_caustic)
+        diffuse.append((w_base > 0 and bool(np.any(np.asarray(m.base_color, float) > 0))) or g_diffuse)
     return np.array(delta, bool), np.array(diffuse, bool)
 
 

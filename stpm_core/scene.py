@@ -90,6 +90,11 @@ class Mesh:
         what Color Attribute and Attribute nodes read; {} = none.
     color_render : name of the render-active colour attribute (a Color Attribute node with no
         name reads it), or None.
+    orco : (V, 3) float32 undeformed object-space positions (Blender's ``CD_ORCO``: a shape-keyed
+        or modifier-deformed mesh's positions before deformation), what Texture Coordinate >
+        Generated reads (normalised by their bounding box, Blender's automatic texture space), so
+        the texture sticks to the surface as it deforms (Cycles' ``ATTR_STD_GENERATED``); None =
+        the vertices (a deforming mesh: at the frame's shutter time, as Cycles without an orco).
     """
 
     vertices: np.ndarray
@@ -103,6 +108,7 @@ class Mesh:
     tangents: dict = field(default_factory=dict)
     color_layers: dict = field(default_factory=dict)
     color_render: str | None = None
+    orco: np.ndarray | None = None
 
     @property
     def is_deforming(self) -> bool:
@@ -303,6 +309,9 @@ class Material:
         None (the default, also :meth:`glass`, whose reflection is thus untinted) = white, a
         Principled BSDF's (Cycles' specular tint, white by default); a Glass BSDF's is its colour
         (Cycles' svm/closure.h), which the exporter sets.
+    constant_fresnel : bool: the metal lobe reflects ``base_color`` at every angle (Cycles 5.0's
+        Glossy BSDF has no Fresnel; the exporter sets it for a Glossy BSDF), not Schlick's
+        F0 + (1 - F0)(1 - cos)^5 with F0 = ``base_color`` (a Principled BSDF's metal, the default).
     name : str.
     graph : the material's shader-node graph (:class:`stpm_core.nodes.ShaderGraph`)
         or None.  With a graph, every hit evaluates it (``kernels.svm``); the
@@ -321,6 +330,7 @@ class Material:
     graph: object = None
     transmission_tint: np.ndarray | None = None
     reflection_tint: np.ndarray | None = None
+    constant_fresnel: bool = False
 
     @classmethod
     def diffuse(cls, color=(0.8, 0.8, 0.8), name: str = "diffuse") -> "Material":
@@ -617,8 +627,11 @@ def scene_warnings(scene: Scene) -> list[str]:
     (local -Z, into the room) faces away from the camera at mid-shutter.  A portal steers world
     samples only from points on that side (as Cycles'), so a portal placed backwards in a
     window silently stops helping; rotating it 180 degrees about X fixes it.
+
+    A light with some Ray Visibility switch (Diffuse, Glossy, Transmission) off is named with what
+    STPM does not honour of it (:func:`light_visibility`).
     """
-    out = _portal_warnings(scene)
+    out = _portal_warnings(scene) + _light_visibility_warnings(scene)
     for li, l in enumerate(scene.lights):
         tr = l.transform
         if l.type not in ("SPOT", "SUN", "AREA") or not isinstance(tr, MotionTransform):
@@ -644,6 +657,49 @@ def scene_warnings(scene: Scene) -> list[str]:
             if np.any(np.abs(np.sum(g * z, axis=1)) < 1e-9):
                 out.append(f"{who}: its -Z axis lies in the light's plane (sheared transform): "
                            f"the light emits nothing")
+    return out
+
+
+LIGHT_VISIBILITY_KEYS = (("light_visible_diffuse", 1, "Diffuse"), ("light_visible_glossy", 2, "Glossy"),
+                         ("light_visible_transmission", 4, "Transmission"))
+
+
+def light_visibility(scene: Scene) -> np.ndarray:
+    """(L,) uint8 per scene light: the ray kinds that see it (Blender's Object > Visibility > Ray
+    Visibility of the light, ``scene.metadata['light_visible_diffuse' / '_glossy' /
+    '_transmission']``): bit 1 diffuse, 2 glossy, 4 transmission; 7 (all) where unset.
+
+    Honoured in next-event estimation, lobe by lobe, as Cycles' ``SHADER_EXCLUDE_*`` leaves the
+    closures of a hidden kind out of a light sample's BSDF (``kernels.bsdf.bsdf_eval_lobes``: the
+    diffuse lobe; the reflection lobes -- coat, metal, glass reflection -- as glossy; glass
+    refraction as transmission).  A light with any of them off is not seen by rays leaving a
+    surface (next-event estimation carries it whole, without multiple importance sampling), so
+    mirror and glass reflections of its shape are missing; photons ignore the switches
+    (:func:`scene_warnings` says both)."""
+    vis = np.full(len(scene.lights), 7, np.uint8)
+    meta = getattr(scene, "metadata", None) or {}
+    for key, bit, _name in LIGHT_VISIBILITY_KEYS:
+        for li, v in enumerate(list(meta.get(key) or [])[:len(scene.lights)]):
+            if not v:
+                vis[li] &= np.uint8(7 - bit)
+    return vis
+
+
+def _light_visibility_warnings(scene: Scene) -> list[str]:
+    """:func:`scene_warnings`' lines for lights with Ray Visibility switches off."""
+    out = []
+    for li, v in enumerate(light_visibility(scene)):
+        if v == 7:
+            continue
+        l = scene.lights[li]
+        off = ", ".join(name for _key, bit, name in LIGHT_VISIBILITY_KEYS if not v & bit)
+        shaped = (l.type == "AREA" or (l.type in ("POINT", "SPOT") and float(getattr(l, "radius", 0.0)) > 0)
+                  or (l.type == "SUN" and float(getattr(l, "angle", 0.0)) > 0))
+        text = (f"light {l.name!r}: Ray Visibility {off} off is honoured in direct light only: its photons "
+                f"(caustic and global maps) ignore it")
+        if shaped and v != 0:
+            text += "; its shape is not seen in mirror or glass reflections"
+        out.append(text)
     return out
 
 
@@ -729,6 +785,10 @@ def validate_scene(scene: Scene) -> None:
             if n.shape != (tri.shape[0], 3, 3) and not (steps and n.shape == (steps, tri.shape[0], 3, 3)):
                 per_step = f" or ({steps}, {tri.shape[0]}, 3, 3) (one per vertex step)" if steps else ""
                 raise SceneError(f"{p}.normals must have shape ({tri.shape[0]}, 3, 3){per_step}, got {n.shape}")
+        if getattr(m, "orco", None) is not None:
+            o = _check_finite(f"{p}.orco", m.orco)
+            if o.shape != (v.shape[-2], 3):
+                raise SceneError(f"{p}.orco must have shape ({v.shape[-2]}, 3), got {o.shape}")
         for attr, width in (("uv_layers", 2), ("tangents", 4), ("color_layers", 4)):
             layers = getattr(m, attr, None) or {}
             if not isinstance(layers, dict):

@@ -149,6 +149,9 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
             arrays[f"{p}/normals"] = np.asarray(m.normals, dtype=np.float32)
         entry = {"name": str(m.name), "has_vertex_times": m.vertex_times is not None,
                  "has_normals": m.normals is not None}
+        if getattr(m, "orco", None) is not None:
+            arrays[f"{p}/orco"] = np.asarray(m.orco, dtype=np.float32)
+            entry["has_orco"] = True
         uv_names = _put_uv_layers(arrays, p, m, f"meshes[{i}] ({m.name!r})")
         if uv_names:
             entry["uv_layers"] = uv_names
@@ -172,6 +175,8 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
         for tint_name in ("transmission_tint", "reflection_tint"):      # written only when set
             if getattr(m, tint_name, None) is not None:
                 d[tint_name] = _scalar_to_json("vec3", getattr(m, tint_name))
+        if getattr(m, "constant_fresnel", False):                       # written only when set
+            d["constant_fresnel"] = True
         if getattr(m, "graph", None) is not None:
             d["graph"] = _graph_to_json(m.graph, f"materials[{i}] ({m.name!r}).graph", len(textures))
         materials.append(d)
@@ -812,6 +817,8 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
         for tint_name in ("transmission_tint", "reflection_tint"):      # absent or null: None
             if f.d.get(tint_name) is not None:
                 setattr(m, tint_name, f.vec3(tint_name))
+        if f.d.get("constant_fresnel") is not None:                      # absent: Schlick
+            m.constant_fresnel = f.bool("constant_fresnel")
         if f.d.get("graph") is not None:
             m.graph = _graph_from_json(f.d["graph"], f"materials[{i}].graph", len(textures))
         materials.append(m)
@@ -837,6 +844,12 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
             # (F, 3, 3), or (K, F, 3, 3) per vertex step of a deforming mesh (format version 4)
             keyed = has_times and np.ndim(arr.data.get(f"{p}/normals")) == 4
             N = arr.get(f"{p}/normals", f"{a}.normals", kind="f", ndim=4 if keyed else 3, tail=(3, 3))
+        orco = None
+        if d.get("has_orco") is True:
+            orco = arr.get(f"{p}/orco", f"{a}.orco", kind="f", ndim=2, tail=(3,))
+            if orco.shape[0] != V.shape[-2] or np.abs(orco).max(initial=0.0) > 1e15:
+                raise SceneError(f"{a}.orco must have shape ({V.shape[-2]}, 3) and coordinates within 1e15, "
+                                 f"got shape {orco.shape}")
         if np.abs(V).max(initial=0.0) > 1e15:
             raise SceneError(f"{a}.vertices has coordinates beyond 1e15")
         # Range-check integer arrays before narrowing them to int32
@@ -853,7 +866,8 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
                            vertex_times=None if vt is None else vt.astype(np.float64),
                            normals=None if N is None else N.astype(np.float32), name=name,
                            uv_layers=uv_layers, uv_render=uv_render, tangents=tangents,
-                           color_layers=color_layers, color_render=color_render))
+                           color_layers=color_layers, color_render=color_render,
+                           orco=None if orco is None else orco.astype(np.float32)))
 
     # Instances
     instances = []

@@ -230,6 +230,12 @@ METADATA: tuple = (
                                             "by camera rays (alpha 0)"),
     Spec("light_visible_camera", "bools", [], "per light (scene order): seen by camera rays "
                                               "(Blender's Ray Visibility > Camera)"),
+    Spec("light_visible_diffuse", "bools", [], "per light (scene order): lights diffuse lobes "
+                                               "(Blender's Ray Visibility > Diffuse; unset: on)"),
+    Spec("light_visible_glossy", "bools", [], "per light (scene order): lights glossy (reflection) lobes "
+                                              "(Blender's Ray Visibility > Glossy; unset: on)"),
+    Spec("light_visible_transmission", "bools", [], "per light (scene order): lights refraction lobes "
+                                                    "(Blender's Ray Visibility > Transmission; unset: on)"),
     Spec("working_space", "enum", "REC709", "the scene's working colour space (Blender 5's "
                                             "bpy.data.colorspace.working_space): every colour is an RGB "
                                             "triple in it, image textures are converted into it",

@@ -74,7 +74,8 @@ def _empty_attributes(n_inst: int) -> tuple:
     return (np.zeros(max(n_inst, 1), np.int64), np.zeros(1, np.int64), np.full((1, 1), -1, np.int64),
             np.zeros((1, 3, 2), np.float32), np.zeros((1, 3, 3), np.float32), np.zeros((1, 3)), np.ones((1, 3)),
             np.zeros((1, 3, 3), np.float32), np.full((1, 1), -1, np.int64), np.zeros((1, 3, 4), np.float32),
-            np.full((1, 1), -1, np.int64), np.zeros((1, 3, 4), np.float32))
+            np.full((1, 1), -1, np.int64), np.zeros((1, 3, 4), np.float32), np.zeros((max(n_inst, 1), 4, 4)),
+            np.full(1, -1, np.int64), np.zeros((1, 3, 3), np.float32))
 
 
 _NM_IDENTITY = np.eye(3)[None].copy()          # (1, 3, 3): every hit's normal matrix is the identity
@@ -92,9 +93,11 @@ def scene_attributes(scene, uv_layers: list, color_layers: list | None = None) -
 
     inst_mesh (I,) int64; mesh_tri0 (M,) int64 first triangle of each mesh in corner_obj;
     uv_off (M, L) int64 first triangle of each (mesh, layer) in corner_uv, -1 = missing;
-    corner_uv (N, 3, 2) float32; corner_obj (T, 3, 3) float32 (first shape of a deforming mesh);
-    gen_lo, gen_inv (M, 3): Generated = (p_obj - gen_lo) * gen_inv, Blender's automatic texture
-    space (the bounding box; an axis of zero extent gets half-size 1, as Blender sets it);
+    corner_uv (N, 3, 2) float32; corner_obj (T, 3, 3) float32 (the shape at the frame's shutter
+    time, what Object coordinates read on a mesh that does not deform);
+    gen_lo, gen_inv (M, 3): Generated = (p_gen - gen_lo) * gen_inv, Blender's automatic texture
+    space (the bounding box of the positions Generated reads; an axis of zero extent gets half-size
+    1, as Blender sets it);
     corner_nrm (T, 3, 3) float32 object-space corner normals (``Mesh.normals``; a deforming mesh's at
     the frame's shutter time, ``Mesh.normals_at``, as Cycles' Normal Map reads the static vertex
     normals and the add-on exports tangents at the frame; flat meshes: the face normal at each
@@ -103,7 +106,12 @@ def scene_attributes(scene, uv_layers: list, color_layers: list | None = None) -
     col_off (M, Lc) int64 and corner_col (N'', 3, 4) float32 the per-corner RGBA of each colour
     layer name of ``color_layers`` ("" = the mesh's render-active colour attribute): the mesh's
     colour attribute of that name (``Mesh.color_layers``), else its UV map of that name as
-    (u, v, 0, 1) (an Attribute node may name either), else -1 (none: the node reads 0).
+    (u, v, 0, 1) (an Attribute node may name either), else -1 (none: the node reads 0);
+    inst_obj (I, 4, 4) float64: for an instance of a deforming mesh the world -> object matrix at
+    the frame (row 3 = 0 0 0 1), whose Object coordinates are that matrix times the hit point;
+    zero elsewhere (Object = corner_obj at the hit's barycentrics); gen_tri0 (M,) int64 first
+    triangle of each mesh in corner_gen (T', 3, 3) float32, its undeformed corners (``Mesh.orco``)
+    that Generated reads, -1 = none (Generated reads corner_obj).
     """
     meshes = scene.meshes
     M = len(meshes)
@@ -115,17 +123,26 @@ def scene_attributes(scene, uv_layers: list, color_layers: list | None = None) -
     mesh_tri0 = np.zeros(max(M, 1), np.int64)
     uv_off = np.full((max(M, 1), L), -1, np.int64)
     gen_lo, gen_inv = np.zeros((max(M, 1), 3)), np.ones((max(M, 1), 3))
-    objs, uvs, nrms, tans = [], [], [], []
+    objs, uvs, nrms, tans, gens = [], [], [], [], []
+    gen_tri0 = np.full(max(M, 1), -1, np.int64)
+    n_gen = 0
     tan_off = np.full((max(M, 1), L), -1, np.int64)
     n_tri = n_uv = n_tan = 0
     for i, m in enumerate(meshes):
-        V = np.asarray(m.vertices, np.float32)
-        if V.ndim == 3:
-            V = V[0]
+        # Object reads the shape at the frame (a deforming mesh's hits use inst_obj instead)
+        V = np.asarray(m.vertices_at(u_frame), np.float32)
         F = np.asarray(m.triangles, np.int64)
         mesh_tri0[i] = n_tri
         corners = V[F] if F.size else np.zeros((0, 3, 3), np.float32)
         objs.append(corners)
+        # Generated reads the undeformed positions (Mesh.orco; none given: the same shape)
+        orco = getattr(m, "orco", None)
+        if orco is not None and F.size:
+            orco = np.asarray(orco, np.float32)
+            gen_tri0[i] = n_gen
+            gens.append(orco[F])
+            n_gen += F.shape[0]
+            V = orco
         if m.normals is not None:
             # a deforming mesh: its normals at the frame (Cycles reads its static vertex normals)
             nrms.append(np.asarray(m.normals_at(u_frame), np.float32).reshape(F.shape[0], 3, 3))
@@ -159,9 +176,21 @@ def scene_attributes(scene, uv_layers: list, color_layers: list | None = None) -
     corner_nrm = np.concatenate(nrms).astype(np.float32) if n_tri else np.zeros((1, 3, 3), np.float32)
     corner_tan = np.concatenate(tans).astype(np.float32) if n_tan else np.zeros((1, 3, 4), np.float32)
     col_off, corner_col = _color_attributes(meshes, list(color_layers or []))
+    # Object coordinates of a deforming mesh: the hit's own position taken to object space (Cycles:
+    # the inverse object transform of P at the ray's time), so the texture stays put in object
+    # space while the surface deforms through it; the transform at the frame (exact unless the
+    # object also moves rigidly).  Other meshes read corner_obj, exact at every time.
+    inst_obj = np.zeros((max(len(scene.instances), 1), 4, 4))
+    for k, inst in enumerate(scene.instances):
+        if meshes[inst.mesh].is_deforming:
+            M = np.asarray(inst.transform.at(u_frame), np.float64)
+            if abs(np.linalg.det(M[:3, :3])) > 1e-300:       # (a zero scale: corner_obj, as other meshes)
+                inst_obj[k] = np.linalg.inv(M)
+                inst_obj[k, 3] = (0.0, 0.0, 0.0, 1.0)
     return (inst_mesh, mesh_tri0, uv_off, np.ascontiguousarray(corner_uv), np.ascontiguousarray(corner_obj),
             gen_lo, gen_inv, np.ascontiguousarray(corner_nrm), tan_off, np.ascontiguousarray(corner_tan),
-            col_off, corner_col)
+            col_off, corner_col, inst_obj, gen_tri0,
+            np.ascontiguousarray(np.concatenate(gens) if n_gen else np.zeros((1, 3, 3), np.float32), np.float32))
 
 
 def _color_attributes(meshes, names: list) -> tuple:

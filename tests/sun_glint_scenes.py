@@ -13,6 +13,9 @@ see its radiance S / (pi sin^2(angle / 2)) (its ``distant_light_intersect``), ST
 * ``rough_metal``, ``glossy_metal``: the same metal at Roughness 0.25 and 0.1: its lobe reaches
   the sun and next-event estimation samples it; both are kept, weighed by the power heuristic
   (at 0.1 next-event estimation alone is the noisier of the two);
+* ``glossy_bsdf``, ``rough_glossy_bsdf``: a Glossy BSDF node (colour 0.9) at Roughness 0 and 0.25:
+  Cycles 5.0 gives it no Fresnel, so at this 70-degree incidence it reflects 0.9 where the
+  Principled metal's Schlick gives 0.912 (Cycles: 0.986 of the chrome's glint, measured);
 * ``mixed_chrome``: a Mix Shader, Fac 0.5 from a (flat) Checker texture (a per-hit choice; until
   2026-12-06 a constant Fac blended the two shaders' parameters at export), of the chrome and a dark
   Diffuse BSDF (0.1): half the hits mirror the sun.
@@ -104,8 +107,28 @@ def glossy_metal():
     return _plane(lambda: metal("Glossy", roughness=0.1))
 
 
+def _glossy_bsdf(name, roughness):
+    """A Glossy BSDF node (colour 0.9): Cycles 5.0 gives it no Fresnel (its colour at every angle)."""
+    mat = bpy.data.materials.new(name)
+    t = mat.node_tree
+    t.nodes.remove(t.nodes["Principled BSDF"])
+    g = t.nodes.new("ShaderNodeBsdfGlossy")
+    g.inputs["Color"].default_value = (0.9, 0.9, 0.9, 1.0)
+    g.inputs["Roughness"].default_value = roughness
+    t.links.new(g.outputs["BSDF"], t.nodes["Material Output"].inputs["Surface"])
+    return mat
+
+
+def glossy_bsdf():
+    return _plane(lambda: _glossy_bsdf("GlossyBSDF", 0.0))
+
+
+def rough_glossy_bsdf():
+    return _plane(lambda: _glossy_bsdf("RoughGlossyBSDF", 0.25))
+
+
 SCENES = {"water": water, "chrome": chrome, "rough_metal": rough_metal, "glossy_metal": glossy_metal,
-          "mixed_chrome": mixed_chrome}
+          "mixed_chrome": mixed_chrome, "glossy_bsdf": glossy_bsdf, "rough_glossy_bsdf": rough_glossy_bsdf}
 
 
 def build(name: str):

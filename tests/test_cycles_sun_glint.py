@@ -14,6 +14,8 @@ mirror angle; black world; 64 x 48 px, 64 samples, 4 seeds of each renderer (mea
 | metal, roughness 0.25 | 2.97, 0.996 | 2.88, 0.997 | 0.43 -> 0.67 |
 | metal, roughness 0.1 | 1.67, 0.997 | 1.93, 1.000 | 19.6 -> 0.68 |
 | Mix Shader (per hit) of chrome and a dark Diffuse | 3.63, 0.991 (choice independent) | 1.68, 0.998 | 40 -> 2.7 (the choice stratified) |
+| Glossy BSDF node, roughness 0 (no Fresnel in Cycles 5.0; was Schlick) | 5.34, 1.013 | 0.68, 0.999 | 1.13 -> 1.10 |
+| Glossy BSDF node, roughness 0.25 | 9.57, 1.012 | 2.84, 0.997 | 0.69 -> 0.67 |
 
 (The roughness-0.25 metal's uniform 0.35 % deficit, also before, is the metal's own.)  Cycles with
 one glossy and one transmission bounce and no diffuse bounce; STPM without photons (max depth 1).

@@ -36,7 +36,7 @@ import pytest
 from oracles import svm_numpy as O
 from oracles import texture_numpy as TO
 from stpm_core.kernels import svm
-from stpm_core.kernels.closure import (C_BASE, C_EMIT, C_IOR, C_METALLIC, C_PASS, C_PROGRAM, C_ROUGHNESS,
+from stpm_core.kernels.closure import (C_METAL_CONST, C_BASE, C_EMIT, C_IOR, C_METALLIC, C_PASS, C_PROGRAM, C_ROUGHNESS,
                                        C_SPECULAR, C_TINT_R, C_TINT_T, C_TRANSMISSION, C_TRANSPARENT, N_CLOSURE, pack_materials)
 from stpm_core.nodes.compile import colorband, compile_graph
 from stpm_core.nodes.graph import Link, Node, ShaderGraph
@@ -1033,7 +1033,8 @@ def _check_derived(C):
                      transmission=C[r, C_TRANSMISSION], roughness=C[r, C_ROUGHNESS], specular=C[r, C_SPECULAR],
                      ior=C[r, C_IOR], emission=C[r, C_EMIT:C_EMIT + 3].copy(),
                      transmission_tint=C[r, C_TINT_T:C_TINT_T + 3].copy(),
-                     reflection_tint=C[r, C_TINT_R:C_TINT_R + 3].copy())
+                     reflection_tint=C[r, C_TINT_R:C_TINT_R + 3].copy(),
+                     constant_fresnel=bool(C[r, C_METAL_CONST] > 0))
         ref = pack_materials([m])[0]
         keep = np.ones(N_CLOSURE, bool)
         keep[C_PROGRAM] = False
@@ -1074,6 +1075,10 @@ def test_shaders_closure_rows():
     assert not sd.unsupported
     _compare_rows(C, oracle_rows(scene, hits, mat, C))
     _check_derived(C)
+    # the metal lobe's Fresnel: constant (its colour) for a Glossy BSDF, Schlick for the others
+    for r, g in enumerate(graphs):
+        glossy = bool({n.type for n in g.nodes.values()} & {"ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"})
+        assert C[r, C_METAL_CONST] == (1.0 if glossy else 0.0), r
 
 
 def test_shader_inputs_linked():

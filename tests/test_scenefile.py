@@ -163,6 +163,21 @@ def test_round_trip_is_bit_exact(tmp_path):
     assert loaded.has_motion and loaded.meshes[1].is_deforming
 
 
+def test_round_trip_keeps_orco_and_constant_fresnel(tmp_path):
+    """Mesh.orco (Generated's undeformed positions) and Material.constant_fresnel (a Glossy BSDF's
+    metal) survive a save and load; a file without them reads None / False."""
+    scene = rich_scene()
+    m = scene.meshes[1]
+    m.orco = (np.asarray(m.vertices_at(0.0), np.float32) * 1.5).astype(np.float32)
+    scene.materials[0].constant_fresnel = True
+    loaded = load_scene(save_scene(scene, tmp_path / "s.stpm"))
+    assert np.array_equal(loaded.meshes[1].orco, m.orco) and loaded.meshes[0].orco is None
+    assert loaded.materials[0].constant_fresnel and not loaded.materials[1].constant_fresnel
+    m.orco = m.orco[:-1]
+    with pytest.raises(SceneError, match="orco"):
+        save_scene(scene, tmp_path / "bad.stpm")
+
+
 def test_round_trip_keeps_graphs_textures_and_uvs(tmp_path):
     """Node graphs compile to the same program, textures keep their native storage, UV maps
     their names (even with a '/') and the render-active one."""

@@ -226,7 +226,8 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                                                name=obj.name, uv_layers=arr["uv_layers"],
                                                uv_render=arr["uv_render"], tangents=arr["tangents"],
                                                color_layers=arr["color_layers"],
-                                               color_render=arr["color_render"]))
+                                               color_render=arr["color_render"],
+                                               orco=mesh_export.orco_positions(obj, arr["vertices"])))
                 mesh_cache[data_key] = len(meshes) - 1
                 if cache is not None:
                     cache.keep_mesh(kept_key, None if inst.is_instance else obj.original.name_full, meshes[-1])
@@ -291,6 +292,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
     # 3. Assemble instances, deformation, lights and camera
     instances, lights, portals = [], [], []
     light_seen: list[bool] = []  # Object > Visibility > Camera of each light (Blender's default: off)
+    light_rays = {"diffuse": [], "glossy": [], "transmission": []}   # ... > Diffuse / Glossy / Transmission
     cam = None
     for key, r in records.items():
         K = len(samples[key])
@@ -307,6 +309,8 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
             elif obj is not None:
                 lights.append(light_export.export_light(obj, t, samples[key], warnings))
                 light_seen.append(bool(getattr(obj, "visible_camera", True)))
+                for kind in light_rays:
+                    light_rays[kind].append(bool(getattr(obj, f"visible_{kind}", True)))
         elif r.kind == "CAMERA" and cam is None and cam_obj is not None:
             cam = camera_export.export_camera(cam_obj.evaluated_get(depsgraph), t, samples[key], warnings)
     if cam is None:          # camera=False: the caller brings its own
@@ -335,6 +339,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                   # Render flags the scene dataclasses have no field for (read by the integrator)
                   "film_transparent": bool(render.film_transparent),
                   "light_visible_camera": light_seen,
+                  **{f"light_visible_{kind}": v for kind, v in light_rays.items()},
                   "working_space": _working_space(warnings)})
     return out, warnings
 

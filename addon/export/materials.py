@@ -8,7 +8,8 @@ Principled BSDF    Base Color, Metallic, Roughness, Transmission Weight, IOR,
                    Emission Color * Emission Strength; refraction tinted by
                    sqrt(Base Color) as Cycles (``Material.transmission_tint``)
 Diffuse BSDF       Color (Lambertian, no coat)
-Glossy BSDF        Color, Roughness (metallic 1)
+Glossy BSDF        Color, Roughness (metallic 1; ``constant_fresnel``: Cycles 5.0 gives it no
+                   Fresnel, it reflects its colour at every angle)
 Glass BSDF         Color (also its refraction and reflection tints, as Cycles:
                    ``Material.reflection_tint``), Roughness, IOR (transmission 1)
 Emission           Color * Strength (radiance, W m^-2 sr^-1, as in Cycles)
@@ -170,7 +171,7 @@ def _params(**kw) -> dict:
     """A full parameter dict (base_color (3,), emission (3,) float64, scalars float)."""
     p = {"base_color": np.full(3, 0.8), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
          "specular": 0.0, "ior": 1.5, "emission": np.zeros(3), "transmission_tint": None,
-         "reflection_tint": None}
+         "reflection_tint": None, "constant_fresnel": False}
     p.update(kw)
     return p
 
@@ -472,7 +473,7 @@ class MaterialExporter:
             metallic=float(np.clip(p["metallic"], 0, 1)), transmission=float(np.clip(p["transmission"], 0, 1)),
             roughness=float(np.clip(p["roughness"], 0, 1)), specular=float(np.clip(p["specular"], 0, 1)),
             ior=float(np.clip(p["ior"], 1.0, 10.0)), emission=np.maximum(np.asarray(p["emission"], float), 0.0),
-            name=name, graph=graph)
+            constant_fresnel=bool(p.get("constant_fresnel", False)), name=name, graph=graph)
 
     def _value(self, node, name: str, default: float) -> float:
         """A scalar input's value (linked inputs: their default, with a warning)."""
@@ -576,7 +577,8 @@ class MaterialExporter:
         if kind == "ShaderNodeBsdfDiffuse":
             return _params(base_color=self._color(node, "Color"), roughness=1.0, specular=0.0)
         if kind in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
-            return _params(base_color=self._color(node, "Color"), metallic=1.0,
+            # Cycles 5.0 gives the Glossy BSDF no Fresnel: its colour at every angle
+            return _params(base_color=self._color(node, "Color"), metallic=1.0, constant_fresnel=True,
                            roughness=self._value(node, "Roughness", 0.5))
         if kind == "ShaderNodeBsdfGlass":
             color = self._color(node, "Color", (1, 1, 1))
@@ -602,6 +604,9 @@ class MaterialExporter:
                 mixed["transmission_tint"] = (1 - fac) * _tint(sides[0]) + fac * _tint(sides[1])
             if any(sd.get("reflection_tint") is not None for sd in sides):
                 mixed["reflection_tint"] = (1 - fac) * _tint_r(sides[0]) + fac * _tint_r(sides[1])
+            # the metal lobe's Fresnel: the side that carries more of it decides
+            metal_w = ((1 - fac) * float(sides[0]["metallic"]), fac * float(sides[1]["metallic"]))
+            mixed["constant_fresnel"] = bool(sides[int(metal_w[1] > metal_w[0])].get("constant_fresnel", False))
             return mixed
         # with a graph, the node compiler names the shader (the graph renders the same grey; a
         # group's shaders it inlines)

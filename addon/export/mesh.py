@@ -41,6 +41,26 @@ def vertex_positions(me) -> np.ndarray:
     return co.reshape(-1, 3)
 
 
+def orco_positions(obj, vertices: np.ndarray) -> np.ndarray | None:
+    """Undeformed object-space positions (V, 3) float32 of evaluated mesh object ``obj`` whose
+    evaluated positions are ``vertices`` (V, 3): what Blender's ``CD_ORCO`` holds and Cycles'
+    Generated texture coordinates read (``scene.Mesh.orco``): the shape keys' reference key, else
+    the original mesh's positions.  None when nothing deforms the mesh, or when its modifiers
+    change the vertex count (Blender carries the orco through them; Python cannot read it: the
+    evaluated positions stand in, as before)."""
+    orig = getattr(obj, "original", None)
+    me = getattr(orig, "data", None) if orig is not None and getattr(orig, "type", "") == "MESH" else None
+    if me is None or len(me.vertices) != vertices.shape[0] or vertices.shape[0] == 0:
+        return None
+    keys = getattr(me, "shape_keys", None)
+    ref = keys.reference_key if keys is not None and keys.reference_key is not None else None
+    co = np.empty(vertices.shape[0] * 3, dtype=np.float32)
+    (ref.data if ref is not None and len(ref.data) == vertices.shape[0] else me.vertices).foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    tol = 1e-6 * (1.0 + float(np.abs(co).max(initial=0.0)))
+    return None if np.abs(co - vertices).max(initial=0.0) <= tol else co
+
+
 def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
     """Triangulated arrays of a mesh.
 

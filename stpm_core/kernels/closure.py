@@ -38,6 +38,9 @@ metallic, transmission, roughness, specular, ior.  Derived columns
 ``C_TINT_R``       the reflection tint (3 columns) of the GLASS_R lobe, as Cycles: white for a
                    Principled BSDF (its specular tint, which STPM does not have), the colour itself
                    for a Glass BSDF (``Material.reflection_tint``; None = white)
+``C_METAL_CONST``  1 where the METAL lobe's Fresnel is its colour at every angle (a Glossy BSDF:
+                   Cycles 5.0 gives it no Fresnel; ``Material.constant_fresnel``), 0 for Schlick's
+                   F0 + (1 - F0)(1 - cos)^5 with F0 = base colour (a Principled BSDF's metal)
 =================  =============================================================
 
 The last row (index M, where hit material -1 lands) is an inert black closure.
@@ -51,7 +54,8 @@ from ..numba_probe import njit
 __all__ = ["N_CLOSURE", "pack_materials", "finish_closure", "finish_closure_at", "closure_row"] + [
     "C_BASE", "C_EMIT", "C_METALLIC", "C_TRANSMISSION", "C_ROUGHNESS", "C_SPECULAR", "C_IOR", "C_ALPHA",
     "C_W_BASE", "C_W_METAL", "C_W_GLASS", "C_ROUGH_LOBE", "C_NONDELTA", "C_COAT", "C_HAS_DELTA",
-    "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED", "C_TRANSPARENT", "C_PASS", "C_TINT_T", "C_TINT_R"]
+    "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED", "C_TRANSPARENT", "C_PASS", "C_TINT_T", "C_TINT_R",
+    "C_METAL_CONST"]
 
 C_BASE = 0            # 3 columns: base colour RGB
 C_EMIT = 3            # 3 columns: emitted radiance RGB
@@ -76,7 +80,8 @@ C_TRANSPARENT = 25    # 3 columns: the tint of a transparent closure (C_PASS = 1
 C_PASS = 28           # 1 where the hit's closure is transparent: the ray passes on, tinted
 C_TINT_T = 29         # 3 columns: the GLASS_T transmission tint (Principled: sqrt(base); Glass BSDF: its colour)
 C_TINT_R = 32         # 3 columns: the GLASS_R reflection tint (Principled: white; Glass BSDF: its colour)
-N_CLOSURE = 35
+C_METAL_CONST = 35    # 1: the METAL lobe reflects its colour at every angle (Glossy BSDF); 0: Schlick (Principled)
+N_CLOSURE = 36
 
 
 @njit(cache=True, nogil=True)
@@ -139,6 +144,7 @@ def pack_materials(materials) -> np.ndarray:
         rows[i, C_SPECULAR] = m.specular
         rows[i, C_IOR] = m.ior
         rows[i, C_PROGRAM] = -1.0
+        rows[i, C_METAL_CONST] = 1.0 if getattr(m, "constant_fresnel", False) else 0.0
     rows[M, C_IOR] = 1.0
     rows[M, C_PROGRAM] = -1.0
     _finish_all(rows)

@@ -47,8 +47,8 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_pdf, bsdf_eval_plain_w, bsdf_eval_smooth,
-                   bsdf_sample_cont, denoising_features, diffuse_albedo, needs_bsdf_call)
+from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_lobes, bsdf_eval_pdf, bsdf_eval_plain_w,
+                   bsdf_eval_smooth, bsdf_sample_cont, denoising_features, diffuse_albedo, needs_bsdf_call)
 from .environment import env_radiance
 from .closure import (C_BASE, C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, C_W_BASE, closure_row)
 from .lights import light_pdf, mesh_light_pdf, sample_light_rows, seen_light, world_nee_pdf
@@ -574,7 +574,7 @@ def light_strata(samples, S, keys, jit, U):
 
 @njit(**_JIT)
 def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners, q, cdf, Le, env, T, U, EPS, TERM,
-              use_term, mis, stop_coat, contrib, so, sd, stmax, live, S):
+              use_term, mis, stop_coat, contrib, so, sd, stmax, live, S, vis):
     """Next-event estimation of one light at the hit rows ``rows`` (n,); returns the shadow-ray count.
 
     P, NG, NS, D (m, 3): hit points, geometric / shading normals and ray
@@ -598,6 +598,10 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
     ``shift_cos_in``) and, below the face on rows without a rough lobe, by :func:`band_nee_weight`
     (light densities are then computed as with mis).  S (>= n, 8): the light samples
     (``sample_light_rows``; a textured MESH light's caller reads the light points from it).
+    vis (int): the lobe kinds the light is visible to (Blender's Ray Visibility of the light):
+    bits 1 diffuse, 2 glossy (reflection lobes), 4 transmission (refraction); 7 = all.  Below 7
+    f keeps only those lobes (``bsdf_eval_lobes``; the caller passes no mis rows then: paths that
+    leave a lobe do not see such a light, so next-event estimation carries it whole).
 
     Rows k with ``mis[k]`` (uint8 bits: 1 a path may go on from them through a rough reflection, 2
     through a rough refraction, ``integrator.mis_rows``; the bit of wi's side counts: camera paths go on from them through their rough lobes,
@@ -639,8 +643,23 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
         if not needs_bsdf_call(C, cr):
             call[k] = 0
             F[k, 0], F[k, 1], F[k, 2], F[k, 3] = C[cr, C_W_BASE], C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
+            if not vis & 1:
+                F[k, 0] = 0.0                   # a bare diffuse lobe the light does not light
             continue
         call[k] = 1 if C[cr, C_ROUGH_LOBE] > 0 else 2
+        if vis != 7:
+            # -- only the lobe kinds the light is visible to (no mis: the caller passes none)
+            if C[cr, C_ROUGH_LOBE] > 0:
+                F[k, 0], F[k, 1], F[k, 2] = bsdf_eval_lobes(C, cr, E, E_avg, (-D[r, 0], -D[r, 1], -D[r, 2]),
+                                                            (S[k, 0], S[k, 1], S[k, 2]), (NS[r, 0], NS[r, 1], NS[r, 2]),
+                                                            (NG[r, 0], NG[r, 1], NG[r, 2]), vis)
+            elif vis & 1:
+                F[k, 0], F[k, 1], F[k, 2] = bsdf_eval_smooth(C, cr, (-D[r, 0], -D[r, 1], -D[r, 2]),
+                                                             (S[k, 0], S[k, 1], S[k, 2]), (NS[r, 0], NS[r, 1], NS[r, 2]),
+                                                             (NG[r, 0], NG[r, 1], NG[r, 2]))
+            else:
+                F[k, 0] = F[k, 1] = F[k, 2] = 0.0      # the smooth path's only NEE lobe is the diffuse one
+            continue
         if C[cr, C_ROUGH_LOBE] > 0:
             wo = (-D[r, 0], -D[r, 1], -D[r, 2])
             wi = (S[k, 0], S[k, 1], S[k, 2])

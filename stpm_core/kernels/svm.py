@@ -14,10 +14,14 @@ object-to-world normal matrix (inverse transpose of the instance's linear part a
 time; (1, 3, 3) identity when no node needs it).  A shader whose Normal input is linked rewrites
 NS of its hits.  Scene attributes (A, :func:`stpm_core.shading.scene_attributes`): inst_mesh (I,),
 mesh_tri0 (M,), uv_off (M, L), corner_uv (N, 3, 2) float32, corner_obj (T, 3, 3) float32 (object
-space, the mesh's first shape), gen_lo, gen_inv (M, 3) (Generated = (p_obj - gen_lo) gen_inv),
+space, the mesh's undeformed shape ``Mesh.orco`` or its shape at the frame), gen_lo, gen_inv (M, 3)
+(Generated = (p_obj - gen_lo) gen_inv),
 corner_nrm (T, 3, 3) float32 object-space corner normals (flat faces: the face normal), tan_off
 (M, L) and corner_tan (N, 3, 4) float32 per-corner tangents and bitangent signs of UV map l, col_off
-(M, Lc) and corner_col (N', 3, 4) float32 per-corner RGBA of colour layer c (-1: none).  Textures (X):
+(M, Lc) and corner_col (N', 3, 4) float32 per-corner RGBA of colour layer c (-1: none), inst_obj
+(I, 4, 4) world -> object at the frame for instances of deforming meshes (Object = inst_obj P), else 0,
+gen_tri0 (M,) and corner_gen (T', 3, 3) float32 the undeformed corners Generated reads (-1: corner_obj).
+Textures (X):
 :class:`stpm_core.textures.TexturePack` arrays.
 
 Mix Shader picks one branch per hit with probability Fac, from a hash of (seed, row): the
@@ -31,7 +35,7 @@ import numpy as np
 
 from ..numba_probe import njit
 from .closure import (C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
-                      C_TRANSMISSION, closure_row, finish_closure_at)
+                      C_TRANSMISSION, C_METAL_CONST, closure_row, finish_closure_at)
 from .sampling import JIT, JIT_INLINE
 
 from .procedural import (brick_color, brick_texture, magic_texture, noise_texture, voronoi_texture, wave_texture,
@@ -891,7 +895,8 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
     """TEXCOORD, UVMAP, GEOMETRY (at the hit, or displaced for Bump: ``#offset``), NORMAL_MAP,
     BUMP for the batch's hits rows (n,)."""
     P, NG, NS, D, inst, prim, bu, bv, NM = G
-    inst_mesh, mesh_tri0, uv_off, corner_uv, co, gen_lo, gen_inv, cn, tan_off, corner_tan, col_off, corner_col = A
+    inst_mesh, mesh_tri0, uv_off, corner_uv, co, gen_lo, gen_inv, cn, tan_off, corner_tan, col_off, corner_col, \
+        inst_obj, gen_tri0, corner_gen = A
     if op == _ATTRIBUTE:
         _attribute(prog, pc, st, n, rows, G, A)
         return
@@ -936,12 +941,30 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
                 p0 = w0 * co[t, 0, 0] + w1 * co[t, 1, 0] + w2 * co[t, 2, 0]
                 p1 = w0 * co[t, 0, 1] + w1 * co[t, 1, 1] + w2 * co[t, 2, 1]
                 p2 = w0 * co[t, 0, 2] + w1 * co[t, 1, 2] + w2 * co[t, 2, 2]
+                d0 = d1 = d2 = 0.0
                 if mode != 0:
                     _, _, d0, d1, d2, _, _, _ = _displacement(mode, r, G, A)
                     p0, p1, p2 = p0 + d0, p1 + d1, p2 + d2
+                if gs >= 0:
+                    q0, q1, q2 = p0, p1, p2
+                    if gen_tri0[mesh] >= 0:
+                        # the undeformed corners (Mesh.orco): Generated sticks to a deforming surface
+                        g = gen_tri0[mesh] + prim[r]
+                        q0 = w0 * corner_gen[g, 0, 0] + w1 * corner_gen[g, 1, 0] + w2 * corner_gen[g, 2, 0] + d0
+                        q1 = w0 * corner_gen[g, 0, 1] + w1 * corner_gen[g, 1, 1] + w2 * corner_gen[g, 2, 1] + d1
+                        q2 = w0 * corner_gen[g, 0, 2] + w1 * corner_gen[g, 1, 2] + w2 * corner_gen[g, 2, 2] + d2
+                    _put3(st, k, gs, (q0 - gen_lo[mesh, 0]) * gen_inv[mesh, 0], (q1 - gen_lo[mesh, 1]) * gen_inv[mesh, 1],
+                          (q2 - gen_lo[mesh, 2]) * gen_inv[mesh, 2])
+                j = inst[r]
+                if obs >= 0 and inst_obj[j, 3, 3] != 0.0:
+                    # a deforming mesh: Object = world -> object of the hit point at its own time
+                    p0 = inst_obj[j, 0, 0] * P[r, 0] + inst_obj[j, 0, 1] * P[r, 1] + inst_obj[j, 0, 2] * P[r, 2] \
+                        + inst_obj[j, 0, 3] + d0
+                    p1 = inst_obj[j, 1, 0] * P[r, 0] + inst_obj[j, 1, 1] * P[r, 1] + inst_obj[j, 1, 2] * P[r, 2] \
+                        + inst_obj[j, 1, 3] + d1
+                    p2 = inst_obj[j, 2, 0] * P[r, 0] + inst_obj[j, 2, 1] * P[r, 1] + inst_obj[j, 2, 2] * P[r, 2] \
+                        + inst_obj[j, 2, 3] + d2
                 _put3(st, k, obs, p0, p1, p2)
-                _put3(st, k, gs, (p0 - gen_lo[mesh, 0]) * gen_inv[mesh, 0], (p1 - gen_lo[mesh, 1]) * gen_inv[mesh, 1],
-                      (p2 - gen_lo[mesh, 2]) * gen_inv[mesh, 2])
             if ns_ >= 0:
                 # Normal: the object-space shading normal, facing the viewer (Cycles' N in object space)
                 q = mesh_tri0[inst_mesh[inst[r]]] + prim[r]
@@ -1063,7 +1086,8 @@ def _normal_map(prog, pc, st, n, rows, G, A):
     facing shading normal Nf: normalize(Nf + (N - Nf) max(s, 0)).  Then normalised, negated on
     back faces; zero -> Nf.  Without tangents (no such UV map) TANGENT gives Nf."""
     P, NG, NS, D, inst, prim, bu, bv, NM = G
-    inst_mesh, mesh_tri0, uv_off, corner_uv, co, gen_lo, gen_inv, cn, tan_off, corner_tan, col_off, corner_col = A
+    inst_mesh, mesh_tri0, uv_off, corner_uv, co, gen_lo, gen_inv, cn, tan_off, corner_tan, col_off, corner_col, \
+        inst_obj, gen_tri0, corner_gen = A
     space, layer, cs, ss, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), \
         int(prog[pc + 5])
     for k in range(n):
@@ -1270,6 +1294,8 @@ def _closure(op, prog, pc, st, k, C, r, w):
     C[r, C_TINT_T + 2] = w * b2
     C[r, C_TRANSPARENT] = C[r, C_TRANSPARENT + 1] = C[r, C_TRANSPARENT + 2] = 0.0
     C[r, C_PASS] = 0.0
+    # Cycles 5.0's Glossy BSDF has no Fresnel: its colour at every angle (Principled: Schlick)
+    C[r, C_METAL_CONST] = 1.0 if op == _BSDF_GLOSSY else 0.0
 
 
 @njit(**JIT_INLINE)            # (inlined: no call left in the closure loop)

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["Link", "Node", "ShaderGraph"]
+__all__ = ["Link", "Node", "ShaderGraph", "shader_lobes"]
 
 
 @dataclass(frozen=True)
@@ -80,3 +80,75 @@ class ShaderGraph:
         s = d.get("surface")
         return cls(nodes={str(k): Node.from_json(v) for k, v in d.get("nodes", {}).items()},
                    surface=Link(str(s[0]), str(s[1])) if s else None)
+
+
+# ----------------------------------------------------------------------------
+# Which lobes a graph can produce (what the effects plan and the caustic tracer's aiming read)
+# ----------------------------------------------------------------------------
+def _may_be_nonzero(v) -> bool:
+    """A linked input may be anything; a constant (float or colour tuple) must be non-zero."""
+    if isinstance(v, Link):
+        return True
+    if isinstance(v, (tuple, list)):
+        return any(float(x) != 0.0 for x in v[:3])
+    return float(v) != 0.0
+
+
+def _may_be(v, pred) -> bool:
+    """A linked input may be anything; a constant float must satisfy ``pred``."""
+    return True if isinstance(v, Link) else bool(pred(float(v if not isinstance(v, (tuple, list)) else v[0])))
+
+
+def shader_lobes(graph: "ShaderGraph") -> tuple[bool, bool]:
+    """(caustic, diffuse): can some hit on this graph's surface scatter through a lobe the caustic
+    tracer follows / through a diffuse lobe?
+
+    Walks the shader tree from the surface through every Mix Shader branch whose weight can be
+    non-zero (a constant Fac 0 drops ``Shader_001``, 1 drops ``Shader``; a linked Fac keeps both:
+    it may be anything per hit) and both Add Shader inputs.  Caustic lobes are the ones
+    ``photons.trace.has_delta`` counts on a material's constants: any Glass BSDF or Glossy /
+    Anisotropic BSDF (a delta at roughness 0, a glossy caustic above), a Principled BSDF whose
+    Metallic or Transmission Weight may be non-zero, or whose dielectric coat may be smooth
+    (Roughness may be 0 with Specular IOR Level non-zero).  Diffuse lobes: a Diffuse BSDF, a
+    Principled base (Metallic and Transmission Weight may be below 1), any shader the interpreter
+    renders as grey diffuse.  A BSDF whose colour is a constant black adds nothing.  Linked inputs
+    count as "may be anything", so the answer can only err towards a lobe that never shows.
+
+    Representative constants cannot answer this: a Mix Shader's blended roughness hides a smooth
+    coat, and a textured Fac whose socket value is 0 or 1 hides a whole branch.
+    """
+    caustic = diffuse = False
+    seen = set()
+    stack = [(graph.surface, 0)]
+    while stack:
+        link, depth = stack.pop()
+        node = graph.nodes.get(link.node) if isinstance(link, Link) else None
+        if node is None or depth > 64 or link.node in seen:
+            continue
+        seen.add(link.node)
+        t, ins = node.type, node.inputs
+        if t == "ShaderNodeMixShader":
+            fac = ins.get("Fac", 0.5)
+            if _may_be(fac, lambda f: f < 1.0):
+                stack.append((ins.get("Shader"), depth + 1))
+            if _may_be(fac, lambda f: f > 0.0):
+                stack.append((ins.get("Shader_001"), depth + 1))
+        elif t == "ShaderNodeAddShader":
+            stack += [(ins.get("Shader"), depth + 1), (ins.get("Shader_001"), depth + 1)]
+        elif t in ("ShaderNodeEmission", "ShaderNodeBsdfTransparent", "ShaderNodeHoldout"):
+            continue
+        elif t == "ShaderNodeBsdfDiffuse":
+            diffuse |= _may_be_nonzero(ins.get("Color", (0.8, 0.8, 0.8)))
+        elif t in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic", "ShaderNodeBsdfGlass"):
+            caustic |= _may_be_nonzero(ins.get("Color", (0.8, 0.8, 0.8) if t != "ShaderNodeBsdfGlass"
+                                               else (1.0, 1.0, 1.0)))
+        elif t == "ShaderNodeBsdfPrincipled":
+            metallic, trans = ins.get("Metallic", 0.0), ins.get("Transmission Weight", 0.0)
+            smooth = _may_be(ins.get("Roughness", 0.5), lambda r: r <= 0.0)
+            coat = _may_be_nonzero(ins.get("Specular IOR Level", 0.5))
+            base = _may_be_nonzero(ins.get("Base Color", (0.8, 0.8, 0.8)))
+            caustic |= (_may_be_nonzero(metallic) and base) or _may_be_nonzero(trans) or (smooth and coat)
+            diffuse |= (base and _may_be(metallic, lambda m: m < 1.0) and _may_be(trans, lambda w: w < 1.0))
+        else:
+            diffuse = True          # an unsupported shader renders as grey diffuse (nodes.compile)
+    return caustic, diffuse

@@ -65,11 +65,16 @@ _NO_BUDGET = 1 << 30          # diffuse_bounces=None: no diffuse bounce budget
 def has_delta(table, mat) -> np.ndarray:
     """(n,) bool: the material casts caustics: a delta lobe (clear glass, mirror metal, smooth coat:
     the closure's ``C_HAS_DELTA`` flag, ``kernels.closure``) or a rough metal or glass lobe (glossy
-    caustics: the caustic map carries L (S|G)+ D), read for material ids mat (-1: none)."""
+    caustics: the caustic map carries L (S|G)+ D), read for material ids mat (-1: none); a node
+    graph counts when some hit can pick such a lobe (``table.graph_caustic``: e.g. the glass or
+    smooth coat of a Mix Shader, which the blended constants hide)."""
     mat = np.asarray(mat, dtype=np.int64)
-    rows = table.closures[np.where(mat < 0, table.closures.shape[0] - 1, mat)]
+    row = np.where(mat < 0, table.closures.shape[0] - 1, mat)
+    rows = table.closures[row]
     glossy = (rows[:, C_ROUGH_LOBE] > 0.0) & ((rows[:, C_W_METAL] > 0.0) | (rows[:, C_W_GLASS] > 0.0))
-    return (rows[:, C_HAS_DELTA] > 0.0) | glossy
+    graph = getattr(table, "graph_caustic", None)
+    from_graph = graph[row] if graph is not None else False
+    return (rows[:, C_HAS_DELTA] > 0.0) | glossy | from_graph
 
 
 def specular_targets(scene, table) -> list[tuple[int, np.ndarray, float]]:

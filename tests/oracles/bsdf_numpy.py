@@ -102,11 +102,13 @@ _ALPHA = np.linspace(0.0, 1.0, 32)              # GGX alpha grid
 def _ggx_albedo_table_numpy() -> tuple[np.ndarray, np.ndarray]:
     """E(mu, alpha) (32, 32) = integral of f_ggx cos over wi for F = 1, and E_avg(alpha) = 2 int E mu dmu (32,).
 
-    Deterministic: a 24 x 24 stratified grid of visible-normal samples per cell,
-    E = mean of the sample weight G2 / G1(wo) over samples that stay above the surface.
+    Deterministic: a 64 x 64 graded grid of visible-normal samples per cell (u = 1 - (1 - m)^3 at
+    the midpoints m, weight 3 (1 - m)^2: the grid reaches GGX's tail as u0 -> 1), E = weighted
+    mean of the sample weight G2 / G1(wo) over samples that stay above the surface.
     """
-    K = 24
-    g = (np.arange(K) + 0.5) / K
+    K = 64
+    m = (np.arange(K) + 0.5) / K
+    g, gw = 1.0 - (1.0 - m) ** 3, 3 * (1.0 - m) ** 2
     uu = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
     mu, al = np.meshgrid(_MU, np.maximum(_ALPHA, 1e-4), indexing="ij")
     mu, al = np.repeat(mu.ravel(), K * K), np.repeat(al.ravel(), K * K)
@@ -116,7 +118,7 @@ def _ggx_albedo_table_numpy() -> tuple[np.ndarray, np.ndarray]:
     wi_z = 2.0 * np.sum(wo * h, -1) * h[:, 2] - mu
     lam_o, lam_i = _ggx_lambda(mu, al), _ggx_lambda(wi_z, al)
     w = np.where(wi_z > 0, (1.0 + lam_o) / (1.0 + lam_o + lam_i), 0.0)
-    E = np.clip(w.reshape(_MU.size, _ALPHA.size, K * K).mean(-1), 0.0, 1.0)
+    E = np.clip((w.reshape(_MU.size, _ALPHA.size, K, K) * gw[:, None] * gw[None, :]).mean(axis=(2, 3)), 0.0, 1.0)
     E_avg = 2.0 * np.mean(E * _MU[:, None], axis=0)
     return E, E_avg
 
