@@ -170,3 +170,28 @@ def test_moving_mapped_render_is_the_same_image_whatever_the_threads():
     plain.materials[1] = Material(base_color=np.array([0.8, 0.5, 0.3]), roughness=0.4)
     c = render(plain, RenderSettings(threads=1, **st)).passes["Combined"][..., :3]
     assert np.abs(c - img).max() > 0.01
+
+
+def test_image_world_sample_density_is_world_nee_pdf_bit_for_bit():
+    """An environment image without portals: the sampler's density is world_nee_pdf's (it no longer
+    calls it), from points with a normal and without one (uniform sphere part)."""
+    from stpm_core.kernels.lights import world_nee_pdf_batch
+    from portal_scenes import room_scene
+    from test_portals import _sky, _world
+    ls, li = _world(room_scene(portal=False, image=_sky()))
+    k = kernel_light(ls, li)
+    env = k[-1]
+    assert env[5].shape[0] == 0                  # no portal rows: the image sampler's branch
+    poses = light_poses(ls, li, np.zeros(1))
+    rng = np.random.default_rng(9)
+    n = 20_000
+    p = rng.uniform(-0.5, 0.5, (n, 3))
+    nrm = rng.normal(size=(n, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    nrm[: n // 4] = 0.0
+    S = np.empty((n, 8))
+    sample_pdf_batch(k[0], poses, *k[2:], p, np.zeros(n), rng.random((n, 2)), nrm, S)
+    again = np.empty(n)
+    world_nee_pdf_batch(env, poses, p, nrm, np.ascontiguousarray(S[:, :3]), again)
+    assert (S[:, 7] > 0).mean() > 0.9
+    assert np.array_equal(S[:, 7], again)

@@ -278,7 +278,9 @@ def _sample_env(img, func, marg, cond, par, M, n, u0, u1):
     """WORLD with an environment image (``kernels.environment``'s env arrays, map-to-world rotation
     M): wi from the mixture p = c p_cos + (1 - c) p_img (c = ``par[E_NEE_COS]``; p_cos cosine
     about n, or uniform on the sphere for a zero n), u0 choosing the technique and reused inside
-    it; weight L(wi) / p.  Distance inf."""
+    it; weight L(wi) / p.  Distance inf.  Returns (wi0, wi1, wi2, inf, w0, w1, w2, p): p is
+    :func:`world_nee_pdf`'s value for wi without portals (the same expression), so next-event
+    estimation reads the density without a second ``env_pdf``."""
     c = par[E_NEE_COS]
     no_n = n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0
     if u0 < c:
@@ -296,9 +298,9 @@ def _sample_env(img, func, marg, cond, par, M, n, u0, u1):
         p_a = max(wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2], 0.0) / np.pi
     pdf = c * p_a + (1.0 - c) * env_pdf(func, par, M, wi)
     if not pdf > 0.0:
-        return wi[0], wi[1], wi[2], np.inf, 0.0, 0.0, 0.0
+        return wi[0], wi[1], wi[2], np.inf, 0.0, 0.0, 0.0, pdf
     L = env_radiance(img, par, M, wi)
-    return wi[0], wi[1], wi[2], np.inf, L[0] / pdf, L[1] / pdf, L[2] / pdf
+    return wi[0], wi[1], wi[2], np.inf, L[0] / pdf, L[1] / pdf, L[2] / pdf, pdf
 
 
 @njit(**JIT)
@@ -577,8 +579,9 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
             if not one:
                 load_pose(poses, k, M)
             nk = _toward(NG, D, rows[k])
-            _put(S, k, _sample_env(img, func, marg, cond, par, M, nk, U[k, 0], U[k, 1]))
-            S[k, 7] = world_nee_pdf(func, par, portals, M, row3(P, rows[k]), nk, (S[k, 0], S[k, 1], S[k, 2]))
+            r = _sample_env(img, func, marg, cond, par, M, nk, U[k, 0], U[k, 1])
+            _put(S, k, r)
+            S[k, 7] = r[7]                      # world_nee_pdf's value (no portals on this branch)
     elif typ == T_WORLD:
         for k in range(n):
             if not one:
