@@ -43,7 +43,9 @@ def camera_to_world(camera, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     tr = camera.transform
     n = times.shape[0]
     R, pos = np.empty((n, 3, 3)), np.empty((n, 3))
-    camera_rows(tr.times, tr._T, tr._Q, tr._S, times, R, pos)
+    c = np.ascontiguousarray                 # (one compiled signature whatever the caller's arrays)
+    camera_rows(c(tr.times, np.float64), c(tr._T, np.float64), c(tr._Q, np.float64), c(tr._S, np.float64),
+                c(times), R, pos)
     return R, pos
 
 
