@@ -22,7 +22,7 @@ from .kernels.svm import shade
 from .nodes.compile import compile_graph
 from .textures import pack_textures
 
-__all__ = ["ShadingData", "shading_data", "constant_shading", "scene_attributes", "hit_geometry", "normal_matrices", "normal_keys",
+__all__ = ["ShadingData", "shading_data", "constant_shading", "scene_attributes", "hit_geometry", "normal_matrices", "normal_keys", "frame_keys",
            "surface_emission"]
 
 _I64_0 = np.zeros(0, np.int64)
@@ -47,7 +47,7 @@ class ShadingData:
     uv_layers: list = field(default_factory=list)
     texture_bytes: int = 0
     instances: list = field(default_factory=list)     # the scene's instances (normal matrices)
-    frame_keys: tuple = None           # normal_keys(instances), built on first use (uses_frames)
+    frame_keys: tuple = None           # (the transforms, normal_keys(instances)), built on first use (frame_keys)
     emitting: frozenset = frozenset()  # materials whose node program may emit (not constant black)
     transparent: frozenset = frozenset()   # materials whose node program may let rays through
     # materials whose program picks its closure per hit (Mix / Add Shader, Alpha) and may pick a
@@ -263,6 +263,17 @@ def normal_matrices(instances, inst: np.ndarray, times: np.ndarray, keys: tuple 
     return out
 
 
+def frame_keys(sd: ShadingData) -> tuple:
+    """:func:`normal_keys` of ``sd.instances``, kept in ``sd.frame_keys`` while every instance keeps
+    the same transform object (the shading data outlives a render; a transform replaced between
+    renders is seen)."""
+    trs = [ins.transform for ins in sd.instances]
+    kept = sd.frame_keys                 # (the transforms themselves: compared by identity, kept alive)
+    if kept is None or len(kept[0]) != len(trs) or any(a is not b for a, b in zip(kept[0], trs)):
+        kept = sd.frame_keys = (trs, normal_keys(sd.instances))
+    return kept[1]
+
+
 def normal_keys(instances) -> tuple:
     """What ``kernels.motion.normal_matrix_rows`` reads of ``instances``: (NM0 (n, 3, 3) each static
     instance's ``np.linalg.inv(M[:3, :3]).T``, moving (n,) int64 the moving instance's transform
@@ -302,9 +313,7 @@ def hit_geometry(hits, d: np.ndarray, rows: np.ndarray | None = None, *, sd=None
         G = (hits.position[rows], hits.ng[rows], hits.ns[rows], np.ascontiguousarray(d, np.float64),
              hits.instance[rows], hits.prim[rows], hits.u[rows], hits.v[rows])
     frames = sd is not None and sd.uses_frames
-    if frames and sd.frame_keys is None:
-        sd.frame_keys = normal_keys(sd.instances)         # once per scene's shading data
-    NM = normal_matrices(sd.instances, G[4], times, sd.frame_keys) if frames else _NM_IDENTITY
+    NM = normal_matrices(sd.instances, G[4], times, frame_keys(sd)) if frames else _NM_IDENTITY
     return G + (NM,)
 
 
@@ -325,9 +334,7 @@ def surface_emission(sd: ShadingData, mat: np.ndarray, inst: np.ndarray, prim: n
     f8 = lambda a: np.ascontiguousarray(a, np.float64)   # noqa: E731
     i4 = lambda a: np.ascontiguousarray(a, np.int32)     # noqa: E731
     inst = i4(inst)
-    if sd.uses_frames and sd.frame_keys is None:
-        sd.frame_keys = normal_keys(sd.instances)
-    NM = normal_matrices(sd.instances, inst, times, sd.frame_keys) if sd.uses_frames else _NM_IDENTITY
+    NM = normal_matrices(sd.instances, inst, times, frame_keys(sd)) if sd.uses_frames else _NM_IDENTITY
     G = (f8(P), f8(N), f8(N).copy(), f8(D), inst, i4(prim), f8(bu), f8(bv), NM)
     shade(sd, i4(mat), G if sd.uses_programs else None, int(seed), C)
     return C[:, C_EMIT:C_EMIT + 3].copy()

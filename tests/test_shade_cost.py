@@ -195,3 +195,22 @@ def test_image_world_sample_density_is_world_nee_pdf_bit_for_bit():
     world_nee_pdf_batch(env, poses, p, nrm, np.ascontiguousarray(S[:, :3]), again)
     assert (S[:, 7] > 0).mean() > 0.9
     assert np.array_equal(S[:, 7], again)
+
+
+def test_normal_matrices_follow_a_transform_replaced_between_renders():
+    """The shading data outlives a render (cached on the scene); the normal matrices it keeps are
+    rebuilt when an instance's transform is replaced."""
+    from stpm_core.shading import frame_keys, shading_data
+    scene = _mapped_scene()
+    sd = shading_data(scene)
+    assert sd.uses_frames
+    k0 = frame_keys(sd)
+    assert frame_keys(sd) is k0
+    M = translate(0.1, 0.0, 0.5) @ _rot_z(0.8) @ _scale(2.0, 1.0, 1.0)
+    scene.instances[1].transform = MotionTransform.static(M)
+    assert shading_data(scene) is sd
+    k1 = frame_keys(sd)
+    assert k1 is not k0
+    inst = np.array([1, 1], np.int32)
+    NM = normal_matrices(sd.instances, inst, np.array([0.2, 0.7]), k1)
+    assert np.array_equal(NM[0], np.linalg.inv(M[:3, :3]).T) and np.array_equal(NM[1], NM[0])
