@@ -38,11 +38,15 @@ def camera_to_world(camera, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         n = times.shape[0]
         pos0 = M0[:3, 3]
         return np.broadcast_to(R0, (n, 3, 3)), np.broadcast_to(pos0, (n, 3))
-    M = camera.transform.at(times)
-    R = M[:, :3, :3]
-    # Ignore scale: normalise each rotation column
-    R = R / np.maximum(np.linalg.norm(R, axis=1, keepdims=True), 1e-300)
-    return R, M[:, :3, 3]
+    # One pose per time, scale ignored (each rotation column normalised): kernels.motion.camera_rows
+    from .kernels.motion import camera_rows
+    tr = camera.transform
+    n = times.shape[0]
+    R, pos = np.empty((n, 3, 3)), np.empty((n, 3))
+    c = np.ascontiguousarray                 # (one compiled signature whatever the caller's arrays)
+    camera_rows(c(tr.times, np.float64), c(tr._T, np.float64), c(tr._Q, np.float64), c(tr._S, np.float64),
+                c(times), R, pos)
+    return R, pos
 
 
 def image_plane(camera, resolution) -> tuple[float, float, float, float]:

@@ -22,7 +22,7 @@ from .kernels.svm import shade
 from .nodes.compile import compile_graph
 from .textures import pack_textures
 
-__all__ = ["ShadingData", "shading_data", "constant_shading", "scene_attributes", "hit_geometry", "normal_matrices",
+__all__ = ["ShadingData", "shading_data", "constant_shading", "scene_attributes", "hit_geometry", "normal_matrices", "normal_keys", "frame_keys",
            "surface_emission"]
 
 _I64_0 = np.zeros(0, np.int64)
@@ -47,6 +47,7 @@ class ShadingData:
     uv_layers: list = field(default_factory=list)
     texture_bytes: int = 0
     instances: list = field(default_factory=list)     # the scene's instances (normal matrices)
+    frame_keys: tuple = None           # (the transforms, normal_keys(instances)), built on first use (frame_keys)
     emitting: frozenset = frozenset()  # materials whose node program may emit (not constant black)
     transparent: frozenset = frozenset()   # materials whose node program may let rays through
     # materials whose program picks its closure per hit (Mix / Add Shader, Alpha) and may pick a
@@ -276,20 +277,56 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
     return sd
 
 
-def normal_matrices(instances, inst: np.ndarray, times: np.ndarray) -> np.ndarray:
+def normal_matrices(instances, inst: np.ndarray, times: np.ndarray, keys: tuple | None = None) -> np.ndarray:
     """(m, 3, 3) object-to-world normal matrices (inverse transpose of each instance's linear part)
-    of hits on ``instances[inst]`` (inst (m,)) at normalised times (m,)."""
+    of hits on ``instances[inst]`` (inst (m,)) at normalised times (m,).
+
+    keys: :func:`normal_keys` of ``instances`` (a caller shading many batches keeps them; None:
+    built here).  One pass of ``kernels.motion.normal_matrix_rows``: a static instance's matrix
+    copied, a moving one's evaluated at the hit's time."""
+    from .kernels.motion import normal_matrix_rows
+    if keys is None:
+        keys = normal_keys(instances)
     out = np.empty((inst.shape[0], 3, 3))
-    for i in np.unique(inst):
-        rows = np.flatnonzero(inst == i)
-        tr = instances[int(i)].transform
-        if tr.is_static:
-            M = np.asarray(tr.matrices[0], np.float64)[:3, :3]
-            out[rows] = np.linalg.inv(M).T
-        else:
-            M = np.asarray(tr.at(np.asarray(times, np.float64)[rows]), np.float64)[:, :3, :3]
-            out[rows] = np.transpose(np.linalg.inv(M), (0, 2, 1))
+    normal_matrix_rows(np.ascontiguousarray(inst, np.int32), np.ascontiguousarray(times, np.float64), *keys, out)
     return out
+
+
+def frame_keys(sd: ShadingData) -> tuple:
+    """:func:`normal_keys` of ``sd.instances``, kept in ``sd.frame_keys`` while every instance keeps
+    the same transform object (the shading data outlives a render; a transform replaced between
+    renders is seen)."""
+    trs = [ins.transform for ins in sd.instances]
+    kept = sd.frame_keys                 # (the transforms themselves: compared by identity, kept alive)
+    if kept is None or len(kept[0]) != len(trs) or any(a is not b for a, b in zip(kept[0], trs)):
+        kept = sd.frame_keys = (trs, normal_keys(sd.instances))
+    return kept[1]
+
+
+def normal_keys(instances) -> tuple:
+    """What ``kernels.motion.normal_matrix_rows`` reads of ``instances``: (NM0 (n, 3, 3) each static
+    instance's ``np.linalg.inv(M[:3, :3]).T``, moving (n,) int64 the moving instance's transform
+    index or -1, then the stacked keys of the moving ones: knots (K,), T (K, 3), Q (K, 4),
+    S (K, 3, 3), first (J,), last (J,) int64)."""
+    n = len(instances)
+    NM0 = np.zeros((max(n, 1), 3, 3))
+    moving = np.full(max(n, 1), -1, np.int64)
+    knots, T, Q, S, first, last = [np.zeros(0)], [np.zeros((0, 3))], [np.zeros((0, 4))], [np.zeros((0, 3, 3))], [], []
+    at = 0
+    for i, ins in enumerate(instances):
+        tr = ins.transform
+        if tr.is_static:
+            NM0[i] = np.linalg.inv(np.asarray(tr.matrices[0], np.float64)[:3, :3]).T
+            continue
+        moving[i] = len(first)
+        K = tr.times.shape[0]
+        knots.append(tr.times), T.append(tr._T), Q.append(tr._Q), S.append(tr._S)
+        first.append(at), last.append(at + K - 1)
+        at += K
+    c = np.ascontiguousarray
+    return (c(NM0), moving, c(np.concatenate(knots), np.float64), c(np.concatenate(T), np.float64),
+            c(np.concatenate(Q), np.float64), c(np.concatenate(S), np.float64),
+            np.asarray(first, np.int64), np.asarray(last, np.int64))
 
 
 def hit_geometry(hits, d: np.ndarray, rows: np.ndarray | None = None, *, sd=None, times=None) -> tuple:
@@ -305,7 +342,7 @@ def hit_geometry(hits, d: np.ndarray, rows: np.ndarray | None = None, *, sd=None
         G = (hits.position[rows], hits.ng[rows], hits.ns[rows], np.ascontiguousarray(d, np.float64),
              hits.instance[rows], hits.prim[rows], hits.u[rows], hits.v[rows])
     frames = sd is not None and sd.uses_frames
-    NM = normal_matrices(sd.instances, G[4], times) if frames else _NM_IDENTITY
+    NM = normal_matrices(sd.instances, G[4], times, frame_keys(sd)) if frames else _NM_IDENTITY
     return G + (NM,)
 
 
@@ -326,7 +363,7 @@ def surface_emission(sd: ShadingData, mat: np.ndarray, inst: np.ndarray, prim: n
     f8 = lambda a: np.ascontiguousarray(a, np.float64)   # noqa: E731
     i4 = lambda a: np.ascontiguousarray(a, np.int32)     # noqa: E731
     inst = i4(inst)
-    NM = normal_matrices(sd.instances, inst, times) if sd.uses_frames else _NM_IDENTITY
+    NM = normal_matrices(sd.instances, inst, times, frame_keys(sd)) if sd.uses_frames else _NM_IDENTITY
     G = (f8(P), f8(N), f8(N).copy(), f8(D), inst, i4(prim), f8(bu), f8(bv), NM)
     shade(sd, i4(mat), G if sd.uses_programs else None, int(seed), C)
     return C[:, C_EMIT:C_EMIT + 3].copy()

@@ -97,7 +97,7 @@ from .closure import (C_ALPHA, C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_COAT, C_I
                       C_W_BASE, C_W_GLASS, C_W_METAL, C_METAL_CONST, closure_row)
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
-           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_lobes", "bsdf_eval_smooth", "bsdf_eval_plain", "bsdf_eval_plain_w", "needs_bsdf_call", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_sample_cont", "bsdf_eval_cont", "diffuse_albedo", "fresnel_dielectric",
+           "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_lobes", "bsdf_eval_smooth", "bsdf_eval_plain", "bsdf_eval_plain_w", "needs_bsdf_call", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_sample_cont", "bsdf_eval_cont", "bsdf_eval_split", "diffuse_albedo", "fresnel_dielectric",
            "fresnel_dielectric_fss", "coat_albedo", "glass_albedo", "glass_albedo_avg", "build_glass_table",
            "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch",
            "denoising_features", "DENOISE_ALPHA"]
@@ -733,14 +733,14 @@ def bump_shadowing(C, cr, wi, nsf, ngf):
 
 
 @njit(**_JIT)
-def _eval_pdf_hit(C, cr, E, hit, wo, wi):
-    """(f0, f1, f2, pdf) of the non-delta lobes at wi for the hit of :func:`_hit`."""
+def _diffuse_part(C, cr, hit, wi):
+    """(f0, f1, f2, pdf) of the DIFFUSE lobe at wi for the hit of :func:`_hit`: base / pi under the
+    coat's Fresnel at wo, wherever wi is above the shading normal (not the face:
+    :func:`diffuse_side`), and its share of the mixture density."""
     ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
-    w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
+    w_base = C[cr, C_W_BASE]
     b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
     cos_i = dot(wi, ns)
-    # -- DIFFUSE: base / pi under the coat's Fresnel at wo, wherever wi is above the shading
-    #    normal (not the face: :func:`diffuse_side`)
     f0 = f1 = f2 = pdf = 0.0
     if cos_i > 0:
         d = w_base * (1.0 - F_coat) * bump_shadowing(C, cr, wi, ns, ng)
@@ -748,6 +748,13 @@ def _eval_pdf_hit(C, cr, E, hit, wo, wi):
         f1 = d * b1 / _PI
         f2 = d * b2 / _PI
         pdf = p_lobe[DIFFUSE] * cos_i / _PI
+    return f0, f1, f2, pdf
+
+
+@njit(**_JIT)
+def _eval_pdf_hit(C, cr, E, hit, wo, wi):
+    """(f0, f1, f2, pdf) of the non-delta lobes at wi for the hit of :func:`_hit`."""
+    f0, f1, f2, pdf = _diffuse_part(C, cr, hit, wi)
     return _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, 1.0)
 
 
@@ -1213,6 +1220,25 @@ def bsdf_eval_cont(C, cr, E, E_avg, wo, wi, ns, ng, stop_coat):
     if not (f0 > 0.0 or f1 > 0.0 or f2 > 0.0):
         return 0.0, 0.0, 0.0, 0.0
     return f0, f1, f2, _eval_pdf_hit(C, cr, E, hit, wo, wi)[3]
+
+
+@njit(**_JIT)
+def bsdf_eval_split(C, cr, E, E_avg, wo, wi, ns, ng, stop_coat):
+    """(f0, f1, f2, c0, c1, c2, p_c): :func:`bsdf_eval_pdf`'s f and :func:`bsdf_eval_cont`'s (c, p_c)
+    from one :func:`_hit` (next-event estimation weighed against the continuation,
+    ``paths.nee_light``).  The same values bit for bit as the two calls: f = f_diffuse + g, g the
+    other rough lobes' sum, which without stop_coat is c itself (``_glossy_add`` adds g to what it is
+    given); p_c the mixture density (0 where c is 0)."""
+    hit = _hit(C, cr, E, E_avg, wo, ns, ng)
+    d0, d1, d2, pdf_d = _diffuse_part(C, cr, hit, wi)
+    g0, g1, g2, pdf = _glossy_add(C, cr, E, hit, wo, wi, 0.0, 0.0, 0.0, pdf_d, 1.0)
+    f0, f1, f2 = d0 + g0, d1 + g1, d2 + g2
+    c0, c1, c2 = g0, g1, g2
+    if stop_coat:
+        c0, c1, c2, _ = _glossy_add(C, cr, E, hit, wo, wi, 0.0, 0.0, 0.0, 0.0, 0.0)
+    if not (c0 > 0.0 or c1 > 0.0 or c2 > 0.0):
+        return f0, f1, f2, 0.0, 0.0, 0.0, 0.0
+    return f0, f1, f2, c0, c1, c2, pdf
 
 
 # ----------------------------------------------------------------------------

@@ -194,6 +194,11 @@ def _sample_area(prm, M, p, u0, u1):
     in S (:func:`spherical_rect_sample`), weight L S where p is in front, else 0.  Every other
     row (DISK / ELLIPSE, sheared or tiny rectangles): a uniform point of the shape, weight
     L cos_l A / t^2 with cos_l = max(0, -wi . n_emit).
+
+    Returns (wi0, wi1, wi2, dist, w0, w1, w2, pdf): pdf the solid-angle density of wi, the value
+    :func:`light_pdf` gives for it (1 / S, or t^2 / (cos_l A) with t the distance along wi to the
+    light's plane; inf where wi cannot reach the front), from the same set-up: next-event
+    estimation with multiple importance sampling reads it without a second solid angle.
     """
     c, ex, ey, A, n_emit, disk = area_shape(prm, M)
     k = prm[P_POWER] / (np.pi * max(A, 1e-300))
@@ -202,6 +207,7 @@ def _sample_area(prm, M, p, u0, u1):
     wi = (0.0, 0.0, 1.0)
     dist = 0.0
     g = 0.0
+    pdf = np.inf
     if not disk:
         exx = edot(ex, ex)
         exy = edot(ex, ey)
@@ -211,12 +217,20 @@ def _sample_area(prm, M, p, u0, u1):
             if S > 1e-7:
                 wi, dist = normalize(sub(qs, p))
                 g = S if -dot(wi, n_emit) > 0.0 else 0.0
+                pdf = 1.0 / S
                 done = True
     if not done:
         wi, dist = normalize(sub(area_point(c, ex, ey, disk, u0, u1), p))
         cos_l = max(-dot(wi, n_emit), 0.0)
         g = cos_l * A / max(dist * dist, 1e-300)
-    return wi[0], wi[1], wi[2], dist, L0 * g, L1 * g, L2 * g
+        # light_pdf's expression: t along wi to the plane (cos_l unclamped, as there)
+        cos_p = -dot(wi, n_emit)
+        if not cos_p > 0.0 or not A > 0.0:
+            pdf = np.inf
+        else:
+            t = dot(sub(c, p), n_emit) / -cos_p
+            pdf = t * t / (cos_p * A)
+    return wi[0], wi[1], wi[2], dist, L0 * g, L1 * g, L2 * g, pdf
 
 
 @njit(**JIT)
@@ -264,7 +278,9 @@ def _sample_env(img, func, marg, cond, par, M, n, u0, u1):
     """WORLD with an environment image (``kernels.environment``'s env arrays, map-to-world rotation
     M): wi from the mixture p = c p_cos + (1 - c) p_img (c = ``par[E_NEE_COS]``; p_cos cosine
     about n, or uniform on the sphere for a zero n), u0 choosing the technique and reused inside
-    it; weight L(wi) / p.  Distance inf."""
+    it; weight L(wi) / p.  Distance inf.  Returns (wi0, wi1, wi2, inf, w0, w1, w2, p): p is
+    :func:`world_nee_pdf`'s value for wi without portals (the same expression), so next-event
+    estimation reads the density without a second ``env_pdf``."""
     c = par[E_NEE_COS]
     no_n = n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0
     if u0 < c:
@@ -282,9 +298,9 @@ def _sample_env(img, func, marg, cond, par, M, n, u0, u1):
         p_a = max(wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2], 0.0) / np.pi
     pdf = c * p_a + (1.0 - c) * env_pdf(func, par, M, wi)
     if not pdf > 0.0:
-        return wi[0], wi[1], wi[2], np.inf, 0.0, 0.0, 0.0
+        return wi[0], wi[1], wi[2], np.inf, 0.0, 0.0, 0.0, pdf
     L = env_radiance(img, par, M, wi)
-    return wi[0], wi[1], wi[2], np.inf, L[0] / pdf, L[1] / pdf, L[2] / pdf
+    return wi[0], wi[1], wi[2], np.inf, L[0] / pdf, L[1] / pdf, L[2] / pdf, pdf
 
 
 @njit(**JIT)
@@ -526,9 +542,9 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
-            p = row3(P, rows[k])
-            _put(S, k, _sample_area(prm, M, p, U[k, 0], U[k, 1]))
-            S[k, 7] = light_pdf(prm, M, p, (S[k, 0], S[k, 1], S[k, 2])) if want_pdf else np.inf
+            r = _sample_area(prm, M, row3(P, rows[k]), U[k, 0], U[k, 1])      # with light_pdf's density
+            _put(S, k, r)
+            S[k, 7] = r[7] if want_pdf else np.inf
     elif typ == T_SUN:
         # a sun of angle > 0 is seen by rays that escape within its cone (seen_light): density
         # 1 / Omega for multiple importance sampling; a sun of angle 0 is a direction only (inf)
@@ -563,8 +579,9 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
             if not one:
                 load_pose(poses, k, M)
             nk = _toward(NG, D, rows[k])
-            _put(S, k, _sample_env(img, func, marg, cond, par, M, nk, U[k, 0], U[k, 1]))
-            S[k, 7] = world_nee_pdf(func, par, portals, M, row3(P, rows[k]), nk, (S[k, 0], S[k, 1], S[k, 2]))
+            r = _sample_env(img, func, marg, cond, par, M, nk, U[k, 0], U[k, 1])
+            _put(S, k, r)
+            S[k, 7] = r[7]                      # world_nee_pdf's value (no portals on this branch)
     elif typ == T_WORLD:
         for k in range(n):
             if not one:

@@ -47,7 +47,7 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_cont, bsdf_eval_lobes, bsdf_eval_pdf, bsdf_eval_plain_w,
+from .bsdf import (PATH_GLOSSY, PATH_STOP, bsdf_eval_lobes, bsdf_eval_pdf, bsdf_eval_split, bsdf_eval_plain_w,
                    bsdf_eval_smooth, bsdf_sample_cont, denoising_features, diffuse_albedo, needs_bsdf_call)
 from .environment import env_radiance
 from .closure import (C_BASE, C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROUGH_LOBE, C_W_BASE, closure_row)
@@ -608,8 +608,9 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
     :func:`specular_step`, and pick up the light where they reach it: the world where they escape,
     an AREA light, a POINT / SPOT sphere or a SUN's cone seen along the ray, :func:`seen_lights_add`, an
     emitting triangle of a MESH light they hit, :func:`mesh_emission_mis`): the part f_c of f those
-    lobes carry, sampled with density p_c (``bsdf_eval_cont``: every non-delta lobe's, one-sample
-    multiple importance sampling; stop_coat as the continuation) is weighed
+    lobes carry, sampled with density p_c (``bsdf_eval_cont``, here with f from one set-up of the hit:
+    ``bsdf_eval_split``; every non-delta lobe's, one-sample multiple importance sampling; stop_coat
+    as the continuation) is weighed
     by the power heuristic p_l^2 / (p_l^2 + p_c^2) (:func:`mis_weight`), p_l = S[k, 7] the light's own density
     (``sample_light_rows`` with want_pdf, set when any row has mis), and the paths that reach
     the light by p_c / (p_l + p_c) (docs/rendering.md, "Multiple importance sampling").  Delta
@@ -665,12 +666,14 @@ def nee_light(rows, P, NG, NS, D, C, crow, E, E_avg, prm, poses, steps, corners,
             wi = (S[k, 0], S[k, 1], S[k, 2])
             ns = (NS[r, 0], NS[r, 1], NS[r, 2])
             g = (NG[r, 0], NG[r, 1], NG[r, 2])
-            f0, f1, f2, _ = bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, g)
             if mis[k] != 0 and S[k, 7] < np.inf and mis[k] & (1 if (wi[0] * g[0] + wi[1] * g[1] + wi[2] * g[2])
                                                              * (wo[0] * g[0] + wo[1] * g[1] + wo[2] * g[2]) > 0.0 else 2):
-                c0, c1, c2, p_c = bsdf_eval_cont(C, cr, E, E_avg, wo, wi, ns, g, stop_coat)
+                # f and the continuation's part of it from one set-up of the hit (bsdf_eval_split)
+                f0, f1, f2, c0, c1, c2, p_c = bsdf_eval_split(C, cr, E, E_avg, wo, wi, ns, g, stop_coat)
                 x = mis_weight(p_c, S[k, 7])
                 f0, f1, f2 = f0 - c0 * x, f1 - c1 * x, f2 - c2 * x
+            else:
+                f0, f1, f2, _ = bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, g)
             F[k, 0], F[k, 1], F[k, 2] = f0, f1, f2
         else:
             F[k, 0], F[k, 1], F[k, 2] = bsdf_eval_smooth(C, cr, (-D[r, 0], -D[r, 1], -D[r, 2]),
