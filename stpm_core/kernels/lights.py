@@ -477,7 +477,16 @@ def mesh_light_pdf(M, steps, corners, q, j, t, p, x):
 # ----------------------------------------------------------------------------
 @njit(**JIT)
 def _put(S, k, r):
+    """S[k, :7] := r, a sampler's 7-tuple (wi, dist, w)."""
     for j in range(7):
+        S[k, j] = r[j]
+
+
+@njit(**JIT)
+def _put8(S, k, r):
+    """S[k, :8] := r, a sampler's 8-tuple (wi, dist, w, density): its own function, so that neither
+    compiles a second signature for the other's tuple length."""
+    for j in range(8):
         S[k, j] = r[j]
 
 
@@ -542,9 +551,9 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
         for k in range(n):
             if not one:
                 load_pose(poses, k, M)
-            r = _sample_area(prm, M, row3(P, rows[k]), U[k, 0], U[k, 1])      # with light_pdf's density
-            _put(S, k, r)
-            S[k, 7] = r[7] if want_pdf else np.inf
+            _put8(S, k, _sample_area(prm, M, row3(P, rows[k]), U[k, 0], U[k, 1]))   # with light_pdf's density
+            if not want_pdf:
+                S[k, 7] = np.inf
     elif typ == T_SUN:
         # a sun of angle > 0 is seen by rays that escape within its cone (seen_light): density
         # 1 / Omega for multiple importance sampling; a sun of angle 0 is a direction only (inf)
@@ -579,9 +588,7 @@ def sample_light_rows(prm, poses, steps, corners, q, cdf, Le, env, rows, P, NG, 
             if not one:
                 load_pose(poses, k, M)
             nk = _toward(NG, D, rows[k])
-            r = _sample_env(img, func, marg, cond, par, M, nk, U[k, 0], U[k, 1])
-            _put(S, k, r)
-            S[k, 7] = r[7]                      # world_nee_pdf's value (no portals on this branch)
+            _put8(S, k, _sample_env(img, func, marg, cond, par, M, nk, U[k, 0], U[k, 1]))  # world_nee_pdf's density (no portals here)
     elif typ == T_WORLD:
         for k in range(n):
             if not one:

@@ -92,7 +92,7 @@ def transform_rows(knots, T, Q, S, times, out):
     T (K, 3), Q (K, 4), S (K, 3, 3))."""
     l = knots.shape[0] - 1
     for k in range(times.shape[0]):
-        tx, ty, tz = linear_at(knots, T, Q, S, 0, l, times[k], out[k])
+        tx, ty, tz = linear_at(knots, T, Q, S, l - l, l, times[k], out[k])   # (key 0 as int64: a literal 0 compiles a 2nd signature)
         out[k, 0, 3], out[k, 1, 3], out[k, 2, 3] = tx, ty, tz
         out[k, 3, 0], out[k, 3, 1], out[k, 3, 2], out[k, 3, 3] = 0.0, 0.0, 0.0, 1.0
 
@@ -103,7 +103,7 @@ def camera_rows(knots, T, Q, S, times, R, pos):
     rotation part with unit columns (scale ignored; a column of length 0 is kept 0), pos (n, 3)."""
     l = knots.shape[0] - 1
     for k in range(times.shape[0]):
-        tx, ty, tz = linear_at(knots, T, Q, S, 0, l, times[k], R[k])
+        tx, ty, tz = linear_at(knots, T, Q, S, l - l, l, times[k], R[k])
         pos[k, 0], pos[k, 1], pos[k, 2] = tx, ty, tz
         for j in range(3):
             s = max(math.sqrt(R[k, 0, j] * R[k, 0, j] + R[k, 1, j] * R[k, 1, j] + R[k, 2, j] * R[k, 2, j]), 1e-300)
