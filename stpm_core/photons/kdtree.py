@@ -133,15 +133,15 @@ if AVAILABLE:
         return np.float64(P[j, d])
 
     @_jit
-    def _dist2(P, j, q0, q1, q2, q3, D, s):
-        """Squared distance in float64 from row j of P (N, 4) float32 to the query (q0, q1, q2, q3):
-        over x, y, z, and for D = 4 also the scaled time s * t."""
-        e0 = np.float64(P[j, 0]) - q0
-        e1 = np.float64(P[j, 1]) - q1
-        e2 = np.float64(P[j, 2]) - q2
+    def _dist2(C, j, q0, q1, q2, q3, D, s):
+        """Squared distance in float64 from photon j of C (4, N) float32 (x, y, z, t rows) to the query
+        (q0, q1, q2, q3): over x, y, z, and for D = 4 also the scaled time s * t."""
+        e0 = np.float64(C[0, j]) - q0
+        e1 = np.float64(C[1, j]) - q1
+        e2 = np.float64(C[2, j]) - q2
         d2 = e0 * e0 + e1 * e1 + e2 * e2
         if D == 4:
-            e3 = s * np.float64(P[j, 3]) - q3
+            e3 = s * np.float64(C[3, j]) - q3
             d2 += e3 * e3
         return d2
     @_jit
@@ -263,16 +263,26 @@ if AVAILABLE:
     @_jit
     def _box_dist2(box, row, q0, q1, q2, q3, D):
         """Squared distance (float64) from the query to the bounding box in row ``row`` of box."""
-        acc = 0.0
-        for d in range(D):
-            v = q0 if d == 0 else (q1 if d == 1 else (q2 if d == 2 else q3))
-            lo = np.float64(box[row, d])
-            hi = np.float64(box[row, 4 + d])
-            if v < lo:
-                acc += (lo - v) * (lo - v)
-            elif v > hi:
-                acc += (v - hi) * (v - hi)
+        # per axis the gap e = max(lo - v, v - hi, 0), branch-free (a NaN coordinate adds 0); the
+        # squares are summed in axis order
+        e = _gap(np.float64(box[row, 0]), np.float64(box[row, 4]), q0)
+        acc = e * e
+        e = _gap(np.float64(box[row, 1]), np.float64(box[row, 5]), q1)
+        acc += e * e
+        e = _gap(np.float64(box[row, 2]), np.float64(box[row, 6]), q2)
+        acc += e * e
+        if D == 4:
+            e = _gap(np.float64(box[row, 3]), np.float64(box[row, 7]), q3)
+            acc += e * e
         return acc
+
+    @_jit
+    def _gap(lo, hi, v):
+        """Distance (float64, >= 0) from v to the interval [lo, hi]; 0 inside it or for a NaN v."""
+        a = lo - v
+        b = v - hi
+        e = a if a > b else b
+        return e if e > 0.0 else 0.0
 
     @_jit
     def _select(key, lo, hi, nth):
@@ -381,7 +391,7 @@ if AVAILABLE:
             b += 1
 
     @_jit
-    def _knn(P, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti):
+    def _knn(C, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2):
         """Best-first kq-nearest search.  On return bd[:kq] / bi[:kq] hold the squared distances and
         rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther), and bx[:kq] their time
         distances |t_j - q[3]| (shutter units; TEMPORAL's, meaningless for KD4D's s t).
@@ -398,7 +408,7 @@ if AVAILABLE:
         than kq photons were found below bound0 (the caller then searches again with inf).
         """
         cap = bd.shape[0]
-        N = P.shape[0]
+        N = C.shape[1]
         cnt = 0
         bound = bound0
         first_leaf = n_leaves - 1
@@ -407,34 +417,11 @@ if AVAILABLE:
         qdist[0] = 0.0
         nq = 1
         while nq > 0:
-            node, dist = qnode[0], qdist[0]
-            if dist >= bound:
-                # the buffer's bound may be loose: cut it to the exact kq-th first
-                if cnt > kq:
-                    _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
-                    cnt = kq
-                    bound = bd[kq - 1]
-                if dist >= bound:
-                    break
-            # pop the nearest queued node
+            # pop the last node pushed (depth first; with a warm-start bound, which the search
+            # rarely tightens, every order visits the same leaves: those within the bound)
             nq -= 1
-            if nq > 0:
-                last_n, last_d = qnode[nq], qdist[nq]
-                pos = 0
-                while True:
-                    c = 2 * pos + 1
-                    if c >= nq:
-                        break
-                    if c + 1 < nq and qdist[c + 1] < qdist[c]:
-                        c += 1
-                    if qdist[c] >= last_d:
-                        break
-                    qnode[pos] = qnode[c]
-                    qdist[pos] = qdist[c]
-                    pos = c
-                qnode[pos] = last_n
-                qdist[pos] = last_d
-            # descend to a leaf through the nearer children, queueing the farther ones
+            node, dist = qnode[nq], qdist[nq]
+            # descend to a leaf through the nearer children, pushing the farther ones
             while node < first_leaf and dist < bound:
                 cl = 2 * node + 1
                 dl = _box_dist2(box, cl + 1, q0, q1, q2, q3, D)
@@ -444,32 +431,42 @@ if AVAILABLE:
                 else:
                     node, dist, far, dfar = cl + 1, dr, cl, dl
                 if dfar < bound:
-                    pos = nq
+                    qnode[nq] = far
+                    qdist[nq] = dfar
                     nq += 1
-                    while pos > 0:
-                        parent = (pos - 1) // 2
-                        if qdist[parent] <= dfar:
-                            break
-                        qnode[pos] = qnode[parent]
-                        qdist[pos] = qdist[parent]
-                        pos = parent
-                    qnode[pos] = far
-                    qdist[pos] = dfar
             if node < first_leaf or dist >= bound:
                 continue
             # scan the leaf's contiguous rows
+            # (first every squared distance, a branch-free loop over the leaf's coordinate rows that
+            # the compiler vectorises; then the appends)
             leaf = node - first_leaf
-            for j in range((leaf * N) // n_leaves, ((leaf + 1) * N) // n_leaves):
-                d2 = _dist2(P, j, q0, q1, q2, q3, D, s)
-                if d2 < bound:
-                    bd[cnt] = d2
-                    bi[cnt] = j
-                    bx[cnt] = abs(np.float64(P[j, 3]) - q3)
-                    cnt += 1
-                    if cnt == cap:
-                        _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
-                        cnt = kq
-                        bound = bd[kq - 1]
+            j0 = (leaf * N) // n_leaves
+            nl = ((leaf + 1) * N) // n_leaves - j0
+            if D == 4:
+                for a in range(nl):
+                    e0 = np.float64(C[0, j0 + a]) - q0
+                    e1 = np.float64(C[1, j0 + a]) - q1
+                    e2 = np.float64(C[2, j0 + a]) - q2
+                    e3 = s * np.float64(C[3, j0 + a]) - q3
+                    leaf_d2[a] = (e0 * e0 + e1 * e1 + e2 * e2) + e3 * e3
+            else:
+                for a in range(nl):
+                    e0 = np.float64(C[0, j0 + a]) - q0
+                    e1 = np.float64(C[1, j0 + a]) - q1
+                    e2 = np.float64(C[2, j0 + a]) - q2
+                    leaf_d2[a] = e0 * e0 + e1 * e1 + e2 * e2
+            if cnt + nl > cap:
+                _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
+                cnt = kq
+                bound = bd[kq - 1]
+            for a in range(nl):
+                # (every photon written, the count advanced only for those inside the bound: no
+                # branch to mispredict where about half the leaf's photons are kept)
+                d2 = leaf_d2[a]
+                bd[cnt] = d2
+                bi[cnt] = j0 + a
+                bx[cnt] = abs(np.float64(C[3, j0 + a]) - q3)
+                cnt += 1 if d2 < bound else 0
             if bound == np.inf and cnt >= kq:
                 _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
                 cnt = kq
@@ -491,7 +488,7 @@ if AVAILABLE:
         return True
 
     @_jit
-    def _lookup(P, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, out_phi, out_r, out_tau):
+    def _lookup(P, C, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, out_phi, out_r, out_tau):
         """Fused search + reduction for queries q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32.
 
         mode STANDARD / KD4D: kq = k nearest (3D / 4D); TEMPORAL: kq = m candidates, then the k
@@ -500,13 +497,15 @@ if AVAILABLE:
         photon (m) and out_tau (n,) TEMPORAL's window half-width (shutter units).
         """
         D = 4 if mode == MODE_KD4D else 3
-        bd = np.empty(2 * kq)
-        bi = np.empty(2 * kq, np.int64)
-        bx = np.empty(2 * kq)
-        sub = np.empty(2 * kq)
-        ti = np.empty(2 * kq, np.int64)
-        bucket = np.empty(2 * kq, np.int64)
+        nbuf = 2 * kq + LEAF_SIZE + 1
+        bd = np.empty(nbuf)
+        bi = np.empty(nbuf, np.int64)
+        bx = np.empty(nbuf)
+        sub = np.empty(nbuf)
+        ti = np.empty(nbuf, np.int64)
+        bucket = np.empty(nbuf, np.int64)
         hist = np.empty(kq, np.int64)
+        leaf_d2 = np.empty(LEAF_SIZE + 1)
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
@@ -521,11 +520,11 @@ if AVAILABLE:
                 far2 = 0.0
                 for a in range(kq):
                     j = bi[a]
-                    d2 = _dist2(P, j, q0, q1, q2, q3, D, s)
+                    d2 = _dist2(C, j, q0, q1, q2, q3, D, s)
                     far2 = max(far2, d2)
                 bound0 = far2 * (1.0 + 1e-9)           # (slack: the farthest itself strictly inside)
-            if not _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti):
-                _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, np.inf, hist, bucket, sub, ti)
+            if not _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2):
+                _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, np.inf, hist, bucket, sub, ti, leaf_d2)
             # slot kq - 1 = the kq-th neighbour (fixes the radius); slots 0 .. kq - 2 are inner
             r = np.sqrt(bd[kq - 1])
             out_r[i] = r
@@ -549,19 +548,33 @@ if AVAILABLE:
             p0 = 0.0
             p1 = 0.0
             p2 = 0.0
-            for a in range(n_sel):
-                if mode == MODE_TEMPORAL:
+            if ties > 0:
+                # some of the k - 1 at exactly tau: the first ``ties`` of them in buffer order
+                for a in range(n_sel):
                     if bx[a] > tau:
                         continue
                     if bx[a] == tau:
                         if ties <= 0:
                             continue
                         ties -= 1
-                j = bi[a]
-                if P[j, 4] * n0 + P[j, 5] * n1 + P[j, 6] * n2 > 0.0:
-                    w = 1.0
+                    j = bi[a]
+                    if P[j, 4] * n0 + P[j, 5] * n1 + P[j, 6] * n2 > 0.0:
+                        w = 1.0
+                        if cone:
+                            w = 1.0 - np.sqrt(bd[a]) * inv_r
+                        p0 += w * P[j, 8]
+                        p1 += w * P[j, 9]
+                        p2 += w * P[j, 10]
+            else:
+                # branch-free: a photon out of the window or on the far side adds w = 0 (exactly
+                # nothing; kept photons add what they did with branches)
+                for a in range(n_sel):
+                    j = bi[a]
+                    w = 1.0 if bx[a] < tau else 0.0
+                    if not (P[j, 4] * n0 + P[j, 5] * n1 + P[j, 6] * n2 > 0.0):
+                        w = 0.0
                     if cone:
-                        w = 1.0 - np.sqrt(bd[a]) * inv_r
+                        w *= 1.0 - np.sqrt(bd[a]) * inv_r
                     p0 += w * P[j, 8]
                     p1 += w * P[j, 9]
                     p2 += w * P[j, 10]
@@ -570,20 +583,22 @@ if AVAILABLE:
             out_phi[i, 2] = p2
 
     @_jit
-    def _knn_radius(P, box, n_leaves, q, D, s, kq, cap2, out_r):
+    def _knn_radius(C, box, n_leaves, q, D, s, kq, cap2, out_r):
         """Distance (n,) to the kq-th nearest photon of each query q (n, 4), at most sqrt(cap2).
 
         The search is bounded by cap2 (squared, m^2): where fewer than kq photons lie nearer, the
         answer is the cap, found without visiting anything beyond it.  Warm-started from the
         previous radius: the previous query's kq nearest lie within r_prev + |q - q_prev|.
         """
-        bd = np.empty(2 * kq)
-        bi = np.empty(2 * kq, np.int64)
-        bx = np.empty(2 * kq)
-        sub = np.empty(2 * kq)
-        ti = np.empty(2 * kq, np.int64)
-        bucket = np.empty(2 * kq, np.int64)
+        nbuf = 2 * kq + LEAF_SIZE + 1
+        bd = np.empty(nbuf)
+        bi = np.empty(nbuf, np.int64)
+        bx = np.empty(nbuf)
+        sub = np.empty(nbuf)
+        ti = np.empty(nbuf, np.int64)
+        bucket = np.empty(nbuf, np.int64)
         hist = np.empty(kq, np.int64)
+        leaf_d2 = np.empty(LEAF_SIZE + 1)
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
@@ -595,9 +610,9 @@ if AVAILABLE:
                 e0, e1, e2, e3 = qq[0] - q[i - 1, 0], qq[1] - q[i - 1, 1], qq[2] - q[i - 1, 2], qq[3] - q[i - 1, 3]
                 dp = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0))
                 bound0 = min(cap2, ((r_prev + dp) * (1.0 + 1e-9)) ** 2)
-            found = _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti)
+            found = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2)
             if not found and bound0 < cap2:
-                found = _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, cap2, hist, bucket, sub, ti)
+                found = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, cap2, hist, bucket, sub, ti, leaf_d2)
             if found:
                 r = np.sqrt(bd[kq - 1])
                 out_r[i] = r
@@ -733,6 +748,9 @@ class FlatTree:
         self.pts = np.empty((N, 12), dtype=np.float32)
         self.pts[:, :4] = xyzt
         self.pts[:, 4:12] = packed[perm]
+        # the coordinates again as rows (4, N) float32 (x, y, z, t): a leaf's are 4 contiguous runs,
+        # read by the search's vectorised distance loop
+        self.xyzt = np.ascontiguousarray(xyzt.T)
 
     def lookup(self, mode: int, q: np.ndarray, ns: np.ndarray, kq: int, k: int, cone: bool, cone_k: float,
                workers: int):
@@ -754,7 +772,7 @@ class FlatTree:
         r = np.zeros(n)
         tau = np.zeros(n)
         def part(a, b):
-            _lookup(self.pts, self.box, self.n_leaves, qs[a:b], nss[a:b], mode, kq, k, self.s, cone, cone_k,
+            _lookup(self.pts, self.xyzt, self.box, self.n_leaves, qs[a:b], nss[a:b], mode, kq, k, self.s, cone, cone_k,
                     phi[a:b], r[a:b], tau[a:b])
 
         run_chunks(part, n, workers)
@@ -782,7 +800,7 @@ class FlatTree:
         cap2 = float(cap) ** 2 if np.isfinite(cap) else np.inf
 
         def part(a, b):
-            _knn_radius(self.pts, self.box, self.n_leaves, qs[a:b], D, self.s, int(kq), cap2, r[a:b])
+            _knn_radius(self.xyzt, self.box, self.n_leaves, qs[a:b], D, self.s, int(kq), cap2, r[a:b])
 
         run_chunks(part, n, workers)
         out[order] = r
