@@ -325,12 +325,21 @@ if AVAILABLE:
         (docs/photon-mapping.md, section 7).
         hist (nb,) int64, bucket (>= n,) int64, sub (>= n,) float64 scratch.
         """
+        return _kth_smallest_count(key, n, nth, hist, bucket, sub)[0]
+
+    @_jit
+    def _kth_smallest_count(key, n, nth, hist, bucket, sub):
+        """(the nth smallest of key[:n], how many of key[:n] are strictly smaller): :func:`_kth_smallest`.
+
+        The loops are branch-free where the branch would be unpredictable (the max, the copy of the
+        answer's bucket).
+        """
         kmax = 0.0
         for a in range(n):
-            if key[a] > kmax:
-                kmax = key[a]
+            v = key[a]
+            kmax = v if v > kmax else kmax
         if kmax == 0.0:
-            return 0.0
+            return 0.0, 0
         nb = hist.shape[0]
         scale = nb / kmax
         for b in range(nb):
@@ -347,11 +356,14 @@ if AVAILABLE:
             b += 1
         m = 0
         for a in range(n):
-            if bucket[a] == b:
-                sub[m] = key[a]
-                m += 1
+            sub[m] = key[a]                        # (m <= a: always inside sub)
+            m += 1 if bucket[a] == b else 0
         _select(sub, 0, m, nth - cum)
-        return sub[nth - cum]
+        ans = sub[nth - cum]
+        n_less = cum
+        for a in range(nth - cum):                 # (the answer's bucket: those left of it are <= it)
+            n_less += 1 if sub[a] < ans else 0
+        return ans, n_less
 
     @_jit
     def _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti):
@@ -362,25 +374,24 @@ if AVAILABLE:
         the kq-th distance after them.  hist, bucket, sub, ti: scratch (:func:`_kth_smallest`;
         sub and ti of >= cnt entries).
         """
-        thr = _kth_smallest(bd, cnt, kq - 1, hist, bucket, sub)
-        # entries at exactly thr (at least one: the kq-th itself), copied out before the compaction
+        thr, n_less = _kth_smallest_count(bd, cnt, kq - 1, hist, bucket, sub)
+        # one pass: those strictly nearer to the front, in buffer order (always copy, advance when
+        # kept), and the first kq - n_less entries at exactly thr (at least one: the kq-th itself)
+        # copied out on the way (the copy never overwrites an entry not yet read: w <= a)
+        need = kq - n_less
         nt = 0
-        for a in range(cnt):
-            if bd[a] == thr:
-                ti[nt] = a
-                nt += 1
-        nt = min(nt, kq)
-        for b in range(nt):
-            a = ti[b]
-            sub[b] = bx[a]
-            ti[b] = bi[a]
-        # those strictly nearer to the front, in buffer order (always copy, advance when kept)
         w = 0
         for a in range(cnt):
             d = bd[a]
+            i_a = bi[a]
+            x_a = bx[a]
+            if d == thr and nt < need:
+                ti[nt] = i_a
+                sub[nt] = x_a
+                nt += 1
             bd[w] = d
-            bi[w] = bi[a]
-            bx[w] = bx[a]
+            bi[w] = i_a
+            bx[w] = x_a
             w += 1 if d < thr else 0
         b = 0
         while w < kq:
@@ -536,11 +547,7 @@ if AVAILABLE:
                 # bx holds their time distances (from the search; bx, bd, bi keep their order);
                 # the sum below then takes every candidate nearer in time than tau, plus as many
                 # at exactly tau as make k - 1.
-                n_less = 0
-                tau = _kth_smallest(bx, kq - 1, k - 1, hist, bucket, sub)
-                for a in range(kq - 1):
-                    if bx[a] < tau:
-                        n_less += 1
+                tau, n_less = _kth_smallest_count(bx, kq - 1, k - 1, hist, bucket, sub)
                 ties = k - 1 - n_less
                 out_tau[i] = tau
             inv_r = 1.0 / (cone_k * max(r, 1e-300))
@@ -558,26 +565,26 @@ if AVAILABLE:
                             continue
                         ties -= 1
                     j = bi[a]
-                    if P[j, 4] * n0 + P[j, 5] * n1 + P[j, 6] * n2 > 0.0:
+                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0:
                         w = 1.0
                         if cone:
                             w = 1.0 - np.sqrt(bd[a]) * inv_r
-                        p0 += w * P[j, 8]
-                        p1 += w * P[j, 9]
-                        p2 += w * P[j, 10]
+                        p0 += w * P[j, 4]
+                        p1 += w * P[j, 5]
+                        p2 += w * P[j, 6]
             else:
                 # branch-free: a photon out of the window or on the far side adds w = 0 (exactly
                 # nothing; kept photons add what they did with branches)
                 for a in range(n_sel):
                     j = bi[a]
                     w = 1.0 if bx[a] < tau else 0.0
-                    if not (P[j, 4] * n0 + P[j, 5] * n1 + P[j, 6] * n2 > 0.0):
+                    if not (P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0):
                         w = 0.0
                     if cone:
                         w *= 1.0 - np.sqrt(bd[a]) * inv_r
-                    p0 += w * P[j, 8]
-                    p1 += w * P[j, 9]
-                    p2 += w * P[j, 10]
+                    p0 += w * P[j, 4]
+                    p1 += w * P[j, 5]
+                    p2 += w * P[j, 6]
             out_phi[i, 0] = p0
             out_phi[i, 1] = p1
             out_phi[i, 2] = p2
@@ -622,7 +629,7 @@ if AVAILABLE:
                 r_prev = np.inf
 
     @_jit
-    def _range(P, box, n_leaves, q, ns, rad, half, D, cyl, s, cone, cone_k, stack, out_phi, out_cnt):
+    def _range(P, C, box, n_leaves, q, ns, rad, half, D, cyl, s, cone, cone_k, stack, out_phi, out_cnt):
         """Fixed-size kernels: photons inside each query's own region, summed (the progressive estimate).
 
         q (n, 4): x, y, z and s t (D = 4; ignored for D = 3); ns (n, 3) float32 normals; rad (n,)
@@ -675,12 +682,12 @@ if AVAILABLE:
                 # -- scan the leaf's contiguous rows ------------------------------------------------
                 leaf = node - first_leaf
                 for j in range((leaf * N) // n_leaves, ((leaf + 1) * N) // n_leaves):
-                    e0 = np.float64(P[j, 0]) - q0
-                    e1 = np.float64(P[j, 1]) - q1
-                    e2 = np.float64(P[j, 2]) - q2
+                    e0 = np.float64(C[0, j]) - q0
+                    e1 = np.float64(C[1, j]) - q1
+                    e2 = np.float64(C[2, j]) - q2
                     d2 = e0 * e0 + e1 * e1 + e2 * e2
                     if D == 4:
-                        e3 = s * np.float64(P[j, 3]) - q3
+                        e3 = s * np.float64(C[3, j]) - q3
                         if cyl:
                             if abs(e3) > h:
                                 continue
@@ -689,13 +696,13 @@ if AVAILABLE:
                     if d2 >= r2:
                         continue
                     cnt += 1
-                    if P[j, 4] * n0 + P[j, 5] * n1 + P[j, 6] * n2 > 0.0:
+                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0:
                         w = 1.0
                         if cone:
                             w = 1.0 - np.sqrt(d2) * inv_r
-                        p0 += w * P[j, 8]
-                        p1 += w * P[j, 9]
-                        p2 += w * P[j, 10]
+                        p0 += w * P[j, 4]
+                        p1 += w * P[j, 5]
+                        p2 += w * P[j, 6]
             out_phi[i, 0] = p0
             out_phi[i, 1] = p1
             out_phi[i, 2] = p2
@@ -745,9 +752,12 @@ class FlatTree:
         self.box = raw[off:off + box.size * 4].view(np.float32).reshape(box.shape)
         self.box[:] = box
         self.perm = perm
-        self.pts = np.empty((N, 12), dtype=np.float32)
-        self.pts[:, :4] = xyzt
-        self.pts[:, 4:12] = packed[perm]
+        # per photon one 32-byte row (wi, 0, Phi, 0) in tree order, 64-byte aligned (two rows a line):
+        # what the sums read of the photons the search keeps
+        raw = np.empty(N * 32 + 64, np.uint8)
+        off = (-raw.ctypes.data) % 64
+        self.pts = raw[off:off + N * 32].view(np.float32).reshape(N, 8)
+        self.pts[:] = packed[perm]
         # the coordinates again as rows (4, N) float32 (x, y, z, t): a leaf's are 4 contiguous runs,
         # read by the search's vectorised distance loop
         self.xyzt = np.ascontiguousarray(xyzt.T)
@@ -830,7 +840,7 @@ class FlatTree:
         depth = int(np.log2(max(self.n_leaves, 1))) + 4
 
         def part(a, b):
-            _range(self.pts, self.box, self.n_leaves, qs[a:b], nss[a:b], rs[a:b], hs[a:b], D, cyl, self.s,
+            _range(self.pts, self.xyzt, self.box, self.n_leaves, qs[a:b], nss[a:b], rs[a:b], hs[a:b], D, cyl, self.s,
                    cone, cone_k, np.empty(2 * depth, np.int64), phi[a:b], cnt[a:b])
 
         run_chunks(part, n, workers)
