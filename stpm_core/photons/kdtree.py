@@ -29,22 +29,32 @@ widths this module returns.
 
 Tree: a balanced kd-tree built here (numba), median split on the widest
 axis of each node (measured on up to 512 strided rows), 2^L leaves of at most ``LEAF_SIZE``
-photons; leaf l is the rows [l N / L, (l + 1) N / L) of one (N, 12) float32
-array in tree order, a 48-byte row per photon ``(x, y, z, t, wi, 0, Phi,
-0)``: the search reads the first 16 bytes of a leaf's contiguous rows, and
-the power of the photons it keeps is then already in cache.  Node boxes are
+photons; leaf l is the photons [l N / L, (l + 1) N / L) in tree order.  Two
+arrays in tree order: the coordinates as rows ``xyzt`` (4, N) float32 (x, y, z,
+t: a leaf's are four contiguous runs, which the search's distance loop reads
+vectorised), and one 32-byte row per photon ``pts`` (N, 8) float32 ``(wi, 0,
+Phi, 0)``, two to a cache line, which only the sums of the kept photons read.
+(Until 2026-12-07 one 48-byte row held both; the search then dragged power
+and direction of every photon tested through the cache.)  Node boxes are
 float32 rounded outward (exact for x, y, z; a hair larger for s t, which only
 makes pruning more conservative), a node's two children in one 64-byte line.
 
-Search (:func:`_knn`): best-first (nodes in increasing box distance, the
-nearer child followed at once, the farther queued), so only leaves that
-reach the final kq-th ball are scanned.  Nearer photons are appended to a
-buffer of 2 kq (with their time distances, TEMPORAL's) and cut back to the kq
-nearest when it fills (O(1) per photon where a heap costs O(log kq); TEMPORAL with
-a large fixed alpha keeps hundreds); the cut and TEMPORAL's time selection find
-their nth smallest by a histogram (:func:`_kth_smallest`), not a quickselect.
+Search (:func:`_knn`): depth first, the nearer child followed at once and
+the farther pushed if its box reaches the current bound; only leaves within
+the bound are scanned.  A leaf's squared distances are computed in one
+branch-free loop, then every photon is written to the buffer and the count
+advanced only for those nearer than the bound (no branch to mispredict: about
+half of a scanned leaf is kept).  The buffer (2 kq + a leaf, with time
+distances, TEMPORAL's) is cut back to the kq nearest when the next leaf might
+not fit (O(1) per photon where a heap costs O(log kq); TEMPORAL with a large
+fixed alpha keeps hundreds); the cut and TEMPORAL's time selection find their
+nth smallest by a histogram (:func:`_kth_smallest_count`), not a quickselect.
 Warm start: the previous query's kq nearest are kq photons within the farthest
-of them from q, so that distance already bounds the search from its first node.
+of them from q, so that distance already bounds the search from its first node
+(the bound then rarely tightens during a search, so the order in which leaves
+are visited hardly matters: a best-first search with a heap, until 2026-12-07,
+visited the same leaves at more cost per node).  The window's sum is branch-free
+too (a photon outside the window or on the far side adds w = 0).
 
 Queries are processed in Morton order, so consecutive queries are neighbours
 (warm start, tree nodes in cache).  An exact candidate cache (photons within
@@ -403,16 +413,17 @@ if AVAILABLE:
 
     @_jit
     def _knn(C, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2):
-        """Best-first kq-nearest search.  On return bd[:kq] / bi[:kq] hold the squared distances and
+        """Depth-first kq-nearest search.  On return bd[:kq] / bi[:kq] hold the squared distances and
         rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther), and bx[:kq] their time
         distances |t_j - q[3]| (shutter units; TEMPORAL's, meaningless for KD4D's s t).
 
-        Nodes are visited in increasing bounding-box distance (min-heap qnode / qdist, scratch of at
-        least the node count + 1), so the search stops at the first node beyond the current kq-th
-        distance: it scans only the leaves that reach the final ball.  Photons nearer than the
-        current bound are appended to the buffer bd / bi / bx (capacity 2 kq); a full buffer is cut
-        back to its kq nearest by :func:`_cut`, which also tightens the bound (O(1) per photon, where
-        a kq-heap costs O(log kq)).  hist, bucket, sub, ti: _cut's scratch (sub, ti of 2 kq).
+        C (4, N) float32: the coordinate rows in tree order.  Nodes whose box lies within the
+        current bound are entered, the nearer child first (stack qnode / qdist, scratch of at least
+        the tree depth + 1 entries; the node count is plenty).  Photons nearer than the current
+        bound are appended to the buffer bd / bi / bx (capacity at least 2 kq + LEAF_SIZE + 1); a
+        buffer that might not take the next leaf is cut back to its kq nearest by :func:`_cut`, which
+        also tightens the bound (O(1) per photon, where a kq-heap costs O(log kq)).  hist, bucket,
+        sub, ti: _cut's scratch (sub, ti as long as the buffer); leaf_d2 (>= LEAF_SIZE,) scratch.
 
         bound0: a squared distance known to hold at least kq photons strictly inside (inf if
         none is known); the search then prunes from its first node.  Returns False if fewer
@@ -501,6 +512,8 @@ if AVAILABLE:
     @_jit
     def _lookup(P, C, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, out_phi, out_r, out_tau):
         """Fused search + reduction for queries q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32.
+
+        P (N, 8) float32 rows (wi, 0, Phi, 0) and C (4, N) float32 coordinate rows, both in tree order.
 
         mode STANDARD / KD4D: kq = k nearest (3D / 4D); TEMPORAL: kq = m candidates, then the k
         nearest in time among the m - 1 inner ones.  Writes out_phi (n, 3) W (sum of w Phi over
@@ -632,6 +645,8 @@ if AVAILABLE:
     def _range(P, C, box, n_leaves, q, ns, rad, half, D, cyl, s, cone, cone_k, stack, out_phi, out_cnt):
         """Fixed-size kernels: photons inside each query's own region, summed (the progressive estimate).
 
+        P (N, 8) float32 rows (wi, 0, Phi, 0) and C (4, N) float32 coordinate rows, both in tree order.
+
         q (n, 4): x, y, z and s t (D = 4; ignored for D = 3); ns (n, 3) float32 normals; rad (n,)
         radius (m); half (n,) the cylinder's half-height in s t units (cyl only).  The region of
         query i is, in (x, y, z, s t):
@@ -731,12 +746,14 @@ class FlatTree:
     ----------
     position : (N, 3) float32 positions (m); time : (N,) float32 shutter times;
     packed : (N, 8) float32 rows (wi, 0, Phi, 0); dims : 3 or 4; s : KD4D's time scale (m per shutter).
+
+    Attributes (tree order): xyzt (4, N) float32 coordinate rows; pts (N, 8) float32 rows (wi, 0, Phi, 0),
+    64-byte aligned; perm (N,) int64 tree row -> input row; box (2 L, 8) float32 node boxes.
     """
 
     def __init__(self, position: np.ndarray, time: np.ndarray, packed: np.ndarray, *, dims: int, s: float):
         N = int(position.shape[0])
-        # One 48-byte row per photon: (x, y, z, t, wi, 0, Phi, 0): the search reads the first
-        # 16 bytes, and the photons it keeps are then already in cache for the sums
+        # coordinates (x, y, z, t), reordered by the build to tree order
         xyzt = np.empty((N, 4), dtype=np.float32)
         xyzt[:, :3] = position
         xyzt[:, 3] = time
