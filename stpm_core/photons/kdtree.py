@@ -414,8 +414,9 @@ if AVAILABLE:
     @_jit
     def _knn(C, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2):
         """Depth-first kq-nearest search.  On return bd[:kq] / bi[:kq] hold the squared distances and
-        rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther), and bx[:kq] their time
-        distances |t_j - q[3]| (shutter units; TEMPORAL's, meaningless for KD4D's s t).
+        rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther).  bx: scratch of the
+        buffer's length that the cuts carry along (the caller computes time distances for the kept
+        photons only).
 
         C (4, N) float32: the coordinate rows in tree order.  Nodes whose box lies within the
         current bound are entered, the nearer child first (stack qnode / qdist, scratch of at least
@@ -487,7 +488,6 @@ if AVAILABLE:
                 d2 = leaf_d2[a]
                 bd[cnt] = d2
                 bi[cnt] = j0 + a
-                bx[cnt] = abs(np.float64(C[3, j0 + a]) - q3)
                 cnt += 1 if d2 < bound else 0
             if bound == np.inf and cnt >= kq:
                 _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
@@ -557,6 +557,9 @@ if AVAILABLE:
             ties = 0
             if mode == MODE_TEMPORAL:
                 # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau.
+                # (their time distances, computed for the kept photons only)
+                for a in range(kq - 1):
+                    bx[a] = abs(np.float64(C[3, bi[a]]) - q3)
                 # bx holds their time distances (from the search; bx, bd, bi keep their order);
                 # the sum below then takes every candidate nearer in time than tau, plus as many
                 # at exactly tau as make k - 1.
@@ -590,7 +593,9 @@ if AVAILABLE:
                 # nothing; kept photons add what they did with branches)
                 for a in range(n_sel):
                     j = bi[a]
-                    w = 1.0 if bx[a] < tau else 0.0
+                    w = 1.0
+                    if mode == MODE_TEMPORAL:
+                        w = 1.0 if bx[a] < tau else 0.0
                     if not (P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0):
                         w = 0.0
                     if cone:
