@@ -31,9 +31,9 @@ Tree: a balanced kd-tree built here (numba), median split on the widest
 axis of each node (measured on up to 512 strided rows), 2^L leaves of at most ``LEAF_SIZE``
 photons; leaf l is the photons [l N / L, (l + 1) N / L) in tree order.  Two
 arrays in tree order: the coordinates as rows ``xyzt`` (4, N) float32 (x, y, z,
-t: a leaf's are four contiguous runs, which the search's distance loop reads
-vectorised), and one 32-byte row per photon ``pts`` (N, 8) float32 ``(wi, 0,
-Phi, 0)``, two to a cache line, which only the sums of the kept photons read.
+t: a leaf's are four contiguous runs, 16 bytes per photon tested), and one
+32-byte row per photon ``pts`` (N, 8) float32 ``(wi, 0, Phi, 0)``, two to a
+cache line, which only the sums of the kept photons read.
 (Until 2026-12-07 one 48-byte row held both; the search then dragged power
 and direction of every photon tested through the cache.)  Node boxes are
 float32 rounded outward (exact for x, y, z; a hair larger for s t, which only
@@ -460,8 +460,9 @@ if AVAILABLE:
             if node < first_leaf or dist >= bound:
                 continue
             # scan the leaf's contiguous rows
-            # (first every squared distance, a branch-free loop over the leaf's coordinate rows that
-            # the compiler vectorises; then the appends)
+            # (first every squared distance, a branch-free loop over the leaf's coordinate rows; then
+            # the appends.  LLVM does not vectorise this loop; a form over slices of the rows that it
+            # does vectorise measured slower at 16-32 photons a leaf)
             leaf = node - first_leaf
             j0 = (leaf * N) // n_leaves
             nl = ((leaf + 1) * N) // n_leaves - j0
@@ -781,7 +782,7 @@ class FlatTree:
         self.pts = raw[off:off + N * 32].view(np.float32).reshape(N, 8)
         self.pts[:] = packed[perm]
         # the coordinates again as rows (4, N) float32 (x, y, z, t): a leaf's are 4 contiguous runs,
-        # read by the search's vectorised distance loop
+        # all the search's distance loop reads
         self.xyzt = np.ascontiguousarray(xyzt.T)
 
     def lookup(self, mode: int, q: np.ndarray, ns: np.ndarray, kq: int, k: int, cone: bool, cone_k: float,
