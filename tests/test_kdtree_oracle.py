@@ -219,3 +219,18 @@ def test_photon_map_degenerate_sizes():
     assert np.array_equal(E[0], E[1]) and np.array_equal(E[0], E[2])      # one time: a timeless map
     r2 = ((p - pos[0].astype(np.float64)) ** 2).sum(axis=1)
     np.testing.assert_allclose(E[0][:, 0], 9 * 1.0 / (np.pi * r2), rtol=1e-6)   # k - 1 = 9 photons of 1 W
+
+
+def test_searches_for_more_photons_than_the_tree_holds_are_refused():
+    # the search would otherwise read kq photons that are not there (out of bounds): callers clamp k
+    rng = np.random.default_rng(9)
+    pos, t, packed = photon_arrays(rng, 40)
+    q, ns = query_arrays(rng, 5, pos)
+    tree = kdtree.FlatTree(pos, t, packed, dims=3, s=S)
+    for mode, kq, k in ((kdtree.MODE_STANDARD, 41, 41), (kdtree.MODE_TEMPORAL, 41, 20), (kdtree.MODE_TEMPORAL, 20, 20),
+                        (kdtree.MODE_STANDARD, 0, 0)):
+        with pytest.raises(ValueError):
+            tree.lookup(mode, q, ns, kq, k, False, 1.1, 1)
+    with pytest.raises(ValueError):
+        tree.knn_radius(q, 41, np.inf, 1)
+    assert np.all(np.isfinite(tree.lookup(kdtree.MODE_TEMPORAL, q, ns, 40, 39, False, 1.1, 1)[1]))

@@ -792,7 +792,11 @@ class FlatTree:
         Queries are processed in Morton order (of x, y, z, plus s t for KD4D; results come back in the
         input order), so consecutive queries are neighbours: the tree nodes they read stay in
         cache and each search starts from the previous one's radius.
+        Requires 1 <= kq <= N (and for TEMPORAL 2 <= k < kq): the search reads kq photons.
         """
+        N = self.pts.shape[0]
+        if not 1 <= kq <= N or (mode == MODE_TEMPORAL and not 2 <= k < kq):
+            raise ValueError(f"k-nearest look-up of kq = {kq}, k = {k} in a tree of {N} photons")
         n = q.shape[0]
         q = np.ascontiguousarray(q, dtype=np.float64)
         ns = np.ascontiguousarray(ns, dtype=np.float32)
@@ -817,8 +821,10 @@ class FlatTree:
         """Distance (n,) m to the kq-th nearest photon of each query q (n, 4) (x, y, z, s t), capped at ``cap``.
 
         In the tree's own dimensions (3D: x, y, z; 4D: with s t).  Where fewer than kq photons lie
-        within ``cap``, the cap is returned; the search never looks beyond it.
+        within ``cap``, the cap is returned; the search never looks beyond it.  Requires 1 <= kq <= N.
         """
+        if not 1 <= kq <= self.pts.shape[0]:
+            raise ValueError(f"k-NN radius of kq = {kq} in a tree of {self.pts.shape[0]} photons")
         n = q.shape[0]
         q = np.ascontiguousarray(q, dtype=np.float64)
         D = self.dims
