@@ -29,22 +29,32 @@ widths this module returns.
 
 Tree: a balanced kd-tree built here (numba), median split on the widest
 axis of each node (measured on up to 512 strided rows), 2^L leaves of at most ``LEAF_SIZE``
-photons; leaf l is the rows [l N / L, (l + 1) N / L) of one (N, 12) float32
-array in tree order, a 48-byte row per photon ``(x, y, z, t, wi, 0, Phi,
-0)``: the search reads the first 16 bytes of a leaf's contiguous rows, and
-the power of the photons it keeps is then already in cache.  Node boxes are
+photons; leaf l is the photons [l N / L, (l + 1) N / L) in tree order.  Two
+arrays in tree order: the coordinates as rows ``xyzt`` (4, N) float32 (x, y, z,
+t: a leaf's are four contiguous runs, 16 bytes per photon tested), and one
+32-byte row per photon ``pts`` (N, 8) float32 ``(wi, 0, Phi, 0)``, two to a
+cache line, which only the sums of the kept photons read.
+(Until 2026-12-07 one 48-byte row held both; the search then dragged power
+and direction of every photon tested through the cache.)  Node boxes are
 float32 rounded outward (exact for x, y, z; a hair larger for s t, which only
 makes pruning more conservative), a node's two children in one 64-byte line.
 
-Search (:func:`_knn`): best-first (nodes in increasing box distance, the
-nearer child followed at once, the farther queued), so only leaves that
-reach the final kq-th ball are scanned.  Nearer photons are appended to a
-buffer of 2 kq (with their time distances, TEMPORAL's) and cut back to the kq
-nearest when it fills (O(1) per photon where a heap costs O(log kq); TEMPORAL with
-a large fixed alpha keeps hundreds); the cut and TEMPORAL's time selection find
-their nth smallest by a histogram (:func:`_kth_smallest`), not a quickselect.
+Search (:func:`_knn`): depth first, the nearer child followed at once and
+the farther pushed if its box reaches the current bound; only leaves within
+the bound are scanned.  A leaf's squared distances are computed in one
+branch-free loop, then every photon is written to the buffer and the count
+advanced only for those nearer than the bound (no branch to mispredict: about
+half of a scanned leaf is kept).  The buffer (2 kq + a leaf, with time
+distances, TEMPORAL's) is cut back to the kq nearest when the next leaf might
+not fit (O(1) per photon where a heap costs O(log kq); TEMPORAL with a large
+fixed alpha keeps hundreds); the cut and TEMPORAL's time selection find their
+nth smallest by a histogram (:func:`_kth_smallest_count`), not a quickselect.
 Warm start: the previous query's kq nearest are kq photons within the farthest
-of them from q, so that distance already bounds the search from its first node.
+of them from q, so that distance already bounds the search from its first node
+(the bound then rarely tightens during a search, so the order in which leaves
+are visited hardly matters: a best-first search with a heap, until 2026-12-07,
+visited the same leaves at more cost per node).  The window's sum is branch-free
+too (a photon outside the window or on the far side adds w = 0).
 
 Queries are processed in Morton order, so consecutive queries are neighbours
 (warm start, tree nodes in cache).  An exact candidate cache (photons within
@@ -133,15 +143,15 @@ if AVAILABLE:
         return np.float64(P[j, d])
 
     @_jit
-    def _dist2(P, j, q0, q1, q2, q3, D, s):
-        """Squared distance in float64 from row j of P (N, 4) float32 to the query (q0, q1, q2, q3):
-        over x, y, z, and for D = 4 also the scaled time s * t."""
-        e0 = np.float64(P[j, 0]) - q0
-        e1 = np.float64(P[j, 1]) - q1
-        e2 = np.float64(P[j, 2]) - q2
+    def _dist2(C, j, q0, q1, q2, q3, D, s):
+        """Squared distance in float64 from photon j of C (4, N) float32 (x, y, z, t rows) to the query
+        (q0, q1, q2, q3): over x, y, z, and for D = 4 also the scaled time s * t."""
+        e0 = np.float64(C[0, j]) - q0
+        e1 = np.float64(C[1, j]) - q1
+        e2 = np.float64(C[2, j]) - q2
         d2 = e0 * e0 + e1 * e1 + e2 * e2
         if D == 4:
-            e3 = s * np.float64(P[j, 3]) - q3
+            e3 = s * np.float64(C[3, j]) - q3
             d2 += e3 * e3
         return d2
     @_jit
@@ -263,16 +273,26 @@ if AVAILABLE:
     @_jit
     def _box_dist2(box, row, q0, q1, q2, q3, D):
         """Squared distance (float64) from the query to the bounding box in row ``row`` of box."""
-        acc = 0.0
-        for d in range(D):
-            v = q0 if d == 0 else (q1 if d == 1 else (q2 if d == 2 else q3))
-            lo = np.float64(box[row, d])
-            hi = np.float64(box[row, 4 + d])
-            if v < lo:
-                acc += (lo - v) * (lo - v)
-            elif v > hi:
-                acc += (v - hi) * (v - hi)
+        # per axis the gap e = max(lo - v, v - hi, 0), branch-free (a NaN coordinate adds 0); the
+        # squares are summed in axis order
+        e = _gap(np.float64(box[row, 0]), np.float64(box[row, 4]), q0)
+        acc = e * e
+        e = _gap(np.float64(box[row, 1]), np.float64(box[row, 5]), q1)
+        acc += e * e
+        e = _gap(np.float64(box[row, 2]), np.float64(box[row, 6]), q2)
+        acc += e * e
+        if D == 4:
+            e = _gap(np.float64(box[row, 3]), np.float64(box[row, 7]), q3)
+            acc += e * e
         return acc
+
+    @_jit
+    def _gap(lo, hi, v):
+        """Distance (float64, >= 0) from v to the interval [lo, hi]; 0 inside it or for a NaN v."""
+        a = lo - v
+        b = v - hi
+        e = a if a > b else b
+        return e if e > 0.0 else 0.0
 
     @_jit
     def _select(key, lo, hi, nth):
@@ -315,12 +335,21 @@ if AVAILABLE:
         (docs/photon-mapping.md, section 7).
         hist (nb,) int64, bucket (>= n,) int64, sub (>= n,) float64 scratch.
         """
+        return _kth_smallest_count(key, n, nth, hist, bucket, sub)[0]
+
+    @_jit
+    def _kth_smallest_count(key, n, nth, hist, bucket, sub):
+        """(the nth smallest of key[:n], how many of key[:n] are strictly smaller): :func:`_kth_smallest`.
+
+        The loops are branch-free where the branch would be unpredictable (the max, the copy of the
+        answer's bucket).
+        """
         kmax = 0.0
         for a in range(n):
-            if key[a] > kmax:
-                kmax = key[a]
+            v = key[a]
+            kmax = v if v > kmax else kmax
         if kmax == 0.0:
-            return 0.0
+            return 0.0, 0
         nb = hist.shape[0]
         scale = nb / kmax
         for b in range(nb):
@@ -337,11 +366,14 @@ if AVAILABLE:
             b += 1
         m = 0
         for a in range(n):
-            if bucket[a] == b:
-                sub[m] = key[a]
-                m += 1
+            sub[m] = key[a]                        # (m <= a: always inside sub)
+            m += 1 if bucket[a] == b else 0
         _select(sub, 0, m, nth - cum)
-        return sub[nth - cum]
+        ans = sub[nth - cum]
+        n_less = cum
+        for a in range(nth - cum):                 # (the answer's bucket: those left of it are <= it)
+            n_less += 1 if sub[a] < ans else 0
+        return ans, n_less
 
     @_jit
     def _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti):
@@ -352,25 +384,24 @@ if AVAILABLE:
         the kq-th distance after them.  hist, bucket, sub, ti: scratch (:func:`_kth_smallest`;
         sub and ti of >= cnt entries).
         """
-        thr = _kth_smallest(bd, cnt, kq - 1, hist, bucket, sub)
-        # entries at exactly thr (at least one: the kq-th itself), copied out before the compaction
+        thr, n_less = _kth_smallest_count(bd, cnt, kq - 1, hist, bucket, sub)
+        # one pass: those strictly nearer to the front, in buffer order (always copy, advance when
+        # kept), and the first kq - n_less entries at exactly thr (at least one: the kq-th itself)
+        # copied out on the way (the copy never overwrites an entry not yet read: w <= a)
+        need = kq - n_less
         nt = 0
-        for a in range(cnt):
-            if bd[a] == thr:
-                ti[nt] = a
-                nt += 1
-        nt = min(nt, kq)
-        for b in range(nt):
-            a = ti[b]
-            sub[b] = bx[a]
-            ti[b] = bi[a]
-        # those strictly nearer to the front, in buffer order (always copy, advance when kept)
         w = 0
         for a in range(cnt):
             d = bd[a]
+            i_a = bi[a]
+            x_a = bx[a]
+            if d == thr and nt < need:
+                ti[nt] = i_a
+                sub[nt] = x_a
+                nt += 1
             bd[w] = d
-            bi[w] = bi[a]
-            bx[w] = bx[a]
+            bi[w] = i_a
+            bx[w] = x_a
             w += 1 if d < thr else 0
         b = 0
         while w < kq:
@@ -381,24 +412,26 @@ if AVAILABLE:
             b += 1
 
     @_jit
-    def _knn(P, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti):
-        """Best-first kq-nearest search.  On return bd[:kq] / bi[:kq] hold the squared distances and
-        rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther), and bx[:kq] their time
-        distances |t_j - q[3]| (shutter units; TEMPORAL's, meaningless for KD4D's s t).
+    def _knn(C, box, n_leaves, q, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2):
+        """Depth-first kq-nearest search.  On return bd[:kq] / bi[:kq] hold the squared distances and
+        rows of the kq nearest, bd[kq - 1] the kq-th (the others no farther).  bx: scratch of the
+        buffer's length that the cuts carry along (the caller computes time distances for the kept
+        photons only).
 
-        Nodes are visited in increasing bounding-box distance (min-heap qnode / qdist, scratch of at
-        least the node count + 1), so the search stops at the first node beyond the current kq-th
-        distance: it scans only the leaves that reach the final ball.  Photons nearer than the
-        current bound are appended to the buffer bd / bi / bx (capacity 2 kq); a full buffer is cut
-        back to its kq nearest by :func:`_cut`, which also tightens the bound (O(1) per photon, where
-        a kq-heap costs O(log kq)).  hist, bucket, sub, ti: _cut's scratch (sub, ti of 2 kq).
+        C (4, N) float32: the coordinate rows in tree order.  Nodes whose box lies within the
+        current bound are entered, the nearer child first (stack qnode / qdist, scratch of at least
+        the tree depth + 1 entries; the node count is plenty).  Photons nearer than the current
+        bound are appended to the buffer bd / bi / bx (capacity at least 2 kq + LEAF_SIZE + 1); a
+        buffer that might not take the next leaf is cut back to its kq nearest by :func:`_cut`, which
+        also tightens the bound (O(1) per photon, where a kq-heap costs O(log kq)).  hist, bucket,
+        sub, ti: _cut's scratch (sub, ti as long as the buffer); leaf_d2 (>= LEAF_SIZE,) scratch.
 
         bound0: a squared distance known to hold at least kq photons strictly inside (inf if
         none is known); the search then prunes from its first node.  Returns False if fewer
         than kq photons were found below bound0 (the caller then searches again with inf).
         """
         cap = bd.shape[0]
-        N = P.shape[0]
+        N = C.shape[1]
         cnt = 0
         bound = bound0
         first_leaf = n_leaves - 1
@@ -407,34 +440,11 @@ if AVAILABLE:
         qdist[0] = 0.0
         nq = 1
         while nq > 0:
-            node, dist = qnode[0], qdist[0]
-            if dist >= bound:
-                # the buffer's bound may be loose: cut it to the exact kq-th first
-                if cnt > kq:
-                    _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
-                    cnt = kq
-                    bound = bd[kq - 1]
-                if dist >= bound:
-                    break
-            # pop the nearest queued node
+            # pop the last node pushed (depth first; with a warm-start bound, which the search
+            # rarely tightens, every order visits the same leaves: those within the bound)
             nq -= 1
-            if nq > 0:
-                last_n, last_d = qnode[nq], qdist[nq]
-                pos = 0
-                while True:
-                    c = 2 * pos + 1
-                    if c >= nq:
-                        break
-                    if c + 1 < nq and qdist[c + 1] < qdist[c]:
-                        c += 1
-                    if qdist[c] >= last_d:
-                        break
-                    qnode[pos] = qnode[c]
-                    qdist[pos] = qdist[c]
-                    pos = c
-                qnode[pos] = last_n
-                qdist[pos] = last_d
-            # descend to a leaf through the nearer children, queueing the farther ones
+            node, dist = qnode[nq], qdist[nq]
+            # descend to a leaf through the nearer children, pushing the farther ones
             while node < first_leaf and dist < bound:
                 cl = 2 * node + 1
                 dl = _box_dist2(box, cl + 1, q0, q1, q2, q3, D)
@@ -444,32 +454,42 @@ if AVAILABLE:
                 else:
                     node, dist, far, dfar = cl + 1, dr, cl, dl
                 if dfar < bound:
-                    pos = nq
+                    qnode[nq] = far
+                    qdist[nq] = dfar
                     nq += 1
-                    while pos > 0:
-                        parent = (pos - 1) // 2
-                        if qdist[parent] <= dfar:
-                            break
-                        qnode[pos] = qnode[parent]
-                        qdist[pos] = qdist[parent]
-                        pos = parent
-                    qnode[pos] = far
-                    qdist[pos] = dfar
             if node < first_leaf or dist >= bound:
                 continue
             # scan the leaf's contiguous rows
+            # (first every squared distance, a branch-free loop over the leaf's coordinate rows; then
+            # the appends.  LLVM does not vectorise this loop; a form over slices of the rows that it
+            # does vectorise measured slower at 16-32 photons a leaf)
             leaf = node - first_leaf
-            for j in range((leaf * N) // n_leaves, ((leaf + 1) * N) // n_leaves):
-                d2 = _dist2(P, j, q0, q1, q2, q3, D, s)
-                if d2 < bound:
-                    bd[cnt] = d2
-                    bi[cnt] = j
-                    bx[cnt] = abs(np.float64(P[j, 3]) - q3)
-                    cnt += 1
-                    if cnt == cap:
-                        _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
-                        cnt = kq
-                        bound = bd[kq - 1]
+            j0 = (leaf * N) // n_leaves
+            nl = ((leaf + 1) * N) // n_leaves - j0
+            if D == 4:
+                for a in range(nl):
+                    e0 = np.float64(C[0, j0 + a]) - q0
+                    e1 = np.float64(C[1, j0 + a]) - q1
+                    e2 = np.float64(C[2, j0 + a]) - q2
+                    e3 = s * np.float64(C[3, j0 + a]) - q3
+                    leaf_d2[a] = (e0 * e0 + e1 * e1 + e2 * e2) + e3 * e3
+            else:
+                for a in range(nl):
+                    e0 = np.float64(C[0, j0 + a]) - q0
+                    e1 = np.float64(C[1, j0 + a]) - q1
+                    e2 = np.float64(C[2, j0 + a]) - q2
+                    leaf_d2[a] = e0 * e0 + e1 * e1 + e2 * e2
+            if cnt + nl > cap:
+                _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
+                cnt = kq
+                bound = bd[kq - 1]
+            for a in range(nl):
+                # (every photon written, the count advanced only for those inside the bound: no
+                # branch to mispredict where about half the leaf's photons are kept)
+                d2 = leaf_d2[a]
+                bd[cnt] = d2
+                bi[cnt] = j0 + a
+                cnt += 1 if d2 < bound else 0
             if bound == np.inf and cnt >= kq:
                 _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
                 cnt = kq
@@ -491,8 +511,10 @@ if AVAILABLE:
         return True
 
     @_jit
-    def _lookup(P, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, out_phi, out_r, out_tau):
+    def _lookup(P, C, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, out_phi, out_r, out_tau):
         """Fused search + reduction for queries q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32.
+
+        P (N, 8) float32 rows (wi, 0, Phi, 0) and C (4, N) float32 coordinate rows, both in tree order.
 
         mode STANDARD / KD4D: kq = k nearest (3D / 4D); TEMPORAL: kq = m candidates, then the k
         nearest in time among the m - 1 inner ones.  Writes out_phi (n, 3) W (sum of w Phi over
@@ -500,13 +522,15 @@ if AVAILABLE:
         photon (m) and out_tau (n,) TEMPORAL's window half-width (shutter units).
         """
         D = 4 if mode == MODE_KD4D else 3
-        bd = np.empty(2 * kq)
-        bi = np.empty(2 * kq, np.int64)
-        bx = np.empty(2 * kq)
-        sub = np.empty(2 * kq)
-        ti = np.empty(2 * kq, np.int64)
-        bucket = np.empty(2 * kq, np.int64)
+        nbuf = 2 * kq + LEAF_SIZE + 1
+        bd = np.empty(nbuf)
+        bi = np.empty(nbuf, np.int64)
+        bx = np.empty(nbuf)
+        sub = np.empty(nbuf)
+        ti = np.empty(nbuf, np.int64)
+        bucket = np.empty(nbuf, np.int64)
         hist = np.empty(kq, np.int64)
+        leaf_d2 = np.empty(LEAF_SIZE + 1)
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
@@ -521,11 +545,11 @@ if AVAILABLE:
                 far2 = 0.0
                 for a in range(kq):
                     j = bi[a]
-                    d2 = _dist2(P, j, q0, q1, q2, q3, D, s)
+                    d2 = _dist2(C, j, q0, q1, q2, q3, D, s)
                     far2 = max(far2, d2)
                 bound0 = far2 * (1.0 + 1e-9)           # (slack: the farthest itself strictly inside)
-            if not _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti):
-                _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, np.inf, hist, bucket, sub, ti)
+            if not _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2):
+                _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, np.inf, hist, bucket, sub, ti, leaf_d2)
             # slot kq - 1 = the kq-th neighbour (fixes the radius); slots 0 .. kq - 2 are inner
             r = np.sqrt(bd[kq - 1])
             out_r[i] = r
@@ -534,14 +558,13 @@ if AVAILABLE:
             ties = 0
             if mode == MODE_TEMPORAL:
                 # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau.
+                # (their time distances, computed for the kept photons only)
+                for a in range(kq - 1):
+                    bx[a] = abs(np.float64(C[3, bi[a]]) - q3)
                 # bx holds their time distances (from the search; bx, bd, bi keep their order);
                 # the sum below then takes every candidate nearer in time than tau, plus as many
                 # at exactly tau as make k - 1.
-                n_less = 0
-                tau = _kth_smallest(bx, kq - 1, k - 1, hist, bucket, sub)
-                for a in range(kq - 1):
-                    if bx[a] < tau:
-                        n_less += 1
+                tau, n_less = _kth_smallest_count(bx, kq - 1, k - 1, hist, bucket, sub)
                 ties = k - 1 - n_less
                 out_tau[i] = tau
             inv_r = 1.0 / (cone_k * max(r, 1e-300))
@@ -549,41 +572,59 @@ if AVAILABLE:
             p0 = 0.0
             p1 = 0.0
             p2 = 0.0
-            for a in range(n_sel):
-                if mode == MODE_TEMPORAL:
+            if ties > 0:
+                # some of the k - 1 at exactly tau: the first ``ties`` of them in buffer order
+                for a in range(n_sel):
                     if bx[a] > tau:
                         continue
                     if bx[a] == tau:
                         if ties <= 0:
                             continue
                         ties -= 1
-                j = bi[a]
-                if P[j, 4] * n0 + P[j, 5] * n1 + P[j, 6] * n2 > 0.0:
+                    j = bi[a]
+                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0:
+                        w = 1.0
+                        if cone:
+                            w = 1.0 - np.sqrt(bd[a]) * inv_r
+                        p0 += w * P[j, 4]
+                        p1 += w * P[j, 5]
+                        p2 += w * P[j, 6]
+            else:
+                # branch-free: a photon out of the window or on the far side adds w = 0 (exactly
+                # nothing; kept photons add what they did with branches)
+                for a in range(n_sel):
+                    j = bi[a]
                     w = 1.0
+                    if mode == MODE_TEMPORAL:
+                        w = 1.0 if bx[a] < tau else 0.0
+                    if not (P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0):
+                        w = 0.0
                     if cone:
-                        w = 1.0 - np.sqrt(bd[a]) * inv_r
-                    p0 += w * P[j, 8]
-                    p1 += w * P[j, 9]
-                    p2 += w * P[j, 10]
+                        w *= 1.0 - np.sqrt(bd[a]) * inv_r
+                    p0 += w * P[j, 4]
+                    p1 += w * P[j, 5]
+                    p2 += w * P[j, 6]
             out_phi[i, 0] = p0
             out_phi[i, 1] = p1
             out_phi[i, 2] = p2
 
     @_jit
-    def _knn_radius(P, box, n_leaves, q, D, s, kq, cap2, out_r):
+    def _knn_radius(C, box, n_leaves, q, D, s, kq, cap2, out_r):
         """Distance (n,) to the kq-th nearest photon of each query q (n, 4), at most sqrt(cap2).
 
         The search is bounded by cap2 (squared, m^2): where fewer than kq photons lie nearer, the
         answer is the cap, found without visiting anything beyond it.  Warm-started from the
         previous radius: the previous query's kq nearest lie within r_prev + |q - q_prev|.
         """
-        bd = np.empty(2 * kq)
-        bi = np.empty(2 * kq, np.int64)
-        bx = np.empty(2 * kq)
-        sub = np.empty(2 * kq)
-        ti = np.empty(2 * kq, np.int64)
-        bucket = np.empty(2 * kq, np.int64)
+        nbuf = 2 * kq + LEAF_SIZE + 1
+        bd = np.empty(nbuf)
+        bi = np.empty(nbuf, np.int64)
+        bx = np.empty(nbuf)
+        sub = np.empty(nbuf)
+        ti = np.empty(nbuf, np.int64)
+        bucket = np.empty(nbuf, np.int64)
         hist = np.empty(kq, np.int64)
+        leaf_d2 = np.empty(LEAF_SIZE + 1)
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
@@ -595,9 +636,9 @@ if AVAILABLE:
                 e0, e1, e2, e3 = qq[0] - q[i - 1, 0], qq[1] - q[i - 1, 1], qq[2] - q[i - 1, 2], qq[3] - q[i - 1, 3]
                 dp = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0))
                 bound0 = min(cap2, ((r_prev + dp) * (1.0 + 1e-9)) ** 2)
-            found = _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti)
+            found = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2)
             if not found and bound0 < cap2:
-                found = _knn(P, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, cap2, hist, bucket, sub, ti)
+                found = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, cap2, hist, bucket, sub, ti, leaf_d2)
             if found:
                 r = np.sqrt(bd[kq - 1])
                 out_r[i] = r
@@ -607,8 +648,10 @@ if AVAILABLE:
                 r_prev = np.inf
 
     @_jit
-    def _range(P, box, n_leaves, q, ns, rad, half, D, cyl, s, cone, cone_k, stack, out_phi, out_cnt):
+    def _range(P, C, box, n_leaves, q, ns, rad, half, D, cyl, s, cone, cone_k, stack, out_phi, out_cnt):
         """Fixed-size kernels: photons inside each query's own region, summed (the progressive estimate).
+
+        P (N, 8) float32 rows (wi, 0, Phi, 0) and C (4, N) float32 coordinate rows, both in tree order.
 
         q (n, 4): x, y, z and s t (D = 4; ignored for D = 3); ns (n, 3) float32 normals; rad (n,)
         radius (m); half (n,) the cylinder's half-height in s t units (cyl only).  The region of
@@ -660,12 +703,12 @@ if AVAILABLE:
                 # -- scan the leaf's contiguous rows ------------------------------------------------
                 leaf = node - first_leaf
                 for j in range((leaf * N) // n_leaves, ((leaf + 1) * N) // n_leaves):
-                    e0 = np.float64(P[j, 0]) - q0
-                    e1 = np.float64(P[j, 1]) - q1
-                    e2 = np.float64(P[j, 2]) - q2
+                    e0 = np.float64(C[0, j]) - q0
+                    e1 = np.float64(C[1, j]) - q1
+                    e2 = np.float64(C[2, j]) - q2
                     d2 = e0 * e0 + e1 * e1 + e2 * e2
                     if D == 4:
-                        e3 = s * np.float64(P[j, 3]) - q3
+                        e3 = s * np.float64(C[3, j]) - q3
                         if cyl:
                             if abs(e3) > h:
                                 continue
@@ -674,13 +717,13 @@ if AVAILABLE:
                     if d2 >= r2:
                         continue
                     cnt += 1
-                    if P[j, 4] * n0 + P[j, 5] * n1 + P[j, 6] * n2 > 0.0:
+                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0:
                         w = 1.0
                         if cone:
                             w = 1.0 - np.sqrt(d2) * inv_r
-                        p0 += w * P[j, 8]
-                        p1 += w * P[j, 9]
-                        p2 += w * P[j, 10]
+                        p0 += w * P[j, 4]
+                        p1 += w * P[j, 5]
+                        p2 += w * P[j, 6]
             out_phi[i, 0] = p0
             out_phi[i, 1] = p1
             out_phi[i, 2] = p2
@@ -709,12 +752,14 @@ class FlatTree:
     ----------
     position : (N, 3) float32 positions (m); time : (N,) float32 shutter times;
     packed : (N, 8) float32 rows (wi, 0, Phi, 0); dims : 3 or 4; s : KD4D's time scale (m per shutter).
+
+    Attributes (tree order): xyzt (4, N) float32 coordinate rows; pts (N, 8) float32 rows (wi, 0, Phi, 0),
+    64-byte aligned; perm (N,) int64 tree row -> input row; box (2 L, 8) float32 node boxes.
     """
 
     def __init__(self, position: np.ndarray, time: np.ndarray, packed: np.ndarray, *, dims: int, s: float):
         N = int(position.shape[0])
-        # One 48-byte row per photon: (x, y, z, t, wi, 0, Phi, 0): the search reads the first
-        # 16 bytes, and the photons it keeps are then already in cache for the sums
+        # coordinates (x, y, z, t), reordered by the build to tree order
         xyzt = np.empty((N, 4), dtype=np.float32)
         xyzt[:, :3] = position
         xyzt[:, 3] = time
@@ -730,9 +775,15 @@ class FlatTree:
         self.box = raw[off:off + box.size * 4].view(np.float32).reshape(box.shape)
         self.box[:] = box
         self.perm = perm
-        self.pts = np.empty((N, 12), dtype=np.float32)
-        self.pts[:, :4] = xyzt
-        self.pts[:, 4:12] = packed[perm]
+        # per photon one 32-byte row (wi, 0, Phi, 0) in tree order, 64-byte aligned (two rows a line):
+        # what the sums read of the photons the search keeps
+        raw = np.empty(N * 32 + 64, np.uint8)
+        off = (-raw.ctypes.data) % 64
+        self.pts = raw[off:off + N * 32].view(np.float32).reshape(N, 8)
+        self.pts[:] = packed[perm]
+        # the coordinates again as rows (4, N) float32 (x, y, z, t): a leaf's are 4 contiguous runs,
+        # all the search's distance loop reads
+        self.xyzt = np.ascontiguousarray(xyzt.T)
 
     def lookup(self, mode: int, q: np.ndarray, ns: np.ndarray, kq: int, k: int, cone: bool, cone_k: float,
                workers: int):
@@ -741,7 +792,11 @@ class FlatTree:
         Queries are processed in Morton order (of x, y, z, plus s t for KD4D; results come back in the
         input order), so consecutive queries are neighbours: the tree nodes they read stay in
         cache and each search starts from the previous one's radius.
+        Requires 1 <= kq <= N (and for TEMPORAL 2 <= k < kq): the search reads kq photons.
         """
+        N = self.pts.shape[0]
+        if not 1 <= kq <= N or (mode == MODE_TEMPORAL and not 2 <= k < kq):
+            raise ValueError(f"k-nearest look-up of kq = {kq}, k = {k} in a tree of {N} photons")
         n = q.shape[0]
         q = np.ascontiguousarray(q, dtype=np.float64)
         ns = np.ascontiguousarray(ns, dtype=np.float32)
@@ -754,7 +809,7 @@ class FlatTree:
         r = np.zeros(n)
         tau = np.zeros(n)
         def part(a, b):
-            _lookup(self.pts, self.box, self.n_leaves, qs[a:b], nss[a:b], mode, kq, k, self.s, cone, cone_k,
+            _lookup(self.pts, self.xyzt, self.box, self.n_leaves, qs[a:b], nss[a:b], mode, kq, k, self.s, cone, cone_k,
                     phi[a:b], r[a:b], tau[a:b])
 
         run_chunks(part, n, workers)
@@ -766,8 +821,10 @@ class FlatTree:
         """Distance (n,) m to the kq-th nearest photon of each query q (n, 4) (x, y, z, s t), capped at ``cap``.
 
         In the tree's own dimensions (3D: x, y, z; 4D: with s t).  Where fewer than kq photons lie
-        within ``cap``, the cap is returned; the search never looks beyond it.
+        within ``cap``, the cap is returned; the search never looks beyond it.  Requires 1 <= kq <= N.
         """
+        if not 1 <= kq <= self.pts.shape[0]:
+            raise ValueError(f"k-NN radius of kq = {kq} in a tree of {self.pts.shape[0]} photons")
         n = q.shape[0]
         q = np.ascontiguousarray(q, dtype=np.float64)
         D = self.dims
@@ -782,7 +839,7 @@ class FlatTree:
         cap2 = float(cap) ** 2 if np.isfinite(cap) else np.inf
 
         def part(a, b):
-            _knn_radius(self.pts, self.box, self.n_leaves, qs[a:b], D, self.s, int(kq), cap2, r[a:b])
+            _knn_radius(self.xyzt, self.box, self.n_leaves, qs[a:b], D, self.s, int(kq), cap2, r[a:b])
 
         run_chunks(part, n, workers)
         out[order] = r
@@ -812,7 +869,7 @@ class FlatTree:
         depth = int(np.log2(max(self.n_leaves, 1))) + 4
 
         def part(a, b):
-            _range(self.pts, self.box, self.n_leaves, qs[a:b], nss[a:b], rs[a:b], hs[a:b], D, cyl, self.s,
+            _range(self.pts, self.xyzt, self.box, self.n_leaves, qs[a:b], nss[a:b], rs[a:b], hs[a:b], D, cyl, self.s,
                    cone, cone_k, np.empty(2 * depth, np.int64), phi[a:b], cnt[a:b])
 
         run_chunks(part, n, workers)
