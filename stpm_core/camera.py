@@ -43,9 +43,9 @@ def camera_to_world(camera, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     tr = camera.transform
     n = times.shape[0]
     R, pos = np.empty((n, 3, 3)), np.empty((n, 3))
-    c = np.ascontiguousarray                 # (one compiled signature whatever the caller's arrays)
-    camera_rows(c(tr.times, np.float64), c(tr._T, np.float64), c(tr._Q, np.float64), c(tr._S, np.float64),
-                c(times), R, pos)
+    def c(a):                                # contiguous, writeable float64 copies: one compiled signature
+        return np.array(a, np.float64)       # whatever the caller's arrays are (read-only ones included)
+    camera_rows(c(tr.times), c(tr._T), c(tr._Q), c(tr._S), c(times), R, pos)
     return R, pos
 
 
