@@ -24,8 +24,8 @@ from test_kernel_svm import N, make_hits, make_scene
 # Texture, a Checker, Mix Color, a ColorRamp on Roughness) and a second material mixing a Diffuse
 # and a Glossy BSDF by the Checker's Fac
 # (the Image Texture's Linear look-up of an 8-bit image, Mix Color's Multiply: parts of an opcode)
-BENCH_OPS = {"TEXCOORD", "MAPPING", "TEX_IMAGE", "IMAGE_LINEAR8", "TEX_CHECKER", "MIX_COLOR", "BLEND_MULTIPLY", "RAMP",
-             "CONVERT", "BSDF_PRINCIPLED"}
+BENCH_OPS = {"TEXCOORD", "TEXCOORD_POINT", "MAPPING", "TEX_IMAGE", "IMAGE_LINEAR8", "TEX_CHECKER", "MIX_COLOR",
+             "BLEND_MULTIPLY", "RAMP", "CONVERT", "BSDF_PRINCIPLED"}
 
 
 def _textured() -> ShaderGraph:
@@ -59,20 +59,29 @@ def _mixed() -> ShaderGraph:
     }, surface=Link("Mix", "Shader"))
 
 
+def _cutout() -> ShaderGraph:
+    """A Principled BSDF coloured by the UV coordinates, its Alpha a Checker's Fac (a cut-out)."""
+    return ShaderGraph(nodes={
+        "Coord": N("ShaderNodeTexCoord"),
+        "Checker": N("ShaderNodeTexChecker", {"Vector": Link("Coord", "UV"), "Scale": 4.0}),
+        "BSDF": N("ShaderNodeBsdfPrincipled", {"Base Color": Link("Coord", "UV"), "Alpha": Link("Checker", "Fac")}),
+    }, surface=Link("BSDF", "BSDF"))
+
+
 def _scene():
     rng = np.random.default_rng(3)
     tex = Texture(rng.integers(0, 256, (16, 8, 3), dtype=np.uint8), colorspace="sRGB", name="noise")
     flat = Material(base_color=np.array([0.3, 0.6, 0.2]), roughness=0.4, name="flat")
-    return make_scene([_textured(), flat, _mixed()], [tex])
+    return make_scene([_textured(), flat, _mixed(), _cutout()], [tex])
 
 
 def _shade(scene, ops, rows: bool):
-    """Closure rows (and the shading normals after) of 600 hits on the scene's three materials and
-    misses, by the interpreter for ``ops`` (None: the full one)."""
+    """Closure rows (and the shading normals after) of 600 hits on the scene's materials and misses,
+    by the interpreter for ``ops`` (None: the full one)."""
     sd = shading_data(scene)
     rng = np.random.default_rng(7)
     hits = make_hits(600, rng)
-    mat = rng.integers(-1, 3, 600).astype(np.int32)
+    mat = rng.integers(-1, len(scene.materials), 600).astype(np.int32)
     h = Hits(t=np.ones(600), instance=np.zeros(600, np.int32), prim=np.zeros(600, np.int32), u=hits["bu"],
              v=hits["bv"], position=hits["P"], ng=hits["NG"], ns=hits["NS"], material=mat)
     G = hit_geometry(h, hits["D"])
@@ -93,7 +102,7 @@ def test_program_ops_walks_every_instruction():
     sd = shading_data(make_scene([_textured()], [Texture(np.zeros((4, 4, 3), np.float32), name="t")]))
     assert sd.ops == BENCH_OPS - {"IMAGE_LINEAR8"} | {"IMAGE_LINEAR"}
     sd = shading_data(_scene())
-    assert sd.ops == BENCH_OPS | {"BSDF_DIFFUSE", "BSDF_GLOSSY", "MIX_SHADER"}
+    assert sd.ops == BENCH_OPS | {"BSDF_DIFFUSE", "BSDF_GLOSSY", "MIX_SHADER", "TEXCOORD_UV", "ALPHA"}
     # a scene without node programs has none
     assert shading_data(make_scene([Material(name="flat")])).ops == frozenset()
 
@@ -128,3 +137,58 @@ def test_the_variant_is_chosen_by_the_opcode_set():
     # interpreter
     assert svm_variants.interpreter(svm_variants.FEATURES | {"END"}) is svm._shade
     assert svm_variants.interpreter(None) is svm._shade
+
+
+_CHILD = r"""
+import json, sys
+sys.path.insert(0, sys.argv[1]); sys.path.insert(0, sys.argv[2])
+import numpy as np
+from stpm_core import numba_probe
+from stpm_core.kernels import svm
+from stpm_core.shading import shading_data
+from stpm_core.nodes.graph import Link, ShaderGraph
+from test_kernel_svm import N, make_scene
+from test_svm_variants import _shade
+g = ShaderGraph(nodes={"Checker": N("ShaderNodeTexChecker", {"Scale": 3.0}),
+                       "Diffuse": N("ShaderNodeBsdfDiffuse", {"Color": Link("Checker", "Color")})},
+                surface=Link("Diffuse", "BSDF"))
+scene = make_scene([g])
+C, _ = _shade(scene, shading_data(scene).ops, False)
+print(json.dumps({"compiled": numba_probe.compile_counts()[0], "sum": float(np.nansum(C)),
+                  "ops": sorted(shading_data(scene).ops), "dir": str(numba_probe.variant_dir())}))
+"""
+
+
+def test_a_second_process_loads_the_variant_from_the_cache(tmp_path):
+    """The variant file and its compiled kernels land in the kernel cache folder; a second process
+    (a warm start) compiles nothing and shades the same; a new kernel-source digest names a new file."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from stpm_core import numba_probe
+    root, tests = Path(__file__).resolve().parent.parent, Path(__file__).resolve().parent
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+
+    def child():
+        out = subprocess.run([sys.executable, "-c", _CHILD, str(root), str(tests)], env=env, capture_output=True,
+                             text=True, check=True)
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    first, second = child(), child()
+    assert first["ops"] == ["BSDF_DIFFUSE", "TEXCOORD", "TEXCOORD_POINT", "TEX_CHECKER"]
+    assert Path(first["dir"]) == tmp_path / "cache" / "svm_variants"
+    files = list(Path(first["dir"]).glob("svm_*.py"))
+    assert len(files) == 1
+    assert first["compiled"] > 0 and second["compiled"] == 0 and first["sum"] == second["sum"]
+    # the file's name follows the kernel sources' digest (numba checks a cached kernel against its
+    # own file only: an edited callee must not be served from an old compile)
+    assert files[0].name == svm_variants.variant_name(first["ops"]) + ".py"
+    old = numba_probe._SOURCES_DIGEST[:]
+    try:
+        numba_probe._SOURCES_DIGEST[:] = ["0" * 64]
+        assert files[0].name != svm_variants.variant_name(first["ops"]) + ".py"
+    finally:
+        numba_probe._SOURCES_DIGEST[:] = old

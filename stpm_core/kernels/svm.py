@@ -107,6 +107,8 @@ _USE_BLEND_SCREEN = _USE_BLEND_DODGE = _USE_BLEND_ADD = _USE_BLEND_OVERLAY = _US
 _USE_BLEND_LINEAR_LIGHT = _USE_BLEND_DIFFERENCE = _USE_BLEND_EXCLUSION = _USE_BLEND_SUBTRACT = True
 _USE_BLEND_DIVIDE = _USE_BLEND_HUE = _USE_BLEND_SATURATION = _USE_BLEND_COLOR = _USE_BLEND_VALUE = True
 _USE_SET_NORMAL = True
+_USE_ALPHA = True                      # a Principled BSDF's Alpha that is not a constant 1
+_USE_TEXCOORD_UV = _USE_TEXCOORD_POINT = _USE_TEXCOORD_NORMAL = _USE_TEXCOORD_REFLECTION = True    # its outputs
 
 
 
@@ -929,7 +931,7 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
     else:
         layer, mode, out = 0, int(prog[pc + 1]), -1
     # (#offset != 0 only in a Bump node's height inputs: without BUMP no displacement is compiled)
-    if (_USE_UVMAP and op == _UVMAP) or (_USE_TEXCOORD and op == _TEXCOORD):
+    if (_USE_UVMAP and op == _UVMAP) or (_USE_TEXCOORD_UV and op == _TEXCOORD):
         if out >= 0:
             for k in range(n):
                 r = rows[k]
@@ -950,7 +952,7 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
         gs, ns_, obs, rfs = int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 5]), int(prog[pc + 6])
         for k in range(n):
             r = rows[k]
-            if gs >= 0 or obs >= 0:
+            if _USE_TEXCOORD_POINT and (gs >= 0 or obs >= 0):
                 mesh = inst_mesh[inst[r]]
                 t = mesh_tri0[mesh] + prim[r]
                 w1, w2 = bu[r], bv[r]
@@ -964,7 +966,7 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
                 _put3(st, k, obs, p0, p1, p2)
                 _put3(st, k, gs, (p0 - gen_lo[mesh, 0]) * gen_inv[mesh, 0], (p1 - gen_lo[mesh, 1]) * gen_inv[mesh, 1],
                       (p2 - gen_lo[mesh, 2]) * gen_inv[mesh, 2])
-            if ns_ >= 0:
+            if _USE_TEXCOORD_NORMAL and ns_ >= 0:
                 # Normal: the object-space shading normal, facing the viewer (Cycles' N in object space)
                 q = mesh_tri0[inst_mesh[inst[r]]] + prim[r]
                 w1, w2 = bu[r], bv[r]
@@ -974,7 +976,7 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
                                 w0 * cn[q, 0, 1] + w1 * cn[q, 1, 1] + w2 * cn[q, 2, 1],
                                 w0 * cn[q, 0, 2] + w1 * cn[q, 1, 2] + w2 * cn[q, 2, 2])
                 _put3(st, k, ns_, f * x, f * y, f * z)
-            if rfs >= 0:
+            if _USE_TEXCOORD_REFLECTION and rfs >= 0:
                 s = -1.0 if D[r, 0] * NG[r, 0] + D[r, 1] * NG[r, 1] + D[r, 2] * NG[r, 2] > 0.0 else 1.0
                 n0, n1, n2 = s * NS[r, 0], s * NS[r, 1], s * NS[r, 2]
                 d = D[r, 0] * n0 + D[r, 1] * n1 + D[r, 2] * n2
@@ -1435,7 +1437,7 @@ def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, U, closures
                 t0, t1, t2 = _v3(st, int(prog[q + 1]), k)
                 _transparent(C, r, w * t0, w * t1, w * t2)
                 break
-            if _USE_BSDF_PRINCIPLED and op == _BSDF_PRINCIPLED:
+            if _USE_ALPHA and op == _BSDF_PRINCIPLED:
                 a = _clamp01(st[int(prog[q + 5]), k])
                 if a < 1.0:
                     # Alpha: Cycles' mix of a Transparent BSDF (1 - alpha) and the BSDF (alpha)

@@ -17,8 +17,10 @@ The generated file goes to the kernel cache folder (:func:`stpm_core.numba_probe
 numba's on-disk cache works for it as for any kernel file.  Its name is a hash of the kernel
 sources (``numba_probe.sources_digest``: a callee's edit must not reuse a stale compile) and of
 its text (which names the opcodes): the same opcodes give the same file in every process
-(deterministic), an edit of any kernel source a new one.  A scene using every opcode, or a
-process with no folder to write to, runs :mod:`.svm`'s own ``_shade``.
+(deterministic), an edit of any kernel source a new one.  A scene using every opcode, a process
+with no folder to write to, or ``STPM_SVM_VARIANTS=0`` in the environment (one compile of the
+whole interpreter for every scene: a test run with a cold cache over many node combinations)
+runs :mod:`.svm`'s own ``_shade``.
 """
 from __future__ import annotations
 
@@ -36,7 +38,7 @@ from .. import numba_probe
 from ..nodes.ops import BLEND_MODES, LAYOUT, OP
 from . import svm, texture
 
-__all__ = ["DISPATCHERS", "FEATURES", "program_ops", "variant_source", "interpreter"]
+__all__ = ["DISPATCHERS", "FEATURES", "program_ops", "variant_source", "variant_name", "interpreter"]
 
 # The functions that test _USE_<feature> flags, and every function calling one of them up to the
 # compiled entry svm._shade (each is compiled again in a variant; callees before callers)
@@ -45,11 +47,14 @@ DISPATCHERS = ((texture, "tex_image_rows"), (svm, "mix_color"), (svm, "_color_no
                (svm, "_run_batch"), (svm, "_closures"), (svm, "_shade"))
 
 # What a variant can leave out: every opcode (but END), each Mix Color blend mode (BLEND_<mode>),
-# a closure's Normal input (SET_NORMAL), the Image Texture's look-ups (IMAGE_CLOSEST, IMAGE_LINEAR,
-# IMAGE_LINEAR8: Linear on an 8-bit image without a working-space matrix, IMAGE_CUBIC, IMAGE_UDIM)
-FEATURES = frozenset(set(OP) - {"END"} | {f"BLEND_{b}" for b in BLEND_MODES} | {"SET_NORMAL"}
-                     | {"IMAGE_CLOSEST", "IMAGE_LINEAR", "IMAGE_LINEAR8", "IMAGE_CUBIC", "IMAGE_UDIM"})
-ALL_OPS = FEATURES
+# a closure's Normal input (SET_NORMAL), a Principled BSDF's Alpha other than a constant 1 (ALPHA),
+# the Image Texture's look-ups (IMAGE_CLOSEST, IMAGE_LINEAR, IMAGE_LINEAR8: Linear on an 8-bit
+# image without a working-space matrix, IMAGE_CUBIC, IMAGE_UDIM), Texture Coordinate's outputs
+# (TEXCOORD_UV, TEXCOORD_POINT: Generated or Object, TEXCOORD_NORMAL, TEXCOORD_REFLECTION)
+FEATURES = frozenset(set(OP) - {"END"} | {f"BLEND_{b}" for b in BLEND_MODES} | {"SET_NORMAL", "ALPHA"}
+                     | {"IMAGE_CLOSEST", "IMAGE_LINEAR", "IMAGE_LINEAR8", "IMAGE_CUBIC", "IMAGE_UDIM"}
+                     | {"TEXCOORD_UV", "TEXCOORD_POINT", "TEXCOORD_NORMAL", "TEXCOORD_REFLECTION"})
+VARIANTS_ENV = "STPM_SVM_VARIANTS"     # "0": always the full interpreter
 _BLEND_NAMES = {v: k for k, v in BLEND_MODES.items()}
 _NORMAL_OPERAND = {name: LAYOUT[name].index("*normal") + 1 for name in ("BSDF_PRINCIPLED", "BSDF_DIFFUSE",
                                                                         "BSDF_GLOSSY", "BSDF_GLASS")}
@@ -64,7 +69,8 @@ def program_ops(words: np.ndarray, hdr: np.ndarray | None = None) -> frozenset:
     size = {OP[name]: 1 + len(ops) for name, ops in LAYOUT.items()}
     names = {v: k for k, v in OP.items()}
     out = set()
-    pc = 3 + int(words[1])
+    n_const = int(words[1])
+    pc = 3 + n_const
     while pc < words.shape[0]:
         name = names[int(words[pc])]
         out.add(name)
@@ -90,8 +96,17 @@ def program_ops(words: np.ndarray, hdr: np.ndarray | None = None) -> frozenset:
                 out.add("IMAGE_CUBIC")
         elif name == "MIX_COLOR":
             out.add(f"BLEND_{_BLEND_NAMES.get(int(words[pc + 1]), 'MIX')}")
-        elif name in _NORMAL_OPERAND and words[pc + _NORMAL_OPERAND[name]] >= 0:
+        elif name == "TEXCOORD":
+            gen, nrm, uv, obj, refl = (words[pc + 1 + LAYOUT["TEXCOORD"].index(k)] >= 0
+                                       for k in ("*generated", "*normal", "*uv", "*object", "*reflection"))
+            out.update(f for f, used in (("TEXCOORD_POINT", gen or obj), ("TEXCOORD_NORMAL", nrm), ("TEXCOORD_UV", uv),
+                                         ("TEXCOORD_REFLECTION", refl)) if used)
+        if name in _NORMAL_OPERAND and words[pc + _NORMAL_OPERAND[name]] >= 0:
             out.add("SET_NORMAL")
+        if name == "BSDF_PRINCIPLED":
+            a = int(words[pc + 1 + LAYOUT["BSDF_PRINCIPLED"].index("alpha")])   # a constant >= 1: always opaque
+            if not (0 <= a < n_const and words[3 + a] >= 1.0):
+                out.add("ALPHA")
         pc += step
     return frozenset(out)
 
@@ -142,14 +157,14 @@ def _check_names(homes) -> None:
 
 
 _LOCK = threading.Lock()
-_LOADED: dict = {}          # frozenset of opcode names -> the compiled entry (a numba dispatcher)
+_LOADED: dict = {}          # frozenset of feature names -> the compiled entry (a numba dispatcher)
 
 
 def interpreter(ops):
-    """The compiled ``_shade`` for programs using only the opcode names ``ops`` (None: any):
-    :mod:`.svm`'s own when ops holds every opcode (but END) or no variant file can be written,
-    else the variant module's (generated and imported once per process)."""
-    if ops is None:
+    """The compiled ``_shade`` for programs using only the :data:`FEATURES` named in ``ops``
+    (``ShadingData.ops``; None: any): :mod:`.svm`'s own when ops holds every feature or no variant
+    file can be written, else the variant module's (generated and imported once per process)."""
+    if ops is None or os.environ.get(VARIANTS_ENV, "") == "0":
         return svm._shade
     ops = frozenset(ops) - {"END"}
     if FEATURES <= ops:
@@ -161,14 +176,21 @@ def interpreter(ops):
         return entry
 
 
+def variant_name(ops) -> str:
+    """The variant module's file name (without .py) for ``ops``: ``svm_`` and 20 hex digits of the
+    SHA-256 of the kernel sources' digest and the module's text."""
+    text = variant_source(frozenset(ops) - {"END"})
+    return "svm_" + hashlib.sha256((numba_probe.sources_digest() + "\0" + text).encode()).hexdigest()[:20]
+
+
 def _load(ops):
     """Write (when missing) and import the variant module of ``ops``; svm._shade when that fails."""
     folder = numba_probe.variant_dir()
     if folder is None or not numba_probe.AVAILABLE:
         return svm._shade
     text = variant_source(ops)
-    h = hashlib.sha256((numba_probe.sources_digest() + "\0" + text).encode()).hexdigest()[:20]
-    name = f"svm_{h}"
+    name = variant_name(ops)
+    h = name[len("svm_"):]
     path = Path(folder) / f"{name}.py"
     try:
         if not path.exists() or path.read_text() != text:
