@@ -188,11 +188,11 @@ def _load(ops):
     folder = numba_probe.variant_dir()
     if folder is None or not numba_probe.AVAILABLE:
         return svm._shade
-    text = variant_source(ops)
-    name = variant_name(ops)
-    h = name[len("svm_"):]
-    path = Path(folder) / f"{name}.py"
     try:
+        text = variant_source(ops)             # (OSError: no source files, e.g. a frozen install)
+        name = variant_name(ops)
+        h = name[len("svm_"):]
+        path = Path(folder) / f"{name}.py"
         if not path.exists() or path.read_text() != text:
             # written once under a temporary name: another process never imports half a file, and a
             # file that is already there keeps its time stamp (numba's cache index checks it)
