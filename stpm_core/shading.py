@@ -44,8 +44,8 @@ class ShadingData:
     uses_mix: bool = False
     uses_normals: bool = False        # some program rewrites hits' shading normals (Normal inputs)
     uses_frames: bool = False         # some program reads each hit's normal matrix (Normal Map)
-    # the opcode names the programs hold (``kernels.svm_variants``: the interpreter compiled for
-    # these only); None: any (the full interpreter)
+    # the features (opcodes and parts of them, ``kernels.svm_variants.FEATURES``) the programs hold:
+    # the interpreter is compiled for these only; None: any (the full interpreter)
     ops: frozenset | None = None
     unsupported: list = field(default_factory=list)
     uv_layers: list = field(default_factory=list)

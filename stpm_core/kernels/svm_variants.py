@@ -101,6 +101,8 @@ def program_ops(words: np.ndarray, hdr: np.ndarray | None = None) -> frozenset:
                                        for k in ("*generated", "*normal", "*uv", "*object", "*reflection"))
             out.update(f for f, used in (("TEXCOORD_POINT", gen or obj), ("TEXCOORD_NORMAL", nrm), ("TEXCOORD_UV", uv),
                                          ("TEXCOORD_REFLECTION", refl)) if used)
+        if "#offset" in LAYOUT[name] and words[pc + 1 + LAYOUT[name].index("#offset")] != 0:
+            out.add("BUMP")                        # (a displaced read: svm gates displacement on BUMP)
         if name in _NORMAL_OPERAND and words[pc + _NORMAL_OPERAND[name]] >= 0:
             out.add("SET_NORMAL")
         if name == "BSDF_PRINCIPLED":
