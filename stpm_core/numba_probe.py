@@ -39,7 +39,7 @@ from pathlib import Path
 from ._version import __version__
 
 __all__ = ["probe", "njit", "AVAILABLE", "IMPORT_ERROR", "invalidate_stale_caches", "KERNEL_SOURCES",
-           "CACHE_ENV", "CACHE", "choose_cache_dir", "cache_key", "compile_counts"]
+           "CACHE_ENV", "CACHE", "choose_cache_dir", "cache_key", "compile_counts", "variant_dir", "sources_digest"]
 
 
 def probe() -> tuple[bool, str]:
@@ -210,6 +210,39 @@ KERNEL_SOURCES = ("kernels/*.py", "raycast/embree_kernels.py", "raycast/numba_ba
 _STAMP = "stpm-kernel-sources.sha256"
 
 
+def _digest(root: Path, patterns) -> str:
+    """SHA-256 over the files of ``patterns`` under root (their paths and bytes, in path order)."""
+    import hashlib
+
+    files = sorted({p for pattern in patterns for p in root.glob(pattern)})
+    h = hashlib.sha256()
+    for p in files:
+        h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+_SOURCES_DIGEST: list = []
+
+
+def sources_digest() -> str:
+    """The SHA-256 of this install's kernel sources (``KERNEL_SOURCES``), computed once per process:
+    generated kernel files (``kernels.svm_variants``) carry it in their names, since numba checks a
+    cached kernel against its own file only."""
+    if not _SOURCES_DIGEST:
+        _SOURCES_DIGEST.append(_digest(_HERE, KERNEL_SOURCES))
+    return _SOURCES_DIGEST[0]
+
+
+def variant_dir():
+    """The folder for generated kernel modules (``kernels.svm_variants``), created if missing, or None
+    when it cannot be written: ``svm_variants`` in the chosen cache folder (:data:`CACHE`), or in
+    ``stpm_core/kernels/__pycache__`` when numba caches in-tree.  numba caches a generated module's
+    kernels as any other's (next to it, or under ``NUMBA_CACHE_DIR``)."""
+    base = Path(CACHE["dir"]) if CACHE.get("dir") else _HERE / "kernels" / "__pycache__"
+    folder = base / "svm_variants"
+    return folder if _writable(folder) else None
+
+
 def invalidate_stale_caches(root=None, patterns=KERNEL_SOURCES) -> bool:
     """Make numba recompile every cached kernel when any kernel source changed; True if it did.
 
@@ -224,17 +257,11 @@ def invalidate_stale_caches(root=None, patterns=KERNEL_SOURCES) -> bool:
     change only by reinstalling, which rewrites them) is left alone.  root / patterns: another
     package and its kernel files (tests).
     """
-    import hashlib
-    from pathlib import Path
-
     root = Path(__file__).resolve().parent if root is None else Path(root)
     files = sorted({p for pattern in patterns for p in root.glob(pattern)})
-    h = hashlib.sha256()
     try:
-        for p in files:
-            h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
+        digest = _digest(root, patterns)
         stamp = root / "__pycache__" / _STAMP
-        digest = h.hexdigest()
         if stamp.exists() and stamp.read_text().strip() == digest:
             return False
         # the new digest is written first: where it cannot be (a read-only install, even one whose

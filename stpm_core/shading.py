@@ -19,6 +19,7 @@ import numpy as np
 from .colorspaces import luma, working_space_of
 from .kernels.closure import C_EMIT, C_PROGRAM, N_CLOSURE, pack_materials
 from .kernels.svm import shade
+from .kernels.svm_variants import program_ops
 from .nodes.compile import compile_graph
 from .textures import pack_textures
 
@@ -43,6 +44,9 @@ class ShadingData:
     uses_mix: bool = False
     uses_normals: bool = False        # some program rewrites hits' shading normals (Normal inputs)
     uses_frames: bool = False         # some program reads each hit's normal matrix (Normal Map)
+    # the features (opcodes and parts of them, ``kernels.svm_variants.FEATURES``) the programs hold:
+    # the interpreter is compiled for these only; None: any (the full interpreter)
+    ops: frozenset | None = None
     unsupported: list = field(default_factory=list)
     uv_layers: list = field(default_factory=list)
     texture_bytes: int = 0
@@ -236,6 +240,7 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
     uv_layers: list = [""]
     color_layers: list = []
     words, unsupported, uses_mix, uses_normals, uses_frames = [], [], False, False, False
+    ops: set = set()
     emitting, transparent, store_any = set(), set(), set()
     at = 0
     for i, m in enumerate(scene.materials):
@@ -264,11 +269,15 @@ def shading_data(scene, closures: np.ndarray | None = None) -> ShadingData:
     if words:
         A = scene_attributes(scene, uv_layers, color_layers)
         pack = pack_textures(textures, working)
+        hdr = pack.arrays()[0]
+        for w in words:
+            ops |= program_ops(w, hdr)
     else:
         A = _empty_attributes(len(scene.instances))
         pack = pack_textures([])
     sd = ShadingData(closures=rows, prog=prog_all, n_slots=n_slots, A=A, X=pack.arrays()[:5],
                      uses_programs=bool(words), uses_mix=uses_mix, uses_normals=uses_normals, uses_frames=uses_frames,
+                     ops=frozenset(ops),
                      unsupported=unsupported, uv_layers=uv_layers,
                      texture_bytes=pack.nbytes if words else 0, instances=list(scene.instances),
                      emitting=frozenset(emitting), transparent=frozenset(transparent),

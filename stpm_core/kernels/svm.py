@@ -91,6 +91,29 @@ _TEX_BRICK = OP["TEX_BRICK"]
 _TEX_MAGIC = OP["TEX_MAGIC"]
 _TEX_WHITE_NOISE = OP["TEX_WHITE_NOISE"]
 
+# Which opcodes this module's interpreter evaluates: every one.  The dispatching functions test
+# ``_USE_<op> and op == _<op>``; a variant of the interpreter for the opcodes one scene's programs
+# use (:mod:`.svm_variants`) compiles these same functions again with the others False, and numba
+# drops those branches (and never compiles what only they call) before typing.
+_USE_CONVERT = _USE_TEXCOORD = _USE_UVMAP = _USE_GEOMETRY = _USE_MAPPING = _USE_MATH = _USE_VECTOR_MATH = True
+_USE_MIX_FLOAT = _USE_MIX_VECTOR = _USE_MIX_COLOR = _USE_INVERT = _USE_HSV = _USE_BRIGHT_CONTRAST = True
+_USE_GAMMA = _USE_SEPARATE_COLOR = _USE_COMBINE_COLOR = _USE_SEPARATE_XYZ = _USE_COMBINE_XYZ = True
+_USE_CLAMP = _USE_MAP_RANGE = _USE_RAMP = _USE_CURVES = _USE_TEX_IMAGE = _USE_TEX_CHECKER = True
+_USE_TEX_GRADIENT = _USE_BSDF_PRINCIPLED = _USE_BSDF_DIFFUSE = _USE_BSDF_GLOSSY = _USE_BSDF_GLASS = True
+_USE_EMISSION = _USE_MIX_SHADER = _USE_TRANSPARENT = _USE_ADD_SHADER = _USE_ATTRIBUTE = True
+_USE_NORMAL_MAP = _USE_BUMP = _USE_TEX_NOISE = _USE_TEX_VORONOI = _USE_TEX_WAVE = _USE_TEX_BRICK = True
+_USE_TEX_MAGIC = _USE_TEX_WHITE_NOISE = True
+# and the parts of an instruction some programs never reach: each Mix Color blend mode, a shader's
+# Normal input (its closure rewrites the hit's shading normal); the Image Texture's kinds of
+# look-up have theirs in kernels.texture
+_USE_BLEND_MIX = _USE_BLEND_DARKEN = _USE_BLEND_MULTIPLY = _USE_BLEND_BURN = _USE_BLEND_LIGHTEN = True
+_USE_BLEND_SCREEN = _USE_BLEND_DODGE = _USE_BLEND_ADD = _USE_BLEND_OVERLAY = _USE_BLEND_SOFT_LIGHT = True
+_USE_BLEND_LINEAR_LIGHT = _USE_BLEND_DIFFERENCE = _USE_BLEND_EXCLUSION = _USE_BLEND_SUBTRACT = True
+_USE_BLEND_DIVIDE = _USE_BLEND_HUE = _USE_BLEND_SATURATION = _USE_BLEND_COLOR = _USE_BLEND_VALUE = True
+_USE_SET_NORMAL = True
+_USE_ALPHA = True                      # a Principled BSDF's Alpha that is not a constant 1
+_USE_TEXCOORD_UV = _USE_TEXCOORD_POINT = _USE_TEXCOORD_NORMAL = _USE_TEXCOORD_REFLECTION = True    # its outputs
+
 
 
 # ----------------------------------------------------------------------------
@@ -463,64 +486,64 @@ def _overlay(t, a, b):
 def mix_color(blend, t, a0, a1, a2, b0, b1, b2):
     """Blender's MixRGB blend modes (``svm_mix``); blend = ``ops.BLEND_MODES`` code, t the factor."""
     tm = 1.0 - t
-    if blend == 0:
+    if _USE_BLEND_MIX and blend == 0:
         return tm * a0 + t * b0, tm * a1 + t * b1, tm * a2 + t * b2
-    if blend == 1:
+    if _USE_BLEND_DARKEN and blend == 1:
         return tm * a0 + t * min(a0, b0), tm * a1 + t * min(a1, b1), tm * a2 + t * min(a2, b2)
-    if blend == 2:
+    if _USE_BLEND_MULTIPLY and blend == 2:
         return a0 * (tm + t * b0), a1 * (tm + t * b1), a2 * (tm + t * b2)
-    if blend == 3:                   # BURN
+    if _USE_BLEND_BURN and blend == 3:                   # BURN
         return _burn(t, a0, b0), _burn(t, a1, b1), _burn(t, a2, b2)
-    if blend == 4:
+    if _USE_BLEND_LIGHTEN and blend == 4:
         return tm * a0 + t * max(a0, b0), tm * a1 + t * max(a1, b1), tm * a2 + t * max(a2, b2)
-    if blend == 5:                   # SCREEN
+    if _USE_BLEND_SCREEN and blend == 5:                   # SCREEN
         return (1.0 - (tm + t * (1.0 - b0)) * (1.0 - a0), 1.0 - (tm + t * (1.0 - b1)) * (1.0 - a1),
                 1.0 - (tm + t * (1.0 - b2)) * (1.0 - a2))
-    if blend == 6:                   # DODGE
+    if _USE_BLEND_DODGE and blend == 6:                   # DODGE
         return _dodge(t, a0, b0), _dodge(t, a1, b1), _dodge(t, a2, b2)
-    if blend == 7:
+    if _USE_BLEND_ADD and blend == 7:
         return a0 + t * b0, a1 + t * b1, a2 + t * b2
-    if blend == 8:                   # OVERLAY
+    if _USE_BLEND_OVERLAY and blend == 8:                   # OVERLAY
         return _overlay(t, a0, b0), _overlay(t, a1, b1), _overlay(t, a2, b2)
-    if blend == 9:                   # SOFT_LIGHT
+    if _USE_BLEND_SOFT_LIGHT and blend == 9:                   # SOFT_LIGHT
         s0 = 1.0 - (1.0 - b0) * (1.0 - a0)
         s1 = 1.0 - (1.0 - b1) * (1.0 - a1)
         s2 = 1.0 - (1.0 - b2) * (1.0 - a2)
         return (tm * a0 + t * ((1.0 - a0) * b0 * a0 + a0 * s0), tm * a1 + t * ((1.0 - a1) * b1 * a1 + a1 * s1),
                 tm * a2 + t * ((1.0 - a2) * b2 * a2 + a2 * s2))
-    if blend == 10:                  # LINEAR_LIGHT
+    if _USE_BLEND_LINEAR_LIGHT and blend == 10:                  # LINEAR_LIGHT
         return a0 + t * (2.0 * b0 - 1.0), a1 + t * (2.0 * b1 - 1.0), a2 + t * (2.0 * b2 - 1.0)
-    if blend == 11:
+    if _USE_BLEND_DIFFERENCE and blend == 11:
         return tm * a0 + t * abs(a0 - b0), tm * a1 + t * abs(a1 - b1), tm * a2 + t * abs(a2 - b2)
-    if blend == 12:                  # EXCLUSION
+    if _USE_BLEND_EXCLUSION and blend == 12:                  # EXCLUSION
         return (max(tm * a0 + t * (a0 + b0 - 2.0 * a0 * b0), 0.0), max(tm * a1 + t * (a1 + b1 - 2.0 * a1 * b1), 0.0),
                 max(tm * a2 + t * (a2 + b2 - 2.0 * a2 * b2), 0.0))
-    if blend == 13:
+    if _USE_BLEND_SUBTRACT and blend == 13:
         return a0 - t * b0, a1 - t * b1, a2 - t * b2
-    if blend == 14:                  # DIVIDE
+    if _USE_BLEND_DIVIDE and blend == 14:                  # DIVIDE
         return (tm * a0 + t * a0 / b0 if b0 != 0.0 else a0, tm * a1 + t * a1 / b1 if b1 != 0.0 else a1,
                 tm * a2 + t * a2 / b2 if b2 != 0.0 else a2)
-    if blend == 15:                  # HUE
+    if _USE_BLEND_HUE and blend == 15:                  # HUE
         h2, s2, v2 = rgb_to_hsv(b0, b1, b2)
         if s2 != 0.0:
             h, s, v = rgb_to_hsv(a0, a1, a2)
             r, g, b = hsv_to_rgb(h2, s, v)
             return tm * a0 + t * r, tm * a1 + t * g, tm * a2 + t * b
         return a0, a1, a2
-    if blend == 16:                  # SATURATION
+    if _USE_BLEND_SATURATION and blend == 16:                  # SATURATION
         h, s, v = rgb_to_hsv(a0, a1, a2)
         if s != 0.0:
             h2, s2, v2 = rgb_to_hsv(b0, b1, b2)
             return hsv_to_rgb(h, tm * s + t * s2, v)
         return a0, a1, a2
-    if blend == 17:                  # COLOR
+    if _USE_BLEND_COLOR and blend == 17:                  # COLOR
         h2, s2, v2 = rgb_to_hsv(b0, b1, b2)
         if s2 != 0.0:
             h, s, v = rgb_to_hsv(a0, a1, a2)
             r, g, b = hsv_to_rgb(h2, s2, v)
             return tm * a0 + t * r, tm * a1 + t * g, tm * a2 + t * b
         return a0, a1, a2
-    if blend == 18:                  # VALUE
+    if _USE_BLEND_VALUE and blend == 18:                  # VALUE
         h, s, v = rgb_to_hsv(a0, a1, a2)
         h2, s2, v2 = rgb_to_hsv(b0, b1, b2)
         return hsv_to_rgb(h, s, tm * v + t * v2)
@@ -531,12 +554,12 @@ def mix_color(blend, t, a0, a1, a2, b0, b1, b2):
 def _color_node(op, prog, pc, st, n):
     """INVERT, HSV, BRIGHT_CONTRAST, GAMMA, SEPARATE_COLOR, COMBINE_COLOR."""
     for k in range(n):
-        if op == _INVERT:
+        if _USE_INVERT and op == _INVERT:
             f = st[int(prog[pc + 1]), k]
             c0, c1, c2 = _v3(st, int(prog[pc + 2]), k)
             _put3(st, k, int(prog[pc + 3]), (1.0 - f) * c0 + f * (1.0 - c0), (1.0 - f) * c1 + f * (1.0 - c1),
                   (1.0 - f) * c2 + f * (1.0 - c2))
-        elif op == _HSV:
+        elif _USE_HSV and op == _HSV:
             hue, sat, val, f = st[int(prog[pc + 1]), k], st[int(prog[pc + 2]), k], st[int(prog[pc + 3]), k], st[int(prog[pc + 4]), k]
             c0, c1, c2 = _v3(st, int(prog[pc + 5]), k)
             h, s, v = rgb_to_hsv(c0, c1, c2)
@@ -546,13 +569,13 @@ def _color_node(op, prog, pc, st, n):
             r, g, b = hsv_to_rgb(h, s, v)
             _put3(st, k, int(prog[pc + 6]), max(f * r + (1.0 - f) * c0, 0.0), max(f * g + (1.0 - f) * c1, 0.0),
                   max(f * b + (1.0 - f) * c2, 0.0))
-        elif op == _BRIGHT_CONTRAST:
+        elif _USE_BRIGHT_CONTRAST and op == _BRIGHT_CONTRAST:
             c0, c1, c2 = _v3(st, int(prog[pc + 1]), k)
             bright, contrast = st[int(prog[pc + 2]), k], st[int(prog[pc + 3]), k]
             a = 1.0 + contrast
             b = bright - contrast * 0.5
             _put3(st, k, int(prog[pc + 4]), max(a * c0 + b, 0.0), max(a * c1 + b, 0.0), max(a * c2 + b, 0.0))
-        elif op == _GAMMA:
+        elif _USE_GAMMA and op == _GAMMA:
             c0, c1, c2 = _v3(st, int(prog[pc + 1]), k)
             gm = st[int(prog[pc + 2]), k]
             if gm == 0.0:
@@ -560,7 +583,7 @@ def _color_node(op, prog, pc, st, n):
             else:
                 _put3(st, k, int(prog[pc + 3]), c0 ** gm if c0 > 0.0 else c0, c1 ** gm if c1 > 0.0 else c1,
                       c2 ** gm if c2 > 0.0 else c2)
-        elif op == _SEPARATE_COLOR:
+        elif _USE_SEPARATE_COLOR and op == _SEPARATE_COLOR:
             mode = int(prog[pc + 1])
             c0, c1, c2 = _v3(st, int(prog[pc + 2]), k)
             if mode == 1:
@@ -570,7 +593,7 @@ def _color_node(op, prog, pc, st, n):
             _put1(st, k, int(prog[pc + 3]), c0)
             _put1(st, k, int(prog[pc + 4]), c1)
             _put1(st, k, int(prog[pc + 5]), c2)
-        elif op == _COMBINE_COLOR:
+        elif _USE_COMBINE_COLOR and op == _COMBINE_COLOR:
             mode = int(prog[pc + 1])
             c0, c1, c2 = st[int(prog[pc + 2]), k], st[int(prog[pc + 3]), k], st[int(prog[pc + 4]), k]
             if mode == 1:
@@ -597,7 +620,7 @@ def _value_node(op, prog, pc, st, n):
     The operands are read from the program once per batch, before the rows' loop: inside it,
     every store to the stack might change a program word as far as the compiler knows (both are
     float64 arrays), so words read there are read and converted again on every row."""
-    if op == _MATH:
+    if _USE_MATH and op == _MATH:
         mop, sa, sb, sc, cl, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), \
             int(prog[pc + 5]), int(prog[pc + 6])
         for k in range(n):
@@ -605,14 +628,14 @@ def _value_node(op, prog, pc, st, n):
             if cl:
                 r = _clamp01(r)
             st[out, k] = r
-    elif op == _MIX_FLOAT:
+    elif _USE_MIX_FLOAT and op == _MIX_FLOAT:
         sf, sa, sb, cl, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), int(prog[pc + 5])
         for k in range(n):
             t = st[sf, k]
             if cl:
                 t = _clamp01(t)
             st[out, k] = (1.0 - t) * st[sa, k] + t * st[sb, k]
-    elif op == _MIX_VECTOR:
+    elif _USE_MIX_VECTOR and op == _MIX_VECTOR:
         sf, sa, sb, cl, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), int(prog[pc + 5])
         for k in range(n):
             t = st[sf, k]
@@ -621,7 +644,7 @@ def _value_node(op, prog, pc, st, n):
             a0, a1, a2 = _v3(st, sa, k)
             b0, b1, b2 = _v3(st, sb, k)
             _put3(st, k, out, (1.0 - t) * a0 + t * b0, (1.0 - t) * a1 + t * b1, (1.0 - t) * a2 + t * b2)
-    elif op == _MIX_COLOR:
+    elif _USE_MIX_COLOR and op == _MIX_COLOR:
         blend, sf, sa, sb, cl, cr, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), \
             int(prog[pc + 5]), int(prog[pc + 6]), int(prog[pc + 7])
         for k in range(n):
@@ -634,14 +657,14 @@ def _value_node(op, prog, pc, st, n):
             if cr:
                 r, g, b = _clamp01(r), _clamp01(g), _clamp01(b)
             _put3(st, k, out, r, g, b)
-    elif op == _CLAMP:
+    elif _USE_CLAMP and op == _CLAMP:
         typ, sv, slo, shi, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]), int(prog[pc + 5])
         for k in range(n):
             v, lo, hi = st[sv, k], st[slo, k], st[shi, k]
             if typ == 1 and lo > hi:
                 lo, hi = hi, lo
             st[out, k] = min(max(v, lo), hi)
-    elif op == _MAP_RANGE:
+    elif _USE_MAP_RANGE and op == _MAP_RANGE:
         typ, sv, sf0, sf1, st0, st1, ssteps, cl, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), \
             int(prog[pc + 4]), int(prog[pc + 5]), int(prog[pc + 6]), int(prog[pc + 7]), int(prog[pc + 8]), int(prog[pc + 9])
         for k in range(n):
@@ -664,7 +687,7 @@ def _value_node(op, prog, pc, st, n):
             if cl:
                 r = min(max(r, t1), t0) if t0 > t1 else min(max(r, t0), t1)
             st[out, k] = r
-    elif op == _CONVERT:
+    elif _USE_CONVERT and op == _CONVERT:
         kind, s, o, w = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4])
         if kind == 0:
             # the working space's luminance weights (a constant)
@@ -676,14 +699,14 @@ def _value_node(op, prog, pc, st, n):
         else:
             for k in range(n):
                 _put3(st, k, o, st[s, k], st[s, k], st[s, k])
-    elif op == _SEPARATE_XYZ:
+    elif _USE_SEPARATE_XYZ and op == _SEPARATE_XYZ:
         sv, ox, oy, oz = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4])
         for k in range(n):
             x, y, z = _v3(st, sv, k)
             _put1(st, k, ox, x)
             _put1(st, k, oy, y)
             _put1(st, k, oz, z)
-    elif op == _COMBINE_XYZ:
+    elif _USE_COMBINE_XYZ and op == _COMBINE_XYZ:
         sx, sy, sz, out = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4])
         for k in range(n):
             _put3(st, k, out, st[sx, k], st[sy, k], st[sz, k])
@@ -897,13 +920,13 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
     P, NG, NS, D, inst, prim, bu, bv, NM = G
     inst_mesh, mesh_tri0, uv_off, corner_uv, co, gen_lo, gen_inv, cn, tan_off, corner_tan, col_off, corner_col, \
         inst_obj, gen_tri0, corner_gen = A
-    if op == _ATTRIBUTE:
+    if _USE_ATTRIBUTE and op == _ATTRIBUTE:
         _attribute(prog, pc, st, n, rows, G, A)
         return
-    if op == _NORMAL_MAP:
+    if _USE_NORMAL_MAP and op == _NORMAL_MAP:
         _normal_map(prog, pc, st, n, rows, G, A)
         return
-    if op == _BUMP:
+    if _USE_BUMP and op == _BUMP:
         _bump(prog, pc, st, n, rows, G, A)
         return
     if op == _UVMAP:
@@ -912,7 +935,8 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
         layer, mode, out = 0, int(prog[pc + 1]), int(prog[pc + 4])
     else:
         layer, mode, out = 0, int(prog[pc + 1]), -1
-    if op == _UVMAP or op == _TEXCOORD:
+    # (#offset != 0 only in a Bump node's height inputs: without BUMP no displacement is compiled)
+    if (_USE_UVMAP and op == _UVMAP) or (_USE_TEXCOORD_UV and op == _TEXCOORD):
         if out >= 0:
             for k in range(n):
                 r = rows[k]
@@ -923,17 +947,17 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
                     continue
                 t = off + prim[r]
                 w1, w2 = bu[r], bv[r]
-                if mode != 0:
+                if _USE_BUMP and mode != 0:
                     dbu, dbv, _, _, _, _, _, _ = _displacement(mode, r, G, A)
                     w1, w2 = w1 + dbu, w2 + dbv
                 w0 = 1.0 - w1 - w2
                 _put3(st, k, out, w0 * corner_uv[t, 0, 0] + w1 * corner_uv[t, 1, 0] + w2 * corner_uv[t, 2, 0],
                       w0 * corner_uv[t, 0, 1] + w1 * corner_uv[t, 1, 1] + w2 * corner_uv[t, 2, 1], 0.0)
-    if op == _TEXCOORD:
+    if _USE_TEXCOORD and op == _TEXCOORD:
         gs, ns_, obs, rfs = int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 5]), int(prog[pc + 6])
         for k in range(n):
             r = rows[k]
-            if gs >= 0 or obs >= 0:
+            if _USE_TEXCOORD_POINT and (gs >= 0 or obs >= 0):
                 mesh = inst_mesh[inst[r]]
                 t = mesh_tri0[mesh] + prim[r]
                 w1, w2 = bu[r], bv[r]
@@ -942,7 +966,7 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
                 p1 = w0 * co[t, 0, 1] + w1 * co[t, 1, 1] + w2 * co[t, 2, 1]
                 p2 = w0 * co[t, 0, 2] + w1 * co[t, 1, 2] + w2 * co[t, 2, 2]
                 d0 = d1 = d2 = 0.0
-                if mode != 0:
+                if _USE_BUMP and mode != 0:
                     _, _, d0, d1, d2, _, _, _ = _displacement(mode, r, G, A)
                     p0, p1, p2 = p0 + d0, p1 + d1, p2 + d2
                 if gs >= 0:
@@ -965,7 +989,7 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
                     p2 = inst_obj[j, 2, 0] * P[r, 0] + inst_obj[j, 2, 1] * P[r, 1] + inst_obj[j, 2, 2] * P[r, 2] \
                         + inst_obj[j, 2, 3] + d2
                 _put3(st, k, obs, p0, p1, p2)
-            if ns_ >= 0:
+            if _USE_TEXCOORD_NORMAL and ns_ >= 0:
                 # Normal: the object-space shading normal, facing the viewer (Cycles' N in object space)
                 q = mesh_tri0[inst_mesh[inst[r]]] + prim[r]
                 w1, w2 = bu[r], bv[r]
@@ -975,18 +999,18 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
                                 w0 * cn[q, 0, 1] + w1 * cn[q, 1, 1] + w2 * cn[q, 2, 1],
                                 w0 * cn[q, 0, 2] + w1 * cn[q, 1, 2] + w2 * cn[q, 2, 2])
                 _put3(st, k, ns_, f * x, f * y, f * z)
-            if rfs >= 0:
+            if _USE_TEXCOORD_REFLECTION and rfs >= 0:
                 s = -1.0 if D[r, 0] * NG[r, 0] + D[r, 1] * NG[r, 1] + D[r, 2] * NG[r, 2] > 0.0 else 1.0
                 n0, n1, n2 = s * NS[r, 0], s * NS[r, 1], s * NS[r, 2]
                 d = D[r, 0] * n0 + D[r, 1] * n1 + D[r, 2] * n2
                 _put3(st, k, rfs, D[r, 0] - 2.0 * d * n0, D[r, 1] - 2.0 * d * n1, D[r, 2] - 2.0 * d * n2)
-    elif op == _GEOMETRY:
+    elif _USE_GEOMETRY and op == _GEOMETRY:
         for k in range(n):
             r = rows[k]
             back = D[r, 0] * NG[r, 0] + D[r, 1] * NG[r, 1] + D[r, 2] * NG[r, 2] > 0.0
             s = -1.0 if back else 1.0          # Cycles flips N and Ng on back faces
             p0, p1, p2 = P[r, 0], P[r, 1], P[r, 2]
-            if mode != 0:
+            if _USE_BUMP and mode != 0:
                 _, _, _, _, _, w0, w1, w2 = _displacement(mode, r, G, A)
                 p0, p1, p2 = p0 + w0, p1 + w1, p2 + w2
             _put3(st, k, int(prog[pc + 2]), p0, p1, p2)
@@ -1014,7 +1038,7 @@ def _attribute(prog, pc, st, n, rows, G, A):
         if off >= 0:
             t = off + prim[r]
             w1, w2 = bu[r], bv[r]
-            if mode != 0:
+            if _USE_BUMP and mode != 0:
                 dbu, dbv, _, _, _, _, _, _ = _displacement(mode, r, G, A)
                 w1, w2 = w1 + dbu, w2 + dbv
             w0 = 1.0 - w1 - w2
@@ -1153,11 +1177,11 @@ def _normal_map(prog, pc, st, n, rows, G, A):
 @njit(**JIT)
 def _texture_node(op, prog, pc, st, n, X):
     """TEX_IMAGE, TEX_CHECKER, TEX_GRADIENT over the batch."""
-    if op == _TEX_IMAGE:
+    if _USE_TEX_IMAGE and op == _TEX_IMAGE:
         tex_image_rows(X[0], X[1], X[2], X[3], X[4], int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]),
                        int(prog[pc + 4]) != 0, st, int(prog[pc + 5]), int(prog[pc + 6]), int(prog[pc + 7]), n,
                        prog, pc + 9, int(prog[pc + 8]))
-    elif op == _TEX_CHECKER:
+    elif _USE_TEX_CHECKER and op == _TEX_CHECKER:
         vs, c1, c2, ss, cs, fs = (int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]),
                                   int(prog[pc + 5]), int(prog[pc + 6]))
         for k in range(n):
@@ -1167,7 +1191,7 @@ def _texture_node(op, prog, pc, st, n, X):
             c = c1 if f == 1.0 else c2
             _put3(st, k, cs, st[c, k], st[c + 1, k], st[c + 2, k])
             _put1(st, k, fs, f)
-    elif op == _TEX_GRADIENT:
+    elif _USE_TEX_GRADIENT and op == _TEX_GRADIENT:
         typ, vs, cs, fs = int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4])
         for k in range(n):
             x, y, z = _v3(st, vs, k)
@@ -1181,7 +1205,7 @@ def _procedural_node(op, prog, pc, st, n):
     """Noise, Voronoi, Wave, Brick, Magic, White Noise over the batch (formulas:
     :mod:`.procedural`, Blender 5.0's)."""
     w_ = lambda j: int(prog[pc + j])                                   # noqa: E731
-    if op == _TEX_NOISE:
+    if _USE_TEX_NOISE and op == _TEX_NOISE:
         dims, typ, norm, col, vs = w_(1), w_(2), w_(3) != 0, w_(4) != 0, w_(5)
         for k in range(n):
             x, y, z = _v3(st, vs, k)
@@ -1189,7 +1213,7 @@ def _procedural_node(op, prog, pc, st, n):
                                        st[w_(10), k], st[w_(13), k], norm, typ, st[w_(11), k], st[w_(12), k], col)
             _put1(st, k, w_(14), f)
             _put3(st, k, w_(15), r, g, b)
-    elif op == _TEX_VORONOI:
+    elif _USE_TEX_VORONOI and op == _TEX_VORONOI:
         dims, feat, metric, norm, vs = w_(1), w_(2), w_(3), w_(4) != 0, w_(5)
         for k in range(n):
             x, y, z = _v3(st, vs, k)
@@ -1201,7 +1225,7 @@ def _procedural_node(op, prog, pc, st, n):
             _put3(st, k, w_(16), px, py, pz)
             _put1(st, k, w_(17), wo)
             _put1(st, k, w_(18), rad)
-    elif op == _TEX_WAVE:
+    elif _USE_TEX_WAVE and op == _TEX_WAVE:
         typ, bd, rd, prof, vs = w_(1), w_(2), w_(3), w_(4), w_(5)
         for k in range(n):
             x, y, z = _v3(st, vs, k)
@@ -1209,7 +1233,7 @@ def _procedural_node(op, prog, pc, st, n):
                                       st[w_(9), k], st[w_(10), k], st[w_(11), k])
             _put3(st, k, w_(12), f, f, f)
             _put1(st, k, w_(13), f)
-    elif op == _TEX_BRICK:
+    elif _USE_TEX_BRICK and op == _TEX_BRICK:
         off, off_f, sq, sq_f, vs = prog[pc + 1], w_(2), prog[pc + 3], w_(4), w_(5)
         for k in range(n):
             x, y, z = _v3(st, vs, k)
@@ -1220,14 +1244,14 @@ def _procedural_node(op, prog, pc, st, n):
                                   st[c2 + 2, k], st[m, k], st[m + 1, k], st[m + 2, k])
             _put3(st, k, w_(15), r, g, b)
             _put1(st, k, w_(16), f)
-    elif op == _TEX_MAGIC:
+    elif _USE_TEX_MAGIC and op == _TEX_MAGIC:
         depth, vs = w_(1), w_(2)
         for k in range(n):
             x, y, z = _v3(st, vs, k)
             f, r, g, b = magic_texture(x, y, z, depth, st[w_(3), k], st[w_(4), k])
             _put3(st, k, w_(5), r, g, b)
             _put1(st, k, w_(6), f)
-    elif op == _TEX_WHITE_NOISE:
+    elif _USE_TEX_WHITE_NOISE and op == _TEX_WHITE_NOISE:
         dims, vs = w_(1), w_(2)
         for k in range(n):
             x, y, z = _v3(st, vs, k)
@@ -1248,7 +1272,8 @@ def _closure(op, prog, pc, st, k, C, r, w):
     rough = 0.5
     ior = 1.5
     e0 = e1 = e2 = 0.0
-    if op == _BSDF_PRINCIPLED:
+    b0 = b1 = b2 = 0.0
+    if _USE_BSDF_PRINCIPLED and op == _BSDF_PRINCIPLED:
         b0, b1, b2 = _v3(st, int(prog[pc + 1]), k)
         metallic = st[int(prog[pc + 2]), k]
         rough = st[int(prog[pc + 3]), k]
@@ -1258,20 +1283,19 @@ def _closure(op, prog, pc, st, k, C, r, w):
         s = st[int(prog[pc + 9]), k]
         e0, e1, e2 = _v3(st, int(prog[pc + 8]), k)
         e0, e1, e2 = e0 * s, e1 * s, e2 * s
-    elif op == _BSDF_DIFFUSE:
+    elif _USE_BSDF_DIFFUSE and op == _BSDF_DIFFUSE:
         b0, b1, b2 = _v3(st, int(prog[pc + 1]), k)
         rough = 1.0
-    elif op == _BSDF_GLOSSY:
+    elif _USE_BSDF_GLOSSY and op == _BSDF_GLOSSY:
         b0, b1, b2 = _v3(st, int(prog[pc + 1]), k)
         metallic = 1.0
         rough = st[int(prog[pc + 2]), k]
-    elif op == _BSDF_GLASS:
+    elif _USE_BSDF_GLASS and op == _BSDF_GLASS:
         b0, b1, b2 = _v3(st, int(prog[pc + 1]), k)
         transmission = 1.0
         rough = st[int(prog[pc + 2]), k]
         ior = st[int(prog[pc + 3]), k]
-    else:                              # EMISSION
-        b0 = b1 = b2 = 0.0
+    elif _USE_EMISSION:                # EMISSION
         rough = 1.0
         s = st[int(prog[pc + 2]), k]
         e0, e1, e2 = _v3(st, int(prog[pc + 1]), k)
@@ -1361,29 +1385,37 @@ def _run_batch(prog, start, st, rows, C, G, A, X, seed, U, closures, cr):
     pc = start + 3 + n_const
     while pc < closure_at:
         op = int(prog[pc])
-        if op == _MATH or op == _MIX_FLOAT or op == _MIX_VECTOR or op == _MIX_COLOR or op == _CLAMP \
-                or op == _MAP_RANGE or op == _CONVERT or op == _SEPARATE_XYZ or op == _COMBINE_XYZ:
+        # (each test is "_USE_<op> and op == _<op>": a variant without the opcode has no branch for it)
+        if (_USE_MATH and op == _MATH) or (_USE_MIX_FLOAT and op == _MIX_FLOAT) \
+                or (_USE_MIX_VECTOR and op == _MIX_VECTOR) or (_USE_MIX_COLOR and op == _MIX_COLOR) \
+                or (_USE_CLAMP and op == _CLAMP) or (_USE_MAP_RANGE and op == _MAP_RANGE) \
+                or (_USE_CONVERT and op == _CONVERT) or (_USE_SEPARATE_XYZ and op == _SEPARATE_XYZ) \
+                or (_USE_COMBINE_XYZ and op == _COMBINE_XYZ):
             _value_node(op, prog, pc, st, n)
-        elif op == _VECTOR_MATH:
+        elif _USE_VECTOR_MATH and op == _VECTOR_MATH:
             _vector_math(prog, pc, st, n)
-        elif op >= _INVERT and op <= _COMBINE_COLOR:
+        elif (_USE_INVERT or _USE_HSV or _USE_BRIGHT_CONTRAST or _USE_GAMMA or _USE_SEPARATE_COLOR
+              or _USE_COMBINE_COLOR) and op >= _INVERT and op <= _COMBINE_COLOR:
             _color_node(op, prog, pc, st, n)
-        elif op == _TEXCOORD or op == _UVMAP or op == _GEOMETRY or op == _NORMAL_MAP or op == _BUMP \
-                or op == _ATTRIBUTE:
+        elif (_USE_TEXCOORD and op == _TEXCOORD) or (_USE_UVMAP and op == _UVMAP) \
+                or (_USE_GEOMETRY and op == _GEOMETRY) or (_USE_NORMAL_MAP and op == _NORMAL_MAP) \
+                or (_USE_BUMP and op == _BUMP) or (_USE_ATTRIBUTE and op == _ATTRIBUTE):
             _geometry_node(op, prog, pc, st, n, rows, G, A)
-        elif op == _MAPPING:
+        elif _USE_MAPPING and op == _MAPPING:
             _mapping(prog, pc, st, n)
-        elif op == _TEX_IMAGE or op == _TEX_CHECKER or op == _TEX_GRADIENT:
+        elif (_USE_TEX_IMAGE and op == _TEX_IMAGE) or (_USE_TEX_CHECKER and op == _TEX_CHECKER) \
+                or (_USE_TEX_GRADIENT and op == _TEX_GRADIENT):
             _texture_node(op, prog, pc, st, n, X)
             if op == _TEX_IMAGE:
                 pc += _LEN[op] + 2 * int(prog[pc + 8])      # then the UDIM tile table
                 continue
-        elif op >= _TEX_NOISE and op <= _TEX_WHITE_NOISE:
+        elif (_USE_TEX_NOISE or _USE_TEX_VORONOI or _USE_TEX_WAVE or _USE_TEX_BRICK or _USE_TEX_MAGIC
+              or _USE_TEX_WHITE_NOISE) and op >= _TEX_NOISE and op <= _TEX_WHITE_NOISE:
             _procedural_node(op, prog, pc, st, n)
-        elif op == _RAMP:
+        elif _USE_RAMP and op == _RAMP:
             pc += _ramp(prog, pc, st, n)
             continue
-        elif op == _CURVES:
+        elif _USE_CURVES and op == _CURVES:
             pc += _curves(prog, pc, st, n)
             continue
         pc += _LEN[op]
@@ -1405,7 +1437,7 @@ def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, U, closures
         w = 1.0
         while True:
             op = int(prog[q])
-            if op == _MIX_SHADER:
+            if _USE_MIX_SHADER and op == _MIX_SHADER:
                 if u < 0.0:
                     u = U[r] if U.shape[0] > 0 else hash_uniform(seed, r)
                 f = _clamp01(st[int(prog[q + 1]), k])
@@ -1416,7 +1448,7 @@ def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, U, closures
                     u = (u - f) / (1.0 - f)
                     q += 3
                 continue
-            if op == _ADD_SHADER:
+            if _USE_ADD_SHADER and op == _ADD_SHADER:
                 if u < 0.0:
                     u = U[r] if U.shape[0] > 0 else hash_uniform(seed, r)
                 w *= 2.0
@@ -1427,11 +1459,11 @@ def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, U, closures
                     u = 2.0 * u - 1.0
                     q = start + int(prog[q + 1])
                 continue
-            if op == _TRANSPARENT:
+            if _USE_TRANSPARENT and op == _TRANSPARENT:
                 t0, t1, t2 = _v3(st, int(prog[q + 1]), k)
                 _transparent(C, r, w * t0, w * t1, w * t2)
                 break
-            if op == _BSDF_PRINCIPLED:
+            if _USE_ALPHA and op == _BSDF_PRINCIPLED:
                 a = _clamp01(st[int(prog[q + 5]), k])
                 if a < 1.0:
                     # Alpha: Cycles' mix of a Transparent BSDF (1 - alpha) and the BSDF (alpha)
@@ -1448,7 +1480,7 @@ def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, U, closures
                     ns = int(prog[q + 10])
                 elif op != _EMISSION:
                     ns = int(prog[q + (op - _BSDF_DIFFUSE) + 2])      # DIFFUSE +2, GLOSSY +3, GLASS +4
-                if ns >= 0:
+                if _USE_SET_NORMAL and ns >= 0:
                     _set_normal(NG, NS, D, C, r, st[ns, k], st[ns + 1, k], st[ns + 2, k])
             elif cr >= 0:
                 # not a closure instruction (the compiler ends every branch with one): the
@@ -1479,7 +1511,16 @@ assert C_NS == C_PROGRAM + 1 and C_BUMPED == C_NS + 3
 BATCH = 256          # hits interpreted together (the stack of a batch stays in the CPU's cache)
 
 
-def shade_closures(mat, closures, prog, n_slots, G, A, X, seed, C, U=None) -> None:
+def _entry(ops):
+    """The compiled interpreter for programs using only the opcode names ops (None: any opcode):
+    :func:`.svm_variants.interpreter`."""
+    if ops is None:
+        return _shade
+    from .svm_variants import interpreter
+    return interpreter(ops)
+
+
+def shade_closures(mat, closures, prog, n_slots, G, A, X, seed, C, U=None, ops=None) -> None:
     """C[r] = the closure of hit r (m,) on material mat[r] (-1 = miss: the inert row).
 
     closures (M + 1, N_CLOSURE) from ``closure.pack_materials``: the constant rows, with
@@ -1489,17 +1530,19 @@ def shade_closures(mat, closures, prog, n_slots, G, A, X, seed, C, U=None) -> No
     Hits are grouped by material (stable order) and each material's program runs over batches of
     up to ``BATCH`` of its hits.  (A Python function: the compiled entry is :func:`_shade`, one
     level for both entries, since every compiled level re-optimises and re-emits all it calls.)
+    ops: the names of the opcodes the programs use (``ShadingData.ops``): the interpreter compiled
+    for those only (:mod:`.svm_variants`); None: every opcode's.
     """
-    _shade(mat, closures, prog, n_slots, G, A, X, seed, _NO_U if U is None else U, C, _NO_ROWS, False)
+    _entry(ops)(mat, closures, prog, n_slots, G, A, X, seed, _NO_U if U is None else U, C, _NO_ROWS, False)
 
 
-def shade_closure_rows(mat, closures, prog, n_slots, G, A, X, seed, C, crow, U=None) -> None:
+def shade_closure_rows(mat, closures, prog, n_slots, G, A, X, seed, C, crow, U=None, ops=None) -> None:
     """:func:`shade_closures` with the closure of hit r in row crow[r] of C (m + M + 1, N_CLOSURE):
     the hits on materials with a program get their own row r, the others (constant materials,
     misses) row m + their material's row, where the material table is copied.  A 280-byte row
     is copied for no hit that has none of its own (a miss, a flat material): 8 bytes of crow
     instead (:func:`shade_rows`)."""
-    _shade(mat, closures, prog, n_slots, G, A, X, seed, _NO_U if U is None else U, C, crow, True)
+    _entry(ops)(mat, closures, prog, n_slots, G, A, X, seed, _NO_U if U is None else U, C, crow, True)
 
 
 _NO_ROWS = np.empty(0, np.int64)
@@ -1571,7 +1614,7 @@ def shade(sd, mat, G, seed, C, U=None) -> None:
     ``shading.ShadingData`` sd: :func:`shade_closures` when the scene has node programs, else
     :func:`constant_closures`; U (m,) or None: the hits' Mix Shader uniforms (:func:`shade_closures`)."""
     if sd.uses_programs:
-        shade_closures(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, seed, C, U)
+        shade_closures(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, seed, C, U, ops=sd.ops)
     else:
         constant_closures(mat, sd.closures, C)
 
@@ -1615,7 +1658,7 @@ def shade_rows(sd, mat, G, seed, C, crow, U=None) -> np.ndarray:
         _identity_rows(crow)
         return C
     if sd.uses_programs:
-        shade_closure_rows(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, seed, C, crow, U)
+        shade_closure_rows(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, seed, C, crow, U, ops=sd.ops)
         return C
     closure_rows(mat, sd.closures, crow)
     return sd.closures

@@ -314,6 +314,13 @@ def udim_tile(prog, at, n_tiles, x, y):
     return -1, x, y
 
 
+# The kinds of look-up tex_image_rows makes: all of them here.  The shader interpreter's variants
+# (kernels.svm_variants) compile tex_image_rows again with the ones a scene's Image Textures do not
+# use False: Closest, Linear (LINEAR8: an 8-bit image without a working-space matrix, _plain8),
+# Cubic, UDIM tiles.
+_USE_IMAGE_CLOSEST = _USE_IMAGE_LINEAR = _USE_IMAGE_LINEAR8 = _USE_IMAGE_CUBIC = _USE_IMAGE_UDIM = True
+
+
 @njit(**JIT)
 def tex_image_rows(hdr, u8, u16, f32, half, tid, interp, ext, unassociate, st, vs, cs, as_, n, prog, tiles_at,
                    n_tiles):
@@ -322,7 +329,7 @@ def tex_image_rows(hdr, u8, u16, f32, half, tid, interp, ext, unassociate, st, v
     The same values as :func:`tex_lookup`, with the interpolation chosen once per batch.  A UDIM
     image (n_tiles > 0) reads the tile table prog[tiles_at:tiles_at + 2 n_tiles] (:func:`udim_tile`;
     tid unused): each row its tile's texture, magenta outside the listed tiles."""
-    if n_tiles > 0:
+    if _USE_IMAGE_UDIM and n_tiles > 0:
         for k in range(n):
             x, y = st[vs, k], st[vs + 1, k]
             if not (math.isfinite(x) and math.isfinite(y)):
@@ -337,7 +344,7 @@ def tex_image_rows(hdr, u8, u16, f32, half, tid, interp, ext, unassociate, st, v
         return
     srgb = hdr[tid, 5] == 1
     unassociate = unassociate and hdr[tid, 6] != 0
-    if interp == 1 and _plain8(hdr, tid):
+    if _USE_IMAGE_LINEAR8 and interp == 1 and _plain8(hdr, tid):
         # the common case (an 8-bit image, Linear) in a loop of its own: no call is left in it
         base, W, H, C = hdr[tid, 0], hdr[tid, 1], hdr[tid, 2], hdr[tid, 3]
         for k in range(n):
@@ -352,12 +359,14 @@ def tex_image_rows(hdr, u8, u16, f32, half, tid, interp, ext, unassociate, st, v
         x, y = st[vs, k], st[vs + 1, k]
         if not (math.isfinite(x) and math.isfinite(y)):
             r = g = b = a = 0.0
-        elif interp == 0:
+        elif _USE_IMAGE_CLOSEST and interp == 0:
             r, g, b, a = _closest(hdr, u8, u16, f32, half, tid, x, y, ext)
-        elif interp == 1:
+        elif _USE_IMAGE_LINEAR and interp == 1:
             r, g, b, a = _bilinear(hdr, u8, u16, f32, half, tid, x, y, ext)
-        else:
+        elif _USE_IMAGE_CUBIC:
             r, g, b, a = _bicubic(hdr, u8, u16, f32, half, tid, x, y, ext)
+        else:                          # (a variant without this look-up: no program has it)
+            r = g = b = a = 0.0
         _store(st, k, cs, as_, r, g, b, a, unassociate, srgb)
 
 

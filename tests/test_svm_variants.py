@@ -1,0 +1,194 @@
+"""The interpreter compiled for the opcodes a scene uses (stpm_core.kernels.svm_variants).
+
+A variant re-compiles svm's dispatching functions with the unused opcodes' branches folded away.
+It must shade exactly as the full interpreter on the same programs (bit for bit: it is the same
+source, with branches that these programs never take removed), be chosen deterministically from
+the programs' opcodes, and must not compile what only the removed branches call (else it saves
+no compile time).  The test_kernel_svm tests run the full interpreter (no ``ops``) against the
+numpy oracle; these compare the two interpreters.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from stpm_core.kernels import svm, svm_variants
+from stpm_core.kernels.closure import N_CLOSURE
+from stpm_core.nodes.graph import Link, Node, ShaderGraph
+from stpm_core.raycast import Hits
+from stpm_core.scene import Material
+from stpm_core.shading import hit_geometry, shading_data
+from stpm_core.textures import Texture
+from test_kernel_svm import N, make_hits, make_scene
+
+# The node kinds of benchmarks/bench_textures.node_material (Texture Coordinate -> Mapping -> Image
+# Texture, a Checker, Mix Color, a ColorRamp on Roughness) and a second material mixing a Diffuse
+# and a Glossy BSDF by the Checker's Fac
+# (the Image Texture's Linear look-up of an 8-bit image, Mix Color's Multiply: parts of an opcode)
+BENCH_OPS = {"TEXCOORD", "TEXCOORD_POINT", "MAPPING", "TEX_IMAGE", "IMAGE_LINEAR8", "TEX_CHECKER", "MIX_COLOR",
+             "BLEND_MULTIPLY", "RAMP", "CONVERT", "BSDF_PRINCIPLED"}
+
+
+def _textured() -> ShaderGraph:
+    return ShaderGraph(nodes={
+        "Coord": N("ShaderNodeTexCoord"),
+        "Mapping": N("ShaderNodeMapping", {"Vector": Link("Coord", "Object"), "Scale": (3.0, 2.0, 1.0),
+                                           "Rotation": (0.0, 0.0, 0.4), "Location": (0.1, 0.0, 0.0)},
+                     {"vector_type": "POINT"}),
+        "Image": N("ShaderNodeTexImage", {"Vector": Link("Mapping", "Vector")},
+                   {"image": 0, "interpolation": "Linear", "extension": "REPEAT", "projection": "FLAT"}),
+        "Checker": N("ShaderNodeTexChecker", {"Vector": Link("Coord", "Object"), "Scale": 2.0,
+                                              "Color1": (1.0, 1.0, 1.0), "Color2": (0.5, 0.5, 0.5)}),
+        "Mix": N("ShaderNodeMix", {"Factor_Float": 1.0, "A_Color": Link("Image", "Color"),
+                                   "B_Color": Link("Checker", "Color")},
+                 {"data_type": "RGBA", "blend_type": "MULTIPLY", "clamp_factor": True}),
+        "Ramp": N("ShaderNodeValToRGB", {"Fac": Link("Checker", "Fac")},
+                  {"elements": [(0.0, (0.2, 0.2, 0.2, 1.0)), (1.0, (0.9, 0.9, 0.9, 1.0))], "interpolation": "LINEAR"}),
+        "BSDF": N("ShaderNodeBsdfPrincipled", {"Base Color": Link("Mix", "Result_Color"),
+                                               "Roughness": Link("Ramp", "Color"), "Specular IOR Level": 0.0}),
+    }, surface=Link("BSDF", "BSDF"))
+
+
+def _mixed() -> ShaderGraph:
+    return ShaderGraph(nodes={
+        "Coord": N("ShaderNodeTexCoord"),
+        "Checker": N("ShaderNodeTexChecker", {"Vector": Link("Coord", "Object"), "Scale": 3.0}),
+        "Diffuse": N("ShaderNodeBsdfDiffuse", {"Color": Link("Checker", "Color")}),
+        "Glossy": N("ShaderNodeBsdfGlossy", {"Color": (0.9, 0.8, 0.7), "Roughness": 0.3}),
+        "Mix": N("ShaderNodeMixShader", {"Fac": Link("Checker", "Fac"), "Shader": Link("Diffuse", "BSDF"),
+                                         "Shader_001": Link("Glossy", "BSDF")}),
+    }, surface=Link("Mix", "Shader"))
+
+
+def _cutout() -> ShaderGraph:
+    """A Principled BSDF coloured by the UV coordinates, its Alpha a Checker's Fac (a cut-out)."""
+    return ShaderGraph(nodes={
+        "Coord": N("ShaderNodeTexCoord"),
+        "Checker": N("ShaderNodeTexChecker", {"Vector": Link("Coord", "UV"), "Scale": 4.0}),
+        "BSDF": N("ShaderNodeBsdfPrincipled", {"Base Color": Link("Coord", "UV"), "Alpha": Link("Checker", "Fac")}),
+    }, surface=Link("BSDF", "BSDF"))
+
+
+def _scene():
+    rng = np.random.default_rng(3)
+    tex = Texture(rng.integers(0, 256, (16, 8, 3), dtype=np.uint8), colorspace="sRGB", name="noise")
+    flat = Material(base_color=np.array([0.3, 0.6, 0.2]), roughness=0.4, name="flat")
+    return make_scene([_textured(), flat, _mixed(), _cutout()], [tex])
+
+
+def _shade(scene, ops, rows: bool):
+    """Closure rows (and the shading normals after) of 600 hits on the scene's materials and misses,
+    by the interpreter for ``ops`` (None: the full one)."""
+    sd = shading_data(scene)
+    rng = np.random.default_rng(7)
+    hits = make_hits(600, rng)
+    mat = rng.integers(-1, len(scene.materials), 600).astype(np.int32)
+    h = Hits(t=np.ones(600), instance=np.zeros(600, np.int32), prim=np.zeros(600, np.int32), u=hits["bu"],
+             v=hits["bv"], position=hits["P"], ng=hits["NG"], ns=hits["NS"], material=mat)
+    G = hit_geometry(h, hits["D"])
+    if rows:
+        C = np.full((600 + sd.closures.shape[0], N_CLOSURE), np.nan)
+        crow = np.zeros(600, np.int64)
+        svm.shade_closure_rows(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, 5, C, crow, ops=ops)
+        return C[crow], G[2].copy()
+    C = np.full((600, N_CLOSURE), np.nan)
+    svm.shade_closures(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, 5, C, ops=ops)
+    return C, G[2].copy()
+
+
+def test_program_ops_walks_every_instruction():
+    sd = shading_data(make_scene([_textured()], [Texture(np.zeros((4, 4, 3), np.uint8), name="t")]))
+    assert sd.ops == BENCH_OPS
+    # a float image's Linear look-up is not the 8-bit one
+    sd = shading_data(make_scene([_textured()], [Texture(np.zeros((4, 4, 3), np.float32), name="t")]))
+    assert sd.ops == BENCH_OPS - {"IMAGE_LINEAR8"} | {"IMAGE_LINEAR"}
+    sd = shading_data(_scene())
+    assert sd.ops == BENCH_OPS | {"BSDF_DIFFUSE", "BSDF_GLOSSY", "MIX_SHADER", "TEXCOORD_UV", "ALPHA"}
+    # a scene without node programs has none
+    assert shading_data(make_scene([Material(name="flat")])).ops == frozenset()
+
+
+def test_a_variant_shades_bit_identically_to_the_full_interpreter():
+    scene = _scene()
+    sd = shading_data(scene)
+    entry = svm_variants.interpreter(sd.ops)
+    assert entry is not svm._shade, "no variant was made (no writable kernel cache folder?)"
+    for rows in (False, True):
+        full, ns_full = _shade(scene, None, rows)
+        var, ns_var = _shade(scene, sd.ops, rows)
+        assert np.isfinite(full).all()
+        assert np.array_equal(full.view(np.int64), var.view(np.int64)), f"rows={rows}: closures differ"
+        assert np.array_equal(ns_full, ns_var)
+    # the removed branches' callees were not compiled: no colour, procedural or geometry-node
+    # function of the variant's own (they are the variant module's dispatchers, compiled only
+    # for it); the ones its opcodes need were
+    mod = __import__(entry.py_func.__module__, fromlist=["_shade"])
+    assert mod._USE_TEX_NOISE is False and mod._USE_TEX_IMAGE is True
+    assert not mod._procedural_node.signatures and not mod._color_node.signatures
+    assert mod._texture_node.signatures and mod._value_node.signatures and mod._geometry_node.signatures
+    assert mod.tex_image_rows.signatures and mod.mix_color.signatures
+
+
+def test_the_variant_is_chosen_by_the_opcode_set():
+    ops = frozenset(BENCH_OPS)
+    assert svm_variants.variant_source(ops) == svm_variants.variant_source(sorted(ops, reverse=True))
+    assert svm_variants.interpreter(ops) is svm_variants.interpreter(set(BENCH_OPS))
+    assert svm_variants.variant_source(ops) != svm_variants.variant_source(ops - {"BLEND_MULTIPLY"})
+    # a scene with every opcode and part of one, and no information about the programs: the full
+    # interpreter
+    assert svm_variants.interpreter(svm_variants.FEATURES | {"END"}) is svm._shade
+    assert svm_variants.interpreter(None) is svm._shade
+
+
+_CHILD = r"""
+import json, sys
+sys.path.insert(0, sys.argv[1]); sys.path.insert(0, sys.argv[2])
+import numpy as np
+from stpm_core import numba_probe
+from stpm_core.kernels import svm
+from stpm_core.shading import shading_data
+from stpm_core.nodes.graph import Link, ShaderGraph
+from test_kernel_svm import N, make_scene
+from test_svm_variants import _shade
+g = ShaderGraph(nodes={"Checker": N("ShaderNodeTexChecker", {"Scale": 3.0}),
+                       "Diffuse": N("ShaderNodeBsdfDiffuse", {"Color": Link("Checker", "Color")})},
+                surface=Link("Diffuse", "BSDF"))
+scene = make_scene([g])
+C, _ = _shade(scene, shading_data(scene).ops, False)
+print(json.dumps({"compiled": numba_probe.compile_counts()[0], "sum": float(np.nansum(C)),
+                  "ops": sorted(shading_data(scene).ops), "dir": str(numba_probe.variant_dir())}))
+"""
+
+
+def test_a_second_process_loads_the_variant_from_the_cache(tmp_path):
+    """The variant file and its compiled kernels land in the kernel cache folder; a second process
+    (a warm start) compiles nothing and shades the same; a new kernel-source digest names a new file."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from stpm_core import numba_probe
+    root, tests = Path(__file__).resolve().parent.parent, Path(__file__).resolve().parent
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+
+    def child():
+        out = subprocess.run([sys.executable, "-c", _CHILD, str(root), str(tests)], env=env, capture_output=True,
+                             text=True, check=True)
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    first, second = child(), child()
+    assert first["ops"] == ["BSDF_DIFFUSE", "TEXCOORD", "TEXCOORD_POINT", "TEX_CHECKER"]
+    assert Path(first["dir"]) == tmp_path / "cache" / "svm_variants"
+    files = list(Path(first["dir"]).glob("svm_*.py"))
+    assert len(files) == 1
+    assert first["compiled"] > 0 and second["compiled"] == 0 and first["sum"] == second["sum"]
+    # the file's name follows the kernel sources' digest (numba checks a cached kernel against its
+    # own file only: an edited callee must not be served from an old compile)
+    assert files[0].name == svm_variants.variant_name(first["ops"]) + ".py"
+    old = numba_probe._SOURCES_DIGEST[:]
+    try:
+        numba_probe._SOURCES_DIGEST[:] = ["0" * 64]
+        assert files[0].name != svm_variants.variant_name(first["ops"]) + ".py"
+    finally:
+        numba_probe._SOURCES_DIGEST[:] = old
