@@ -1333,6 +1333,7 @@ def _transparent(C, r, t0, t1, t2):
     C[r, C_TRANSPARENT + 1] = max(t1, 0.0)
     C[r, C_TRANSPARENT + 2] = max(t2, 0.0)
     C[r, C_PASS] = 1.0
+    C[r, C_METAL_CONST] = 0.0
 
 
 @njit(**JIT_INLINE)            # (inlined with _closure, _transparent)
