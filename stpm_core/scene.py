@@ -95,6 +95,11 @@ class Mesh:
         Generated reads (normalised by their bounding box, Blender's automatic texture space), so
         the texture sticks to the surface as it deforms (Cycles' ``ATTR_STD_GENERATED``); None =
         the vertices (a deforming mesh: at the frame's shutter time, as Cycles without an orco).
+    texspace : (2, 3) float64 a manual texture space (Blender's Texture Space panel with Auto
+        Texture Space off): row 0 its location, row 1 its size (half extents), object units;
+        Generated = (p - (location - size)) / (2 size) per axis (an axis of size 0 reads as size 1,
+        as Blender's automatic space does).  None = the automatic space (the bounding box of the
+        positions Generated reads).
     """
 
     vertices: np.ndarray
@@ -109,6 +114,7 @@ class Mesh:
     color_layers: dict = field(default_factory=dict)
     color_render: str | None = None
     orco: np.ndarray | None = None
+    texspace: np.ndarray | None = None
 
     @property
     def is_deforming(self) -> bool:
@@ -789,6 +795,10 @@ def validate_scene(scene: Scene) -> None:
             o = _check_finite(f"{p}.orco", m.orco)
             if o.shape != (v.shape[-2], 3):
                 raise SceneError(f"{p}.orco must have shape ({v.shape[-2]}, 3), got {o.shape}")
+        if getattr(m, "texspace", None) is not None:
+            ts = _check_finite(f"{p}.texspace", m.texspace)
+            if ts.shape != (2, 3):
+                raise SceneError(f"{p}.texspace must have shape (2, 3) (location, size), got {ts.shape}")
         for attr, width in (("uv_layers", 2), ("tangents", 4), ("color_layers", 4)):
             layers = getattr(m, attr, None) or {}
             if not isinstance(layers, dict):

@@ -152,6 +152,9 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
         if getattr(m, "orco", None) is not None:
             arrays[f"{p}/orco"] = np.asarray(m.orco, dtype=np.float32)
             entry["has_orco"] = True
+        if getattr(m, "texspace", None) is not None:
+            arrays[f"{p}/texspace"] = np.asarray(m.texspace, dtype=np.float64)
+            entry["has_texspace"] = True
         uv_names = _put_uv_layers(arrays, p, m, f"meshes[{i}] ({m.name!r})")
         if uv_names:
             entry["uv_layers"] = uv_names
@@ -850,6 +853,12 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
             if orco.shape[0] != V.shape[-2] or np.abs(orco).max(initial=0.0) > 1e15:
                 raise SceneError(f"{a}.orco must have shape ({V.shape[-2]}, 3) and coordinates within 1e15, "
                                  f"got shape {orco.shape}")
+        texspace = None
+        if d.get("has_texspace") is True:
+            texspace = arr.get(f"{p}/texspace", f"{a}.texspace", kind="f", ndim=2, tail=(3,))
+            if texspace.shape != (2, 3) or np.abs(texspace).max(initial=0.0) > 1e15:
+                raise SceneError(f"{a}.texspace must have shape (2, 3) (location, size) and values within 1e15, "
+                                 f"got shape {texspace.shape}")
         if np.abs(V).max(initial=0.0) > 1e15:
             raise SceneError(f"{a}.vertices has coordinates beyond 1e15")
         # Range-check integer arrays before narrowing them to int32
@@ -867,7 +876,8 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
                            normals=None if N is None else N.astype(np.float32), name=name,
                            uv_layers=uv_layers, uv_render=uv_render, tangents=tangents,
                            color_layers=color_layers, color_render=color_render,
-                           orco=None if orco is None else orco.astype(np.float32)))
+                           orco=None if orco is None else orco.astype(np.float32),
+                           texspace=None if texspace is None else texspace.astype(np.float64)))
 
     # Instances
     instances = []

@@ -100,9 +100,9 @@ def scene_attributes(scene, uv_layers: list, color_layers: list | None = None) -
     uv_off (M, L) int64 first triangle of each (mesh, layer) in corner_uv, -1 = missing;
     corner_uv (N, 3, 2) float32; corner_obj (T, 3, 3) float32 (the shape at the frame's shutter
     time, what Object coordinates read on a mesh that does not deform);
-    gen_lo, gen_inv (M, 3): Generated = (p_gen - gen_lo) * gen_inv, Blender's automatic texture
-    space (the bounding box of the positions Generated reads; an axis of zero extent gets half-size
-    1, as Blender sets it);
+    gen_lo, gen_inv (M, 3): Generated = (p_gen - gen_lo) * gen_inv, the mesh's manual texture
+    space (``Mesh.texspace``) or Blender's automatic one (the bounding box of the positions
+    Generated reads; an axis of zero extent gets half-size 1, as Blender sets it);
     corner_nrm (T, 3, 3) float32 object-space corner normals (``Mesh.normals``; a deforming mesh's at
     the frame's shutter time, ``Mesh.normals_at``, as Cycles' Normal Map reads the static vertex
     normals and the add-on exports tangents at the frame; flat meshes: the face normal at each
@@ -156,7 +156,13 @@ def scene_attributes(scene, uv_layers: list, color_layers: list | None = None) -
             fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30)
             nrms.append(np.repeat(fn[:, None, :], 3, axis=1).astype(np.float32))
         n_tri += F.shape[0]
-        if V.shape[0]:
+        ts = getattr(m, "texspace", None)
+        if ts is not None:
+            # a manual texture space (Mesh.texspace: location, size)
+            loc, size = np.asarray(ts, np.float64)[0], np.asarray(ts, np.float64)[1]
+            size = np.where(size == 0.0, 1.0, size)
+            gen_lo[i], gen_inv[i] = loc - size, 1.0 / (2.0 * size)
+        elif V.shape[0]:
             lo, hi = V.min(axis=0).astype(np.float64), V.max(axis=0).astype(np.float64)
             loc, size = 0.5 * (lo + hi), 0.5 * (hi - lo)
             size = np.where(size == 0.0, 1.0, np.where(size < 1e-5, 1e-5, size))

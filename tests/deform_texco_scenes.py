@@ -7,6 +7,9 @@ The plane emits a Checker (scale 3, white / black) read through Texture Coordina
 ("Object" or "Generated"), strength 1, nothing else lights anything; an orthographic camera
 looks straight down at it.  Emission only: the image is the texture as each renderer reads it.
 
+``build_texspace()``: the same plane without the shape key, Generated coordinates, its Auto
+Texture Space off and a manual space ``TEXSPACE`` (location, size) that is not the plane's bounds.
+
 Built by ``tests/test_cycles_deforming_texco.py``.
 """
 from __future__ import annotations
@@ -17,13 +20,25 @@ import bpy
 
 from test_addon_scenes import add_camera, fresh, linear_keys, set_world
 
-__all__ = ["build", "W", "H"]
+__all__ = ["build", "build_texspace", "TEXSPACE", "W", "H"]
 
 W, H = 48, 48
 
 
-def build(coords: str = "Object", motion_blur: bool = True, w: int = W, h: int = H):
-    """The scene above; returns bpy.context.scene (frame 5)."""
+TEXSPACE = ((0.3, -0.2, 0.0), (0.6, 0.9, 1.0))
+
+
+def build_texspace(w: int = W, h: int = H):
+    """The flat plane with a manual texture space (Generated, no motion blur)."""
+    scene = build("Generated", False, w, h, bow=False)
+    me = bpy.data.objects["Sheet"].data
+    me.use_auto_texspace = False
+    me.texspace_location, me.texspace_size = TEXSPACE
+    return scene
+
+
+def build(coords: str = "Object", motion_blur: bool = True, w: int = W, h: int = H, bow: bool = True):
+    """The scene above (``bow`` False: no shape key); returns bpy.context.scene (frame 5)."""
     scene = fresh()
     scene.render.resolution_x, scene.render.resolution_y = w, h
     set_world((0, 0, 0), 0.0)
@@ -43,14 +58,15 @@ def build(coords: str = "Object", motion_blur: bool = True, w: int = W, h: int =
     t.links.new(ck.outputs["Color"], em.inputs["Color"])
     t.links.new(em.outputs[0], t.nodes["Material Output"].inputs["Surface"])
     obj.data.materials.append(mat)
-    obj.shape_key_add(name="Basis")
-    key = obj.shape_key_add(name="Bow")
-    for p in key.data:
-        p.co.x += 0.5 * (1.0 - p.co.y ** 2)
-    for f, v in ((4, 0.0), (6, 1.0)):
-        key.value = v
-        key.keyframe_insert("value", frame=f)
-    linear_keys(obj.data.shape_keys)
+    if bow:
+        obj.shape_key_add(name="Basis")
+        key = obj.shape_key_add(name="Bow")
+        for p in key.data:
+            p.co.x += 0.5 * (1.0 - p.co.y ** 2)
+        for f, v in ((4, 0.0), (6, 1.0)):
+            key.value = v
+            key.keyframe_insert("value", frame=f)
+        linear_keys(obj.data.shape_keys)
     add_camera(location=(0.25, 0.0, 3.0), rotation=(0.0, 0.0, 0.0), type="ORTHO", ortho_scale=2.6)
     scene.render.use_motion_blur, scene.render.motion_blur_shutter = motion_blur, 1.0
     scene.frame_set(5)

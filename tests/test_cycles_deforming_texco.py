@@ -61,3 +61,24 @@ def test_export_carries_the_undeformed_positions():
     assert np.abs(m.vertices[0] - m.orco).max() > 0.1          # deformed at the shutter's start
     bpy.data.objects["Sheet"].shape_key_clear()
     assert export_now()[0].meshes[0].orco is None
+
+
+def test_manual_texture_space_matches_cycles(tmp_path):
+    """Auto Texture Space off, a location and size that are not the plane's bounds: Generated is
+    normalised by them (``Mesh.texspace``), as in Cycles; the exporter carries them and the scene
+    file keeps them.  (Before, STPM used the plane's bounds: cells 1.1-1.7x too large and shifted, block |z| max 389.)"""
+    from test_addon_scenes import export_now
+    from stpm_core import scenefile
+    scene = dts.build_texspace()
+    core = export_now()[0]
+    np.testing.assert_allclose(core.meshes[0].texspace, np.array(dts.TEXSPACE), atol=1e-6)
+    path = tmp_path / "ts.stpm"
+    scenefile.save_scene(core, str(path))
+    np.testing.assert_allclose(scenefile.load_scene(str(path)).meshes[0].texspace, core.meshes[0].texspace)
+    cyc = render_cycles(scene, tmp_path, samples=SPP, seeds=SEEDS)
+    stpm, _ = render_stpm(scene, samples=SPP, seeds=SEEDS, max_depth=1)
+    r = block_ztest(stpm, cyc)
+    print(f"manual texture space: {r.summary()}")
+    assert r.z_abs_max < Z_MAX, (r.summary(), np.round(r.z, 1))
+    bpy.data.objects["Sheet"].data.use_auto_texspace = True
+    assert export_now()[0].meshes[0].texspace is None

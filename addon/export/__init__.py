@@ -204,7 +204,9 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                     tuple(mat_ids.tolist()))
         if data_key not in mesh_cache:
             tangent_maps, color_maps = mats.tangent_maps(mat_ids.tolist()), mats.color_maps(mat_ids.tolist())
-            kept_key = (data_key, tuple(tangent_maps), tuple(color_maps))
+            texspace = mesh_export.texture_space(obj)
+            kept_key = (data_key, tuple(tangent_maps), tuple(color_maps),
+                        None if texspace is None else tuple(texspace.ravel().tolist()))
             kept = cache.mesh(kept_key) if cache is not None else None
             if kept is not None:        # unchanged since the last export (ExportCache)
                 meshes.append(kept)
@@ -227,7 +229,8 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                                                uv_render=arr["uv_render"], tangents=arr["tangents"],
                                                color_layers=arr["color_layers"],
                                                color_render=arr["color_render"],
-                                               orco=mesh_export.orco_positions(obj, arr["vertices"])))
+                                               orco=mesh_export.orco_positions(obj, arr["vertices"]),
+                                               texspace=texspace))
                 mesh_cache[data_key] = len(meshes) - 1
                 if cache is not None:
                     cache.keep_mesh(kept_key, None if inst.is_instance else obj.original.name_full, meshes[-1])

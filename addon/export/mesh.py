@@ -61,6 +61,21 @@ def orco_positions(obj, vertices: np.ndarray) -> np.ndarray | None:
     return None if np.abs(co - vertices).max(initial=0.0) <= tol else co
 
 
+def texture_space(obj) -> np.ndarray | None:
+    """The manual texture space (2, 3) float64 (row 0 location, row 1 size: half extents, object
+    units) of mesh object ``obj`` whose Auto Texture Space is off (Object Data > Texture Space),
+    what Generated coordinates are normalised by (``scene.Mesh.texspace``); None when Blender
+    computes it from the mesh's bounds (the core does the same from the positions it has)."""
+    me = getattr(obj, "data", None)
+    if me is None or getattr(obj, "type", "") != "MESH" or getattr(me, "use_auto_texspace", True):
+        return None
+    try:
+        ts = np.array([tuple(me.texspace_location), tuple(me.texspace_size)], dtype=np.float64)
+    except (AttributeError, TypeError, ValueError):
+        return None
+    return ts if ts.shape == (2, 3) and np.isfinite(ts).all() else None
+
+
 def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
     """Triangulated arrays of a mesh.
 
