@@ -64,7 +64,8 @@ __all__ = [
 ESTIMATOR_NAMES = ("STANDARD", "TEMPORAL", "KD4D")
 CONE_K = 1.1                 # cone kernel: w(d) = 1 - d / (CONE_K * r)
 TEMPORAL_SLICE_C = 0.25      # automatic time slices B = max(1, round(C * (N / k)^(1/3)))
-TEMPORAL_SLICE_ALPHA = 1.5   # candidates per estimate inside a slice, as a multiple of k (the paper's 1.5)
+TEMPORAL_SLICE_ALPHA = 1.5   # candidates per estimate inside a slice, as a multiple of k (the paper's 1.5; fewer
+                             # is cheaper but darkens a receiver moving along its normal: docs/photon-mapping.md)
 _QUERY_BATCH_ELEMS = 1 << 21 # neighbours gathered per batch (bounds memory)
 
 
@@ -140,24 +141,25 @@ def temporal_slices(n_photons: int, k: int, temporal_alpha: float = 0.0) -> int:
     B = max(1, round(C (N/k)^(1/3))), and never so many that a slice holds
     fewer than 4 m photons.  Each slice covers 1/B of the shutter mass; its
     window is at most that long, so it shrinks like B^-1, and the candidate
-    disc holds m = 1.5 k of the slice's N / B photons, so its radius shrinks
-    like (B k / N)^(1/2); B ~ (N / k)^(1/3) sends both to zero and balances a
-    moving edge's spatial bias (~ r) against the temporal one (~ window) --
-    see docs/photon-mapping.md.
+    disc holds m = alpha k (``TEMPORAL_SLICE_ALPHA`` = 1.5) of the slice's N / B
+    photons, so its radius shrinks like (alpha B k / N)^(1/2); B ~ (N / k)^(1/3)
+    sends both to zero and balances a moving edge's spatial bias (~ r) against
+    the temporal one (~ window, whose mass is about 1 / (alpha B)) -- see
+    docs/photon-mapping.md.
     """
     if temporal_alpha >= 1.0:
         return 1
     N, k = max(int(n_photons), 1), max(int(k), 1)
     B = int(round(TEMPORAL_SLICE_C * (N / k) ** (1.0 / 3.0)))
-    m = int(math.ceil(TEMPORAL_SLICE_ALPHA * k))
+    m = int(math.ceil(TEMPORAL_SLICE_ALPHA * k - 1e-9))   # (1.1 * 50 is 55.000000000000007 in float64)
     return max(1, min(B, N // (4 * m)))
 
 
 def auto_temporal_alpha(n_photons: int, k: int) -> float:
     """The effective candidate multiple of the consistent TEMPORAL, over the whole shutter.
 
-    Within one of B slices the search takes 1.5 k candidates, i.e. 1.5 B k photons'
-    worth of the whole shutter's density: alpha = 1.5 B (for reports; B from
+    Within one of B slices the search takes alpha k candidates (``TEMPORAL_SLICE_ALPHA``),
+    i.e. alpha B k photons' worth of the whole shutter's density: alpha B (for reports; B from
     :func:`temporal_slices`).
     """
     return TEMPORAL_SLICE_ALPHA * temporal_slices(n_photons, k, 0.0)
@@ -166,10 +168,11 @@ def auto_temporal_alpha(n_photons: int, k: int) -> float:
 def temporal_candidates(n_photons: int, k: int, temporal_alpha: float) -> int:
     """Spatial candidates m per TEMPORAL search (m - 1 >= k inner candidates when possible).
 
-    ``temporal_alpha`` >= 1: m = ceil(alpha k) over the shutter; 0: m = ceil(1.5 k) within a slice.
+    ``temporal_alpha`` >= 1: m = ceil(alpha k) over the shutter; 0: m = ceil(TEMPORAL_SLICE_ALPHA k)
+    (1.5 k) within a slice.
     """
     alpha = temporal_alpha if temporal_alpha >= 1.0 else TEMPORAL_SLICE_ALPHA
-    return max(int(math.ceil(alpha * k)), k + 1)
+    return max(int(math.ceil(alpha * k - 1e-9)), k + 1)   # (1.1 * 50 is 55.000000000000007 in float64)
 
 
 # ---------------------------------------------------------------------------
