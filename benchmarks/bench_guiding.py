@@ -73,6 +73,9 @@ def _settings(name: str, method: str):
 
 def run() -> dict:
     from stpm_core.render import render
+    from stpm_core.photons import guide as _guide
+    if os.environ.get("STPM_GUIDING_TEMPER"):               # a sweep: the guide's density exponent
+        _guide.TEMPER = float(os.environ["STPM_GUIDING_TEMPER"])
     scenes = _scenes()
     from cycles_ref import block_ztest
     from stpm_core.compare.report_html import png_bytes
