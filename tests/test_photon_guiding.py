@@ -182,6 +182,23 @@ def test_multilevel_mixture_integrates_to_one_and_is_sampled(monkeypatch):
         assert pdf[box].sum() / fine ** D > 0.5, pdf[box].sum() / fine ** D
 
 
+def test_box_kernels_dense_and_sparse_agree(monkeypatch):
+    """``_spread`` and ``_neighbourhood_counts`` filter small grids as dense arrays (separable) and
+    large ones per occupied cell: both give the same cells, weights (summing to the marks') and
+    counts, at the edges of the domain too."""
+    rng = np.random.default_rng(0)
+    for D, res in ((2, 64), (4, 8), (2, 1024)):
+        V = np.concatenate([0.3 + 0.05 * rng.random((3000, D)), rng.random((300, D)), np.zeros((5, D))])
+        w = rng.random(V.shape[0])
+        f = G._cells(V, res)
+        a, na = G._spread(f, w, res, D), G._neighbourhood_counts(f, res, D)
+        monkeypatch.setattr(G, "DENSE_CELLS", 0)
+        b, nb = G._spread(f, w, res, D), G._neighbourhood_counts(f, res, D)
+        monkeypatch.undo()
+        assert np.array_equal(a[0], b[0]) and np.allclose(a[1], b[1], rtol=1e-12) and np.array_equal(na, nb)
+        assert abs(a[1].sum() - w.sum()) < 1e-9 * w.sum()
+
+
 def test_guided_photons_carry_the_flux_and_equal_powers():
     scene = _lights_scene()
     lights = LightSet(scene)

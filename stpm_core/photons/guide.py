@@ -255,35 +255,86 @@ def _guidable(lights, li: int) -> bool:
     return True
 
 
-def _spread(coords: np.ndarray, wts: np.ndarray, res: int) -> tuple[np.ndarray, np.ndarray]:
+def _cells(V: np.ndarray, res: int) -> np.ndarray:
+    """(K,) int64 flat cells of points V (K, D) in [0, 1)^D on a res^D grid."""
+    c = np.minimum((V * res).astype(np.int64), res - 1)
+    return np.ravel_multi_index(tuple(c.T), (res,) * V.shape[1])
+
+
+def _offsets(D: int) -> np.ndarray:
+    """(3^D, D) the offsets to a cell and its neighbours one cell each way in every column."""
+    return np.stack(np.meshgrid(*([[-1, 0, 1]] * D), indexing="ij"), -1).reshape(-1, D)
+
+
+DENSE_CELLS = 1 << 22          # grids of at most this many cells are filtered as dense arrays
+
+
+def _box3(A: np.ndarray) -> np.ndarray:
+    """A (res,)*D summed over each cell and its neighbours one cell each way in every column
+    (zero outside the grid): D separable passes of three shifted copies."""
+    for ax in range(A.ndim):
+        B = A.copy()
+        lo = [slice(None)] * A.ndim
+        hi = [slice(None)] * A.ndim
+        lo[ax], hi[ax] = slice(1, None), slice(None, -1)
+        B[tuple(lo)] += A[tuple(hi)]
+        B[tuple(hi)] += A[tuple(lo)]
+        A = B
+    return A
+
+
+def _inside(res: int, D: int) -> np.ndarray:
+    """(res,)*D the number of a cell's 3^D neighbourhood inside the grid (separable: 2 or 3 a column)."""
+    n1 = np.full(res, 3.0)
+    n1[0] = n1[-1] = 2.0
+    if res == 1:
+        n1[0] = 1.0
+    A = np.ones((1,) * D)
+    for ax in range(D):
+        shape = [1] * D
+        shape[ax] = res
+        A = A * n1.reshape(shape)
+    return A
+
+
+def _spread(flat: np.ndarray, wts: np.ndarray, res: int, D: int) -> tuple[np.ndarray, np.ndarray]:
     """Each mark's weight spread evenly over its cell and the neighbours one cell each way in every
-    column (those inside the grid): coords (K, D) int64 cells of a res^D grid, wts (K,).  Returns
-    the sorted flat cells (M,) and their summed weights (M,)."""
-    D = coords.shape[1]
-    off = np.stack(np.meshgrid(*([[-1, 0, 1]] * D), indexing="ij"), -1).reshape(-1, D)
-    allc = coords[:, None, :] + off[None]
+    column (those inside the grid): flat (K,) int64 cells of a res^D grid, wts (K,).  Marks are
+    gathered per cell first; a grid of at most ``DENSE_CELLS`` cells is filtered as a dense array
+    (separable), a larger one per occupied cell.  Returns the sorted flat cells (M,) and their
+    summed weights (M,)."""
+    if res ** D <= DENSE_CELLS:
+        A = np.bincount(flat, wts, minlength=res ** D).reshape((res,) * D)
+        A = _box3(A / _inside(res, D)).ravel()
+        cells = np.flatnonzero(A > 0.0)
+        return cells.astype(np.int64), A[cells]
+    keys, inv = np.unique(flat, return_inverse=True)
+    wk = np.bincount(inv.ravel(), wts, minlength=keys.size)
+    coords = np.stack(np.unravel_index(keys, (res,) * D), -1)
+    allc = coords[:, None, :] + _offsets(D)[None]
     ok = np.all((allc >= 0) & (allc < res), axis=2)
-    ww = (wts / ok.sum(1))[:, None] * ok
-    flat = np.ravel_multi_index(tuple(np.clip(allc, 0, res - 1).reshape(-1, D).T), (res,) * D).reshape(ok.shape)
-    cells, inv = np.unique(flat[ok], return_inverse=True)
-    return cells, np.bincount(inv.ravel(), ww[ok], minlength=cells.size)
+    ww = (wk / ok.sum(1))[:, None] * ok
+    f = np.ravel_multi_index(tuple(np.clip(allc, 0, res - 1).reshape(-1, D).T), (res,) * D).reshape(ok.shape)
+    cells, inv2 = np.unique(f[ok], return_inverse=True)
+    return cells, np.bincount(inv2.ravel(), ww[ok], minlength=cells.size)
 
 
-def _neighbourhood_counts(coords: np.ndarray, res: int) -> np.ndarray:
-    """(K,) the number of marks (cells coords (K, D) of a res^D grid) in each mark's cell and the
-    cells one each way in every column."""
-    D = coords.shape[1]
-    flat = np.ravel_multi_index(tuple(coords.T), (res,) * D)
-    keys, cnt = np.unique(flat, return_counts=True)
-    off = np.stack(np.meshgrid(*([[-1, 0, 1]] * D), indexing="ij"), -1).reshape(-1, D)
-    total = np.zeros(coords.shape[0], np.int64)
-    for o in off:
+def _neighbourhood_counts(flat: np.ndarray, res: int, D: int) -> np.ndarray:
+    """(K,) the number of marks (flat (K,) int64 cells of a res^D grid) in each mark's cell and
+    the cells one each way in every column (dense or per occupied cell, as :func:`_spread`)."""
+    if res ** D <= DENSE_CELLS:
+        A = np.bincount(flat, minlength=res ** D).reshape((res,) * D).astype(np.int64)
+        return _box3(A).ravel()[flat]
+    keys, inv, cnt = np.unique(flat, return_inverse=True, return_counts=True)
+    coords = np.stack(np.unravel_index(keys, (res,) * D), -1)
+    total = np.zeros(keys.size, np.int64)
+    for o in _offsets(D):
         c = coords + o
         ok = np.all((c >= 0) & (c < res), axis=1)
         f = np.ravel_multi_index(tuple(np.clip(c, 0, res - 1).T), (res,) * D)
         j = np.minimum(np.searchsorted(keys, f), keys.size - 1)
         total += np.where(ok & (keys[j] == f), cnt[j], 0)
-    return total
+    return total[inv.ravel()]
 
 
 def _guide_from_marks(cols, V: np.ndarray, wts: np.ndarray, grids) -> EmissionGuide | None:
@@ -293,18 +344,17 @@ def _guide_from_marks(cols, V: np.ndarray, wts: np.ndarray, grids) -> EmissionGu
     cells hold ``NEIGHBOURS`` marks or more (the coarsest grid where none does): sharp where the
     marks are dense (a window's patch of the sun's disc), wide where they are sparse (the ground
     outside it), without holes between marks (a hole's photons are the heavy ones).
-    p: the cells' weights over their sum."""
+    p: the cells' weights, tempered (``TEMPER``), over their sum."""
     D = V.shape[1]
     level = np.zeros(V.shape[0], np.int64)
     for l, res in enumerate(grids):
-        n = _neighbourhood_counts(np.minimum((V * res).astype(np.int64), res - 1), res)
-        level[n >= NEIGHBOURS] = l
+        level[_neighbourhood_counts(_cells(V, res), res, D) >= NEIGHBOURS] = l
     res_l, start, cells, w = [], [0], [], []
     for l, res in enumerate(grids):
         sel = level == l
         if not sel.any():
             continue
-        c, ww = _spread(np.minimum((V[sel] * res).astype(np.int64), res - 1), wts[sel], res)
+        c, ww = _spread(_cells(V[sel], res), wts[sel], res, D)
         res_l.append(res)
         start.append(start[-1] + c.size)
         cells.append(c)
@@ -315,6 +365,9 @@ def _guide_from_marks(cols, V: np.ndarray, wts: np.ndarray, grids) -> EmissionGu
     # pilot marks thinly (light that reaches the view after a bounce outside) keeps more photons
     area = np.repeat(np.array(res_l, np.float64) ** -D, np.diff(start))
     w = (np.concatenate(w) / area) ** TEMPER * area
+    # rounded to 2^-24 of the largest (at least that): np.power may differ in its last bit between
+    # machines (SIMD or libm), and every pass chunk, anywhere, must draw from the same cdf
+    w = np.maximum(np.round(w / w.max() * 2.0 ** 24), 1.0)
     return EmissionGuide(tuple(cols), np.array(res_l, np.int64), np.array(start, np.int64),
                          np.concatenate(cells).astype(np.int64), w / w.sum())
 
