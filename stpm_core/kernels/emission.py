@@ -47,10 +47,11 @@ Emission over the whole light (:func:`emit_photons`)
 * MESH: triangle j with probability q_j, uniform point (``mesh_point``), random side
   (u_side < 1/2: the geometric normal, else its opposite), cosine direction about it; power
   ``Le_j * 2 pi A_j(t) / (q_j n)`` (A_j the triangle's world area at the photon's time).
-* SUN: origin uniform on a disc of radius R = ``P_SUN_R`` perpendicular to Z, centred 2 R_s
-  upstream (+Z side) of the scene's bounding sphere (centre ``P_SCENE_C``, radius R_s =
-  ``P_SCENE_R``); direction -Z (angle 0) or uniform in the cone of half-angle angle / 2 about -Z;
-  power ``color * S * pi R^2 * cos_t / n`` (S = strength W/m^2, cos_t the cosine to -Z):
+* SUN: a point q uniform on a disc of radius R = ``P_SUN_R`` perpendicular to Z through the
+  centre of the scene's bounding sphere (centre ``P_SCENE_C``, radius R_s = ``P_SCENE_R``);
+  direction d = -Z (angle 0) or uniform in the cone of half-angle angle / 2 about -Z; origin
+  q - (2 R_s / cos_t) d (2 R_s upstream of the disc, outside the scene); power
+  ``color * S * pi R^2 * cos_t / n`` (S = strength W/m^2, cos_t the cosine to -Z):
   :func:`_sun_photon`.
 * WORLD (constant; an environment image: :func:`_world_photon`): direction d uniform on the sphere, origin uniform on the disc of radius R_s
   perpendicular to d through the scene centre, moved 2 R_s back along d; power
@@ -140,17 +141,21 @@ def _point_origin(row, c, d, u2, i):
 
 @njit(**JIT)
 def _sun_photon(row, cos_half, Z, ce, R, back, n, u1, u2, i):
-    """Sun photon i through a disc of radius R perpendicular to Z (unit or zero), ``back`` upstream of ce.
+    """Sun photon i whose line crosses a disc of radius R perpendicular to Z (unit or zero) through
+    ce, starting ``back`` upstream of that disc (along Z).
 
     The sun's radiance is S norm / Omega in its cone (``sampling.sun_cone``: norm = 2 / (1 +
-    cos_half), Cycles' normalisation, 1 at angle 0), so points uniform on the disc (u2[i], pdf
-    1 / (pi R^2)) and directions -Z (angle 0) or uniform in the cone of cosine cos_half about -Z
-    (u1[i], pdf 1 / Omega) carry color * S * norm * pi R^2 * cos_t / n (0 for a zero Z).
+    cos_half), Cycles' normalisation, 1 at angle 0), so points q uniform on the disc (u2[i], pdf
+    1 / (pi R^2)) and directions d = -Z (angle 0) or uniform in the cone of cosine cos_half about
+    -Z (u1[i], pdf 1 / Omega) carry color * S * norm * pi R^2 * cos_t / n (0 for a zero Z); the
+    photon starts at o = q - (back / cos_t) d.  The disc passes through the scene (not upstream of
+    it), so a surface near ce is reached by photons of nearly one patch of the disc whatever the
+    direction in the cone: emission guiding (``kernels.guide``) draws that patch sharply.
     Returns origin, direction, power (3-tuples).
     """
     Z, ok = axis_or_z(Z)
     x, y = concentric_disk(u2[i, 0], u2[i, 1])
-    o = add(madd(ce, back, Z), to_world((x * R, y * R, 0.0), Z))
+    q = add(ce, to_world((x * R, y * R, 0.0), Z))
     if row[P_ANGLE] > 0.0:
         local = uniform_cone(u1[i, 0], u1[i, 1], cos_half)
         d = to_world(local, neg(Z))
@@ -158,6 +163,7 @@ def _sun_photon(row, cos_half, Z, ce, R, back, n, u1, u2, i):
     else:
         d = neg(Z)
         cos_t = 1.0
+    o = madd(q, -back / max(cos_t, 1e-6), d)
     g = np.pi * R * R * cos_t * ok / n
     S = row[P_POWER] * sun_cone(row)[2]
     return o, d, (row[P_COLOR] * S * g, row[P_COLOR + 1] * S * g, row[P_COLOR + 2] * S * g)
@@ -368,7 +374,7 @@ def emit_photons(row, poses, steps, corners, q, cdf, Le, env, times, u1, u2, u_s
             axis, ok = axis_or_z(n_emit)
             di = to_world(cosine_hemisphere(u1[i, 0], u1[i, 1]), axis)
             Pi = (row[P_FLUX] / n * ok, row[P_FLUX + 1] / n * ok, row[P_FLUX + 2] / n * ok)
-        # ---- SUN: a disc covering the scene's bounding sphere, 2 R_s upstream ----
+        # ---- SUN: lines through a disc across the scene's bounding sphere, starting 2 R_s upstream ----
         elif typ == T_SUN:
             oi, di, Pi = _sun_photon(row, cos_half, light_axis(M), scene_c, row[P_SUN_R], 2.0 * row[P_SCENE_R],
                                      n, u1, u2, i)
@@ -523,7 +529,7 @@ def emit(lights, li: int, n: int, times: np.ndarray, rng: np.random.Generator, *
             w = np.empty(n)
             U = (u1, u2)
             V = np.ascontiguousarray(np.stack([U[c // 2][:, c % 2] for c in guide.cols], axis=1))
-            guide_warp(V, int(guide.res), guide.mask, guide.marked, float(guide.g), rng.random(n), w)
+            guide_warp(V, guide.res, guide.start, guide.cells, guide.cdf, guide.dens, float(guide.g), rng.random(n), w)
             for k, c in enumerate(guide.cols):
                 U[c // 2][:, c % 2] = V[:, k]
         emit_photons(*inputs, u1, u2, u_side, o, d, P, s_lit)

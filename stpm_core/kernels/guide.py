@@ -14,10 +14,10 @@ Two kernels:
 * :func:`guide_marks` -- the inverse: for a point p the camera sees (and a time), the uniforms
   of a photon of the light that reaches p straight from the light, and the shadow ray
   (from p back toward where that photon starts) that decides whether it does;
-* :func:`guide_warp` -- the mixture: with probability g a uniform cell of the M marked ones
-  (then uniform inside it), else the uniforms as drawn; writes the weight 1 / pdf with
-  ``pdf(u) = (1 - g) + g N_c / M [cell(u) marked]`` (density on [0, 1)^D, N_c = res^D cells),
-  the factor the photon's power is multiplied by.
+* :func:`guide_warp` -- the mixture: with probability g a listed cell j of one of several
+  grids (coarse to fine), drawn with its probability p_j (then uniform inside it), else the uniforms as drawn;
+  writes the weight 1 / pdf with ``pdf(u) = (1 - g) + g sum_levels p_cell(u) res^D`` (a density
+  on [0, 1)^D), the factor the photon's power is multiplied by.
 """
 from __future__ import annotations
 
@@ -80,8 +80,9 @@ def guide_marks(row, poses, P, R, U, uu, o_sh, d_sh, tmax, ok):
     * POINT: d = (p - c) / |p - c|, u1 = uniform_sphere^-1(d);
     * SPOT: d's local coordinates about the cone axis, u1 = uniform_cone^-1 (cos_half);
     * SUN: d = -Z (angle 0) or uniform_cone(U[i, :2]) about -Z; the line through p along d
-      crosses the emission disc (radius ``P_SUN_R`` about c_s + 2 R_s Z) at o, u2 =
-      concentric^-1 of o's disc coordinates / ``P_SUN_R``;
+      crosses the emission disc (radius ``P_SUN_R`` about c_s, perpendicular to Z) at q, u2 =
+      concentric^-1 of q's disc coordinates / ``P_SUN_R``; the photon starts at
+      o = q - (2 R_s / cos_t) d;
     * WORLD: d = uniform_sphere(U[i, :2]); u2 = concentric^-1 of p's coordinates across d about
       the scene centre / R_s; o = that disc point moved 2 R_s back along d;
     * AREA: o = area_point(U[i, 2:]); u1 = cosine_hemisphere^-1 of d about the emitting normal.
@@ -121,7 +122,7 @@ def guide_marks(row, poses, P, R, U, uu, o_sh, d_sh, tmax, ok):
                 uu[i, 1] = _phi_u(dot(d, b), dot(d, t))
             o = c
         elif typ == T_SUN:
-            # ---- the line through p along the sun's direction, back to the emission disc ----
+            # ---- the line through p along the sun's direction: where it crosses the emission disc ----
             Z, good = axis_or_z(light_axis(M))
             if good == 0.0:
                 continue
@@ -129,20 +130,20 @@ def guide_marks(row, poses, P, R, U, uu, o_sh, d_sh, tmax, ok):
                 d = to_world(uniform_cone(U[i, 0], U[i, 1], cos_half), neg(Z))
             else:
                 d = neg(Z)
-            back = 2.0 * Rs
-            C = (ce[0] + back * Z[0], ce[1] + back * Z[1], ce[2] + back * Z[2])
             dz = dot(d, Z)
             if dz >= 0.0:
                 continue
-            s = dot(sub(p, C), Z) / dz
-            o = (p[0] - s * d[0], p[1] - s * d[1], p[2] - s * d[2])
+            s = dot(sub(p, ce), Z) / dz                 # p = q + s d, q on the disc through ce
+            q = (p[0] - s * d[0], p[1] - s * d[1], p[2] - s * d[2])
             t, b = basis(Z)
-            v = sub(o, C)
+            v = sub(q, ce)
             Rd = row[P_SUN_R]
             x, y = dot(v, t) / Rd, dot(v, b) / Rd
-            if s <= 0.0 or x * x + y * y > 1.0:
+            if x * x + y * y > 1.0:
                 continue
             uu[i, 2], uu[i, 3] = inverse_concentric(x, y)
+            back = 2.0 * Rs / (-dz)                     # the photon starts 2 R_s upstream of the disc
+            o = (q[0] - back * d[0], q[1] - back * d[1], q[2] - back * d[2])
         elif typ == T_WORLD:
             # ---- a direction, and where its line through p crosses the disc across it ----
             d = uniform_sphere(U[i, 0], U[i, 1])
@@ -179,28 +180,70 @@ def guide_marks(row, poses, P, R, U, uu, o_sh, d_sh, tmax, ok):
 
 
 @njit(**JIT)
-def guide_warp(V, res, mask, marked, g, u_pick, w):
+def _find(cells, lo, hi, c):
+    """Index j in [lo, hi) with cells[j] == c (cells[lo:hi] sorted), or -1."""
+    a, b = lo, hi
+    while a < b:
+        mid = (a + b) // 2
+        if cells[mid] < c:
+            a = mid + 1
+        else:
+            b = mid
+    if a < hi and cells[a] == c:
+        return a
+    return -1
+
+
+@njit(**JIT)
+def _cell(V, i, res):
+    """Flat cell of row V[i] (D,) on a res^D grid: sum_k floor(V_k res) res^(D - 1 - k)."""
+    c = 0
+    for k in range(V.shape[1]):
+        c = c * res + min(int(V[i, k] * res), res - 1)
+    return c
+
+
+@njit(**JIT)
+def guide_warp(V, res, start, cells, cdf, dens, g, u_pick, w):
     """Draw the guided columns V (n, D) in place from the mixture and write the weights w (n,).
 
-    V: the uniforms as drawn (uniform on [0, 1)^D); res cells per column (N_c = res^D cells, cell
-    index sum_k floor(V_k res) res^(D - 1 - k)); mask (N_c,) uint8, 1 for the M marked cells
-    listed (sorted) in marked (M,) int64; g the guided share; u_pick (n,) uniforms choosing the
-    technique (u_pick < g: marked cell number floor(u_pick / g M), V then placed inside it).
-    w[i] = 1 / pdf(V[i]) with pdf = (1 - g) + g N_c / M mask[cell(V[i])].
+    The guide lists cells of L grids: level l has res[l] cells per column and its cells are
+    cells[start[l]:start[l + 1]] (sorted flat indices sum_k floor(V_k res) res^(D - 1 - k));
+    res (L,) int64, start (L + 1,) int64.  Cell j is drawn with probability cdf[j] - cdf[j - 1]
+    (cdf (M,) cumulative, last 1) and adds dens[j] = g p_j res^D (its level's res) to the density
+    wherever it lies.  V: the uniforms as drawn (uniform on [0, 1)^D); u_pick (n,) uniforms
+    choosing the technique (u_pick < g: cell j with cdf[j - 1] <= u_pick / g < cdf[j], V then
+    placed uniformly inside it; else V as drawn).
+    w[i] = 1 / pdf(V[i]), pdf = (1 - g) + sum over levels of dens[the level's cell of V[i]] (0 for
+    a cell not listed): a density on [0, 1)^D that integrates to 1.
     """
     n, D = V.shape
-    Mk = marked.shape[0]
-    Nc = mask.shape[0]
-    dens = g * Nc / Mk
+    M = cells.shape[0]
+    L = res.shape[0]
     for i in range(n):
         if u_pick[i] < g:
-            c = marked[min(int(u_pick[i] / g * Mk), Mk - 1)]
+            # ---- the guided technique: a listed cell by its probability, uniform inside it ----
+            x = u_pick[i] / g
+            a, b = 0, M - 1
+            while a < b:
+                mid = (a + b) // 2
+                if cdf[mid] <= x:
+                    a = mid + 1
+                else:
+                    b = mid
+            lev = 0
+            while start[lev + 1] <= a:
+                lev += 1
+            r = res[lev]
+            c = cells[a]
             for k in range(D - 1, -1, -1):
-                V[i, k] = (c % res + V[i, k]) / res
-                c //= res
-            w[i] = 1.0 / ((1.0 - g) + dens)
-        else:
-            c = 0
-            for k in range(D):
-                c = c * res + min(int(V[i, k] * res), res - 1)
-            w[i] = 1.0 / ((1.0 - g) + dens * mask[c])
+                V[i, k] = min((c % r + V[i, k]) / r, 1.0 - 1e-12)
+                c //= r
+        # ---- the mixture's density where V[i] lies, summed over the levels ----
+        pdf = 1.0 - g
+        for lev in range(L):
+            if start[lev + 1] > start[lev]:
+                j = _find(cells, start[lev], start[lev + 1], _cell(V, i, res[lev]))
+                if j >= 0:
+                    pdf += dens[j]
+        w[i] = 1.0 / pdf

@@ -10,18 +10,22 @@ visibility"; setting ``photon_guiding``).
    photon stored on a seen surface at its second hit bounced first at such a point).  From each,
    ``LIGHT_SAMPLES`` photons of each light that would reach it straight from the light
    (``kernels.guide.guide_marks``: the inverse of the light's emission warps), each with a
-   shadow ray at the point's time; an unoccluded one marks the cell of the light's emission
-   domain that photon comes from (cells of a grid over the guided uniform columns,
-   :data:`COLUMNS`).  Each of the two sets of marks picks its own grid from :data:`GRID`, the
-   finest on which its marked cells hold ``MIN_MARKS`` marks each on average (a finer grid would
-   leave holes between the marks, and a hole's photons are the heavy ones), marks the
-   neighbours of every marked cell (one cell each way in every column), and the two are joined
-   on the finer grid.
-3. **Emission** (``kernels.emission.emit(..., guide=)``): the uniforms of a photon come from
-   ``pdf(u) = g N_c / M [cell(u) marked] + (1 - g)`` (g = ``GUIDED_SHARE``, M marked cells of
-   N_c) and its power is divided by pdf (``kernels.guide.guide_warp``): unbiased for any marks,
-   and every photon drawn in a marked cell carries the same power, so the photons that light a
-   seen surface directly (and what they store after bouncing there) keep equal powers.
+   shadow ray at the point's time; an unoccluded one is a mark at that photon's guided uniform
+   columns (:data:`COLUMNS`), weight 1 (a seen point's) or ``BOUNCE_WEIGHT`` (a point a seen
+   point sees).
+3. **Importance per cell** (:func:`_guide_from_marks`): an adaptive box-kernel density estimate
+   of the marks on the grids of :data:`GRID` (coarse to fine, each twice the one before): each
+   mark's weight is spread evenly over its cell and the cells one each way in every column, on
+   the finest grid on which those 3^D cells hold ``NEIGHBOURS`` marks or more (the coarsest
+   where none does).  So a window's patch of the sun's disc, where the marks are dense, is drawn
+   on fine cells (not blurred into neighbouring wall cells), and the ground outside, where they
+   are sparse, on coarse ones without holes between the marks.  A cell's probability is its
+   density (weight over measure) raised to ``TEMPER`` times its measure, normalised: a power
+   below 1 keeps photons on what the pilot marks thinly (photons that reach the view after a
+   bounce outside would otherwise be hundreds of times heavier than the rest, each a speck).
+4. **Emission** (``kernels.emission.emit(..., guide=)``): the uniforms of a photon come from
+   ``pdf(u) = (1 - g) + g sum_levels p_(cell of u) res^D`` (g = ``GUIDED_SHARE``) and its power
+   is divided by pdf (``kernels.guide.guide_warp``): unbiased for any cells and probabilities.
 
 A light with no marked cell (nothing the camera sees is lit by it directly), a MESH light, and a
 textured or portal-lit world emit uniformly (guide None).  The pilot's random stream is
@@ -57,36 +61,93 @@ STREAM_GUIDE = 0x6D1D         # the pilot's random stream
 CELLS = 128                   # voxels along the diagonal of the seen points (VisibleCells, stats only)
 #: guided uniform columns of (u1_0, u1_1, u2_0, u2_1) per light type and cells per column
 COLUMNS = {"POINT": (0, 1), "SPOT": (0, 1), "SUN": (2, 3), "AREA": (0, 1, 2, 3), "WORLD": (0, 1, 2, 3)}
-#: cells per column tried, coarse to fine: the finest whose marked cells hold MIN_MARKS marks each on average
-GRID = {"POINT": (16, 32, 64, 128, 256), "SPOT": (16, 32, 64, 128, 256), "SUN": (16, 32, 64, 128, 256),
-        "AREA": (4, 8, 16), "WORLD": (4, 8, 16)}
-MIN_MARKS = 16
-BOUNCE_MARKS = 4              # the seen points' points: MIN_MARKS x this (they spread wider, thinner)
+#: cells per column of the guide's grids, coarse to fine (each mark's kernel on one of them: NEIGHBOURS).
+#: SUN stops at 2048 (cells of 1/2048 of the disc's width, 2.9 cm in the 4 m room): a sun's
+#: photons reaching one point come from a patch of the disc blurred by the cone (the point's
+#: distance from the disc x tan(angle / 2), 1.8 cm for a window 1.8 m from it at 0.02 rad), and the
+#: kernel's one cell each way must cover that, or the window's edge sends the heaviest photons in.
+GRID = {"POINT": tuple(2 ** k for k in range(4, 13)), "SPOT": tuple(2 ** k for k in range(4, 13)),
+        "SUN": tuple(2 ** k for k in range(4, 12)), "AREA": (4, 8, 16, 32), "WORLD": (4, 8, 16, 32)}
+BOUNCE_WEIGHT = 1.0           # a mark of a point a seen point sees, against a seen point's own (1)
+TEMPER = 0.3                  # a cell's probability: (its marks' density)^TEMPER x its measure (1: the marks' density)
+NEIGHBOURS = 16               # a mark's kernel: the finest grid whose 3^D cells about it hold this many marks
 LIGHT_SAMPLES = {"POINT": 1, "SPOT": 1, "SUN": 2, "AREA": 8, "WORLD": 32}    # marking photons per seen point
 
 
 @dataclass(frozen=True)
 class EmissionGuide:
-    """One light's guide: the guided columns ``cols`` of (u1_0, u1_1, u2_0, u2_1), ``res`` cells
-    per column, ``mask`` (res^D,) uint8 (1 = marked), ``marked`` (M,) int64 sorted marked cells,
-    ``g`` the guided share."""
+    """One light's guide over its guided columns ``cols`` of (u1_0, u1_1, u2_0, u2_1): cells of
+    several grids, coarse to fine: level l has ``res[l]`` cells per column (each a multiple of the
+    one before), its cells ``cells[start[l]:start[l + 1]]`` (sorted flat int64 indices); ``p``
+    (M,) each cell's probability within the guided share ``g`` (sum 1).  The density on [0, 1)^D
+    is ``pdf(u) = (1 - g) + g sum_l p_(cell of u at level l) res[l]^D``
+    (``kernels.guide.guide_warp``); res (L,) int64, start (L + 1,) int64."""
     cols: tuple
-    res: int
-    mask: np.ndarray
-    marked: np.ndarray
+    res: np.ndarray
+    start: np.ndarray
+    cells: np.ndarray
+    p: np.ndarray
     g: float = GUIDED_SHARE
+
+    @classmethod
+    def uniform(cls, cols, res: int, cells: np.ndarray, g: float = GUIDED_SHARE) -> "EmissionGuide":
+        """The binary guide: cells (M,) of one res^D grid, each with probability 1 / M."""
+        cells = np.unique(np.asarray(cells, np.int64))
+        return cls(tuple(cols), np.array([res], np.int64), np.array([0, cells.size], np.int64), cells,
+                   np.full(cells.size, 1.0 / cells.size), g)
+
+    @property
+    def D(self) -> int:
+        return len(self.cols)
+
+    @property
+    def cdf(self) -> np.ndarray:
+        c = np.cumsum(self.p)
+        return c / c[-1]
+
+    def _levels(self):
+        return [(int(self.start[l]), int(self.start[l + 1]), int(self.res[l])) for l in range(self.res.size)]
+
+    @property
+    def dens(self) -> np.ndarray:
+        """(M,) g p_j res^D: what cell j adds to the density where it lies."""
+        r = np.repeat(self.res.astype(np.float64), np.diff(self.start))
+        return self.g * self.p * r ** self.D
 
     @property
     def marked_fraction(self) -> float:
-        return self.marked.size / self.mask.size
+        """Measure of [0, 1)^D covered by listed cells of any level."""
+        D = self.D
+        # union of the listed cells, level by level coarse to fine (cells inside coarser listed ones once)
+        total, seen = 0.0, []
+        for lo, hi, r in self._levels():
+            if hi == lo:
+                continue
+            c = self.cells[lo:hi]
+            keep = np.ones(c.size, bool)
+            coords = np.stack(np.unravel_index(c, (r,) * D), -1)
+            for rr, cc in seen:
+                par = np.ravel_multi_index(tuple((coords // (r // rr)).T), (rr,) * D)
+                keep &= ~np.isin(par, cc)
+            total += np.count_nonzero(keep) / r ** D
+            seen.append((r, c))
+        return total
 
     def pdf(self, V: np.ndarray) -> np.ndarray:
         """(n,) the mixture density at guided columns V (n, D) (numpy; tests and stats)."""
         V = np.asarray(V, np.float64)
-        c = np.zeros(V.shape[0], np.int64)
-        for k in range(V.shape[1]):
-            c = c * self.res + np.minimum((V[:, k] * self.res).astype(np.int64), self.res - 1)
-        return (1.0 - self.g) + self.g * self.mask.size / self.marked.size * self.mask[c]
+        out = np.full(V.shape[0], 1.0 - self.g)
+        dens = self.dens
+        for lo, hi, res in self._levels():
+            c = np.zeros(V.shape[0], np.int64)
+            for k in range(V.shape[1]):
+                c = c * res + np.minimum((V[:, k] * res).astype(np.int64), res - 1)
+            sub = self.cells[lo:hi]
+            if sub.size:
+                j = np.minimum(np.searchsorted(sub, c), sub.size - 1)
+                hit = sub[j] == c
+                out[hit] += dens[lo:hi][j[hit]]
+        return out
 
 
 @dataclass(frozen=True)
@@ -132,10 +193,11 @@ def visible_cells(pilot: CameraPilot) -> VisibleCells:
     h = max(float(np.linalg.norm(b - a)) / CELLS, 1e-6)
     lo = p.min(axis=0) - 2.0 * h
     h = max(h, float(np.max(p.max(axis=0) - lo)) / ((1 << 20) - 4))
-    v = np.floor((p - lo) / h).astype(np.int64)
+    v = np.unique(_key(np.floor((p - lo) / h).astype(np.int64)))
     off = np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1]), -1).reshape(-1, 3)
-    allv = np.unique((v[:, None, :] + off[None]).reshape(-1, 3), axis=0)
-    return VisibleCells(np.unique(_key(allv)), lo, h)
+    # the neighbours' keys: the packed offsets added (every voxel index lies in [2, 2^20 - 2) here)
+    koff = off[:, 0] * (1 << 40) + off[:, 1] * (1 << 20) + off[:, 2]
+    return VisibleCells(np.unique((v[:, None] + koff[None]).ravel()), lo, h)
 
 
 def camera_pilot(scene, caster, table, *, shading, inst_offset, origin, rng, rays: int = PILOT_RAYS,
@@ -193,22 +255,121 @@ def _guidable(lights, li: int) -> bool:
     return True
 
 
-def _dilate(cells: np.ndarray, res: int, D: int) -> np.ndarray:
-    """Sorted flat cells (M,) and their neighbours one cell each way in every column."""
-    coords = np.stack(np.unravel_index(cells, (res,) * D), -1)
-    off = np.stack(np.meshgrid(*([[-1, 0, 1]] * D), indexing="ij"), -1).reshape(-1, D)
-    allc = (coords[:, None, :] + off[None]).reshape(-1, D)
-    allc = allc[np.all((allc >= 0) & (allc < res), axis=1)]
-    return np.unique(np.ravel_multi_index(tuple(allc.T), (res,) * D))
+def _cells(V: np.ndarray, res: int) -> np.ndarray:
+    """(K,) int64 flat cells of points V (K, D) in [0, 1)^D on a res^D grid."""
+    c = np.minimum((V * res).astype(np.int64), res - 1)
+    return np.ravel_multi_index(tuple(c.T), (res,) * V.shape[1])
 
 
-def _refine(cells: np.ndarray, res: int, fine: int, D: int) -> np.ndarray:
-    """Flat cells (M,) of a res^D grid as the cells of the fine^D grid they hold (fine = res 2^j)."""
-    k = fine // res
-    coords = np.stack(np.unravel_index(cells, (res,) * D), -1) * k
-    sub = np.stack(np.meshgrid(*([np.arange(k)] * D), indexing="ij"), -1).reshape(-1, D)
-    allc = (coords[:, None, :] + sub[None]).reshape(-1, D)
-    return np.ravel_multi_index(tuple(allc.T), (fine,) * D)
+def _offsets(D: int) -> np.ndarray:
+    """(3^D, D) the offsets to a cell and its neighbours one cell each way in every column."""
+    return np.stack(np.meshgrid(*([[-1, 0, 1]] * D), indexing="ij"), -1).reshape(-1, D)
+
+
+DENSE_CELLS = 1 << 22          # grids of at most this many cells are filtered as dense arrays
+
+
+def _box3(A: np.ndarray) -> np.ndarray:
+    """A (res,)*D summed over each cell and its neighbours one cell each way in every column
+    (zero outside the grid): D separable passes of three shifted copies."""
+    for ax in range(A.ndim):
+        B = A.copy()
+        lo = [slice(None)] * A.ndim
+        hi = [slice(None)] * A.ndim
+        lo[ax], hi[ax] = slice(1, None), slice(None, -1)
+        B[tuple(lo)] += A[tuple(hi)]
+        B[tuple(hi)] += A[tuple(lo)]
+        A = B
+    return A
+
+
+def _inside(res: int, D: int) -> np.ndarray:
+    """(res,)*D the number of a cell's 3^D neighbourhood inside the grid (separable: 2 or 3 a column)."""
+    n1 = np.full(res, 3.0)
+    n1[0] = n1[-1] = 2.0
+    if res == 1:
+        n1[0] = 1.0
+    A = np.ones((1,) * D)
+    for ax in range(D):
+        shape = [1] * D
+        shape[ax] = res
+        A = A * n1.reshape(shape)
+    return A
+
+
+def _spread(flat: np.ndarray, wts: np.ndarray, res: int, D: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each mark's weight spread evenly over its cell and the neighbours one cell each way in every
+    column (those inside the grid): flat (K,) int64 cells of a res^D grid, wts (K,).  Marks are
+    gathered per cell first; a grid of at most ``DENSE_CELLS`` cells is filtered as a dense array
+    (separable), a larger one per occupied cell.  Returns the sorted flat cells (M,) and their
+    summed weights (M,)."""
+    if res ** D <= DENSE_CELLS:
+        A = np.bincount(flat, wts, minlength=res ** D).reshape((res,) * D)
+        A = _box3(A / _inside(res, D)).ravel()
+        cells = np.flatnonzero(A > 0.0)
+        return cells.astype(np.int64), A[cells]
+    keys, inv = np.unique(flat, return_inverse=True)
+    wk = np.bincount(inv.ravel(), wts, minlength=keys.size)
+    coords = np.stack(np.unravel_index(keys, (res,) * D), -1)
+    allc = coords[:, None, :] + _offsets(D)[None]
+    ok = np.all((allc >= 0) & (allc < res), axis=2)
+    ww = (wk / ok.sum(1))[:, None] * ok
+    f = np.ravel_multi_index(tuple(np.clip(allc, 0, res - 1).reshape(-1, D).T), (res,) * D).reshape(ok.shape)
+    cells, inv2 = np.unique(f[ok], return_inverse=True)
+    return cells, np.bincount(inv2.ravel(), ww[ok], minlength=cells.size)
+
+
+def _neighbourhood_counts(flat: np.ndarray, res: int, D: int) -> np.ndarray:
+    """(K,) the number of marks (flat (K,) int64 cells of a res^D grid) in each mark's cell and
+    the cells one each way in every column (dense or per occupied cell, as :func:`_spread`)."""
+    if res ** D <= DENSE_CELLS:
+        A = np.bincount(flat, minlength=res ** D).reshape((res,) * D).astype(np.int64)
+        return _box3(A).ravel()[flat]
+    keys, inv, cnt = np.unique(flat, return_inverse=True, return_counts=True)
+    coords = np.stack(np.unravel_index(keys, (res,) * D), -1)
+    total = np.zeros(keys.size, np.int64)
+    for o in _offsets(D):
+        c = coords + o
+        ok = np.all((c >= 0) & (c < res), axis=1)
+        f = np.ravel_multi_index(tuple(np.clip(c, 0, res - 1).T), (res,) * D)
+        j = np.minimum(np.searchsorted(keys, f), keys.size - 1)
+        total += np.where(ok & (keys[j] == f), cnt[j], 0)
+    return total[inv.ravel()]
+
+
+def _guide_from_marks(cols, V: np.ndarray, wts: np.ndarray, grids) -> EmissionGuide | None:
+    """The guide of marks V (K, D) in [0, 1)^D with weights wts (K,): an adaptive box-kernel
+    density estimate.  Each mark's weight is spread evenly over its cell and the cells one each
+    way in every column (:func:`_spread`) on the finest grid of ``grids`` on which those 3^D
+    cells hold ``NEIGHBOURS`` marks or more (the coarsest grid where none does): sharp where the
+    marks are dense (a window's patch of the sun's disc), wide where they are sparse (the ground
+    outside it), without holes between marks (a hole's photons are the heavy ones).
+    p: the cells' weights, tempered (``TEMPER``), over their sum."""
+    D = V.shape[1]
+    level = np.zeros(V.shape[0], np.int64)
+    for l, res in enumerate(grids):
+        level[_neighbourhood_counts(_cells(V, res), res, D) >= NEIGHBOURS] = l
+    res_l, start, cells, w = [], [0], [], []
+    for l, res in enumerate(grids):
+        sel = level == l
+        if not sel.any():
+            continue
+        c, ww = _spread(_cells(V[sel], res), wts[sel], res, D)
+        res_l.append(res)
+        start.append(start[-1] + c.size)
+        cells.append(c)
+        w.append(ww)
+    if len(res_l) == 1 and cells[0].size == res_l[0] ** D:
+        return None                          # every cell of one grid: nearly uniform anyway
+    # Tempered: a cell's density (weight over its measure res^-D) raised to TEMPER, so a region the
+    # pilot marks thinly (light that reaches the view after a bounce outside) keeps more photons
+    area = np.repeat(np.array(res_l, np.float64) ** -D, np.diff(start))
+    w = (np.concatenate(w) / area) ** TEMPER * area
+    # rounded to 2^-24 of the largest (at least that): np.power may differ in its last bit between
+    # machines (SIMD or libm), and every pass chunk, anywhere, must draw from the same cdf
+    w = np.maximum(np.round(w / w.max() * 2.0 ** 24), 1.0)
+    return EmissionGuide(tuple(cols), np.array(res_l, np.int64), np.array(start, np.int64),
+                         np.concatenate(cells).astype(np.int64), w / w.sum())
 
 
 def build_guides(pilot: CameraPilot, caster, lights, rng, *, scale: float) -> tuple[list, list]:
@@ -239,35 +400,16 @@ def build_guides(pilot: CameraPilot, caster, lights, rng, *, scale: float) -> tu
         lit = np.zeros(P.shape[0], bool)
         if sel.size:
             lit[sel] = ~caster.occluded(o_sh[sel], d_sh[sel], T[sel], tmax[sel] * (1.0 - 1e-6))
-        cols = COLUMNS[light.type]
-        D = len(cols)
         if not lit.any():
             guides.append(None)
             marks.append(0)
             continue
-        # Each set of marks (the seen points' own, those of the points they see) on the finest grid
-        # whose marked cells hold MIN_MARKS marks each on average (fewer: holes between the marks),
-        # dilated there and refined to the finer of the two grids (every grid a power of two)
-        grids = GRID[light.type]
-        parts = []
-        for part, need in ((lit & (np.arange(P.shape[0]) < S * m0), MIN_MARKS),
-                           (lit & (np.arange(P.shape[0]) >= S * m0), MIN_MARKS * BOUNCE_MARKS)):
-            if not part.any():
-                continue
-            for res in grids:
-                c = np.minimum((uu[part][:, cols] * res).astype(np.int64), res - 1)
-                found = np.unique(np.ravel_multi_index(tuple(c.T), (res,) * D))
-                if res == grids[0] or part.sum() >= need * found.size:
-                    best = res, found
-                else:
-                    break
-            parts.append((best[0], _dilate(best[1], best[0], D)))
-        res = max(r for r, _ in parts)
-        cells = np.unique(np.concatenate([_refine(c, r, res, D) for r, c in parts]))
-        mask = np.zeros(res ** D, np.uint8)
-        mask[cells] = 1
+        # Each mark weighs 1 (a seen point's) or BOUNCE_WEIGHT (a point a seen point sees)
+        cols = COLUMNS[light.type]
+        first = (np.arange(P.shape[0]) < S * m0)[lit]
+        wts = np.where(first, 1.0, BOUNCE_WEIGHT)
         marks.append(int(lit.sum()))
-        guides.append(None if cells.size == mask.size else EmissionGuide(cols, res, mask, cells))
+        guides.append(_guide_from_marks(cols, uu[lit][:, cols], wts, GRID[light.type]))
     return guides, marks
 
 

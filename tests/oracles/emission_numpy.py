@@ -102,12 +102,13 @@ def point_origins(lights, li, c, dirs, rng) -> np.ndarray:
 
 
 def sun_photons(lights, li, n, Z, center, R, back, u, rng):
-    """Sun photons through a disc of radius R (scalar or (n,)) perpendicular to Z, ``back`` upstream of center."""
+    """Sun photons whose lines cross a disc of radius R (scalar or (n,)) perpendicular to Z through
+    center, starting ``back`` upstream of it (along Z)."""
     l = lights.lights[li]
     Z, ok = _axis_or_z(np.broadcast_to(Z, (n, 3)))     # zero Z scale: no direction, no power
     R = np.broadcast_to(np.asarray(R, float), (n,))
     disc = concentric_disk(rng.random((n, 2))) * R[:, None]
-    origins = center + back * Z + _local_to_world(np.concatenate([disc, np.zeros((n, 1))], axis=1), Z)
+    q = center + _local_to_world(np.concatenate([disc, np.zeros((n, 1))], axis=1), Z)
     if l.angle > 0.0:
         local = uniform_cone(u, np.cos(0.5 * l.angle))
         dirs = _local_to_world(local, -Z)
@@ -115,6 +116,7 @@ def sun_photons(lights, li, n, Z, center, R, back, u, rng):
     else:
         dirs = -Z.copy()
         cos_t = np.ones(n)
+    origins = q - (np.broadcast_to(np.asarray(back, float).reshape(-1), (n,)) / np.maximum(cos_t, 1e-6))[:, None] * dirs
     norm = 2.0 / (1.0 + np.cos(0.5 * l.angle))       # radiance S / (pi sin^2(angle / 2)) (Cycles'), 1 at angle 0
     power = (np.asarray(l.color, float) * (float(l.power) * norm))[None, :] * (np.pi * R * R * cos_t * ok / n)[:, None]
     return origins, dirs, power
