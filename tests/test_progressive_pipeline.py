@@ -145,3 +145,18 @@ def test_range_sums_do_not_depend_on_the_order_of_the_queries(dims, cyl):
                                 True, 1.1, 1)
         np.testing.assert_array_equal(p1[0], phi[i])
         assert c1[0] == cnt[i]
+
+
+def test_an_error_during_a_pass_leaves_no_pass_traced_ahead():
+    scene = moving_caustic_scene((16, 12), mirror=(-0.25, 0.25))
+    seen = []
+
+    def on_pass(img, info):
+        seen.append(info["pass"])
+        if info["pass"] == 6:                       # pass 7 is being traced ahead
+            raise RuntimeError("viewer closed")
+
+    with pytest.raises(RuntimeError, match="viewer closed"):
+        render(scene, RenderSettings(**COMMON, passes=16, threads=2), on_pass=on_pass)
+    assert seen == [1, 2, 3, 4, 5, 6]
+    assert not any(t.name.startswith(THREAD) for t in threading.enumerate())
