@@ -383,11 +383,15 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
             fit = None
             if settings.time_limit > 0:
                 # the wall time a pass takes (its overheads too): the last one's, or the last four's mean
-                walls = np.diff([0.0] + wall_at)[-4:]
-                p_est = max(float(walls[-1]), float(walls.mean()), 1e-9)
+                walls = np.diff(([0.0] if len(wall_at) <= 9 else []) + wall_at[-9:])      # the last 8 passes'
+                p_est = max(float(walls[-1]), float(walls[-4:].mean()), 1e-9)
                 fit = int(max(settings.time_limit - elapsed, 0.0) / p_est)
-                # a round begun is finished unless that would overrun the limit by more than TIME_SLACK
-                if not rounds.is_end(i) and elapsed + (rounds.end_of(i) - i) * p_est > \
+                # a round begun is finished unless that would overrun the limit by more than TIME_SLACK,
+                # its remaining passes at the median of the last 8 (one pass slowed by a hiccup -- a
+                # garbage collection, a busy scheduler -- does not abandon a round; passes that all
+                # slow down do, after a few)
+                p_round = max(float(np.median(walls)), 1e-9)
+                if not rounds.is_end(i) and elapsed + (rounds.end_of(i) - i) * p_round > \
                         (1.0 + TIME_SLACK) * settings.time_limit:
                     stop = "time_limit"
                     break

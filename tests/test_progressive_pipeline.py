@@ -160,3 +160,24 @@ def test_an_error_during_a_pass_leaves_no_pass_traced_ahead():
         render(scene, RenderSettings(**COMMON, passes=16, threads=2), on_pass=on_pass)
     assert seen == [1, 2, 3, 4, 5, 6]
     assert not any(t.name.startswith(THREAD) for t in threading.enumerate())
+
+
+def test_one_slow_pass_does_not_abandon_a_round_under_a_time_limit(monkeypatch):
+    """A time limit finishes a round begun unless its remaining passes would overrun the limit; one pass
+    slowed by a hiccup (here a 0.3 s sleep in pass 70 of the round 65-128) must not make every remaining
+    pass look that slow (until 2026-12-07 the last pass's time alone could stop the round, leaving
+    its passes out; cheap passes made this frequent on a loaded machine)."""
+    import time
+    scene = moving_caustic_scene((8, 6), mirror=(-0.25, 0.25))
+    trace = progressive.trace_image
+
+    def slow_once(*a, **k):
+        if k.get("stream") == 70:
+            time.sleep(0.3)
+        return trace(*a, **k)
+
+    monkeypatch.setattr(progressive, "trace_image", slow_once)
+    st = RenderSettings(**{**COMMON, "photons_caustic": 0}, passes=0, time_limit=3.0, threads=1)
+    pr = render(scene, st).stats["progressive"]
+    assert pr["passes_rendered"] > 70, pr                     # (the hiccup was inside the render)
+    assert pr["left_out"] is None, pr
