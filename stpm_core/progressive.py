@@ -30,13 +30,16 @@ in the stats), and said so.
 """
 from __future__ import annotations
 
+import copy
 import math
 import time as _time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from .errors import RenderCancelled
 from .integrator import trace_image
+from .parallel import worker_count
 from .photons import build_photon_maps
 from .photons.progressive import ProgressiveMaps, auto_shrink_alpha, build_pilot
 from .photons.timescale import auto_time_scale
@@ -52,6 +55,7 @@ NOISE_BLOCK = 8               # noise is averaged over NOISE_BLOCK x NOISE_BLOCK
 NOISE_PERCENTILE = 95.0       # ... and its 95th percentile over the blocks is compared with the threshold
 FLIP_VISIBLE = 0.05           # an LDR-FLIP error above this between the halves counts as a visible difference
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
+PIPELINE_PHOTONS = 1 << 16    # passes of at most this many photons trace the next pass's photons during their image
 TIME_SLACK = 0.1              # a round begun under a time limit is finished if it overruns the limit by at most this
 
 
@@ -261,99 +265,158 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
         pilot = build_pilot(scene, psettings, caster, lights, time_scale=s, cancel=cancel)
     sums = PassSums(first)
     rounds = Rounds()
+    # the passes' settings but for the seed (a copy with the pass's seed per pass: a replace would
+    # validate every field again, 0.5 ms a pass; pass_seed is a valid seed, 0 <= seed < 2^62)
+    pbase = psettings.replace(time_scale=s)
+
+    def with_seed(j):
+        pset_j = copy.copy(pbase)
+        pset_j.seed = pass_seed(settings.seed, j)
+        return pset_j
+
+    def pass_maps(j, u, prog, pset_j=None):
+        """Pass j's photon maps (stratum u = (lo, hi) of shutter mass) as the pass reads them, its
+        kd-trees built: a pure function of (seed, j, u)."""
+        stratum_j = u if tuple(u) != (0.0, 1.0) else None
+        # (no k-nearest trees: the pass's fixed regions build the one they read, ProgressiveMaps)
+        pset_j = with_seed(j) if pset_j is None else pset_j
+        raw = build_photon_maps(scene, pset_j, caster, lights,
+                                time_override=stratum_j, progress=prog, cancel=cancel, build_trees=False)
+        t_lo, t_hi = scene.shutter.sample(np.array([u[0], u[1]]))
+        pm = ProgressiveMaps(raw, pilot, pass_index=j, alpha=alpha, kernel=psettings.kernel,
+                             stratum=(t_lo, t_hi, u[1] - u[0]))
+        pm.prepare()
+        return pm
+
+    # Passes of few photons trace the next pass's photons while the image is traced (two passes' photons
+    # in memory, at most 2 x PIPELINE_PHOTONS); not with threads = 1
+    pipeline = with_photons and worker_count(settings) > 1 and \
+        psettings.photons_caustic + psettings.photons_global <= PIPELINE_PHOTONS
+    pool: list = []
+
+    def ahead_pool():
+        if not pool:
+            pool.append(ThreadPoolExecutor(max_workers=1, thread_name_prefix="stpm-pass-photons"))
+        return pool[0]
+
+    ahead = None                  # (pass index, future of its ProgressiveMaps) traced ahead
+
+    def drop_ahead():
+        """The render stops: wait for a pass traced ahead that it does not take, drop it, end the thread."""
+        if ahead is not None:
+            ahead[1].cancel()
+            try:
+                ahead[1].result()
+            except BaseException:      # noqa: BLE001  (its error, or a cancel, concerns no pass of the image)
+                pass
+        for ex in pool:
+            ex.shutdown(wait=True)
+    noise_end = None              # sums.end when the noise was last estimated (the halves change at round ends only)
     trace_stats, map_stats, pass_s, wall_at = [], [], [], []
     noise = {"noise_p95": math.inf, "noise_mean": math.inf}
     stop = "passes"
     i = first
-    while True:
-        # -- Progress: the fraction of the stop that comes first -----------------------------------
-        elapsed = _time.perf_counter() - t0
-        done = i - first
-        frac = [done / settings.passes] if settings.passes > 0 else []
-        if settings.time_limit > 0:
-            frac.append(elapsed / settings.time_limit)
-        if settings.noise_threshold > 0 and math.isfinite(noise["noise_p95"]) and noise["noise_p95"] > 0:
-            frac.append(min(1.0, (settings.noise_threshold / noise["noise_p95"]) ** 2))
-        f_lo = max(frac) if frac else 0.0
+    try:
+        while True:
+            # -- Progress: the fraction of the stop that comes first -----------------------------------
+            elapsed = _time.perf_counter() - t0
+            done = i - first
+            frac = [done / settings.passes] if settings.passes > 0 else []
+            if settings.time_limit > 0:
+                frac.append(elapsed / settings.time_limit)
+            if settings.noise_threshold > 0 and math.isfinite(noise["noise_p95"]) and noise["noise_p95"] > 0:
+                frac.append(min(1.0, (settings.noise_threshold / noise["noise_p95"]) ** 2))
+            f_lo = max(frac) if frac else 0.0
 
-        def span(f, msg, lo=f_lo, i=i):
-            hi = lo + (1 - lo) / max(1, (last - i + 1) if last is not None else 4)
-            say(lo + (hi - lo) * f, f"pass {i}: {msg}")
+            def span(f, msg, lo=f_lo, i=i):
+                hi = lo + (1 - lo) / max(1, (last - i + 1) if last is not None else 4)
+                say(lo + (hi - lo) * f, f"pass {i}: {msg}")
 
-        # -- One pass: its photons, read with this pass's kernel, and its camera samples ------------
-        t_pass = _time.perf_counter()
-        seed_i = pass_seed(settings.seed, i)
-        pset = psettings.replace(seed=seed_i)
-        u_lo, u_hi = rounds.stratum(i)
-        stratum = (u_lo, u_hi) if (u_lo, u_hi) != (0.0, 1.0) else None
-        try:
-            maps = None
-            if with_photons:
-                # (no k-nearest trees: the pass's fixed regions build the one they read, ProgressiveMaps)
-                raw = build_photon_maps(scene, pset.replace(time_scale=s), caster, lights, time_override=stratum,
-                                        progress=lambda f, m: span(0.3 * f, m), cancel=cancel, build_trees=False)
-                t_lo, t_hi = scene.shutter.sample(np.array([u_lo, u_hi]))
-                maps = ProgressiveMaps(raw, pilot, pass_index=i, alpha=alpha, kernel=psettings.kernel,
-                                       stratum=(t_lo, t_hi, u_hi - u_lo))
-            img, ts = trace_image(scene, pset, caster, lights, maps, table=table, stream=i, time_override=stratum,
-                                  progress=lambda f, m: span(f, m), cancel=cancel,
-                                  progress_span=(0.3 if maps is not None else 0.0, 1.0))
-        except RenderCancelled:
-            if sums.next == sums.first:
-                raise
-            stop = "cancelled"
-            break
-        sums.add(i, img, round_end=rounds.is_end(i))
-        trace_stats.append(ts)
-        if maps is not None:
-            map_stats.append(maps.stats)
-        pass_s.append(_time.perf_counter() - t_pass)
-        noise = noise_estimate(sums)
-        elapsed = _time.perf_counter() - t0
-        wall_at.append(elapsed)
-        if on_pass is not None:
-            on_pass(sums, {"pass": i, "passes": i - first + 1, "elapsed_s": elapsed, "noise_p95": noise["noise_p95"]})
-        # -- Stop? ------------------------------------------------------------------------------
-        if last is not None and i >= last:
-            stop = "passes"
-            break
-        if settings.noise_threshold > 0 and noise["noise_p95"] <= settings.noise_threshold:
-            stop = "noise_threshold"
-            break
-        # The next round: the schedule's, or (unless the schedule must be kept) a smaller one that
-        # ends by the pass limit, within the time limit (else its passes would be left out), and not
-        # long after the noise so far says the threshold is reached (it is read at round ends)
-        fit = None
-        if settings.time_limit > 0:
-            # the wall time a pass takes (its overheads too): the last one's, or the last four's mean
-            walls = np.diff([0.0] + wall_at)[-4:]
-            p_est = max(float(walls[-1]), float(walls.mean()), 1e-9)
-            fit = int(max(settings.time_limit - elapsed, 0.0) / p_est)
-            # a round begun is finished unless that would overrun the limit by more than TIME_SLACK
-            if not rounds.is_end(i) and elapsed + (rounds.end_of(i) - i) * p_est > \
-                    (1.0 + TIME_SLACK) * settings.time_limit:
-                stop = "time_limit"
+            # -- One pass: its photons, read with this pass's kernel, and its camera samples ------------
+            t_pass = _time.perf_counter()
+            pset = with_seed(i)
+            u_lo, u_hi = rounds.stratum(i)
+            stratum = (u_lo, u_hi) if (u_lo, u_hi) != (0.0, 1.0) else None
+            try:
+                maps = None
+                if with_photons:
+                    if ahead is not None and ahead[0] == i:
+                        maps = ahead[1].result()              # traced while the pass before traced its image
+                    else:
+                        maps = pass_maps(i, (u_lo, u_hi), lambda f, m: span(0.3 * f, m), pset)
+                    ahead = None
+                    # -- Pass i + 1's photons, traced on a second thread while this pass traces its image:
+                    #    only when its stratum is already fixed (pass i does not end a round, whose end may
+                    #    choose the next round's strata) and it is a pass the render takes
+                    if pipeline and not rounds.is_end(i) and (last is None or i < last):
+                        ahead = (i + 1, ahead_pool().submit(pass_maps, i + 1, rounds.stratum(i + 1), None))
+                img, ts = trace_image(scene, pset, caster, lights, maps, table=table, stream=i, time_override=stratum,
+                                      progress=lambda f, m: span(f, m), cancel=cancel,
+                                      progress_span=(0.3 if maps is not None else 0.0, 1.0))
+            except RenderCancelled:
+                if sums.next == sums.first:
+                    raise
+                stop = "cancelled"
                 break
-        if rounds.is_end(i):
-            # (a round takes at most half the time left: it still ends in time if the passes slow
-            # down twofold, as on a machine that gets busy; the last rounds are smaller)
-            half = None if fit is None else max(1, fit // 2)
-            want = half if last is None else (last - i if half is None else min(half, last - i))
-            if settings.noise_threshold > 0 and math.isfinite(noise["noise_p95"]) and not scheduled_rounds:
-                # noise ~ 1 / sqrt(passes) at best: the passes still needed, at least
-                more = sums.count * ((noise["noise_p95"] / settings.noise_threshold) ** 2 - 1.0)
-                want = max(1, int(math.ceil(more))) if want is None else min(want, max(1, int(math.ceil(more))))
-            if scheduled_rounds:
-                n = round_end_after(i + 1) - i
-            else:
-                n = rounds.begin(i + 1, max(want, 1) if want is not None else None)
-            if fit is not None and (n == 0 or n > fit):
-                stop = "time_limit"
+            sums.add(i, img, round_end=rounds.is_end(i))
+            trace_stats.append(ts)
+            if maps is not None:
+                map_stats.append(maps.stats)
+            pass_s.append(_time.perf_counter() - t_pass)
+            if sums.end != noise_end:
+                # (the image, and so its halves, changes only when a round of passes joins it)
+                noise, noise_end = noise_estimate(sums), sums.end
+            elapsed = _time.perf_counter() - t0
+            wall_at.append(elapsed)
+            if on_pass is not None:
+                on_pass(sums, {"pass": i, "passes": i - first + 1, "elapsed_s": elapsed, "noise_p95": noise["noise_p95"]})
+            # -- Stop? ------------------------------------------------------------------------------
+            if last is not None and i >= last:
+                stop = "passes"
                 break
-        if cancel is not None and cancel():
-            stop = "cancelled"
-            break
-        i += 1
+            if settings.noise_threshold > 0 and noise["noise_p95"] <= settings.noise_threshold:
+                stop = "noise_threshold"
+                break
+            # The next round: the schedule's, or (unless the schedule must be kept) a smaller one that
+            # ends by the pass limit, within the time limit (else its passes would be left out), and not
+            # long after the noise so far says the threshold is reached (it is read at round ends)
+            fit = None
+            if settings.time_limit > 0:
+                # the wall time a pass takes (its overheads too): the last one's, or the last four's mean
+                walls = np.diff(([0.0] if len(wall_at) <= 9 else []) + wall_at[-9:])      # the last 8 passes'
+                p_est = max(float(walls[-1]), float(walls[-4:].mean()), 1e-9)
+                fit = int(max(settings.time_limit - elapsed, 0.0) / p_est)
+                # a round begun is finished unless that would overrun the limit by more than TIME_SLACK,
+                # its remaining passes at the median of the last 8 (one pass slowed by a hiccup -- a
+                # garbage collection, a busy scheduler -- does not abandon a round; passes that all
+                # slow down do, after a few)
+                p_round = max(float(np.median(walls)), 1e-9)
+                if not rounds.is_end(i) and elapsed + (rounds.end_of(i) - i) * p_round > \
+                        (1.0 + TIME_SLACK) * settings.time_limit:
+                    stop = "time_limit"
+                    break
+            if rounds.is_end(i):
+                # (a round takes at most half the time left: it still ends in time if the passes slow
+                # down twofold, as on a machine that gets busy; the last rounds are smaller)
+                half = None if fit is None else max(1, fit // 2)
+                want = half if last is None else (last - i if half is None else min(half, last - i))
+                if settings.noise_threshold > 0 and math.isfinite(noise["noise_p95"]) and not scheduled_rounds:
+                    # noise ~ 1 / sqrt(passes) at best: the passes still needed, at least
+                    more = sums.count * ((noise["noise_p95"] / settings.noise_threshold) ** 2 - 1.0)
+                    want = max(1, int(math.ceil(more))) if want is None else min(want, max(1, int(math.ceil(more))))
+                if scheduled_rounds:
+                    n = round_end_after(i + 1) - i
+                else:
+                    n = rounds.begin(i + 1, max(want, 1) if want is not None else None)
+                if fit is not None and (n == 0 or n > fit):
+                    stop = "time_limit"
+                    break
+            if cancel is not None and cancel():
+                stop = "cancelled"
+                break
+            i += 1
+    finally:
+        drop_ahead()          # (also when the loop raises: no pass traced ahead outlives the render)
     left_out = [sums.end, sums.next - 1, rounds.end_of(sums.next - 1)] if sums.pending and sums.count else None
     info = {
         "passes": sums.count,

@@ -851,7 +851,7 @@ class FlatTree:
 
         q (n, 4): x, y, z and s t (the tree's own s; column 3 ignored by a 3D tree); rad (n,) m;
         half (n,) the cylinder's half-height in s t units, or None for balls (3D: time ignored,
-        4D: balls in (x, y, z, s t)).  Queries run in Morton order, results in input order.
+        4D: balls in (x, y, z, s t)).  Queries run in the order given (each region's sum is its own).
         """
         n = q.shape[0]
         q = np.ascontiguousarray(q, dtype=np.float64)
@@ -860,19 +860,16 @@ class FlatTree:
         cyl = half is not None and self.dims == 4
         half = np.zeros(n) if half is None else np.ascontiguousarray(half, dtype=np.float64)
         D = self.dims
-        lo = q.min(axis=0) if n else np.zeros(4)
-        scale = 1024.0 / np.maximum((q.max(axis=0) if n else np.ones(4)) - lo, 1e-30)
-        order = np.argsort(_morton(q, lo, scale, D), kind="stable")
-        qs, nss, rs, hs = q[order], ns[order], rad[order], half[order]
+        # (no Morton sort: a fixed region's sum does not depend on the query before it, and the
+        # sort and its permutations cost more than the locality gained: 0.8 ms of 4 ms a call of
+        # a progressive pass's 4k queries, which come in tile order)
         phi = np.zeros((n, 3))
         cnt = np.zeros(n, np.int64)
         depth = int(np.log2(max(self.n_leaves, 1))) + 4
 
         def part(a, b):
-            _range(self.pts, self.xyzt, self.box, self.n_leaves, qs[a:b], nss[a:b], rs[a:b], hs[a:b], D, cyl, self.s,
+            _range(self.pts, self.xyzt, self.box, self.n_leaves, q[a:b], ns[a:b], rad[a:b], half[a:b], D, cyl, self.s,
                    cone, cone_k, np.empty(2 * depth, np.int64), phi[a:b], cnt[a:b])
 
         run_chunks(part, n, workers)
-        out_phi, out_cnt = np.empty_like(phi), np.empty_like(cnt)
-        out_phi[order], out_cnt[order] = phi, cnt
-        return out_phi, out_cnt
+        return phi, cnt

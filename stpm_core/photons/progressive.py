@@ -291,6 +291,14 @@ class ProgressiveMaps:
         m = self.maps.maps[kind]
         return m.flat_tree(dims).range_sum(q, ns, r, half, cone, CONE_K, m.workers)
 
+    def prepare(self) -> None:
+        """Build now the kd-trees :meth:`estimate` reads (else built on its first call; the same trees)."""
+        for kind in KINDS:
+            if self.has(kind):
+                m = self.maps.maps[kind]
+                timeless = self.estimator == "STANDARD" or m.timeless or self.pilot.maps.maps[kind].timeless
+                m.flat_tree(3 if timeless else 4)
+
     def has(self, kind: str) -> bool:
         return self.maps.has(kind) and self.pilot.maps.maps[kind].n > PILOT_K
 

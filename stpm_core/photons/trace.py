@@ -295,7 +295,13 @@ def trace_caustic_map(scene, settings, caster, lights, table, *, time_override=N
     only moves variance around, the power weighting of ``emit_toward`` keeps
     every pair unbiased.
     """
-    targets = specular_targets(scene, table)
+    # (the same every pass of a render: kept in the scene's frozen cache while it renders)
+    cache = scene.frozen_cache() if hasattr(scene, "frozen_cache") else None
+    targets = cache.get("specular_targets") if cache is not None else None
+    if targets is None:
+        targets = specular_targets(scene, table)
+        if cache is not None:
+            cache["specular_targets"] = targets
     r_scene, inst_offset = scene.bounding_sphere()[1], instance_offsets(scene)
     origin = photon_origin(scene)
     pairs, weights = [], []
