@@ -396,8 +396,9 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
 
         def exr(tmp):
             if partial:
-                from .partial import scene_hash, settings_hash, write_partial
+                from .partial import scene_fingerprint, scene_hash, settings_hash, write_partial
                 write_partial(tmp, result.sums, seed=settings.seed, scene_digest=scene_hash(scene),
+                              scene_print=scene_fingerprint(scene),
                               settings_digest=settings_hash(settings), metadata={**meta, "stpm:stats": stats},
                               atomic=False, working=working)
             else:
@@ -485,6 +486,10 @@ def _cmd_merge(args) -> int:
                 raise StpmError(f"the {what} {p} is the partial result {part} itself: choose another --output")
     check_cancel(CancelFlag.active)
     sums, head = merge(args.parts)
+    if head.get("scene_rounding"):
+        _warn(f"{', '.join(head['scene_rounding'])}: the scene was exported with float values differing in the "
+              "last bits from the first partial's (Blender's modifiers, e.g. Bevel UVs, are not bit-reproducible): "
+              "merged; the image is not bit-equal to one process's")
     if sums.first != 1:
         _warn(f"the partial results hold passes {sums.first}..{sums.end - 1}: passes 1..{sums.first - 1} are "
               "missing (the image is right but noisier than one of passes 1..)")
