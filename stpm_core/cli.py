@@ -271,6 +271,14 @@ def _warn_progressive_options(args, overrides: dict, settings) -> None:
     if settings.method != "PROGRESSIVE" and given:
         _warn(f"{' / '.join(given)} {'has' if len(given) == 1 else 'have'} no effect with --method "
               f"{settings.method.lower()}: they set progressive rendering (--method progressive)")
+    # `--time-limit 60` alone stops at the file's pass limit (16 by default) long before 60 s: the
+    # render stops at the first stop reached (artist review: 16 passes in 16.8 s at --time-limit 20)
+    stops = [f for f, k in (("--time-limit", "time_limit"), ("--noise-threshold", "noise_threshold"))
+             if k in overrides and overrides[k]]
+    if settings.method == "PROGRESSIVE" and stops and "passes" not in overrides and settings.passes > 0:
+        _warn(f"{' / '.join(stops)} without --passes: the render also stops at the file's pass limit "
+              f"({settings.passes} passes), whichever comes first; give --passes 0 to render until "
+              f"{'it' if len(stops) == 1 else 'they'} alone stop{'s' if len(stops) == 1 else ''} the render")
     per_pass = ("samples", "photons_caustic", "photons_global")
     if settings.method == "PROGRESSIVE" and str(overrides.get("method", "")).upper() == "PROGRESSIVE" \
             and not any(k in overrides for k in per_pass) \
