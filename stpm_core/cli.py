@@ -271,6 +271,14 @@ def _warn_progressive_options(args, overrides: dict, settings) -> None:
     if settings.method != "PROGRESSIVE" and given:
         _warn(f"{' / '.join(given)} {'has' if len(given) == 1 else 'have'} no effect with --method "
               f"{settings.method.lower()}: they set progressive rendering (--method progressive)")
+    # `--time-limit 60` alone stops at the file's pass limit (16 by default) long before 60 s: the
+    # render stops at the first stop reached (artist review: 16 passes in 16.8 s at --time-limit 20)
+    stops = [f for f, k in (("--time-limit", "time_limit"), ("--noise-threshold", "noise_threshold"))
+             if k in overrides and overrides[k]]
+    if settings.method == "PROGRESSIVE" and stops and "passes" not in overrides and settings.passes > 0:
+        _warn(f"{' / '.join(stops)} without --passes: the render also stops at the file's pass limit "
+              f"({settings.passes} passes), whichever comes first; give --passes 0 to render until "
+              f"{'it' if len(stops) == 1 else 'they'} alone stop{'s' if len(stops) == 1 else ''} the render")
     per_pass = ("samples", "photons_caustic", "photons_global")
     if settings.method == "PROGRESSIVE" and str(overrides.get("method", "")).upper() == "PROGRESSIVE" \
             and not any(k in overrides for k in per_pass) \
@@ -396,8 +404,9 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
 
         def exr(tmp):
             if partial:
-                from .partial import scene_hash, settings_hash, write_partial
+                from .partial import scene_fingerprint, scene_hash, settings_hash, write_partial
                 write_partial(tmp, result.sums, seed=settings.seed, scene_digest=scene_hash(scene),
+                              scene_print=scene_fingerprint(scene),
                               settings_digest=settings_hash(settings), metadata={**meta, "stpm:stats": stats},
                               atomic=False, working=working)
             else:
@@ -485,6 +494,10 @@ def _cmd_merge(args) -> int:
                 raise StpmError(f"the {what} {p} is the partial result {part} itself: choose another --output")
     check_cancel(CancelFlag.active)
     sums, head = merge(args.parts)
+    if head.get("scene_rounding"):
+        _warn(f"{', '.join(head['scene_rounding'])}: the scene was exported with float values differing in the "
+              "last bits from the first partial's (Blender's modifiers, e.g. Bevel UVs, are not bit-reproducible): "
+              "merged; the image is not bit-equal to one process's")
     if sums.first != 1:
         _warn(f"the partial results hold passes {sums.first}..{sums.end - 1}: passes 1..{sums.first - 1} are "
               "missing (the image is right but noisier than one of passes 1..)")

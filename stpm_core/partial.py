@@ -12,7 +12,9 @@ beside it, and a JSON header attribute ``stpm:partial``:
 * ``pass_first``, ``pass_end``: the passes it holds, ``[first, end)`` (1-based; whole
   rounds of time strata: first - 1 and end - 1 are round ends, :mod:`stpm_core.strata`);
 * ``n_even``, ``n_odd``: how many even / odd pass indices (for the noise estimate);
-* ``seed``, ``scene_hash`` (:func:`scene_hash`), ``settings_hash``
+* ``seed``, ``scene_hash`` (:func:`scene_hash`), ``scene_fingerprint`` (:func:`scene_fingerprint`:
+  per array of the scene file a digest and float sums, so that :func:`merge` can tell float
+  rounding from an edit), ``settings_hash``
   (:func:`settings_hash`: every setting that changes a pass's pixels), ``resolution``,
   ``working_space`` (the colour space the passes are in: ``stpm_core.colorspaces``).
 
@@ -42,7 +44,8 @@ from .errors import StpmError
 from .progressive import PassSums
 from .strata import is_round_end
 
-__all__ = ["PARTIAL_FORMAT", "PARTIAL_VERSION", "scene_hash", "settings_hash", "write_partial", "read_partial",
+__all__ = ["PARTIAL_FORMAT", "PARTIAL_VERSION", "scene_hash", "scene_fingerprint", "fingerprint_difference",
+           "settings_hash", "write_partial", "read_partial",
            "merge", "split64", "join64"]
 
 PARTIAL_FORMAT = "stpm-partial"
@@ -81,6 +84,94 @@ def scene_hash(scene) -> str:
     return h.hexdigest()
 
 
+# Blender's evaluated meshes are not bit-reproducible from run to run: the Bevel modifier's UVs
+# differ in the last bit or two (review/make_bevel_min.py: a new scene_hash in every process), so
+# two machines exporting one .blend frame get scenes whose exact hashes differ.  The fingerprint
+# keeps, per float array, its sums under three fixed weightings and its sum of |x|; merge accepts
+# arrays whose sums agree to _ULP_TOL float32 rounding units of sum |x| (a last-bit difference of
+# every element moves a sum by at most 2^-23 sum |x|) and names any other difference as an edit.
+_ULP_TOL = 8.0 * 2.0 ** -23
+_SKETCH_LEN = 4              # sum x, sum x * ramp, sum x * hash weights, sum |x|
+
+
+def _sketch(a: np.ndarray) -> list[float]:
+    """Float64 sums of a float array (any shape; flattened): [sum x, sum x r_i, sum x h_i, sum |x|].
+
+    r_i = i / n (a ramp) and h_i in [-0.5, 0.5) from a multiplicative hash of i, so that an edit
+    which keeps sum x (a vertex moved one way, another the other way) still moves a sum.
+    """
+    x = np.asarray(a, dtype=np.float64).ravel()
+    n = x.size
+    if n == 0:
+        return [0.0] * _SKETCH_LEN
+    i = np.arange(n, dtype=np.uint64)
+    ramp = (i.astype(np.float64) + 0.5) / n
+    h = ((i * np.uint64(2654435761)) & np.uint64(0xFFFFFFFF)).astype(np.float64) / 2.0 ** 32 - 0.5
+    return [float(x.sum()), float(x @ ramp), float(x @ h), float(np.abs(x).sum())]
+
+
+def scene_fingerprint(scene) -> dict:
+    """What :func:`merge` compares when two partials' ``scene_hash`` differ.
+
+    ``{"header": SHA-256 of the scene file's header JSON, "arrays": {key: [digest (16 hex), kind,
+    sketch]}}`` where kind is "f" for a float array (sketch: :func:`_sketch`, 4 floats) and "x" for
+    any other (sketch empty: it must match exactly).
+    """
+    from .scenefile import scene_to_arrays
+    header, arrays = scene_to_arrays(scene)
+    out = {}
+    for key in sorted(arrays):
+        a = np.ascontiguousarray(arrays[key])
+        h = hashlib.sha256(f"{key}|{a.dtype.str}|{a.shape}".encode())
+        h.update(a.tobytes())
+        is_float = a.dtype.kind == "f" and np.all(np.isfinite(a))
+        out[key] = [h.hexdigest()[:16], "f" if is_float else "x", _sketch(a) if is_float else []]
+    return {"header": hashlib.sha256(json.dumps(header, sort_keys=True, default=str).encode()).hexdigest(),
+            "arrays": out}
+
+
+def _check_fingerprint(fp, path) -> None:
+    """Raise StpmError unless ``fp`` has :func:`scene_fingerprint`'s shape (untrusted input)."""
+    ok = (isinstance(fp, dict) and isinstance(fp.get("header"), str) and len(fp["header"]) == 64
+          and isinstance(fp.get("arrays"), dict))
+    if ok:
+        for k, v in fp["arrays"].items():
+            if not (isinstance(k, str) and isinstance(v, list) and len(v) == 3 and isinstance(v[0], str)
+                    and v[1] in ("f", "x") and isinstance(v[2], list)
+                    and len(v[2]) == (_SKETCH_LEN if v[1] == "f" else 0)
+                    and all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x)
+                            for x in v[2])):
+                ok = False
+                break
+    if not ok:
+        raise StpmError(f"{path}: partial result header field 'scene_fingerprint' is invalid")
+
+
+def fingerprint_difference(a: dict | None, b: dict | None) -> str | None:
+    """None when two fingerprints describe one scene up to float rounding, else what differs (text).
+
+    Float arrays may differ by rounding: each of their sums within _ULP_TOL * sum |x| (the larger
+    of the two) of the other's; everything else (the header, array names, shapes, dtypes, integer
+    arrays) must be identical.  A missing fingerprint (an older partial) is a difference.
+    """
+    if a is None or b is None:
+        return "a partial without a scene fingerprint"
+    if a["header"] != b["header"]:
+        return "the scene description (objects, materials, camera, lights or settings)"
+    if set(a["arrays"]) != set(b["arrays"]):
+        return "the scene's arrays (" + ", ".join(sorted(set(a["arrays"]) ^ set(b["arrays"])))[:80] + ")"
+    for key in sorted(a["arrays"]):
+        (da, ka, sa), (db, kb, sb) = a["arrays"][key], b["arrays"][key]
+        if da == db:
+            continue
+        if ka != "f" or kb != "f":
+            return f"array {key}"
+        tol = _ULP_TOL * max(abs(sa[-1]), abs(sb[-1]))
+        if any(abs(x - y) > tol for x, y in zip(sa, sb)):
+            return f"array {key}"
+    return None
+
+
 def settings_hash(settings) -> str:
     """SHA-256 of the settings that change a pass's pixels (not passes, pass_offset, stops, threads)."""
     d = {k: v for k, v in settings.to_dict().items() if k not in _NOT_HASHED}
@@ -88,7 +179,8 @@ def settings_hash(settings) -> str:
 
 
 def write_partial(path, sums: PassSums, *, seed: int, scene_digest: str, settings_digest: str,
-                  metadata: dict | None = None, atomic: bool = True, working: str = "REC709") -> Path:
+                  metadata: dict | None = None, atomic: bool = True, working: str = "REC709",
+                  scene_print: dict | None = None) -> Path:
     """Write ``sums`` (its mean as the visible passes, the exact sums beside) to the EXR ``path``."""
     from .imageio import write_exr
     if sums.count == 0:
@@ -104,6 +196,8 @@ def write_partial(path, sums: PassSums, *, seed: int, scene_digest: str, setting
             "n_even": sums.n_even, "n_odd": sums.n_odd, "seed": int(seed), "scene_hash": scene_digest,
             "settings_hash": settings_digest, "resolution": [int(W), int(H)],
             "passes": sorted(sums.sums), "working_space": working}
+    if scene_print is not None:
+        head["scene_fingerprint"] = scene_print
     meta = dict(metadata or {})
     meta["stpm:partial"] = json.dumps(head)
     return write_exr(path, passes, meta, atomic=atomic, working=working)
@@ -167,6 +261,8 @@ def read_partial(path) -> tuple[PassSums, dict]:
     if not isinstance(working, str) or working not in WORKING_SPACES:
         raise StpmError(f"{path}: partial result header field 'working_space' is invalid ({working!r:.40})")
     head["working_space"] = working
+    if "scene_fingerprint" in head:      # absent in partials written before it was added
+        _check_fingerprint(head["scene_fingerprint"], path)
     # where it came from (the render's settings, plan, scene and frame), carried into a merged EXR
     head["provenance"] = {k: v for k, v in data["_metadata"].items()
                           if k in ("stpm:settings", "stpm:plan", "stpm:scene", "stpm:frame") and isinstance(v, str)}
@@ -203,15 +299,26 @@ def merge(paths) -> tuple[PassSums, dict]:
     """The passes of several partial results as one (PassSums over their joint range, the first header).
 
     Refuses (StpmError, one line) partials of different scenes, seeds, settings or sizes, and pass
-    ranges that overlap or leave a gap.  The sums are added in pass order.
+    ranges that overlap or leave a gap.  The sums are added in pass order.  Partials whose
+    ``scene_hash`` differs but whose ``scene_fingerprint`` says the scenes differ only by float
+    rounding (Blender's exports are not bit-reproducible: :func:`fingerprint_difference`) are
+    merged; the header returned then holds ``scene_rounding`` (the files that differed).
     """
     if not paths:
         raise StpmError("stpm merge needs at least one partial result")
     parts = [(read_partial(p), Path(p)) for p in paths]
     parts.sort(key=lambda x: x[0][1]["pass_first"])
     (total, head0), p0 = parts[0]
+    rounding = []
     for key in ("resolution", "seed", "settings_hash", "scene_hash", "passes", "working_space"):
         for (_, head), p in parts[1:]:
+            if key == "scene_hash" and head[key] != head0[key]:
+                diff = fingerprint_difference(head.get("scene_fingerprint"), head0.get("scene_fingerprint"))
+                if diff is None:
+                    rounding.append(str(p))
+                    continue
+                raise StpmError(f"{p} and {p0} are partials of different scenes (another file, frame, camera "
+                                f"or edit of the scene; differing: {diff}): they cannot be merged")
             if head[key] != head0[key]:
                 if key == "resolution":
                     what = f"resolutions ({'x'.join(map(str, head[key]))} and {'x'.join(map(str, head0[key]))})"
@@ -229,6 +336,8 @@ def merge(paths) -> tuple[PassSums, dict]:
         if s.first > total.end:
             raise StpmError(f"passes {total.end}..{s.first - 1} are missing between {prev} and {p}")
         total = total.merged(s)
+    if rounding:
+        head0 = {**head0, "scene_rounding": rounding}
     return total, head0
 
 

@@ -272,6 +272,19 @@ def test_particle_hair_is_warned(render_type, warned):
     assert "Hairy" in {i.name for i in LAST_RENDER["scene"].instances}  # the emitter mesh itself still renders
 
 
+def test_volume_object_is_warned_not_skipped_silently():
+    """Add > Volume (an OpenVDB Volume object) was dropped from the export without a warning
+    (artist review, review/odd_inputs.py); Cycles renders it."""
+    scene = fresh()
+    add_camera(); add_light(); set_world((0.1, 0.1, 0.1))
+    bpy.ops.object.volume_add(location=(0, 0, 1))
+    bpy.context.object.name = "Smoke"
+    core = export_now(scene)
+    core = core[0] if isinstance(core, tuple) else core
+    hits = [w for w in core.metadata.get("warnings", []) if "'Smoke'" in w and "Volume objects are not rendered" in w]
+    assert len(hits) == 1, core.metadata.get("warnings")
+
+
 # 7. Settings a Cycles render honours and STPM ignores: each one warned
 def _bump(obj):
     tree = obj.data.materials[0].node_tree

@@ -637,6 +637,20 @@ def test_progressive_options_that_do_nothing_or_surprise_are_named(parts):
     assert out.returncode == 0 and "every progressive pass" not in out.stderr, out.stderr
 
 
+def test_a_time_limit_alone_says_that_the_pass_limit_still_stops_the_render(parts):
+    """`--time-limit 60` (docs/cli.md's example) without --passes stopped at the file's 16 passes,
+    silently (artist review: 16 passes in 16.8 s at --time-limit 20): now said before rendering."""
+    out = _cli("render", "mc.stpm", "--method", "progressive", "--time-limit", "30", "--stats", "t.json", "-q",
+               "-o", "t.exr", cwd=parts)
+    assert out.returncode == 0, out.stderr
+    assert json.loads((parts / "t.json").read_text())["progressive"]["stopped_by"] == "passes"
+    assert "--time-limit without --passes: the render also stops at the file's pass limit (16 passes)" \
+        in out.stderr and "--passes 0" in out.stderr, out.stderr
+    out = _cli("render", "mc.stpm", "--method", "progressive", "--passes", "0", "--time-limit", "0.5", "-q",
+               "-o", "t.exr", cwd=parts)
+    assert out.returncode == 0 and "pass limit" not in out.stderr, out.stderr
+
+
 def test_pass_offset_needs_the_progressive_method(parts):
     out = _cli("render", "mc.stpm", "--pass-offset", "0", "-o", "x.exr", cwd=parts)
     assert out.returncode == 1 and "--method progressive" in out.stderr

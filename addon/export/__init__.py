@@ -185,6 +185,12 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
             else:
                 _warn_once(warnings, f"light {obj.name!r}: instanced lights are not supported, skipped")
             continue
+        if obj.type == "VOLUME" and not _hidden_instancer_child(inst):
+            # an OpenVDB Volume object (Add > Volume, smoke / fire caches): Cycles renders it, STPM
+            # renders surfaces only; it was skipped without a word (artist review)
+            _warn_once(warnings, f"object {obj.name!r}: Volume objects are not rendered (STPM renders "
+                                 "surfaces only; volume shaders are ignored too)")
+            continue
         if obj.type not in mesh_export.GEOMETRY_TYPES or _hidden_instancer_child(inst):
             continue
         if not inst.is_instance:
