@@ -667,6 +667,36 @@ def test_geometry(output):
         assert 0 < np.sum(hits["D"] @ NG > 0) < len(hits["D"])
 
 
+def test_fresnel():
+    """Fresnel (view-dependent, written with Math instructions by the compiler) against Cycles'
+    formula: IORs below, at and above 1 (total internal reflection on back faces), a per-hit IOR,
+    a linked Normal."""
+    cases = [({"F": N("ShaderNodeFresnel", {"IOR": ior})}, L("F", "Fac")) for ior in (1.0, 1.33, 1.5, 2.4, 0.7, -1.0)]
+    cases.append(({"G": N("ShaderNodeNewGeometry"),
+                   "M": N("ShaderNodeMath", {"Value": L("G", "Backfacing"), "Value_001": 1.45},
+                          {"operation": "ADD"}),
+                   "F": N("ShaderNodeFresnel", {"IOR": L("M", "Value")})}, L("F", "Fac")))
+    cases.append(({"V": N("ShaderNodeVectorMath", {"Vector": (0.3, -0.2, 0.9)}, {"operation": "NORMALIZE"}),
+                   "F": N("ShaderNodeFresnel", {"IOR": 1.6, "Normal": L("V", "Vector")})}, L("F", "Fac")))
+    C, sd, scene, hits = check_values(cases, hits_per_case=40, seed=_seed("fresnel"))
+    assert 0 < np.sum(hits["D"] @ NG > 0) < len(hits["D"])
+
+
+@pytest.mark.parametrize("output", ["Fresnel", "Facing"])
+def test_layer_weight(output):
+    """Layer Weight's two outputs against Cycles' formulas for blends inside, at the ends of and
+    outside [0, 1] (0.5: the plain facing term), a per-hit blend, a linked Normal."""
+    cases = [({"W": N("ShaderNodeLayerWeight", {"Blend": b})}, L("W", output))
+             for b in (0.0, 0.2, 0.5, 0.7, 0.99, 1.0, -0.3, 1.3)]
+    cases.append(({"G": N("ShaderNodeNewGeometry"),
+                   "M": N("ShaderNodeMath", {"Value": L("G", "Backfacing"), "Value_001": 0.3, "Value_002": 0.35},
+                          {"operation": "MULTIPLY_ADD"}),
+                   "W": N("ShaderNodeLayerWeight", {"Blend": L("M", "Value")})}, L("W", output)))
+    cases.append(({"V": N("ShaderNodeVectorMath", {"Vector": (-0.5, 0.1, 0.8)}, {"operation": "NORMALIZE"}),
+                   "W": N("ShaderNodeLayerWeight", {"Blend": 0.3, "Normal": L("V", "Vector")})}, L("W", output)))
+    check_values(cases, hits_per_case=40, seed=_seed("layer_weight", output))
+
+
 @pytest.mark.parametrize("vtype", ["POINT", "TEXTURE", "VECTOR", "NORMAL"])
 def test_mapping(vtype):
     rng = np.random.default_rng(_seed("mapping", vtype))

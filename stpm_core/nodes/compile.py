@@ -376,6 +376,89 @@ def _geometry(c, name, node):
     return outs
 
 
+def _geometry_slots(c):
+    """The Geometry outputs at the hit for the compiler's own use (one GEOMETRY per program and
+    Bump offset): {"Normal", "Incoming", "Backfacing"} -> slot."""
+    cache = c.__dict__.setdefault("_geometry_slots", {})
+    if c.offset not in cache:
+        pos, nrm, true_n, inc, back = c.alloc(VEC), c.alloc(VEC), c.alloc(VEC), c.alloc(VEC), c.alloc(FLT)
+        c.emit("GEOMETRY", float(c.offset), pos, nrm, true_n, inc, back)
+        cache[c.offset] = {"Normal": nrm, "Incoming": inc, "Backfacing": back}
+    return cache[c.offset]
+
+
+def _m(c, op, a, b=None, d=None):
+    """Slot of Math ``op`` on slots a, b, d (unset: the constant 0), unclamped."""
+    zero = c.const((0.0,))
+    out = c.alloc(FLT)
+    c.emit("MATH", float(MATH_OPS[op]), a, zero if b is None else b, zero if d is None else d, 0.0, out)
+    return out
+
+
+def _lerp(c, t, a, b):
+    """Slot of (1 - t) a + t b (MIX_FLOAT, t unclamped)."""
+    out = c.alloc(FLT)
+    c.emit("MIX_FLOAT", t, a, b, 0.0, out)
+    return out
+
+
+def _fresnel_of(c, cosi, eta):
+    """Slot of Cycles' ``fresnel_dielectric_cos(cosi, eta)`` written with Math instructions:
+    c = |cosi|, g^2 = eta^2 - 1 + c^2; 1 where g^2 <= 0 (total internal reflection), else
+    A = (g - c) / (g + c), B = (c (g + c) - 1) / (c (g - c) + 1), F = A^2 (1 + B^2) / 2."""
+    k = lambda v: c.const((float(v),))                                         # noqa: E731
+    cc = _m(c, "ABSOLUTE", cosi)
+    g2 = _m(c, "MULTIPLY_ADD", cc, cc, _m(c, "MULTIPLY_ADD", eta, eta, k(-1.0)))
+    g = _m(c, "SQRT", g2)                                                      # (0 where g^2 <= 0)
+    gpc, gmc = _m(c, "ADD", g, cc), _m(c, "SUBTRACT", g, cc)
+    A = _m(c, "DIVIDE", gmc, gpc)
+    B = _m(c, "DIVIDE", _m(c, "MULTIPLY_ADD", cc, gpc, k(-1.0)), _m(c, "MULTIPLY_ADD", cc, gmc, k(1.0)))
+    F = _m(c, "MULTIPLY", _m(c, "MULTIPLY", _m(c, "MULTIPLY", A, A), _m(c, "MULTIPLY_ADD", B, B, k(1.0))), k(0.5))
+    return _lerp(c, _m(c, "GREATER_THAN", g2, k(0.0)), k(1.0), F)
+
+
+def _cos_view(c, name, node, geo):
+    """Slot of dot(wi, N): wi towards where the ray came from (Geometry Incoming), N the node's
+    linked Normal, else the shading normal facing wi (Cycles' sd->N)."""
+    n = c.input(name, node, "Normal", VEC, (0.0, 0.0, 1.0)) if isinstance(node.inputs.get("Normal"), Link) \
+        else geo["Normal"]
+    out, val = c.alloc(VEC), c.alloc(FLT)
+    zero3 = c.const((0.0, 0.0, 0.0))
+    c.emit("VECTOR_MATH", float(VMATH_OPS["DOT_PRODUCT"]), geo["Incoming"], n, zero3, c.const((1.0,)), out, val)
+    return val
+
+
+def _fresnel(c, name, node):
+    """Fresnel (``svm_node_fresnel``): the dielectric reflectance for the view direction, IOR
+    eta = max(IOR, 1e-5) on a front face, 1 / eta on a back face."""
+    geo = _geometry_slots(c)
+    eta = _m(c, "MAXIMUM", c.input(name, node, "IOR", FLT, 1.5), c.const((1e-5,)))
+    eta = _lerp(c, geo["Backfacing"], eta, _m(c, "DIVIDE", c.const((1.0,)), eta))
+    return {"Fac": (_fresnel_of(c, _cos_view(c, name, node, geo), eta), FLT)}
+
+
+def _layer_weight(c, name, node):
+    """Layer Weight (``svm_node_layer_weight``) with b = Blend: Fresnel = the dielectric
+    reflectance with eta = 1 / max(1 - b, 1e-5) on a front face (its inverse on a back face);
+    Facing = 1 - |dot(wi, N)|^e, e = 2 b' for b' < 1/2 else 1 / (2 (1 - b')), b' = b clamped to
+    [0, 1 - 1e-5] (e = 1 at b = 1/2)."""
+    geo = _geometry_slots(c)
+    blend = c.input(name, node, "Blend", FLT, 0.5)
+    cosv = _cos_view(c, name, node, geo)
+    out = {}
+    k = lambda v: c.const((float(v),))                                         # noqa: E731
+    if c.used(name, "Fresnel"):
+        e0 = _m(c, "MAXIMUM", _m(c, "SUBTRACT", k(1.0), blend), k(1e-5))
+        eta = _lerp(c, geo["Backfacing"], _m(c, "DIVIDE", k(1.0), e0), e0)
+        out["Fresnel"] = (_fresnel_of(c, cosv, eta), FLT)
+    if c.used(name, "Facing"):
+        b = _m(c, "MINIMUM", _m(c, "MAXIMUM", blend, k(0.0)), k(1.0 - 1e-5))
+        e = _lerp(c, _m(c, "LESS_THAN", b, k(0.5)), _m(c, "DIVIDE", k(0.5), _m(c, "SUBTRACT", k(1.0), b)),
+                  _m(c, "MULTIPLY", b, k(2.0)))
+        out["Facing"] = (_m(c, "SUBTRACT", k(1.0), _m(c, "POWER", _m(c, "ABSOLUTE", cosv), e)), FLT)
+    return out
+
+
 def _attribute(c, name, node):
     """Color Attribute (``layer_name``, "" = the render-active one) and Attribute (Geometry type,
     ``attribute_name``: a colour attribute or a UV map of the mesh): the per-corner value at the
@@ -790,6 +873,8 @@ _HANDLERS = {
     "ShaderNodeTexCoord": _texcoord,
     "ShaderNodeUVMap": _uvmap,
     "ShaderNodeNewGeometry": _geometry,
+    "ShaderNodeFresnel": _fresnel,
+    "ShaderNodeLayerWeight": _layer_weight,
     "ShaderNodeMapping": _mapping,
     "ShaderNodeAttribute": _attribute,
     "ShaderNodeVertexColor": _attribute,

@@ -77,6 +77,8 @@ SOCKET_TYPES = {
                               "Incoming": "VECTOR", "Parametric": "VECTOR", "Backfacing": "VALUE",
                               "Pointiness": "VALUE", "Random Per Island": "VALUE"},
     "ShaderNodeMapping": {"Vector": "VECTOR"},
+    "ShaderNodeFresnel": {"Fac": "VALUE"},
+    "ShaderNodeLayerWeight": {"Fresnel": "VALUE", "Facing": "VALUE"},
     "ShaderNodeMath": {"Value": "VALUE"},
     "ShaderNodeVectorMath": {"Vector": "VECTOR", "Value": "VALUE"},
     "ShaderNodeMix": {"Result_Float": "VALUE", "Result_Vector": "VECTOR", "Result_Color": "RGBA"},
@@ -108,6 +110,8 @@ _G3 = (0.8, 0.8, 0.8)
 DEFAULTS = {
     "ShaderNodeMapping": {"Vector": (0, 0, 0), "Location": (0, 0, 0), "Rotation": (0, 0, 0), "Scale": (1, 1, 1)},
     "ShaderNodeMath": {"Value": 0.5, "Value_001": 0.5, "Value_002": 0.5},
+    "ShaderNodeFresnel": {"IOR": 1.5},
+    "ShaderNodeLayerWeight": {"Blend": 0.5},
     "ShaderNodeVectorMath": {"Vector": (0, 0, 0), "Vector_001": (0, 0, 0), "Vector_002": (0, 0, 0), "Scale": 1.0},
     "ShaderNodeMix": {"Factor_Float": 0.5, "A_Float": 0.0, "B_Float": 0.0, "A_Vector": (0, 0, 0),
                       "B_Vector": (0, 0, 0), "A_Color": (0.5, 0.5, 0.5), "B_Color": (0.5, 0.5, 0.5)},
@@ -930,6 +934,43 @@ def _h_geometry(e, node):
             "Backfacing": 1.0 if h.backfacing else 0.0}
 
 
+def fresnel_dielectric_cos(cosi: float, eta: float) -> float:
+    """Cycles' ``fresnel_dielectric_cos`` (bsdf_util.h): unpolarised dielectric reflectance."""
+    c = abs(cosi)
+    g = eta * eta - 1.0 + c * c
+    if g > 0.0:
+        g = math.sqrt(g)
+        A = (g - c) / (g + c)
+        B = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+        return 0.5 * A * A * (1.0 + B * B)
+    return 1.0
+
+
+def _view_normal(e, node):
+    h = e.hit
+    N = e.inp(node, "Normal", "v") if isinstance(node.inputs.get("Normal"), Link) else h.N
+    return float(np.dot(-h.D, N)), h.backfacing
+
+
+def _h_fresnel(e, node):
+    cosi, back = _view_normal(e, node)
+    eta = max(e.inp(node, "IOR", "f"), 1e-5)
+    return {"Fac": fresnel_dielectric_cos(cosi, 1.0 / eta if back else eta)}
+
+
+def _h_layer_weight(e, node):
+    cosi, back = _view_normal(e, node)
+    blend = e.inp(node, "Blend", "f")
+    eta = max(1.0 - blend, 1e-5)
+    fresnel = fresnel_dielectric_cos(cosi, eta if back else 1.0 / eta)
+    facing = abs(cosi)
+    if blend != 0.5:
+        b = min(max(blend, 0.0), 1.0 - 1e-5)
+        b = 2.0 * b if b < 0.5 else 0.5 / (1.0 - b)
+        facing = facing ** b
+    return {"Fresnel": fresnel, "Facing": 1.0 - facing}
+
+
 def _h_mapping(e, node):
     return {"Vector": mapping(node.props.get("vector_type", "POINT"), e.inp(node, "Vector", "v"),
                               e.inp(node, "Location", "v"), e.inp(node, "Rotation", "v"), e.inp(node, "Scale", "v"))}
@@ -1162,7 +1203,8 @@ def _h_reroute(e, node):
 
 _HANDLERS = {
     "ShaderNodeTexCoord": _h_texcoord, "ShaderNodeUVMap": _h_uvmap, "ShaderNodeNewGeometry": _h_geometry,
-    "ShaderNodeMapping": _h_mapping, "ShaderNodeMath": _h_math, "ShaderNodeVectorMath": _h_vector_math,
+    "ShaderNodeMapping": _h_mapping, "ShaderNodeFresnel": _h_fresnel, "ShaderNodeLayerWeight": _h_layer_weight,
+    "ShaderNodeMath": _h_math, "ShaderNodeVectorMath": _h_vector_math,
     "ShaderNodeAttribute": _h_attribute, "ShaderNodeVertexColor": _h_attribute,
     "ShaderNodeMix": _h_mix, "ShaderNodeMixRGB": _h_mix_rgb, "ShaderNodeInvert": _h_invert,
     "ShaderNodeHueSaturation": _h_hsv, "ShaderNodeBrightContrast": _h_bright_contrast,
