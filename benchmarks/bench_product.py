@@ -346,7 +346,11 @@ def run() -> dict:
             imgs = {"file": stpm[y0:y1, x0:x1]}
             for seed in extra:
                 with _this_scene():
-                    imgs[seed] = room.stpm_final(seed=seed, warm=False)[0][y0:y1, x0:x1]
+                    img_s, passes_s, _ = room.stpm_final(seed=seed, warm=False)
+                imgs[seed] = img_s[y0:y1, x0:x1]
+                # the whole frame and its passes: several seeds give the per-pixel mean and variance
+                # (bias against Cycles apart from noise; benchmarks/product_noise.py reads them)
+                np.savez_compressed(OUT / f"stpm_passes_seed{seed}.npz", **passes_s)
             seeds = []
             for seed, img in imgs.items():
                 row = {"seed": seed}
