@@ -41,7 +41,9 @@ Measured against the reference after the Standard view transform (``bench_room.f
 * the caustic region by part (:func:`caustic_parts`: each connected part's ratio to the converged
   crop, STPM's passes there and Cycles without refractive caustics), printed and in
   ``caustic_parts.json``; with ``STPM_BENCH_SEEDS=1,2`` STPM is rendered again with those seeds and
-  scored inside the region (``stpm_seeds``: one seed's figures are one draw of a heavy-tailed estimate);
+  scored inside the region (``stpm_seeds``: one seed's figures are one draw of a heavy-tailed estimate),
+  their whole passes saved as ``stpm_passes_seed<N>.npz`` (``python -m benchmarks.product_noise``:
+  bias and variance per surface and pass over the seeds);
 * wall seconds of every render.
 
 Pictures in ``bench_out/product/``: ``stpm_final_vs_cycles1024.png`` (side by side),
