@@ -19,7 +19,7 @@ PRESETS: dict[str, dict] = {
         "method": "PHOTON", "estimator": "TEMPORAL", "samples": 256, "photons_global": 1_000_000,
         "photons_caustic": 2_000_000, "k_nearest": 100, "temporal_alpha": 0.0, "time_scale": 0.0,
         "use_adaptive_sampling": True, "adaptive_threshold": 0.05, "adaptive_min_samples": 32,
-        "max_depth": 8, "motion_steps": 5,
+        "max_depth": 8, "motion_steps": 5, "rough_splits": 2,
     },
     "PREVIEW_PROGRESSIVE": {
         "method": "PROGRESSIVE", "estimator": "TEMPORAL", "samples": 1, "photons_global": 20_000,

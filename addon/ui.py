@@ -99,7 +99,7 @@ class _STPMPanel:
 class STPM_RENDER_PT_sampling(_STPMPanel, bpy.types.Panel):
     bl_label = "Sampling"
     PROPS = ("samples", "seed", "max_depth", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
-             "transparent_max_bounces", "filter_width", "threads", "clamp_direct", "clamp_indirect")
+             "transparent_max_bounces", "rough_splits", "filter_width", "threads", "clamp_direct", "clamp_indirect")
 
     def draw_header_preset(self, context):
         self.layout.menu(STPM_MT_presets.bl_idname, text="", icon="PRESET")

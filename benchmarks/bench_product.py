@@ -41,7 +41,9 @@ Measured against the reference after the Standard view transform (``bench_room.f
 * the caustic region by part (:func:`caustic_parts`: each connected part's ratio to the converged
   crop, STPM's passes there and Cycles without refractive caustics), printed and in
   ``caustic_parts.json``; with ``STPM_BENCH_SEEDS=1,2`` STPM is rendered again with those seeds and
-  scored inside the region (``stpm_seeds``: one seed's figures are one draw of a heavy-tailed estimate);
+  scored inside the region (``stpm_seeds``: one seed's figures are one draw of a heavy-tailed estimate),
+  their whole passes saved as ``stpm_passes_seed<N>.npz`` (``python -m benchmarks.product_noise``:
+  bias and variance per surface and pass over the seeds);
 * wall seconds of every render.
 
 Pictures in ``bench_out/product/``: ``stpm_final_vs_cycles1024.png`` (side by side),
@@ -346,7 +348,11 @@ def run() -> dict:
             imgs = {"file": stpm[y0:y1, x0:x1]}
             for seed in extra:
                 with _this_scene():
-                    imgs[seed] = room.stpm_final(seed=seed, warm=False)[0][y0:y1, x0:x1]
+                    img_s, passes_s, _ = room.stpm_final(seed=seed, warm=False)
+                imgs[seed] = img_s[y0:y1, x0:x1]
+                # the whole frame and its passes: several seeds give the per-pixel mean and variance
+                # (bias against Cycles apart from noise; benchmarks/product_noise.py reads them)
+                np.savez_compressed(OUT / f"stpm_passes_seed{seed}.npz", **passes_s)
             seeds = []
             for seed, img in imgs.items():
                 row = {"seed": seed}

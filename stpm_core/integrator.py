@@ -43,7 +43,7 @@ from .film import BH_INVERSE_CDF, DENOISING_GUIDES, DEPTH_BACKGROUND, PASSES, Fi
 from .kernels import gather as _G
 from .kernels import paths as _K
 from .kernels.bsdf import ggx_albedo_tables
-from .kernels.closure import N_CLOSURE, pack_materials
+from .kernels.closure import C_ROUGH_LOBE, N_CLOSURE, pack_materials
 from .kernels.light_params import light_params, light_poses, mesh_arrays
 from .world_light import constant_environment
 from .kernels.svm import shade_rows
@@ -245,7 +245,7 @@ def _light_vis(ctx, li: int) -> int:
 
 def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.ndarray, t_s: np.ndarray, rng,
             stats: TraceStats, dst: np.ndarray, idx_k, use_idx: bool, beta_k, use_beta: bool, mis: np.ndarray = None,
-            clamp: float = 0.0, strata: tuple = None) -> bool:
+            clamp: float = 0.0, strata: tuple = None, sid: np.ndarray = None) -> bool:
     """Next-event estimation at the hit rows sh (k,) of ``hits`` (rays d, closures C, hit r's is row
     crow[r], ``kernels.svm.shade_rows``), added straight
     into dst (n, 3) (the Direct pass: dst[idx[row]] += beta[row] * contribution, light by light);
@@ -254,7 +254,8 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
     ``kernels.paths.nee_light``; :func:`mis_rows`; None: none may);
     clamp: each light sample's contribution at most this (0: off; Cycles' Clamp Direct / Indirect);
     strata: (n, S) the tile's sample count and samples per pixel (None: (k, 1), no strata), over
-    which the light's uniforms are stratified.
+    which the light's uniforms are stratified; sid (live rows,) int64: each row's stratum among
+    them when it is not its sample (split paths, :func:`shade_paths`; None: idx_k's).
 
     Per light with power: its (k, 2) uniforms (``_light_uniforms``), ``kernels.paths.nee_light``
     (light sample + BSDF + shadow-ray set-up), the shadow rays at the rows' times, then
@@ -274,6 +275,8 @@ def _direct(ctx, sh: np.ndarray, hits, d: np.ndarray, C: np.ndarray, crow: np.nd
     E, E_avg = ctx.ggx
     if strata is None:
         samples, strata = np.arange(k), (k, 1)
+    elif sid is not None:
+        samples = np.take(sid, sh, out=_scratch("light_samples_of", (k,), np.int64))
     else:
         samples = np.take(idx_k, sh, out=_scratch("light_samples_of", (k,), np.int64)) if use_idx else sh
     for li in range(len(lights)):
@@ -692,6 +695,9 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         cam_R = _IDENTITY_POSE[:, :3, :3].copy() if cam_R is None else np.ascontiguousarray(cam_R, np.float64)
     tmax = tmax0                             # camera clipping for the first segment
     guard = None                             # camera rays: the caster's own guard
+    sid = None                               # each live row's stratum, split paths (None: its sample)
+    done = None                              # (live rows,) uint8: 1 where the path has split (with sid)
+    split = 1                                # strata per sample (ctx.rough_splits once paths split)
     for bounce in range(ctx.max_depth + 1):
         m = n if idx is None else idx.size
         if m == 0:
@@ -712,8 +718,8 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         # block per bounce, its first column
         u_mix = None
         if sd.uses_mix and sd.uses_programs:
-            rows = np.arange(m) if idx is None else idx
-            u_mix = np.ascontiguousarray(strata_uniforms(rows, (n, int(spp)), rng,
+            rows = np.arange(m) if idx is None else (idx if sid is None else sid)
+            u_mix = np.ascontiguousarray(strata_uniforms(rows, (n * split, int(spp) * split), rng,
                                                          _scratch("mix_strata", (m, 2)))[:, 0])
         C = shade_rows(sd, hits.material, hit_geometry(hits, d, sd=sd, times=t) if sd.uses_programs else None,
                        int(rng.integers(1 << 62)) if sd.uses_mix else 0,
@@ -770,7 +776,7 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
             t_s = np.take(t, sh, out=_scratch("t_s", (n_sh,)))
             if len(ctx.lights) and _direct(ctx, sh, hits, d, C, crow, t_s, rng, stats, L_direct, idx_k, use_idx,
                                            beta_k, use_beta, mis=mis_rows(ctx, bounce, counts, sh), clamp=clamp,
-                                           strata=(n, int(spp))):
+                                           strata=(n * split, int(spp) * split), sid=sid):
                 touched.add("Direct")
             if ctx.maps is not None:
                 _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched,
@@ -782,25 +788,71 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         # (Cycles' Sobol dimensions): the directions (u1, u2) one block, then the pick u0 (which
         # lobe, a smooth dielectric's reflect or refract, and the roulette of its remainder) the
         # first column of another
+        # Path splitting: a path's first vertex with a rough lobe goes on with ctx.rough_splits rays,
+        # each carrying 1 / rough_splits; the copies become rows of their own (hit arrays gathered),
+        # each its own stratum for the lobes' and later lights' uniforms: sample x rough_splits +
+        # copy (paths that have not split keep sample x rough_splits)
+        Pc, NGc, NSc, Dc, crow_c = hits.position, hits.ng, hits.ns, d, crow
+        feat_c, dft_c = feat_b, dft_b
+        rows_c = spec                            # the hit row of each continuation
+        beta_c, use_beta_c, idx_c, use_idx_c = beta_k, use_beta, idx_k, use_idx
+        sid_c = None if sid is None else sid[spec]
+        sid_rows = samp_rows = done_rows = None  # with strata of their own: per row of idx_n, its stratum / sample
+        if sid is not None:
+            # paths split earlier keep their strata: idx_n gets each continuation's hit row
+            idx_c, use_idx_c, sid_rows, samp_rows, done_rows = _NO_IDX, False, sid, idx, done
+        if ctx.rough_splits > 1:
+            Ns = int(ctx.rough_splits)
+            rough = C[crow[spec], C_ROUGH_LOBE] > 0.0
+            if done is not None:
+                rough &= done[spec] == 0
+            if rough.any():
+                reps = np.where(rough, Ns, 1)
+                rows_c = np.repeat(spec, reps)
+                copy = np.arange(rows_c.size) - np.repeat(np.cumsum(reps) - reps, reps)
+                samples_c = rows_c if idx is None else idx[rows_c]
+                sid_c = (samples_c * Ns if sid is None else sid[rows_c]) + copy
+                split_c = np.repeat(rough, reps)
+                done_c = split_c.astype(np.uint8) if done is None else done[rows_c] | split_c
+                split = Ns
+                Pc, NGc, NSc, Dc = hits.position[rows_c], hits.ng[rows_c], hits.ns[rows_c], d[rows_c]
+                crow_c = np.ascontiguousarray(crow[rows_c])
+                beta_c = np.ones((rows_c.size, 3)) if beta is None else beta[rows_c]
+                beta_c[split_c] *= 1.0 / Ns
+                use_beta_c = True
+                idx_c, use_idx_c = _NO_IDX, False   # idx_n: the continuation's copy
+                sid_rows, samp_rows, done_rows = sid_c, samples_c, done_c
+                if ctx.features:
+                    feat_c, dft_c = feat_b[rows_c], dft_b[rows_c]
+                n_spec = rows_c.size
+        spec_k = rows_c if rows_c is spec else np.arange(n_spec)
         u = _scratch("u_cont", (n_spec, 3))
-        samples = spec if idx is None else np.take(idx, spec)
-        u[:, 1:3] = strata_uniforms(samples, (n, int(spp)), rng, _scratch("dir_strata", (n_spec, 2)))
-        u[:, 0] = strata_uniforms(samples, (n, int(spp)), rng, _scratch("pick_strata", (n_spec, 2)))[:, 0]
+        if sid_c is not None:
+            samples = sid_c
+        else:
+            samples = spec if idx is None else np.take(idx, spec)
+        u[:, 1:3] = strata_uniforms(samples, (n * split, int(spp) * split), rng, _scratch("dir_strata", (n_spec, 2)))
+        u[:, 0] = strata_uniforms(samples, (n * split, int(spp) * split), rng, _scratch("pick_strata", (n_spec, 2)))[:, 0]
         rr = bounce + 1 >= RR_START
         u_rr = rng.random(n_spec) if rr else _NO_U
-        EPS = offset_lengths(ctx.inst_offset, hits.instance[spec], hits.position[spec])
+        EPS = offset_lengths(ctx.inst_offset, hits.instance[rows_c], hits.position[rows_c])
         idx_n = np.empty(n_spec, np.int64)
         beta_n, o_n, d_n, guard_n = np.empty((n_spec, 3)), np.empty((n_spec, 3)), np.empty((n_spec, 3)), np.empty(n_spec)
         glossy_n, world_w_n, pc_n = np.empty(n_spec, np.uint8), np.empty(n_spec), np.empty(n_spec)
         counts_n = np.empty((n_spec, 2), np.int32)
-        counts_s = np.zeros((n_spec, 2), np.int32) if counts is None else np.ascontiguousarray(counts[spec])
+        counts_s = np.zeros((n_spec, 2), np.int32) if counts is None else np.ascontiguousarray(counts[rows_c])
         feat_n, dft_n = (np.empty(n_spec, np.uint8), np.empty((n_spec, 3))) if ctx.features else (_NO_FLAGS, _NO_ROWS3)
-        t_spec = t[spec] if ctx.world_li >= 0 and not ctx.lights.lights[ctx.world_li].transform.is_static else t[:1]
-        n_go = _K.specular_step(spec, idx_k, use_idx, beta_k, use_beta, hits.position, hits.ng, hits.ns, d, C, crow,
+        t_spec = t[rows_c] if ctx.world_li >= 0 and not ctx.lights.lights[ctx.world_li].transform.is_static else t[:1]
+        n_go = _K.specular_step(spec_k, idx_c, use_idx_c, beta_c, use_beta_c, Pc, NGc, NSc, Dc, C, crow_c,
                                 E, E_avg, u, rr, u_rr, EPS, GUARD_FRACTION, ctx.stop_coat, CONT_RR, ctx.env,
                                 _world_poses(ctx, t_spec), ctx.world_li >= 0, counts_s, ctx.glossy_bounces,
                                 ctx.transmission_bounces, idx_n, beta_n, o_n, d_n, guard_n, glossy_n, world_w_n,
-                                pc_n, counts_n, ctx.features, feat_b, dft_b, feat_n, dft_n)
+                                pc_n, counts_n, ctx.features, feat_c, dft_c, feat_n, dft_n)
+        if sid_rows is not None:
+            # idx_n holds each continuation's row (copy); back to its sample, and its stratum
+            j = idx_n[:n_go]
+            sid, done = sid_rows[j], done_rows[j]
+            idx_n[:n_go] = samp_rows[j]
         idx, beta, o, d, guard = idx_n[:n_go], beta_n[:n_go], o_n[:n_go], d_n[:n_go], guard_n[:n_go]
         glossy = glossy_n[:n_go] if glossy_n[:n_go].any() else None
         world_w = world_w_n[:n_go] if glossy is not None else None
@@ -840,6 +892,7 @@ class _Context:
     world_li: int = -1                       # the world's light index, -1 when it does not shine
     stop_coat: bool = False                  # camera paths carry no rough coat on (kernels.bsdf.bsdf_sample_cont)
     glossy_bounces: int = 4                  # RenderSettings.glossy_bounces / transmission_bounces
+    rough_splits: int = 1                    # RenderSettings.rough_splits: continuations of a first rough vertex
     transmission_bounces: int = 12
     transparent_max_bounces: int = 8         # RenderSettings.transparent_max_bounces: passes in a row (transparency)
     clamp_direct: float = 0.0                # RenderSettings.clamp_direct / clamp_indirect (0: off)
@@ -1130,6 +1183,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                    closures=closures, ggx=ggx_albedo_tables(),
                    clamp_direct=float(settings.clamp_direct), clamp_indirect=float(settings.clamp_indirect),
                    glossy_bounces=int(settings.glossy_bounces),
+                   rough_splits=int(settings.rough_splits),
                    transmission_bounces=int(settings.transmission_bounces),
                    transparent_max_bounces=int(settings.transparent_max_bounces))
     ctx.shading = shading_data(scene, closures)

@@ -150,6 +150,11 @@ class RenderSettings:
     transmission_bounces: int = setting(
         12, "int", "as Cycles' Transmission bounces: refractions a camera path goes on through, within "
         "max_depth", lo=0, hi=1024, label="Transmission Bounces")
+    rough_splits: int = setting(
+        1, "int", "camera paths go on from their first vertex with a rough glossy or rough glass lobe with this "
+        "many rays, each carrying 1 / N of it (path splitting): N times the samples of what such a lobe "
+        "reflects -- a varnish or rough metal reflecting the sun through glass -- for the cost of the extra "
+        "rays, not of whole camera samples; 1 = off", lo=1, hi=64, label="Rough Splits")
     transparent_max_bounces: int = setting(
         8, "int", "as Cycles' Transparent bounces: transparent surfaces (Transparent BSDF, alpha cut-outs) one "
         "ray segment -- camera, shadow or photon -- passes in a row; the next one absorbs it (black, "

@@ -98,7 +98,8 @@ def test_panels_draw_every_setting():
         cls.draw(panel, context)
         drawn[name] = log
     assert drawn["STPM_RENDER_PT_sampling"] == ["samples", "seed", "max_depth", "diffuse_bounces", "glossy_bounces",
-                                                "transmission_bounces", "transparent_max_bounces", "filter_width",
+                                                "transmission_bounces", "transparent_max_bounces", "rough_splits",
+                                                "filter_width",
                                                 "threads", "clamp_direct", "clamp_indirect"]
     assert drawn["STPM_RENDER_PT_photons"] == ["photons_global", "photons_caustic", "k_nearest", "kernel",
                                                "final_gather_samples", "photon_guiding"]
