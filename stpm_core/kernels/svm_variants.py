@@ -21,6 +21,12 @@ its text (which names the opcodes): the same opcodes give the same file in every
 with no folder to write to, or ``STPM_SVM_VARIANTS=0`` in the environment (one compile of the
 whole interpreter for every scene: a test run with a cold cache over many node combinations)
 runs :mod:`.svm`'s own ``_shade``.
+
+The variant's dispatchers other than its entry ``_shade`` are compiled without numba's CPython and
+C wrappers (they are called from compiled code only; unboxing the hit and scene tuples in a
+wrapper cost about as much to compile as a dispatcher's body).  Variant files of other kernel
+sources accumulate as kernels are edited: :func:`remove_stale` (run once per process, when the
+first variant loads) removes those left alone for :data:`STALE_AGE_S`, with their compiled kernels.
 """
 from __future__ import annotations
 
