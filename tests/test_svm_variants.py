@@ -263,7 +263,8 @@ def test_stale_variants_are_removed_conservatively(tmp_path):
     keep += [put(folder / f"svm_{a}.py", current), put(cache / f"svm_{a}._shade-10.py311.nbi")]
     b = next(h)                                      # another digest, old: removed with its kernels
     gone += [put(folder / f"svm_{b}.py", other), put(cache / f"svm_{b}._shade-10.py311.nbi"),
-             put(cache / f"svm_{b}._shade-10.py311.1.nbc"), put(mirror / f"svm_{b}._closures-9.py311.nbi")]
+             put(cache / f"svm_{b}._shade-10.py311.1.nbc"), put(mirror / f"svm_{b}._closures-9.py311.nbi"),
+             put(cache / f"svm_{b}.cpython-311.pyc")]
     c = next(h)                                      # written before the digest line: another digest's
     gone += [put(folder / f"svm_{c}.py", legacy)]
     d = next(h)                                      # another digest, but a kernel of it saved lately

@@ -67,7 +67,7 @@ VARIANTS_ENV = "STPM_SVM_VARIANTS"     # "0": always the full interpreter
 _DIGEST_TAG = "# kernel sources: "     # a variant file's line: the kernel sources' digest it was made from
 STALE_AGE_S = 86400.0                  # remove_stale: files of another digest untouched for a day
 _NAME = re.compile(r"svm_([0-9a-f]{20})(\.py|\.\d+\.tmp)")
-_COMPILED = re.compile(r"svm_([0-9a-f]{20})\..+\.(nbi|nbc)")
+_COMPILED = re.compile(r"svm_([0-9a-f]{20})\..+\.(nbi|nbc|pyc)")
 _BLEND_NAMES = {v: k for k, v in BLEND_MODES.items()}
 _NORMAL_OPERAND = {name: LAYOUT[name].index("*normal") + 1 for name in ("BSDF_PRINCIPLED", "BSDF_DIFFUSE",
                                                                         "BSDF_GLOSSY", "BSDF_GLASS")}
@@ -271,7 +271,7 @@ def remove_stale(folder, digest: str | None = None, min_age: float = STALE_AGE_S
 
     Conservative: only names this module writes (``svm_<20 hex>.py``, the ``.<pid>.tmp`` of an
     interrupted write, and in ``cache_dirs`` (default :func:`_cache_dirs`) numba's
-    ``svm_<20 hex>.*.nbi`` / ``.nbc`` of such a module); never a module whose digest line names
+    ``svm_<20 hex>.*.nbi`` / ``.nbc`` of such a module, and Python's ``.pyc`` of it); never a module whose digest line names
     ``digest``; and only when neither the module nor any of its compiled files changed in the last
     ``min_age`` seconds (a process running older kernel sources from the same folder may be
     writing or loading them now; one that loaded them earlier holds its code in memory).  A module
