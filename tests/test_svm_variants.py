@@ -24,7 +24,7 @@ from test_kernel_svm import N, make_hits, make_scene
 # Texture, a Checker, Mix Color, a ColorRamp on Roughness) and a second material mixing a Diffuse
 # and a Glossy BSDF by the Checker's Fac
 # (the Image Texture's Linear look-up of an 8-bit image, Mix Color's Multiply: parts of an opcode)
-BENCH_OPS = {"TEXCOORD", "TEXCOORD_POINT", "MAPPING", "TEX_IMAGE", "IMAGE_LINEAR8", "TEX_CHECKER", "MIX_COLOR",
+BENCH_OPS = {"TEXCOORD", "TEXCOORD_OBJECT", "MAPPING", "TEX_IMAGE", "IMAGE_LINEAR8", "TEX_CHECKER", "MIX_COLOR",
              "BLEND_MULTIPLY", "RAMP", "CONVERT", "BSDF_PRINCIPLED"}
 
 
@@ -120,12 +120,53 @@ def test_a_variant_shades_bit_identically_to_the_full_interpreter():
         assert np.array_equal(ns_full, ns_var)
     # the removed branches' callees were not compiled: no colour, procedural or geometry-node
     # function of the variant's own (they are the variant module's dispatchers, compiled only
-    # for it); the ones its opcodes need were
+    # for it); the ones its opcodes need were, unless the entry came from the on-disk cache
+    # (then none of them is compiled: the entry's cached code holds them)
     mod = __import__(entry.py_func.__module__, fromlist=["_shade"])
     assert mod._USE_TEX_NOISE is False and mod._USE_TEX_IMAGE is True
     assert not mod._procedural_node.signatures and not mod._color_node.signatures
-    assert mod._texture_node.signatures and mod._value_node.signatures and mod._geometry_node.signatures
-    assert mod.tex_image_rows.signatures and mod.mix_color.signatures
+    if not sum(entry.stats.cache_hits.values()):
+        assert mod._texture_node.signatures and mod._value_node.signatures and mod._geometry_node.signatures
+        assert mod.tex_image_rows.signatures and mod.mix_color.signatures
+
+
+def _generated() -> ShaderGraph:
+    """A Glass BSDF coloured by a Checker on Generated coordinates (Texture Coordinate's Generated
+    without its Object output; the Glass tints)."""
+    return ShaderGraph(nodes={
+        "Coord": N("ShaderNodeTexCoord"),
+        "Checker": N("ShaderNodeTexChecker", {"Vector": Link("Coord", "Generated"), "Scale": 3.0}),
+        "Glass": N("ShaderNodeBsdfGlass", {"Color": Link("Checker", "Color"), "Roughness": 0.2, "IOR": 1.45}),
+    }, surface=Link("Glass", "BSDF"))
+
+
+def _closest_float() -> ShaderGraph:
+    """A Principled BSDF coloured by a float image read with Closest at the UV coordinates (the
+    Image Texture's general look-ups, without the 8-bit Linear loop)."""
+    return ShaderGraph(nodes={
+        "Image": N("ShaderNodeTexImage", {}, {"image": 0, "interpolation": "Closest", "extension": "REPEAT",
+                                              "projection": "FLAT"}),
+        "BSDF": N("ShaderNodeBsdfPrincipled", {"Base Color": Link("Image", "Color"), "Metallic": 0.3}),
+    }, surface=Link("BSDF", "BSDF"))
+
+
+def test_the_parts_a_variant_leaves_out_shade_bit_identically():
+    """Texture Coordinate's Generated without Object, a Glass BSDF without the Principled or Glossy
+    columns' tests, Closest look-ups without the 8-bit Linear loop: the same closures."""
+    rng = np.random.default_rng(5)
+    tex = Texture(rng.uniform(0.0, 1.0, (8, 4, 4)).astype(np.float32), name="float")
+    scene = make_scene([_generated(), _closest_float()], [tex])
+    sd = shading_data(scene)
+    assert {"TEXCOORD_GENERATED", "BSDF_GLASS", "IMAGE_CLOSEST"} <= sd.ops
+    assert not sd.ops & {"TEXCOORD_OBJECT", "BSDF_GLOSSY", "IMAGE_LINEAR8", "IMAGE_LINEAR", "SET_NORMAL"}
+    entry = svm_variants.interpreter(sd.ops)
+    assert entry is not svm._shade
+    for rows in (False, True):
+        full, ns_full = _shade(scene, None, rows)
+        var, ns_var = _shade(scene, sd.ops, rows)
+        assert np.isfinite(full).all()
+        assert np.array_equal(full.view(np.int64), var.view(np.int64)), f"rows={rows}: closures differ"
+        assert np.array_equal(ns_full, ns_var)
 
 
 def test_the_variant_is_chosen_by_the_opcode_set():
@@ -178,7 +219,7 @@ def test_a_second_process_loads_the_variant_from_the_cache(tmp_path):
         return json.loads(out.stdout.strip().splitlines()[-1])
 
     first, second = child(), child()
-    assert first["ops"] == ["BSDF_DIFFUSE", "TEXCOORD", "TEXCOORD_POINT", "TEX_CHECKER"]
+    assert first["ops"] == ["BSDF_DIFFUSE", "TEXCOORD", "TEXCOORD_GENERATED", "TEX_CHECKER"]
     assert Path(first["dir"]) == tmp_path / "cache" / "svm_variants"
     files = list(Path(first["dir"]).glob("svm_*.py"))
     assert len(files) == 1
@@ -192,3 +233,52 @@ def test_a_second_process_loads_the_variant_from_the_cache(tmp_path):
         assert files[0].name != svm_variants.variant_name(first["ops"]) + ".py"
     finally:
         numba_probe._SOURCES_DIGEST[:] = old
+
+
+def test_stale_variants_are_removed_conservatively(tmp_path):
+    """Variant modules of other kernel sources (and numba's compiled files of them) go once they
+    have been left alone for STALE_AGE_S; this install's, recent ones and other names stay."""
+    import os
+    import time
+
+    folder, cache, mirror = tmp_path / "svm_variants", tmp_path / "svm_variants" / "__pycache__", tmp_path / "mirror"
+    cache.mkdir(parents=True)
+    mirror.mkdir()
+    current = svm_variants.variant_source({"BSDF_DIFFUSE"})
+    digest = svm_variants.numba_probe.sources_digest()
+    other = current.replace(digest, "f" * 64)
+    assert other != current
+    legacy = "\n".join(line for line in current.splitlines() if not line.startswith("# kernel sources: "))
+    now = time.time()
+    old = now - svm_variants.STALE_AGE_S - 60
+
+    def put(path, text="", mtime=old):
+        path.write_text(text)
+        os.utime(path, (mtime, mtime))
+        return path
+
+    h = iter(f"{i:020x}" for i in range(1, 100))
+    keep, gone = [], []
+    a = next(h)                                      # this install's, old: kept with its kernels
+    keep += [put(folder / f"svm_{a}.py", current), put(cache / f"svm_{a}._shade-10.py311.nbi")]
+    b = next(h)                                      # another digest, old: removed with its kernels
+    gone += [put(folder / f"svm_{b}.py", other), put(cache / f"svm_{b}._shade-10.py311.nbi"),
+             put(cache / f"svm_{b}._shade-10.py311.1.nbc"), put(mirror / f"svm_{b}._closures-9.py311.nbi"),
+             put(cache / f"svm_{b}.cpython-311.pyc")]
+    c = next(h)                                      # written before the digest line: another digest's
+    gone += [put(folder / f"svm_{c}.py", legacy)]
+    d = next(h)                                      # another digest, but a kernel of it saved lately
+    keep += [put(folder / f"svm_{d}.py", other), put(cache / f"svm_{d}._shade-10.py311.nbi", mtime=now)]
+    e = next(h)                                      # another digest, written lately
+    keep += [put(folder / f"svm_{e}.py", other, mtime=now)]
+    gone += [put(folder / f"svm_{next(h)}.4242.tmp", other)]     # an interrupted write
+    keep += [put(folder / "notes.py", other), put(folder / "svm_short.py", other),
+             put(cache / "svm_short._shade-1.py311.nbi"), put(mirror / "other.f-1.py311.nbi")]
+
+    removed = svm_variants.remove_stale(folder, cache_dirs=[cache, mirror], now=now)
+    assert sorted(removed) == sorted(gone)
+    assert all(p.exists() for p in keep) and not any(p.exists() for p in gone)
+    # nothing left to remove: a second sweep (another process) removes nothing and does not fail
+    assert svm_variants.remove_stale(folder, cache_dirs=[cache, mirror], now=now) == []
+    # the default cache folders: numba's __pycache__ next to the modules
+    assert svm_variants._cache_dirs(folder)[0] == cache

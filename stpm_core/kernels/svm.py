@@ -112,7 +112,8 @@ _USE_BLEND_LINEAR_LIGHT = _USE_BLEND_DIFFERENCE = _USE_BLEND_EXCLUSION = _USE_BL
 _USE_BLEND_DIVIDE = _USE_BLEND_HUE = _USE_BLEND_SATURATION = _USE_BLEND_COLOR = _USE_BLEND_VALUE = True
 _USE_SET_NORMAL = True
 _USE_ALPHA = True                      # a Principled BSDF's Alpha that is not a constant 1
-_USE_TEXCOORD_UV = _USE_TEXCOORD_POINT = _USE_TEXCOORD_NORMAL = _USE_TEXCOORD_REFLECTION = True    # its outputs
+_USE_TEXCOORD_UV = _USE_TEXCOORD_GENERATED = _USE_TEXCOORD_OBJECT = True     # Texture Coordinate's outputs
+_USE_TEXCOORD_NORMAL = _USE_TEXCOORD_REFLECTION = True
 
 
 
@@ -957,7 +958,7 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
         gs, ns_, obs, rfs = int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 5]), int(prog[pc + 6])
         for k in range(n):
             r = rows[k]
-            if _USE_TEXCOORD_POINT and (gs >= 0 or obs >= 0):
+            if (_USE_TEXCOORD_GENERATED and gs >= 0) or (_USE_TEXCOORD_OBJECT and obs >= 0):
                 mesh = inst_mesh[inst[r]]
                 t = mesh_tri0[mesh] + prim[r]
                 w1, w2 = bu[r], bv[r]
@@ -969,7 +970,7 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
                 if _USE_BUMP and mode != 0:
                     _, _, d0, d1, d2, _, _, _ = _displacement(mode, r, G, A)
                     p0, p1, p2 = p0 + d0, p1 + d1, p2 + d2
-                if gs >= 0:
+                if _USE_TEXCOORD_GENERATED and gs >= 0:
                     q0, q1, q2 = p0, p1, p2
                     if gen_tri0[mesh] >= 0:
                         # the undeformed corners (Mesh.orco): Generated sticks to a deforming surface
@@ -980,7 +981,7 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
                     _put3(st, k, gs, (q0 - gen_lo[mesh, 0]) * gen_inv[mesh, 0], (q1 - gen_lo[mesh, 1]) * gen_inv[mesh, 1],
                           (q2 - gen_lo[mesh, 2]) * gen_inv[mesh, 2])
                 j = inst[r]
-                if obs >= 0 and inst_obj[j, 3, 3] != 0.0:
+                if _USE_TEXCOORD_OBJECT and obs >= 0 and inst_obj[j, 3, 3] != 0.0:
                     # a deforming mesh: Object = world -> object of the hit point at its own time
                     p0 = inst_obj[j, 0, 0] * P[r, 0] + inst_obj[j, 0, 1] * P[r, 1] + inst_obj[j, 0, 2] * P[r, 2] \
                         + inst_obj[j, 0, 3] + d0
@@ -988,7 +989,8 @@ def _geometry_node(op, prog, pc, st, n, rows, G, A):
                         + inst_obj[j, 1, 3] + d1
                     p2 = inst_obj[j, 2, 0] * P[r, 0] + inst_obj[j, 2, 1] * P[r, 1] + inst_obj[j, 2, 2] * P[r, 2] \
                         + inst_obj[j, 2, 3] + d2
-                _put3(st, k, obs, p0, p1, p2)
+                if _USE_TEXCOORD_OBJECT:
+                    _put3(st, k, obs, p0, p1, p2)
             if _USE_TEXCOORD_NORMAL and ns_ >= 0:
                 # Normal: the object-space shading normal, facing the viewer (Cycles' N in object space)
                 q = mesh_tri0[inst_mesh[inst[r]]] + prim[r]
@@ -1175,13 +1177,10 @@ def _normal_map(prog, pc, st, n, rows, G, A):
 
 
 @njit(**JIT)
-def _texture_node(op, prog, pc, st, n, X):
-    """TEX_IMAGE, TEX_CHECKER, TEX_GRADIENT over the batch."""
-    if _USE_TEX_IMAGE and op == _TEX_IMAGE:
-        tex_image_rows(X[0], X[1], X[2], X[3], X[4], int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]),
-                       int(prog[pc + 4]) != 0, st, int(prog[pc + 5]), int(prog[pc + 6]), int(prog[pc + 7]), n,
-                       prog, pc + 9, int(prog[pc + 8]))
-    elif _USE_TEX_CHECKER and op == _TEX_CHECKER:
+def _texture_node(op, prog, pc, st, n):
+    """TEX_CHECKER, TEX_GRADIENT over the batch (TEX_IMAGE: ``texture.tex_image_rows``, called by
+    :func:`_shade` itself)."""
+    if _USE_TEX_CHECKER and op == _TEX_CHECKER:
         vs, c1, c2, ss, cs, fs = (int(prog[pc + 1]), int(prog[pc + 2]), int(prog[pc + 3]), int(prog[pc + 4]),
                                   int(prog[pc + 5]), int(prog[pc + 6]))
         for k in range(n):
@@ -1305,11 +1304,12 @@ def _closure(op, prog, pc, st, k, C, r, w):
              w * max(e2, 0.0), metallic, transmission, rough, specular, ior)
     # Cycles' glass reflection tint (svm/closure.h): a Glass BSDF's colour, a Principled BSDF's
     # specular tint (white: STPM has none); white for the others (they have no glass lobe)
-    if op == _BSDF_GLASS:
+    # (each "_USE_<op> and op == ...": a variant without the opcode drops the test)
+    if _USE_BSDF_GLASS and op == _BSDF_GLASS:
         C[r, C_TINT_R], C[r, C_TINT_R + 1], C[r, C_TINT_R + 2] = w * b0, w * b1, w * b2
     else:
         C[r, C_TINT_R] = C[r, C_TINT_R + 1] = C[r, C_TINT_R + 2] = w
-    if op == _BSDF_PRINCIPLED:
+    if _USE_BSDF_PRINCIPLED and op == _BSDF_PRINCIPLED:
         # Cycles' Principled BSDF tints its refraction by sqrt(base colour) (svm/closure.h), the
         # Glass BSDF by its colour
         b0, b1, b2 = math.sqrt(b0), math.sqrt(b1), math.sqrt(b2)
@@ -1319,7 +1319,7 @@ def _closure(op, prog, pc, st, k, C, r, w):
     C[r, C_TRANSPARENT] = C[r, C_TRANSPARENT + 1] = C[r, C_TRANSPARENT + 2] = 0.0
     C[r, C_PASS] = 0.0
     # Cycles 5.0's Glossy BSDF has no Fresnel: its colour at every angle (Principled: Schlick)
-    C[r, C_METAL_CONST] = 1.0 if op == _BSDF_GLOSSY else 0.0
+    C[r, C_METAL_CONST] = 1.0 if (_USE_BSDF_GLOSSY and op == _BSDF_GLOSSY) else 0.0
 
 
 @njit(**JIT_INLINE)            # (inlined: no call left in the closure loop)
@@ -1368,64 +1368,9 @@ def _constants(prog, start, st, n):
             st[j, k] = v
 
 
-@njit(**JIT_INLINE)          # one caller (_shade): inlined, so the interpreter is one compiled level less
-def _run_batch(prog, start, st, rows, C, G, A, X, seed, U, closures, cr):
-    """Evaluate the program at word ``start`` for the hits rows (n,) into their closure rows of C,
-    for a batch whose constants are in st (n_slots, >= n) float64 already (:func:`_constants`).
-
-    The value section runs instruction by instruction over the whole batch; then each hit walks
-    the closure section to one closure, its Mix Shader choices drawn from U[row] (U (m,): the
-    camera paths' per-pixel stratified uniforms), or ``hash_uniform(seed, row)`` when U is empty
-    (rescaled at each choice, so nested mixes stay independent).
-    Each hit's row first gets the columns no closure instruction writes (C_PROGRAM, C_NS,
-    C_BUMPED) from row cr of closures (the material's constant row), so that the row is whole
-    without a copy of it."""
-    n = rows.shape[0]
-    n_const = int(prog[start + 1])
-    closure_at = start + int(prog[start + 2])
-    pc = start + 3 + n_const
-    while pc < closure_at:
-        op = int(prog[pc])
-        # (each test is "_USE_<op> and op == _<op>": a variant without the opcode has no branch for it)
-        if (_USE_MATH and op == _MATH) or (_USE_MIX_FLOAT and op == _MIX_FLOAT) \
-                or (_USE_MIX_VECTOR and op == _MIX_VECTOR) or (_USE_MIX_COLOR and op == _MIX_COLOR) \
-                or (_USE_CLAMP and op == _CLAMP) or (_USE_MAP_RANGE and op == _MAP_RANGE) \
-                or (_USE_CONVERT and op == _CONVERT) or (_USE_SEPARATE_XYZ and op == _SEPARATE_XYZ) \
-                or (_USE_COMBINE_XYZ and op == _COMBINE_XYZ):
-            _value_node(op, prog, pc, st, n)
-        elif _USE_VECTOR_MATH and op == _VECTOR_MATH:
-            _vector_math(prog, pc, st, n)
-        elif (_USE_INVERT or _USE_HSV or _USE_BRIGHT_CONTRAST or _USE_GAMMA or _USE_SEPARATE_COLOR
-              or _USE_COMBINE_COLOR) and op >= _INVERT and op <= _COMBINE_COLOR:
-            _color_node(op, prog, pc, st, n)
-        elif (_USE_TEXCOORD and op == _TEXCOORD) or (_USE_UVMAP and op == _UVMAP) \
-                or (_USE_GEOMETRY and op == _GEOMETRY) or (_USE_NORMAL_MAP and op == _NORMAL_MAP) \
-                or (_USE_BUMP and op == _BUMP) or (_USE_ATTRIBUTE and op == _ATTRIBUTE):
-            _geometry_node(op, prog, pc, st, n, rows, G, A)
-        elif _USE_MAPPING and op == _MAPPING:
-            _mapping(prog, pc, st, n)
-        elif (_USE_TEX_IMAGE and op == _TEX_IMAGE) or (_USE_TEX_CHECKER and op == _TEX_CHECKER) \
-                or (_USE_TEX_GRADIENT and op == _TEX_GRADIENT):
-            _texture_node(op, prog, pc, st, n, X)
-            if op == _TEX_IMAGE:
-                pc += _LEN[op] + 2 * int(prog[pc + 8])      # then the UDIM tile table
-                continue
-        elif (_USE_TEX_NOISE or _USE_TEX_VORONOI or _USE_TEX_WAVE or _USE_TEX_BRICK or _USE_TEX_MAGIC
-              or _USE_TEX_WHITE_NOISE) and op >= _TEX_NOISE and op <= _TEX_WHITE_NOISE:
-            _procedural_node(op, prog, pc, st, n)
-        elif _USE_RAMP and op == _RAMP:
-            pc += _ramp(prog, pc, st, n)
-            continue
-        elif _USE_CURVES and op == _CURVES:
-            pc += _curves(prog, pc, st, n)
-            continue
-        pc += _LEN[op]
-    _closures(prog, start, closure_at, st, rows, C, G[1], G[2], G[3], seed, U, closures, cr)
-
-
 @njit(**JIT)
 def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, U, closures, cr):
-    """The closure section of :func:`_run_batch`: each hit rows[k] walks it to one closure (NG, NS,
+    """The closure section of a batch (:func:`_shade`): each hit rows[k] walks it to one closure (NG, NS,
     D: the hits' normals and directions, for a Normal input)."""
     n = rows.shape[0]
     for k in range(n):
@@ -1476,13 +1421,14 @@ def _closures(prog, start, closure_at, st, rows, C, NG, NS, D, seed, U, closures
                     u = u / a
             if op >= _BSDF_PRINCIPLED and op <= _EMISSION:
                 _closure(op, prog, q, st, k, C, r, w)
-                ns = -1
-                if op == _BSDF_PRINCIPLED:
-                    ns = int(prog[q + 10])
-                elif op != _EMISSION:
-                    ns = int(prog[q + (op - _BSDF_DIFFUSE) + 2])      # DIFFUSE +2, GLOSSY +3, GLASS +4
-                if _USE_SET_NORMAL and ns >= 0:
-                    _set_normal(NG, NS, D, C, r, st[ns, k], st[ns + 1, k], st[ns + 2, k])
+                if _USE_SET_NORMAL:
+                    ns = -1
+                    if op == _BSDF_PRINCIPLED:
+                        ns = int(prog[q + 10])
+                    elif op != _EMISSION:
+                        ns = int(prog[q + (op - _BSDF_DIFFUSE) + 2])      # DIFFUSE +2, GLOSSY +3, GLASS +4
+                    if ns >= 0:
+                        _set_normal(NG, NS, D, C, r, st[ns, k], st[ns + 1, k], st[ns + 2, k])
             elif cr >= 0:
                 # not a closure instruction (the compiler ends every branch with one): the
                 # material's constant row, as before the program ran
@@ -1506,7 +1452,7 @@ def _set_normal(NG, NS, D, C, r, x, y, z):
     NS[r, 0], NS[r, 1], NS[r, 2] = x, y, z
 
 
-# _run_batch copies the columns C_PROGRAM .. C_BUMPED of the constant row as one run
+# _closures copies the columns C_PROGRAM .. C_BUMPED of the constant row as one run
 assert C_NS == C_PROGRAM + 1 and C_BUMPED == C_NS + 3
 
 BATCH = 256          # hits interpreted together (the stack of a batch stays in the CPU's cache)
@@ -1555,7 +1501,7 @@ def _shade(mat, closures, prog, n_slots, G, A, X, seed, U, C, crow, compact):
     """:func:`shade_closures` (compact False) and :func:`shade_closure_rows` (compact True).
 
     Rows on materials with a program are not copied from the constant row first: the program
-    writes every column of them (``_run_batch``), so each such row is written once."""
+    writes every column of them, so each such row is written once."""
     m = mat.shape[0]
     nc = closures.shape[0]
     nw = closures.shape[1]
@@ -1597,7 +1543,62 @@ def _shade(mat, closures, prog, n_slots, G, A, X, seed, U, C, crow, compact):
             start = int(closures[cr, C_PROGRAM])
             _constants(prog, start, st, min(BATCH, j - i))      # once per material: no slot overwrites them
             for b in range(i, j, BATCH):
-                _run_batch(prog, start, st, order[b:min(b + BATCH, j)], C, G, A, X, seed, U, closures, cr)
+                # The program at word start for the batch's hits rows (n,) into their closure rows
+                # of C, the constants in st already.  The value section runs instruction by
+                # instruction over the whole batch; then each hit walks the closure section to one
+                # closure (_closures), its Mix Shader choices drawn from U[row] (U (m,): the camera
+                # paths' per-pixel stratified uniforms), or hash_uniform(seed, row) when U is empty
+                # (rescaled at each choice, so nested mixes stay independent).  Each hit's row first
+                # gets the columns no closure instruction writes (C_PROGRAM, C_NS, C_BUMPED) from
+                # row cr of closures (the material's constant row), so the row is whole without a
+                # copy of it.  (Written here rather than in a function of its own that _shade
+                # inlines: numba's IR inlining copies a callee's IR block by block, a cost that
+                # grows as blocks x variables.)
+                rows = order[b:min(b + BATCH, j)]
+                n = rows.shape[0]
+                n_const = int(prog[start + 1])
+                closure_at = start + int(prog[start + 2])
+                pc = start + 3 + n_const
+                while pc < closure_at:
+                    op = int(prog[pc])
+                    # (each test is "_USE_<op> and op == _<op>": a variant without the opcode has no branch for it)
+                    if (_USE_MATH and op == _MATH) or (_USE_MIX_FLOAT and op == _MIX_FLOAT) \
+                            or (_USE_MIX_VECTOR and op == _MIX_VECTOR) or (_USE_MIX_COLOR and op == _MIX_COLOR) \
+                            or (_USE_CLAMP and op == _CLAMP) or (_USE_MAP_RANGE and op == _MAP_RANGE) \
+                            or (_USE_CONVERT and op == _CONVERT) or (_USE_SEPARATE_XYZ and op == _SEPARATE_XYZ) \
+                            or (_USE_COMBINE_XYZ and op == _COMBINE_XYZ):
+                        _value_node(op, prog, pc, st, n)
+                    elif _USE_VECTOR_MATH and op == _VECTOR_MATH:
+                        _vector_math(prog, pc, st, n)
+                    elif (_USE_INVERT or _USE_HSV or _USE_BRIGHT_CONTRAST or _USE_GAMMA or _USE_SEPARATE_COLOR
+                          or _USE_COMBINE_COLOR) and op >= _INVERT and op <= _COMBINE_COLOR:
+                        _color_node(op, prog, pc, st, n)
+                    elif (_USE_TEXCOORD and op == _TEXCOORD) or (_USE_UVMAP and op == _UVMAP) \
+                            or (_USE_GEOMETRY and op == _GEOMETRY) or (_USE_NORMAL_MAP and op == _NORMAL_MAP) \
+                            or (_USE_BUMP and op == _BUMP) or (_USE_ATTRIBUTE and op == _ATTRIBUTE):
+                        _geometry_node(op, prog, pc, st, n, rows, G, A)
+                    elif _USE_MAPPING and op == _MAPPING:
+                        _mapping(prog, pc, st, n)
+                    elif _USE_TEX_IMAGE and op == _TEX_IMAGE:
+                        # (called from here, not from _texture_node: one compiled level less above it)
+                        tex_image_rows(X[0], X[1], X[2], X[3], X[4], int(prog[pc + 1]), int(prog[pc + 2]),
+                                       int(prog[pc + 3]), int(prog[pc + 4]) != 0, st, int(prog[pc + 5]),
+                                       int(prog[pc + 6]), int(prog[pc + 7]), n, prog, pc + 9, int(prog[pc + 8]))
+                        pc += _LEN[op] + 2 * int(prog[pc + 8])      # then the UDIM tile table
+                        continue
+                    elif (_USE_TEX_CHECKER and op == _TEX_CHECKER) or (_USE_TEX_GRADIENT and op == _TEX_GRADIENT):
+                        _texture_node(op, prog, pc, st, n)
+                    elif (_USE_TEX_NOISE or _USE_TEX_VORONOI or _USE_TEX_WAVE or _USE_TEX_BRICK or _USE_TEX_MAGIC
+                          or _USE_TEX_WHITE_NOISE) and op >= _TEX_NOISE and op <= _TEX_WHITE_NOISE:
+                        _procedural_node(op, prog, pc, st, n)
+                    elif _USE_RAMP and op == _RAMP:
+                        pc += _ramp(prog, pc, st, n)
+                        continue
+                    elif _USE_CURVES and op == _CURVES:
+                        pc += _curves(prog, pc, st, n)
+                        continue
+                    pc += _LEN[op]
+                _closures(prog, start, closure_at, st, rows, C, G[1], G[2], G[3], seed, U, closures, cr)
 
 
 @njit(**JIT)

@@ -355,6 +355,11 @@ def tex_image_rows(hdr, u8, u16, f32, half, tid, interp, ext, unassociate, st, v
                 r, g, b, a = _bilinear8(u8, base, W, H, C, x, y, ext)
             _store(st, k, cs, as_, r, g, b, a, unassociate, srgb)
         return
+    if not (_USE_IMAGE_CLOSEST or _USE_IMAGE_LINEAR or _USE_IMAGE_CUBIC):
+        # (a variant whose programs only read 8-bit images linearly: no loop of the general look-ups)
+        for k in range(n):
+            _put(st, k, cs, as_, 0.0, 0.0, 0.0, 0.0)
+        return
     for k in range(n):
         x, y = st[vs, k], st[vs + 1, k]
         if not (math.isfinite(x) and math.isfinite(y)):
