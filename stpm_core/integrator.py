@@ -72,6 +72,17 @@ RR_START = 3
 #: weights": at 0.25 the review's scene casts 5 % more bounce rays, a scene of default Principled
 #: BSDFs at roughness 0.5 2.7x as many, +20 % CPU time; 0.5 and 1 trade variance back for rays)
 CONT_RR = 0.25
+#: A static view reads the shutter's average (docs/photon-mapping.md, "Static views read the
+#: shutter's average"): with TEMPORAL or KD4D maps, a camera ray's first hit on a static surface,
+#: seen along a ray no moving object crosses during the shutter, is estimated with STANDARD (the
+#: same expected value there, all photons, a cheaper search).  False: every query uses the
+#: render's estimator.
+STATIC_VIEW = True
+#: A moving instance's sweep is tested as capsules around its bounding sphere's path over
+#: STATIC_VIEW_STEPS equal parts of the shutter; at most STATIC_VIEW_MAX_CAPSULES capsules in all
+#: (fewer parts per instance when many move, down to one each)
+STATIC_VIEW_STEPS = 16
+STATIC_VIEW_MAX_CAPSULES = 256
 
 
 @dataclass
@@ -83,6 +94,7 @@ class TraceStats:
     shadow_rays: int = 0
     photon_lookups: int = 0                  # photon-map queries (shading points x maps)
     photon_estimates: int = 0                # of them estimated; the others shared one (photons.sharing)
+    static_lookups: int = 0                  # of the look-ups, those read as STANDARD: a static view (static_view_rows)
     gather_rays: int = 0                     # final gathering's rays (all bounces)
     gather_lookups: int = 0                  # final gathering's reads of the precomputed irradiance
     seconds: float = 0.0
@@ -95,6 +107,7 @@ class TraceStats:
         self.shadow_rays += other.shadow_rays
         self.photon_lookups += other.photon_lookups
         self.photon_estimates += other.photon_estimates
+        self.static_lookups += other.static_lookups
         self.gather_rays += other.gather_rays
         self.gather_lookups += other.gather_lookups
 
@@ -444,8 +457,128 @@ def _glossy_emission(ctx, gem: np.ndarray, hits, o, t: np.ndarray, C, crow, p_c,
     _K.emission_rows_add(dst, gem, C, crow, W, idx_k, use_idx, beta_k, use_beta, float(clamp))
 
 
+def _estimate(ctx, kind: str, p, ns, t, group, extra: dict, estimator: str | None = None):
+    """(E (n, 3) irradiance of map ``kind`` at the queries, estimates made): alone, or shared by
+    ``group`` (``photons.sharing``); estimator None: the render's."""
+    if estimator is not None:
+        extra = dict(extra, estimator=estimator)
+    if group is None:
+        return ctx.maps.estimate(kind, p, ns, t, **extra), p.shape[0]
+    return _sharing.shared_estimate(lambda p, ns, t: ctx.maps.estimate(kind, p, ns, t, support=True, **extra),
+                                    p, ns, t, group)
+
+
+def static_view_setup(scene, maps) -> tuple | None:
+    """What :func:`static_view_rows` needs, or None when no query may read the shutter's average.
+
+    Returns (static (n_instances,) bool: the instance neither moves nor deforms within the shutter;
+    lo, hi (M, 3): each moving instance's box over the whole shutter; a, b (K, 3), r (K,): capsules
+    (segments a-b, radius r) that hold every moving instance at every instant -- the sphere around
+    its vertices (centred on their box) has its centre sampled at ``STATIC_VIEW_STEPS`` + 1 instants, consecutive samples joined, the
+    radius widened by the path's bend between them).  None unless ``STATIC_VIEW``, the maps answer
+    STANDARD too (``PhotonMaps``; not the progressive kernel or SPPM's per-pixel statistics), the
+    render's estimator depends on time (TEMPORAL, KD4D), the shutter is open and the camera does
+    not move.
+    """
+    if not STATIC_VIEW or maps is None or not getattr(maps, "reads_standard", False):
+        return None
+    if str(getattr(maps, "estimator", "STANDARD")).upper() not in ("TEMPORAL", "KD4D"):
+        return None
+    if scene.shutter.is_instant or not scene.camera.transform.is_static or not scene.instances:
+        return None
+    static = np.array([inst.transform.is_static and not scene.meshes[inst.mesh].is_deforming
+                       for inst in scene.instances], dtype=bool)
+    if not static.any():
+        return None
+    moving = [inst for inst, s in zip(scene.instances, static) if not s]
+    steps = max(1, min(STATIC_VIEW_STEPS, STATIC_VIEW_MAX_CAPSULES // max(len(moving), 1)))
+    lo, hi, ca, cb, cr = [], [], [], [], []
+    for inst in moving:
+        a, b = scene.meshes[inst.mesh].vertex_bounds()
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+            continue                                      # no vertices
+        box_lo, box_hi = inst.transform.bounds_of(a, b)
+        lo.append(box_lo)
+        hi.append(box_hi)
+        # the object's bounding sphere at 2 * steps + 1 instants: the ends and middles of the parts
+        M = inst.transform.at(np.linspace(0.0, 1.0, 2 * steps + 1))
+        c = np.einsum("kij,j->ki", M[:, :3, :3], 0.5 * (a + b)) + M[:, :3, 3]
+        v = np.asarray(scene.meshes[inst.mesh].vertices, np.float64).reshape(-1, 3)   # every time step
+        radius = float(np.sqrt(np.max(np.sum((v - 0.5 * (a + b)) ** 2, axis=1)))) \
+            * float(np.max(np.linalg.norm(M[:, :3, :3], axis=1)))
+        p0, pm, p1 = c[0:-1:2], c[1::2], c[2::2]
+        # how far the middle instant's centre is from the part's chord: the bend (twice, for margin)
+        e = p1 - p0
+        u = np.clip(np.einsum("ki,ki->k", pm - p0, e) / np.maximum(np.einsum("ki,ki->k", e, e), 1e-300), 0.0, 1.0)
+        bend = np.linalg.norm(pm - (p0 + u[:, None] * e), axis=1)
+        ca.append(p0)
+        cb.append(p1)
+        cr.append(radius * 1.01 + 2.0 * bend + 1e-6 * (1.0 + np.abs(c).max()))
+    cat = (lambda v, w: np.concatenate(v).reshape(-1, w) if v else np.zeros((0, w)))
+    lo, hi = np.array(lo).reshape(-1, 3), np.array(hi).reshape(-1, 3)
+    return static, lo, hi, cat(ca, 3), cat(cb, 3), cat(cr, 1).ravel()
+
+
+def _segments_distance(p0: np.ndarray, d1: np.ndarray, q0: np.ndarray, d2: np.ndarray) -> np.ndarray:
+    """Distances (m,) between the segments p0 + s d1 (m, 3 each) and q0 + u d2 (3,), s, u in [0, 1]:
+    the closest points' parameters clamped to the segments (Ericson, Real-Time Collision
+    Detection, 5.1.9)."""
+    r = p0 - q0
+    a = np.einsum("ki,ki->k", d1, d1)
+    e = float(d2 @ d2)
+    f = r @ d2
+    c = np.einsum("ki,ki->k", d1, r)
+    b = d1 @ d2
+    den = a * e - b * b
+    s = np.where(den > 1e-30 * np.maximum(a * e, 1e-300), np.clip((b * f - c * e) / np.where(den > 0, den, 1.0), 0, 1), 0.0)
+    if e > 0.0:
+        u = (b * s + f) / e
+        s = np.where(u < 0.0, np.clip(-c / np.maximum(a, 1e-300), 0, 1), np.where(u > 1.0, np.clip((b - c) / np.maximum(a, 1e-300), 0, 1), s))
+        u = np.clip(u, 0.0, 1.0)
+        # with s clamped, u follows again
+        u = np.clip((b * s + f) / e, 0.0, 1.0)
+    else:
+        u = np.zeros_like(s)
+        s = np.clip(-c / np.maximum(a, 1e-300), 0, 1)
+    diff = p0 + s[:, None] * d1 - (q0 + u[:, None] * d2)
+    return np.sqrt(np.einsum("ki,ki->k", diff, diff))
+
+
+def static_view_rows(setup: tuple, o: np.ndarray, position: np.ndarray, instance: np.ndarray) -> np.ndarray:
+    """(m,) bool: camera rays from o (m, 3) (or (1, 3)) whose hit at ``position`` (m, 3) on
+    ``instance`` (m,) (-1: a miss) is a static view -- the instance is static (``setup[0]``) and
+    the segment o -> position comes near no moving instance at any instant of the shutter (it
+    misses each moving instance's box, or all of its capsules: :func:`static_view_setup`), so
+    every instant sees the same point along that ray.
+    """
+    static, lo, hi, ca, cb, cr = setup
+    ok = np.zeros(instance.shape[0], dtype=bool)
+    hit = instance >= 0
+    ok[hit] = static[instance[hit]]
+    if lo.shape[0] == 0 or not ok.any():
+        return ok
+    rows = np.flatnonzero(ok)
+    o = np.broadcast_to(np.asarray(o, np.float64), position.shape)[rows]
+    seg = position[rows] - o
+    inv = 1.0 / np.where(seg == 0.0, 1e-300, seg)        # an axis-parallel segment: huge, never nan
+    near = np.zeros(rows.size, dtype=bool)
+    for j in range(lo.shape[0]):
+        a, b = (lo[j] - o) * inv, (hi[j] - o) * inv
+        t0 = np.max(np.minimum(a, b), axis=1)
+        t1 = np.min(np.maximum(a, b), axis=1)
+        near |= (t1 >= np.maximum(t0, 0.0)) & (t0 <= 1.0)
+    if near.any():
+        k = np.flatnonzero(near)
+        crosses = np.zeros(k.size, dtype=bool)
+        for j in range(ca.shape[0]):
+            crosses |= _segments_distance(o[k], seg[k], ca[j], cb[j] - ca[j]) <= cr[j]
+        near[k] = crosses
+    ok[rows[near]] = False
+    return ok
+
+
 def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k, use_idx, beta_k, use_beta,
-                  touched, spp: int = 1, rng=None):
+                  touched, spp: int = 1, rng=None, static_rows: np.ndarray | None = None):
     """Caustic and Indirect at the hit rows sh (k,): rho_d / pi * E_kind(p, ns_f, t) added into the passes.
 
     rho_d and the query rows from ``kernels.paths.photon_albedo`` (once for both maps), the
@@ -453,7 +586,8 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
     spp > 1 (samples of a pixel consecutive): the queries of one pixel on one instance share
     estimates (``photons.sharing``, on while ``SHARE_RADIUS_FRACTION`` > 0 and the maps support it).
     With final gathering (``ctx.final_gather`` > 0) Indirect is :func:`_final_gather`'s instead
-    (rng: its random numbers).
+    (rng: its random numbers).  static_rows (m,) bool per hit row, or None: the rows of a static
+    view (:func:`static_view_rows`), whose queries read the maps with STANDARD.
     """
     k = sh.size
     rho = _scratch("rho", (k, 3))
@@ -475,6 +609,11 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
     if spp > 1 and _sharing.SHARE_RADIUS_FRACTION > 0.0 and getattr(ctx.maps, "shares_lookups", False):
         rows = sh[live[:n_q_rows]]
         group = (idx_k[rows] if use_idx else rows) // spp * (ctx.n_instances + 1) + hits.instance[rows]
+    q_static = None
+    if static_rows is not None:
+        q_static = static_rows[sh[live[:n_q_rows]]]
+        n_static = int(np.count_nonzero(q_static))
+        q_static = q_static if n_static else None
     for kind, name in (("caustic", "Caustic"), ("global", "Indirect")):
         if not ctx.map_kinds.get(kind, False):
             continue
@@ -484,13 +623,17 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
                           idx_k, use_idx, beta_k, use_beta, dsts[name], stats, rng)
             touched.add(name)
             continue
-        if group is None:
-            E = ctx.maps.estimate(kind, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows], **extra)
-            estimated = n_q_rows
+        if q_static is None:
+            E, estimated = _estimate(ctx, kind, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows], group, extra)
         else:
-            E, estimated = _sharing.shared_estimate(
-                lambda p, ns, t: ctx.maps.estimate(kind, p, ns, t, support=True),
-                p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows], group)
+            # a static view's queries read the shutter's average, the others the render's estimator
+            E, estimated = np.empty((n_q_rows, 3)), 0
+            for sel, est in ((q_static, "STANDARD"), (~q_static, None)):
+                if sel.any():
+                    E[sel], e = _estimate(ctx, kind, p_q[:n_q_rows][sel], n_q[:n_q_rows][sel], t_q[:n_q_rows][sel],
+                                          None if group is None else group[sel], extra, est)
+                    estimated += e
+            stats.static_lookups += n_static
         E = np.ascontiguousarray(E, np.float64)
         stats.photon_lookups += n_q_rows
         stats.photon_estimates += estimated
@@ -779,8 +922,10 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                                            strata=(n * split, int(spp) * split), sid=sid):
                 touched.add("Direct")
             if ctx.maps is not None:
+                static_rows = (static_view_rows(ctx.static_view, o, hits.position, hits.instance)
+                               if bounce == 0 and ctx.static_view is not None else None)
                 _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched,
-                              int(spp), rng=rng)
+                              int(spp), rng=rng, static_rows=static_rows)
         if bounce == ctx.max_depth or n_spec == 0:
             break
         # -- Continue through delta lobes, or with the rough non-diffuse lobes' part of f ------------
@@ -914,6 +1059,7 @@ class _Context:
     term_freq: np.ndarray = None             # (n_instances,) shading offset's frequency multiplier, 1: off
     term_any: bool = False                   # some instance has either (next-event estimation reads TERM)
     term_meshes: dict = field(default_factory=dict)   # mesh -> its arrays for terminator_rows (_term_mesh)
+    static_view: tuple = None                # static_view_setup: camera rays that may read STANDARD (None: none)
 
 
 def _mesh_emitters(scene, lights) -> dict:
@@ -1204,6 +1350,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                             if maps is None or not ctx.map_kinds.get(kind, False))
     ctx.features = bool(getattr(settings, "denoise", False))
     ctx.n_instances = len(scene.instances)
+    ctx.static_view = static_view_setup(scene, maps)
     ctx.final_gather = int(getattr(settings, "final_gather_samples", 0)) if getattr(maps, "gather_cache", None) is not None else 0
     if ctx.final_gather and maps.gather_cache.direct_pending:
         # the cache's direct irradiance: next-event estimation at its points (photons.gather)

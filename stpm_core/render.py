@@ -148,7 +148,8 @@ def _render(scene, settings, *, progress=None, cancel=None, on_pass=None, schedu
     stats keys: wall_s, export_s (0 here; the add-on fills it), plan_s, photon_trace_s,
     photon_map_build_s, photon_lookup_s, render_s, rays_cast, camera_rays, shadow_rays,
     bounce_rays, rays_per_s, photon_lookups, photon_estimates (of the look-ups, those estimated: the
-    others shared a pixel's estimate, ``photons.sharing``), photons_caustic, photons_global
+    others shared a pixel's estimate, ``photons.sharing``), static_lookups (of the look-ups, those
+    of a static view read with STANDARD: ``integrator.static_view_rows``), photons_caustic, photons_global
     (stored), photon_stats (the maps' own dict; a list for ACCUMULATION),
     estimator (the one used), method, samples, resolution, seed, accumulation_steps.
     """
@@ -259,6 +260,7 @@ def _render(scene, settings, *, progress=None, cancel=None, on_pass=None, schedu
         "rays_per_s": float(rays / render_s) if render_s > 0 else 0.0,
         "photon_lookups": int(sum(ts.photon_lookups for ts in trace_stats)),
         "photon_estimates": int(sum(ts.photon_estimates for ts in trace_stats)),
+        "static_lookups": int(sum(ts.static_lookups for ts in trace_stats)),
         "gather_rays": int(sum(ts.gather_rays for ts in trace_stats)),
         "gather_lookups": int(sum(ts.gather_lookups for ts in trace_stats)),
         "photons_caustic": int(total("caustic_photons") or total("photons_caustic")),

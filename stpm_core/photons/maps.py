@@ -45,6 +45,7 @@ class PhotonMaps:
         self._info = dict(info or {})
 
     shares_lookups = True    # estimate(..., support=True) gives what photons.sharing needs
+    reads_standard = True    # estimate(..., estimator='STANDARD') reads any map (integrator.static_view_setup)
     gather_cache = None      # photons.gather.IrradianceCache with final gathering (else None)
 
     def has(self, kind: str) -> bool:
