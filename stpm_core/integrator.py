@@ -511,9 +511,14 @@ def static_view_setup(scene, maps) -> tuple | None:
         e = p1 - p0
         u = np.clip(np.einsum("ki,ki->k", pm - p0, e) / np.maximum(np.einsum("ki,ki->k", e, e), 1e-300), 0.0, 1.0)
         bend = np.linalg.norm(pm - (p0 + u[:, None] * e), axis=1)
+        slack = 1e-6 * (1.0 + np.abs(c).max())
+        e_all = c[-1] - c[0]
+        u_all = np.clip((c - c[0]) @ e_all / max(float(e_all @ e_all), 1e-300), 0.0, 1.0)
+        if np.max(np.linalg.norm(c - (c[0] + u_all[:, None] * e_all), axis=1)) <= slack:
+            p0, p1, bend = c[:1], c[-1:], np.zeros(1)        # a straight path (translation): one capsule
         ca.append(p0)
         cb.append(p1)
-        cr.append(radius * 1.01 + 2.0 * bend + 1e-6 * (1.0 + np.abs(c).max()))
+        cr.append(radius * 1.01 + 2.0 * bend + slack)
     cat = (lambda v, w: np.concatenate(v).reshape(-1, w) if v else np.zeros((0, w)))
     lo, hi = np.array(lo).reshape(-1, 3), np.array(hi).reshape(-1, 3)
     return static, lo, hi, cat(ca, 3), cat(cb, 3), cat(cr, 1).ravel()
@@ -578,7 +583,7 @@ def static_view_rows(setup: tuple, o: np.ndarray, position: np.ndarray, instance
 
 
 def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k, use_idx, beta_k, use_beta,
-                  touched, spp: int = 1, rng=None, static_rows: np.ndarray | None = None):
+                  touched, spp: int = 1, rng=None, view_o: np.ndarray | None = None):
     """Caustic and Indirect at the hit rows sh (k,): rho_d / pi * E_kind(p, ns_f, t) added into the passes.
 
     rho_d and the query rows from ``kernels.paths.photon_albedo`` (once for both maps), the
@@ -586,8 +591,9 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
     spp > 1 (samples of a pixel consecutive): the queries of one pixel on one instance share
     estimates (``photons.sharing``, on while ``SHARE_RADIUS_FRACTION`` > 0 and the maps support it).
     With final gathering (``ctx.final_gather`` > 0) Indirect is :func:`_final_gather`'s instead
-    (rng: its random numbers).  static_rows (m,) bool per hit row, or None: the rows of a static
-    view (:func:`static_view_rows`), whose queries read the maps with STANDARD.
+    (rng: its random numbers).  view_o: the camera rays' origins (m, 3) or (1, 3) at bounce 0 with
+    static views possible (``ctx.static_view``), else None: the queries of static views
+    (:func:`static_view_rows`) read the maps with STANDARD.
     """
     k = sh.size
     rho = _scratch("rho", (k, 3))
@@ -610,8 +616,10 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
         rows = sh[live[:n_q_rows]]
         group = (idx_k[rows] if use_idx else rows) // spp * (ctx.n_instances + 1) + hits.instance[rows]
     q_static = None
-    if static_rows is not None:
-        q_static = static_rows[sh[live[:n_q_rows]]]
+    if view_o is not None:
+        rows = sh[live[:n_q_rows]]
+        q_static = static_view_rows(ctx.static_view, view_o if view_o.shape[0] == 1 else view_o[rows],
+                                    hits.position[rows], hits.instance[rows])
         n_static = int(np.count_nonzero(q_static))
         q_static = q_static if n_static else None
     for kind, name in (("caustic", "Caustic"), ("global", "Indirect")):
@@ -922,10 +930,8 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                                            strata=(n * split, int(spp) * split), sid=sid):
                 touched.add("Direct")
             if ctx.maps is not None:
-                static_rows = (static_view_rows(ctx.static_view, o, hits.position, hits.instance)
-                               if bounce == 0 and ctx.static_view is not None else None)
                 _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched,
-                              int(spp), rng=rng, static_rows=static_rows)
+                              int(spp), rng=rng, view_o=o if bounce == 0 and ctx.static_view is not None else None)
         if bounce == ctx.max_depth or n_spec == 0:
             break
         # -- Continue through delta lobes, or with the rough non-diffuse lobes' part of f ------------
@@ -1351,6 +1357,8 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     ctx.features = bool(getattr(settings, "denoise", False))
     ctx.n_instances = len(scene.instances)
     ctx.static_view = static_view_setup(scene, maps)
+    if ctx.static_view is not None and hasattr(maps, "prepare_standard"):
+        maps.prepare_standard()
     ctx.final_gather = int(getattr(settings, "final_gather_samples", 0)) if getattr(maps, "gather_cache", None) is not None else 0
     if ctx.final_gather and maps.gather_cache.direct_pending:
         # the cache's direct irradiance: next-event estimation at its points (photons.gather)

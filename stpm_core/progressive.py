@@ -34,11 +34,12 @@ import copy
 import math
 import time as _time
 from concurrent.futures import ThreadPoolExecutor
+from types import SimpleNamespace
 
 import numpy as np
 
 from .errors import RenderCancelled
-from .integrator import trace_image
+from .integrator import static_view_setup, trace_image
 from .parallel import worker_count
 from .photons import build_photon_maps
 from .photons.progressive import ProgressiveMaps, auto_shrink_alpha, build_pilot
@@ -269,6 +270,10 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
     # validate every field again, 0.5 ms a pass; pass_seed is a valid seed, 0 <= seed < 2^62)
     pbase = psettings.replace(time_scale=s)
 
+    # static views (integrator.static_view_setup) read the pass's 3D tree too: built with the others
+    static_views = with_photons and static_view_setup(
+        scene, SimpleNamespace(reads_standard=True, estimator=psettings.estimator)) is not None
+
     def with_seed(j):
         pset_j = copy.copy(pbase)
         pset_j.seed = pass_seed(settings.seed, j)
@@ -285,7 +290,7 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
         t_lo, t_hi = scene.shutter.sample(np.array([u[0], u[1]]))
         pm = ProgressiveMaps(raw, pilot, pass_index=j, alpha=alpha, kernel=psettings.kernel,
                              stratum=(t_lo, t_hi, u[1] - u[0]))
-        pm.prepare()
+        pm.prepare(static=static_views)
         return pm
 
     # Passes of few photons trace the next pass's photons while the image is traced (two passes' photons

@@ -720,10 +720,15 @@ def test_partials_carry_their_working_space_and_do_not_mix_them(tmp_path):
         merge([tmp_path / "a.exr", tmp_path / "b.exr"])
 
 
-def test_a_pass_builds_only_the_tree_its_regions_read(monkeypatch):
+@pytest.mark.parametrize("static_views", [False, True])
+def test_a_pass_builds_only_the_tree_its_regions_read(monkeypatch, static_views):
     """A pass's maps get no k-nearest trees up front (TEMPORAL's time-slice trees went unread, about
-    half of a pass's tree building): the 4D tree its fixed regions read is built at the first look-up."""
+    half of a pass's tree building): the 4D tree its fixed regions read, and with static views
+    (integrator.static_view_setup: the moving mirror's caustic lands on a static floor) the 3D tree
+    of their discs."""
     import stpm_core.progressive as prog
+    from stpm_core import integrator
+    monkeypatch.setattr(integrator, "STATIC_VIEW", static_views)
     built = []
     real = prog.build_photon_maps
 
@@ -737,4 +742,4 @@ def test_a_pass_builds_only_the_tree_its_regions_read(monkeypatch):
     assert len(built) == 2
     for maps in built:
         m = maps.maps["caustic"]
-        assert m.n > 0 and m._slices == {} and set(m._flat) == {4}
+        assert m.n > 0 and m._slices == {} and set(m._flat) == ({3, 4} if static_views else {4})

@@ -52,6 +52,12 @@ class PhotonMaps:
         """Does the ``kind`` map hold any photon?"""
         return self.maps[kind].n > 0
 
+    def prepare_standard(self) -> None:
+        """Build now the trees STANDARD reads (static views of a TEMPORAL or KD4D render,
+        ``integrator.static_view_setup``), so they count as map building, not as look-ups."""
+        for m in self.maps.values():
+            m.build("STANDARD", k=self.k)
+
     def estimate(self, kind: str, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str | None = None,
                  k: int | None = None, kernel: str | None = None, temporal_alpha: float | None = None,
                  support: bool = False):

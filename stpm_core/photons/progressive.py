@@ -122,14 +122,15 @@ class Pilot:
         self._grids = {}
         self._lock = threading.Lock()
 
-    def _tree(self, kind: str):
-        """(the pilot map's kd-tree for this kernel, its dimension d)."""
+    def _tree(self, kind: str, static: bool = False):
+        """(the pilot map's kd-tree for this kernel, its dimension d); static: the surface disc's
+        (a static view's kernel, :meth:`ProgressiveMaps.estimate`)."""
         m = self.maps.maps[kind]
-        if self.estimator == "STANDARD" or m.timeless:
+        if static or self.estimator == "STANDARD" or m.timeless:
             return m.flat_tree(3), 2
         return m.flat_tree(4), 3
 
-    def search_cap(self, kind: str) -> float:
+    def search_cap(self, kind: str, static: bool = False) -> float:
         """The farthest a pilot search looks (m): CAP_FACTOR x the 90th percentile of the PILOT_K-nearest
         radius of the pilot photons themselves (at most CAP_SAMPLE of them, evenly strided).
 
@@ -137,20 +138,21 @@ class Pilot:
         carries (a dark region): its region stops at the cap, so its searches stay cheap, and the
         pass's photons there (if any) are read with that radius.  A pure function of the pilot.
         """
-        if kind not in self.cap:
+        key = (kind, True) if static else kind
+        if key not in self.cap:
             m = self.maps.maps[kind]
-            tree, d = self._tree(kind)
+            tree, d = self._tree(kind, static)
             idx = np.arange(0, m.n, max(1, m.n // CAP_SAMPLE))
             q = np.empty((idx.size, 4))
             q[:, :3] = m.position[idx]
             q[:, 3] = self.time_scale * m.time[idx]
             r = tree.knn_radius(q, PILOT_K + 1, np.inf, m.workers)     # + 1: the photon itself
             # _median first: tile threads that see cap[kind] go on to read _median[kind]
-            self._median[kind] = float(np.median(r))
-            self.cap[kind] = CAP_FACTOR * float(np.percentile(r, 90.0))
-        return self.cap[kind]
+            self._median[key] = float(np.median(r))
+            self.cap[key] = CAP_FACTOR * float(np.percentile(r, 90.0))
+        return self.cap[key]
 
-    def initial_size(self, kind: str, q: np.ndarray, ns: np.ndarray):
+    def initial_size(self, kind: str, q: np.ndarray, ns: np.ndarray, static: bool = False):
         """Pass 1's region at queries q (n, 4) (x, y, z relative to the map origin, s t): (r (n,) m,
         tau (n,) shutter units or None) -- :meth:`region_at` read on a grid.
 
@@ -159,13 +161,14 @@ class Pilot:
         kept: a pilot search per camera sample and pass costs as much as the pass's own look-up;
         per cell it is paid once per render.  Still a pure function of the pilot and the point (the
         passes' analysis holds); the k-NN radius moves by at most the distance it is read from, a
-        quarter of the radius, so the regions hardly differ from the exact ones.
+        quarter of the radius, so the regions hardly differ from the exact ones.  static: the surface
+        disc of a static view (tau None), on a grid of its own.
         """
         m = self.maps.maps[kind]
         n = q.shape[0]
         if m.n <= PILOT_K:
             return np.full(n, np.inf), None
-        grid = self._grid(kind)
+        grid = self._grid(kind, static)
         h, lo, nt = grid["h"], grid["lo"], grid["nt"]
         cells = np.clip(np.floor((q[:, :3] - lo) / h), 0, (1 << _AXIS_BITS) - 1).astype(np.int64)
         it = np.clip(np.floor(q[:, 3] / self.time_scale * nt), 0, nt - 1).astype(np.int64) if nt > 1 \
@@ -185,33 +188,34 @@ class Pilot:
                                (new >> 7) & ((1 << _AXIS_BITS) - 1)], axis=1)
                 qc[:, :3] = lo + (ci + 0.5) * h
                 qc[:, 3] = self.time_scale * ((new & 127) + 0.5) / nt if nt > 1 else self.time_scale * 0.5
-                r_new, tau_new = self.region_at(kind, qc)
+                r_new, tau_new = self.region_at(kind, qc, static)
                 tau_new = tau_new if tau_new is not None else np.zeros(new.size)
                 r[miss], tau[miss] = r_new[inv], tau_new[inv]
                 table.put(new, r_new, tau_new)
         return r, (tau if grid["timed"] else None)
 
-    def _grid(self, kind: str) -> dict:
-        """The cache of regions on kind's grid (built empty on first use)."""
+    def _grid(self, kind: str, static: bool = False) -> dict:
+        """The cache of regions on kind's grid (built empty on first use); static: the discs' grid."""
+        key = (kind, True) if static else kind
         with self._lock:
-            g = self._grids.get(kind)
+            g = self._grids.get(key)
         if g is not None:
             return g
         m = self.maps.maps[kind]
-        median = self._median_radius(kind)
-        lo = m.position.min(axis=0) - 4 * self.search_cap(kind)
-        timed = self.estimator == "TEMPORAL" and not m.timeless
-        nt = TIME_CELLS if self.estimator != "STANDARD" and not m.timeless else 1
+        median = self._median_radius(kind, static)
+        lo = m.position.min(axis=0) - 4 * self.search_cap(kind, static)
+        timed = self.estimator == "TEMPORAL" and not m.timeless and not static
+        nt = TIME_CELLS if self.estimator != "STANDARD" and not m.timeless and not static else 1
         g = {"h": max(GRID_FRACTION * median, 1e-9), "lo": lo, "nt": nt, "timed": timed,
              "table": _hashgrid.CellTable(GRID_CELLS_MAX)}
         with self._lock:
-            return self._grids.setdefault(kind, g)
+            return self._grids.setdefault(key, g)
 
-    def _median_radius(self, kind: str) -> float:
-        self.search_cap(kind)
-        return self._median[kind]
+    def _median_radius(self, kind: str, static: bool = False) -> float:
+        self.search_cap(kind, static)
+        return self._median[(kind, True) if static else kind]
 
-    def region_at(self, kind: str, q: np.ndarray):
+    def region_at(self, kind: str, q: np.ndarray, static: bool = False):
         """Pass 1's region exactly at points q (n, 4) (x, y, z relative to the map origin, s t).
 
         STANDARD / KD4D: the pilot's PILOT_K-th nearest photon (3D / 4D) fixes a ball holding
@@ -221,12 +225,13 @@ class Pilot:
         PILOT_K - 1 pilot photons, so its aspect follows the light: long in time where the light holds
         still, short where it changes; both sides scaled by the cube root of the measure factor.
         r is inf where the pilot map holds no more than PILOT_K photons (the pass then reads 0).
+        static: STANDARD's disc whatever the estimator (a static view's kernel).
         """
         m = self.maps.maps[kind]
         n = q.shape[0]
         if m.n <= PILOT_K:
             return np.full(n, np.inf), None
-        tree, d = self._tree(kind)
+        tree, d = self._tree(kind, static)
         c = self.scale[kind] ** (1.0 / d)
         if self.estimator == "TEMPORAL" and d == 3:
             m_c = min(int(math.ceil(TEMPORAL_PILOT * PILOT_K)), m.n)
@@ -236,7 +241,7 @@ class Pilot:
             up[:, 2] = 1.0                                        # (the side test does not change r, tau)
             _, r, tau = m.flat_tree(3).lookup(MODE_TEMPORAL, qt, up, m_c, PILOT_K, False, CONE_K, m.workers)
             return r * c, tau * c
-        r = tree.knn_radius(q, PILOT_K, self.search_cap(kind), m.workers)
+        r = tree.knn_radius(q, PILOT_K, self.search_cap(kind, static), m.workers)
         return r * c, None
 
 
@@ -269,8 +274,12 @@ class ProgressiveMaps:
     kernel-smoothed density).
     """
 
+    #: ``estimate(..., estimator='STANDARD')`` reads a static view with the surface disc
+    #: (integrator.static_view_setup)
+    reads_standard = True
+
     def __init__(self, maps, pilot: Pilot, *, pass_index: int, alpha: float, kernel: str = "BOX",
-                 stratum: tuple | None = None):
+                 stratum: tuple | None = None, static_alpha: float | None = None):
         self.maps = maps
         # the pass's time stratum: (lo, hi) shutter times and its shutter mass w (its photons' and camera
         # samples' times lie in it); None = the whole shutter
@@ -282,6 +291,9 @@ class ProgressiveMaps:
         self.estimator = pilot.estimator
         self.d = kernel_dims(self.estimator)
         self.radius_scale = shrink_ratio(self.pass_index, self.alpha) ** (1.0 / self.d)
+        # a static view's disc (d = 2) shrinks by its own schedule: a = static_alpha, else 2 / (2 + 2)
+        self.static_alpha = auto_shrink_alpha("STANDARD") if static_alpha is None else float(static_alpha)
+        self.static_radius_scale = shrink_ratio(self.pass_index, self.static_alpha) ** 0.5
         self._photons_in = {kind: [0, 0] for kind in KINDS}     # photons inside regions, queries
         self._radius = {kind: [] for kind in KINDS}             # a sample of the radii used (for stats)
         self._lookup_s = 0.0
@@ -291,19 +303,28 @@ class ProgressiveMaps:
         m = self.maps.maps[kind]
         return m.flat_tree(dims).range_sum(q, ns, r, half, cone, CONE_K, m.workers)
 
-    def prepare(self) -> None:
-        """Build now the kd-trees :meth:`estimate` reads (else built on its first call; the same trees)."""
+    def prepare(self, static: bool = False) -> None:
+        """Build now the kd-trees :meth:`estimate` reads (else built on its first call; the same trees);
+        static: also the 3D trees of static views' discs."""
         for kind in KINDS:
             if self.has(kind):
                 m = self.maps.maps[kind]
                 timeless = self.estimator == "STANDARD" or m.timeless or self.pilot.maps.maps[kind].timeless
                 m.flat_tree(3 if timeless else 4)
+                if not timeless and static:
+                    m.flat_tree(3)                                # static views' discs
 
     def has(self, kind: str) -> bool:
         return self.maps.has(kind) and self.pilot.maps.maps[kind].n > PILOT_K
 
-    def estimate(self, kind: str, p: np.ndarray, ns: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """Irradiance E (n, 3) W/m^2 at p (n, 3) on the ns (n, 3) side at shutter times t (n,)."""
+    def estimate(self, kind: str, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *,
+                 estimator: str | None = None) -> np.ndarray:
+        """Irradiance E (n, 3) W/m^2 at p (n, 3) on the ns (n, 3) side at shutter times t (n,).
+
+        estimator 'STANDARD' with a space-time kernel: the queries are static views
+        (``integrator.static_view_rows``), read with the surface disc over the pass's stratum (its
+        own pilot region and schedule: d = 2), whose shutter average is their pixels' value.
+        """
         if kind not in KINDS:
             raise ValueError(f"unknown photon map {kind!r} (expected one of {KINDS})")
         t0 = _time.perf_counter()
@@ -321,12 +342,14 @@ class ProgressiveMaps:
         # -- this pass's radius at each query: the pilot's, shrunk by the schedule -----------------
         pm = self.pilot.maps.maps[kind]
         q[:, :3] = p - pm.origin
-        r, tau = self.pilot.initial_size(kind, q, ns)
+        timeless = self.estimator == "STANDARD" or m.timeless or pm.timeless
+        static = not timeless and str(estimator or "").upper() == "STANDARD"
+        r, tau = self.pilot.initial_size(kind, q, ns, static)
         ok = np.isfinite(r)
         r = np.where(ok, r, 0.0)
-        c = self.radius_scale
+        c = self.static_radius_scale if static else self.radius_scale
+        timeless = timeless or static
         lo, hi, w = self.stratum
-        timeless = self.estimator == "STANDARD" or m.timeless or pm.timeless
         cone = self.kernel == "CONE"
         disc = 1.0 - 2.0 / (3.0 * CONE_K) if cone else 1.0     # mean cone weight over a disc
         ball = 1.0 - 3.0 / (4.0 * CONE_K) if cone else 1.0     # ... over a ball
