@@ -84,3 +84,18 @@ def test_a_clear_glass_cube_resting_on_a_black_floor_shows_the_floor_not_the_wor
     img = r.passes["Combined"][..., :3].mean(axis=-1)
     inner = img[8:16, 8:16]                           # well inside the turned cube's footprint
     assert abs(inner.mean() - 0.04) < 0.005, inner.mean()
+
+
+def test_the_compiled_row_filter_matches_numpy():
+    from stpm_core.raycast.contact import _back_contact_rows, _back_contact_rows_np
+    rng = np.random.default_rng(4)
+    n = 5000
+    first_face = np.array([0, 10, 25, 40], np.int64)             # 3 instances, 40 faces
+    is_contact = rng.random(41) < 0.3
+    is_contact[-1] = False
+    inst = rng.integers(-1, 3, n).astype(np.int32)
+    prim = np.where(inst >= 0, rng.integers(0, 10, n), -1).astype(np.int32)
+    d, ng = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    a = _back_contact_rows(inst, prim, d, ng, first_face, is_contact)
+    b = _back_contact_rows_np(inst, prim, d, ng, first_face, is_contact)
+    assert a.size > 100 and np.array_equal(a, b)

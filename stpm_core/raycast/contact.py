@@ -11,13 +11,15 @@ table.  Physically the light leaving the glass there meets the table at once.
 Rule (``Contacts.resolve``): a hit on the *back* of a face (the ray leaves the solid that face
 bounds, ``d . ng > 0``) is replaced by the hit on the *front* of a face of another object that
 lies in the same plane (normals opposite, planes within ``tol`` of each other) and contains the
-hit point.  The ray then enters the other object's surface there, as it would after a gap of zero
-width.  Contacts are found once, over static rigid instances (``find_contacts``); ``tol`` of a pair
-is twice the larger of the two objects' origin offsets (``geometry.instance_offsets`` plus float32
-resolution at the point), the distance below which a ray leaving one face cannot find the other.
+hit point.  The ray then enters the other object's surface there, as if the two solids overlapped
+by a hair (a contact without an air gap).  Contacts are found once, over static rigid instances
+(``find_contacts``); ``tol`` of a pair is twice the larger of the two objects' origin offsets
+(``geometry.instance_offsets`` plus float32 resolution at the point), the distance below which a
+ray leaving one face cannot find the other.
 
-Cycles does the same in practice for a ray inside the cube: it keeps the table (docs/raycast.md,
-"Surfaces in contact").  ``occluded`` needs nothing: any hit blocks.
+Cycles gives this answer for the cube sunk into the table (measured: 1 um; raised 1 um, Cycles sees
+an air gap instead); at an exact contact its answer rests on float zeros and the table under the
+cube renders black (docs/raycast.md, "Surfaces in contact").  ``occluded`` needs nothing: any hit blocks.
 """
 from __future__ import annotations
 
@@ -50,6 +52,12 @@ class Contacts:
         self.inst, self.prim, self.P, self.n, self.w = inst, prim, P, n, w
         self.skipped = skipped
         self._shading: dict[int, InstanceShading] = {}
+        # is_contact[first_face[i] + prim]: is triangle prim of instance i a contact face?  (one
+        # byte per triangle of the scene; first_face[-1] points at a last, False entry for misses)
+        counts = [len(scene.meshes[i.mesh].triangles) for i in scene.instances]
+        self.first_face = np.r_[0, np.cumsum(counts)].astype(np.int64)
+        self.is_contact = np.zeros(int(self.first_face[-1]) + 1, bool)
+        self.is_contact[self.first_face[keys // stride] + keys % stride] = True
 
     def __len__(self) -> int:
         return int(self.keys.size)
@@ -59,15 +67,13 @@ class Contacts:
         (module docstring); returns how many rays changed.  o, d (n, 3), times, tmax (n,)."""
         if self.keys.size == 0:
             return 0
-        hit = hits.instance >= 0
-        key = hits.instance.astype(np.int64) * self.stride + hits.prim
-        j = np.searchsorted(self.keys, key)
-        j = np.minimum(j, self.keys.size - 1)
-        rows = np.flatnonzero(hit & (self.keys[j] == key)
-                              & (np.einsum("ij,ij->i", d, hits.ng) > 0.0))
+        # Rows on a contact face (a flag per triangle of the scene), left through its back
+        inst = hits.instance
+        rows = _back_contact_rows(inst, hits.prim, d, hits.ng, self.first_face, self.is_contact)
         if rows.size == 0:
             return 0
-        j = j[rows]
+        key = inst[rows].astype(np.int64) * self.stride + hits.prim[rows]
+        j = np.searchsorted(self.keys, key)
         # Every (row, partner) pair: the partner's plane along the ray, then inside its triangle
         cnt = self.start[j + 1] - self.start[j]
         r = np.repeat(rows, cnt)
@@ -108,6 +114,36 @@ class Contacts:
             ng, ns, mat = sh.shade(self.prim[qs][m].astype(np.int64), hits.u[rr], hits.v[rr], times[rr])
             hits.ng[rr], hits.ns[rr], hits.material[rr] = ng, ns, mat
         return int(r_ok.size)
+
+
+def _back_contact_rows_np(inst, prim, d, ng, first_face, is_contact):
+    """(k,) int64 rows whose hit is a contact face (is_contact[first_face[inst] + prim]) seen from
+    its back (d . ng > 0); inst -1 (a miss) maps to first_face[-1], a False entry."""
+    face = first_face[inst] + np.where(inst >= 0, prim, 0)
+    cand = np.flatnonzero(is_contact[face])
+    return cand[np.einsum("ij,ij->i", d[cand], ng[cand]) > 0.0]
+
+
+try:
+    from numba import njit
+
+    @njit(cache=True, nogil=True)
+    def _back_contact_rows(inst, prim, d, ng, first_face, is_contact):
+        """:func:`_back_contact_rows_np` in one pass: 5 ns a ray against 43 in numpy where most rays
+        hit a contact face from its front (a table top under the camera; measured on the product
+        shot's table, 200k rays)."""
+        out = np.empty(inst.shape[0], np.int64)
+        k = 0
+        for r in range(inst.shape[0]):
+            i = inst[r]
+            if i < 0 or not is_contact[first_face[i] + prim[r]]:
+                continue
+            if d[r, 0] * ng[r, 0] + d[r, 1] * ng[r, 1] + d[r, 2] * ng[r, 2] > 0.0:
+                out[k] = r
+                k += 1
+        return out[:k]
+except ImportError:                                      # pragma: no cover (numba is a dependency)
+    _back_contact_rows = _back_contact_rows_np
 
 
 def _static_triangles(scene):
