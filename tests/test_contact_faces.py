@@ -99,3 +99,39 @@ def test_the_compiled_row_filter_matches_numpy():
     a = _back_contact_rows(inst, prim, d, ng, first_face, is_contact)
     b = _back_contact_rows_np(inst, prim, d, ng, first_face, is_contact)
     assert a.size > 100 and np.array_equal(a, b)
+
+
+@pytest.mark.skipif(not embree_available(), reason="persistent static geometry is the embree backend's")
+def test_contacts_are_kept_with_the_persistent_static_part():
+    from stpm_core.raycast import set_persistent_static
+    set_persistent_static(True)
+    try:
+        first = make_caster(_cube_on_floor(), "embree")
+        again = make_caster(_cube_on_floor(), "embree")       # same static instances: reused
+    finally:
+        set_persistent_static(False)
+    assert again.stats["static_reused"] and again.contacts is first.contacts
+    o, d = _rays_down_inside()
+    h = again.intersect(o, d, np.zeros(len(o)), None)
+    bottom = np.abs(h.position[:, 2]) < 1e-9
+    assert bottom.sum() > 10000 and np.all(h.instance[bottom] == 0)
+
+
+def test_a_large_scene_finds_its_contacts():
+    """2000 unit boxes on a floor, half of them resting on it (one mesh instanced): every resting box's
+    two bottom triangles pair with the floor's two; floating boxes and box sides pair with nothing."""
+    from scenes import translate
+    from stpm_core.raycast.contact import find_contacts
+    rng = np.random.default_rng(2)
+    objs = [plane_mesh(200.0)]
+    box = box_mesh((0, 0, 0), (1, 1, 1))
+    resting = 0
+    for k in range(2000):
+        z = 0.0 if k % 2 == 0 else float(rng.uniform(0.01, 3.0))
+        resting += z == 0.0
+        objs.append((box, translate(float(rng.uniform(-90, 90)), float(rng.uniform(-90, 90)), z)))
+    scene = make_scene(objs, [Material.diffuse()], ortho_camera_down(5.0, 2.0))
+    c = find_contacts(scene)
+    assert c.skipped == 0
+    assert len(c) == 2 * resting + 2                  # each resting box's bottom, and the floor's 2 triangles
+    assert set(np.unique(c.keys // c.stride)) == {0} | {1 + k for k in range(0, 2000, 2)}

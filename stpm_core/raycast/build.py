@@ -168,7 +168,17 @@ class Caster:
         self.contacts = None
         if contacts:
             from .contact import find_contacts
-            self.contacts = find_contacts(scene)
+            first = parts[0] if parts else None
+            kept = getattr(first, "contacts", None) if getattr(first, "reused_now", False) else None
+            if kept is not None:
+                # The persistent static part was reused (same static instances, meshes, matrices):
+                # so are its contacts, which depend on nothing else
+                kept.rebind(scene)
+                self.contacts = kept
+            else:
+                self.contacts = find_contacts(scene)
+                if first is not None and first.bounds is None:
+                    first.contacts = self.contacts
             self.stats["contact_faces"] = len(self.contacts)
 
     def _bounded_rays(self, o, d, t0, t1, subset=None) -> dict:

@@ -25,14 +25,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .geometry import OFFSET_POS, InstanceShading, cross, instance_offsets
+from .geometry import OFFSET_POS, InstanceShading, instance_offsets
 
-__all__ = ["Contacts", "find_contacts", "CONTACT_PAIRS_MAX"]
+__all__ = ["Contacts", "find_contacts", "CONTACT_PAIRS_MAX", "warm_up"]
 
 # Normals within this angle of opposite count as one plane (about 0.08 degrees)
 COS_OPPOSITE = 1.0 - 1e-6
-# Triangle pairs tested per plane group, at most; a group beyond this (two finely subdivided
-# coplanar surfaces facing each other) is left unresolved and counted in Contacts.skipped
+# Candidate face pairs tested, at most; beyond this (finely subdivided coplanar surfaces facing each
+# other) the remaining faces are left out and counted in Contacts.skipped
 CONTACT_PAIRS_MAX = 4_000_000
 # Normal bins (unit normal components rounded to this) group candidate planes
 _NORMAL_BIN = 1e-3
@@ -43,8 +43,8 @@ class Contacts:
 
     keys (k,) int64 sorted: instance * stride + prim of each face that has partners; start (k + 1,)
     its partners' range in the partner arrays: inst (m,), prim (m,), n (m, 3) unit normals, w (m,)
-    plane offsets (n . x = w), P (m, 3, 3) world corners.  ``skipped``: plane groups too large to
-    pair (``CONTACT_PAIRS_MAX``)."""
+    plane offsets (n . x = w), P (m, 3, 3) world corners.  ``skipped``: faces left out because the
+    candidate pairs would pass ``CONTACT_PAIRS_MAX``."""
 
     def __init__(self, scene, keys, start, inst, prim, P, n, w, stride, skipped=0):
         self.scene = scene
@@ -58,6 +58,12 @@ class Contacts:
         self.first_face = np.r_[0, np.cumsum(counts)].astype(np.int64)
         self.is_contact = np.zeros(int(self.first_face[-1]) + 1, bool)
         self.is_contact[self.first_face[keys // stride] + keys % stride] = True
+
+    def rebind(self, scene) -> None:
+        """Use these contacts with ``scene``, whose static instances are those they were found in
+        (a persistent static part reused for the next frame)."""
+        self.scene = scene
+        self._shading = {}
 
     def __len__(self) -> int:
         return int(self.keys.size)
@@ -109,8 +115,8 @@ class Contacts:
             rr = r_ok[m]
             sh = self._shading.get(int(i))
             if sh is None:
-                inst = self.scene.instances[int(i)]
-                sh = self._shading[int(i)] = InstanceShading(self.scene.meshes[inst.mesh], inst.transform)
+                obj = self.scene.instances[int(i)]
+                sh = self._shading[int(i)] = InstanceShading(self.scene.meshes[obj.mesh], obj.transform)
             ng, ns, mat = sh.shade(self.prim[qs][m].astype(np.int64), hits.u[rr], hits.v[rr], times[rr])
             hits.ng[rr], hits.ns[rr], hits.material[rr] = ng, ns, mat
         return int(r_ok.size)
@@ -125,112 +131,197 @@ def _back_contact_rows_np(inst, prim, d, ng, first_face, is_contact):
 
 
 try:
-    from numba import njit
+    from numba import njit as _njit
 
-    @njit(cache=True, nogil=True)
-    def _back_contact_rows(inst, prim, d, ng, first_face, is_contact):
-        """:func:`_back_contact_rows_np` in one pass: 5 ns a ray against 43 in numpy where most rays
-        hit a contact face from its front (a table top under the camera; measured on the product
-        shot's table, 200k rays)."""
-        out = np.empty(inst.shape[0], np.int64)
-        k = 0
-        for r in range(inst.shape[0]):
-            i = inst[r]
-            if i < 0 or not is_contact[first_face[i] + prim[r]]:
-                continue
-            if d[r, 0] * ng[r, 0] + d[r, 1] * ng[r, 1] + d[r, 2] * ng[r, 2] > 0.0:
-                out[k] = r
-                k += 1
-        return out[:k]
+    def _jit(f):
+        return _njit(cache=True, nogil=True)(f)
 except ImportError:                                      # pragma: no cover (numba is a dependency)
-    _back_contact_rows = _back_contact_rows_np
+    def _jit(f):
+        return f                                         # same loops in Python: correct, slow
 
 
-def _static_triangles(scene):
-    """(instance (F,), prim (F,), corners (F, 3, 3) world) of every static rigid instance."""
-    I, J, Ps = [], [], []
-    for i, inst in enumerate(scene.instances):
-        mesh = scene.meshes[inst.mesh]
-        if not inst.transform.is_static or mesh.is_deforming:
+@_jit
+def _back_contact_rows(inst, prim, d, ng, first_face, is_contact):
+    """:func:`_back_contact_rows_np` in one pass: 5 ns a ray against 43 in numpy where most rays
+    hit a contact face from its front (a table top under the camera; measured on the product
+    shot's table, 200k rays)."""
+    out = np.empty(inst.shape[0], np.int64)
+    k = 0
+    for r in range(inst.shape[0]):
+        i = inst[r]
+        if i < 0 or not is_contact[first_face[i] + prim[r]]:
             continue
-        F = np.asarray(mesh.triangles, np.int64)
-        if F.shape[0] == 0:
+        if d[r, 0] * ng[r, 0] + d[r, 1] * ng[r, 1] + d[r, 2] * ng[r, 2] > 0.0:
+            out[k] = r
+            k += 1
+    return out[:k]
+
+
+@_jit
+def _face_planes(V, F, M, row, n, w, lo, hi, amax):
+    """World planes of the triangles F (f, 3) of vertices V (v, 3) under the affine M (4, 4), into
+    rows row.. of n (unit normal; 0 for a degenerate face), w (n . x = w), lo / hi (corner box) and
+    amax (largest |coordinate| of a corner)."""
+    P = np.empty((3, 3))
+    for k in range(F.shape[0]):
+        for c in range(3):
+            v = V[F[k, c]]
+            for a in range(3):
+                P[c, a] = M[a, 0] * v[0] + M[a, 1] * v[1] + M[a, 2] * v[2] + M[a, 3]
+        e1 = P[1] - P[0]
+        e2 = P[2] - P[0]
+        nx = e1[1] * e2[2] - e1[2] * e2[1]
+        ny = e1[2] * e2[0] - e1[0] * e2[2]
+        nz = e1[0] * e2[1] - e1[1] * e2[0]
+        L = np.sqrt(nx * nx + ny * ny + nz * nz)
+        r = row + k
+        if L > 0.0:
+            nx, ny, nz = nx / L, ny / L, nz / L
+        else:
+            nx = ny = nz = 0.0
+        n[r, 0], n[r, 1], n[r, 2] = nx, ny, nz
+        w[r] = nx * P[0, 0] + ny * P[0, 1] + nz * P[0, 2]
+        m = 0.0
+        for a in range(3):
+            lo[r, a] = min(P[0, a], P[1, a], P[2, a])
+            hi[r, a] = max(P[0, a], P[1, a], P[2, a])
+            m = max(m, abs(lo[r, a]), abs(hi[r, a]))
+        amax[r] = m
+
+
+@_jit
+def _face_keys(n, w, wbin, nbin, key, side):
+    """Per face: side = +1 / -1 as its normal points along the canonical orientation (largest
+    |component| positive), 0 for a degenerate face; key = one int64 of the rounded canonical normal
+    (bins of nbin) and plane offset (bins of wbin)."""
+    for r in range(n.shape[0]):
+        ax, ay, az = abs(n[r, 0]), abs(n[r, 1]), abs(n[r, 2])
+        if ax == 0.0 and ay == 0.0 and az == 0.0:
+            side[r] = 0
+            key[r] = 0
             continue
+        big = n[r, 0] if (ax >= ay and ax >= az) else (n[r, 1] if ay >= az else n[r, 2])
+        sg = 1 if big >= 0.0 else -1
+        side[r] = sg
+        k0 = np.int64(np.round(sg * n[r, 0] / nbin))
+        k1 = np.int64(np.round(sg * n[r, 1] / nbin))
+        k2 = np.int64(np.round(sg * n[r, 2] / nbin))
+        kw = np.int64(np.floor(sg * w[r] / wbin))
+        key[r] = ((k0 * 4099 + k1) * 4099 + k2) * 1_000_003 + kw
+
+
+@_jit
+def _join_pairs(pos, kp, neg, kq, inst, n, w, lo, hi, tol, budget, a_out, b_out):
+    """Pairs in contact between faces pos (sorted by their keys kp) and neg (sorted, keys kq): for
+    each pos face, the neg faces whose key is within one offset bin of its own, tested exactly
+    (different instances, normals opposite within COS_OPPOSITE, planes within the larger tol, boxes
+    overlapping by tol).  Writes up to a_out.size pairs (a_out None: counts only); returns (pairs
+    found, pos faces left out because more than ``budget`` candidates came before them)."""
+    found = 0
+    seen = 0
+    for j in range(pos.shape[0]):
+        f = pos[j]
+        for shift in (-1, 0, 1):
+            q = np.searchsorted(kq, kp[j] + shift)
+            while q < kq.shape[0] and kq[q] == kp[j] + shift:
+                g = neg[q]
+                q += 1
+                seen += 1
+                if inst[f] == inst[g]:
+                    continue
+                if n[f, 0] * n[g, 0] + n[f, 1] * n[g, 1] + n[f, 2] * n[g, 2] > -COS_OPPOSITE:
+                    continue
+                t = max(tol[f], tol[g])
+                if abs(w[f] + w[g]) > t:
+                    continue
+                ok = True
+                for c in range(3):
+                    if lo[f, c] > hi[g, c] + t or lo[g, c] > hi[f, c] + t:
+                        ok = False
+                if not ok:
+                    continue
+                if found < a_out.shape[0]:
+                    a_out[found] = f
+                    b_out[found] = g
+                found += 1
+        if seen > budget:
+            return found, pos.shape[0] - 1 - j
+    return found, 0
+
+
+def _static_instances(scene) -> list[int]:
+    """Indices of the static rigid instances with triangles (the embree static part's)."""
+    return [i for i, inst in enumerate(scene.instances)
+            if inst.transform.is_static and not scene.meshes[inst.mesh].is_deforming
+            and len(scene.meshes[inst.mesh].triangles)]
+
+
+def _corners(scene, inst: np.ndarray, prim: np.ndarray) -> np.ndarray:
+    """(k, 3, 3) world corners of triangle prim[j] of static instance inst[j]."""
+    out = np.empty((inst.size, 3, 3))
+    for i in np.unique(inst):
+        sel = np.flatnonzero(inst == i)
+        obj = scene.instances[int(i)]
+        mesh = scene.meshes[obj.mesh]
         V = np.asarray(mesh.vertices, np.float64)
         V = V[0] if V.ndim == 3 else V
-        M = inst.transform.matrices[0]
-        W = V @ M[:3, :3].T + M[:3, 3]
-        I.append(np.full(F.shape[0], i, np.int64))
-        J.append(np.arange(F.shape[0], dtype=np.int64))
-        Ps.append(W[F])
-    if not Ps:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3, 3))
-    return np.concatenate(I), np.concatenate(J), np.concatenate(Ps)
+        M = obj.transform.matrices[0]
+        out[sel] = (V[np.asarray(mesh.triangles, np.int64)[prim[sel]]] @ M[:3, :3].T) + M[:3, 3]
+    return out
 
 
 def find_contacts(scene) -> Contacts:
     """The contacts of ``scene`` (:class:`Contacts`): pairs of faces of different static rigid
-    instances whose planes coincide within tol with opposite normals and whose boxes overlap."""
-    inst, prim, P = _static_triangles(scene)
-    stride = int(prim.max()) + 1 if prim.size else 1
+    instances whose planes coincide within tol with opposite normals and whose boxes overlap.
+
+    Compiled passes over the faces (planes, then keys), a sorted join on the keys with the exact
+    test on the candidates (2.2M triangles: 2-4 s on a loaded 2-core machine; docs/raycast.md)."""
+    static = _static_instances(scene)
+    counts = [len(scene.meshes[scene.instances[i].mesh].triangles) for i in static]
+    total = int(sum(counts))
+    stride = max([int(c) for c in counts], default=1)
     empty = Contacts(scene, np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(0, np.int32),
                      np.zeros(0, np.int32), np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0), stride)
-    if len(scene.instances) < 2 or P.shape[0] == 0:
+    if len(static) < 2:
         return empty
-    n = cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
-    L = np.linalg.norm(n, axis=1)
-    good = L > 0
-    n = n / np.where(good, L, 1.0)[:, None]
-    w = np.einsum("ij,ij->i", n, P[:, 0])
+    # Planes of every static face, instance by instance (no (F, 3, 3) corner array)
+    n, w = np.empty((total, 3)), np.empty(total)
+    lo, hi, amax = np.empty((total, 3)), np.empty((total, 3)), np.empty(total)
+    inst = np.repeat(np.asarray(static, np.int64), counts)
+    prim = np.concatenate([np.arange(c, dtype=np.int64) for c in counts])
+    row, arrays = 0, {}
+    for i, c in zip(static, counts):
+        obj = scene.instances[i]
+        if obj.mesh not in arrays:                        # copies of one mesh share its arrays
+            mesh = scene.meshes[obj.mesh]
+            V = np.asarray(mesh.vertices, np.float64)
+            arrays[obj.mesh] = (np.ascontiguousarray(V[0] if V.ndim == 3 else V),
+                                np.ascontiguousarray(mesh.triangles, np.int64))
+        V, F = arrays[obj.mesh]
+        _face_planes(V, F, np.ascontiguousarray(obj.transform.matrices[0], np.float64), row, n, w, lo, hi, amax)
+        row += c
     off = instance_offsets(scene)
-    tol = 2.0 * (off[inst] + OFFSET_POS * np.abs(P).max(axis=(1, 2)))
-    # Canonical orientation: the largest |component| positive; side = +1 / -1 as the face points
-    big = np.argmax(np.abs(n), axis=1)
-    side = np.where(n[np.arange(n.shape[0]), big] >= 0.0, 1, -1)
-    nc, wc = n * side[:, None], w * side
-    # Group by rounded canonical normal and plane offset (bins of the largest tol, and the next
-    # bin too, so a plane on a bin border still meets its partner)
+    tol = 2.0 * (off[inst] + OFFSET_POS * amax)
+    # Group by rounded canonical normal and plane offset (bins of 2 x the largest tol; the join
+    # below also looks one bin either side, so a plane on a bin border still meets its partner)
     wbin = float(tol.max()) * 2.0
-    kn = np.round(nc / _NORMAL_BIN).astype(np.int64)
-    kw = np.floor(wc / wbin).astype(np.int64)
-    lo, hi = P.min(axis=1), P.max(axis=1)
-    pairs_a, pairs_b, skipped = [], [], 0
-    cand = np.flatnonzero(good)
-    pos, neg = cand[side[cand] > 0], cand[side[cand] < 0]
-    # Keep only faces whose (normal, offset) bin meets a bin of the other orientation (numpy;
-    # a closed object's opposite faces share a normal bin but not an offset bin)
-    def h(f, dk):
-        return ((kn[f, 0] * 4099 + kn[f, 1]) * 4099 + kn[f, 2]) * 1_000_003 + kw[f] + dk
-    hp = h(pos, 0)
-    hq = np.concatenate([h(neg, s) for s in (-1, 0, 1)])
-    pos = pos[np.isin(hp, hq)]
-    neg = neg[np.isin(h(neg, 0), np.concatenate([h(pos, s) for s in (-1, 0, 1)]))]
-    kp = {}
-    for f in pos:
-        kp.setdefault((kn[f, 0], kn[f, 1], kn[f, 2], kw[f]), []).append(f)
-    kq = {}
-    for f in neg:
-        kq.setdefault((kn[f, 0], kn[f, 1], kn[f, 2], kw[f]), []).append(f)
-    for (k0, k1, k2, k3), A in kp.items():
-        for shift in (-1, 0, 1):
-            B = kq.get((k0, k1, k2, k3 + shift))
-            if B is None:
-                continue
-            A, B = np.asarray(A), np.asarray(B)
-            if A.size * B.size > CONTACT_PAIRS_MAX:
-                skipped += 1
-                continue
-            a, b = np.repeat(A, B.size), np.tile(B, A.size)
-            t = np.maximum(tol[a], tol[b])
-            keep = ((inst[a] != inst[b]) & (np.einsum("ij,ij->i", n[a], n[b]) <= -COS_OPPOSITE)
-                    & (np.abs(w[a] + w[b]) <= t)
-                    & np.all(lo[a] <= hi[b] + t[:, None], axis=1) & np.all(lo[b] <= hi[a] + t[:, None], axis=1))
-            pairs_a.append(a[keep])
-            pairs_b.append(b[keep])
-    if not pairs_a or sum(x.size for x in pairs_a) == 0:
+    key, side = np.empty(total, np.int64), np.empty(total, np.int64)
+    _face_keys(n, w, wbin, _NORMAL_BIN, key, side)
+    pos, neg = np.flatnonzero(side > 0), np.flatnonzero(side < 0)
+    # Candidate pairs by a sorted join on the keys: each face facing +canonical against the faces
+    # facing -canonical in its offset bin and the two next to it (a key collision only adds
+    # candidates, which the exact test below rejects)
+    order = np.argsort(key[neg], kind="stable")
+    neg, kq = neg[order], key[neg][order]
+    order = np.argsort(key[pos], kind="stable")          # sorted queries: searchsorted walks in order
+    pos, kp = pos[order], key[pos][order]
+    none = np.zeros(0, np.int64)
+    m, skipped = _join_pairs(pos, kp, neg, kq, inst, n, w, lo, hi, tol, CONTACT_PAIRS_MAX, none, none)
+    if m == 0:
         empty.skipped = skipped
         return empty
-    a, b = np.concatenate(pairs_a), np.concatenate(pairs_b)
+    a, b = np.empty(m, np.int64), np.empty(m, np.int64)
+    _join_pairs(pos, kp, neg, kq, inst, n, w, lo, hi, tol, CONTACT_PAIRS_MAX, a, b)
     # Both directions: a back-face hit on either face finds the other
     src, dst = np.r_[a, b], np.r_[b, a]
     uniq = np.unique(np.stack([src, dst], axis=1), axis=0)
@@ -241,4 +332,24 @@ def find_contacts(scene) -> Contacts:
     keys, first = np.unique(key, return_index=True)
     start = np.r_[first, key.size].astype(np.int64)
     return Contacts(scene, keys, start, inst[dst].astype(np.int32), prim[dst].astype(np.int32),
-                    np.ascontiguousarray(P[dst]), np.ascontiguousarray(n[dst]), w[dst], stride, skipped)
+                    _corners(scene, inst[dst], prim[dst]), np.ascontiguousarray(n[dst]), w[dst], stride,
+                    skipped)
+
+
+def warm_up() -> float:
+    """Compile (or load from numba's cache) this module's kernels on two triangles lying on each
+    other; seconds taken (``embree_kernels.warm_up`` calls it)."""
+    import time
+    from .. import raycast
+    from ..scene import Instance, Material, Mesh, Scene
+    start = time.perf_counter()
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    up = Mesh(vertices=V, triangles=np.array([[0, 1, 2]], np.int32), material_ids=np.zeros(1, np.int32))
+    down = Mesh(vertices=V, triangles=np.array([[0, 2, 1]], np.int32), material_ids=np.zeros(1, np.int32))
+    scene = Scene(meshes=[up, down], instances=[Instance(0), Instance(1)], materials=[Material()])
+    contacts = find_contacts(scene)
+    hits = raycast.Hits.empty(1)
+    hits.instance[:], hits.prim[:], hits.t[:] = 1, 0, 1.0
+    hits.ng[:], hits.position[:] = (0.0, 0.0, -1.0), (0.2, 0.2, 0.0)
+    contacts.resolve(np.array([[0.2, 0.2, 1.0]]), np.array([[0.0, 0.0, -1.0]]), np.zeros(1), np.full(1, np.inf), hits)
+    return time.perf_counter() - start
