@@ -306,6 +306,18 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
     for key, r in records.items():
         K = len(samples[key])
         t = times if K == len(times) else np.array([0.5])
+        bad = _first_nonfinite_frame(samples[key], t, shutter, frame)
+        if bad is not None:
+            # A NaN or infinite location / rotation / scale (a keyframe typed as nan, a driver
+            # dividing by zero): Cycles leaves such an object out of the image; the whole render
+            # used to fail with "transform contains NaN or inf", naming nothing (artist review 2)
+            what = {"MESH": "object", "LIGHT": "light", "CAMERA": "camera"}[r.kind]
+            text = (f"{what} {r.name!r}: its transform is NaN or infinite at frame {bad:g} "
+                    f"(a keyframe, driver or constraint)")
+            if r.kind == "CAMERA":
+                raise StpmError(text + "; fix the camera's animation")
+            warnings.append(text + ": not rendered, as in Cycles")
+            continue
         if r.kind == "MESH":
             if r.use_motion and key in shapes and len(shapes[key]) == len(times):
                 _attach_deformation(meshes[r.mesh], shapes[key], times, r.name, warnings, step_normals.get(key))
@@ -351,6 +363,15 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                   **{f"light_visible_{kind}": v for kind, v in light_rays.items()},
                   "working_space": _working_space(warnings)})
     return out, warnings
+
+
+def _first_nonfinite_frame(matrices: list, times: np.ndarray, shutter, frame: float):
+    """The frame of the first of ``matrices`` (sampled at shutter ``times``) holding a NaN or
+    infinite entry, or None when all are finite."""
+    for u, M in zip(times, matrices):
+        if not np.all(np.isfinite(M)):
+            return float(shutter.to_frame(float(u))) if len(matrices) > 1 else float(frame)
+    return None
 
 
 def _working_space(warnings: list) -> str:

@@ -1,0 +1,102 @@
+"""Fixes from the second artist review (a perfume-bottle product shot, review/make_bottle.py), each
+through the real bpy module: a NaN keyframe, light node trees with a constant Emission.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+pytest.importorskip("OpenImageIO")
+
+from test_addon_render import _render_to_exr, _tiny  # noqa: E402
+from test_addon_scenes import add_camera, add_light, add_mesh, export_now, fresh, node_material, set_world  # noqa: E402
+from cycles_ref import block_ztest, render_cycles, render_stpm  # noqa: E402
+
+import addon  # noqa: E402
+from addon.engine import LAST_RENDER  # noqa: E402
+
+addon.register()
+
+
+def _scene(box: bool = True):
+    scene = fresh()
+    scene.render.engine = "STPM"
+    _tiny(scene, samples=2, photons=0)
+    floor, _ = node_material("Floor", "ShaderNodeBsdfDiffuse")
+    add_mesh("plane", "Floor", material=floor, size=8.0)
+    add_camera()
+    add_light("POINT", energy=800.0, location=(1, -1, 3))
+    set_world((0.05, 0.05, 0.05), 1.0)
+    return add_mesh("cube", "Box", location=(0, 0, 1)) if box else None
+
+
+# 1. A NaN in a keyframe: Cycles leaves the object out; STPM failed the whole render with
+#    "transform contains NaN or inf", naming neither the object nor the frame.
+@pytest.mark.parametrize("channel", ["location", "scale"])
+def test_nan_keyframe_leaves_the_object_out_with_a_warning_naming_it(tmp_path, channel):
+    box = _scene()
+    scene = bpy.context.scene
+    box.keyframe_insert(channel, frame=1)
+    getattr(box, channel)[0] = float("nan") if channel == "location" else float("inf")
+    box.keyframe_insert(channel, frame=2)
+    scene.render.use_motion_blur = True
+    scene.frame_set(1)
+    LAST_RENDER.clear()
+    got = _render_to_exr(scene, tmp_path / "nan.exr")["Combined"]
+    warns = [w for w in LAST_RENDER["warnings"] if "'Box'" in w]
+    assert warns and "NaN or infinite" in warns[0] and "frame 1." in warns[0], LAST_RENDER["warnings"]
+    # The image is the scene without the box (Cycles: 0.4338 both, measured in the review)
+    _scene(box=False)
+    want = _render_to_exr(bpy.context.scene, tmp_path / "none.exr")["Combined"]
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+
+
+def test_nan_camera_transform_is_one_error_naming_the_camera():
+    _scene()
+    scene = bpy.context.scene
+    scene.camera.location.x = float("nan")
+    with pytest.raises(Exception, match="camera 'Cam'.*NaN or infinite"):
+        export_now(scene)
+
+
+# 2. Light node trees: Cycles multiplies the light by its Emission node's Color x Strength; STPM
+#    ignored the tree (white, strength 1) whatever its constants.
+def test_constant_light_emission_node_scales_colour_and_power():
+    _scene()
+    lamp = bpy.data.lights["Light"]
+    lamp.color = (0.9, 0.8, 0.7)
+    lamp.use_nodes = True
+    em = lamp.node_tree.nodes["Emission"]
+    em.inputs["Color"].default_value = (1.0, 0.3, 0.2, 1.0)
+    em.inputs["Strength"].default_value = 2.5
+    core, warnings = export_now(bpy.context.scene)
+    light = core.lights[0]
+    np.testing.assert_allclose(light.color, np.array([0.9, 0.8, 0.7]) * [1.0, 0.3, 0.2], rtol=1e-6)
+    assert light.power == pytest.approx(800.0 * 2.5)
+    assert not [w for w in warnings if "node tree" in w], warnings
+    # A Blackbody on Color is not evaluated: its constant Strength still counts, and a warning names it
+    bb = lamp.node_tree.nodes.new("ShaderNodeBlackbody")
+    lamp.node_tree.links.new(bb.outputs[0], em.inputs["Color"])
+    core, warnings = export_now(bpy.context.scene)
+    assert core.lights[0].power == pytest.approx(800.0 * 2.5)
+    np.testing.assert_allclose(core.lights[0].color, [0.9, 0.8, 0.7], rtol=1e-6)
+    assert any("Blackbody" in w and "not evaluated" in w for w in warnings), warnings
+
+
+def test_constant_light_emission_node_matches_cycles(tmp_path):
+    _scene()
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 48, 32
+    lamp = bpy.data.lights["Light"]
+    lamp.use_nodes = True
+    em = lamp.node_tree.nodes["Emission"]
+    em.inputs["Color"].default_value = (1.0, 0.3, 0.2, 1.0)
+    em.inputs["Strength"].default_value = 2.5
+    seeds = (0, 1, 2)
+    stpm, _ = render_stpm(scene, samples=16, seeds=seeds)
+    cyc = render_cycles(scene, tmp_path, samples=16, seeds=seeds, max_bounces=0)
+    r = block_ztest(stpm, cyc)
+    assert r.z_abs_max < 4.0, r.summary()
+    for c in range(3):    # per channel: the node's red tint
+        assert stpm[..., c].mean() / cyc[..., c].mean() == pytest.approx(1.0, abs=0.03)
