@@ -100,3 +100,23 @@ def test_constant_light_emission_node_matches_cycles(tmp_path):
     assert r.z_abs_max < 4.0, r.summary()
     for c in range(3):    # per channel: the node's red tint
         assert stpm[..., c].mean() / cyc[..., c].mean() == pytest.approx(1.0, abs=0.03)
+
+
+# 3. A camera zooming during the shutter: Cycles blurs the zoom (its field of view at each motion
+#    step; measured: cubes at the frame's edge smeared from columns 6-12 to 0-10 at 64 px); STPM's
+#    camera has one lens, and the zoom rendered sharp without a warning.
+def test_lens_animated_during_the_shutter_is_warned():
+    _scene()
+    scene = bpy.context.scene
+    scene.render.use_motion_blur = True
+    scene.frame_set(1)
+    assert not [w for w in export_now(scene)[1] if "animated during the shutter" in w]
+    cam = scene.camera.data
+    cam.keyframe_insert("lens", frame=1)
+    cam.lens = 80.0
+    cam.keyframe_insert("lens", frame=2)
+    scene.frame_set(1)
+    warns = [w for w in export_now(scene)[1] if "animated during the shutter" in w]
+    assert warns and "camera 'Cam'" in warns[0] and "lens" in warns[0], warns
+    scene.render.use_motion_blur = False          # no shutter, nothing to blur: no warning
+    assert not [w for w in export_now(scene)[1] if "animated during the shutter" in w]

@@ -66,8 +66,10 @@ def light_node_emission(node_tree, name: str, warnings: list) -> tuple:
         fed = [f"{sock.name} <- {getattr(_linked_node(sock), 'name', '?')!r}" for sock in (col, strength)
                if sock.is_linked]
         if fed:
+            hint = "; for a blackbody colour tick the light's own Temperature, which STPM reads" \
+                if any(getattr(_linked_node(sock), "type", "") == "BLACKBODY" for sock in (col, strength)) else ""
             warnings.append(f"light {name!r}: its node tree's Emission {', '.join(fed)} is not evaluated "
-                            f"(only constant Emission Color and Strength are): read as 1")
+                            f"(only constant Emission Color and Strength are): read as 1{hint}")
         return c, k
     else:
         what = f"node {node.name!r} ({node.bl_idname})" if node is not None else "no Emission node"
