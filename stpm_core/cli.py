@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import sys
@@ -422,6 +423,13 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
             "settings": settings.to_dict(), "plan": plan,
             "warnings": list(getattr(result, "warnings", []) or []),
         })
+        if not partial:
+            region = apply_render_region(result.passes, scene.metadata, stats)
+            if region is not None and not args.quiet:
+                print(f"{label}render region: {region}", file=sys.stderr)
+        elif scene_region(scene.metadata, scene.resolution) is not None:
+            _warn("the file's Render Region is not applied to a partial result (--pass-offset): "
+                  "the merged EXR holds the whole frame")
         outputs = [(out_exr, exr), (out_png, lambda tmp: write_png(tmp, result.passes["Combined"][:, :, :3],
                                                                      atomic=False, working=working))]
         if stats_path is not None:
@@ -451,6 +459,60 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
                   f"photons {stats.get('photon_trace_s', 0.0) + stats.get('photon_map_build_s', 0.0):.2f} s)",
                   file=sys.stderr)
     return EXIT_OK
+
+
+def scene_region(metadata, resolution) -> tuple | None:
+    """The Render Region of a .blend's export (``metadata.render_region``: [min_x, max_x, min_y,
+    max_y] fractions, y from the bottom) in pixels of ``resolution`` (W, H): (x0, y0, x1, y1) with
+    rows counted from the *top* (row 0 = top, as the passes), or None when there is none or it
+    covers the frame.  Blender's arithmetic: ``(int)(fraction * size)`` in float32, as
+    ``addon.engine.border_region``.  A malformed value (a hand-edited scene file) is an error."""
+    if not isinstance(metadata, dict) or metadata.get("render_region") is None:
+        return None
+    box = metadata["render_region"]
+    if (not isinstance(box, (list, tuple)) or len(box) != 4
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in box)):
+        raise StpmError(f"metadata.render_region must be [min_x, max_x, min_y, max_y] (4 finite numbers), "
+                        f"got {safe_text(repr(box)[:80])}")
+    import numpy as np
+    W, H = int(resolution[0]), int(resolution[1])
+    f32 = np.float32
+
+    def edge(frac, size):
+        return int(f32(min(max(float(frac), 0.0), 1.0)) * f32(size))
+    x0, x1 = edge(box[0], W), edge(box[1], W)
+    y0, y1 = edge(box[2], H), edge(box[3], H)
+    if x1 <= x0 or y1 <= y0 or (x0, y0, x1, y1) == (0, 0, W, H):
+        return None
+    return x0, H - y1, x1, H - y0
+
+
+def apply_render_region(passes: dict, metadata, stats: dict) -> str | None:
+    """Make the passes what Blender writes for a Render Region (``blender -b -f``): with Crop to
+    Render Region the region alone, else the whole frame with everything outside the region
+    blank (0, alpha 0; Depth Blender's background 1e10).  In place; returns a description for the
+    log (also ``stats["render_region"]``), None without a region."""
+    import numpy as np
+    from .film import DEPTH_BACKGROUND
+    any_pass = next(iter(passes.values()))
+    H, W = any_pass.shape[:2]
+    px = scene_region(metadata, (W, H))
+    if px is None:
+        return None
+    x0, r0, x1, r1 = px
+    crop = bool(metadata.get("render_region_crop", False))
+    for name in list(passes):
+        a = np.asarray(passes[name])
+        if crop:
+            passes[name] = np.ascontiguousarray(a[r0:r1, x0:x1])
+        else:
+            out = np.full_like(a, DEPTH_BACKGROUND if name == "Depth" else 0.0)
+            out[r0:r1, x0:x1] = a[r0:r1, x0:x1]
+            passes[name] = out
+    text = (f"columns {x0}..{x1 - 1}, rows {r0}..{r1 - 1} of {W}x{H}"
+            + (", cropped" if crop else ", the rest blank"))
+    stats["render_region"] = {"x0": x0, "x1": x1, "row0": r0, "row1": r1, "crop": crop}
+    return text
 
 
 def _write_together(outputs, cancel) -> None:

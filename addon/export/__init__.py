@@ -370,8 +370,21 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                   "film_transparent": bool(render.film_transparent),
                   "light_visible_camera": light_seen,
                   **{f"light_visible_{kind}": v for kind, v in light_rays.items()},
-                  "working_space": _working_space(warnings)})
+                  "working_space": _working_space(warnings),
+                  **_render_region(render)})
     return out, warnings
+
+
+def _render_region(render) -> dict:
+    """Blender's Render Region as metadata for the command line (``stpm render`` cuts or blanks
+    the image as Blender writes it; F12 hands Blender the region itself): ``render_region`` =
+    [min_x, max_x, min_y, max_y] (fractions of the frame, y from the bottom) and
+    ``render_region_crop`` (Crop to Render Region).  Empty without a region."""
+    if not getattr(render, "use_border", False):
+        return {}
+    return {"render_region": [float(render.border_min_x), float(render.border_max_x),
+                              float(render.border_min_y), float(render.border_max_y)],
+            "render_region_crop": bool(render.use_crop_to_border)}
 
 
 def _first_nonfinite_frame(matrices: list, times: np.ndarray, shutter, frame: float):
