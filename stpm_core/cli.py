@@ -430,8 +430,9 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
         elif scene_region(scene.metadata, scene.resolution) is not None:
             _warn("the file's Render Region is not applied to a partial result (--pass-offset): "
                   "the merged EXR holds the whole frame")
-        outputs = [(out_exr, exr), (out_png, lambda tmp: write_png(tmp, result.passes["Combined"][:, :, :3],
-                                                                     atomic=False, working=working))]
+        png_warnings: list = []
+        outputs = [(out_exr, exr), (out_png, lambda tmp: write_view_png(tmp, result.passes["Combined"][:, :, :3],
+                                                                          scene.metadata, working, png_warnings))]
         if stats_path is not None:
             def timed_stats(tmp):
                 stats.update({"write_s": time.perf_counter() - t_write, "wall_s": time.perf_counter() - t_frame})
@@ -440,7 +441,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
         _write_together(outputs, cancel)
         if stats_path is None:
             stats.update({"write_s": time.perf_counter() - t_write, "wall_s": time.perf_counter() - t_frame})
-        for w in stats["warnings"]:
+        for w in stats["warnings"] + png_warnings:
             _warn(w)
         if stats.get("progressive") and not args.quiet:
             from .progressive import summary
@@ -513,6 +514,54 @@ def apply_render_region(passes: dict, metadata, stats: dict) -> str | None:
             + (", cropped" if crop else ", the rest blank"))
     stats["render_region"] = {"x0": x0, "x1": x1, "row0": r0, "row1": r1, "crop": crop}
     return text
+
+
+def write_view_png(path, rgb, metadata, working: str, warnings: list) -> None:
+    """The PNG of ``stpm render``: linear ``rgb`` (H, W, 3) through the .blend's colour management
+    as Blender writes a PNG (``metadata.view_settings``: display device, view transform such as
+    AgX or Filmic, exposure, gamma; Blender's own OCIO config, through OpenImageIO's
+    ``ociodisplay``), else (a core scene file, no config) the sRGB curve of the clipped values
+    (:func:`~stpm_core.imageio.write_png`).  A look or curves the preview cannot apply, or a
+    config OpenImageIO cannot read, add a line to ``warnings`` and fall back where needed."""
+    import numpy as np
+
+    from .imageio import _oiio_write, write_png
+    view = metadata.get("view_settings") if isinstance(metadata, dict) else None
+    if not isinstance(view, dict) or not isinstance(view.get("ocio_config"), str) \
+            or not Path(view["ocio_config"]).is_file():
+        write_png(path, rgb, atomic=False, working=working)
+        return
+    import OpenImageIO as oiio
+    try:
+        exposure, gamma = float(view.get("exposure", 0.0)), float(view.get("gamma", 1.0))
+        display, vt = str(view.get("display_device", "sRGB")), str(view.get("view_transform", "Standard"))
+        src = str(view.get("working_space", "Linear Rec.709"))
+        if not (math.isfinite(exposure) and math.isfinite(gamma) and gamma > 0):
+            raise ValueError(f"exposure {exposure} / gamma {gamma}")
+        if str(view.get("look", "None")).upper() != "NONE":
+            warnings.append(f"PNG preview: the look {safe_text(str(view['look']))!r} is not applied (the EXR is "
+                            "linear and unaffected)")
+        if view.get("use_curve_mapping"):
+            warnings.append("PNG preview: Color Management curves are not applied (the EXR is linear and unaffected)")
+        lin = np.ascontiguousarray(np.nan_to_num(np.asarray(rgb, np.float32)[:, :, :3], nan=0.0, posinf=0.0)
+                                   * np.float32(2.0 ** exposure))
+        H, W = lin.shape[:2]
+        buf = oiio.ImageBuf(oiio.ImageSpec(W, H, 3, oiio.FLOAT))
+        buf.set_pixels(oiio.ROI(0, W, 0, H), lin)
+        out = oiio.ImageBufAlgo.ociodisplay(buf, display, vt, src, "", False, "", "", view["ocio_config"])
+        if out.has_error:
+            raise ValueError(out.geterror().splitlines()[0] if out.geterror() else "ociodisplay failed")
+        v = np.clip(out.get_pixels(oiio.FLOAT).reshape(H, W, 3), 0.0, 1.0)
+        if gamma != 1.0:
+            v = v ** (1.0 / gamma)
+    except Exception as e:  # noqa: BLE001 -- a preview never fails a render: fall back to sRGB
+        warnings.append(f"PNG preview: the file's view transform could not be applied ({safe_text(str(e))[:120]}): "
+                        "written with the sRGB curve (the EXR is linear and unaffected)")
+        write_png(path, rgb, atomic=False, working=working)
+        return
+    spec = oiio.ImageSpec(W, H, 3, oiio.UINT8)
+    spec.attribute("oiio:ColorSpace", display)
+    _oiio_write(Path(path), spec, np.ascontiguousarray(np.round(v * 255.0).astype(np.uint8)), f"PNG {path}")
 
 
 def _write_together(outputs, cancel) -> None:

@@ -25,6 +25,8 @@ Blender's frame), ``camera=False`` (it brings the view's camera) and an :class:`
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from .._core import StpmError, scene_model, sub
@@ -371,8 +373,27 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                   "light_visible_camera": light_seen,
                   **{f"light_visible_{kind}": v for kind, v in light_rays.items()},
                   "working_space": _working_space(warnings),
-                  **_render_region(render)})
+                  **_render_region(render), **_view_settings(scene)})
     return out, warnings
+
+
+def _view_settings(scene) -> dict:
+    """Blender's colour management of the scene (Render Properties > Color Management) and the
+    OCIO config it uses, as metadata: ``stpm render`` writes its PNG through them as Blender writes
+    a PNG (F12 hands Blender linear passes and Blender applies them itself).  Empty if unreadable."""
+    try:
+        import bpy
+        v, d = scene.view_settings, scene.display_settings
+        cfg = bpy.utils.system_resource("DATAFILES", path="colormanagement")
+        cs = getattr(bpy.data, "colorspace", None)
+        return {"view_settings": {
+            "display_device": str(d.display_device), "view_transform": str(v.view_transform),
+            "look": str(v.look), "exposure": float(v.exposure), "gamma": float(v.gamma),
+            "use_curve_mapping": bool(v.use_curve_mapping),
+            "working_space": str(getattr(cs, "working_space", "") or "Linear Rec.709"),
+            "ocio_config": str(Path(cfg) / "config.ocio") if cfg else ""}}
+    except Exception:  # noqa: BLE001 -- a preview's colour management never fails an export
+        return {}
 
 
 def _render_region(render) -> dict:
