@@ -516,19 +516,34 @@ def apply_render_region(passes: dict, metadata, stats: dict) -> str | None:
     return text
 
 
+def blender_ocio_config() -> Path | None:
+    """The OCIO config of the bpy module beside this Python (``bpy/<version>/datafiles/
+    colormanagement/config.ocio``: the one the .blend reader's Blender uses), or None."""
+    import importlib.util
+    try:
+        spec = importlib.util.find_spec("bpy")
+    except (ImportError, ValueError):
+        return None
+    for root in (getattr(spec, "submodule_search_locations", None) or []) if spec is not None else []:
+        found = sorted(Path(root).glob("*/datafiles/colormanagement/config.ocio"))
+        if found:
+            return found[-1]
+    return None
+
+
 def write_view_png(path, rgb, metadata, working: str, warnings: list) -> None:
     """The PNG of ``stpm render``: linear ``rgb`` (H, W, 3) through the .blend's colour management
     as Blender writes a PNG (``metadata.view_settings``: display device, view transform such as
-    AgX or Filmic, exposure, gamma; Blender's own OCIO config, through OpenImageIO's
-    ``ociodisplay``), else (a core scene file, no config) the sRGB curve of the clipped values
+    AgX or Filmic, exposure, gamma; Blender's own OCIO config (:func:`blender_ocio_config`), through
+    OpenImageIO's ``ociodisplay``), else (a core scene file, no config) the sRGB curve of the clipped values
     (:func:`~stpm_core.imageio.write_png`).  A look or curves the preview cannot apply, or a
     config OpenImageIO cannot read, add a line to ``warnings`` and fall back where needed."""
     import numpy as np
 
     from .imageio import _oiio_write, write_png
     view = metadata.get("view_settings") if isinstance(metadata, dict) else None
-    if not isinstance(view, dict) or not isinstance(view.get("ocio_config"), str) \
-            or not Path(view["ocio_config"]).is_file():
+    config = blender_ocio_config() if isinstance(view, dict) else None
+    if config is None:
         write_png(path, rgb, atomic=False, working=working)
         return
     import OpenImageIO as oiio
@@ -548,7 +563,7 @@ def write_view_png(path, rgb, metadata, working: str, warnings: list) -> None:
         H, W = lin.shape[:2]
         buf = oiio.ImageBuf(oiio.ImageSpec(W, H, 3, oiio.FLOAT))
         buf.set_pixels(oiio.ROI(0, W, 0, H), lin)
-        out = oiio.ImageBufAlgo.ociodisplay(buf, display, vt, src, "", False, "", "", view["ocio_config"])
+        out = oiio.ImageBufAlgo.ociodisplay(buf, display, vt, src, "", False, "", "", str(config))
         if out.has_error:
             raise ValueError(out.geterror().splitlines()[0] if out.geterror() else "ociodisplay failed")
         v = np.clip(out.get_pixels(oiio.FLOAT).reshape(H, W, 3), 0.0, 1.0)

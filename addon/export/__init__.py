@@ -25,8 +25,6 @@ Blender's frame), ``camera=False`` (it brings the view's camera) and an :class:`
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from .._core import StpmError, scene_model, sub
@@ -378,20 +376,20 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
 
 
 def _view_settings(scene) -> dict:
-    """Blender's colour management of the scene (Render Properties > Color Management) and the
-    OCIO config it uses, as metadata: ``stpm render`` writes its PNG through them as Blender writes
-    a PNG (F12 hands Blender linear passes and Blender applies them itself).  Empty if unreadable."""
+    """Blender's colour management of the scene (Render Properties > Color Management) as
+    metadata: ``stpm render`` writes its PNG through it as Blender writes a PNG (F12 hands Blender
+    linear passes and Blender applies it itself).  No machine-specific path goes in (partials of
+    one frame rendered on different machines must hash alike): the command line finds Blender's
+    OCIO config itself.  Empty if unreadable."""
     try:
         import bpy
         v, d = scene.view_settings, scene.display_settings
-        cfg = bpy.utils.system_resource("DATAFILES", path="colormanagement")
         cs = getattr(bpy.data, "colorspace", None)
         return {"view_settings": {
             "display_device": str(d.display_device), "view_transform": str(v.view_transform),
             "look": str(v.look), "exposure": float(v.exposure), "gamma": float(v.gamma),
             "use_curve_mapping": bool(v.use_curve_mapping),
-            "working_space": str(getattr(cs, "working_space", "") or "Linear Rec.709"),
-            "ocio_config": str(Path(cfg) / "config.ocio") if cfg else ""}}
+            "working_space": str(getattr(cs, "working_space", "") or "Linear Rec.709")}}
     except Exception:  # noqa: BLE001 -- a preview's colour management never fails an export
         return {}
 
