@@ -1,5 +1,6 @@
 """Fixes from the second artist review (a perfume-bottle product shot, review/make_bottle.py), each
-through the real bpy module: a NaN keyframe, light node trees with a constant Emission.
+through the real bpy module: a NaN keyframe, light node trees with a constant Emission or
+Blackbody, a zoom during the shutter.
 """
 from __future__ import annotations
 
@@ -85,16 +86,39 @@ def test_constant_light_emission_node_scales_colour_and_power():
     np.testing.assert_allclose(light.color, np.array([0.9, 0.8, 0.7]) * [1.0, 0.3, 0.2], rtol=1e-6)
     assert light.power == pytest.approx(800.0 * 2.5)
     assert not [w for w in warnings if "node tree" in w], warnings
-    # A Blackbody on Color is not evaluated: its constant Strength still counts, and a warning names it
+    # A Blackbody of constant temperature on Color: Blender's blackbody colour (= the light's own
+    # Temperature colour), Strength still counts, no warning
     bb = lamp.node_tree.nodes.new("ShaderNodeBlackbody")
+    bb.inputs[0].default_value = 3000.0
     lamp.node_tree.links.new(bb.outputs[0], em.inputs["Color"])
     core, warnings = export_now(bpy.context.scene)
     assert core.lights[0].power == pytest.approx(800.0 * 2.5)
-    np.testing.assert_allclose(core.lights[0].color, [0.9, 0.8, 0.7], rtol=1e-6)
-    assert any("Blackbody" in w and "not evaluated" in w for w in warnings), warnings
+    probe = bpy.data.lights.new("probe", "POINT")
+    probe.use_temperature, probe.temperature = True, 3000.0
+    np.testing.assert_allclose(core.lights[0].color, np.array([0.9, 0.8, 0.7]) * probe.temperature_color[:],
+                               rtol=3e-3)
+    assert not [w for w in warnings if "node tree" in w], warnings
+    # Anything else linked (a texture on Strength) is read as 1 and named
+    tex = lamp.node_tree.nodes.new("ShaderNodeTexChecker")
+    lamp.node_tree.links.new(tex.outputs["Fac"], em.inputs["Strength"])
+    core, warnings = export_now(bpy.context.scene)
+    assert core.lights[0].power == pytest.approx(800.0)
+    assert any("Strength <- 'Checker Texture'" in w and "not evaluated" in w for w in warnings), warnings
 
 
-def test_constant_light_emission_node_matches_cycles(tmp_path):
+def test_blackbody_table_is_blenders():
+    from addon.export.blackbody import TABLE, blackbody, table_from_blender
+    np.testing.assert_allclose(table_from_blender(), TABLE, rtol=1e-4, atol=1e-5)
+    probe = bpy.data.lights.new("probe", "POINT")
+    probe.use_temperature = True
+    for t in (900.0, 1234.0, 2500.0, 5400.0, 6500.0, 9000.0, 11999.0, 20000.0):
+        probe.temperature = t
+        want = np.array(probe.temperature_color[:])
+        assert np.abs(blackbody(t) - want).max() <= 2e-3 * want.max(), (t, blackbody(t), want)
+
+
+@pytest.mark.parametrize("blackbody", [False, True])
+def test_constant_light_emission_node_matches_cycles(tmp_path, blackbody):
     _scene()
     scene = bpy.context.scene
     scene.render.resolution_x, scene.render.resolution_y = 48, 32
@@ -103,6 +127,10 @@ def test_constant_light_emission_node_matches_cycles(tmp_path):
     em = lamp.node_tree.nodes["Emission"]
     em.inputs["Color"].default_value = (1.0, 0.3, 0.2, 1.0)
     em.inputs["Strength"].default_value = 2.5
+    if blackbody:       # the review's softbox: a 4000 K Blackbody (STPM rendered it white: red 0.71x Cycles)
+        bb = lamp.node_tree.nodes.new("ShaderNodeBlackbody")
+        bb.inputs[0].default_value = 4000.0
+        lamp.node_tree.links.new(bb.outputs[0], em.inputs["Color"])
     seeds = (0, 1, 2)
     stpm, _ = render_stpm(scene, samples=16, seeds=seeds)
     cyc = render_cycles(scene, tmp_path, samples=16, seeds=seeds, max_bounces=0)

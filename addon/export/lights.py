@@ -5,8 +5,9 @@ colour when ``use_temperature`` is on.  Area lights fold the object's scale
 into their size (as Cycles does); a non-normalised area light's power grows
 with its area.
 
-Light node trees: a constant Emission node at the Light Output multiplies colour and power, as in
-Cycles (:func:`light_node_emission`); other trees are warned and ignored.
+Light node trees: a constant Emission node at the Light Output (its Color possibly from a constant
+Blackbody) multiplies colour and power, as in Cycles (:func:`light_node_emission`); other trees are
+warned and ignored.
 
 Light portals: an AREA light with Cycles' portal flag (``light.cycles.is_portal``) is not a
 light: it becomes one of ``Scene.portals`` (:func:`is_portal`), through which the world's light is
@@ -51,8 +52,9 @@ def light_node_emission(node_tree, name: str, warnings: list) -> tuple:
 
     Cycles multiplies the light's colour x power by the emission its Light Output receives.  A
     tree whose output is fed by an Emission node with constant Color and Strength (the default
-    tree: white, 1; or an artist's constant edits) is that constant.  A linked Color or Strength (a
-    Blackbody, an IES Texture, textures, Light Falloff) is not evaluated: read as 1, warned; so is a
+    tree: white, 1; or an artist's constant edits) is that constant; a Blackbody node of constant
+    temperature on Color gives Blender's blackbody colour (:mod:`.blackbody`).  Anything else
+    linked (an IES Texture, textures, Light Falloff) is not evaluated: read as 1, warned; so is a
     tree with no Emission node at its output.
     """
     outputs = [n for n in node_tree.nodes if n.type == "OUTPUT_LIGHT"
@@ -63,13 +65,18 @@ def light_node_emission(node_tree, name: str, warnings: list) -> tuple:
         col, strength = node.inputs["Color"], node.inputs["Strength"]
         c = np.ones(3) if col.is_linked else np.array(col.default_value[:3], dtype=np.float64)
         k = 1.0 if strength.is_linked else float(strength.default_value)
+        bb = _linked_node(col) if col.is_linked else None
+        if bb is not None and bb.type == "BLACKBODY" and not bb.mute and not bb.inputs[0].is_linked:
+            # Blackbody (constant temperature) -> Color: the colour Cycles computes (blackbody.py)
+            from .blackbody import blackbody
+            from .nodes import working_space
+            c = blackbody(float(bb.inputs[0].default_value), working_space())
+            col = None
         fed = [f"{sock.name} <- {getattr(_linked_node(sock), 'name', '?')!r}" for sock in (col, strength)
-               if sock.is_linked]
+               if sock is not None and sock.is_linked]
         if fed:
-            hint = "; for a blackbody colour tick the light's own Temperature, which STPM reads" \
-                if any(getattr(_linked_node(sock), "type", "") == "BLACKBODY" for sock in (col, strength)) else ""
             warnings.append(f"light {name!r}: its node tree's Emission {', '.join(fed)} is not evaluated "
-                            f"(only constant Emission Color and Strength are): read as 1{hint}")
+                            f"(constant Emission Color and Strength and a constant Blackbody are): read as 1")
         return c, k
     else:
         what = f"node {node.name!r} ({node.bl_idname})" if node is not None else "no Emission node"
