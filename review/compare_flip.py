@@ -3,7 +3,7 @@
 Per test image against the reference (Combined, linear): mean ratio, 3x3 grid of mean ratios,
 LDR-FLIP after the Standard view (sRGB curve of clip(x, 0, 1)), the share of pixels whose FLIP > 0.2,
 the fraction of 'firefly' pixels (> 10x their 5x5 neighbourhood median).  --png writes the images side
-by side (reference first, each x3, exposure E)."""
+by side (reference first, each x3).  --expo E scales both images first (FLIP and PNG; ratios unchanged)."""
 import sys, numpy as np, OpenImageIO as oiio
 import flip_evaluator as flip
 from scipy.ndimage import median_filter
@@ -25,10 +25,11 @@ def srgb(x):
 args = sys.argv[1:]; png = expo = None
 if "--png" in args: i = args.index("--png"); png = args[i + 1]; del args[i:i + 2]
 if "--expo" in args: i = args.index("--expo"); expo = float(args[i + 1]); del args[i:i + 2]
-ref = read(args[0]); H, W = ref.shape[:2]
+scale = expo or 1.0                    # exposure applied to both before FLIP and the PNG (ratios unchanged)
+ref = read(args[0]) * scale; H, W = ref.shape[:2]
 imgs = [ref]
 for p in args[1:]:
-    x = read(p); imgs.append(x)
+    x = read(p) * scale; imgs.append(x)
     _, fmean, _ = flip.evaluate(np.ascontiguousarray(srgb(ref), np.float32), np.ascontiguousarray(srgb(x), np.float32), "LDR", inputsRGB=True, applyMagma=False)
     fmap = np.asarray(flip.evaluate(np.ascontiguousarray(srgb(ref), np.float32), np.ascontiguousarray(srgb(x), np.float32), "LDR", inputsRGB=True, applyMagma=False)[0]).reshape(H, W)
     y = x.mean(-1); fire = float(np.mean(y > 10 * np.maximum(median_filter(y, 5), 1e-4)))
@@ -37,7 +38,6 @@ for p in args[1:]:
     for i in range(3):
         print("   grid", " ".join(f"{x[i*H//3:(i+1)*H//3, j*W//3:(j+1)*W//3].mean() / max(ref[i*H//3:(i+1)*H//3, j*W//3:(j+1)*W//3].mean(), 1e-9):6.3f}" for j in range(3)))
 if png:
-    e = expo or 1.0
-    row = np.concatenate(sum([[srgb(im * e), np.ones((H, 3, 3))] for im in imgs], [])[:-1], 1)
+    row = np.concatenate(sum([[srgb(im), np.ones((H, 3, 3))] for im in imgs], [])[:-1], 1)
     row = np.repeat(np.repeat(row, 3, 0), 3, 1)
     o = oiio.ImageBuf(oiio.ImageSpec(row.shape[1], row.shape[0], 3, "uint8")); o.set_pixels(oiio.ROI(), (row * 255 + 0.5).astype(np.uint8)); o.write(png)

@@ -119,3 +119,37 @@ def test_stpm_render_png_follows_the_files_view_transform(tmp_path, view, exposu
     want = oiio.ImageBuf(str(ref)).get_pixels(oiio.UINT8).astype(int)[..., :3]
     assert got.shape == want.shape
     assert np.abs(got - want).max() <= 1, (np.abs(got - want).max(), np.abs(got - want).mean())
+
+
+# Partials of one frame from the .blend at two paths: the exporter records the path it was given
+# (metadata.source), which went into the scene hash and the fingerprint's header, so `stpm merge`
+# refused them as "partials of different scenes" (a copy of the review's bottle under another name;
+# on a farm: workers mounting the project at different paths, or run from another folder).
+def test_scene_hash_ignores_where_the_scene_came_from():
+    from stpm_core.demo import demo_scene
+    from stpm_core.partial import fingerprint_difference, scene_fingerprint, scene_hash
+    a, b = demo_scene(resolution=(8, 6)), demo_scene(resolution=(8, 6))
+    a.metadata.update(source="/mnt/proj/shot.blend", warnings=["image '/mnt/proj/tex/wood.png' is missing"])
+    b.metadata.update(source="P:/proj/shot.blend", warnings=["image 'P:/proj/tex/wood.png' is missing"])
+    assert scene_hash(a) == scene_hash(b)
+    assert fingerprint_difference(scene_fingerprint(a), scene_fingerprint(b)) is None
+    b.metadata["film_transparent"] = True            # what changes pixels still counts
+    assert scene_hash(a) != scene_hash(b)
+    assert fingerprint_difference(scene_fingerprint(a), scene_fingerprint(b)) is not None
+
+
+@needs_blend
+def test_partials_of_one_blend_at_two_paths_merge(tmp_path):
+    import shutil
+    other = tmp_path / "elsewhere" / "copy.blend"
+    other.parent.mkdir()
+    shutil.copy(STATIC_BLEND, other)
+    opts = ["--frame", "1", "--method", "progressive", "--samples", "1", "--photons-global", "200",
+            "--photons-caustic", "200", "--resolution", "16x12", "--quiet"]
+    one = stpm("render", STATIC_BLEND, *opts, "--passes", "4", "-o", tmp_path / "one.exr")
+    a = stpm("render", STATIC_BLEND, *opts, "--pass-offset", "0", "--passes", "2", "-o", tmp_path / "a.exr")
+    b = stpm("render", other, *opts, "--pass-offset", "2", "--passes", "2", "-o", tmp_path / "b.exr")
+    assert one.returncode == a.returncode == b.returncode == 0, (one.stderr, a.stderr, b.stderr)
+    m = stpm("merge", tmp_path / "a.exr", tmp_path / "b.exr", "-o", tmp_path / "m.exr")
+    assert m.returncode == 0, m.stderr
+    np.testing.assert_array_equal(read_exr(tmp_path / "m.exr")["Combined"], read_exr(tmp_path / "one.exr")["Combined"])
