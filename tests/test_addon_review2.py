@@ -158,3 +158,14 @@ def test_lens_animated_during_the_shutter_is_warned():
     assert warns and "camera 'Cam'" in warns[0] and "lens" in warns[0], warns
     scene.render.use_motion_blur = False          # no shutter, nothing to blur: no warning
     assert not [w for w in export_now(scene)[1] if "animated during the shutter" in w]
+
+
+# 4. Film > Transparent > Transparent Glass (Cycles): a product shot's glass over a transparent
+#    background; Cycles gives alpha 0.0625 at a glass sphere's centre (16 spp), STPM alpha 1, silently.
+def test_transparent_glass_is_warned():
+    _scene()
+    scene = bpy.context.scene
+    scene.render.film_transparent = True
+    assert not [w for w in export_now(scene)[1] if "Transparent Glass" in w]
+    scene.cycles.film_transparent_glass = True
+    assert [w for w in export_now(scene)[1] if "Transparent Glass is not supported" in w]
