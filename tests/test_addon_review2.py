@@ -169,3 +169,15 @@ def test_transparent_glass_is_warned():
     assert not [w for w in export_now(scene)[1] if "Transparent Glass" in w]
     scene.cycles.film_transparent_glass = True
     assert [w for w in export_now(scene)[1] if "Transparent Glass is not supported" in w]
+
+
+# 5. Cycles' Motion Blur > Rolling Shutter: ignored without a word.
+def test_rolling_shutter_is_warned():
+    _scene()
+    scene = bpy.context.scene
+    scene.render.use_motion_blur = True
+    assert not [w for w in export_now(scene)[1] if "Rolling Shutter" in w]
+    scene.cycles.rolling_shutter_type = "TOP"
+    assert [w for w in export_now(scene)[1] if "Rolling Shutter is not supported" in w]
+    scene.render.use_motion_blur = False     # no shutter: nothing to roll
+    assert not [w for w in export_now(scene)[1] if "Rolling Shutter" in w]

@@ -364,6 +364,11 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
         # opaque, as with the option off: it was ignored without a word (artist review 2)
         warnings.append("Film > Transparent Glass is not supported: glass over the transparent background "
                         "is opaque (alpha 1), as with the option off")
+    if not shutter.is_instant and getattr(getattr(scene, "cycles", None), "rolling_shutter_type", "NONE") != "NONE":
+        # Cycles' Motion Blur > Rolling Shutter: each row has its own shutter interval; STPM's
+        # shutter is global (every pixel sees the whole shutter): ignored without a word before
+        warnings.append("Motion Blur > Rolling Shutter is not supported: every row sees the whole shutter "
+                        "(a global shutter)")
     out = scene_model.Scene(
         meshes=meshes, instances=instances, camera=cam, lights=lights, portals=portals, materials=mats.materials,
         textures=mats.textures.textures,
