@@ -181,3 +181,16 @@ def test_rolling_shutter_is_warned():
     assert [w for w in export_now(scene)[1] if "Rolling Shutter is not supported" in w]
     scene.render.use_motion_blur = False     # no shutter: nothing to roll
     assert not [w for w in export_now(scene)[1] if "Rolling Shutter" in w]
+
+
+# 6. Object > Visibility: Shadow Catcher and Ray Visibility > Diffuse / Glossy / Transmission were
+#    ignored without a word (Camera and Shadow off were warned already).
+def test_shadow_catcher_and_ray_visibility_are_warned():
+    box = _scene()
+    scene = bpy.context.scene
+    assert not [w for w in export_now(scene)[1] if "'Box'" in w]
+    box.is_shadow_catcher = True
+    box.visible_glossy = False
+    warns = [w for w in export_now(scene)[1] if "'Box'" in w]
+    assert any("Shadow Catcher is not supported" in w for w in warns), warns
+    assert any("Ray Visibility > Glossy off is ignored" in w for w in warns), warns

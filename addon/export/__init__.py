@@ -451,6 +451,14 @@ def _warn_ignored_object_flags(obj, warnings: list) -> None:
         _warn_once(warnings, f"object {obj.name!r}: Ray Visibility > Shadow off is ignored (it casts shadows)")
     if getattr(obj, "is_holdout", False):
         _warn_once(warnings, f"object {obj.name!r}: Holdout is not supported, rendered as a normal object")
+    # Product shots put the object on a Shadow Catcher, and hide helpers from reflections: both were
+    # ignored without a word (artist review 2)
+    if getattr(obj, "is_shadow_catcher", False):
+        _warn_once(warnings, f"object {obj.name!r}: Shadow Catcher is not supported, rendered as a normal object")
+    off = [k.title() for k in ("diffuse", "glossy", "transmission") if not getattr(obj, f"visible_{k}", True)]
+    if off:
+        _warn_once(warnings, f"object {obj.name!r}: Ray Visibility > {' / '.join(off)} off is ignored "
+                             f"(indirect rays see it)")
 
 
 def _warn_holdout_collections(view_layer, warnings: list) -> None:
