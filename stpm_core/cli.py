@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import sys
@@ -422,8 +423,16 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
             "settings": settings.to_dict(), "plan": plan,
             "warnings": list(getattr(result, "warnings", []) or []),
         })
-        outputs = [(out_exr, exr), (out_png, lambda tmp: write_png(tmp, result.passes["Combined"][:, :, :3],
-                                                                     atomic=False, working=working))]
+        if not partial:
+            region = apply_render_region(result.passes, scene.metadata, stats)
+            if region is not None and not args.quiet:
+                print(f"{label}render region: {region}", file=sys.stderr)
+        elif scene_region(scene.metadata, scene.resolution) is not None:
+            _warn("the file's Render Region is not applied to a partial result (--pass-offset): "
+                  "the merged EXR holds the whole frame")
+        png_warnings: list = []
+        outputs = [(out_exr, exr), (out_png, lambda tmp: write_view_png(tmp, result.passes["Combined"][:, :, :3],
+                                                                          scene.metadata, working, png_warnings))]
         if stats_path is not None:
             def timed_stats(tmp):
                 stats.update({"write_s": time.perf_counter() - t_write, "wall_s": time.perf_counter() - t_frame})
@@ -432,7 +441,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
         _write_together(outputs, cancel)
         if stats_path is None:
             stats.update({"write_s": time.perf_counter() - t_write, "wall_s": time.perf_counter() - t_frame})
-        for w in stats["warnings"]:
+        for w in stats["warnings"] + png_warnings:
             _warn(w)
         if stats.get("progressive") and not args.quiet:
             from .progressive import summary
@@ -451,6 +460,123 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
                   f"photons {stats.get('photon_trace_s', 0.0) + stats.get('photon_map_build_s', 0.0):.2f} s)",
                   file=sys.stderr)
     return EXIT_OK
+
+
+def scene_region(metadata, resolution) -> tuple | None:
+    """The Render Region of a .blend's export (``metadata.render_region``: [min_x, max_x, min_y,
+    max_y] fractions, y from the bottom) in pixels of ``resolution`` (W, H): (x0, y0, x1, y1) with
+    rows counted from the *top* (row 0 = top, as the passes), or None when there is none or it
+    covers the frame.  Blender's arithmetic: ``(int)(fraction * size)`` in float32, as
+    ``addon.engine.border_region``.  A malformed value (a hand-edited scene file) is an error."""
+    if not isinstance(metadata, dict) or metadata.get("render_region") is None:
+        return None
+    box = metadata["render_region"]
+    if (not isinstance(box, (list, tuple)) or len(box) != 4
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in box)):
+        raise StpmError(f"metadata.render_region must be [min_x, max_x, min_y, max_y] (4 finite numbers), "
+                        f"got {safe_text(repr(box)[:80])}")
+    import numpy as np
+    W, H = int(resolution[0]), int(resolution[1])
+    f32 = np.float32
+
+    def edge(frac, size):
+        return int(f32(min(max(float(frac), 0.0), 1.0)) * f32(size))
+    x0, x1 = edge(box[0], W), edge(box[1], W)
+    y0, y1 = edge(box[2], H), edge(box[3], H)
+    if x1 <= x0 or y1 <= y0 or (x0, y0, x1, y1) == (0, 0, W, H):
+        return None
+    return x0, H - y1, x1, H - y0
+
+
+def apply_render_region(passes: dict, metadata, stats: dict) -> str | None:
+    """Make the passes what Blender writes for a Render Region (``blender -b -f``): with Crop to
+    Render Region the region alone, else the whole frame with everything outside the region
+    blank (0, alpha 0; Depth Blender's background 1e10).  In place; returns a description for the
+    log (also ``stats["render_region"]``), None without a region."""
+    import numpy as np
+    from .film import DEPTH_BACKGROUND
+    any_pass = next(iter(passes.values()))
+    H, W = any_pass.shape[:2]
+    px = scene_region(metadata, (W, H))
+    if px is None:
+        return None
+    x0, r0, x1, r1 = px
+    crop = bool(metadata.get("render_region_crop", False))
+    for name in list(passes):
+        a = np.asarray(passes[name])
+        if crop:
+            passes[name] = np.ascontiguousarray(a[r0:r1, x0:x1])
+        else:
+            out = np.full_like(a, DEPTH_BACKGROUND if name == "Depth" else 0.0)
+            out[r0:r1, x0:x1] = a[r0:r1, x0:x1]
+            passes[name] = out
+    text = (f"columns {x0}..{x1 - 1}, rows {r0}..{r1 - 1} of {W}x{H}"
+            + (", cropped" if crop else ", the rest blank"))
+    stats["render_region"] = {"x0": x0, "x1": x1, "row0": r0, "row1": r1, "crop": crop}
+    return text
+
+
+def blender_ocio_config() -> Path | None:
+    """The OCIO config of the bpy module beside this Python (``bpy/<version>/datafiles/
+    colormanagement/config.ocio``: the one the .blend reader's Blender uses), or None."""
+    import importlib.util
+    try:
+        spec = importlib.util.find_spec("bpy")
+    except (ImportError, ValueError):
+        return None
+    for root in (getattr(spec, "submodule_search_locations", None) or []) if spec is not None else []:
+        found = sorted(Path(root).glob("*/datafiles/colormanagement/config.ocio"))
+        if found:
+            return found[-1]
+    return None
+
+
+def write_view_png(path, rgb, metadata, working: str, warnings: list) -> None:
+    """The PNG of ``stpm render``: linear ``rgb`` (H, W, 3) through the .blend's colour management
+    as Blender writes a PNG (``metadata.view_settings``: display device, view transform such as
+    AgX or Filmic, exposure, gamma; Blender's own OCIO config (:func:`blender_ocio_config`), through
+    OpenImageIO's ``ociodisplay``), else (a core scene file, no config) the sRGB curve of the clipped values
+    (:func:`~stpm_core.imageio.write_png`).  A look or curves the preview cannot apply, or a
+    config OpenImageIO cannot read, add a line to ``warnings`` and fall back where needed."""
+    import numpy as np
+
+    from .imageio import _oiio_write, write_png
+    view = metadata.get("view_settings") if isinstance(metadata, dict) else None
+    config = blender_ocio_config() if isinstance(view, dict) else None
+    if config is None:
+        write_png(path, rgb, atomic=False, working=working)
+        return
+    import OpenImageIO as oiio
+    try:
+        exposure, gamma = float(view.get("exposure", 0.0)), float(view.get("gamma", 1.0))
+        display, vt = str(view.get("display_device", "sRGB")), str(view.get("view_transform", "Standard"))
+        src = str(view.get("working_space", "Linear Rec.709"))
+        if not (math.isfinite(exposure) and math.isfinite(gamma) and gamma > 0):
+            raise ValueError(f"exposure {exposure} / gamma {gamma}")
+        if str(view.get("look", "None")).upper() != "NONE":
+            warnings.append(f"PNG preview: the look {safe_text(str(view['look']))!r} is not applied (the EXR is "
+                            "linear and unaffected)")
+        if view.get("use_curve_mapping"):
+            warnings.append("PNG preview: Color Management curves are not applied (the EXR is linear and unaffected)")
+        lin = np.ascontiguousarray(np.nan_to_num(np.asarray(rgb, np.float32)[:, :, :3], nan=0.0, posinf=0.0)
+                                   * np.float32(2.0 ** exposure))
+        H, W = lin.shape[:2]
+        buf = oiio.ImageBuf(oiio.ImageSpec(W, H, 3, oiio.FLOAT))
+        buf.set_pixels(oiio.ROI(0, W, 0, H), lin)
+        out = oiio.ImageBufAlgo.ociodisplay(buf, display, vt, src, "", False, "", "", str(config))
+        if out.has_error:
+            raise ValueError(out.geterror().splitlines()[0] if out.geterror() else "ociodisplay failed")
+        v = np.clip(out.get_pixels(oiio.FLOAT).reshape(H, W, 3), 0.0, 1.0)
+        if gamma != 1.0:
+            v = v ** (1.0 / gamma)
+    except Exception as e:  # noqa: BLE001 -- a preview never fails a render: fall back to sRGB
+        warnings.append(f"PNG preview: the file's view transform could not be applied ({safe_text(str(e))[:120]}): "
+                        "written with the sRGB curve (the EXR is linear and unaffected)")
+        write_png(path, rgb, atomic=False, working=working)
+        return
+    spec = oiio.ImageSpec(W, H, 3, oiio.UINT8)
+    spec.attribute("oiio:ColorSpace", display)
+    _oiio_write(Path(path), spec, np.ascontiguousarray(np.round(v * 255.0).astype(np.uint8)), f"PNG {path}")
 
 
 def _write_together(outputs, cancel) -> None:

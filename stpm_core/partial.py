@@ -72,11 +72,29 @@ def join64(parts: np.ndarray) -> np.ndarray:
     return (p[..., 0] + p[..., 1]) + p[..., 2]
 
 
+# Scene metadata that says where a scene came from, not what it looks like: left out of the hashes,
+# so that partials of one frame rendered from the .blend at different paths merge (a farm's
+# workers mount the project at different paths; `stpm render shot.blend` run from another folder).
+# ``source`` is the .blend's path as typed; ``warnings`` name missing files by their resolved paths.
+# (Second artist review: one .blend copied under another name, both partials refused as "partials
+# of different scenes".)
+UNHASHED_METADATA = ("source", "warnings", "name", "description")
+
+
+def _hashed_header(header: dict) -> str:
+    """The scene file's header as JSON for hashing, without :data:`UNHASHED_METADATA`."""
+    meta = header.get("metadata") if isinstance(header, dict) else None
+    if isinstance(meta, dict):
+        header = {**header, "metadata": {k: v for k, v in meta.items() if k not in UNHASHED_METADATA}}
+    return json.dumps(header, sort_keys=True, default=str)
+
+
 def scene_hash(scene) -> str:
-    """SHA-256 of the scene as the scene file stores it (header JSON and every array's bytes)."""
+    """SHA-256 of the scene as the scene file stores it (header JSON without
+    :data:`UNHASHED_METADATA`, and every array's bytes)."""
     from .scenefile import scene_to_arrays
     header, arrays = scene_to_arrays(scene)
-    h = hashlib.sha256(json.dumps(header, sort_keys=True, default=str).encode())
+    h = hashlib.sha256(_hashed_header(header).encode())
     for key in sorted(arrays):
         a = np.ascontiguousarray(arrays[key])
         h.update(f"{key}|{a.dtype.str}|{a.shape}".encode())
@@ -113,7 +131,7 @@ def _sketch(a: np.ndarray) -> list[float]:
 def scene_fingerprint(scene) -> dict:
     """What :func:`merge` compares when two partials' ``scene_hash`` differ.
 
-    ``{"header": SHA-256 of the scene file's header JSON, "arrays": {key: [digest (16 hex), kind,
+    ``{"header": SHA-256 of the scene file's header JSON (as :func:`scene_hash`), "arrays": {key: [digest (16 hex), kind,
     sketch]}}`` where kind is "f" for a float array (sketch: :func:`_sketch`, 4 floats) and "x" for
     any other (sketch empty: it must match exactly).
     """
@@ -126,8 +144,7 @@ def scene_fingerprint(scene) -> dict:
         h.update(a.tobytes())
         is_float = a.dtype.kind == "f" and np.all(np.isfinite(a))
         out[key] = [h.hexdigest()[:16], "f" if is_float else "x", _sketch(a) if is_float else []]
-    return {"header": hashlib.sha256(json.dumps(header, sort_keys=True, default=str).encode()).hexdigest(),
-            "arrays": out}
+    return {"header": hashlib.sha256(_hashed_header(header).encode()).hexdigest(), "arrays": out}
 
 
 def _check_fingerprint(fp, path) -> None:

@@ -257,6 +257,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
     times = np.array([0.5])
     world_keys: list = []            # the world's Mapping rotation per step, when animated
     samples = {k: [r.matrix] for k, r in records.items()}
+    cam_optics: list = []            # the camera's lens, ortho scale and shifts per step
     shapes: dict = {}
     step_normals: dict = {}          # key -> [(triangles, normals)] per step of smooth deforming meshes
     if not shutter.is_instant:
@@ -285,8 +286,16 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                 if ("", cam_name, ()) in samples and ("", cam_name, ()) not in seen:
                     cam_eval = scene.camera.evaluated_get(depsgraph)
                     samples[("", cam_name, ())].append(np.array(cam_eval.matrix_world, dtype=np.float64))
+                if cam_obj is not None:
+                    cam_optics.append(camera_export.optics(cam_obj.evaluated_get(depsgraph)))
         finally:
             frame_set(frame_now, sub_now)
+        changed = camera_export.optics_changed(cam_optics)
+        if changed:
+            # Cycles blurs a zoom (the field of view at each motion step); STPM's camera has one
+            # lens: the zoom was rendered sharp at the frame's lens without a word (artist review 2)
+            warnings.append(f"camera {cam_name!r}: {', '.join(changed)} animated during the shutter: the zoom is "
+                            f"not motion-blurred (Cycles blurs it), the frame's value is used")
         for key, r in records.items():
             if len(samples[key]) != len(times):
                 warnings.append(f"object {r.name!r} is not present during the whole shutter; rendered without motion")
@@ -306,6 +315,18 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
     for key, r in records.items():
         K = len(samples[key])
         t = times if K == len(times) else np.array([0.5])
+        bad = _first_nonfinite_frame(samples[key], t, shutter, frame)
+        if bad is not None:
+            # A NaN or infinite location / rotation / scale (a keyframe typed as nan, a driver
+            # dividing by zero): Cycles leaves such an object out of the image; the whole render
+            # used to fail with "transform contains NaN or inf", naming nothing (artist review 2)
+            what = {"MESH": "object", "LIGHT": "light", "CAMERA": "camera"}[r.kind]
+            text = (f"{what} {r.name!r}: its transform is NaN or infinite at frame {bad:g} "
+                    f"(a keyframe, driver or constraint)")
+            if r.kind == "CAMERA":
+                raise StpmError(text + "; fix the camera's animation")
+            warnings.append(text + ": not rendered, as in Cycles")
+            continue
         if r.kind == "MESH":
             if r.use_motion and key in shapes and len(shapes[key]) == len(times):
                 _attach_deformation(meshes[r.mesh], shapes[key], times, r.name, warnings, step_normals.get(key))
@@ -337,6 +358,17 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
 
     if abs(render.pixel_aspect_x - render.pixel_aspect_y) > 1e-6:
         warnings.append("non-square pixel aspect is ignored")
+    if render.film_transparent and getattr(getattr(scene, "cycles", None), "film_transparent_glass", False):
+        # Cycles' Film > Transparent > Transparent Glass makes smooth glass over the transparent
+        # background transparent (alpha 0.06 at a glass sphere's centre, measured); STPM renders it
+        # opaque, as with the option off: it was ignored without a word (artist review 2)
+        warnings.append("Film > Transparent Glass is not supported: glass over the transparent background "
+                        "is opaque (alpha 1), as with the option off")
+    if not shutter.is_instant and getattr(getattr(scene, "cycles", None), "rolling_shutter_type", "NONE") != "NONE":
+        # Cycles' Motion Blur > Rolling Shutter: each row has its own shutter interval; STPM's
+        # shutter is global (every pixel sees the whole shutter): ignored without a word before
+        warnings.append("Motion Blur > Rolling Shutter is not supported: every row sees the whole shutter "
+                        "(a global shutter)")
     out = scene_model.Scene(
         meshes=meshes, instances=instances, camera=cam, lights=lights, portals=portals, materials=mats.materials,
         textures=mats.textures.textures,
@@ -349,8 +381,49 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                   "film_transparent": bool(render.film_transparent),
                   "light_visible_camera": light_seen,
                   **{f"light_visible_{kind}": v for kind, v in light_rays.items()},
-                  "working_space": _working_space(warnings)})
+                  "working_space": _working_space(warnings),
+                  **_render_region(render), **_view_settings(scene)})
     return out, warnings
+
+
+def _view_settings(scene) -> dict:
+    """Blender's colour management of the scene (Render Properties > Color Management) as
+    metadata: ``stpm render`` writes its PNG through it as Blender writes a PNG (F12 hands Blender
+    linear passes and Blender applies it itself).  No machine-specific path goes in (partials of
+    one frame rendered on different machines must hash alike): the command line finds Blender's
+    OCIO config itself.  Empty if unreadable."""
+    try:
+        import bpy
+        v, d = scene.view_settings, scene.display_settings
+        cs = getattr(bpy.data, "colorspace", None)
+        return {"view_settings": {
+            "display_device": str(d.display_device), "view_transform": str(v.view_transform),
+            "look": str(v.look), "exposure": float(v.exposure), "gamma": float(v.gamma),
+            "use_curve_mapping": bool(v.use_curve_mapping),
+            "working_space": str(getattr(cs, "working_space", "") or "Linear Rec.709")}}
+    except Exception:  # noqa: BLE001 -- a preview's colour management never fails an export
+        return {}
+
+
+def _render_region(render) -> dict:
+    """Blender's Render Region as metadata for the command line (``stpm render`` cuts or blanks
+    the image as Blender writes it; F12 hands Blender the region itself): ``render_region`` =
+    [min_x, max_x, min_y, max_y] (fractions of the frame, y from the bottom) and
+    ``render_region_crop`` (Crop to Render Region).  Empty without a region."""
+    if not getattr(render, "use_border", False):
+        return {}
+    return {"render_region": [float(render.border_min_x), float(render.border_max_x),
+                              float(render.border_min_y), float(render.border_max_y)],
+            "render_region_crop": bool(render.use_crop_to_border)}
+
+
+def _first_nonfinite_frame(matrices: list, times: np.ndarray, shutter, frame: float):
+    """The frame of the first of ``matrices`` (sampled at shutter ``times``) holding a NaN or
+    infinite entry, or None when all are finite."""
+    for u, M in zip(times, matrices):
+        if not np.all(np.isfinite(M)):
+            return float(shutter.to_frame(float(u))) if len(matrices) > 1 else float(frame)
+    return None
 
 
 def _working_space(warnings: list) -> str:
@@ -378,6 +451,14 @@ def _warn_ignored_object_flags(obj, warnings: list) -> None:
         _warn_once(warnings, f"object {obj.name!r}: Ray Visibility > Shadow off is ignored (it casts shadows)")
     if getattr(obj, "is_holdout", False):
         _warn_once(warnings, f"object {obj.name!r}: Holdout is not supported, rendered as a normal object")
+    # Product shots put the object on a Shadow Catcher, and hide helpers from reflections: both were
+    # ignored without a word (artist review 2)
+    if getattr(obj, "is_shadow_catcher", False):
+        _warn_once(warnings, f"object {obj.name!r}: Shadow Catcher is not supported, rendered as a normal object")
+    off = [k.title() for k in ("diffuse", "glossy", "transmission") if not getattr(obj, f"visible_{k}", True)]
+    if off:
+        _warn_once(warnings, f"object {obj.name!r}: Ray Visibility > {' / '.join(off)} off is ignored "
+                             f"(indirect rays see it)")
 
 
 def _warn_holdout_collections(view_layer, warnings: list) -> None:

@@ -45,6 +45,23 @@ def export_camera(cam_obj, times, matrices, warnings: list) -> "scene_model.Came
     )
 
 
+_OPTICS = ("lens", "ortho_scale", "shift_x", "shift_y")
+
+
+def optics(cam_obj) -> tuple:
+    """The camera data values that change the frame's field of view: lens, ortho scale, shifts."""
+    return tuple(float(getattr(cam_obj.data, k)) for k in _OPTICS)
+
+
+def optics_changed(steps: list) -> list:
+    """Names of the :func:`optics` values that differ between motion steps (relative 1e-6)."""
+    if len(steps) < 2:
+        return []
+    a = np.asarray(steps, dtype=np.float64)
+    spread = a.max(axis=0) - a.min(axis=0)
+    return [k for k, d, m in zip(_OPTICS, spread, np.abs(a).max(axis=0)) if d > 1e-6 * max(m, 1e-6)]
+
+
 # Sensor width given to a view's camera: any value works, the lens is derived from it
 _VIEW_SENSOR = 36.0
 

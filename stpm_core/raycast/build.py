@@ -148,7 +148,7 @@ class Caster:
     ``stats``: rays intersected / occlusion-tested and seconds spent.
     """
 
-    def __init__(self, scene, parts, scale: float, backend: str):
+    def __init__(self, scene, parts, scale: float, backend: str, contacts: bool = True):
         self.scene = scene
         self.parts = parts
         self.scale = scale
@@ -164,6 +164,22 @@ class Caster:
         self._is_bounded[self.bounded] = True
         many = len(self.bounded) > PART_BVH_MIN
         self._part_bvh = PairBVH(self._part_lo, self._part_hi, leaf=2) if many else None
+        # Faces of different static objects lying on each other (:mod:`.contact`); None = rule off
+        self.contacts = None
+        if contacts:
+            from .contact import find_contacts
+            first = parts[0] if parts else None
+            kept = getattr(first, "contacts", None) if getattr(first, "reused_now", False) else None
+            if kept is not None:
+                # The persistent static part was reused (same static instances, meshes, matrices):
+                # so are its contacts, which depend on nothing else
+                kept.rebind(scene)
+                self.contacts = kept
+            else:
+                self.contacts = find_contacts(scene)
+                if first is not None and first.bounds is None:
+                    first.contacts = self.contacts
+            self.stats["contact_faces"] = len(self.contacts)
 
     def _bounded_rays(self, o, d, t0, t1, subset=None) -> dict:
         """{part index k: ray indices (ascending) whose segment [t0, t1] meets part k's bounds}.
@@ -208,7 +224,20 @@ class Caster:
         """Nearest hit of each ray at its own time -> :class:`Hits` (see package docstring).
 
         guard: None (every ray ignores hits closer than TMIN_REL * scale) or (n,) distances, each
-        ray's own (capped at that; :func:`~.geometry.ray_guard`)."""
+        ray's own (capped at that; :func:`~.geometry.ray_guard`).  A ray that leaves an object
+        through a face lying on another object's face (a cube resting on a table) hits the other
+        object there (:mod:`.contact`)."""
+        hits = self._nearest(origins, dirs, times, tmax, guard)
+        if self.contacts is not None and len(self.contacts):
+            start = _time.perf_counter()
+            o, d, times, tmax = _as_rays(origins, dirs, times, tmax)
+            self.stats["contact_hits"] = self.stats.get("contact_hits", 0) + \
+                self.contacts.resolve(o, d, times, tmax, hits)
+            self.stats["seconds_intersect"] += _time.perf_counter() - start
+        return hits
+
+    def _nearest(self, origins, dirs, times, tmax=None, guard=None) -> Hits:
+        """:meth:`intersect` without the contact rule: the nearest hit over the parts."""
         start = _time.perf_counter()
         n_tmax = tmax
         o, d, times, tmax = _as_rays(origins, dirs, times, tmax)

@@ -569,4 +569,6 @@ def warm_up() -> float:
     o, d = np.array([[0.2, 0.2, 2.0]]), np.array([[0.0, 0.0, -1.0]])
     caster.intersect(o, d, np.zeros(1))
     caster.occluded(o, d, np.zeros(1), np.full(1, 10.0))
+    from .contact import warm_up as warm_contacts    # surfaces in contact (every backend's caster)
+    warm_contacts()
     return time.perf_counter() - start
