@@ -26,7 +26,7 @@ from . import kernels
 from .bsdf import MaterialTable
 from .errors import RenderCancelled
 from .film import PASSES, PASS_NAMES
-from .integrator import trace_image
+from .integrator import static_view_setup, trace_image
 from .lights import LightSet
 from .photons import build_photon_maps
 from .plan import apply_plan, make_plan
@@ -67,8 +67,11 @@ def _build_maps(scene, settings, caster, lights, *, time_override=None, progress
     """build_photon_maps(...) or None when no photons are asked for."""
     if settings.photons_caustic <= 0 and settings.photons_global <= 0:
         return None
-    return build_photon_maps(scene, settings, caster, lights, time_override=time_override,
+    maps = build_photon_maps(scene, settings, caster, lights, time_override=time_override,
                              progress=progress, cancel=cancel)
+    if static_view_setup(scene, maps) is not None:
+        maps.prepare_standard()      # static views read STANDARD's trees too: built with the maps
+    return maps
 
 
 def _span(progress, a: float, b: float):
