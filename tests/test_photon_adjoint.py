@@ -50,9 +50,10 @@ def _bounce(mat: Material, theta_in: float, n: int, seed: int) -> tuple[np.ndarr
     return out[1][:n_next], out[2][:n_next]
 
 
-def _expected(mat: Material, theta_in: float, n: int, seed: int) -> np.ndarray:
-    """(len(BINS), 3) integral over each bin of f(wo = outgoing, wi = toward the light) cos(outgoing):
-    uniform directions on the upper hemisphere (pdf 1 / 2 pi)."""
+def _expected(mat: Material, theta_in: float, n: int, seed: int) -> tuple:
+    """((len(BINS), 3) integral over each bin of f(wo = outgoing, wi = toward the light) cos(outgoing),
+    the (n, 3) samples f cos / pdf, their (n,) polar angles): n uniform directions on the upper
+    hemisphere (pdf 1 / 2 pi)."""
     table = MaterialTable([mat])
     E, E_avg = kb.ggx_albedo_tables()
     rng = np.random.default_rng(seed)
