@@ -43,15 +43,19 @@ def load(folder: Path) -> tuple[list[dict], np.ndarray, np.ndarray, list[str], n
     return runs, np.asarray(ref, np.float64), index, names, np.load(folder / "caustic_mask.npy")
 
 
-def decompose(runs, ref, index, names, caustic) -> dict:
-    """{region: {pass: {mean, var, bias2}}} (see the module docstring) and the per-pixel images."""
+def decompose(runs, ref, index, names, caustic=None) -> dict:
+    """{region: {pass: {mean, var, bias2}}} (see the module docstring) and the per-pixel images;
+    caustic (H, W) bool or None (no caustic region: ``benchmarks.room_noise``)."""
     n = len(runs)
     lum = lambda a: np.asarray(a[..., :3], np.float64) @ LUMA
     X = {k: np.stack([lum(r[k]) if k in r else np.zeros(ref.shape[:2]) for r in runs]) for k in PASSES}
     X["Combined"] = np.stack([lum(r["Combined"]) for r in runs])
     R = ref @ LUMA
     regs = room.regions(index, names, ref)
-    regs["caustic region"] = caustic
+    if caustic is None:
+        caustic = np.zeros(R.shape, bool)
+    else:
+        regs["caustic region"] = caustic
     regs = {k: (v & ~caustic if k != "caustic region" else v) for k, v in regs.items()}
     regs["all outside"] = ~caustic
     out = {"seeds": n}
@@ -67,9 +71,9 @@ def decompose(runs, ref, index, names, caustic) -> dict:
     return out, X
 
 
-def main(folder: Path) -> None:
-    runs, ref, index, names, caustic = load(folder)
-    out, X = decompose(runs, ref, index, names, caustic)
+def print_table(out: dict) -> None:
+    """The decomposition as a table: per region the mean over the reference's, the shares of the
+    image's one-render variance and squared bias, and each pass's mean luminance and variance share."""
     tot = out["all outside"]["Combined"]
     print(f"{out['seeds']} seeds; outside the caustic: var {tot['var']:.2f}, bias^2 {tot['bias2']:.2f} "
           f"(sums over pixels of luminance^2)")
@@ -83,6 +87,12 @@ def main(folder: Path) -> None:
              f"{100 * c['bias2'] / tot['var']:>8.1f} | ")
         s += "".join(f"{r[k]['abs_mean']:>11.4f}{100 * r[k]['var'] / tot['var']:>6.1f}" for k in PASSES)
         print(s)
+
+
+def main(folder: Path) -> None:
+    runs, ref, index, names, caustic = load(folder)
+    out, X = decompose(runs, ref, index, names, caustic)
+    print_table(out)
     (folder / "noise_decomposition.json").write_text(json.dumps(out, indent=1))
     from stpm_core.imageio import write_png
     mean_rgb = np.mean([np.asarray(r["Combined"][..., :3], np.float64) for r in runs], 0)

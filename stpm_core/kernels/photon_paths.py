@@ -19,12 +19,23 @@ docs/photon-mapping.md ("Tracing") has the equations:
   vertex reading the photon adds one (its own diffuse bounce), so a photon is stored only
   while ``n_diffuse + 1 <= max_diffuse`` and stops once no later vertex could be stored;
 * **scatter**: global photons: (wi, weight, lobe) = ``bsdf_sample_lobe`` at the hit, with
-  weight = f |cos| / pdf (n, 3) or a delta lobe's throughput; caustic photons:
+  weight = f |cos| / pdf (n, 3) or a delta lobe's throughput, where a photon reflected off a
+  non-delta lobe carries the adjoint BSDF, f(wo = wi, wi = wo) (:func:`adjoint_weight`);
+  caustic photons:
   ``bsdf_sample_path`` (they stop where the DIFFUSE lobe is chosen, and a rough lobe's
   weight counts the non-diffuse lobes alone);
 * **Russian roulette by albedo**: the photon survives with
   q = min(1, max_c weight_c) and its power becomes Phi weight / q, so stored
   powers stay even; caustic paths go on only through delta and glossy lobes;
+* **adjoint BSDF**: the camera side evaluates f(wo, wi) with wo toward the viewer, and Cycles'
+  closures are not reciprocal: a coated base's diffuse lobe is scaled by 1 - (the coat's albedo
+  at wo), a rough coat or metal by energy compensation at wo, a bump-mapped lobe by a shadowing
+  term at wi.  A photon arriving along wo (toward the light) and leaving along wi goes the other
+  way, so it must carry f(wi, wo) |cos wi| / pdf(wi | wo) (Veach 1997, section 3.7).  Taking
+  f(wo, wi) instead gave a coated floor's diffuse light the coat's loss at the *light's* angle,
+  not at the receiver's: on the textured room, whose sun strikes a Principled floor at 55 degrees
+  and whose walls see that floor at grazing angles, the walls' Indirect read up to 10 % bright
+  (docs/blender.md, the room section).  Refraction keeps f(wo, wi) and the eta^2 below;
 * **refraction**: a photon crossing a dielectric interface (wi and wo on opposite sides of ng
   through a closure with a glass lobe) has its power scaled by (n_i / n_t)^2 = 1 / eta^2
   (eta = ior entering, 1 / ior leaving, the closures' convention).  The camera side, as Cycles,
@@ -38,13 +49,44 @@ docs/photon-mapping.md ("Tracing") has the equations:
 from __future__ import annotations
 
 from ..numba_probe import njit
-from .bsdf import COAT, DIFFUSE, PATH_STOP, bsdf_sample_lobe, bsdf_sample_path
+from .bsdf import (COAT, DIFFUSE, GLASS_R, GLASS_T, METAL, PATH_STOP, bsdf_eval_pdf, bsdf_sample_lobe,
+                   bsdf_sample_path, needs_bsdf_call)
 from .closure import C_IOR, C_NONDELTA, C_ROUGHNESS, C_W_GLASS
 from .sampling import offset_origin
 
-__all__ = ["photon_bounce"]
+__all__ = ["photon_bounce", "adjoint_weight"]
 
 _JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+
+
+@njit(**_JIT)
+def adjoint_weight(C, cr, E, E_avg, wo, wi, ns, ng, lobe, w0, w1, w2):
+    """(w0, w1, w2): the weight of a photon that arrived along wo (unit, toward the light) and
+    leaves along wi, drawn by ``bsdf_sample_lobe`` (which returned lobe and the weight w =
+    f(wo, wi) |ns . wi| / pdf(wi | wo)), with the adjoint BSDF: f(wi, wo) |ns . wi| / pdf(wi | wo)
+    (module docstring, "adjoint BSDF").
+
+    Only where the two differ: a non-delta reflection (wi on wo's side of ng) off a closure that is
+    not a bare diffuse lobe (``needs_bsdf_call``: a coat, a rough lobe or a replaced normal).  Delta
+    lobes (mirror angles, so the same Fresnel both ways), refractions (their eta^2 is
+    ``photon_bounce``'s) and bare diffuse lobes keep w."""
+    if lobe < 0 or not needs_bsdf_call(C, cr):
+        return w0, w1, w2
+    rough = C[cr, C_ROUGHNESS] > 0.0
+    if (lobe == COAT or lobe == METAL or lobe == GLASS_R) and not rough:
+        return w0, w1, w2                                # a delta reflection
+    if lobe == GLASS_T:
+        return w0, w1, w2                                # a refraction (delta or rough)
+    go = wo[0] * ng[0] + wo[1] * ng[1] + wo[2] * ng[2]
+    gi = wi[0] * ng[0] + wi[1] * ng[1] + wi[2] * ng[2]
+    if not go * gi > 0.0:
+        return w0, w1, w2                                # (a weight of 0 below the face stays 0)
+    _, _, _, pdf = bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, ng)
+    if not pdf > 0.0:
+        return 0.0, 0.0, 0.0
+    f0, f1, f2, _ = bsdf_eval_pdf(C, cr, E, E_avg, wi, wo, ns, ng)
+    r = abs(wi[0] * ns[0] + wi[1] * ns[1] + wi[2] * ns[2]) / pdf
+    return f0 * r, f1 * r, f2 * r
 
 
 @njit(**_JIT)
@@ -102,6 +144,8 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
             diffuse_lobe = False                         # (the DIFFUSE lobe stops a caustic path)
         else:
             wi0, wi1, wi2, w0, w1, w2, lobe = bsdf_sample_lobe(C, j, E, E_avg, wo, ns, g, U[j, 0], U[j, 1], U[j, 2])
+            # the photon carries the adjoint BSDF f(wi, wo) (module docstring)
+            w0, w1, w2 = adjoint_weight(C, j, E, E_avg, wo, (wi0, wi1, wi2), ns, g, lobe, w0, w1, w2)
             diffuse_lobe = lobe == DIFFUSE
             diffuse_bounce = diffuse_lobe or (lobe == COAT and C[j, C_ROUGHNESS] > 0.0)
             spec_bounce = not diffuse_bounce

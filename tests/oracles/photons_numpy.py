@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from oracles.bsdf_numpy import COAT, DIFFUSE, bsdf_sample_lobe, bsdf_sample_path, has_nondelta
+from oracles.bsdf_numpy import (COAT, DIFFUSE, GLASS_T, bsdf_eval, bsdf_pdf, bsdf_sample_lobe, bsdf_sample_path,
+                                 has_nondelta)
 from stpm_core.photons.record import PHOTON_DTYPE, make_records
 from stpm_core.raycast.geometry import GUARD_FRACTION, offset_lengths
 
@@ -91,6 +92,18 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         else:
             wi, weight, is_delta, lobe = bsdf_sample_lobe(table, mat, wo, ns, ng, u)
             rough = table.roughness[np.where(mat < 0, table.size, mat)] > 0
+            # The adjoint BSDF f(wi, wo) |ns . wi| / pdf(wi | wo) for a non-delta reflection off a
+            # closure that is not a bare diffuse lobe (kernels.photon_paths.adjoint_weight)
+            mi = np.where(mat < 0, table.size, mat)
+            adj = np.nonzero((lobe >= 0) & ~is_delta & (lobe != GLASS_T) & (table.rough_lobe[mi] | table.coat[mi])
+                             & (np.sum(wo * ng, axis=1) * np.sum(wi * ng, axis=1) > 0.0))[0]
+            if adj.size:
+                a = (mat[adj], wo[adj], wi[adj], ns[adj], ng[adj])
+                pdf = bsdf_pdf(table, a[0], a[1], a[2], a[3], a[4])
+                f = bsdf_eval(table, a[0], a[2], a[1], a[3], a[4])
+                r = np.abs(np.sum(a[2] * a[3], axis=1)) / np.where(pdf > 0, pdf, 1.0)
+                weight = weight.copy()
+                weight[adj] = np.where((pdf > 0)[:, None], f * r[:, None], 0.0)
             spec_b = ~((lobe == DIFFUSE) | ((lobe == COAT) & rough))
             diffuse_lobe = lobe == DIFFUSE
         # -- Possibly terminate the path with Russian roulette (by albedo) -------------------
