@@ -211,7 +211,7 @@ def camera_rays(px, py, W, H, half_w, half_h, cx, cy, R, pos, ortho, clip_start,
     R (k, 3, 3) unit-column rotations and pos (k, 3) camera positions, k = 1
     (static camera) or n (one pose per sample).  The tracer's only camera-ray
     code (``camera.generate_rays`` calls it too); the numpy oracle is
-    ``tests/oracles/integrator_numpy.generate_rays``.
+    ``tests/oracles/integrator_numpy.generate_rays`` (pinhole only).
 
     Thin lens (depth of field) when aperture > 0: lens_uv (n, 2) uniforms (:func:`lens_tile`) are
     mapped to the aperture (:func:`aperture_point`) of radius ``aperture`` in the camera's XY plane;
