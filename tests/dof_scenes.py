@@ -4,7 +4,8 @@
 across the frame, so blur grows from the focus row to both ends) and three small emissive spheres
 far behind it (depth 9) on a black world, seen by a 200 mm camera (a long lens makes the blur
 several pixels wide at 64 x 48: blur radius in pixels = A |1/z - 1/z_f| lens / sensor * 64).  Emission only: no lights, so the only noise is the camera's (film and lens).
-``CASES`` names the f-stop, focus and aperture shape.
+``CASES`` names the f-stop, focus and aperture shape (and ``ortho_scale`` for an orthographic
+camera).
 """
 from __future__ import annotations
 
@@ -20,6 +21,9 @@ CASES = {
     "f4_round": dict(aperture_fstop=4.0, focus_distance=1.6),
     "f2_5blades_ratio": dict(aperture_fstop=2.0, focus_distance=1.4, aperture_blades=5,
                              aperture_rotation=math.radians(25), aperture_ratio=1.5),
+    # orthographic (ortho_scale 1.2): Cycles' radius 1 / (2 fstop) = 0.125 scene units
+    "ortho_f4_5blades": dict(aperture_fstop=4.0, focus_distance=1.6, aperture_blades=5, aperture_rotation=0.3,
+                             ortho_scale=1.2),
 }
 
 
@@ -56,7 +60,10 @@ def build(case: str, resolution=(64, 48)):
     cam.data.clip_start, cam.data.clip_end = 0.05, 100.0
     cam.data.dof.use_dof = True
     for k, v in CASES[case].items():
-        setattr(cam.data.dof, k, v)
+        if k == "ortho_scale":
+            cam.data.type, cam.data.ortho_scale = "ORTHO", v
+        else:
+            setattr(cam.data.dof, k, v)
     # The checker strip tilted 12 degrees off the view axis: depth 1.12 (below the frame) to 1.86 (its
     # far edge, above the frame's centre); black world above it
     plane = add_mesh("plane", "Checker", size=1.0, location=(0.0, -1.5065, -0.0226),

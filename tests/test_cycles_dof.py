@@ -2,10 +2,12 @@
 
 ``dof_scenes``: an emissive checker strip inclined to a 200 mm camera (depth 1.2 to 1.9) and small
 emissive spheres far behind it (depth 9, bokeh 5 to 13 px wide), at f/1.4 and f/4 with a round
-aperture and at f/2 with 5 blades rotated 25 degrees and an anamorphic ratio of 1.5.  Emission
+aperture, at f/2 with 5 blades rotated 25 degrees and an anamorphic ratio of 1.5, and an
+orthographic camera at f/4 with 5 blades.  Emission
 only, so the image is the camera's sampling alone.  Each block's mean must agree within noise
 (``cycles_ref.block_ztest``).  On main (depth of field ignored: a pinhole, with a warning) the
-blurred strip and the bokeh fail it: block |z| max 94, 71 and 40 for f/1.4, f/4 and f/2 (2026-12-07).
+blurred strip and the bokeh fail it: block |z| max 94, 71, 40 and 74 for f/1.4, f/4, f/2 and the
+orthographic case (2026-12-07).
 """
 from __future__ import annotations
 
