@@ -17,12 +17,15 @@ Conventions (docs/camera.md has the derivation and a picture):
   image plane (square pixels).
 * Shift: ``shift_x`` / ``shift_y`` move the frame by that fraction of the
   fitted size F (Blender: shift 1.0 moves by one full fitted width).
+* Depth of field: a thin lens of radius ``aperture_radius`` (scene units) in the camera's XY
+  plane, focused at ``focus_distance`` along the view axis; round, or a regular polygon of
+  ``aperture_blades`` sides (``kernels.paths.aperture_point``).  0 = a pinhole.
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["generate_rays", "view_axis", "camera_to_world", "image_plane"]
+__all__ = ["generate_rays", "view_axis", "camera_to_world", "image_plane", "lens_args"]
 
 
 def camera_to_world(camera, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -77,7 +80,19 @@ def image_plane(camera, resolution) -> tuple[float, float, float, float]:
     return half_w, half_h, camera.shift_x * F, camera.shift_y * F
 
 
-def generate_rays(camera, resolution, px: np.ndarray, py: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lens_args(camera) -> tuple[float, float, int, float, float]:
+    """The thin lens as ``kernels.paths.camera_rays`` takes it: (aperture radius, focus distance,
+    blades, rotation, ratio); radius 0 for an orthographic or perspective pinhole."""
+    return (float(getattr(camera, "aperture_radius", 0.0)), float(getattr(camera, "focus_distance", 10.0)),
+            int(getattr(camera, "aperture_blades", 0)), float(getattr(camera, "aperture_rotation", 0.0)),
+            float(getattr(camera, "aperture_ratio", 1.0)))
+
+
+_NO_LENS = np.zeros((0, 2))
+
+
+def generate_rays(camera, resolution, px: np.ndarray, py: np.ndarray, times: np.ndarray,
+                  lens_uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Primary rays through continuous pixel positions at their own times (``kernels.paths.camera_rays``,
     the tracer's own kernel).
 
@@ -87,11 +102,13 @@ def generate_rays(camera, resolution, px: np.ndarray, py: np.ndarray, times: np.
     resolution : (W, H) pixels.
     px, py : (n,) float pixel coordinates (px left -> right, py top -> bottom).
     times : (n,) normalised shutter times.
+    lens_uv : (n, 2) uniforms in [0, 1)^2 placing each ray on the camera's thin lens
+        (``camera.aperture_radius > 0``); None: every ray through the lens centre (the pinhole).
 
     Returns
     -------
-    origins : (n, 3) world positions (PERSP: the camera position; ORTHO: on the
-        plane at ``clip_start`` in front of the camera).
+    origins : (n, 3) world positions (PERSP: the camera position, or the lens point; ORTHO: on
+        the plane at ``clip_start`` in front of the camera).
     dirs : (n, 3) unit world directions.
     """
     from .kernels import kernel_array
@@ -105,10 +122,15 @@ def generate_rays(camera, resolution, px: np.ndarray, py: np.ndarray, times: np.
     static = camera.transform.is_static
     R, pos = camera_to_world(camera, times[:1] if static else times)
     n = px.shape[0]
+    aperture, focus, blades, rotation, ratio = lens_args(camera)
+    if lens_uv is None or aperture <= 0.0:
+        aperture, uv = 0.0, _NO_LENS
+    else:
+        uv = np.ascontiguousarray(np.broadcast_to(np.asarray(lens_uv, np.float64), (n, 2)))
     o, d, tmax0 = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
     camera_rays(kernel_array(px), kernel_array(py), W, H, float(half_w), float(half_h), float(cx), float(cy),
                 kernel_array(R), kernel_array(pos), camera.type == "ORTHO", float(camera.clip_start),
-                float(camera.clip_end), o, d, tmax0)
+                float(camera.clip_end), kernel_array(uv), aperture, focus, blades, rotation, ratio, o, d, tmax0)
     return o, d
 
 

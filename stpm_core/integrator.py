@@ -38,7 +38,7 @@ import numpy as np
 
 from . import kernels as _kernels
 from .kernels import kernel_array
-from .camera import camera_to_world, image_plane
+from .camera import camera_to_world, image_plane, lens_args
 from .film import BH_INVERSE_CDF, DENOISING_GUIDES, DEPTH_BACKGROUND, PASSES, Film
 from .kernels import gather as _G
 from .kernels import paths as _K
@@ -1160,10 +1160,15 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
                                   columns=np.flatnonzero(keep)), tstats
 
 
+_NO_LENS = np.zeros((0, 2))            # camera_rays' lens uniforms for a pinhole
+
+
 def _shade_samples(ctx, cam, resolution, px, py, times, S, rng, tstats):
     """Camera rays through film positions px, py (n,) at times (n,), shaded: (V, chan, keep).
 
-    The samples are laid out as pixels of S consecutive samples.  V (n, m) float64 (a reused
+    The samples are laid out as pixels of S consecutive samples.  A camera with a thin lens
+    (``aperture_radius > 0``) first draws its lens uniforms from rng, keys (n / S, S) then jitters
+    (n / S, S, 2), placed per pixel by ``kernels.paths.lens_tile``.  V (n, m) float64 (a reused
     buffer: valid until this thread's next call) holds the layout's columns (``ctx.layout``),
     chan (m,) each column's image channel, keep (m,) bool the columns some sample reached.
     """
@@ -1172,9 +1177,19 @@ def _shade_samples(ctx, cam, resolution, px, py, times, S, rng, tstats):
     R = kernel_array(R[:1] if cam.transform.is_static else R)
     pos = kernel_array(pos[:1] if cam.transform.is_static else pos)
     half_w, half_h, cx, cy = image_plane(cam, resolution)
+    # The thin lens: per-pixel stratified lens uniforms, drawn only for a camera with an aperture
+    aperture, focus, blades, rotation, ratio = lens_args(cam)
+    if aperture > 0.0:
+        keys = rng.random(out=_scratch("lens_keys", (n // S, S)))
+        jit = rng.random(out=_scratch("lens_jit", (n // S, S, 2)))
+        lens_uv = _scratch("lens_uv", (n, 2))
+        _K.lens_tile(S, keys, jit, lens_uv)
+    else:
+        lens_uv = _NO_LENS
     o, d, tmax0 = _scratch("o", (n, 3)), _scratch("d", (n, 3)), _scratch("tmax0", (n,))
     _K.camera_rays(px, py, int(resolution[0]), int(resolution[1]), float(half_w), float(half_h), float(cx),
-                   float(cy), R, pos, cam.type == "ORTHO", float(cam.clip_start), float(cam.clip_end), o, d, tmax0)
+                   float(cy), R, pos, cam.type == "ORTHO", float(cam.clip_start), float(cam.clip_end),
+                   lens_uv, aperture, focus, blades, rotation, ratio, o, d, tmax0)
     axis = np.ascontiguousarray(-R[:, :, 2])
     touched: set = set()
     layout = ctx.layout

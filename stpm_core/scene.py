@@ -35,11 +35,13 @@ __all__ = [
     "validate_scene", "scene_warnings", "SCENE_FORMAT_VERSION", "MAX_EMISSION", "check_tiles",
 ]
 
-SCENE_FORMAT_VERSION = 4          # 2 (2026-12-01): material graphs, textures, UV maps, tangents
+SCENE_FORMAT_VERSION = 5          # 2 (2026-12-01): material graphs, textures, UV maps, tangents
                                   # 3 (2026-12-07): UDIM tile tables, metadata.working_space (written
                                   # only by files that use them: others stay 2)
                                   # 4 (2026-12-06): per-step normals (K, F, 3, 3) of deforming meshes
                                   # (written only by files that have them)
+                                  # 5 (2026-12-07): the camera's thin lens, aperture_radius > 0 (depth
+                                  # of field; written only by such files)
 
 #: Largest emission :func:`validate_scene` accepts (docs/scene-format.md, "Limits"):
 #: light ``power * max(color)`` (W, or W/m^2 for a sun), material ``emission``
@@ -228,6 +230,15 @@ class Camera:
     ortho_scale : width of the view in scene units along the fitted axis (ortho).
     shift_x, shift_y : lens shift in units of the fitted sensor size.
     clip_start, clip_end : scene units along the view axis.
+    aperture_radius : thin-lens radius in scene units; 0 = a pinhole (no depth of field).  Blender:
+        ``lens / (2 aperture_fstop)`` with the lens in mm converted to m (PERSP), ``1 / (2 fstop)``
+        (ORTHO), as Cycles (docs/camera.md, "Depth of field").
+    focus_distance : scene units from the lens to the plane in sharp focus, along the view axis
+        (a focus object's distance is projected on it by the exporter).  Used when
+        ``aperture_radius > 0``.
+    aperture_blades : 0 (or 1, 2) = a round aperture; n >= 3 = a regular n-gon (polygonal bokeh).
+    aperture_rotation : radians, the polygon's rotation in the lens plane.
+    aperture_ratio : anamorphic bokeh: the lens's x extent is divided by it (> 0; 1 = round).
     """
 
     type: Literal["PERSP", "ORTHO"] = "PERSP"
@@ -241,6 +252,11 @@ class Camera:
     shift_y: float = 0.0
     clip_start: float = 0.1
     clip_end: float = 1000.0
+    aperture_radius: float = 0.0
+    focus_distance: float = 10.0
+    aperture_blades: int = 0
+    aperture_rotation: float = 0.0
+    aperture_ratio: float = 1.0
 
 
 @dataclass
@@ -560,6 +576,23 @@ def _axis_lengths(M: np.ndarray) -> np.ndarray:
     return big * np.sqrt(np.sum((A / big[:, None, :]) ** 2, axis=1))
 
 
+def _check_camera_lens(c: Camera) -> None:
+    """The thin lens (depth of field): radius >= 0, and with a lens a positive focus distance,
+    blades an integer in [0, 64], a finite rotation and a positive ratio."""
+    def number(name, ok, want):
+        v = getattr(c, name, None)
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not ok(float(v)):
+            raise SceneError(f"camera.{name} must be {want}, got {v!r:.40}")
+    number("aperture_radius", lambda v: 0.0 <= v < 1e6, "a number in [0, 1e6) (scene units; 0 = pinhole)")
+    if float(c.aperture_radius) > 0.0:
+        number("focus_distance", lambda v: 0.0 < v < 1e9, "a positive finite distance (scene units)")
+    b = c.aperture_blades
+    if isinstance(b, bool) or not isinstance(b, (int, np.integer)) or not 0 <= int(b) <= 64:
+        raise SceneError(f"camera.aperture_blades must be an integer in [0, 64] (0: round), got {b!r:.40}")
+    number("aperture_rotation", lambda v: abs(v) < 1e6, "a finite angle in radians")
+    number("aperture_ratio", lambda v: 1e-3 <= v <= 1e3, "a number in [0.001, 1000] (1 = round bokeh)")
+
+
 def _check_camera_transform(c: Camera) -> None:
     """A camera whose axes cannot form rays (zero scale, collapsed axes) is an error.
 
@@ -849,6 +882,7 @@ def validate_scene(scene: Scene) -> None:
         _check_range(f"camera.{name}", getattr(c, name), -1e6, 1e6)
     if not np.isfinite(c.clip_end) or c.clip_end <= c.clip_start:
         raise SceneError(f"camera.clip_end must be finite and > clip_start, got {c.clip_end}")
+    _check_camera_lens(c)
     _check_camera_transform(c)
     for li, l in enumerate(scene.lights):
         p = f"lights[{li}] ({l.name!r})"

@@ -32,7 +32,9 @@ in its node's ``props["tiles"]`` ([tile, texture index] pairs, one texture per t
 ``metadata.working_space`` names the scene's working colour space; a file using either is
 written as version 3 (:func:`_version_needed`), every other one as version 2.  A deforming
 mesh's ``normals`` may be (K, F, 3, 3), one (F, 3, 3) set per vertex step; a file with such
-normals is written as version 4.
+normals is written as version 4; a camera with a thin lens (``aperture_radius > 0``) writes the
+lens fields (``aperture_radius``, ``focus_distance``, ``aperture_blades``, ``aperture_rotation``,
+``aperture_ratio``) into its header entry and is written as version 5.
 
 Loading
 -------
@@ -80,6 +82,9 @@ _CAMERA_FIELDS = {
     "sensor_fit": ("AUTO", "HORIZONTAL", "VERTICAL"), "ortho_scale": "num",
     "shift_x": "num", "shift_y": "num", "clip_start": "num", "clip_end": "num",
 }
+# The thin lens (depth of field): written only when camera.aperture_radius > 0 (format version 5)
+_LENS_FIELDS = {"aperture_radius": "num", "focus_distance": "num", "aperture_blades": "int",
+                "aperture_rotation": "num", "aperture_ratio": "num"}
 _LIGHT_FIELDS = {
     "name": "str", "type": ("POINT", "SPOT", "AREA", "SUN"), "color": "vec3", "power": "num",
     "radius": "num", "use_soft_falloff": "bool", "spot_size": "num", "spot_blend": "num",
@@ -223,7 +228,7 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
         "resolution": [int(scene.resolution[0]), int(scene.resolution[1])],
         "shutter": {"open": float(scene.shutter.open), "close": float(scene.shutter.close),
                     "has_curve": scene.shutter.curve is not None},
-        "camera": _fields_to_json(scene.camera, _CAMERA_FIELDS),
+        "camera": _camera_to_json(scene.camera),
         "world": _world_to_json(arrays, scene.world),
         "materials": materials,
         "lights": lights,
@@ -240,14 +245,25 @@ def scene_to_arrays(scene: Scene, settings: RenderSettings | None = None) -> tup
     return header, arrays
 
 
+def _camera_to_json(cam: Camera) -> dict:
+    """The camera's header entry; the lens fields only for a thin lens (aperture_radius > 0)."""
+    d = _fields_to_json(cam, _CAMERA_FIELDS)
+    if float(cam.aperture_radius) > 0.0:
+        d.update(_fields_to_json(cam, _LENS_FIELDS))
+    return d
+
+
 def _version_needed(scene: Scene, materials: list) -> int:
-    """The lowest format version that reads this scene as written: 4 when a deforming mesh has
+    """The lowest format version that reads this scene as written: 5 when the camera has a thin
+    lens (a version-4 reader would ignore it and render a pinhole: it must refuse instead); 4 when a deforming mesh has
     normals per vertex step (K, F, 3, 3); else 3 when it uses UDIM tile tables or a working space
     other than Linear Rec.709 (a version-2 reader would render the first tile only, or the colours
     unconverted: it must refuse the file instead); else 2."""
     udim = any("tiles" in n.get("props", {}) for m in materials for n in m.get("graph", {}).get("nodes", {}).values())
     working = str(scene.metadata.get("working_space", "REC709")).upper() != "REC709"
     keyed = any(m.normals is not None and np.ndim(m.normals) == 4 for m in scene.meshes)
+    if float(scene.camera.aperture_radius) > 0.0:
+        return 5
     return 4 if keyed else 3 if udim or working else 2
 
 
@@ -894,7 +910,9 @@ def _build_scene(h: _Fields, arr: _Arrays) -> Scene:
                                   **terminator))
 
     # Camera, lights, world
-    cam = Camera(**h.sub("camera").read(_CAMERA_FIELDS),
+    fc = h.sub("camera")
+    lens = fc.read(_LENS_FIELDS) if "aperture_radius" in fc.d else {}      # optional (version 5)
+    cam = Camera(**fc.read(_CAMERA_FIELDS), **lens,
                  transform=arr.transform("camera/transform", "camera.transform"))
     lights = []
     for i, d in enumerate(h.list("lights")):

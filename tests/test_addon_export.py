@@ -393,7 +393,7 @@ def test_text_and_curve_objects_become_meshes():
     assert all(out.meshes[i.mesh].triangles.shape[0] > 10 for i in out.instances)
 
 
-def test_moving_light_and_depth_of_field_warning():
+def test_moving_light_and_depth_of_field_without_warning():
     scene = fresh()
     cam = add_camera()
     cam.data.dof.use_dof = True
@@ -408,4 +408,5 @@ def test_moving_light_and_depth_of_field_warning():
     scene.frame_set(1)
     out, warnings = export_now()
     np.testing.assert_allclose(out.lights[0].transform.matrices[:, 2, 3], [3.0, 3.5, 4.0], atol=1e-5)
-    assert out.has_motion and any("depth of field" in w for w in warnings)
+    # depth of field is exported now (tests/test_addon_dof.py): no "not supported" warning
+    assert out.has_motion and not any("depth of field" in w for w in warnings) and out.camera.aperture_radius > 0

@@ -11,6 +11,7 @@ that already had one.
 """
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import pkgutil
 
@@ -76,7 +77,8 @@ def _new_scenes():
                     transform=moving((0, 0, 2.5), (0.2, 0, 2.6))),
               point_light((-1.0, 1.0, 2.0), 250.0, radius=0.1)]
     cam = persp_camera((0.3, -5.0, 3.0), (0, 0, 0.3), lens=28.0)
-    yield make_scene(objs, mats, cam, lights, world=(0.02, 0.02, 0.03), resolution=(19, 11),
+    lens = dataclasses.replace(cam, aperture_radius=0.05, focus_distance=5.0, aperture_blades=6)   # depth of field
+    yield make_scene(objs, mats, lens, lights, world=(0.02, 0.02, 0.03), resolution=(19, 11),
                      shutter=Shutter(3.0, 3.25)), RenderSettings(samples=1, photons_caustic=3000, photons_global=2000,
                                                                  k_nearest=8, seed=99, threads=2, estimator="KD4D",
                                                                  final_gather_samples=3)

@@ -788,10 +788,11 @@ def test_fuzz_arrays(tmp_path, data):
 def test_format_constants():
     """A file says the lowest version that reads it as written: 2 unless it uses UDIM tiles or a
     working space other than Rec.709 (3, which a version-2 reader refuses rather than misread), or
-    per-step normals of a deforming mesh (4: tests/test_deforming_normals.py)."""
+    per-step normals of a deforming mesh (4: tests/test_deforming_normals.py), or a camera with a thin
+    lens (5: tests/test_depth_of_field.py)."""
     header, _ = _parts()
     assert header["format"] == FORMAT_NAME == "stpm-scene"
-    assert header["version"] == 2 and SCENE_FORMAT_VERSION == 4
+    assert header["version"] == 2 and SCENE_FORMAT_VERSION == 5
     scene = rich_scene()
     scene.metadata["working_space"] = "ACESCG"
     assert scene_to_arrays(scene)[0]["version"] == 3

@@ -259,6 +259,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
     samples = {k: [r.matrix] for k, r in records.items()}
     cam_optics: list = []            # the camera's lens, ortho scale and shifts per step
     shapes: dict = {}
+    focus_steps: list = []           # the camera's focus distance per step (depth of field)
     step_normals: dict = {}          # key -> [(triangles, normals)] per step of smooth deforming meshes
     if not shutter.is_instant:
         times = motion.step_times(steps)
@@ -288,6 +289,8 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                     samples[("", cam_name, ())].append(np.array(cam_eval.matrix_world, dtype=np.float64))
                 if cam_obj is not None:
                     cam_optics.append(camera_export.optics(cam_obj.evaluated_get(depsgraph)))
+                if cam_obj is not None and cam_obj.data.dof.use_dof:     # the focus per step: warned if it moves
+                    focus_steps.append(camera_export.focus_distance(cam_obj.evaluated_get(depsgraph)))
         finally:
             frame_set(frame_now, sub_now)
         changed = camera_export.optics_changed(cam_optics)
@@ -342,7 +345,8 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                 for kind in light_rays:
                     light_rays[kind].append(bool(getattr(obj, f"visible_{kind}", True)))
         elif r.kind == "CAMERA" and cam is None and cam_obj is not None:
-            cam = camera_export.export_camera(cam_obj.evaluated_get(depsgraph), t, samples[key], warnings)
+            cam = camera_export.export_camera(cam_obj.evaluated_get(depsgraph), t, samples[key], warnings,
+                                              focus_steps=focus_steps)
     if cam is None:          # camera=False: the caller brings its own
         cam = scene_model.Camera()
     if cache is not None and cache.world is not None:

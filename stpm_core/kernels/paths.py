@@ -8,7 +8,9 @@ equations with these names):
 
 * :func:`camera_tile` -- stratified film positions (placed by the pixel
   filter's inverse CDF) and permuted stratified shutter numbers of one tile;
-* :func:`camera_rays` -- pinhole / ortho rays, camera clipping ``tmax0``;
+* :func:`lens_tile` -- stratified lens uniforms (depth of field only);
+* :func:`camera_rays` -- pinhole / thin-lens / ortho rays (:func:`aperture_point`), camera
+  clipping ``tmax0``;
 * the closure of every hit comes first, from :func:`stpm_core.kernels.svm.shade_rows`:
   hit r's closure is row ``crow[r]`` of ``C`` (the material table itself when no material has a
   node program, else one row per hit filled by the interpreter); nothing after it depends on
@@ -54,7 +56,7 @@ from .closure import (C_BASE, C_EMISSIVE, C_EMIT, C_HAS_DELTA, C_NONDELTA, C_ROU
 from .lights import light_pdf, mesh_light_pdf, sample_light_rows, seen_light, world_nee_pdf
 from .sampling import dot, load_pose, offset_origin, pose_buffer, row3
 
-__all__ = ["camera_tile", "camera_rays", "classify_hits", "denoising_rows", "denoising_seen_add", "light_strata",
+__all__ = ["camera_tile", "lens_tile", "aperture_point", "camera_rays", "classify_hits", "denoising_rows", "denoising_seen_add", "light_strata",
            "nee_light",
            "offset_rows", "terminator_rows", "smooth_surface_heights", "nee_accumulate",
            "seen_lights_add", "photon_albedo", "photon_add", "specular_step", "scatter_add", "active_channels",
@@ -127,36 +129,137 @@ def camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, radius, table
 
 
 @njit(**_JIT)
-def camera_rays(px, py, W, H, half_w, half_h, cx, cy, R, pos, ortho, clip_start, clip_end, o, d, tmax0):
+def lens_tile(S, keys, jit, uv):
+    """Lens uniforms uv (P*S, 2) in [0, 1)^2 of P pixels of S samples each, stratified per pixel.
+
+    keys (P, S), jit (P, S, 2): the uniforms ``integrator._shade_samples`` draws.  The lens square
+    has the rows x cols grid of :func:`camera_tile` (m = rows cols <= S cells); sample j of pixel p
+    takes cell pi_p(j), pi_p = argsort(keys[p]) (a permutation per pixel, so the lens cell is
+    independent of the film cell j and of the time stratum), jittered by jit[p, j]; samples with
+    pi_p(j) >= m (the leftovers) are uniform.  Each pixel's S samples thus put one sample in every
+    lens cell.
+    """
+    P = keys.shape[0]
+    rows = max(1, int(math.floor(math.sqrt(S))))
+    cols = max(1, S // rows)
+    m = rows * cols
+    order = np.empty(S, np.int64)
+    for p in range(P):
+        # argsort of keys[p] (insertion sort: S is small; random keys have no ties)
+        for j in range(S):
+            order[j] = j
+        for j in range(1, S):
+            k = order[j]
+            key = keys[p, k]
+            i = j - 1
+            while i >= 0 and keys[p, order[i]] > key:
+                order[i + 1] = order[i]
+                i -= 1
+            order[i + 1] = k
+        for j in range(S):
+            c = order[j]
+            r = p * S + j
+            if c < m:
+                uv[r, 0] = (c % cols + jit[p, j, 0]) / cols
+                uv[r, 1] = (c // cols + jit[p, j, 1]) / rows
+            else:
+                uv[r, 0] = jit[p, j, 0]
+                uv[r, 1] = jit[p, j, 1]
+
+
+@njit(**_JIT)
+def aperture_point(u, v, blades, rotation, ratio):
+    """Point (x, y) of the unit aperture for uniforms (u, v) in [0, 1)^2, uniform in its area.
+
+    blades < 3: the unit disc by the concentric (Shirley-Chiu) map, which keeps the square's
+    strata compact.  blades = n >= 3: the regular n-gon of circumradius 1 whose edge midpoints lie
+    at angles rotation + 2 pi k / n (corners half-way between): u picks the triangle (centre, two
+    corners) k = floor(n u) and, rescaled, with v places a uniform point in it.  Then x /= ratio
+    (anamorphic bokeh).  Camera-space axes: x right, y up.
+    """
+    if blades < 3:
+        a = 2.0 * u - 1.0
+        b = 2.0 * v - 1.0
+        if a == 0.0 and b == 0.0:
+            return 0.0, 0.0
+        if a * a > b * b:
+            rad, phi = a, 0.25 * math.pi * (b / a)
+        else:
+            rad, phi = b, 0.5 * math.pi - 0.25 * math.pi * (a / b)
+        x, y = rad * math.cos(phi), rad * math.sin(phi)
+    else:
+        n = float(blades)
+        k = math.floor(u * n)
+        u1 = min(u * n - k, 1.0)
+        half = math.pi / n                           # half the angle a blade's edge subtends
+        # Uniform point s (c0 A + c1 B) of the triangle (0, A, B), A, B = the edge's corners at +-half
+        s = math.sqrt(u1)
+        c0, c1 = s * (1.0 - v), s * v
+        px = (c0 + c1) * math.cos(half)
+        py = (c0 - c1) * math.sin(half)
+        ang = rotation + 2.0 * half * k              # the triangle's own rotation
+        ca, sa = math.cos(ang), math.sin(ang)
+        x, y = ca * px - sa * py, sa * px + ca * py
+    return x / ratio, y
+
+
+@njit(**_JIT)
+def camera_rays(px, py, W, H, half_w, half_h, cx, cy, R, pos, ortho, clip_start, clip_end, lens_uv, aperture,
+                focus, blades, rotation, ratio, o, d, tmax0):
     """Rays o, d (n, 3) and clipping distances tmax0 (n,) through film positions px, py (n,).
 
     R (k, 3, 3) unit-column rotations and pos (k, 3) camera positions, k = 1
     (static camera) or n (one pose per sample).  The tracer's only camera-ray
     code (``camera.generate_rays`` calls it too); the numpy oracle is
-    ``tests/oracles/integrator_numpy.generate_rays``.
+    ``tests/oracles/integrator_numpy.generate_rays`` (pinhole only).
+
+    Thin lens (depth of field) when aperture > 0: lens_uv (n, 2) uniforms (:func:`lens_tile`) are
+    mapped to the aperture (:func:`aperture_point`) of radius ``aperture`` in the camera's XY plane;
+    the ray leaves that lens point towards the point the pinhole ray meets the focus plane (at
+    ``focus`` along the view axis), so the focus plane stays sharp.  The lens point is in camera
+    space, so a moving camera carries its lens.  aperture = 0: lens_uv may be (0, 2) (a pinhole).
+    docs/camera.md, "Depth of field".
     """
     n = px.shape[0]
     one = R.shape[0] == 1
+    lens = aperture > 0.0
+    fd = max(focus, 1e-5)
     for i in range(n):
         r = 0 if one else i
         x = cx + (2.0 * px[i] / W - 1.0) * half_w
         y = cy + (1.0 - 2.0 * py[i] / H) * half_h
         ax0, ax1, ax2 = -R[r, 0, 2], -R[r, 1, 2], -R[r, 2, 2]
+        # Camera-space lens point (lx, ly, 0) and direction (dx, dy, dz) (view axis -z)
+        lx = ly = 0.0
         if ortho:
-            z = -clip_start
-            for a in range(3):
-                o[i, a] = R[r, a, 0] * x + R[r, a, 1] * y + R[r, a, 2] * z + pos[r, a]
-                d[i, a] = -R[r, a, 2]
-            tmax0[i] = clip_end - clip_start
+            dx, dy, dz = 0.0, 0.0, -1.0
         else:
-            d0 = R[r, 0, 0] * x + R[r, 0, 1] * y - R[r, 0, 2]
-            d1 = R[r, 1, 0] * x + R[r, 1, 1] * y - R[r, 1, 2]
-            d2 = R[r, 2, 0] * x + R[r, 2, 1] * y - R[r, 2, 2]
-            inv = 1.0 / math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)      # (one division, not three)
-            d0, d1, d2 = d0 * inv, d1 * inv, d2 * inv
-            d[i, 0], d[i, 1], d[i, 2] = d0, d1, d2
-            o[i, 0], o[i, 1], o[i, 2] = pos[r, 0], pos[r, 1], pos[r, 2]
-            tmax0[i] = clip_end / max(d0 * ax0 + d1 * ax1 + d2 * ax2, 1e-12)
+            dx, dy, dz = x, y, -1.0
+        if lens:
+            ux, uy = aperture_point(lens_uv[i, 0], lens_uv[i, 1], blades, rotation, ratio)
+            lx, ly = aperture * ux, aperture * uy
+            # The pinhole ray meets the focus plane z = -fd at (dx, dy) fd (perspective; ortho: (0, 0) fd)
+            dx, dy, dz = dx * fd - lx, dy * fd - ly, -fd
+        if ortho:
+            # Origin on the near clip plane: the image-plane point (x, y) moved by the lens, then along
+            # the ray to z = -clip_start
+            sx, sy, sz = x + lx + dx * (clip_start / -dz), y + ly + dy * (clip_start / -dz), -clip_start
+        else:
+            sx, sy, sz = lx, ly, 0.0
+        # To world: direction normalised there (one division, not three), origin
+        d0 = R[r, 0, 0] * dx + R[r, 0, 1] * dy + R[r, 0, 2] * dz
+        d1 = R[r, 1, 0] * dx + R[r, 1, 1] * dy + R[r, 1, 2] * dz
+        d2 = R[r, 2, 0] * dx + R[r, 2, 1] * dy + R[r, 2, 2] * dz
+        inv = 1.0 / math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        d0, d1, d2 = d0 * inv, d1 * inv, d2 * inv
+        d[i, 0], d[i, 1], d[i, 2] = d0, d1, d2
+        for a in range(3):
+            o[i, a] = R[r, a, 0] * sx + R[r, a, 1] * sy + R[r, a, 2] * sz + pos[r, a]
+        cos_axis = d0 * ax0 + d1 * ax1 + d2 * ax2
+        if ortho:
+            tmax0[i] = (clip_end - clip_start) / max(cos_axis, 1e-12)
+        else:
+            tmax0[i] = clip_end / max(cos_axis, 1e-12)
 
 
 # ----------------------------------------------------------------------------
