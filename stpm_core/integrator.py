@@ -463,10 +463,12 @@ def glossy_caustic_rows(ctx, C, crow) -> np.ndarray:
 
 
 def _glossy_caustic(ctx, sh, kc, hits, d, C, crow, t_s, stats, dst, idx_k, use_idx, beta_k, use_beta, rho,
-                    has_rho):
+                    has_rho, spp: int = 1):
     """Caustic at the covered rows sh[kc]: rho_d / pi * E_caustic (where has_rho[kc]) plus the rough
     lobes' reading of the caustic map, L_g = sum_p w_p f_c(wo, wi_p) Phi_p / measure over the same
-    estimate's delta-only photons (``PhotonMaps.estimate(..., glossy=...)``), times beta."""
+    estimate's delta-only photons (``PhotonMaps.estimate(..., glossy=...)``), times beta.  spp > 1
+    (a pixel's samples consecutive): shared between a pixel's queries on one instance as E is, where
+    their view directions also agree (``photons.sharing``, ``SHARE_WO_COS``)."""
     rows = sh[kc]
     wo = -d[rows]
     ns, ng = hits.ns[rows], hits.ng[rows]
@@ -474,10 +476,22 @@ def _glossy_caustic(ctx, sh, kc, hits, d, C, crow, t_s, stats, dst, idx_k, use_i
     gW = np.ascontiguousarray(np.concatenate([wo, ns, ng], axis=1), np.float64)
     gC = np.ascontiguousarray(C[crow[rows]], np.float64)
     E_t, E_avg = ctx.ggx
-    Ec, Lg = ctx.maps.estimate("caustic", np.ascontiguousarray(hits.position[rows]), n_f, t_s[kc],
-                               glossy=(gC, gW, E_t, E_avg, 0.0 if ctx.stop_coat else 1.0))
+    coat_w = 0.0 if ctx.stop_coat else 1.0
+    p_q = np.ascontiguousarray(hits.position[rows])
+    if spp > 1 and _sharing.SHARE_RADIUS_FRACTION > 0.0 and getattr(ctx.maps, "shares_lookups", False):
+        group = (idx_k[rows] if use_idx else rows) // spp * (ctx.n_instances + 1) + hits.instance[rows]
+
+        def estimate(p, ns_q, t_q, sel):
+            # (the sharing's subset sel of the queries: their closure rows and directions go with them)
+            return ctx.maps.estimate("caustic", p, ns_q, t_q, support=True,
+                                     glossy=(gC[sel], gW[sel], E_t, E_avg, coat_w))
+
+        Ec, Lg, estimated = _sharing.shared_estimate(estimate, p_q, n_f, t_s[kc], group, wo=wo)
+    else:
+        Ec, Lg = ctx.maps.estimate("caustic", p_q, n_f, t_s[kc], glossy=(gC, gW, E_t, E_avg, coat_w))
+        estimated = kc.size
     stats.photon_lookups += kc.size
-    stats.photon_estimates += kc.size
+    stats.photon_estimates += estimated
     live = np.flatnonzero(has_rho[kc])
     if live.size:
         _K.photon_add(dst, rows, live, rho[kc], np.ascontiguousarray(Ec[live]), idx_k, use_idx, beta_k, use_beta,
@@ -509,7 +523,7 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
         has_rho = np.zeros(k, bool)
         has_rho[live[:n_q_rows]] = True
         _glossy_caustic(ctx, sh, np.flatnonzero(cov_sh), hits, d, C, crow, t_s, stats, dsts["Caustic"], idx_k,
-                        use_idx, beta_k, use_beta, rho, has_rho)
+                        use_idx, beta_k, use_beta, rho, has_rho, spp)
         touched.add("Caustic")
         # the other rows' caustic look-ups below (the global map's for all queried rows)
         keep_c = ~cov_sh[live[:n_q_rows]]

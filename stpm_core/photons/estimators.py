@@ -355,8 +355,8 @@ class PhotonMap:
         E_avg, coat_w) (``kdtree.FlatTree.lookup``): then returns (E, L_g), L_g (n, 3) W/(m^2 sr)
         the radiance the hit's rough lobes reflect of the same photons, those with a delta-only
         path: sum w f_c(wo, wi_p) Phi_p over the estimate's measure (docs/rendering.md, "Path
-        partition").  The compiled search only (a ``RuntimeError`` on the scipy backend); not with
-        support.
+        partition").  The compiled search only (a ``RuntimeError`` on the scipy backend); with
+        support, ``(E, r, tau, lo, hi, L_g)``.
 
         support: also return the region each estimate read, ``(E, r, tau, lo, hi)``, all (n,):
         r (m) its spatial radius (STANDARD r_k, TEMPORAL r_m, KD4D R_k), tau its time half-width
@@ -368,11 +368,13 @@ class PhotonMap:
         p = np.asarray(p, dtype=np.float64).reshape(-1, 3) - self.origin  # into the records' frame
         n = p.shape[0]
         E = np.zeros((n, 3), dtype=np.float64)
-        if glossy is not None and (support or self.backend != "numba"):
-            raise RuntimeError("glossy look-ups need the compiled search and no support")
+        if glossy is not None and self.backend != "numba":
+            raise RuntimeError("glossy look-ups need the compiled search")
         if self.n < 2 or n == 0:
-            if glossy is not None:
+            if glossy is not None and not support:
                 return E, np.zeros((n, 3))
+            if glossy is not None:
+                return E, np.zeros(n), np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf), np.zeros((n, 3))
             return (E, np.zeros(n), np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf)) if support else E
         ns = np.asarray(ns, dtype=np.float32).reshape(-1, 3)
         t = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
@@ -401,7 +403,7 @@ class PhotonMap:
                 E[:], r, tau, lo, hi, Lg = self._search_sliced(B, p, ns, t, k, m, kernel, glossy)
                 self.stats["lookup_s"] += _time.perf_counter() - t0
                 self.stats["lookup_count"] += n
-                return E, Lg
+                return (E, r, tau, lo, hi, Lg) if support else (E, Lg)
             E[:], r, tau, lo, hi = self._estimate_sliced(B, p, ns, t, k, m, kernel)
             self.stats["lookup_s"] += _time.perf_counter() - t0
             self.stats["lookup_count"] += n
@@ -413,7 +415,9 @@ class PhotonMap:
             Lg = self._normalise(estimator, G, r, tau, t, kernel)
             self.stats["lookup_s"] += _time.perf_counter() - t0
             self.stats["lookup_count"] += n
-            return E, Lg
+            if not support:
+                return E, Lg
+            return self._support(estimator, E, r, tau) + (Lg,)
         if self.backend == "numba":
             try:
                 Phi, r, tau = self._search_numba(estimator, p, ns, t, k, m, kernel)
@@ -427,6 +431,11 @@ class PhotonMap:
         self.stats["lookup_count"] += n
         if not support:
             return E
+        return self._support(estimator, E, r, tau)
+
+    def _support(self, estimator, E, r, tau):
+        """(E, r, half, lo, hi): :meth:`estimate`'s result with its support (unsliced searches)."""
+        n = r.shape[0]
         if estimator == "STANDARD":
             return E, r, np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf)
         half = tau if estimator == "TEMPORAL" else r / self.time_scale
