@@ -504,7 +504,8 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
     """Caustic and Indirect at the hit rows sh (k,): rho_d / pi * E_kind(p, ns_f, t) added into the passes.
 
     cov_sh (k,) bool or None: the rows whose rough lobes read the caustic map too (:func:`glossy_caustic_rows`;
-    their Caustic from :func:`_glossy_caustic`, one look-up each, not shared).
+    their Caustic from :func:`_glossy_caustic`: E and the glossy radiance from one look-up, shared
+    between a pixel's samples where their view directions agree).
 
     rho_d and the query rows from ``kernels.paths.photon_albedo`` (once for both maps), the
     irradiance estimates from the photon maps (``PhotonMaps.estimate``), ``photon_add`` into dsts.
