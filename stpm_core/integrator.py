@@ -24,10 +24,12 @@ Per camera sample i (docs/rendering.md has the equations):
 
   each multiplied by the chain throughput ``beta``.  Combined = their sum.
 
-Rough glossy lobes at a shading vertex get light only through next-event
-estimation (``bsdf_eval`` includes every non-delta lobe); photon estimates
-multiply by the diffuse albedo only (a photon map stores irradiance, which
-cannot be weighted by a glossy lobe without incoming directions).
+Rough glossy lobes at a shading vertex get light through next-event estimation (``bsdf_eval``
+includes every non-delta lobe) and the paths that go on through them; photon estimates multiply
+by the diffuse albedo, except that a rough reflection lobe of roughness >=
+``GLOSSY_CAUSTIC_MIN_ROUGHNESS`` also reads the caustic map's delta-only photons, each weighed by
+f_c(wo, wi_p) (then its paths drop what they reach through delta vertices alone; docs/rendering.md,
+"Path partition").
 """
 from __future__ import annotations
 
@@ -43,7 +45,7 @@ from .film import BH_INVERSE_CDF, DENOISING_GUIDES, DEPTH_BACKGROUND, PASSES, Fi
 from .kernels import gather as _G
 from .kernels import paths as _K
 from .kernels.bsdf import ggx_albedo_tables
-from .kernels.closure import C_ROUGH_LOBE, N_CLOSURE, pack_materials
+from .kernels.closure import C_PASS, C_ROUGH_LOBE, C_ROUGHNESS, C_W_GLASS, N_CLOSURE, pack_materials
 from .kernels.light_params import light_params, light_poses, mesh_arrays
 from .world_light import constant_environment
 from .kernels.svm import shade_rows
@@ -83,6 +85,12 @@ STATIC_VIEW = True
 #: (fewer parts per instance when many move, down to one each)
 STATIC_VIEW_STEPS = 16
 STATIC_VIEW_MAX_CAPSULES = 256
+#: The roughness from which a rough reflection lobe (coat, metal) of a camera vertex reads the caustic
+#: map (L S+ x through that lobe: each delta-only caustic photon weighed by f_c(wo, wi_p)), and the
+#: paths that leave the vertex through its rough lobes stop counting the light they reach through
+#: delta vertices alone (docs/rendering.md, "Path partition").  Below it a lobe is too sharp for a
+#: k-nearest disc and stays path traced; inf switches the rule off.
+GLOSSY_CAUSTIC_MIN_ROUGHNESS = 0.5
 
 
 @dataclass
@@ -468,6 +476,21 @@ def _estimate(ctx, kind: str, p, ns, t, group, extra: dict, estimator: str | Non
                                     p, ns, t, group)
 
 
+def _estimate_split(ctx, kind: str, p, ns, t, group, extra: dict, static: np.ndarray | None):
+    """:func:`_estimate` where the queries of static views (static (n,) bool, or None: none) read the
+    maps with STANDARD, the others with the render's estimator."""
+    if static is None or not static.any():
+        return _estimate(ctx, kind, p, ns, t, group, extra)
+    E, estimated = np.empty((p.shape[0], 3)), 0
+    for sel, est in ((static, "STANDARD"), (~static, None)):
+        if sel.any():
+            i = np.flatnonzero(sel)
+            E[i], e = _estimate(ctx, kind, p[i], ns[i], t[i], None if group is None else group[i],
+                                extra_sel(extra, i), est)
+            estimated += e
+    return E, estimated
+
+
 def static_view_setup(scene, maps) -> tuple | None:
     """What :func:`static_view_rows` needs, or None when no query may read the shutter's average.
 
@@ -582,9 +605,60 @@ def static_view_rows(setup: tuple, o: np.ndarray, position: np.ndarray, instance
     return ok
 
 
+def glossy_caustic_rows(ctx, C, crow) -> np.ndarray:
+    """(m,) bool: the hits (closure rows C[crow]) whose rough lobes read the caustic map (docs/rendering.md,
+    "Path partition"): with ``ctx.glossy_caustic``, a rough reflection lobe (coat, metal; no glass
+    lobe, not transparent) of roughness >= ``ctx.glossy_floor``."""
+    if not ctx.glossy_caustic:
+        return np.zeros(crow.shape[0], bool)
+    return ((C[crow, C_ROUGH_LOBE] > 0.0) & (C[crow, C_W_GLASS] <= 0.0) & (C[crow, C_PASS] <= 0.0)
+            & (C[crow, C_ROUGHNESS] >= ctx.glossy_floor))
+
+
+def _glossy_caustic(ctx, sh, kc, hits, d, C, crow, t_s, stats, dst, idx_k, use_idx, beta_k, use_beta, rho,
+                    has_rho, spp: int = 1):
+    """Caustic at the covered rows sh[kc]: rho_d / pi * E_caustic (where has_rho[kc]) plus the rough
+    lobes' reading of the caustic map, L_g = sum_p w_p f_c(wo, wi_p) Phi_p / measure over the same
+    estimate's delta-only photons (``PhotonMaps.estimate(..., glossy=...)``), times beta.  spp > 1
+    (a pixel's samples consecutive): shared between a pixel's queries on one instance as E is, where
+    their view directions also agree (``photons.sharing``, ``SHARE_WO_COS``)."""
+    rows = sh[kc]
+    wo = -d[rows]
+    ns, ng = hits.ns[rows], hits.ng[rows]
+    n_f = np.where((np.einsum("ij,ij->i", ns, wo) < 0.0)[:, None], -ns, ns)
+    gW = np.ascontiguousarray(np.concatenate([wo, ns, ng], axis=1), np.float64)
+    gC = np.ascontiguousarray(C[crow[rows]], np.float64)
+    E_t, E_avg = ctx.ggx
+    coat_w = 0.0 if ctx.stop_coat else 1.0
+    p_q = np.ascontiguousarray(hits.position[rows])
+    if spp > 1 and _sharing.SHARE_RADIUS_FRACTION > 0.0 and getattr(ctx.maps, "shares_lookups", False):
+        group = (idx_k[rows] if use_idx else rows) // spp * (ctx.n_instances + 1) + hits.instance[rows]
+
+        def estimate(p, ns_q, t_q, sel):
+            # (the sharing's subset sel of the queries: their closure rows and directions go with them)
+            return ctx.maps.estimate("caustic", p, ns_q, t_q, support=True,
+                                     glossy=(gC[sel], gW[sel], E_t, E_avg, coat_w))
+
+        Ec, Lg, estimated = _sharing.shared_estimate(estimate, p_q, n_f, t_s[kc], group, wo=wo)
+    else:
+        Ec, Lg = ctx.maps.estimate("caustic", p_q, n_f, t_s[kc], glossy=(gC, gW, E_t, E_avg, coat_w))
+        estimated = kc.size
+    stats.photon_lookups += kc.size
+    stats.photon_estimates += estimated
+    live = np.flatnonzero(has_rho[kc])
+    if live.size:
+        _K.photon_add(dst, rows, live, rho[kc], np.ascontiguousarray(Ec[live]), idx_k, use_idx, beta_k, use_beta,
+                      ctx.clamp_indirect)
+    _K.scatter_add(dst, rows, idx_k, use_idx, beta_k, use_beta, np.ascontiguousarray(Lg), ctx.clamp_indirect)
+
+
 def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k, use_idx, beta_k, use_beta,
-                  touched, spp: int = 1, rng=None, view_o: np.ndarray | None = None):
+                  touched, spp: int = 1, rng=None, view_o: np.ndarray | None = None, cov_sh=None):
     """Caustic and Indirect at the hit rows sh (k,): rho_d / pi * E_kind(p, ns_f, t) added into the passes.
+
+    cov_sh (k,) bool or None: the rows whose rough lobes read the caustic map too (:func:`glossy_caustic_rows`;
+    their Caustic from :func:`_glossy_caustic`: E and the glossy radiance from one look-up, shared
+    between a pixel's samples where their view directions agree).
 
     rho_d and the query rows from ``kernels.paths.photon_albedo`` (once for both maps), the
     irradiance estimates from the photon maps (``PhotonMaps.estimate``), ``photon_add`` into dsts.
@@ -600,6 +674,17 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
     p_q, n_q, t_q = _scratch("p_q", (k, 3)), _scratch("n_q", (k, 3)), _scratch("t_q", (k,))
     live = _scratch("live_q", (k,), np.int64)
     n_q_rows = _K.photon_albedo(sh, hits.position, hits.ns, d, C, crow, ctx.ggx[0], t_s, rho, p_q, n_q, t_q, live)
+    if cov_sh is not None and cov_sh.any() and ctx.map_kinds.get("caustic", False):
+        # rows whose rough lobes read the caustic map: their own look-ups (diffuse and glossy at once)
+        has_rho = np.zeros(k, bool)
+        has_rho[live[:n_q_rows]] = True
+        _glossy_caustic(ctx, sh, np.flatnonzero(cov_sh), hits, d, C, crow, t_s, stats, dsts["Caustic"], idx_k,
+                        use_idx, beta_k, use_beta, rho, has_rho, spp)
+        touched.add("Caustic")
+        # the other rows' caustic look-ups below (the global map's for all queried rows)
+        keep_c = ~cov_sh[live[:n_q_rows]]
+    else:
+        keep_c = None
     if n_q_rows == 0:
         return
     extra = {}
@@ -625,28 +710,41 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
     for kind, name in (("caustic", "Caustic"), ("global", "Indirect")):
         if not ctx.map_kinds.get(kind, False):
             continue
+        if kind == "caustic" and keep_c is not None:
+            # the caustic map at the rows not covered by _glossy_caustic
+            sel = np.flatnonzero(keep_c)
+            if sel.size:
+                lv = np.ascontiguousarray(live[:n_q_rows][sel])
+                pq, nq, tq = p_q[:n_q_rows][sel], n_q[:n_q_rows][sel], t_q[:n_q_rows][sel]
+                st_sel = None if q_static is None else q_static[sel]
+                E, estimated = _estimate_split(ctx, kind, pq, nq, tq, None if group is None else group[sel],
+                                               extra_sel(extra, sel), st_sel)
+                stats.static_lookups += 0 if st_sel is None else int(np.count_nonzero(st_sel))
+                stats.photon_lookups += sel.size
+                stats.photon_estimates += estimated
+                _K.photon_add(dsts[name], sh, lv, rho, np.ascontiguousarray(E, np.float64), idx_k, use_idx, beta_k,
+                              use_beta, ctx.clamp_indirect)
+                touched.add(name)
+            continue
         if kind == "global" and ctx.final_gather > 0:
             # final gathering: rays from the diffuse lobe read the precomputed irradiance where they land
             _final_gather(ctx, sh, hits, live[:n_q_rows], rho, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows],
                           idx_k, use_idx, beta_k, use_beta, dsts[name], stats, rng)
             touched.add(name)
             continue
-        if q_static is None:
-            E, estimated = _estimate(ctx, kind, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows], group, extra)
-        else:
-            # a static view's queries read the shutter's average, the others the render's estimator
-            E, estimated = np.empty((n_q_rows, 3)), 0
-            for sel, est in ((q_static, "STANDARD"), (~q_static, None)):
-                if sel.any():
-                    E[sel], e = _estimate(ctx, kind, p_q[:n_q_rows][sel], n_q[:n_q_rows][sel], t_q[:n_q_rows][sel],
-                                          None if group is None else group[sel], extra, est)
-                    estimated += e
-            stats.static_lookups += n_static
+        E, estimated = _estimate_split(ctx, kind, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows], group, extra,
+                                       q_static)
+        stats.static_lookups += 0 if q_static is None else n_static
         E = np.ascontiguousarray(E, np.float64)
         stats.photon_lookups += n_q_rows
         stats.photon_estimates += estimated
         _K.photon_add(dsts[name], sh, live[:n_q_rows], rho, E, idx_k, use_idx, beta_k, use_beta, ctx.clamp_indirect)
         touched.add(name)
+
+
+def extra_sel(extra: dict, sel: np.ndarray) -> dict:
+    """The per-query keyword arguments of a look-up (``pixels``) for the queries sel."""
+    return {key: val[sel] for key, val in extra.items()}
 
 
 # Gather rays traced at once (a chunk of a tile's queries times final_gather_samples)
@@ -849,6 +947,9 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     sid = None                               # each live row's stratum, split paths (None: its sample)
     done = None                              # (live rows,) uint8: 1 where the path has split (with sid)
     split = 1                                # strata per sample (ctx.rough_splits once paths split)
+    cov = None                               # (live rows,) uint8: 1 where the path left a vertex whose rough
+                                             # lobes read the caustic map and met delta vertices only since
+                                             # (None: none did; glossy_caustic_rows)
     for bounce in range(ctx.max_depth + 1):
         m = n if idx is None else idx.size
         if m == 0:
@@ -922,6 +1023,9 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         if n_hit == 0:
             break
         sh, spec = sh[:n_sh], spec[:n_spec]
+        # the hits whose rough lobes read the caustic map (their paths then drop the light they reach
+        # through delta vertices alone)
+        cov_hit = glossy_caustic_rows(ctx, C, crow) if ctx.glossy_caustic else None
         # -- Shade non-delta vertices: Direct, Caustic, Indirect -------------------------------------
         if n_sh:
             t_s = np.take(t, sh, out=_scratch("t_s", (n_sh,)))
@@ -931,7 +1035,8 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                 touched.add("Direct")
             if ctx.maps is not None:
                 _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched,
-                              int(spp), rng=rng, view_o=o if bounce == 0 and ctx.static_view is not None else None)
+                              int(spp), rng=rng, view_o=o if bounce == 0 and ctx.static_view is not None else None,
+                              cov_sh=None if cov_hit is None else cov_hit[sh])
         if bounce == ctx.max_depth or n_spec == 0:
             break
         # -- Continue through delta lobes, or with the rough non-diffuse lobes' part of f ------------
@@ -952,6 +1057,9 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         if sid is not None:
             # paths split earlier keep their strata: idx_n gets each continuation's hit row
             idx_c, use_idx_c, sid_rows, samp_rows, done_rows = _NO_IDX, False, sid, idx, done
+        elif cov_hit is not None:
+            # (the caustic-map rule needs each continuation's hit row: idx_n gets it, mapped below)
+            idx_c, use_idx_c = _NO_IDX, False
         if ctx.rough_splits > 1:
             Ns = int(ctx.rough_splits)
             rough = C[crow[spec], C_ROUGH_LOBE] > 0.0
@@ -999,11 +1107,31 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                                 _world_poses(ctx, t_spec), ctx.world_li >= 0, counts_s, ctx.glossy_bounces,
                                 ctx.transmission_bounces, idx_n, beta_n, o_n, d_n, guard_n, glossy_n, world_w_n,
                                 pc_n, counts_n, ctx.features, feat_c, dft_c, feat_n, dft_n)
+        src = None                               # each continuation's hit row (with cov_hit)
         if sid_rows is not None:
             # idx_n holds each continuation's row (copy); back to its sample, and its stratum
             j = idx_n[:n_go]
+            if cov_hit is not None:
+                src = j.copy() if rows_c is spec else rows_c[j]
             sid, done = sid_rows[j], done_rows[j]
             idx_n[:n_go] = samp_rows[j]
+        elif cov_hit is not None:
+            src = idx_n[:n_go].copy()
+            if idx is not None:
+                idx_n[:n_go] = idx[src]
+        if cov_hit is not None:
+            # Path partition (docs/rendering.md): a path that left a covered vertex through its rough
+            # lobes and met only delta vertices since reaches lights whose light the caustic map
+            # carries: its emission, world and light shapes count 0 (weight 0 against the map's 1:
+            # marked as leaving a rough lobe with density 0); a rough continuation starts afresh
+            g_n = glossy_n[:n_go]
+            cov_n = np.where(g_n != 0, cov_hit[src], 0 if cov is None else cov[src]).astype(np.uint8)
+            drop = (g_n == 0) & (cov_n != 0)
+            if drop.any():
+                g_n[drop] = 1
+                pc_n[:n_go][drop] = 0.0
+                world_w_n[:n_go][drop] = 0.0
+            cov = cov_n if cov_n.any() else None
         idx, beta, o, d, guard = idx_n[:n_go], beta_n[:n_go], o_n[:n_go], d_n[:n_go], guard_n[:n_go]
         glossy = glossy_n[:n_go] if glossy_n[:n_go].any() else None
         world_w = world_w_n[:n_go] if glossy is not None else None
@@ -1044,6 +1172,8 @@ class _Context:
     stop_coat: bool = False                  # camera paths carry no rough coat on (kernels.bsdf.bsdf_sample_cont)
     glossy_bounces: int = 4                  # RenderSettings.glossy_bounces / transmission_bounces
     rough_splits: int = 1                    # RenderSettings.rough_splits: continuations of a first rough vertex
+    glossy_caustic: bool = False             # rough lobes read the caustic map (glossy_caustic_rows, trace_image)
+    glossy_floor: float = np.inf             # ... from this roughness (GLOSSY_CAUSTIC_MIN_ROUGHNESS)
     transmission_bounces: int = 12
     transparent_max_bounces: int = 8         # RenderSettings.transparent_max_bounces: passes in a row (transparency)
     clamp_direct: float = 0.0                # RenderSettings.clamp_direct / clamp_indirect (0: off)
@@ -1378,6 +1508,13 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     if ctx.final_gather and maps.gather_cache.direct_pending:
         # the cache's direct irradiance: next-event estimation at its points (photons.gather)
         _cache_direct(ctx, maps.gather_cache, settings.seed)
+    # Rough lobes read the caustic map where it can weigh photons by them and every light with power
+    # sends caustic photons (else the light its paths would drop is in no map): docs/rendering.md
+    ctx.glossy_floor = float(GLOSSY_CAUSTIC_MIN_ROUGHNESS)
+    ctx.glossy_caustic = bool(np.isfinite(ctx.glossy_floor) and maps is not None and ctx.map_kinds.get("caustic", False)
+                              and getattr(maps, "glossy_lookups", False)
+                              and not getattr(maps, "per_pixel", False)
+                              and np.all((lights.power <= 0) | (lights.photon_weight > 0)))
     ctx.layout = _compact_layout(ctx)
     film = Film(W, H, settings.filter_width, passes=PASSES + DENOISING_GUIDES if ctx.features else PASSES)
     cam = scene.camera

@@ -49,8 +49,8 @@ docs/photon-mapping.md ("Tracing") has the equations:
 from __future__ import annotations
 
 from ..numba_probe import njit
-from .bsdf import (COAT, DIFFUSE, GLASS_R, GLASS_T, METAL, PATH_STOP, bsdf_eval_pdf, bsdf_sample_lobe,
-                   bsdf_sample_path, needs_bsdf_call)
+from .bsdf import (COAT, DIFFUSE, GLASS_R, GLASS_T, METAL, PATH_GLOSSY, PATH_STOP, bsdf_eval_pdf,
+                   bsdf_sample_lobe, bsdf_sample_path, needs_bsdf_call)
 from .closure import C_IOR, C_NONDELTA, C_ROUGHNESS, C_W_GLASS
 from .sampling import offset_origin
 
@@ -107,7 +107,9 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
     U (k, 3), U_rr (k,) uniforms for the BSDF sample and the roulette; EPS (k,)
     origin offsets (scene units).
 
-    n_lobe (k,) int32: the photon's bounces off the DIFFUSE lobe so far (its first hit's included).
+    n_lobe (k,) int32: the photon's bounces off the DIFFUSE lobe so far (its first hit's included);
+    caustic photons (which stop on the DIFFUSE lobe): their bounces off a rough lobe, so a stored
+    caustic photon with n_lobe 0 came through delta lobes alone (the record's ``delta_only`` flag).
     split_coat (global photons with final gathering): a photon stored with no DIFFUSE-lobe bounce
     behind it (its non-delta bounces all rough coats: L (S|G|C)* C (S|G|C)* D) is written as
     ``-1 - j`` in ``store``: those paths reach the vertex through no diffuse vertex, so with
@@ -146,6 +148,7 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
             wi0, wi1, wi2, w0, w1, w2, lobe = bsdf_sample_lobe(C, j, E, E_avg, wo, ns, g, U[j, 0], U[j, 1], U[j, 2])
             # the photon carries the adjoint BSDF f(wi, wo) (module docstring)
             w0, w1, w2 = adjoint_weight(C, j, E, E_avg, wo, (wi0, wi1, wi2), ns, g, lobe, w0, w1, w2)
+            kind = PATH_STOP
             diffuse_lobe = lobe == DIFFUSE
             diffuse_bounce = diffuse_lobe or (lobe == COAT and C[j, C_ROUGHNESS] > 0.0)
             spec_bounce = not diffuse_bounce
@@ -180,7 +183,8 @@ def photon_bounce(rows, P, NG, NS, D, C, E, E_avg, Phi, T, n_delta, n_nondelta, 
         nd_next[n_next] = n_delta[j] + (1 if spec_bounce else 0)
         nn_next[n_next] = n_nondelta[j] + (1 if diffuse_bounce else 0)
         ndf_next[n_next] = nd
-        nl_next[n_next] = n_lobe[j] + (1 if diffuse_lobe else 0)
+        # (caustic photons: their bounces off a rough lobe, which take the record's delta-only flag away)
+        nl_next[n_next] = n_lobe[j] + (1 if (diffuse_lobe or (caustic and kind == PATH_GLOSSY)) else 0)
         guard_next[n_next] = guard_fraction * e
         n_next += 1
     return n_store, n_next

@@ -54,7 +54,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import kdtree as _kdtree
-from .record import oct_decode
+from .record import delta_only, oct_decode
 
 __all__ = [
     "PhotonMap", "ESTIMATOR_NAMES", "CONE_K", "auto_temporal_alpha", "temporal_candidates",
@@ -226,10 +226,13 @@ class PhotonMap:
         self.records = records
         self.position = np.ascontiguousarray(records["position"], dtype=np.float64)
         self.time = np.ascontiguousarray(records["time"], dtype=np.float64)
-        # One 32-byte row per photon for the look-ups: (wi_x, wi_y, wi_z, 0, Phi_r, Phi_g, Phi_b, 0)
+        # One 32-byte row per photon for the look-ups: (wi_x, wi_y, wi_z, delta_only, Phi_r, Phi_g, Phi_b, 0)
+        # (delta_only 1: the photon came through delta lobes alone, record.delta_only; read by the
+        # glossy sums of caustic-map look-ups only)
         self._packed = np.zeros((self.n, 8), dtype=np.float32)
         if self.n:
             self._packed[:, :3] = oct_decode(records["wi_oct"])
+            self._packed[:, 3] = delta_only(records)
             self._packed[:, 4:7] = records["power"]
         self.wi = self._packed[:, :3]
         self.power = self._packed[:, 4:7]
@@ -344,8 +347,16 @@ class PhotonMap:
 
     # -- the estimate ---------------------------------------------------------
     def estimate(self, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str = "TEMPORAL",
-                 k: int = 50, kernel: str = "BOX", temporal_alpha: float = 0.0, support: bool = False):
+                 k: int = 50, kernel: str = "BOX", temporal_alpha: float = 0.0, support: bool = False,
+                 glossy=None):
         """Irradiance E (n, 3) W/m^2 at points p (n, 3), normals ns (n, 3), times t (n,).
+
+        glossy: None, or (closure rows (n, N_CLOSURE), (wo, ns, ng) (n, 9) of each query's hit, E,
+        E_avg, coat_w) (``kdtree.FlatTree.lookup``): then returns (E, L_g), L_g (n, 3) W/(m^2 sr)
+        the radiance the hit's rough lobes reflect of the same photons, those with a delta-only
+        path: sum w f_c(wo, wi_p) Phi_p over the estimate's measure (docs/rendering.md, "Path
+        partition").  The compiled search only (a ``RuntimeError`` on the scipy backend); with
+        support, ``(E, r, tau, lo, hi, L_g)``.
 
         support: also return the region each estimate read, ``(E, r, tau, lo, hi)``, all (n,):
         r (m) its spatial radius (STANDARD r_k, TEMPORAL r_m, KD4D R_k), tau its time half-width
@@ -357,7 +368,13 @@ class PhotonMap:
         p = np.asarray(p, dtype=np.float64).reshape(-1, 3) - self.origin  # into the records' frame
         n = p.shape[0]
         E = np.zeros((n, 3), dtype=np.float64)
+        if glossy is not None and self.backend != "numba":
+            raise RuntimeError("glossy look-ups need the compiled search")
         if self.n < 2 or n == 0:
+            if glossy is not None and not support:
+                return E, np.zeros((n, 3))
+            if glossy is not None:
+                return E, np.zeros(n), np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf), np.zeros((n, 3))
             return (E, np.zeros(n), np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf)) if support else E
         ns = np.asarray(ns, dtype=np.float32).reshape(-1, 3)
         t = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
@@ -382,11 +399,25 @@ class PhotonMap:
             self.stats["temporal_slices"] = B
         t0 = _time.perf_counter()
         if B > 1:
+            if glossy is not None:
+                E[:], r, tau, lo, hi, Lg = self._search_sliced(B, p, ns, t, k, m, kernel, glossy)
+                self.stats["lookup_s"] += _time.perf_counter() - t0
+                self.stats["lookup_count"] += n
+                return (E, r, tau, lo, hi, Lg) if support else (E, Lg)
             E[:], r, tau, lo, hi = self._estimate_sliced(B, p, ns, t, k, m, kernel)
             self.stats["lookup_s"] += _time.perf_counter() - t0
             self.stats["lookup_count"] += n
             return (E, r, tau, lo, hi) if support else E
         # -- search: Phi summed over the inner / selected photons, radius, time window ----------
+        if glossy is not None:
+            Phi, r, tau, G = self._search_numba(estimator, p, ns, t, k, m, kernel, glossy)
+            E[:] = self._normalise(estimator, Phi, r, tau, t, kernel)
+            Lg = self._normalise(estimator, G, r, tau, t, kernel)
+            self.stats["lookup_s"] += _time.perf_counter() - t0
+            self.stats["lookup_count"] += n
+            if not support:
+                return E, Lg
+            return self._support(estimator, E, r, tau) + (Lg,)
         if self.backend == "numba":
             try:
                 Phi, r, tau = self._search_numba(estimator, p, ns, t, k, m, kernel)
@@ -400,6 +431,11 @@ class PhotonMap:
         self.stats["lookup_count"] += n
         if not support:
             return E
+        return self._support(estimator, E, r, tau)
+
+    def _support(self, estimator, E, r, tau):
+        """(E, r, half, lo, hi): :meth:`estimate`'s result with its support (unsliced searches)."""
+        n = r.shape[0]
         if estimator == "STANDARD":
             return E, r, np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf)
         half = tau if estimator == "TEMPORAL" else r / self.time_scale
@@ -417,13 +453,15 @@ class PhotonMap:
         """
         return self._numba_or_scipy(lambda: self._search_sliced(B, p, ns, t, k, m, kernel))
 
-    def _search_sliced(self, B, p, ns, t, k, m, kernel):
-        """:meth:`_estimate_sliced` with the map's current engine."""
+    def _search_sliced(self, B, p, ns, t, k, m, kernel, glossy=None):
+        """:meth:`_estimate_sliced` with the map's current engine (glossy: :meth:`estimate`'s; then
+        the glossy radiance (n, 3) is a sixth result)."""
         sl = self.time_slices(B)
         edges = sl["edges"]
         which, order, starts = _by_slice(edges, t)
         n = p.shape[0]
         Phi, r, tau = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
+        G = np.zeros((n, 3)) if glossy is not None else None
         lo, hi = edges[which], edges[which + 1]
         for j in range(B):
             q = order[starts[j]:starts[j + 1]]
@@ -438,6 +476,11 @@ class PhotonMap:
                 qq = np.empty((len(q), 4))
                 qq[:, :3] = p[q]
                 qq[:, 3] = t[q]
+                if glossy is not None:
+                    gq = (glossy[0][q], glossy[1][q]) + tuple(glossy[2:])
+                    Phi[q], r[q], tau[q], G[q] = tree.lookup(_kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj,
+                                                             kernel == "CONE", CONE_K, self.workers, gq)
+                    continue
                 Phi[q], r[q], tau[q] = tree.lookup(_kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj, kernel == "CONE",
                                                    CONE_K, self.workers)
             else:
@@ -446,7 +489,10 @@ class PhotonMap:
                     qb = q[a:a + batch]
                     Phi[qb], r[qb], tau[qb] = self._temporal(p[qb], ns[qb], t[qb], kj, mj, kernel,
                                                              tree=tree, rows=rows)
-        return self._normalise("TEMPORAL", Phi, r, tau, t, kernel, lo=lo, hi=hi), r, tau, lo, hi
+        E = self._normalise("TEMPORAL", Phi, r, tau, t, kernel, lo=lo, hi=hi)
+        if glossy is not None:
+            return E, r, tau, lo, hi, self._normalise("TEMPORAL", G, r, tau, t, kernel, lo=lo, hi=hi)
+        return E, r, tau, lo, hi
 
     # -- normalisations (docs/photon-mapping.md, section 5) -------------------------------------------
     def _normalise(self, estimator, Phi, r, tau, t, kernel, lo=0.0, hi=1.0):
@@ -471,8 +517,9 @@ class PhotonMap:
         return Phi / area[:, None]
 
     # -- compiled search ------------------------------------------------------------------------
-    def _search_numba(self, estimator, p, ns, t, k, m, kernel):
-        """(Phi (n, 3) W, r (n,) m, tau (n,)) from the fused numba kernel (see kdtree.py)."""
+    def _search_numba(self, estimator, p, ns, t, k, m, kernel, glossy=None):
+        """(Phi (n, 3) W, r (n,) m, tau (n,)) from the fused numba kernel (see kdtree.py); with glossy
+        (:meth:`estimate`) the glossy sums (n, 3) as a fourth."""
         q = np.empty((p.shape[0], 4))
         q[:, :3] = p
         if estimator == "KD4D":
@@ -483,7 +530,7 @@ class PhotonMap:
             tree = self.flat_tree(3)
             mode = _kdtree.MODE_TEMPORAL if estimator == "TEMPORAL" else _kdtree.MODE_STANDARD
         kq = m if estimator == "TEMPORAL" else k
-        return tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers)
+        return tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers, glossy)
 
     # -- scipy search -----------------------------------------------------------------------------
     def _search_scipy(self, estimator, p, ns, t, k, m, kernel):

@@ -92,6 +92,8 @@ _CHUNK_MIN = 2048        # fewer queries than this per thread are not split
 AVAILABLE, _IMPORT_ERROR = probe()
 if AVAILABLE:
     import numba as _nb
+    # the rough lobes a camera vertex weighs caustic photons by (FlatTree.lookup's glossy sums)
+    from ..kernels.bsdf import _glossy_add as _bsdf_glossy_add, _hit as _bsdf_hit
 
 
 def disable(reason: str) -> None:
@@ -511,15 +513,46 @@ if AVAILABLE:
         return True
 
     @_jit
-    def _lookup(P, C, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, out_phi, out_r, out_tau):
+    def _glossy_sum(P, bi, wk, n_sel, gC, i, E, E_avg, gW, coat_w):
+        """(g0, g1, g2) = sum over the kept photons a < n_sel (weights wk[a] > 0, rows bi[a]) whose
+        path was delta-only (P[j, 3] > 0) of wk[a] f_c(wo, wi_j) Phi_j: f_c the rough non-delta
+        lobes other than DIFFUSE (rough COAT times coat_w, METAL, GLASS) of closure row gC[i]
+        (``kernels.bsdf._glossy_add``), gW[i] = (wo, ns, ng) of the query's hit."""
+        wo = (gW[i, 0], gW[i, 1], gW[i, 2])
+        hit = _bsdf_hit(gC, i, E, E_avg, wo, (gW[i, 3], gW[i, 4], gW[i, 5]), (gW[i, 6], gW[i, 7], gW[i, 8]))
+        g0 = 0.0
+        g1 = 0.0
+        g2 = 0.0
+        for a in range(n_sel):
+            w = wk[a]
+            j = bi[a]
+            if not (w > 0.0 and P[j, 3] > 0.0):
+                continue
+            wi = (np.float64(P[j, 0]), np.float64(P[j, 1]), np.float64(P[j, 2]))
+            f0, f1, f2, _ = _bsdf_glossy_add(gC, i, E, hit, wo, wi, 0.0, 0.0, 0.0, 0.0, coat_w)
+            g0 += w * f0 * P[j, 4]
+            g1 += w * f1 * P[j, 5]
+            g2 += w * f2 * P[j, 6]
+        return g0, g1, g2
+
+    @_jit
+    def _lookup(P, C, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, out_phi, out_r, out_tau,
+                glossy, gC, gW, E, E_avg, coat_w, out_g):
         """Fused search + reduction for queries q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32.
 
-        P (N, 8) float32 rows (wi, 0, Phi, 0) and C (4, N) float32 coordinate rows, both in tree order.
+        P (N, 8) float32 rows (wi, delta_only, Phi, 0) and C (4, N) float32 coordinate rows, both in
+        tree order.
 
         mode STANDARD / KD4D: kq = k nearest (3D / 4D); TEMPORAL: kq = m candidates, then the k
         nearest in time among the m - 1 inner ones.  Writes out_phi (n, 3) W (sum of w Phi over
         the k - 1 inner / selected photons on the ns side), out_r (n,) distance of the kq-th
         photon (m) and out_tau (n,) TEMPORAL's window half-width (shutter units).
+
+        glossy: also out_g (n, 3) W/sr, the same photons' sum of w f_c(wo, wi) Phi over those whose
+        path was delta-only, f_c query i's rough lobes (:func:`_glossy_sum`; gC (n, N_CLOSURE) its
+        closure row, gW (n, 9) its wo, ns, ng; E, E_avg the GGX tables; coat_w 1, or 0 without the
+        rough coat): what a rough lobe reads of the caustic map (docs/rendering.md, "Path
+        partition"), normalised as out_phi.
         """
         D = 4 if mode == MODE_KD4D else 3
         nbuf = 2 * kq + LEAF_SIZE + 1
@@ -531,6 +564,7 @@ if AVAILABLE:
         bucket = np.empty(nbuf, np.int64)
         hist = np.empty(kq, np.int64)
         leaf_d2 = np.empty(LEAF_SIZE + 1)
+        wk = np.empty(nbuf)                    # the weight of each kept photon (glossy)
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
@@ -575,6 +609,7 @@ if AVAILABLE:
             if ties > 0:
                 # some of the k - 1 at exactly tau: the first ``ties`` of them in buffer order
                 for a in range(n_sel):
+                    wk[a] = 0.0
                     if bx[a] > tau:
                         continue
                     if bx[a] == tau:
@@ -586,6 +621,7 @@ if AVAILABLE:
                         w = 1.0
                         if cone:
                             w = 1.0 - np.sqrt(bd[a]) * inv_r
+                        wk[a] = w
                         p0 += w * P[j, 4]
                         p1 += w * P[j, 5]
                         p2 += w * P[j, 6]
@@ -601,12 +637,15 @@ if AVAILABLE:
                         w = 0.0
                     if cone:
                         w *= 1.0 - np.sqrt(bd[a]) * inv_r
+                    wk[a] = w
                     p0 += w * P[j, 4]
                     p1 += w * P[j, 5]
                     p2 += w * P[j, 6]
             out_phi[i, 0] = p0
             out_phi[i, 1] = p1
             out_phi[i, 2] = p2
+            if glossy:
+                out_g[i, 0], out_g[i, 1], out_g[i, 2] = _glossy_sum(P, bi, wk, n_sel, gC, i, E, E_avg, gW, coat_w)
 
     @_jit
     def _knn_radius(C, box, n_leaves, q, D, s, kq, cap2, out_r):
@@ -745,6 +784,13 @@ if AVAILABLE:
         return code
 
 
+_NO_C = np.zeros((0, 1))          # no glossy sums: empty closure rows / hit rows, GGX tables
+_NO_E = np.zeros((1, 1, 1))
+_NO_EA = np.zeros(1)
+_NO_E.setflags(write=False)          # read-only as the GGX tables (kernels.bsdf): one compiled signature
+_NO_EA.setflags(write=False)
+
+
 class FlatTree:
     """A compiled kd-tree over one map's photons, in 3D (x, y, z) or 4D (x, y, z, s t).
 
@@ -786,8 +832,12 @@ class FlatTree:
         self.xyzt = np.ascontiguousarray(xyzt.T)
 
     def lookup(self, mode: int, q: np.ndarray, ns: np.ndarray, kq: int, k: int, cone: bool, cone_k: float,
-               workers: int):
+               workers: int, glossy=None):
         """Sums Phi (n, 3) W, radius r (n,) m of the kq-th neighbour and TEMPORAL's tau (n,) for queries q (n, 4).
+
+        glossy: None, or (gC (n, N_CLOSURE) float64 closure rows, gW (n, 9) float64 (wo, ns, ng) of
+        each query's hit, E, E_avg the GGX tables, coat_w): then a fourth result, the sums (n, 3) of
+        w f_c(wo, wi) Phi over the same photons with a delta-only path (:func:`_lookup`).
 
         Queries are processed in Morton order (of x, y, z, plus s t for KD4D; results come back in the
         input order), so consecutive queries are neighbours: the tree nodes they read stay in
@@ -808,14 +858,28 @@ class FlatTree:
         phi = np.zeros((n, 3))
         r = np.zeros(n)
         tau = np.zeros(n)
+        g = np.zeros((n if glossy is not None else 0, 3))
+        if glossy is not None:
+            gC = np.ascontiguousarray(glossy[0][order], np.float64)
+            gW = np.ascontiguousarray(glossy[1][order], np.float64)
+            E_t, E_avg, coat_w = glossy[2], glossy[3], float(glossy[4])
+        else:
+            gC, gW, E_t, E_avg, coat_w = _NO_C, _NO_C, _NO_E, _NO_EA, 0.0
+
         def part(a, b):
+            ga, gb = (a, b) if glossy is not None else (0, 0)
             _lookup(self.pts, self.xyzt, self.box, self.n_leaves, qs[a:b], nss[a:b], mode, kq, k, self.s, cone, cone_k,
-                    phi[a:b], r[a:b], tau[a:b])
+                    phi[a:b], r[a:b], tau[a:b], glossy is not None, gC[ga:gb], gW[ga:gb], E_t, E_avg, coat_w,
+                    g[ga:gb])
 
         run_chunks(part, n, workers)
         out_phi, out_r, out_tau = np.empty_like(phi), np.empty_like(r), np.empty_like(tau)
         out_phi[order], out_r[order], out_tau[order] = phi, r, tau
-        return out_phi, out_r, out_tau
+        if glossy is None:
+            return out_phi, out_r, out_tau
+        out_g = np.empty_like(g)
+        out_g[order] = g
+        return out_phi, out_r, out_tau, out_g
 
     def knn_radius(self, q: np.ndarray, kq: int, cap: float, workers: int) -> np.ndarray:
         """Distance (n,) m to the kq-th nearest photon of each query q (n, 4) (x, y, z, s t), capped at ``cap``.

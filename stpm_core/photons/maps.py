@@ -58,13 +58,22 @@ class PhotonMaps:
         for m in self.maps.values():
             m.build("STANDARD", k=self.k)
 
+    @property
+    def glossy_lookups(self) -> bool:
+        """Can :meth:`estimate` weigh caustic photons by a rough lobe (``glossy``)?  The compiled
+        search only (``PhotonMap.estimate``)."""
+        m = self.maps.get("caustic")
+        return m is not None and m.n > 0 and m.backend == "numba"
+
     def estimate(self, kind: str, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str | None = None,
                  k: int | None = None, kernel: str | None = None, temporal_alpha: float | None = None,
-                 support: bool = False):
+                 support: bool = False, glossy=None):
         """Irradiance E (n, 3) W/m^2 at p (n, 3) on the ns (n, 3) side at shutter times t (n,).
 
         Zeros where the map is empty.  Keyword overrides default to the settings.  support: return
-        ``(E, r, tau, lo, hi)``, the region each estimate read (``PhotonMap.estimate``).
+        ``(E, r, tau, lo, hi)``, the region each estimate read (``PhotonMap.estimate``).  glossy:
+        return (E, L_g), L_g the radiance the query's rough lobes reflect of the delta-only photons
+        (``PhotonMap.estimate``; :attr:`glossy_lookups` says whether the map can).
         """
         if kind not in self.maps:
             raise ValueError(f"unknown photon map {kind!r} (expected one of {KINDS})")
@@ -74,7 +83,7 @@ class PhotonMaps:
             k=self.k if k is None else int(k),
             kernel=(kernel or self.kernel).upper(),
             temporal_alpha=self.temporal_alpha if temporal_alpha is None else float(temporal_alpha),
-            support=support)
+            support=support, glossy=glossy)
 
     @property
     def stats(self) -> dict:

@@ -24,12 +24,20 @@ project the unit vector onto the octahedron |x|+|y|+|z| = 1, fold the lower
 half (z < 0) over the diagonals onto the square [-1, 1]^2 and quantise each
 coordinate to int16 (step 1/32767).  The worst-case angular error is about
 6e-5 rad, far below anything the side test can notice.
+
+The parity of ``wi_oct[0]`` carries one flag, :func:`delta_only`: odd = the photon reached its
+surface through delta lobes alone (L S+ D; the caustic map's photons a rough lobe of the camera
+vertex may read, docs/rendering.md "Path partition").  ``make_records(..., delta_only=...)`` sets
+it by moving the first code by at most one step (3e-5) toward zero; records made without it keep
+their rounding (and read as flagged where it happens to be odd: only the caustic map's records,
+which the tracer always flags, are read for it).
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["PHOTON_DTYPE", "BYTES_PER_PHOTON", "make_records", "photon_origin", "oct_encode", "oct_decode"]
+__all__ = ["PHOTON_DTYPE", "BYTES_PER_PHOTON", "make_records", "photon_origin", "oct_encode", "oct_decode",
+           "delta_only"]
 
 PHOTON_DTYPE = np.dtype([
     ("position", "<f4", (3,)),
@@ -81,8 +89,21 @@ def photon_origin(scene) -> np.ndarray:
     return 0.5 * (np.asarray(lo, np.float64) + np.asarray(hi, np.float64))
 
 
+def delta_only(records: np.ndarray) -> np.ndarray:
+    """(n,) bool: the photon's path bounced off delta lobes only (the parity flag of ``wi_oct[0]``)."""
+    return (np.asarray(records["wi_oct"][:, 0], np.int32) & 1) == 1
+
+
+def _set_parity(code: np.ndarray, flag: np.ndarray) -> None:
+    """Make code (n,) int16 odd where flag, even elsewhere, moving it by one step toward zero."""
+    c = code.astype(np.int32)
+    wrong = (c & 1) != np.asarray(flag, np.int32)
+    c = np.where(wrong, c - np.where(c > 0, 1, -1), c)
+    code[:] = c.astype(np.int16)
+
+
 def make_records(position: np.ndarray, wi: np.ndarray, power: np.ndarray, time: np.ndarray,
-                 origin: np.ndarray | None = None) -> np.ndarray:
+                 origin: np.ndarray | None = None, delta_only: np.ndarray | None = None) -> np.ndarray:
     """Pack photons into records.
 
     Parameters
@@ -92,6 +113,7 @@ def make_records(position: np.ndarray, wi: np.ndarray, power: np.ndarray, time: 
     wi : (n, 3) unit incoming directions (pointing away from the surface).
     power : (n, 3) RGB flux (W).
     time : (n,) normalised shutter times.
+    delta_only : (n,) bool or None: the flag of :func:`delta_only` (None: not set).
 
     Returns
     -------
@@ -104,4 +126,6 @@ def make_records(position: np.ndarray, wi: np.ndarray, power: np.ndarray, time: 
         rec["time"] = time
         rec["power"] = power
         rec["wi_oct"] = oct_encode(wi)
+        if delta_only is not None:
+            _set_parity(rec["wi_oct"][:, 0], np.broadcast_to(np.asarray(delta_only, bool), (n,)))
     return rec

@@ -36,7 +36,10 @@ receiver reuses across at most SHARE_WINDOW_FRACTION x the pilots' window (the T
 an estimate at that pixel and surface), never across a time slice.  The tolerance measured and
 tested is in docs/photon-mapping.md.
 
-The albedo and throughput stay each query's own: only E is shared.
+The albedo and throughput stay each query's own: only E is shared; and, for camera vertices whose
+rough lobes read the caustic map (``wo`` given), their glossy radiance L_g where also the view
+directions agree (``SHARE_WO_COS``: within 1.1 degrees, so f_c(wo, wi) of a lobe of roughness >=
+0.5 barely differs; a pixel's first hits differ by a fraction of the pixel's angle).
 """
 from __future__ import annotations
 
@@ -51,10 +54,12 @@ SHARE_NORMAL_COS = 0.9        # ... with shading normals at most acos(0.9) = 26 
 SHARE_ROUNDS = 16             # representatives per group at most; the queries left are estimated alone
 SHARE_PILOTS = 8              # queries per group estimated alone first: the smallest of their regions sets the reach
 SHARE_MIN_GAIN = 1.0          # ... and once a round's representatives answer fewer others than this each
+SHARE_WO_COS = 0.9998         # glossy reads (wo given): view directions at most acos(0.9998) = 1.1 degrees apart
 
 
 def shared_estimate(estimate, p: np.ndarray, ns: np.ndarray, t: np.ndarray, group: np.ndarray, *,
-                    f: float = None, f_t: float = None, cos_n: float = None, rounds: int = None):
+                    f: float = None, f_t: float = None, cos_n: float = None, rounds: int = None,
+                    wo: np.ndarray | None = None):
     """Irradiance (n, 3) at the queries, estimated at representatives and shared inside groups.
 
     Parameters
@@ -64,8 +69,12 @@ def shared_estimate(estimate, p: np.ndarray, ns: np.ndarray, t: np.ndarray, grou
     p : (n, 3) float64 positions; ns : (n, 3) shading normals on the query's side; t : (n,) times.
     group : (n,) int64 key: queries may share only inside one key (pixel x instance).
     f, f_t, cos_n, rounds : default to the module's constants.
+    wo : (n, 3) view directions, or None; given, ``estimate`` is called with the queries' indices
+        (m,) as a fourth argument and also returns the glossy radiance L_g (m, 3) as a sixth result (``PhotonMaps.estimate(..., glossy=...)``) and it is shared
+        as E, where also wo . wo_rep >= ``SHARE_WO_COS``.
 
-    Returns (E (n, 3) float64, estimated: how many queries were estimated, the others shared).
+    Returns (E (n, 3) float64, estimated: how many queries were estimated, the others shared); with
+    wo (E, L_g (n, 3), estimated).
     """
     f = SHARE_RADIUS_FRACTION if f is None else float(f)
     f_t = SHARE_WINDOW_FRACTION if f_t is None else float(f_t)
@@ -73,6 +82,8 @@ def shared_estimate(estimate, p: np.ndarray, ns: np.ndarray, t: np.ndarray, grou
     rounds = SHARE_ROUNDS if rounds is None else int(rounds)
     n = p.shape[0]
     E = np.empty((n, 3))
+    glossy = wo is not None
+    Lg = np.empty((n, 3)) if glossy else None
     order = np.argsort(group, kind="stable")  # by group, then sample order
     # -- Pilots: the first query of each group, estimated alone; its region sets the group's reach --
     g = group[order]
@@ -83,8 +94,11 @@ def shared_estimate(estimate, p: np.ndarray, ns: np.ndarray, t: np.ndarray, grou
     rank = np.arange(n) - start[gi]          # its place in the group
     is_pilot = rank < SHARE_PILOTS
     pilots = order[is_pilot]
-    Ep, rp, taup, _, _ = estimate(p[pilots], ns[pilots], t[pilots])
+    got = estimate(p[pilots], ns[pilots], t[pilots], *((pilots,) if glossy else ()))
+    Ep, rp, taup = got[:3]
     E[pilots] = Ep
+    if glossy:
+        Lg[pilots] = got[5]
     estimated = pilots.size
     # the group's reach: f x the smallest pilot radius, f_t x the smallest pilot window
     n_g = start.size
@@ -105,8 +119,11 @@ def shared_estimate(estimate, p: np.ndarray, ns: np.ndarray, t: np.ndarray, grou
         if not (last or rnd == rounds - 1):
             first[1:] = g[1:] != g[:-1]
         reps = todo[first]
-        Er, r, _, lo, hi = estimate(p[reps], ns[reps], t[reps])
+        got = estimate(p[reps], ns[reps], t[reps], *((reps,) if glossy else ()))
+        Er, r, _, lo, hi = got[:5]
         E[reps] = Er
+        if glossy:
+            Lg[reps] = got[5]
         estimated += reps.size
         if first.all():
             break
@@ -119,8 +136,11 @@ def shared_estimate(estimate, p: np.ndarray, ns: np.ndarray, t: np.ndarray, grou
         tq = t[todo]
         in_time = (np.abs(tq - t[rep]) <= reach_t[g]) & (tq >= lo[j]) & (tq <= hi[j])
         share = near & same_side & in_time & ~first & (r[j] > 0.0)
+        if glossy:
+            share &= np.einsum("ij,ij->i", wo[todo], wo[rep]) >= SHARE_WO_COS
+            Lg[todo[share]] = got[5][j[share]]
         E[todo[share]] = Er[j[share]]
         keep = ~(share | first)
         todo, g_todo = todo[keep], g_todo[keep]
         last = np.count_nonzero(share) < SHARE_MIN_GAIN * reps.size   # sharing has run dry: the rest alone
-    return E, estimated
+    return (E, Lg, estimated) if glossy else (E, estimated)

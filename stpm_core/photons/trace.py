@@ -12,7 +12,9 @@ Two maps (docs/photon-mapping.md, "Tracing"):
   the whole shutter), with :meth:`LightSet.emit_toward`.  A photon aimed at
   target j must hit instance j first (so overlapping cones never count a path
   twice), continues only through delta lobes, and is stored at every
-  non-delta surface reached after >= 1 delta bounce.
+  non-delta surface reached after >= 1 delta bounce.  Its record is flagged ``delta_only``
+  (``record.delta_only``) when no bounce was off a rough lobe: the photons a rough lobe of a
+  camera vertex reads (docs/rendering.md, "Path partition").
 * global map -- photons from :meth:`LightSet.emit` over the whole emission,
   stored at non-delta surfaces after >= 1 non-delta bounce.  Direct light is
   next-event estimation's job and L S+ D belongs to the caustic map, so the
@@ -237,7 +239,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
                 coat = split_coat & (n_lobe[extra] == 0)
                 for part, out in ((extra[~coat], stored), (extra[coat], coat_paths)):
                     if part.size:
-                        out.append(make_records(hits.position[idx[part]], -d[part], Phi[part], t[part], origin))
+                        out.append(make_records(hits.position[idx[part]], -d[part], Phi[part], t[part], origin,
+                                                _delta_flag(caustic, out is coat_paths, n_lobe[part])))
         if sd.transparent:
             # transparent hits: the photon goes on behind, its power tinted (not a bounce)
             Phi = pass_through(caster, sd, inst_offset, hits, d, t, C, Phi, rng, at=idx, limit=transparent_bounces)
@@ -260,7 +263,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
             s = store[:n_store]
             for part, out in ((s[s >= 0], stored), (-1 - s[s < 0], coat_paths)):
                 if part.size:
-                    out.append(make_records(hits.position[idx[part]], -d[part], Phi[part], t[part], origin))
+                    out.append(make_records(hits.position[idx[part]], -d[part], Phi[part], t[part], origin,
+                                            _delta_flag(caustic, out is coat_paths, n_lobe[part])))
         if last:
             break
         o, d, Phi, t, guard = o_n[:n_next], d_n[:n_next], Phi_n[:n_next], t_n[:n_next], g_n[:n_next]
@@ -268,6 +272,16 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     if not stored:
         return np.empty(0, dtype=PHOTON_DTYPE)
     return np.concatenate(stored)
+
+
+def _delta_flag(caustic: bool, coat: bool, n_lobe: np.ndarray):
+    """The records' delta-only flag (``record.delta_only``): caustic photons with no rough bounce
+    (``n_lobe``, which counts a caustic photon's bounces off rough lobes, is 0), never the global
+    photons that final gathering moves to the caustic map (``coat_paths``); the global map's own
+    records are left unflagged (None: never read for it)."""
+    if caustic:
+        return n_lobe == 0
+    return np.zeros(n_lobe.shape[0], bool) if coat else None
 
 
 def _run_batches(trace_batch, jobs: list, settings, progress, cancel, message: str) -> list:
