@@ -44,7 +44,7 @@ import numpy as np
 from . import _core
 from .export import ExportCache, export_scene
 from .export.cache import forget_for_updates
-from .export.camera import view_camera
+from .export.camera import thin_lens, view_camera
 
 __all__ = ["ViewParams", "ViewportSession", "ViewportDisplay", "viewport_settings", "first_pass_size",
            "FIRST_PASS_PIXELS", "view_update", "view_draw"]
@@ -60,31 +60,49 @@ class ViewParams:
     """What the worker needs of a 3D view, copied on Blender's main thread.
 
     width, height : the region's size in pixels; view_matrix : world -> view (16 floats, row
-    major); window_matrix : the projection (16 floats, row major).
+    major); window_matrix : the projection (16 floats, row major); lens : the depth of field
+    of a view through the scene camera, ((Camera field, value), ...) (:func:`camera_view_lens`;
+    empty: a pinhole).
     """
 
     width: int
     height: int
     view_matrix: tuple
     window_matrix: tuple
+    lens: tuple = ()
 
     @classmethod
     def from_context(cls, context) -> "ViewParams":
         """The view of ``context.region`` / ``context.region_data`` (main thread: reads bpy)."""
         region, rv3d = context.region, context.region_data
-        return cls.from_matrices(region.width, region.height, rv3d.view_matrix, rv3d.window_matrix)
+        return cls.from_matrices(region.width, region.height, rv3d.view_matrix, rv3d.window_matrix,
+                                 lens=camera_view_lens(context.scene, rv3d))
 
     @classmethod
-    def from_matrices(cls, width, height, view_matrix, window_matrix) -> "ViewParams":
+    def from_matrices(cls, width, height, view_matrix, window_matrix, lens: tuple = ()) -> "ViewParams":
         """From any 4 x 4 matrices (mathutils or numpy)."""
         def flat(m):
             return tuple(float(x) for row in m for x in row)
-        return cls(max(1, int(width)), max(1, int(height)), flat(view_matrix), flat(window_matrix))
+        return cls(max(1, int(width)), max(1, int(height)), flat(view_matrix), flat(window_matrix), tuple(lens))
 
     def camera(self):
-        """The core camera of this view (:func:`addon.export.camera.view_camera`)."""
-        return view_camera(np.reshape(self.view_matrix, (4, 4)), np.reshape(self.window_matrix, (4, 4)),
-                           self.width, self.height)
+        """The core camera of this view (:func:`addon.export.camera.view_camera`), with the scene
+        camera's depth of field when the view looks through it (``lens``)."""
+        cam = view_camera(np.reshape(self.view_matrix, (4, 4)), np.reshape(self.window_matrix, (4, 4)),
+                          self.width, self.height)
+        for name, value in self.lens:
+            setattr(cam, name, value)
+        return cam
+
+
+def camera_view_lens(scene, rv3d) -> tuple:
+    """((Camera field, value), ...): the scene camera's depth of field (``export.camera.thin_lens``,
+    as F12 exports it) when the 3D view looks through that camera (``view_perspective`` 'CAMERA'),
+    as Cycles' viewport shows it; () for any other view or a camera without depth of field."""
+    cam = getattr(scene, "camera", None)
+    if cam is None or getattr(rv3d, "view_perspective", "") != "CAMERA" or getattr(cam, "type", "") != "CAMERA":
+        return ()
+    return tuple(sorted(thin_lens(cam, cam.data.type).items()))
 
 
 def viewport_settings(base, passes: int, time_limit: float):

@@ -98,6 +98,30 @@ def test_the_view_camera_casts_the_rays_of_the_scene_camera(kind, fit):
         assert np.allclose(diff - along, 0.0, atol=1e-5)
 
 
+def test_a_view_through_the_camera_has_its_depth_of_field():
+    """Looking through the scene camera, the rendered view has F12's lens (Cycles' viewport shows
+    depth of field there); any other view, or a camera without it, is a pinhole."""
+    from types import SimpleNamespace
+    from addon.viewport import camera_view_lens
+    scene = fresh()
+    add_camera(type="PERSP", lens=50.0)
+    dof = scene.camera.data.dof
+    dof.use_dof, dof.focus_distance, dof.aperture_fstop, dof.aperture_blades = True, 3.0, 2.0, 6
+    through, free = SimpleNamespace(view_perspective="CAMERA"), SimpleNamespace(view_perspective="PERSP")
+    lens = camera_view_lens(scene, through)
+    view = camera_view(scene, 48, 32)
+    cam = ViewParams.from_matrices(48, 32, np.reshape(view.view_matrix, (4, 4)), np.reshape(view.window_matrix, (4, 4)),
+                                   lens=lens).camera()
+    f12 = exported_camera(scene)
+    for name in ("aperture_radius", "focus_distance", "aperture_blades", "aperture_rotation", "aperture_ratio"):
+        assert getattr(cam, name) == pytest.approx(getattr(f12, name)), name
+    assert cam.aperture_radius == pytest.approx(0.05 / 4.0)       # 50 mm / (2 x f/2)
+    assert camera_view_lens(scene, free) == ()
+    dof.use_dof = False
+    assert camera_view_lens(scene, through) == ()
+    assert view.camera().aperture_radius == 0.0
+
+
 def test_an_ortho_view_whose_near_plane_is_behind_the_eye_moves_the_eye_back():
     # Blender's ortho views clip symmetrically around the eye: near < 0 is not a camera the
     # core accepts, so the eye moves back along the view axis and the rays stay the same lines
