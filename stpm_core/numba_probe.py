@@ -206,7 +206,7 @@ else:                                          # pragma: no cover - depends on t
 
 # Files whose numba kernels are cached on disk (cache=True), relative to stpm_core/
 KERNEL_SOURCES = ("kernels/*.py", "raycast/embree_kernels.py", "raycast/numba_backend.py", "raycast/bvh_build.py",
-                  "photons/kdtree.py", "photons/hashgrid.py", "numba_probe.py", "nodes/ops.py")
+                  "raycast/contact.py", "photons/kdtree.py", "photons/hashgrid.py", "numba_probe.py", "nodes/ops.py")
 _STAMP = "stpm-kernel-sources.sha256"
 
 

@@ -18,6 +18,7 @@ import pytest
 
 from kernel_scenes import kernel_scenes
 from oracles.integrator_numpy import trace_image_numpy
+from stpm_core import integrator
 from stpm_core.integrator import trace_image
 from stpm_core.lights import LightSet
 from stpm_core.photons import build_photon_maps, sharing
@@ -39,6 +40,8 @@ def _compare(a: np.ndarray, b: np.ndarray, name: str) -> None:
 def test_kernels_match_the_numpy_tracer(name, monkeypatch):
     # the oracle estimates every query: compare with look-up sharing off (tests/test_sharing.py tests it)
     monkeypatch.setattr(sharing, "SHARE_RADIUS_FRACTION", 0.0)
+    # ... and with the render's estimator at every query (static views: tests/test_static_view.py)
+    monkeypatch.setattr(integrator, "STATIC_VIEW", False)
     scene, settings = SCENES[name]
     caster, lights = make_caster(scene), LightSet(scene)
     maps = None
