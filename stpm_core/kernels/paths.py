@@ -70,6 +70,22 @@ _INV_PI = 1.0 / np.pi
 # Camera
 # ----------------------------------------------------------------------------
 @njit(**_JIT)
+def _argsort_row(keys, p, S, order):
+    """order[:S] = argsort(keys[p, :S]): insertion sort (S, a pixel's samples, is small; random
+    keys have no ties)."""
+    for j in range(S):
+        order[j] = j
+    for j in range(1, S):
+        k = order[j]
+        key = keys[p, k]
+        i = j - 1
+        while i >= 0 and keys[p, order[i]] > key:
+            order[i + 1] = order[i]
+            i -= 1
+        order[i + 1] = k
+
+
+@njit(**_JIT)
 def camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, radius, table, px, py, xi):
     """Film positions px, py (P*S,) and shutter numbers xi (P*S,) of a tile's P = tw*th pixels.
 
@@ -113,17 +129,7 @@ def camera_tile(x0, y0, tw, th, S, jit, perm_u, time_u, with_time, radius, table
                 py[base + j] = iy + uy
         if not with_time:
             continue
-        # argsort of perm_u[p] (insertion sort: S is small; random keys have no ties)
-        for j in range(S):
-            order[j] = j
-        for j in range(1, S):
-            k = order[j]
-            key = perm_u[p, k]
-            i = j - 1
-            while i >= 0 and perm_u[p, order[i]] > key:
-                order[i + 1] = order[i]
-                i -= 1
-            order[i + 1] = k
+        _argsort_row(perm_u, p, S, order)
         for j in range(S):
             xi[base + j] = (order[j] + time_u[p, j]) / S
 
@@ -145,17 +151,7 @@ def lens_tile(S, keys, jit, uv):
     m = rows * cols
     order = np.empty(S, np.int64)
     for p in range(P):
-        # argsort of keys[p] (insertion sort: S is small; random keys have no ties)
-        for j in range(S):
-            order[j] = j
-        for j in range(1, S):
-            k = order[j]
-            key = keys[p, k]
-            i = j - 1
-            while i >= 0 and keys[p, order[i]] > key:
-                order[i + 1] = order[i]
-                i -= 1
-            order[i + 1] = k
+        _argsort_row(keys, p, S, order)
         for j in range(S):
             c = order[j]
             r = p * S + j
