@@ -44,6 +44,7 @@ from .camera import camera_to_world, image_plane, lens_args
 from .film import BH_INVERSE_CDF, DENOISING_GUIDES, DEPTH_BACKGROUND, PASSES, Film
 from .kernels import gather as _G
 from .kernels import paths as _K
+from .kernels import static_views as _SV
 from .kernels.bsdf import ggx_albedo_tables
 from .kernels.closure import C_PASS, C_ROUGH_LOBE, C_ROUGHNESS, C_W_GLASS, N_CLOSURE, pack_materials
 from .kernels.light_params import light_params, light_poses, mesh_arrays
@@ -484,9 +485,10 @@ def _estimate_split(ctx, kind: str, p, ns, t, group, extra: dict, static: np.nda
     E, estimated = np.empty((p.shape[0], 3)), 0
     for sel, est in ((static, "STANDARD"), (~static, None)):
         if sel.any():
+            # (np.take: half the time of fancy indexing for these row gathers)
             i = np.flatnonzero(sel)
-            E[i], e = _estimate(ctx, kind, p[i], ns[i], t[i], None if group is None else group[i],
-                                extra_sel(extra, i), est)
+            E[i], e = _estimate(ctx, kind, np.take(p, i, axis=0), np.take(ns, i, axis=0), np.take(t, i),
+                                None if group is None else np.take(group, i), extra_sel(extra, i), est)
             estimated += e
     return E, estimated
 
@@ -547,62 +549,25 @@ def static_view_setup(scene, maps) -> tuple | None:
     return static, lo, hi, cat(ca, 3), cat(cb, 3), cat(cr, 1).ravel()
 
 
-def _segments_distance(p0: np.ndarray, d1: np.ndarray, q0: np.ndarray, d2: np.ndarray) -> np.ndarray:
-    """Distances (m,) between the segments p0 + s d1 (m, 3 each) and q0 + u d2 (3,), s, u in [0, 1]:
-    the closest points' parameters clamped to the segments (Ericson, Real-Time Collision
-    Detection, 5.1.9)."""
-    r = p0 - q0
-    a = np.einsum("ki,ki->k", d1, d1)
-    e = float(d2 @ d2)
-    f = r @ d2
-    c = np.einsum("ki,ki->k", d1, r)
-    b = d1 @ d2
-    den = a * e - b * b
-    s = np.where(den > 1e-30 * np.maximum(a * e, 1e-300), np.clip((b * f - c * e) / np.where(den > 0, den, 1.0), 0, 1), 0.0)
-    if e > 0.0:
-        u = (b * s + f) / e
-        s = np.where(u < 0.0, np.clip(-c / np.maximum(a, 1e-300), 0, 1), np.where(u > 1.0, np.clip((b - c) / np.maximum(a, 1e-300), 0, 1), s))
-        u = np.clip(u, 0.0, 1.0)
-        # with s clamped, u follows again
-        u = np.clip((b * s + f) / e, 0.0, 1.0)
-    else:
-        u = np.zeros_like(s)
-        s = np.clip(-c / np.maximum(a, 1e-300), 0, 1)
-    diff = p0 + s[:, None] * d1 - (q0 + u[:, None] * d2)
-    return np.sqrt(np.einsum("ki,ki->k", diff, diff))
-
-
-def static_view_rows(setup: tuple, o: np.ndarray, position: np.ndarray, instance: np.ndarray) -> np.ndarray:
-    """(m,) bool: camera rays from o (m, 3) (or (1, 3)) whose hit at ``position`` (m, 3) on
-    ``instance`` (m,) (-1: a miss) is a static view -- the instance is static (``setup[0]``) and
-    the segment o -> position comes near no moving instance at any instant of the shutter (it
-    misses each moving instance's box, or all of its capsules: :func:`static_view_setup`), so
-    every instant sees the same point along that ray.
+def static_view_rows(setup: tuple, o: np.ndarray, position: np.ndarray, instance: np.ndarray,
+                     chain: np.ndarray | None = None) -> np.ndarray:
+    """(m,) bool: ray segments from o (m, 3) (or (1, 3)) to their hits at ``position`` (m, 3) on
+    ``instance`` (m,) (-1: a miss) that are static views -- the instance is static (``setup[0]``)
+    and the segment comes near no moving instance at any instant of the shutter (it misses each
+    moving instance's box, or all of its capsules: :func:`static_view_setup`), so every instant
+    sees the same point along that ray.  chain (m,) bool or None: the path before the segment is
+    time-independent (camera rays: None, every row); a later segment counts only where its path's
+    did (docs/photon-mapping.md, "Later vertices").  ``kernels.static_views.static_segments``.
     """
     static, lo, hi, ca, cb, cr = setup
-    ok = np.zeros(instance.shape[0], dtype=bool)
-    hit = instance >= 0
-    ok[hit] = static[instance[hit]]
-    if lo.shape[0] == 0 or not ok.any():
-        return ok
-    rows = np.flatnonzero(ok)
-    o = np.broadcast_to(np.asarray(o, np.float64), position.shape)[rows]
-    seg = position[rows] - o
-    inv = 1.0 / np.where(seg == 0.0, 1e-300, seg)        # an axis-parallel segment: huge, never nan
-    near = np.zeros(rows.size, dtype=bool)
-    for j in range(lo.shape[0]):
-        a, b = (lo[j] - o) * inv, (hi[j] - o) * inv
-        t0 = np.max(np.minimum(a, b), axis=1)
-        t1 = np.min(np.maximum(a, b), axis=1)
-        near |= (t1 >= np.maximum(t0, 0.0)) & (t0 <= 1.0)
-    if near.any():
-        k = np.flatnonzero(near)
-        crosses = np.zeros(k.size, dtype=bool)
-        for j in range(ca.shape[0]):
-            crosses |= _segments_distance(o[k], seg[k], ca[j], cb[j] - ca[j]) <= cr[j]
-        near[k] = crosses
-    ok[rows[near]] = False
-    return ok
+    m = instance.shape[0]
+    out = np.empty(m, np.uint8)
+    use_chain = chain is not None
+    _SV.static_segments(kernel_array(o), kernel_array(position), kernel_array(instance, np.int32),
+                        kernel_array(chain, np.uint8) if use_chain else _NO_FLAGS, use_chain,
+                        kernel_array(static, np.uint8), kernel_array(lo), kernel_array(hi), kernel_array(ca),
+                        kernel_array(cb), kernel_array(cr), out)
+    return out.view(np.bool_)
 
 
 def glossy_caustic_rows(ctx, C, crow) -> np.ndarray:
@@ -616,13 +581,15 @@ def glossy_caustic_rows(ctx, C, crow) -> np.ndarray:
 
 
 def _glossy_caustic(ctx, sh, kc, hits, d, C, crow, t_s, stats, dst, idx_k, use_idx, beta_k, use_beta, rho,
-                    has_rho, spp: int = 1):
+                    has_rho, spp: int = 1, estimator: str | None = None):
     """Caustic at the covered rows sh[kc]: rho_d / pi * E_caustic (where has_rho[kc]) plus the rough
     lobes' reading of the caustic map, L_g = sum_p w_p f_c(wo, wi_p) Phi_p / measure over the same
     estimate's delta-only photons (``PhotonMaps.estimate(..., glossy=...)``), times beta.  spp > 1
     (a pixel's samples consecutive): shared between a pixel's queries on one instance as E is, where
-    their view directions also agree (``photons.sharing``, ``SHARE_WO_COS``)."""
+    their view directions also agree (``photons.sharing``, ``SHARE_WO_COS``).  estimator: the maps'
+    (None: the render's; 'STANDARD' at static views)."""
     rows = sh[kc]
+    est = {} if estimator is None else {"estimator": estimator}
     wo = -d[rows]
     ns, ng = hits.ns[rows], hits.ng[rows]
     n_f = np.where((np.einsum("ij,ij->i", ns, wo) < 0.0)[:, None], -ns, ns)
@@ -637,11 +604,11 @@ def _glossy_caustic(ctx, sh, kc, hits, d, C, crow, t_s, stats, dst, idx_k, use_i
         def estimate(p, ns_q, t_q, sel):
             # (the sharing's subset sel of the queries: their closure rows and directions go with them)
             return ctx.maps.estimate("caustic", p, ns_q, t_q, support=True,
-                                     glossy=(gC[sel], gW[sel], E_t, E_avg, coat_w))
+                                     glossy=(gC[sel], gW[sel], E_t, E_avg, coat_w), **est)
 
         Ec, Lg, estimated = _sharing.shared_estimate(estimate, p_q, n_f, t_s[kc], group, wo=wo)
     else:
-        Ec, Lg = ctx.maps.estimate("caustic", p_q, n_f, t_s[kc], glossy=(gC, gW, E_t, E_avg, coat_w))
+        Ec, Lg = ctx.maps.estimate("caustic", p_q, n_f, t_s[kc], glossy=(gC, gW, E_t, E_avg, coat_w), **est)
         estimated = kc.size
     stats.photon_lookups += kc.size
     stats.photon_estimates += estimated
@@ -653,7 +620,7 @@ def _glossy_caustic(ctx, sh, kc, hits, d, C, crow, t_s, stats, dst, idx_k, use_i
 
 
 def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k, use_idx, beta_k, use_beta,
-                  touched, spp: int = 1, rng=None, view_o: np.ndarray | None = None, cov_sh=None):
+                  touched, spp: int = 1, rng=None, static_sh: np.ndarray | None = None, cov_sh=None):
     """Caustic and Indirect at the hit rows sh (k,): rho_d / pi * E_kind(p, ns_f, t) added into the passes.
 
     cov_sh (k,) bool or None: the rows whose rough lobes read the caustic map too (:func:`glossy_caustic_rows`;
@@ -665,9 +632,9 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
     spp > 1 (samples of a pixel consecutive): the queries of one pixel on one instance share
     estimates (``photons.sharing``, on while ``SHARE_RADIUS_FRACTION`` > 0 and the maps support it).
     With final gathering (``ctx.final_gather`` > 0) Indirect is :func:`_final_gather`'s instead
-    (rng: its random numbers).  view_o: the camera rays' origins (m, 3) or (1, 3) at bounce 0 with
-    static views possible (``ctx.static_view``), else None: the queries of static views
-    (:func:`static_view_rows`) read the maps with STANDARD.
+    (rng: its random numbers).  static_sh (k,) bool or None (none): the rows that are static views
+    (:func:`static_view_rows` along the whole path, ``shade_paths``); their queries read the maps
+    with STANDARD, the glossy ones' too.
     """
     k = sh.size
     rho = _scratch("rho", (k, 3))
@@ -678,8 +645,18 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
         # rows whose rough lobes read the caustic map: their own look-ups (diffuse and glossy at once)
         has_rho = np.zeros(k, bool)
         has_rho[live[:n_q_rows]] = True
-        _glossy_caustic(ctx, sh, np.flatnonzero(cov_sh), hits, d, C, crow, t_s, stats, dsts["Caustic"], idx_k,
-                        use_idx, beta_k, use_beta, rho, has_rho, spp)
+        kc = np.flatnonzero(cov_sh)
+        if static_sh is not None:
+            # static views among them read STANDARD (the shutter's average), the others the render's estimator
+            st_c = static_sh[kc]
+            for sel, est in ((kc[st_c], "STANDARD"), (kc[~st_c], None)):
+                if sel.size:
+                    _glossy_caustic(ctx, sh, sel, hits, d, C, crow, t_s, stats, dsts["Caustic"], idx_k, use_idx,
+                                    beta_k, use_beta, rho, has_rho, spp, estimator=est)
+            stats.static_lookups += int(np.count_nonzero(st_c))
+        else:
+            _glossy_caustic(ctx, sh, kc, hits, d, C, crow, t_s, stats, dsts["Caustic"], idx_k, use_idx, beta_k,
+                            use_beta, rho, has_rho, spp)
         touched.add("Caustic")
         # the other rows' caustic look-ups below (the global map's for all queried rows)
         keep_c = ~cov_sh[live[:n_q_rows]]
@@ -701,10 +678,8 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
         rows = sh[live[:n_q_rows]]
         group = (idx_k[rows] if use_idx else rows) // spp * (ctx.n_instances + 1) + hits.instance[rows]
     q_static = None
-    if view_o is not None:
-        rows = sh[live[:n_q_rows]]
-        q_static = static_view_rows(ctx.static_view, view_o if view_o.shape[0] == 1 else view_o[rows],
-                                    hits.position[rows], hits.instance[rows])
+    if static_sh is not None:
+        q_static = static_sh[live[:n_q_rows]]
         n_static = int(np.count_nonzero(q_static))
         q_static = q_static if n_static else None
     for kind, name in (("caustic", "Caustic"), ("global", "Indirect")):
@@ -950,6 +925,8 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
     cov = None                               # (live rows,) uint8: 1 where the path left a vertex whose rough
                                              # lobes read the caustic map and met delta vertices only since
                                              # (None: none did; glossy_caustic_rows)
+    chain = None                             # (live rows,) bool: camera -> ... -> the ray's origin is a static
+                                             # view (static_view_rows; None: bounce 0 all, later none)
     for bounce in range(ctx.max_depth + 1):
         m = n if idx is None else idx.size
         if m == 0:
@@ -1026,6 +1003,12 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         # the hits whose rough lobes read the caustic map (their paths then drop the light they reach
         # through delta vertices alone)
         cov_hit = glossy_caustic_rows(ctx, C, crow) if ctx.glossy_caustic else None
+        # the hits that are static views: the whole path to them the same at every instant (their
+        # photon queries read the shutter's average with STANDARD; docs/photon-mapping.md)
+        sv = None
+        if ctx.static_view is not None and (bounce == 0 or chain is not None):
+            sv = static_view_rows(ctx.static_view, o, hits.position, hits.instance, chain)
+            sv = sv if sv.any() else None
         # -- Shade non-delta vertices: Direct, Caustic, Indirect -------------------------------------
         if n_sh:
             t_s = np.take(t, sh, out=_scratch("t_s", (n_sh,)))
@@ -1035,7 +1018,7 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                 touched.add("Direct")
             if ctx.maps is not None:
                 _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats, dsts, idx_k, use_idx, beta_k, use_beta, touched,
-                              int(spp), rng=rng, view_o=o if bounce == 0 and ctx.static_view is not None else None,
+                              int(spp), rng=rng, static_sh=None if sv is None else sv[sh],
                               cov_sh=None if cov_hit is None else cov_hit[sh])
         if bounce == ctx.max_depth or n_spec == 0:
             break
@@ -1057,8 +1040,9 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
         if sid is not None:
             # paths split earlier keep their strata: idx_n gets each continuation's hit row
             idx_c, use_idx_c, sid_rows, samp_rows, done_rows = _NO_IDX, False, sid, idx, done
-        elif cov_hit is not None:
-            # (the caustic-map rule needs each continuation's hit row: idx_n gets it, mapped below)
+        elif cov_hit is not None or sv is not None:
+            # (the caustic-map rule and static views need each continuation's hit row: idx_n gets it,
+            # mapped below)
             idx_c, use_idx_c = _NO_IDX, False
         if ctx.rough_splits > 1:
             Ns = int(ctx.rough_splits)
@@ -1107,15 +1091,15 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                                 _world_poses(ctx, t_spec), ctx.world_li >= 0, counts_s, ctx.glossy_bounces,
                                 ctx.transmission_bounces, idx_n, beta_n, o_n, d_n, guard_n, glossy_n, world_w_n,
                                 pc_n, counts_n, ctx.features, feat_c, dft_c, feat_n, dft_n)
-        src = None                               # each continuation's hit row (with cov_hit)
+        src = None                               # each continuation's hit row (with cov_hit or sv)
         if sid_rows is not None:
             # idx_n holds each continuation's row (copy); back to its sample, and its stratum
             j = idx_n[:n_go]
-            if cov_hit is not None:
+            if cov_hit is not None or sv is not None:
                 src = j.copy() if rows_c is spec else rows_c[j]
             sid, done = sid_rows[j], done_rows[j]
             idx_n[:n_go] = samp_rows[j]
-        elif cov_hit is not None:
+        elif cov_hit is not None or sv is not None:
             src = idx_n[:n_go].copy()
             if idx is not None:
                 idx_n[:n_go] = idx[src]
@@ -1132,6 +1116,11 @@ def shade_paths(ctx, o, d, times, tmax0, rng, stats: TraceStats, cam_pos, cam_ax
                 pc_n[:n_go][drop] = 0.0
                 world_w_n[:n_go][drop] = 0.0
             cov = cov_n if cov_n.any() else None
+        # a continuation from a static view goes on testing its segments (Later vertices)
+        chain = None
+        if sv is not None:
+            chain = sv[src]
+            chain = chain if chain.any() else None
         idx, beta, o, d, guard = idx_n[:n_go], beta_n[:n_go], o_n[:n_go], d_n[:n_go], guard_n[:n_go]
         glossy = glossy_n[:n_go] if glossy_n[:n_go].any() else None
         world_w = world_w_n[:n_go] if glossy is not None else None

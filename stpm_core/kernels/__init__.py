@@ -10,6 +10,8 @@
   light's triangles, packed once per LightSet (plain numpy, no kernels);
 * :mod:`.paths` -- camera-path bookkeeping, next-event estimation, specular steps, film sums;
 * :mod:`.photon_paths` -- one bounce of photon paths: deposit, BSDF sampling, Russian roulette.
+* :mod:`.static_views` -- which camera-path segments see the same point at every instant (static
+  views, whose photon queries read the shutter's average).
 
 Ray casting (embree, or the numba BVH of :mod:`stpm_core.raycast`) happens
 between kernel calls, one wavefront bounce at a time.
