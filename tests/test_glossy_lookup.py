@@ -90,3 +90,57 @@ def test_glossy_sums_match_the_oracle(mode, mat):
             want += np.array([f0, f1, f2]) * packed[j, 4:7]
         np.testing.assert_allclose(g[i], want, rtol=1e-5, atol=1e-12)
     assert g.sum() > 0.0
+
+
+@pytest.mark.parametrize("cone", [False, True])
+@pytest.mark.parametrize("cyl", [False, True])
+def test_range_glossy_sums_match_the_oracle(cone, cyl):
+    """The progressive method's fixed regions (``FlatTree.range_sum(..., glossy=...)``, 4D tree): the
+    glossy sum is the sum of w f_c(wo, wi_p) Phi_p over the photons inside the region on the query's
+    side (w the cone's weight) whose flag is set; the power sums and counts do not change."""
+    rng = np.random.default_rng(11)
+    rec, flag = _map(rng)
+    N = len(rec)
+    packed = np.zeros((N, 8), np.float32)
+    packed[:, :3] = oct_decode(rec["wi_oct"])
+    packed[:, 3] = delta_only(rec)
+    packed[:, 4:7] = rec["power"]
+    s = 0.7
+    tree = kdtree.FlatTree(rec["position"], rec["time"], packed, dims=4, s=s)
+    n = 40
+    q = np.zeros((n, 4))
+    q[:, :2] = rng.uniform(-0.8, 0.8, (n, 2))
+    q[:, 3] = s * rng.uniform(0.1, 0.9, n)
+    ns = np.tile([0.0, 0.0, 1.0], (n, 1))
+    rad = rng.uniform(0.1, 0.25, n)
+    half = rng.uniform(0.05, 0.3, n) if cyl else None
+    wo = rng.normal(size=(n, 3))
+    wo[:, 2] = np.abs(wo[:, 2]) + 0.2
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    C = pack_materials([Material(base_color=np.full(3, 0.4), roughness=0.6, specular=1.0)])
+    E, E_avg = ggx_albedo_tables()
+    gC = np.ascontiguousarray(np.repeat(C[:1], n, axis=0))
+    gW = np.concatenate([wo, ns, ns], axis=1)
+    phi0, cnt0 = tree.range_sum(q, ns, rad, half, cone, 1.1, 1)
+    phi, cnt, g = tree.range_sum(q, ns, rad, half, cone, 1.1, 1, (gC, gW, E, E_avg, 1.0))
+    np.testing.assert_array_equal(phi, phi0)
+    np.testing.assert_array_equal(cnt, cnt0)
+    # oracle: the photons inside by brute force (float64 distances from the float32 records, as the search)
+    P = rec["position"].astype(np.float64)
+    T = s * rec["time"].astype(np.float64)
+    W = packed[:, :3].astype(np.float64)
+    for i in range(n):
+        d2 = ((P - q[i, :3]) ** 2).sum(axis=1)
+        if cyl:
+            inside = (d2 < rad[i] ** 2) & (np.abs(T - q[i, 3]) <= half[i])
+        else:
+            d2 = d2 + (T - q[i, 3]) ** 2
+            inside = d2 < rad[i] ** 2
+        j_in = np.flatnonzero(inside & (W @ ns[i] > 0.0) & flag)
+        w = 1.0 - np.sqrt(d2[j_in]) / (1.1 * rad[i]) if cone else np.ones(j_in.size)
+        want = np.zeros(3)
+        for wj, j in zip(w, j_in):
+            f0, f1, f2, _ = bsdf_eval_cont(C, 0, E, E_avg, tuple(wo[i]), tuple(W[j]), tuple(ns[i]), tuple(ns[i]), False)
+            want += wj * np.array([f0, f1, f2]) * packed[j, 4:7]
+        np.testing.assert_allclose(g[i], want, rtol=1e-5, atol=1e-12)
+    assert g.sum() > 0.0

@@ -687,10 +687,11 @@ if AVAILABLE:
                 r_prev = np.inf
 
     @_jit
-    def _range(P, C, box, n_leaves, q, ns, rad, half, D, cyl, s, cone, cone_k, stack, out_phi, out_cnt):
+    def _range(P, C, box, n_leaves, q, ns, rad, half, D, cyl, s, cone, cone_k, stack, out_phi, out_cnt,
+               glossy, gC, gW, E, E_avg, coat_w, out_g):
         """Fixed-size kernels: photons inside each query's own region, summed (the progressive estimate).
 
-        P (N, 8) float32 rows (wi, 0, Phi, 0) and C (4, N) float32 coordinate rows, both in tree order.
+        P (N, 8) float32 rows (wi, delta_only, Phi, 0) and C (4, N) float32 coordinate rows, both in tree order.
 
         q (n, 4): x, y, z and s t (D = 4; ignored for D = 3); ns (n, 3) float32 normals; rad (n,)
         radius (m); half (n,) the cylinder's half-height in s t units (cyl only).  The region of
@@ -704,6 +705,10 @@ if AVAILABLE:
         cone 1 - d / (cone_k rad) of the spatial distance d for D = 3 / cyl and of the 4D one for the
         ball), out_cnt (n,) how many photons were inside (either side).  stack: int64 scratch of at
         least the tree depth + 2.  Depth-first: a node is entered only if its box reaches the region.
+        glossy: also out_g (n, 3) W/sr, the sum of w f_c(wo, wi) Phi over the same photons whose path
+        was delta-only (P[j, 3] > 0), f_c query i's rough lobes but DIFFUSE (gC (n, N_CLOSURE) its
+        closure row, gW (n, 9) its (wo, ns, ng), E, E_avg the GGX tables, coat_w the coat's weight:
+        ``kernels.bsdf._glossy_add``, as :func:`_glossy_sum` of the k-nearest search).
         """
         N = P.shape[0]
         first_leaf = n_leaves - 1
@@ -716,6 +721,13 @@ if AVAILABLE:
             p0 = 0.0
             p1 = 0.0
             p2 = 0.0
+            g0 = 0.0
+            g1 = 0.0
+            g2 = 0.0
+            if glossy:
+                # the query's rough lobes, set up once (kernels.bsdf._hit)
+                wo = (gW[i, 0], gW[i, 1], gW[i, 2])
+                hit = _bsdf_hit(gC, i, E, E_avg, wo, (gW[i, 3], gW[i, 4], gW[i, 5]), (gW[i, 6], gW[i, 7], gW[i, 8]))
             cnt = 0
             top = 0
             stack[0] = 0
@@ -763,10 +775,20 @@ if AVAILABLE:
                         p0 += w * P[j, 4]
                         p1 += w * P[j, 5]
                         p2 += w * P[j, 6]
+                        if glossy and P[j, 3] > 0.0:
+                            wi = (np.float64(P[j, 0]), np.float64(P[j, 1]), np.float64(P[j, 2]))
+                            f0, f1, f2, _ = _bsdf_glossy_add(gC, i, E, hit, wo, wi, 0.0, 0.0, 0.0, 0.0, coat_w)
+                            g0 += w * f0 * P[j, 4]
+                            g1 += w * f1 * P[j, 5]
+                            g2 += w * f2 * P[j, 6]
             out_phi[i, 0] = p0
             out_phi[i, 1] = p1
             out_phi[i, 2] = p2
             out_cnt[i] = cnt
+            if glossy:
+                out_g[i, 0] = g0
+                out_g[i, 1] = g1
+                out_g[i, 2] = g2
 
     @_jit
     def _morton(q, lo, scale, D):
@@ -910,8 +932,11 @@ class FlatTree:
         return out
 
     def range_sum(self, q: np.ndarray, ns: np.ndarray, rad: np.ndarray, half: np.ndarray | None, cone: bool,
-                  cone_k: float, workers: int):
+                  cone_k: float, workers: int, glossy=None):
         """Sums Phi (n, 3) W and counts (n,) of the photons inside fixed regions (:func:`_range`).
+
+        glossy: None, or (gC, gW, E, E_avg, coat_w) as :meth:`lookup`'s: then a third result, the sums
+        (n, 3) of w f_c(wo, wi) Phi over the same photons with a delta-only path.
 
         q (n, 4): x, y, z and s t (the tree's own s; column 3 ignored by a 3D tree); rad (n,) m;
         half (n,) the cylinder's half-height in s t units, or None for balls (3D: time ignored,
@@ -930,10 +955,19 @@ class FlatTree:
         phi = np.zeros((n, 3))
         cnt = np.zeros(n, np.int64)
         depth = int(np.log2(max(self.n_leaves, 1))) + 4
+        g = np.zeros((n if glossy is not None else 0, 3))
+        if glossy is not None:
+            gC = np.ascontiguousarray(glossy[0], np.float64)
+            gW = np.ascontiguousarray(glossy[1], np.float64)
+            E_t, E_avg, coat_w = glossy[2], glossy[3], float(glossy[4])
+        else:
+            gC, gW, E_t, E_avg, coat_w = _NO_C, _NO_C, _NO_E, _NO_EA, 0.0
 
         def part(a, b):
+            ga, gb = (a, b) if glossy is not None else (0, 0)
             _range(self.pts, self.xyzt, self.box, self.n_leaves, q[a:b], ns[a:b], rad[a:b], half[a:b], D, cyl, self.s,
-                   cone, cone_k, np.empty(2 * depth, np.int64), phi[a:b], cnt[a:b])
+                   cone, cone_k, np.empty(2 * depth, np.int64), phi[a:b], cnt[a:b], glossy is not None, gC[ga:gb],
+                   gW[ga:gb], E_t, E_avg, coat_w, g[ga:gb])
 
         run_chunks(part, n, workers)
-        return phi, cnt
+        return (phi, cnt) if glossy is None else (phi, cnt, g)

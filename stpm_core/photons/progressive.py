@@ -298,10 +298,17 @@ class ProgressiveMaps:
         self._radius = {kind: [] for kind in KINDS}             # a sample of the radii used (for stats)
         self._lookup_s = 0.0
 
-    def _range_sum(self, kind, dims, q, ns, r, half, cone):
-        """(Phi (n, 3), count (n,)) of the pass's photons inside each region (the kd-tree's range query)."""
+    def _range_sum(self, kind, dims, q, ns, r, half, cone, glossy=None):
+        """(Phi (n, 3), count (n,)) of the pass's photons inside each region (the kd-tree's range query);
+        with glossy (:meth:`estimate`) also the regions' glossy sums (n, 3)."""
         m = self.maps.maps[kind]
-        return m.flat_tree(dims).range_sum(q, ns, r, half, cone, CONE_K, m.workers)
+        return m.flat_tree(dims).range_sum(q, ns, r, half, cone, CONE_K, m.workers, glossy)
+
+    @property
+    def glossy_lookups(self) -> bool:
+        """Can :meth:`estimate` weigh caustic photons by a rough lobe (``glossy``)?  The range query
+        is the compiled one's (``kdtree._range``): wherever the pass has caustic photons."""
+        return self.has("caustic")
 
     def prepare(self, static: bool = False) -> None:
         """Build now the kd-trees :meth:`estimate` reads (else built on its first call; the same trees);
@@ -318,12 +325,16 @@ class ProgressiveMaps:
         return self.maps.has(kind) and self.pilot.maps.maps[kind].n > PILOT_K
 
     def estimate(self, kind: str, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *,
-                 estimator: str | None = None) -> np.ndarray:
+                 estimator: str | None = None, glossy=None):
         """Irradiance E (n, 3) W/m^2 at p (n, 3) on the ns (n, 3) side at shutter times t (n,).
 
         estimator 'STANDARD' with a space-time kernel: the queries are static views
         (``integrator.static_view_rows``), read with the surface disc over the pass's stratum (its
         own pilot region and schedule: d = 2), whose shutter average is their pixels' value.
+        glossy: None, or (closure rows (n, N_CLOSURE), (wo, ns, ng) (n, 9), E, E_avg, coat_w) as
+        ``PhotonMaps.estimate``'s: then (E, L_g), L_g (n, 3) W/(m^2 sr) = the region's sum of
+        f_c(wo, wi_p) Phi_p over its delta-only photons divided by the same measure as E
+        (docs/rendering.md, "Path partition").
         """
         if kind not in KINDS:
             raise ValueError(f"unknown photon map {kind!r} (expected one of {KINDS})")
@@ -332,8 +343,9 @@ class ProgressiveMaps:
         p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
         n = p.shape[0]
         E = np.zeros((n, 3))
+        Lg = np.zeros((n, 3)) if glossy is not None else None
         if n == 0 or not self.has(kind):
-            return E
+            return E if glossy is None else (E, Lg)
         ns = np.ascontiguousarray(np.asarray(ns, dtype=np.float32).reshape(-1, 3))
         t = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
         s = self.pilot.time_scale
@@ -369,7 +381,8 @@ class ProgressiveMaps:
             r = r * c * w ** (1.0 / 3.0)                         # the 4D ball, unclipped
         # -- photons of this pass inside each region -----------------------------------------------
         q[:, :3] = p - m.origin
-        Phi, cnt = self._range_sum(kind, 3 if timeless else 4, q, ns, r, half, cone)
+        sums = self._range_sum(kind, 3 if timeless else 4, q, ns, r, half, cone, glossy)
+        Phi, cnt = sums[0], sums[1]
         # -- normalise by the region's measure in the stratum (area x its share of the stratum's mass) --
         rr = np.maximum(r, 1e-12)
         if timeless:
@@ -381,13 +394,15 @@ class ProgressiveMaps:
         ok &= r > 0
         good = ok & (measure > 0)
         E[good] = Phi[good] / measure[good, None]
+        if glossy is not None:
+            Lg[good] = sums[2][good] / measure[good, None]
         st = self._photons_in[kind]
         st[0] += int(cnt.sum())
         st[1] += n
         if len(self._radius[kind]) < 64:
             self._radius[kind].append(r[ok][:: max(1, int(ok.sum()) // 256)])
         self._lookup_s += _time.perf_counter() - t0
-        return E
+        return E if glossy is None else (E, Lg)
 
     @property
     def stats(self) -> dict:
