@@ -16,7 +16,8 @@ swaps them for the duration of a call):
 * **Cycles without refractive caustics**: the same settings with ``caustics_refractive`` off,
   ``NOCAUSTIC_SPP`` samples, cached next to the reference: it defines the caustic region;
 * **STPM FINAL** (``bench_room.stpm_final``: export + render, after a warm-up);
-* **Cycles at equal time** (``bench_room.cycles_equal_time``).
+* **Cycles at equal time** (``bench_room.cycles_equal_time``, seed ``bench_room.EQUAL_TIME_SEED``, not
+  the reference's).
 
 Caustic region (derived, not hand-set): the light that reaches the table through the glass
 objects is the reference minus the no-refractive-caustics render.  Both luminances are box
@@ -34,7 +35,8 @@ difference is above ``CAUSTIC_REL`` x the filtered no-caustics luminance and abo
 Measured against the reference after the Standard view transform (``bench_room.flip_ldr``):
 
 * outside the caustic region: mean LDR-FLIP, mean ratio (linear, all channels), 8 x 8-block
-  luminance correlation; the same over the whole image;
+  luminance correlation; the same over the whole image; FLIP outside and farther than ``CUBE_MARGIN``
+  from the frosted cube (``*_flip_ldr_outside_far_cube``: the reference's dark contact under it);
 * inside it: mean luminance ratio, and the correlation of the 8 x 8-block luminance means of
   the blocks at least half covered by the region (``*_caustic_blocks`` counts them), mean FLIP;
 * per surface (``bench_room.regions`` / ``region_stats``), printed and in ``regions.json``;
@@ -78,6 +80,11 @@ NOCAUSTIC_SPP = 256
 #: converged reference there
 CONVERGED_SPP = 16384
 CAUSTIC_REL, CAUSTIC_ABS = 0.25, 0.02
+#: pixels within this many of the frosted cube (its object-index mask, dilated) are also scored apart
+#: (``*_flip_ldr_outside_far_cube``): the cube rests exactly on the table, and at that contact the
+#: reference renders the table seen through the cube black (Cycles' rays die on the coincident faces;
+#: docs/blender.md), which STPM does not; the issue's figure stays the whole outside
+CUBE_MARGIN = 6
 #: environment variable: more STPM seeds (comma-separated, e.g. "1,2") rendered after the main one
 #: and scored inside the caustic region only (``stpm_seeds``): the region's figures are one draw of
 #: a heavy-tailed estimate (the table's varnish reflecting the sun through the glass is path traced
@@ -277,6 +284,8 @@ def run() -> dict:
     table = index == names.index("Table") + 1
     caustic = caustic_mask(ref, nc, table)
     outside = ~caustic
+    from scipy.ndimage import binary_dilation
+    far_cube = outside & ~binary_dilation(index == names.index("FrostedCube") + 1, iterations=CUBE_MARGIN)
 
     out: dict = {"resolution": f"{W}x{H}", "frame": 1,
                  "reference": f"Cycles {room.REF_SPP} spp, no denoise/adaptive/clamp, 12 bounces, caustics on, "
@@ -289,6 +298,7 @@ def run() -> dict:
                  "stpm_render_s": tim["render_s"], "stpm_photon_trace_s": tim["photon_trace_s"],
                  "stpm_warmup_s": tim["warmup_s"], "stpm_estimator": tim["estimator"],
                  "cycles_equal_time_spp": eq_spp, "cycles_equal_time_s": eq_s,
+                 "cycles_equal_time_seed": room.EQUAL_TIME_SEED,
                  "equal_time_ratio": eq_s / stpm_s, "stpm_over_ref_time": stpm_s / ref_s}
     maps = {}
     y_ref = ref @ LUMA
@@ -296,6 +306,7 @@ def run() -> dict:
         f, fmap = room.flip_ldr(img, ref)
         maps[tag] = fmap
         out[f"{tag}_flip_ldr_outside"] = float(fmap[outside].mean())
+        out[f"{tag}_flip_ldr_outside_far_cube"] = float(fmap[far_cube].mean())
         out[f"{tag}_mean_ratio_outside"] = float(img[outside].mean() / ref[outside].mean())
         out[f"{tag}_block8_corr_outside"] = masked_block_corr(img, ref, outside)[0]
         out[f"{tag}_flip_ldr"] = f
