@@ -45,3 +45,17 @@ def test_zero_anisotropy_is_not_warned():
     bpy.data.materials["Brushed"].node_tree.nodes["Principled BSDF"].inputs["Anisotropic"].default_value = 0.0
     _scene, warnings = export_now()
     assert not [w for w in warnings if "Anisotrop" in w], warnings
+
+
+def test_cycles_denoising_data_switch_is_named_when_its_passes_are_missing():
+    # A view layer with Cycles' Denoising Data ticked (the review's file, made as a Cycles user
+    # makes it) got no Denoising passes from STPM and no word about it
+    from addon.engine import unsupported_passes
+    fresh()
+    vl = bpy.context.scene.view_layers[0]
+    assert not any("Denoising" in n for n in unsupported_passes(vl))
+    vl.cycles.denoising_store_passes = True
+    missing = unsupported_passes(vl)
+    assert len(missing) == 1 and missing[0].startswith("Denoising Data") and "Sampling > Denoising" in missing[0]
+    # with STPM's Denoise on, Albedo and Normal are written: only Cycles' Denoising Depth is missing
+    assert unsupported_passes(vl, denoise=True) == ["Denoising Depth"]
