@@ -36,9 +36,17 @@ _PRODUCED = {"use_pass_combined", "use_pass_z", "use_pass_normal", "use_pass_emi
 _NOT_PASSES = {"use_pass_cryptomatte_accurate"}  # a quality option, not a pass
 
 
-def unsupported_passes(view_layer) -> list[str]:
-    """UI names of the passes enabled on ``view_layer`` that STPM does not produce (Mist, AO, ...)."""
+def unsupported_passes(view_layer, denoise: bool = False) -> list[str]:
+    """UI names of the passes enabled on ``view_layer`` that STPM does not produce (Mist, AO, ...).
+
+    Cycles' *Denoising Data* (``view_layer.cycles.denoising_store_passes``) asks for Denoising
+    Normal, Albedo and Depth: STPM writes the first two only with ``scene.stpm.denoise``
+    (``denoise``), and Denoising Depth never; the name says which are missing and how to get the
+    others."""
     names = []
+    if getattr(getattr(view_layer, "cycles", None), "denoising_store_passes", False):
+        names.append("Denoising Depth" if denoise else
+                     "Denoising Data (tick Sampling > Denoising for Denoising Albedo and Denoising Normal)")
     for owner in (view_layer, getattr(view_layer, "eevee", None), getattr(view_layer, "cycles", None)):
         if owner is None:
             continue
@@ -194,7 +202,7 @@ class STPMRenderEngine(bpy.types.RenderEngine):
                 motion_steps=scene.stpm.motion_steps)
             export_s = time.perf_counter() - t0
             stpm_scene.metadata["warnings"] = list(warnings)     # the core does not repeat these
-            missing = unsupported_passes(depsgraph.view_layer)
+            missing = unsupported_passes(depsgraph.view_layer, denoise=settings.denoise)
             if missing:
                 warnings.append(f"view layer {depsgraph.view_layer.name!r}: passes STPM does not produce stay empty: "
                                 f"{', '.join(missing)} (STPM writes "

@@ -181,7 +181,7 @@ def _bounding_sphere(scene, inst) -> tuple[np.ndarray, float] | None:
 
 def _light_faces(light, c: np.ndarray, r: float) -> bool:
     """Can the light emit toward the sphere (c, r) at some sampled time?  (spot cone, area side)."""
-    if light.type in ("POINT", "SUN", "WORLD"):
+    if light.type in ("POINT", "SUN", "WORLD", "MESH"):       # an emissive mesh emits from both sides
         return True
     M = light.transform.at(np.linspace(0.0, 1.0, 1 if light.transform.is_static else 9))
     pos, axis = M[:, :3, 3], -M[:, :3, 2]
@@ -205,7 +205,8 @@ def world_light(scene):
 
 
 def _lightset_index(lights, n_scene: int) -> list[int]:
-    """Plan light index -> LightSet index: the scene's lights keep theirs; the world is LightSet's WORLD entry."""
+    """Plan light index -> LightSet index: the first ``n_scene`` (the scene's lights, then the emissive
+    meshes, in LightSet's order) keep theirs; the world is LightSet's WORLD entry."""
     idx = list(range(n_scene))
     idx += [i for i, l in enumerate(lights.lights) if l.type == "WORLD"]
     return idx
@@ -334,8 +335,14 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
     reasons: list[str] = []
 
     # -- Motion within the shutter --------------------------------------------------------
-    # The scene's lights, then the world when it shines (it lights every object it can see)
-    plan_lights = list(scene.lights) + ([world_light(scene)] if scene.world.shines else [])
+    # The scene's lights, the emissive meshes (a lamp shade, a TV screen: LightSet's MESH
+    # entries, in its order), then the world when it shines (it lights every object it can see)
+    if lights is not None:
+        emissive = [l for l in lights.lights if l.type == "MESH"]
+    else:
+        from .lights import mesh_lights
+        emissive = mesh_lights(scene)
+    plan_lights = list(scene.lights) + emissive + ([world_light(scene)] if scene.world.shines else [])
     emits = [l.power > 0 and bool(np.any(np.asarray(l.color, float) > 0)) for l in plan_lights]
     moving = [i for i, inst in enumerate(scene.instances)
               if not inst.transform.is_static and not scene.meshes[inst.mesh].is_deforming]
@@ -393,7 +400,7 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
         targets = {i: spheres[i] for i in sorted({i for s in geo_reach.values() for i in s})}
         closed = {i for i in lit_geo if per_mesh(_mesh_is_closed, i)}
         pr = _probe(scene, settings, caster, lights, targets, emitting, set(lit_geo), closed,
-                    ls_index=_lightset_index(lights, len(scene.lights)))
+                    ls_index=_lightset_index(lights, len(scene.lights) + len(emissive)))
         reach = {li: s for li, s in pr["reach_specular"].items() if s}
         lit_diffuse = pr["lit_diffuse"]
         probe_info = {"photons_aimed": pr["aimed"], "photons_emitted": pr["emitted"],

@@ -272,3 +272,29 @@ def test_stpm_render_records_the_plan_in_stats_and_exr(tmp_path):
     assert st["plan"] == expected
     assert st["photons_caustic"] == 0 and st["estimator"] == expected["estimator"] == "STANDARD"
     assert json.loads(read_exr(out)["_metadata"]["stpm:plan"]) == expected
+
+
+def test_an_emissive_mesh_is_a_light_of_the_plan():
+    """A lamp shade with an Emission shader (a mesh light) lights a glass ball over a floor: the
+    plan must see it as a light (the artist review 3's living room, lit by an emissive shade only
+    above a wine glass, had caustics off: "no light reaches the specular objects")."""
+    mats = MATERIALS + [Material.emitter((20.0, 15.0, 10.0), name="shade")]
+    shade = plane_mesh(0.6, z=0.0, flip=True, material=len(MATERIALS), name="shade")
+    scene = make_scene([plane_mesh(6.0, name="floor"),
+                        (sphere_mesh(0.5, 12, 24, material=GLASS, name="ball"), translate(0, 0, 1)),
+                        (shade, translate(0, 0, 2.5))],
+                       mats, persp_camera((0, -6, 3), (0, 0, 0.5)), [], shutter=OPEN)
+    plan = make_plan(scene)
+    d = plan["details"]
+    assert d["lights"] == ["shade (emission)"]
+    assert plan["caustics"] and d["lights_reaching_specular"] == {"shade (emission)": ["ball"]}
+    assert d["probe"]["caustic_photons_stored"] > 0
+
+
+def test_a_room_lit_by_an_emissive_panel_only_gets_indirect_light():
+    mats = MATERIALS + [Material.emitter((5.0, 5.0, 5.0), name="panel")]
+    panel = plane_mesh(0.5, z=0.0, flip=True, material=len(MATERIALS), name="panel")
+    scene = make_scene([_inward_box(4.0), (panel, translate(0, 0, 1.9))], mats,
+                       persp_camera((0, -1.5, 0.5), (0, 0, 0)), [], shutter=OPEN)
+    plan = make_plan(scene)
+    assert plan["indirect"] and plan["details"]["lit_diffuse_objects"] == ["room"]

@@ -59,6 +59,16 @@ _IMAGE_MEANS_MAX = 512
 
 FIELDS = ("base_color", "metallic", "transmission", "roughness", "specular", "ior", "emission")
 
+# Anisotropic GGX (Principled Anisotropic, the Glossy BSDF's Anisotropy) is not in the kernels: such
+# lobes render isotropic with their Roughness, and the render report says so
+ANISOTROPY_IGNORED = "{what} is not rendered (the highlight is isotropic, as with 0)"
+
+
+def _anisotropic(node, name: str) -> bool:
+    """Is ``node``'s input ``name`` (an anisotropy amount) linked or non-zero?"""
+    sock = node.inputs.get(name)
+    return sock is not None and (sock.is_linked or abs(float(sock.default_value)) > 0.0)
+
 
 def _uses_nodes(idblock) -> bool:
     """Blender < 5 has a use_nodes switch; 5.0 always uses the node tree (and deprecates the flag)."""
@@ -559,6 +569,8 @@ class MaterialExporter:
             for name in ("Coat Weight", "Sheen Weight", "Subsurface Weight"):
                 if self._value(node, name, 0.0) > 0:
                     self._warn(f"Principled {name} is ignored", graph_carries=True)
+            if _anisotropic(node, "Anisotropic"):
+                self._warn(ANISOTROPY_IGNORED.format(what="Principled Anisotropic"), graph_carries=True)
             alpha = node.inputs.get("Alpha")
             alpha_linked = alpha is not None and alpha.is_linked and \
                 self._follow(alpha.links[0]).bl_idname != "ShaderNodeValue"
@@ -577,6 +589,8 @@ class MaterialExporter:
         if kind == "ShaderNodeBsdfDiffuse":
             return _params(base_color=self._color(node, "Color"), roughness=1.0, specular=0.0)
         if kind in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
+            if _anisotropic(node, "Anisotropy"):
+                self._warn(ANISOTROPY_IGNORED.format(what=f"{node.name}.Anisotropy"), graph_carries=True)
             # Cycles 5.0 gives the Glossy BSDF no Fresnel: its colour at every angle
             return _params(base_color=self._color(node, "Color"), metallic=1.0, constant_fresnel=True,
                            roughness=self._value(node, "Roughness", 0.5))

@@ -113,6 +113,12 @@ class _Compiler:
         if msg not in self.unsupported:
             self.unsupported.append(msg)
 
+    def _warn_anisotropy(self, node_name: str, node, ident: str) -> None:
+        """Anisotropic GGX is not in the kernels: a linked or non-zero anisotropy renders isotropic."""
+        v = node.inputs.get(ident, 0.0)
+        if isinstance(v, Link) or (isinstance(v, (int, float)) and v != 0):
+            self.warn(node_name, node, f"{ident} is not rendered (the highlight is isotropic, as with 0)")
+
     def used(self, name: str, ident: str) -> bool:
         """Is output ``ident`` of node ``name`` linked to an input of a node that reaches the
         surface?  (Cycles drops the rest before compiling.)"""
@@ -266,6 +272,7 @@ class _Compiler:
                 v = node.inputs.get(ident, 0.0)
                 if isinstance(v, Link) or (isinstance(v, (int, float)) and v > 0):
                     self.warn(n, node, f"{ident} is not rendered")
+            self._warn_anisotropy(n, node, "Anisotropic")
             self.emit("BSDF_PRINCIPLED",
                       self.input(n, node, "Base Color", VEC, (0.8, 0.8, 0.8)),
                       self.input(n, node, "Metallic", FLT, 0.0), self.input(n, node, "Roughness", FLT, 0.5),
@@ -276,6 +283,7 @@ class _Compiler:
         elif t == "ShaderNodeBsdfDiffuse":
             self.emit("BSDF_DIFFUSE", self.input(n, node, "Color", VEC, (0.8, 0.8, 0.8)), normal)
         elif t in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
+            self._warn_anisotropy(n, node, "Anisotropy")
             self.emit("BSDF_GLOSSY", self.input(n, node, "Color", VEC, (0.8, 0.8, 0.8)),
                       self.input(n, node, "Roughness", FLT, 0.5), normal)
         elif t == "ShaderNodeBsdfGlass":
