@@ -5,7 +5,9 @@ setting for frames that leave the studio.  The progressive variants render
 passes until a time limit (``Preview Progressive``: the image sharpens for
 as long as you watch) or a noise threshold (``Final Progressive``); their
 photon counts and samples are per pass: many small passes (1 sample per pixel, k = 20) measured
-best (docs/compare.md, "Progressive and SPPM").  Applied by ``stpm.apply_preset``.
+best (docs/compare.md, "Progressive and SPPM").  Every preset allows 8 bounces: a glass of liquid is six
+interfaces deep, and the Preview presets' former 4 rendered it black (tests/test_preset_depth.py; no
+measurable cost on the demo: diffuse paths end at the photon maps).  Applied by ``stpm.apply_preset``.
 """
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ PRESETS: dict[str, dict] = {
     "PREVIEW": {
         "method": "PHOTON", "estimator": "TEMPORAL", "samples": 4, "photons_global": 20_000,
         "photons_caustic": 50_000, "k_nearest": 30, "temporal_alpha": 0.0, "time_scale": 0.0,
-        "max_depth": 4, "motion_steps": 3,
+        "max_depth": 8, "motion_steps": 3,
     },
     "FINAL": {
         "method": "PHOTON", "estimator": "TEMPORAL", "samples": 256, "photons_global": 1_000_000,
@@ -25,7 +27,7 @@ PRESETS: dict[str, dict] = {
         "method": "PROGRESSIVE", "estimator": "TEMPORAL", "samples": 1, "photons_global": 20_000,
         "photons_caustic": 50_000, "k_nearest": 20, "temporal_alpha": 0.0, "time_scale": 0.0,
         "passes": 0, "time_limit": 20.0, "noise_threshold": 0.0, "shrink_alpha": 0.0, "pass_offset": 0,
-        "max_depth": 4, "motion_steps": 3,
+        "max_depth": 8, "motion_steps": 3,
     },
     "FINAL_PROGRESSIVE": {
         "method": "PROGRESSIVE", "estimator": "TEMPORAL", "samples": 1, "photons_global": 100_000,
