@@ -20,7 +20,10 @@ Methods, every render on the same machine in one run:
 
 Figures: each method's error (RMSE against the exact image) at the middle and at the end of the time
 axis (log-interpolated on its Pareto front), the time each needs to reach ACCUMULATION-16's error, and
-the speed-ups PROGRESSIVE / ACCUMULATION-16 (target >= 8x) and PROGRESSIVE / SPPM (target >= 2x).
+the speed-ups PROGRESSIVE / ACCUMULATION-16 (target >= 8x) and PROGRESSIVE / SPPM (target >= 2x); the
+same speed-ups in CPU seconds (``*_cpu_*``: every thread of the process, ``time.process_time``), which
+the machine's load moves less than the wall time (at load 12-17 on 2 cores a render's wall time was
+2-4x its CPU time, by how busy the machine was during it), and the load average.
 The curves go to ``bench_out/progressive_<scene>.svg`` (and .png when ImageMagick can convert).
 
     python -m benchmarks progressive      # about 6-10 minutes on 2 cores
@@ -72,16 +75,28 @@ def _exact(mirror):
 
 
 def _curve(fn, scene, settings, ref, passes):
-    """[(seconds, rmse, label)] after passes 1, 2, 4, ... of a progressive render (measuring time taken out)."""
-    marks, pts, spent = checkpoints(passes), [], [0.0]
+    """([(seconds, rmse, label)], [(CPU seconds, rmse, label)]) after passes 1, 2, 4, ... of a progressive
+    render (the time spent measuring taken out of both)."""
+    marks, pts, cpu, spent, cpu_spent = checkpoints(passes), [], [], [0.0], [0.0]
+    c0 = time.process_time()
 
     def on_pass(img, info):
         if info["pass"] in marks:
-            t0 = time.perf_counter()
-            pts.append((info["elapsed_s"] - spent[0], _rmse(img["Combined"], ref), f"pass {info['pass']}"))
+            t0, u0 = time.perf_counter(), time.process_time()
+            e = _rmse(img["Combined"], ref)
+            pts.append((info["elapsed_s"] - spent[0], e, f"pass {info['pass']}"))
+            cpu.append((u0 - c0 - cpu_spent[0], e, f"pass {info['pass']}"))
             spent[0] += time.perf_counter() - t0
+            cpu_spent[0] += time.process_time() - u0
     fn(scene, settings, on_pass=on_pass)
-    return pts
+    return pts, cpu
+
+
+def _timed_render(scene, settings):
+    """(RenderResult, its CPU seconds: every thread of this process, :func:`time.process_time`)."""
+    c0 = time.process_time()
+    r = render(scene, settings)
+    return r, time.process_time() - c0
 
 
 def _error_at(pts, t: float) -> float | None:
@@ -110,30 +125,34 @@ def _warm(scene):
 def run_scene(name, mirror) -> tuple[dict, dict]:
     scene = moving_caustic_scene(RESOLUTION, mirror=mirror)
     ref = _exact(mirror)
-    series = {}
+    load0 = os.getloadavg()[0]
+    series, cpu = {}, {}        # method -> [(wall seconds, rmse, label)], [(CPU seconds, rmse, label)]
     # -- Progressive, both kernel forms; SPPM -------------------------------------------------------
     prog = RenderSettings(**COMMON, method="PROGRESSIVE", passes=PASSES, photons_caustic=PASS_PHOTONS,
                           samples=PASS_SAMPLES, k_nearest=PASS_K)
-    series["PROGRESSIVE"] = _curve(render, scene, prog, ref, PASSES)
-    series["PROGRESSIVE KD4D"] = _curve(render, scene, prog.replace(estimator="KD4D"), ref, PASSES)
+    series["PROGRESSIVE"], cpu["PROGRESSIVE"] = _curve(render, scene, prog, ref, PASSES)
+    series["PROGRESSIVE KD4D"], cpu["PROGRESSIVE KD4D"] = _curve(render, scene, prog.replace(estimator="KD4D"),
+                                                                 ref, PASSES)
     sppm = RenderSettings(**COMMON, passes=SPPM_PASSES, photons_caustic=PASS_PHOTONS, samples=1, k_nearest=PASS_K)
-    series["SPPM"] = _curve(render_sppm, scene, sppm, ref, SPPM_PASSES)
+    series["SPPM"], cpu["SPPM"] = _curve(render_sppm, scene, sppm, ref, SPPM_PASSES)
     # -- Accumulation buffer of 16 stills, fixed-k TEMPORAL budgets ----------------------------------
-    acc = render(scene, RenderSettings(**COMMON, method="ACCUMULATION", **ACC16))
+    acc, acc_cpu = _timed_render(scene, RenderSettings(**COMMON, method="ACCUMULATION", **ACC16))
     acc_pt = (acc.stats["wall_s"], _rmse(acc.passes["Combined"], ref), "ACCUMULATION-16")
-    series["ACCUMULATION"] = [acc_pt]
-    fixed = []
+    series["ACCUMULATION"], cpu["ACCUMULATION"] = [acc_pt], [(acc_cpu,) + acc_pt[1:]]
+    series["TEMPORAL"], cpu["TEMPORAL"] = [], []
     for photons, samples in FIXED:
         b = photons / FIXED[0][0]
         st = RenderSettings(**COMMON, method="PHOTON", estimator="TEMPORAL", photons_caustic=photons, samples=samples,
                             k_nearest=max(1, round(10 * b ** 0.25)))
-        r = render(scene, st)
-        fixed.append((r.stats["wall_s"], _rmse(r.passes["Combined"], ref), f"{photons // 1000}k s{samples}"))
-    series["TEMPORAL"] = fixed
+        r, r_cpu = _timed_render(scene, st)
+        e, lbl = _rmse(r.passes["Combined"], ref), f"{photons // 1000}k s{samples}"
+        series["TEMPORAL"].append((r.stats["wall_s"], e, lbl))
+        cpu["TEMPORAL"].append((r_cpu, e, lbl))
     # -- Figures ----------------------------------------------------------------------------------------
     t_max = min(max(p[0] for p in pts) for pts in series.values() if len(pts) > 1)
     t_mid = math.sqrt(min(p[0] for pts in series.values() for p in pts) * t_max)
-    out = {"acc16_s": acc_pt[0], "acc16_rmse": acc_pt[1], "t_mid_s": t_mid, "t_end_s": t_max}
+    out = {"acc16_s": acc_pt[0], "acc16_rmse": acc_pt[1], "t_mid_s": t_mid, "t_end_s": t_max,
+           "load": f"{load0:.1f} -> {os.getloadavg()[0]:.1f}"}
     reach = {}
     for key, pts in series.items():
         tag = key.lower().replace(" ", "_")
@@ -142,11 +161,19 @@ def run_scene(name, mirror) -> tuple[dict, dict]:
         reach[key], bound = time_to_reach([(a, b) for a, b, *_ in pts], acc_pt[1])
         out[f"{tag}_time_to_acc16_s"] = reach[key]
         out[f"{tag}_points"] = " ".join(f"{lbl}:{e:.4f}@{t:.2f}s" for t, e, lbl in pts)
+    # the same in CPU seconds (every thread of the process): at a load of 8-14 on 2 cores the wall
+    # time measures the scheduler as much as the work (docs/photon-mapping.md, "Error budget")
+    reach_cpu = {key: time_to_reach([(a, b) for a, b, *_ in pts], acc_pt[1])[0] for key, pts in cpu.items()}
+    out["acc16_cpu_s"] = acc_cpu
     for form in ("PROGRESSIVE", "PROGRESSIVE KD4D"):
         tag = form.lower().replace(" ", "_")
         t = reach[form]
         out[f"{tag}_speedup_vs_acc16"] = acc_pt[0] / t if t else None
         out[f"{tag}_speedup_vs_sppm"] = (reach["SPPM"] / t) if (t and reach["SPPM"]) else None
+        t = reach_cpu[form]
+        out[f"{tag}_cpu_time_to_acc16_s"] = t
+        out[f"{tag}_cpu_speedup_vs_acc16"] = acc_cpu / t if t else None
+        out[f"{tag}_cpu_speedup_vs_sppm"] = (reach_cpu["SPPM"] / t) if (t and reach_cpu["SPPM"]) else None
     lowest = {}
     for when in ("mid", "end"):
         vals = {k: out[f"{k.lower().replace(' ', '_')}_rmse_at_{when}"] for k in series if k != "ACCUMULATION"}
