@@ -59,3 +59,24 @@ def test_cycles_denoising_data_switch_is_named_when_its_passes_are_missing():
     assert len(missing) == 1 and missing[0].startswith("Denoising Data") and "Sampling > Denoising" in missing[0]
     # with STPM's Denoise on, Albedo and Normal are written: only Cycles' Denoising Depth is missing
     assert unsupported_passes(vl, denoise=True) == ["Denoising Depth"]
+
+
+@pytest.mark.parametrize("textured", [False, True])
+@pytest.mark.parametrize("name, value", [("Diffuse Roughness", 0.5), ("Thin Film Thickness", 300.0),
+                                         ("Specular Tint", (1.0, 0.5, 0.2, 1.0))])
+def test_other_ignored_principled_inputs_are_named(name, value, textured):
+    # The review found these Principled inputs ignored without a word (the kernels have no
+    # Oren-Nayar base, no thin film, an untinted specular layer)
+    _lamp("ShaderNodeBsdfPrincipled", textured)
+    node = bpy.data.materials["Brushed"].node_tree.nodes["Principled BSDF"]
+    node.inputs["Anisotropic"].default_value = 0.0
+    sock = node.inputs.get(name)
+    if sock is None:
+        pytest.skip(f"this Blender's Principled BSDF has no {name} input")
+    sock.default_value = value
+    _scene, warnings = export_now()
+    hits = [w for w in warnings if name in w]
+    assert len(hits) == 1, warnings
+    sock.default_value = 0.0 if isinstance(value, float) else (1.0, 1.0, 1.0, 1.0)
+    _scene, warnings = export_now()
+    assert not [w for w in warnings if name in w], warnings

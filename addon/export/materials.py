@@ -65,7 +65,8 @@ ANISOTROPY_IGNORED = "{what} is not rendered (the highlight is isotropic, as wit
 
 
 def _anisotropic(node, name: str) -> bool:
-    """Is ``node``'s input ``name`` (an anisotropy amount) linked or non-zero?"""
+    """Is ``node``'s input ``name`` (an anisotropy amount, or another amount whose 0 is what the
+    kernels render) linked or non-zero?"""
     sock = node.inputs.get(name)
     return sock is not None and (sock.is_linked or abs(float(sock.default_value)) > 0.0)
 
@@ -569,6 +570,12 @@ class MaterialExporter:
             for name in ("Coat Weight", "Sheen Weight", "Subsurface Weight"):
                 if self._value(node, name, 0.0) > 0:
                     self._warn(f"Principled {name} is ignored", graph_carries=True)
+            for name in ("Diffuse Roughness", "Thin Film Thickness"):   # (Blender 4.2 / 4.3 on)
+                if _anisotropic(node, name):
+                    self._warn(f"Principled {name} is ignored", graph_carries=True)
+            tint = node.inputs.get("Specular Tint")
+            if tint is not None and (tint.is_linked or any(float(c) != 1.0 for c in tuple(tint.default_value)[:3])):
+                self._warn("Principled Specular Tint is ignored (untinted, as white)", graph_carries=True)
             if _anisotropic(node, "Anisotropic"):
                 self._warn(ANISOTROPY_IGNORED.format(what="Principled Anisotropic"), graph_carries=True)
             alpha = node.inputs.get("Alpha")

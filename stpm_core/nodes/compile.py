@@ -268,10 +268,14 @@ class _Compiler:
             if isinstance(a, Link) or (isinstance(a, (int, float)) and a < 1.0):
                 self.may_pass = True
                 self.uses_mix = True      # Alpha picks the BSDF or transparency per hit
-            for ident in ("Coat Weight", "Sheen Weight", "Subsurface Weight"):
+            for ident in ("Coat Weight", "Sheen Weight", "Subsurface Weight", "Diffuse Roughness",
+                          "Thin Film Thickness"):
                 v = node.inputs.get(ident, 0.0)
                 if isinstance(v, Link) or (isinstance(v, (int, float)) and v > 0):
                     self.warn(n, node, f"{ident} is not rendered")
+            tint = node.inputs.get("Specular Tint", (1.0, 1.0, 1.0))
+            if isinstance(tint, Link) or (isinstance(tint, (tuple, list)) and any(float(c) != 1.0 for c in tint[:3])):
+                self.warn(n, node, "Specular Tint is not rendered (untinted, as white)")
             self._warn_anisotropy(n, node, "Anisotropic")
             self.emit("BSDF_PRINCIPLED",
                       self.input(n, node, "Base Color", VEC, (0.8, 0.8, 0.8)),
