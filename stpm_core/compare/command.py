@@ -87,7 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reference", metavar="REF.exr",
                    help="reference image (its Combined pass); default: computed and cached")
     p.add_argument("--time-budget", type=finite_float, dest="time_budget", metavar="SECONDS",
-                   help="stop starting runs once the sweep has taken this long (the report notes what was skipped)")
+                   help="stop starting runs once the sweep has taken this long (the report notes what was skipped); "
+                        "not counted: the reference computed first (unless --reference or cached) and the run "
+                        "in flight when it runs out")
     p.add_argument("--photon-budgets", type=_budgets, dest="photon_budgets", metavar="B[:S[:K]],...",
                    default=list(DEFAULT_PHOTON_BUDGETS),
                    help="budgets of the photon-estimator runs: photons x B (and samples x S, k x K) of the file's "
