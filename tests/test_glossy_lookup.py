@@ -42,17 +42,22 @@ def test_records_keep_the_delta_only_flag():
     assert np.max(np.abs(wi - again)) < 1e-4
 
 
+def _packed(rec) -> np.ndarray:
+    """(N, 8) float32 records as the tree holds them: wi, the delta-only flag, power."""
+    packed = np.zeros((len(rec), 8), np.float32)
+    packed[:, :3] = oct_decode(rec["wi_oct"])
+    packed[:, 3] = delta_only(rec)
+    packed[:, 4:7] = rec["power"]
+    return packed
+
+
 @pytest.mark.parametrize("mode", [kdtree.MODE_STANDARD, kdtree.MODE_TEMPORAL])
 @pytest.mark.parametrize("mat", [Material(base_color=np.full(3, 0.4), roughness=0.6, specular=1.0),
                                  Material(base_color=np.array([0.9, 0.6, 0.4]), metallic=1.0, roughness=0.5)])
 def test_glossy_sums_match_the_oracle(mode, mat):
     rng = np.random.default_rng(7)
     rec, flag = _map(rng)
-    N = len(rec)
-    packed = np.zeros((N, 8), np.float32)
-    packed[:, :3] = oct_decode(rec["wi_oct"])
-    packed[:, 3] = delta_only(rec)
-    packed[:, 4:7] = rec["power"]
+    packed = _packed(rec)
     tree = kdtree.FlatTree(rec["position"], rec["time"], packed, dims=3, s=1.0)
     n, k = 40, 30
     kq = 90 if mode == kdtree.MODE_TEMPORAL else k
@@ -100,11 +105,7 @@ def test_range_glossy_sums_match_the_oracle(cone, cyl):
     side (w the cone's weight) whose flag is set; the power sums and counts do not change."""
     rng = np.random.default_rng(11)
     rec, flag = _map(rng)
-    N = len(rec)
-    packed = np.zeros((N, 8), np.float32)
-    packed[:, :3] = oct_decode(rec["wi_oct"])
-    packed[:, 3] = delta_only(rec)
-    packed[:, 4:7] = rec["power"]
+    packed = _packed(rec)
     s = 0.7
     tree = kdtree.FlatTree(rec["position"], rec["time"], packed, dims=4, s=s)
     n = 40
