@@ -67,6 +67,16 @@ TEMPORAL_SLICE_C = 0.25      # automatic time slices B = max(1, round(C * (N / k
 TEMPORAL_SLICE_ALPHA = 1.5   # candidates per estimate inside a slice, as a multiple of k (the paper's 1.5; fewer
                              # is cheaper but darkens a receiver moving along its normal: docs/photon-mapping.md)
 _QUERY_BATCH_ELEMS = 1 << 21 # neighbours gathered per batch (bounds memory)
+#: Bounded k-nearest searches (docs/photon-mapping.md, "Bounded searches"): a map built with
+#: ``bounded=True`` (the caustic map of a render: ``maps.BOUNDED_MAPS``) never searches beyond
+#: r_max = SEARCH_CAP_FACTOR x the SEARCH_CAP_PERCENTILE-th percentile of the distances from its own
+#: photons to their kq-th neighbour (the same search: tree, dimensions and kq); a query with fewer
+#: than kq photons within r_max sums those over the r_max region.  False: every search unbounded,
+#: bit for bit as before.
+SEARCH_CAP = True
+SEARCH_CAP_PERCENTILE = 90.0 # of the photons' own kq-th radii: 90 % of the map's photons (of its power) lie denser
+SEARCH_CAP_FACTOR = 2.0      # r_max / that radius: a capped query's density is < 1/4 of the percentile's
+SEARCH_CAP_SAMPLE = 2048     # photons (strided in tree order) whose kq-th radius sets r_max
 
 
 # ---------------------------------------------------------------------------
@@ -192,6 +202,7 @@ class PhotonMap:
         'scipy'.  Both give the same estimates (:mod:`.kdtree`).
     origin : (3,) float64 world point the record positions are relative to
         (:func:`.record.photon_origin`; None = the world origin).
+    bounded : cap every compiled k-nearest search at :meth:`search_cap` (if ``SEARCH_CAP``).
 
     Attributes
     ----------
@@ -206,8 +217,11 @@ class PhotonMap:
     """
 
     def __init__(self, records: np.ndarray, shutter, *, time_scale: float, workers: int = -1,
-                 backend: str = "auto", origin: np.ndarray | None = None):
+                 backend: str = "auto", origin: np.ndarray | None = None, bounded: bool = False):
         self.shutter = shutter
+        # compiled searches capped at r_max (search_cap; SEARCH_CAP switches it off everywhere)
+        self.bounded = bool(bounded)
+        self._caps = {}                      # (id(tree), kq) -> r_max of that search (m)
         # World position of the records' (0, 0, 0) (record.py); queries are shifted by it
         self.origin = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64).reshape(3)
         self.time_scale = float(time_scale)
@@ -244,7 +258,7 @@ class PhotonMap:
         self._lock = threading.Lock()
         # Sorting and packing count as map building
         self.stats = {"tree_build_s": _time.perf_counter() - t0, "lookup_s": 0.0, "lookup_count": 0,
-                      "temporal_candidates": 0}
+                      "temporal_candidates": 0, "capped_count": 0}
 
     # -- kd-trees -----------------------------------------------------------
     def tree3(self) -> cKDTree:
@@ -311,6 +325,42 @@ class PhotonMap:
             self._slices[B] = sl
             self.stats["tree_build_s"] += _time.perf_counter() - t0
         return sl
+
+    def search_cap(self, tree, kq: int) -> float:
+        """r_max (m, in the tree's dimensions) of kq-nearest searches in ``tree`` (a kdtree.FlatTree of
+        this map or of one of its time slices), or inf when this map's searches are unbounded.
+
+        r_max = SEARCH_CAP_FACTOR x the SEARCH_CAP_PERCENTILE-th percentile over up to SEARCH_CAP_SAMPLE
+        of the tree's photons (strided in tree order: spread over the map as its photons are) of the
+        distance to their own kq-th neighbour, the photon itself not counted.  Computed once per
+        (tree, kq).
+        """
+        if not (SEARCH_CAP and self.bounded):
+            return np.inf
+        key = (id(tree), int(kq))
+        cap = self._caps.get(key)
+        if cap is None:
+            N = tree.pts.shape[0]
+            if kq + 1 > N:
+                cap = np.inf
+            else:
+                rows = np.unique(np.linspace(0, N - 1, min(N, SEARCH_CAP_SAMPLE)).astype(np.int64))
+                q = tree.xyzt[:, rows].T.astype(np.float64)
+                if tree.dims == 4:
+                    q[:, 3] *= tree.s
+                r = tree.knn_radius(q, kq + 1, np.inf, self.workers)
+                cap = float(SEARCH_CAP_FACTOR * np.percentile(r, SEARCH_CAP_PERCENTILE))
+                cap = cap if cap > 0.0 else np.inf      # (all photons at one point: nothing to bound)
+            self._caps[key] = cap
+        return cap
+
+    def _capped_lookup(self, tree, mode, q, ns, kq, k, kernel, glossy=None):
+        """tree.lookup(...) capped at :meth:`search_cap` (counted in ``stats['capped_count']``)."""
+        cap = self.search_cap(tree, kq)
+        out = tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers, glossy, cap=cap)
+        if np.isfinite(cap):
+            self.stats["capped_count"] += int(np.count_nonzero(out[1] >= cap))
+        return out
 
     def build(self, estimator: str, *, k: int = 50, temporal_alpha: float = 0.0) -> None:
         """Build the tree(s) ``estimator`` needs now (so build time is not charged to look-ups)."""
@@ -478,11 +528,10 @@ class PhotonMap:
                 qq[:, 3] = t[q]
                 if glossy is not None:
                     gq = (glossy[0][q], glossy[1][q]) + tuple(glossy[2:])
-                    Phi[q], r[q], tau[q], G[q] = tree.lookup(_kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj,
-                                                             kernel == "CONE", CONE_K, self.workers, gq)
+                    Phi[q], r[q], tau[q], G[q] = self._capped_lookup(tree, _kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj,
+                                                                     kernel, gq)
                     continue
-                Phi[q], r[q], tau[q] = tree.lookup(_kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj, kernel == "CONE",
-                                                   CONE_K, self.workers)
+                Phi[q], r[q], tau[q] = self._capped_lookup(tree, _kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj, kernel)
             else:
                 batch = max(256, _QUERY_BATCH_ELEMS // mj)
                 for a in range(0, len(q), batch):
@@ -530,7 +579,7 @@ class PhotonMap:
             tree = self.flat_tree(3)
             mode = _kdtree.MODE_TEMPORAL if estimator == "TEMPORAL" else _kdtree.MODE_STANDARD
         kq = m if estimator == "TEMPORAL" else k
-        return tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers, glossy)
+        return self._capped_lookup(tree, mode, q, ns, kq, k, kernel, glossy)
 
     # -- scipy search -----------------------------------------------------------------------------
     def _search_scipy(self, estimator, p, ns, t, k, m, kernel):

@@ -429,8 +429,11 @@ if AVAILABLE:
         sub, ti: _cut's scratch (sub, ti as long as the buffer); leaf_d2 (>= LEAF_SIZE,) scratch.
 
         bound0: a squared distance known to hold at least kq photons strictly inside (inf if
-        none is known); the search then prunes from its first node.  Returns False if fewer
-        than kq photons were found below bound0 (the caller then searches again with inf).
+        none is known), or a cap the caller will not search beyond; the search then prunes from
+        its first node.  Returns how many photons it found strictly below bound0, at most kq:
+        kq when it found the kq nearest; fewer (c < kq) when bound0 holds fewer, which are then
+        bd[:c] / bi[:c] (the buffer is only cut once it holds more than kq, so they are all
+        there), and the caller searches again with a larger bound or uses those c.
         """
         cap = bd.shape[0]
         N = C.shape[1]
@@ -497,7 +500,7 @@ if AVAILABLE:
                 cnt = kq
                 bound = bd[kq - 1]
         if cnt < kq:
-            return False
+            return cnt
         if cnt > kq:
             _cut(bd, bi, bx, cnt, kq, hist, bucket, sub, ti)
         else:
@@ -510,7 +513,7 @@ if AVAILABLE:
             bd[am], bd[kq - 1] = bd[kq - 1], bd[am]
             bi[am], bi[kq - 1] = bi[kq - 1], bi[am]
             bx[am], bx[kq - 1] = bx[kq - 1], bx[am]
-        return True
+        return kq
 
     @_jit
     def _glossy_sum(P, bi, wk, n_sel, gC, i, E, E_avg, gW, coat_w):
@@ -536,7 +539,7 @@ if AVAILABLE:
         return g0, g1, g2
 
     @_jit
-    def _lookup(P, C, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, out_phi, out_r, out_tau,
+    def _lookup(P, C, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, cap2, out_phi, out_r, out_tau,
                 glossy, gC, gW, E, E_avg, coat_w, out_g):
         """Fused search + reduction for queries q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32.
 
@@ -547,6 +550,12 @@ if AVAILABLE:
         nearest in time among the m - 1 inner ones.  Writes out_phi (n, 3) W (sum of w Phi over
         the k - 1 inner / selected photons on the ns side), out_r (n,) distance of the kq-th
         photon (m) and out_tau (n,) TEMPORAL's window half-width (shutter units).
+
+        cap2: the search's cap r_max^2 (m^2, in the tree's dimensions; inf = unbounded).  A query
+        whose kq-th neighbour is not strictly within r_max sums all c < kq photons strictly within
+        it instead (no time selection: every candidate of the slice), out_r = r_max and out_tau
+        = inf (the whole time slice); the search never looks beyond r_max (docs/photon-mapping.md,
+        "Bounded searches").  With cap2 = inf every value is the unbounded search's, bit for bit.
 
         glossy: also out_g (n, 3) W/sr, the same photons' sum of w f_c(wo, wi) Phi over those whose
         path was delta-only, f_c query i's rough lobes (:func:`_glossy_sum`; gC (n, N_CLOSURE) its
@@ -569,28 +578,37 @@ if AVAILABLE:
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
         n = q.shape[0]
+        full = False                           # bi[:kq] holds the previous query's kq nearest
         for i in range(n):
             q0, q1, q2, q3 = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
             # -- the kq nearest by a tree search, warm-started: the previous query's kq nearest
-            # (still in bi[:kq]) are kq photons within the farthest of them from q
+            # (still in bi[:kq]) are kq photons within the farthest of them from q; never beyond the cap
             qq[0], qq[1], qq[2], qq[3] = q0, q1, q2, q3
-            bound0 = np.inf
-            if i > 0:
+            bound0 = cap2
+            if full:
                 far2 = 0.0
                 for a in range(kq):
                     j = bi[a]
                     d2 = _dist2(C, j, q0, q1, q2, q3, D, s)
                     far2 = max(far2, d2)
-                bound0 = far2 * (1.0 + 1e-9)           # (slack: the farthest itself strictly inside)
-            if not _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2):
-                _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, np.inf, hist, bucket, sub, ti, leaf_d2)
-            # slot kq - 1 = the kq-th neighbour (fixes the radius); slots 0 .. kq - 2 are inner
-            r = np.sqrt(bd[kq - 1])
+                bound0 = min(far2 * (1.0 + 1e-9), cap2)  # (slack: the farthest itself strictly inside)
+            c = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2)
+            if c < kq and bound0 < cap2:
+                c = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, cap2, hist, bucket, sub, ti, leaf_d2)
+            full = c == kq
+            # slot kq - 1 = the kq-th neighbour (fixes the radius); slots 0 .. kq - 2 are inner.
+            # Capped (c < kq within r_max): the c photons bd[:c] inside the r_max ball, r = r_max
+            r = np.sqrt(bd[kq - 1]) if full else np.sqrt(cap2)
             out_r[i] = r
-            n_sel = kq - 1
+            n_sel = kq - 1 if full else c
             tau = np.inf
             ties = 0
-            if mode == MODE_TEMPORAL:
+            if mode == MODE_TEMPORAL and not full:
+                # capped: no time selection, every candidate (finite time distances < tau = inf)
+                for a in range(c):
+                    bx[a] = abs(np.float64(C[3, bi[a]]) - q3)
+                out_tau[i] = tau
+            elif mode == MODE_TEMPORAL:
                 # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau.
                 # (their time distances, computed for the kept photons only)
                 for a in range(kq - 1):
@@ -675,9 +693,10 @@ if AVAILABLE:
                 e0, e1, e2, e3 = qq[0] - q[i - 1, 0], qq[1] - q[i - 1, 1], qq[2] - q[i - 1, 2], qq[3] - q[i - 1, 3]
                 dp = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0))
                 bound0 = min(cap2, ((r_prev + dp) * (1.0 + 1e-9)) ** 2)
-            found = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2)
+            found = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2) == kq
             if not found and bound0 < cap2:
-                found = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, cap2, hist, bucket, sub, ti, leaf_d2)
+                found = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, cap2, hist, bucket, sub, ti,
+                             leaf_d2) == kq
             if found:
                 r = np.sqrt(bd[kq - 1])
                 out_r[i] = r
@@ -854,8 +873,12 @@ class FlatTree:
         self.xyzt = np.ascontiguousarray(xyzt.T)
 
     def lookup(self, mode: int, q: np.ndarray, ns: np.ndarray, kq: int, k: int, cone: bool, cone_k: float,
-               workers: int, glossy=None):
+               workers: int, glossy=None, cap: float = np.inf):
         """Sums Phi (n, 3) W, radius r (n,) m of the kq-th neighbour and TEMPORAL's tau (n,) for queries q (n, 4).
+
+        cap: the search's largest radius r_max (m, in the tree's dimensions; inf: unbounded).  A query
+        with fewer than kq photons strictly within r_max gets the sum over all of them, r = r_max
+        (exactly: the caller tells capped queries by ``r >= cap``) and tau = inf (:func:`_lookup`).
 
         glossy: None, or (gC (n, N_CLOSURE) float64 closure rows, gW (n, 9) float64 (wo, ns, ng) of
         each query's hit, E, E_avg the GGX tables, coat_w): then a fourth result, the sums (n, 3) of
@@ -869,6 +892,9 @@ class FlatTree:
         N = self.pts.shape[0]
         if not 1 <= kq <= N or (mode == MODE_TEMPORAL and not 2 <= k < kq):
             raise ValueError(f"k-nearest look-up of kq = {kq}, k = {k} in a tree of {N} photons")
+        if not cap > 0.0:
+            raise ValueError(f"k-nearest look-up capped at r_max = {cap} (must be > 0, or inf)")
+        cap2 = float(cap) * float(cap) if np.isfinite(cap) else np.inf
         n = q.shape[0]
         q = np.ascontiguousarray(q, dtype=np.float64)
         ns = np.ascontiguousarray(ns, dtype=np.float32)
@@ -891,7 +917,7 @@ class FlatTree:
         def part(a, b):
             ga, gb = (a, b) if glossy is not None else (0, 0)
             _lookup(self.pts, self.xyzt, self.box, self.n_leaves, qs[a:b], nss[a:b], mode, kq, k, self.s, cone, cone_k,
-                    phi[a:b], r[a:b], tau[a:b], glossy is not None, gC[ga:gb], gW[ga:gb], E_t, E_avg, coat_w,
+                    cap2, phi[a:b], r[a:b], tau[a:b], glossy is not None, gC[ga:gb], gW[ga:gb], E_t, E_avg, coat_w,
                     g[ga:gb])
 
         run_chunks(part, n, workers)

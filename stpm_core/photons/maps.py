@@ -22,6 +22,10 @@ from .trace import trace_caustic_map, trace_global_map
 __all__ = ["PhotonMaps", "build_photon_maps", "KINDS"]
 
 KINDS = ("caustic", "global")
+#: the maps whose k-nearest searches are bounded (``PhotonMap(bounded=True)``; ``estimators.SEARCH_CAP``
+#: switches it off): the caustic map, whose look-ups far from every caustic found their neighbours
+#: metres away for a density of almost nothing (docs/photon-mapping.md, "Bounded searches")
+BOUNDED_MAPS = ("caustic",)
 
 
 class PhotonMaps:
@@ -98,6 +102,7 @@ class PhotonMaps:
             st[f"{kind}_tree_build_s"] = m.stats["tree_build_s"]
             st[f"{kind}_lookup_s"] = m.stats["lookup_s"]
             st[f"{kind}_lookup_count"] = m.stats["lookup_count"]
+            st[f"{kind}_capped_count"] = m.stats["capped_count"]
             st[f"{kind}_temporal_candidates"] = m.stats["temporal_candidates"]
             st[f"{kind}_temporal_slices"] = m.stats.get("temporal_slices", 1)
             build += m.stats["tree_build_s"]
@@ -171,10 +176,9 @@ def build_photon_maps(scene, settings, caster, lights, *, time_override=None, pr
 
     # -- Build the search structure the chosen estimator needs ----------------------------
     origin = photon_origin(scene)  # the records' positions are relative to it (record.py)
-    maps = {
-        "caustic": PhotonMap(rec_c, scene.shutter, time_scale=s, workers=workers, origin=origin),
-        "global": PhotonMap(rec_g, scene.shutter, time_scale=s, workers=workers, origin=origin),
-    }
+    maps = {kind: PhotonMap(rec, scene.shutter, time_scale=s, workers=workers, origin=origin,
+                            bounded=kind in BOUNDED_MAPS)
+            for kind, rec in (("caustic", rec_c), ("global", rec_g))}
     for m in maps.values() if build_trees else ():
         m.build(settings.estimator, k=settings.k_nearest, temporal_alpha=settings.temporal_alpha)
     out = PhotonMaps(maps, estimator=settings.estimator, k=settings.k_nearest, kernel=settings.kernel,
