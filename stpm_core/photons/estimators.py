@@ -23,6 +23,10 @@ its selected photons and the radius / window that bound them -- with the
 compiled kd-tree of :mod:`.kdtree` (numba) when available, else scipy's
 cKDTree (``PhotonMap.backend``); both give the same neighbours, and the
 normalisations below are one numpy code path (``PhotonMap._normalise``).
+A ``bounded`` map's compiled searches stop at r_max (``SEARCH_CAP``, :meth:`PhotonMap.search_cap`):
+a query with fewer than kq photons within r_max sums those over the r_max region (radius r_max;
+TEMPORAL's window the whole slice), which keeps the expected value (docs/photon-mapping.md,
+"Bounded searches").
 
 Estimators (``k`` = ``settings.k_nearest``):
 

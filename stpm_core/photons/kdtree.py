@@ -56,6 +56,12 @@ are visited hardly matters: a best-first search with a heap, until 2026-12-07,
 visited the same leaves at more cost per node).  The window's sum is branch-free
 too (a photon outside the window or on the far side adds w = 0).
 
+Bounded searches (``_lookup``'s cap2, ``FlatTree.lookup(..., cap=r_max)``): the search starts from
+min(warm start, r_max^2) and never looks beyond r_max; a query with fewer than kq photons strictly
+within r_max sums all of them over the r_max region (TEMPORAL: no time selection, tau = inf) and
+leaves no warm start for the next query.  Which maps are bounded and how r_max is chosen:
+:mod:`.estimators` (``SEARCH_CAP``), docs/photon-mapping.md ("Bounded searches").
+
 Queries are processed in Morton order, so consecutive queries are neighbours
 (warm start, tree nodes in cache).  An exact candidate cache (photons within
 r_c + 2 beta r_c of the last full search, reused by the queries within beta
