@@ -699,7 +699,8 @@ if AVAILABLE:
                 e0, e1, e2, e3 = qq[0] - q[i - 1, 0], qq[1] - q[i - 1, 1], qq[2] - q[i - 1, 2], qq[3] - q[i - 1, 3]
                 dp = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + (e3 * e3 if D == 4 else 0.0))
                 bound0 = min(cap2, ((r_prev + dp) * (1.0 + 1e-9)) ** 2)
-            found = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti, leaf_d2) == kq
+            found = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, bound0, hist, bucket, sub, ti,
+                         leaf_d2) == kq
             if not found and bound0 < cap2:
                 found = _knn(C, box, n_leaves, qq, D, s, kq, bd, bi, bx, qnode, qdist, cap2, hist, bucket, sub, ti,
                              leaf_d2) == kq
