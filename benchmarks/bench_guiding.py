@@ -33,6 +33,15 @@ Reported per scene and method:
   time ratio (``equal_time_photons_global``; ``equal_time_guided_s`` their mean seconds, to set
   against ``unguided_s``), their MSE over the unguided one.
 
+Where the power stored in view comes from (``room_split_*``, :func:`where_in_view`): the sun
+room's global photons, unguided and guided, sorted by where each first lands: through the window
+(its first hit inside the room), on the ground outside, on the room's outside (walls, roof).  Per
+class: its share of the emitted photons, its records stored on camera-visible surfaces per photon,
+its share of their power and of their summed squared power.  ``room_split_in_view_bound``: the
+most any guide with the guided share g = ``GUIDED_SHARE`` can store in view,
+g r_window + (1 - g) f_unguided (r_window the window photons' in-view records per photon, every
+guided photon through the window; f_unguided the unguided fraction in view).
+
 Pictures: ``bench_out/guiding/<scene>_<method>.png`` (left unguided, right guided; one row per
 seed and the mean last, exposure x4), the images in ``<scene>_<method>.npz``.
 
@@ -51,6 +60,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = range(int(os.environ.get("STPM_GUIDING_SEEDS", 6)))
 REF_FACTOR = 16
+SPLIT_PHOTONS = int(os.environ.get("STPM_GUIDING_SPLIT_PHOTONS", 2_000_000))   # where_in_view's unguided photons
 
 
 def _scenes():
@@ -74,6 +84,58 @@ def _settings(name: str, method: str):
     return st
 
 
+def where_in_view(scene, n: int, *, guided: bool, seed: int = 11) -> dict:
+    """The sun room's global photons sorted by where they first land (module docstring): per class
+    (``window``, ``ground``, ``exterior``) the share of the n emitted photons, in-view records per
+    photon, the share of the in-view power and of its summed squares."""
+    from guide_scenes import ROOM_INSIDE
+    from stpm_core.bsdf import MaterialTable
+    from stpm_core.lights import LightSet
+    from stpm_core.photons import guide as _guide
+    from stpm_core.photons.record import photon_origin
+    from stpm_core.photons.trace import _times, trace_photon_paths
+    from stpm_core.raycast import make_caster
+    from stpm_core.raycast.geometry import instance_offsets
+    from stpm_core.sampling import rng_for
+    from stpm_core.settings import RenderSettings
+    from stpm_core.shading import shading_data
+    caster, lights, table = make_caster(scene), LightSet(scene), MaterialTable(scene.materials)
+    st, origin, inst_offset = RenderSettings(), photon_origin(scene), instance_offsets(scene)
+    shading = shading_data(scene, table.closures)
+    cells, guides, _, _ = _guide.guides_for(scene, caster, lights, table, shading=shading, inst_offset=inst_offset,
+                                            origin=origin, time_override=None, guiding=True)
+    ground = [i for i, inst in enumerate(scene.instances) if inst.name == "ground"]
+    lo, hi = np.array(ROOM_INSIDE[0]) - 1e-3, np.array(ROOM_INSIDE[1]) + 1e-3     # (its faces: the inside walls)
+    names = ("window", "ground", "exterior")
+    tot = {k: np.zeros(4) for k in names}               # photons, in-view records, power, power^2
+    batch = 1 << 18
+    for b0 in range(0, n, batch):
+        m = min(batch, n - b0)
+        rng = rng_for(seed, 0x5B17, b0 // batch)
+        t = _times(scene, m, rng, None)
+        o, d, Phi, s_lit = lights.emit(0, m, t, rng, with_s_lit=True, guide=guides[0] if guided else None)
+        h = caster.intersect(o, d, t)
+        on_ground = h.hit & np.isin(h.instance, ground)
+        X = np.asarray(h.position, np.float64)
+        inside = h.hit & ~on_ground & np.all((X > lo) & (X < hi), axis=1)
+        recs, pid = trace_photon_paths(caster, table, o, d, Phi * (m / n), t, rng, origin=origin, mode="global",
+                                       s_lit=s_lit, max_depth=st.max_depth, inst_offset=inst_offset,
+                                       shading=shading, diffuse_bounces=st.diffuse_bounces, path_ids=np.arange(m))
+        on = cells.contains(recs["position"].astype(np.float64) + origin)
+        P, ids = recs["power"][on].astype(np.float64).mean(axis=1), pid[on]
+        for k, sel in zip(names, (inside, on_ground, ~inside & ~on_ground)):
+            r = sel[ids]
+            tot[k] += (np.count_nonzero(sel), np.count_nonzero(r), P[r].sum(), (P[r] ** 2).sum())
+    P1, P2 = sum(v[2] for v in tot.values()), sum(v[3] for v in tot.values())
+    out = {"in_view_fraction": sum(v[1] for v in tot.values()) / n}
+    for k, (nph, nrec, p1, p2) in tot.items():
+        out[f"{k}_photon_share"] = nph / n
+        out[f"{k}_in_view_per_photon"] = nrec / max(nph, 1.0)
+        out[f"{k}_power_share"] = p1 / max(P1, 1e-300)
+        out[f"{k}_power_sq_share"] = p2 / max(P2, 1e-300)
+    return out
+
+
 def run() -> dict:
     from stpm_core.render import render
     from stpm_core.photons import guide as _guide
@@ -87,6 +149,16 @@ def run() -> dict:
     render(scenes["moving_receiver"], _settings("moving_receiver", "PHOTON").replace(
         photons_global=1000, photons_caustic=100, photon_guiding=True))          # warm-up (kernels)
     out = {}
+    # Where the sun room's in-view power comes from, and the most a guide can store in view
+    split = {"unguided": where_in_view(scenes["room"], SPLIT_PHOTONS, guided=False),
+             "guided": where_in_view(scenes["room"], SPLIT_PHOTONS // 4, guided=True)}
+    for k, v in split.items():
+        out.update({f"room_split_{k}_{a}": b for a, b in v.items()})
+        print(f"room_split_{k}", {a: round(b, 6) for a, b in v.items()}, flush=True)
+    g = _guide.GUIDED_SHARE
+    out["room_split_in_view_bound"] = (g * split["unguided"]["window_in_view_per_photon"]
+                                       + (1.0 - g) * split["unguided"]["in_view_fraction"])
+    print("room_split_in_view_bound", round(out["room_split_in_view_bound"], 4), flush=True)
     for name, scene in scenes.items():
         st_ref = _settings(name, "PHOTON")
         st_ref = st_ref.replace(photons_global=REF_FACTOR * st_ref.photons_global,

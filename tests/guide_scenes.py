@@ -8,6 +8,10 @@ from stpm_core.motion import MotionTransform
 from stpm_core.scene import Light, Material
 
 
+#: the room's inside (not the window's 0.2 m reveal): a photon whose first hit lies on its faces came through the window
+ROOM_INSIDE = ((-2.0, -2.0, 0.0), (2.0, 2.0, 3.0))
+
+
 def window_room(res=(32, 24), window=(2.0, 1.6), ground=8.0, light: str = "SUN"):
     """A closed 4 x 4 x 3 m room (grey walls 0.2 m thick) with a window (width x height, m) in its
     +x wall, a green ground (ground x ground m) outside and a light outside shining in and down

@@ -273,6 +273,31 @@ def test_no_light_on_what_the_camera_sees_falls_back_to_uniform():
     assert b.stats["photon_stats"]["photons_guided_global_per_light"] == [0]
 
 
+def test_path_ids_name_each_record_s_photon():
+    """``trace_photon_paths(..., path_ids=)`` (what ``benchmarks/bench_guiding.py`` sorts the in-view
+    power by): the same records as without it, each with the number of the photon that stored it
+    (checked by the time each path carries, distinct per photon here), photons with no power
+    dropped before tracing."""
+    from stpm_core.photons.trace import trace_photon_paths
+    scene = window_room((8, 6))
+    caster, lights, table = make_caster(scene), LightSet(scene), MaterialTable(scene.materials)
+    n = 20_000
+    rng = np.random.default_rng(3)
+    t = rng.random(n)                                   # (a static scene: distinct times name the paths)
+    o, d, Phi = lights.emit(0, n, t, rng)
+    Phi[::7] = 0.0
+    kw = dict(mode="global", max_depth=6, inst_offset=instance_offsets(scene), origin=photon_origin(scene),
+              shading=shading_data(scene, table.closures))
+    plain = trace_photon_paths(caster, table, o, d, Phi, t, np.random.default_rng(4), **kw)
+    recs, ids = trace_photon_paths(caster, table, o, d, Phi, t, np.random.default_rng(4), path_ids=10 + np.arange(n),
+                                   **kw)
+    assert recs.shape[0] > 500 and ids.shape == (recs.shape[0],)
+    assert np.array_equal(recs, plain)
+    assert np.array_equal(recs["time"], t[ids - 10].astype(np.float32))
+    assert np.all((ids - 10) % 7 != 0)
+    assert np.bincount(ids - 10).max() >= 2                 # paths that stored more than once
+
+
 # -- The renderer ------------------------------------------------------------------------------------
 def _renders(scene, settings, seeds):
     ims, frac = [], []

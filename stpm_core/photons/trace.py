@@ -134,7 +134,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
                        target_instance: int | None = None, min_nondelta: int = 1,
                        origin: np.ndarray | None = None, shading=None, diffuse_bounces: int | None = None,
                        transparent_bounces: int = TRANSPARENT_MAX_BOUNCES, reader: int = 1,
-                       s_lit: np.ndarray | None = None, coat_paths: list | None = None) -> np.ndarray:
+                       s_lit: np.ndarray | None = None, coat_paths: list | None = None,
+                       path_ids: np.ndarray | None = None):
     """Trace photon paths and return the stored records.
 
     Parameters
@@ -167,10 +168,14 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         behind them (their non-delta bounces all rough coats) are appended to it instead of
         returned; with final gathering they belong to the caustic map (a camera vertex reads them:
         docs/photon-mapping.md, "The path partition with final gathering").  None: all returned.
+    path_ids : (n,) int64 or None: a number per path; given, the paths' numbers of the returned
+        records come back too (``benchmarks/bench_guiding.py`` sorts the power stored in view by
+        where each photon first landed).  ``photon_bounce`` copies each surviving path's time
+        unchanged, so here it is handed the row numbers instead and the times and numbers follow.
 
     Returns
     -------
-    (m,) PHOTON_DTYPE records.
+    (m,) PHOTON_DTYPE records; with ``path_ids`` also their paths' numbers (m,) int64.
 
     Per bounce: cast every path at its own time, keep the hits (at the first
     bounce of a caustic path: only hits on its target), gather their closures,
@@ -191,6 +196,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
     # Photons with no power carry nothing
     live = np.any(Phi > 0.0, axis=1)
     o, d, Phi, t = o[live], d[live], Phi[live], t[live]
+    ids = None if path_ids is None else np.asarray(path_ids, np.int64)[live]
+    stored_ids = []                                      # (with path_ids) the numbers of stored's rows
     s_lit = None if s_lit is None else np.asarray(s_lit, dtype=np.float64)[live]
     n_delta = np.zeros(o.shape[0], dtype=np.int32)      # delta bounces so far
     n_nondelta = np.zeros(o.shape[0], dtype=np.int32)   # non-delta bounces so far
@@ -215,6 +222,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         if k == 0:
             break
         d, Phi, t = np.ascontiguousarray(d[idx]), np.ascontiguousarray(Phi[idx]), t[idx]
+        if ids is not None:
+            ids = ids[idx]
         n_delta, n_nondelta, n_diffuse, n_lobe = n_delta[idx], n_nondelta[idx], n_diffuse[idx], n_lobe[idx]
         C = np.empty((k, N_CLOSURE))
         sd = shading if shading is not None else constant_shading(closures)
@@ -241,6 +250,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
                     if part.size:
                         out.append(make_records(hits.position[idx[part]], -d[part], Phi[part], t[part], origin,
                                                 _delta_flag(caustic, out is coat_paths, n_lobe[part])))
+                        if ids is not None and out is stored:
+                            stored_ids.append(ids[part])
         if sd.transparent:
             # transparent hits: the photon goes on behind, its power tinted (not a bounce)
             Phi = pass_through(caster, sd, inst_offset, hits, d, t, C, Phi, rng, at=idx, limit=transparent_bounces)
@@ -254,7 +265,9 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
         t_n, g_n = np.empty(k), np.empty(k)
         nd_n, nn_n, ndf_n = np.empty(k, np.int32), np.empty(k, np.int32), np.empty(k, np.int32)
         nl_n = np.empty(k, np.int32)
-        n_store, n_next = photon_bounce(idx, hits.position, hits.ng, hits.ns, d, C, E, E_avg, Phi, t, n_delta,
+        # (with path_ids the kernel carries row numbers where the times go: T_next = T[j])
+        T, T_t = (t, None) if ids is None else (np.arange(k, dtype=np.float64), t)
+        n_store, n_next = photon_bounce(idx, hits.position, hits.ng, hits.ns, d, C, E, E_avg, Phi, T, n_delta,
                                         n_nondelta, n_diffuse, n_lobe, caustic, int(min_nondelta), max_diffuse,
                                         int(reader), split_coat, last, U, U_rr, EPS, GUARD_FRACTION, store, o_n, d_n,
                                         Phi_n, t_n, nd_n, nn_n, ndf_n, nl_n, g_n)
@@ -265,13 +278,19 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
                 if part.size:
                     out.append(make_records(hits.position[idx[part]], -d[part], Phi[part], t[part], origin,
                                             _delta_flag(caustic, out is coat_paths, n_lobe[part])))
+                    if ids is not None and out is stored:
+                        stored_ids.append(ids[part])
         if last:
             break
         o, d, Phi, t, guard = o_n[:n_next], d_n[:n_next], Phi_n[:n_next], t_n[:n_next], g_n[:n_next]
+        if ids is not None:
+            rows = t.astype(np.int64)
+            t, ids = T_t[rows], ids[rows]
         n_delta, n_nondelta, n_diffuse, n_lobe = nd_n[:n_next], nn_n[:n_next], ndf_n[:n_next], nl_n[:n_next]
-    if not stored:
-        return np.empty(0, dtype=PHOTON_DTYPE)
-    return np.concatenate(stored)
+    recs = np.concatenate(stored) if stored else np.empty(0, dtype=PHOTON_DTYPE)
+    if ids is None:
+        return recs
+    return recs, (np.concatenate(stored_ids) if stored_ids else np.empty(0, np.int64))
 
 
 def _delta_flag(caustic: bool, coat: bool, n_lobe: np.ndarray):
