@@ -187,6 +187,14 @@ def _params(**kw) -> dict:
     return p
 
 
+def _transparent_graph():
+    """A graph of one white Transparent BSDF: what Cycles renders where a surface has no closure."""
+    g = sub("nodes.graph")
+    node = g.Node(type="ShaderNodeBsdfTransparent", inputs={"Color": (1.0, 1.0, 1.0)},
+                  outputs={"BSDF": "SHADER"}, input_types={"Color": "RGBA"})
+    return g.ShaderGraph(nodes={"Transparent BSDF": node}, surface=g.Link("Transparent BSDF", "BSDF"))
+
+
 def _tint(p: dict) -> np.ndarray:
     """The transmission tint (3,) of parameters p: theirs, else the base colour (a Glass BSDF's)."""
     t = p.get("transmission_tint")
@@ -357,11 +365,14 @@ class MaterialExporter:
                         metallic=float(mat.metallic), roughness=float(mat.roughness))
         else:
             out = self._output_node(tree)
+            sock = out.inputs.get("Surface") if out is not None else None
+            no_surface = sock is None or not sock.is_linked
+            vol = out.inputs.get("Volume") if out is not None else None
+            volume_only = no_surface and vol is not None and vol.is_linked
             for ignored in ("Displacement", "Volume"):
                 other = out.inputs.get(ignored) if out is not None else None
-                if other is not None and other.is_linked:
+                if other is not None and other.is_linked and not (ignored == "Volume" and volume_only):
                     self._warn(f"Material Output {ignored} is ignored (STPM renders the Surface only)")
-            sock = out.inputs.get("Surface") if out is not None else None
             builder = node_export.GraphBuilder()
             try:
                 graph = builder.build(out) if out is not None else None
@@ -376,9 +387,18 @@ class MaterialExporter:
                 graph = None
             self._graph_mode = graph is not None
             try:
-                if sock is None or not sock.is_linked:
-                    self._warn("no surface shader connected, using grey diffuse")
+                if volume_only:
+                    # Cycles: a material with a Volume and no Surface has no surface at all (rays
+                    # cross its boundary); STPM has no volumes, so what is behind shows through
+                    # (it rendered an opaque grey box: artist review 4's fog cube)
+                    self._warn("volume-only material: the Volume is not rendered (STPM has no volumes) and "
+                               "its surface is transparent, as in Cycles (no Surface shader)")
                     p = _params()
+                    graph = _transparent_graph()
+                elif no_surface:
+                    # Cycles renders a Material Output with nothing linked black (it rendered grey)
+                    self._warn("no surface shader connected: rendered black, as in Cycles")
+                    p = _params(base_color=np.zeros(3), roughness=1.0)
                 else:
                     p = self._shader(self._follow(sock.links[0]), depth=0)
             finally:
