@@ -102,24 +102,52 @@ def test_surfaceless_materials_render_as_in_cycles(case, tmp_path):
 @pytest.mark.parametrize("blur", [False, True])
 def test_nan_vertices_leave_out_their_triangles_not_the_render(blur):
     # The review's broken mesh (a NaN vertex among good ones) stopped the whole F12 render with
-    # "meshes[..] ('Broken').vertices contains NaN or inf"; Cycles renders the rest.  With motion
-    # blur the vertices are read again at every step (the deformation check)
+    # "meshes[..] ('Broken').vertices contains NaN or inf"; a vertex at 1e30 made every object
+    # vanish (only the sky was left); Cycles renders the rest.  With motion blur the vertices are
+    # read again at every step (the deformation check)
     fresh().render.use_motion_blur = blur
     add_camera()
     add_light("POINT", energy=500.0, location=(1, -1, 3))
     add_mesh("plane", "Floor", size=8)
     me = bpy.data.meshes.new("Broken")
-    v = [(0, 0, 1), (1, 0, 1), (0, 1, 1), (float("nan"), 0, 1), (1, 1, 1), (2, 0, 1), (2, 1, 1)]
-    me.from_pydata(v, [], [(0, 1, 2), (0, 1, 3), (1, 4, 2), (1, 5, 6, 4)])
+    v = [(0, 0, 1), (1, 0, 1), (0, 1, 1), (float("nan"), 0, 1), (1, 1, 1), (2, 0, 1), (2, 1, 1),
+         (1e30, 0, 1), (0, 1e30, 1)]
+    me.from_pydata(v, [], [(0, 1, 2), (0, 1, 3), (1, 4, 2), (1, 5, 6, 4), (0, 7, 8)])
     me.update()
     for p in me.polygons:
         p.use_smooth = True        # vertex normals around the NaN vertex are NaN too
     bpy.context.scene.collection.objects.link(bpy.data.objects.new("Broken", me))
     scene, warnings = export_now()
-    hits = [w for w in warnings if "'Broken'" in w and "NaN or infinite" in w]
-    assert len(hits) == 1 and "1 triangle(s)" in hits[0], warnings
+    hits = [w for w in warnings if "'Broken'" in w and "NaN, infinite or huge" in w]
+    assert len(hits) == 1 and "2 triangle(s)" in hits[0], warnings
     broken = next(m for m in scene.meshes if m.name == "Broken")
     assert len(broken.triangles) == 4 and np.isfinite(broken.vertices).all()
     assert broken.normals is None or np.isfinite(broken.normals).all()
     from stpm_core.scene import validate_scene
     validate_scene(scene)
+    assert float(np.abs(broken.vertices).max()) < 10     # no huge vertex kept either
+    # the floor is still there: its pixels are lit, not the black world
+    img, _res = render_stpm(bpy.context.scene, samples=1, seeds=(0,))
+    assert img[0, -8:].mean() > 0.05, img[0, -8:].mean()
+
+
+def test_objects_scaled_to_zero_render_as_in_cycles(tmp_path):
+    # The review's 0-sized box stopped the render ("LinAlgError: Singular matrix", the normal
+    # matrix of a textured instance); a plane scaled to 0 along z (its normal) renders as in Cycles
+    s = fresh()
+    add_camera(location=(0, -5, 3), rotation=(math.radians(55), 0, 0))
+    add_light("POINT", energy=600.0, location=(1.5, -2, 4))
+    set_world((0.2, 0.2, 0.2))
+    add_mesh("plane", "Floor", size=10, material=node_material("Ground", "ShaderNodeBsdfDiffuse")[0])
+    m, bsdf = node_material("Checker", "ShaderNodeBsdfDiffuse")
+    chk = m.node_tree.nodes.new("ShaderNodeTexChecker")
+    chk.inputs["Color1"].default_value = (0.9, 0.2, 0.1, 1)
+    m.node_tree.links.new(chk.outputs["Color"], bsdf.inputs["Color"])
+    add_mesh("plane", "Flat", location=(-0.8, 0, 0.6), material=m).scale = (0.7, 0.7, 0.0)
+    add_mesh("cube", "Gone", location=(0.8, 0, 0.6), material=m).scale = (0.0, 0.0, 0.0)
+    s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 48, 36, 100
+    st, _res = render_stpm(s, samples=16, max_depth=8)
+    assert np.isfinite(st).all()
+    cy = render_cycles(s, tmp_path, samples=16)
+    z = block_ztest(st, cy, block=6, floor=0.01)
+    assert z.z_abs_max < 5.0, z.summary()

@@ -227,8 +227,9 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                                           color_maps=color_maps)
             cleanup()
             if arr["nonfinite_dropped"]:
-                _warn_once(warnings, f"object {obj.name!r}: {arr['nonfinite_dropped']} triangle(s) with NaN or "
-                                     f"infinite vertex coordinates left out")
+                _warn_once(warnings, f"object {obj.name!r}: {arr['nonfinite_dropped']} triangle(s) with NaN, "
+                                     f"infinite or huge (beyond {mesh_export.HUGE_COORDINATE:g}) vertex "
+                                     f"coordinates left out")
             if arr["triangles"].shape[0] == 0:
                 mesh_cache[data_key] = -1
             else:
@@ -529,7 +530,8 @@ def _attach_deformation(mesh, shapes: list, times: np.ndarray, name: str, warnin
                         f"deformation blur skipped, the frame's shape is used")
         return
     stack = np.stack(shapes).astype(np.float32)
-    bad = ~np.isfinite(stack).all(axis=2)        # NaN / inf at a step: the frame's position (whose
+    with np.errstate(invalid="ignore"):          # NaN / inf / huge at a step: the frame's position (whose
+        bad = ~(np.abs(stack) <= mesh_export.HUGE_COORDINATE).all(axis=2)
     if bad.any():                                # own bad vertices are 0 and unused: mesh_export)
         stack[bad] = np.broadcast_to(np.asarray(mesh.vertices, np.float32), stack.shape)[bad]
     tol = 1e-6 * (1.0 + float(np.abs(stack).max(initial=0.0)))

@@ -57,7 +57,8 @@ def orco_positions(obj, vertices: np.ndarray) -> np.ndarray | None:
     co = np.empty(vertices.shape[0] * 3, dtype=np.float32)
     (ref.data if ref is not None and len(ref.data) == vertices.shape[0] else me.vertices).foreach_get("co", co)
     co = co.reshape(-1, 3)
-    co[~np.isfinite(co).all(axis=1)] = 0.0      # as the evaluated positions' (``_drop_nonfinite``)
+    with np.errstate(invalid="ignore"):           # as the evaluated positions' (``_drop_nonfinite``)
+        co[~(np.abs(co) <= HUGE_COORDINATE).all(axis=1)] = 0.0
     tol = 1e-6 * (1.0 + float(np.abs(co).max(initial=0.0)))
     return None if np.abs(co - vertices).max(initial=0.0) <= tol else co
 
@@ -129,9 +130,16 @@ def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
     return _drop_nonfinite(out)
 
 
+#: object-space coordinates beyond this are "huge": their triangles are left out (a vertex at 1e30 made
+#: every object of the review's outdoor scene vanish, the ray casting's extent-relative offsets then
+#: being astronomical; Cycles renders that scene as without the triangle)
+HUGE_COORDINATE = 1e15
+
+
 def _drop_nonfinite(arr: dict) -> dict:
-    """Leave out the triangles with a NaN or infinite vertex (a driver dividing by zero, a broken
-    import), as Cycles renders the rest of the mesh; ``nonfinite_dropped`` counts them.
+    """Leave out the triangles with a NaN, infinite or huge (|x| > ``HUGE_COORDINATE``) vertex (a
+    driver dividing by zero, a broken import), as Cycles renders the rest of the mesh;
+    ``nonfinite_dropped`` counts them.
 
     The bad vertices are set to 0 (no triangle uses them any more) so the scene validates, and
     kept triangles' shading normals / tangents that the bad faces made non-finite (Blender's
@@ -139,7 +147,8 @@ def _drop_nonfinite(arr: dict) -> dict:
     Before, one such vertex stopped the whole render ("meshes[12] ('Broken').vertices contains
     NaN or inf": artist review 4)."""
     V = arr["vertices"]
-    bad_v = ~np.isfinite(V).all(axis=1)
+    with np.errstate(invalid="ignore"):
+        bad_v = ~(np.abs(V) <= HUGE_COORDINATE).all(axis=1)      # NaN compares False
     if not bad_v.any():
         return arr
     tri = arr["triangles"]
