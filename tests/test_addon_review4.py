@@ -151,3 +151,26 @@ def test_objects_scaled_to_zero_render_as_in_cycles(tmp_path):
     cy = render_cycles(s, tmp_path, samples=16)
     z = block_ztest(st, cy, block=6, floor=0.01)
     assert z.z_abs_max < 5.0, z.summary()
+
+
+def test_missing_image_is_reported_once():
+    # The review's missing rust.png was reported twice: by the exporter (with its path) and by the
+    # renderer's node compiler ("has no image (or it could not be loaded)")
+    from stpm_core.render import render
+    from stpm_core.settings import RenderSettings
+    fresh()
+    add_camera()
+    add_light("POINT", energy=500.0, location=(1, -1, 3))
+    m, bsdf = node_material("Rusty", "ShaderNodeBsdfPrincipled")
+    t = m.node_tree.nodes.new("ShaderNodeTexImage")
+    im = bpy.data.images.new("rust.png", 4, 4)
+    im.source, im.filepath = "FILE", "/nonexistent/rust.png"
+    t.image = im
+    m.node_tree.links.new(t.outputs["Color"], bsdf.inputs["Base Color"])
+    add_mesh("cube", "Box", material=m)
+    scene, warnings = export_now()
+    scene.metadata["warnings"] = list(warnings)
+    res = render(scene, RenderSettings(samples=1, photons_global=0, photons_caustic=0))
+    report = list(warnings) + list(res.warnings)        # what the render report lists
+    said = [w for w in report if "'Rusty'" in w and ("rust.png" in w or "no image" in w)]
+    assert len(said) == 1 and "/nonexistent/rust.png" in said[0], report

@@ -433,7 +433,9 @@ class MaterialExporter:
                 continue
             problem = self._image_problem(image)
             if problem is not None:
-                self._warn(problem)
+                # naming the node lets the renderer's own "has no image" line for it be dropped
+                # as already said (artist review 4 read both)
+                self._warn(f"node {name!r} ({node.type}): {problem}")
                 continue
             if image.source in ("SEQUENCE", "MOVIE"):
                 self._warn(f"image {image.name!r}: an image {image.source.lower()} is rendered as the one frame "
@@ -553,7 +555,7 @@ class MaterialExporter:
             return None, False
         problem = self._image_problem(image)
         if problem is not None:
-            self._warn(problem)
+            self._warn(problem, graph_carries=True)     # the graph's own line names the node
             return MISSING_IMAGE.copy(), False
         return image_mean(image), True
 
