@@ -174,3 +174,19 @@ def test_missing_image_is_reported_once():
     report = list(warnings) + list(res.warnings)        # what the render report lists
     said = [w for w in report if "'Rusty'" in w and ("rust.png" in w or "no image" in w)]
     assert len(said) == 1 and "/nonexistent/rust.png" in said[0], report
+
+
+def test_object_without_material_renders_as_in_cycles(tmp_path):
+    # Cycles 5.0 renders an object without a material as a default Principled BSDF (the same
+    # pixels as a default Principled material); STPM rendered a Lambertian 0.8, 11 % brighter on
+    # this floor lit at 50-70 degrees (the review's probe of its fog cube found it)
+    s = fresh()
+    add_camera(location=(0, -5, 1.2), rotation=(math.radians(85), 0, 0))
+    add_light("POINT", energy=400.0, location=(1.5, -2, 3))
+    add_mesh("plane", "Floor", size=10)
+    s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 48, 36, 100
+    st, _res = render_stpm(s, samples=16, max_depth=8)
+    cy = render_cycles(s, tmp_path, samples=16)
+    z = block_ztest(st, cy, block=6, floor=0.01)
+    floor = st[:, 24:].mean() / cy[:, 24:].mean()
+    assert z.z_abs_max < 5.0 and abs(floor - 1) < 0.03, (z.summary(), floor)

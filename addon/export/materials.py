@@ -174,8 +174,13 @@ def bake_hint() -> str:
 
 
 def default_material(name: str = "STPM default") -> "scene_model.Material":
-    """Blender's default grey diffuse."""
-    return scene_model.Material.diffuse((0.8, 0.8, 0.8), name=name)
+    """What Cycles (Blender 5.0) renders on an object without a material: a Principled BSDF at its
+    defaults (base colour 0.8, roughness 0.5, IOR 1.5, Specular IOR Level 0.5), bit for bit the
+    same image as a default Principled material there.  It was a Lambertian grey: 11 % brighter
+    than Cycles on a floor lit at 50-70 degrees, whose Principled base loses the specular layer's
+    Fresnel (artist review 4)."""
+    return scene_model.Material(base_color=np.full(3, 0.8), metallic=0.0, transmission=0.0, roughness=0.5,
+                                specular=1.0, ior=1.5, emission=np.zeros(3), name=name)
 
 
 def _params(**kw) -> dict:
