@@ -133,7 +133,7 @@ def test_nan_vertices_leave_out_their_triangles_not_the_render(blur):
 
 def test_objects_scaled_to_zero_render_as_in_cycles(tmp_path):
     # The review's 0-sized box stopped the render ("LinAlgError: Singular matrix", the normal
-    # matrix of a textured instance); a plane scaled to 0 along z (its normal) renders as in Cycles
+    # matrix of every instance, built when a Bump or Normal Map node is in the scene); a plane scaled to 0 along z (its normal) renders as in Cycles
     s = fresh()
     add_camera(location=(0, -5, 3), rotation=(math.radians(55), 0, 0))
     add_light("POINT", energy=600.0, location=(1.5, -2, 4))
@@ -143,6 +143,10 @@ def test_objects_scaled_to_zero_render_as_in_cycles(tmp_path):
     chk = m.node_tree.nodes.new("ShaderNodeTexChecker")
     chk.inputs["Color1"].default_value = (0.9, 0.2, 0.1, 1)
     m.node_tree.links.new(chk.outputs["Color"], bsdf.inputs["Color"])
+    bump = m.node_tree.nodes.new("ShaderNodeBump")      # reads each hit's normal matrix (as the car's flakes)
+    bump.inputs["Strength"].default_value = 0.3
+    m.node_tree.links.new(chk.outputs["Fac"], bump.inputs["Height"])
+    m.node_tree.links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
     add_mesh("plane", "Flat", location=(-0.8, 0, 0.6), material=m).scale = (0.7, 0.7, 0.0)
     add_mesh("cube", "Gone", location=(0.8, 0, 0.6), material=m).scale = (0.0, 0.0, 0.0)
     s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 48, 36, 100
