@@ -194,3 +194,25 @@ def test_object_without_material_renders_as_in_cycles(tmp_path):
     z = block_ztest(st, cy, block=6, floor=0.01)
     floor = st[:, 24:].mean() / cy[:, 24:].mean()
     assert z.z_abs_max < 5.0 and abs(floor - 1) < 0.03, (z.summary(), floor)
+
+
+@pytest.mark.parametrize("far", [1e3, 1e8])
+def test_an_object_parked_far_away_is_named(far):
+    # A cube at x = 1e8 made the rays' guard (1e-6 of the scene's span) 100 units: the floor 6
+    # units from the camera vanished, the image black without a word; Cycles renders the floor
+    from stpm_core.render import render
+    from stpm_core.settings import RenderSettings
+    s = fresh()
+    add_camera()
+    add_light("POINT", energy=500.0, location=(1, -1, 3))
+    add_mesh("plane", "Floor", size=8)
+    add_mesh("cube", "Box", location=(0, 0, 1))
+    add_mesh("cube", "Far", location=(far, 0, 0))
+    s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 32, 24, 100
+    scene, _warnings = export_now()
+    res = render(scene, RenderSettings(samples=1, photons_global=0, photons_caustic=0))
+    said = [w for w in res.warnings if "the scene spans" in w]
+    if far < 1e6:
+        assert not said, res.warnings
+    else:
+        assert len(said) == 1 and "'Far'" in said[0], res.warnings
