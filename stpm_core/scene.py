@@ -648,6 +648,41 @@ def _check_radiance_image(name: str, img, world: World) -> None:
                     float(img.max()) * float(np.max(world.color)) * float(world.strength), "W/(m^2 sr)")
 
 
+#: a scene whose rays' guard (``raycast.geometry.TMIN_REL`` x its diagonal) exceeds this share of
+#: its median object's size is named by :func:`_span_warnings`
+SPAN_GUARD_SHARE = 0.1
+
+
+def _span_warnings(scene: Scene) -> list[str]:
+    """One line when the scene is so large next to its objects that rays skip them.
+
+    Rays ignore surfaces nearer to their start than ``TMIN_REL`` (1e-6) x the scene's diagonal:
+    one object parked 1e8 units away (a typo, an object "hidden" far off) makes that 100 units,
+    and every object near the camera vanishes (artist review 4: a cube at x = 1e8 left a black
+    image where Cycles renders the floor; at 1e6 the floor rendered).  Named when that guard
+    exceeds ``SPAN_GUARD_SHARE`` of the median object's size, with the object farthest from the
+    median object centre."""
+    from .raycast.geometry import TMIN_REL, scene_scale
+    sizes, centres, names = [], [], []
+    for inst in scene.instances:
+        vlo, vhi = scene.meshes[inst.mesh].vertex_bounds()
+        if not np.all(np.isfinite(vlo)):
+            continue
+        a, b = inst.transform.bounds_of(vlo, vhi)
+        sizes.append(float(np.linalg.norm(b - a))), centres.append(0.5 * (a + b)), names.append(inst.name)
+    if len(sizes) < 2:
+        return []
+    guard = TMIN_REL * scene_scale(scene)
+    if not guard > SPAN_GUARD_SHARE * float(np.median(sizes)):
+        return []
+    C = np.array(centres)
+    far = int(np.argmax(np.linalg.norm(C - np.median(C, axis=0), axis=1)))
+    dist = float(np.linalg.norm(C[far] - np.median(C, axis=0)))
+    return [f"the scene spans {scene_scale(scene):.3g} units ({names[far]!r} lies {dist:.3g} from the other objects): "
+            f"rays ignore surfaces nearer than {guard:.3g} units to where they start (1e-6 of the span), so "
+            f"objects near the camera can vanish; move {names[far]!r} closer or hide it from renders"]
+
+
 def scene_warnings(scene: Scene) -> list[str]:
     """Inputs that are valid but render a light black without saying so: one line each.
 
@@ -670,7 +705,7 @@ def scene_warnings(scene: Scene) -> list[str]:
     A light with some Ray Visibility switch (Diffuse, Glossy, Transmission) off is named with what
     STPM does not honour of it (:func:`light_visibility`).
     """
-    out = _portal_warnings(scene) + _light_visibility_warnings(scene)
+    out = _portal_warnings(scene) + _light_visibility_warnings(scene) + _span_warnings(scene)
     for li, l in enumerate(scene.lights):
         tr = l.transform
         if l.type not in ("SPOT", "SUN", "AREA") or not isinstance(tr, MotionTransform):

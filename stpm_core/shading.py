@@ -318,6 +318,20 @@ def frame_keys(sd: ShadingData) -> tuple:
     return kept[1]
 
 
+def _normal_matrix(A: np.ndarray) -> np.ndarray:
+    """(3, 3) what object-space normals are multiplied by under the linear part ``A`` (3, 3) of an
+    instance's transform: ``inv(A).T``; for a singular ``A`` (an object scaled to 0 along an axis,
+    or to 0 altogether: a "pop-in" keyframe) the cofactor matrix, ``det(A) inv(A).T``'s limit, whose
+    columns are a1 x a2, a2 x a0, a0 x a1 (a flattened object keeps its flat side's normal), or the
+    identity when that is 0 too (no triangle of such an instance has an area to be hit).  Before,
+    ``np.linalg.inv`` raised and the render stopped ("LinAlgError: Singular matrix": artist review 4)."""
+    if abs(np.linalg.det(A)) > 1e-300:
+        return np.linalg.inv(A).T
+    a0, a1, a2 = A[:, 0], A[:, 1], A[:, 2]
+    C = np.column_stack([np.cross(a1, a2), np.cross(a2, a0), np.cross(a0, a1)])
+    return C if np.abs(C).max() > 0 else np.eye(3)
+
+
 def normal_keys(instances) -> tuple:
     """What ``kernels.motion.normal_matrix_rows`` reads of ``instances``: (NM0 (n, 3, 3) each static
     instance's ``np.linalg.inv(M[:3, :3]).T``, moving (n,) int64 the moving instance's transform
@@ -331,7 +345,7 @@ def normal_keys(instances) -> tuple:
     for i, ins in enumerate(instances):
         tr = ins.transform
         if tr.is_static:
-            NM0[i] = np.linalg.inv(np.asarray(tr.matrices[0], np.float64)[:3, :3]).T
+            NM0[i] = _normal_matrix(np.asarray(tr.matrices[0], np.float64)[:3, :3])
             continue
         moving[i] = len(first)
         K = tr.times.shape[0]

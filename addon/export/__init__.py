@@ -182,6 +182,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
         if obj.type == "LIGHT":
             if not inst.is_instance:  # light data is read again after the motion steps
                 records[key] = _Record("LIGHT", obj.name, obj.original.name_full, M, use_motion=use_mb)
+                _warn_light_linking(obj, warnings)
             else:
                 _warn_once(warnings, f"light {obj.name!r}: instanced lights are not supported, skipped")
             continue
@@ -225,6 +226,10 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                                           warn=lambda text: _warn_once(warnings, text),
                                           color_maps=color_maps)
             cleanup()
+            if arr["nonfinite_dropped"]:
+                _warn_once(warnings, f"object {obj.name!r}: {arr['nonfinite_dropped']} triangle(s) with NaN, "
+                                     f"infinite or huge (beyond {mesh_export.HUGE_COORDINATE:g}) vertex "
+                                     f"coordinates left out")
             if arr["triangles"].shape[0] == 0:
                 mesh_cache[data_key] = -1
             else:
@@ -463,6 +468,24 @@ def _warn_ignored_object_flags(obj, warnings: list) -> None:
     if off:
         _warn_once(warnings, f"object {obj.name!r}: Ray Visibility > {' / '.join(off)} off is ignored "
                              f"(indirect rays see it)")
+    _warn_light_linking(obj, warnings)   # an emissive mesh can link its light too
+
+
+def _warn_light_linking(obj, warnings: list) -> None:
+    """Blender 4's light and shadow linking (Object > Light Linking / Shadow Linking on the emitter).
+
+    Cycles lights only the receiver collection's objects and lets only the blocker collection's
+    cast the emitter's shadows; STPM lights and shadows every object.  It was ignored without a
+    word (artist review 4: a key light linked to a car lit the whole ground, 1.8x Cycles there)."""
+    link = getattr(obj, "light_linking", None)
+    if link is None:
+        return
+    for attr, what, means in (("receiver_collection", "Light Linking", "it lights every object"),
+                              ("blocker_collection", "Shadow Linking", "every object casts its shadows")):
+        coll = getattr(link, attr, None)
+        if coll is not None:
+            _warn_once(warnings, f"object {obj.name!r}: {what} (collection {coll.name!r}) is not supported, "
+                                 f"{means}")
 
 
 def _warn_holdout_collections(view_layer, warnings: list) -> None:
@@ -507,6 +530,10 @@ def _attach_deformation(mesh, shapes: list, times: np.ndarray, name: str, warnin
                         f"deformation blur skipped, the frame's shape is used")
         return
     stack = np.stack(shapes).astype(np.float32)
+    with np.errstate(invalid="ignore"):          # NaN / inf / huge at a step: the frame's position (whose
+        bad = ~(np.abs(stack) <= mesh_export.HUGE_COORDINATE).all(axis=2)
+    if bad.any():                                # own bad vertices are 0 and unused: mesh_export)
+        stack[bad] = np.broadcast_to(np.asarray(mesh.vertices, np.float32), stack.shape)[bad]
     tol = 1e-6 * (1.0 + float(np.abs(stack).max(initial=0.0)))
     if np.abs(stack - stack[:1]).max(initial=0.0) <= tol:
         return  # rigid: nothing deforms

@@ -174,8 +174,13 @@ def bake_hint() -> str:
 
 
 def default_material(name: str = "STPM default") -> "scene_model.Material":
-    """Blender's default grey diffuse."""
-    return scene_model.Material.diffuse((0.8, 0.8, 0.8), name=name)
+    """What Cycles (Blender 5.0) renders on an object without a material: a Principled BSDF at its
+    defaults (base colour 0.8, roughness 0.5, IOR 1.5, Specular IOR Level 0.5), bit for bit the
+    same image as a default Principled material there.  It was a Lambertian grey: 11 % brighter
+    than Cycles on a floor lit at 50-70 degrees, whose Principled base loses the specular layer's
+    Fresnel (artist review 4)."""
+    return scene_model.Material(base_color=np.full(3, 0.8), metallic=0.0, transmission=0.0, roughness=0.5,
+                                specular=1.0, ior=1.5, emission=np.zeros(3), name=name)
 
 
 def _params(**kw) -> dict:
@@ -185,6 +190,14 @@ def _params(**kw) -> dict:
          "reflection_tint": None, "constant_fresnel": False}
     p.update(kw)
     return p
+
+
+def _transparent_graph():
+    """A graph of one white Transparent BSDF: what Cycles renders where a surface has no closure."""
+    g = sub("nodes.graph")
+    node = g.Node(type="ShaderNodeBsdfTransparent", inputs={"Color": (1.0, 1.0, 1.0)},
+                  outputs={"BSDF": "SHADER"}, input_types={"Color": "RGBA"})
+    return g.ShaderGraph(nodes={"Transparent BSDF": node}, surface=g.Link("Transparent BSDF", "BSDF"))
 
 
 def _tint(p: dict) -> np.ndarray:
@@ -357,11 +370,14 @@ class MaterialExporter:
                         metallic=float(mat.metallic), roughness=float(mat.roughness))
         else:
             out = self._output_node(tree)
+            sock = out.inputs.get("Surface") if out is not None else None
+            no_surface = sock is None or not sock.is_linked
+            vol = out.inputs.get("Volume") if out is not None else None
+            volume_only = no_surface and vol is not None and vol.is_linked
             for ignored in ("Displacement", "Volume"):
                 other = out.inputs.get(ignored) if out is not None else None
-                if other is not None and other.is_linked:
+                if other is not None and other.is_linked and not (ignored == "Volume" and volume_only):
                     self._warn(f"Material Output {ignored} is ignored (STPM renders the Surface only)")
-            sock = out.inputs.get("Surface") if out is not None else None
             builder = node_export.GraphBuilder()
             try:
                 graph = builder.build(out) if out is not None else None
@@ -376,9 +392,18 @@ class MaterialExporter:
                 graph = None
             self._graph_mode = graph is not None
             try:
-                if sock is None or not sock.is_linked:
-                    self._warn("no surface shader connected, using grey diffuse")
+                if volume_only:
+                    # Cycles: a material with a Volume and no Surface has no surface at all (rays
+                    # cross its boundary); STPM has no volumes, so what is behind shows through
+                    # (it rendered an opaque grey box: artist review 4's fog cube)
+                    self._warn("volume-only material: the Volume is not rendered (STPM has no volumes) and "
+                               "its surface is transparent, as in Cycles (no Surface shader)")
                     p = _params()
+                    graph = _transparent_graph()
+                elif no_surface:
+                    # Cycles renders a Material Output with nothing linked black (it rendered grey)
+                    self._warn("no surface shader connected: rendered black, as in Cycles")
+                    p = _params(base_color=np.zeros(3), roughness=1.0)
                 else:
                     p = self._shader(self._follow(sock.links[0]), depth=0)
             finally:
@@ -413,7 +438,9 @@ class MaterialExporter:
                 continue
             problem = self._image_problem(image)
             if problem is not None:
-                self._warn(problem)
+                # naming the node lets the renderer's own "has no image" line for it be dropped
+                # as already said (artist review 4 read both)
+                self._warn(f"node {name!r} ({node.type}): {problem}")
                 continue
             if image.source in ("SEQUENCE", "MOVIE"):
                 self._warn(f"image {image.name!r}: an image {image.source.lower()} is rendered as the one frame "
@@ -533,7 +560,7 @@ class MaterialExporter:
             return None, False
         problem = self._image_problem(image)
         if problem is not None:
-            self._warn(problem)
+            self._warn(problem, graph_carries=True)     # the graph's own line names the node
             return MISSING_IMAGE.copy(), False
         return image_mean(image), True
 

@@ -57,6 +57,8 @@ def orco_positions(obj, vertices: np.ndarray) -> np.ndarray | None:
     co = np.empty(vertices.shape[0] * 3, dtype=np.float32)
     (ref.data if ref is not None and len(ref.data) == vertices.shape[0] else me.vertices).foreach_get("co", co)
     co = co.reshape(-1, 3)
+    with np.errstate(invalid="ignore"):           # as the evaluated positions' (``_drop_nonfinite``)
+        co[~(np.abs(co) <= HUGE_COORDINATE).all(axis=1)] = 0.0
     tol = 1e-6 * (1.0 + float(np.abs(co).max(initial=0.0)))
     return None if np.abs(co - vertices).max(initial=0.0) <= tol else co
 
@@ -121,9 +123,52 @@ def mesh_arrays(me, tangent_maps=(), warn=None, color_maps=()) -> dict:
             own = bool(np.abs(cn.reshape(-1, 3)[loops].reshape(F, 3, 3) - normals).max() > 1e-5)
         tangents = tangent_arrays(me, loops, names, tri.reshape(F, 3), uv_layers, normals, warn, copy=own)
     color_layers, color_render = color_arrays(me, loops, color_maps) if color_maps else ({}, None)
-    return {"vertices": vertices, "triangles": tri.reshape(F, 3),
-            "slots": slots, "normals": normals, "uv_layers": uv_layers, "uv_render": uv_render,
-            "tangents": tangents, "color_layers": color_layers, "color_render": color_render}
+    out = {"vertices": vertices, "triangles": tri.reshape(F, 3),
+           "slots": slots, "normals": normals, "uv_layers": uv_layers, "uv_render": uv_render,
+           "tangents": tangents, "color_layers": color_layers, "color_render": color_render,
+           "nonfinite_dropped": 0}
+    return _drop_nonfinite(out)
+
+
+#: object-space coordinates beyond this are "huge": their triangles are left out (a vertex at 1e30 made
+#: every object of the review's outdoor scene vanish, the ray casting's extent-relative offsets then
+#: being astronomical; Cycles renders that scene as without the triangle)
+HUGE_COORDINATE = 1e15
+
+
+def _drop_nonfinite(arr: dict) -> dict:
+    """Leave out the triangles with a NaN, infinite or huge (|x| > ``HUGE_COORDINATE``) vertex (a
+    driver dividing by zero, a broken import), as Cycles renders the rest of the mesh;
+    ``nonfinite_dropped`` counts them.
+
+    The bad vertices are set to 0 (no triangle uses them any more) so the scene validates, and
+    kept triangles' shading normals / tangents that the bad faces made non-finite (Blender's
+    vertex normals average every face around a vertex) fall back to the geometric normal / 0.
+    Before, one such vertex stopped the whole render ("meshes[12] ('Broken').vertices contains
+    NaN or inf": artist review 4)."""
+    V = arr["vertices"]
+    with np.errstate(invalid="ignore"):
+        bad_v = ~(np.abs(V) <= HUGE_COORDINATE).all(axis=1)      # NaN compares False
+    if not bad_v.any():
+        return arr
+    tri = arr["triangles"]
+    keep = ~bad_v[tri].any(axis=1)
+    V = V.copy(); V[bad_v] = 0.0
+    tri = tri[keep]
+    arr.update(vertices=V, triangles=tri, slots=arr["slots"][keep], nonfinite_dropped=int((~keep).sum()))
+    for name in ("uv_layers", "tangents", "color_layers"):
+        arr[name] = {k: np.nan_to_num(v[keep], nan=0.0, posinf=0.0, neginf=0.0) for k, v in arr[name].items()}
+    n = arr["normals"]
+    if n is not None:
+        n = n[keep].copy()
+        bad_n = ~np.isfinite(n).all(axis=(1, 2))
+        if bad_n.any():
+            p = V[tri[bad_n]].astype(np.float64)
+            g = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+            g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-30)
+            n[bad_n] = g[:, None, :].astype(n.dtype)
+        arr["normals"] = n
+    return arr
 
 
 def _loop_triangles(me) -> tuple:
