@@ -634,6 +634,8 @@ if AVAILABLE:
             inv_r = 1.0 / (cone_k * max(r, 1e-300))
             n0, n1, n2 = ns[i, 0], ns[i, 1], ns[i, 2]
             m0, m1, m2 = np.float64(ng[i, 0]), np.float64(ng[i, 1]), np.float64(ng[i, 2])
+            # (no slab for a zero normal or two open sides: the test skipped, not only passed)
+            slab = (m0 != 0.0 or m1 != 0.0 or m2 != 0.0) and (plane_b < np.inf or plane_f < np.inf)
             r2 = bd[kq - 1]                       # the tangent slab's reach (_in_slab): r^2, KD4D's R^2
             ball4 = mode == MODE_KD4D
             p0 = 0.0
@@ -650,8 +652,8 @@ if AVAILABLE:
                             continue
                         ties -= 1
                     j = bi[a]
-                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0 and _in_slab(
-                            C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f):
+                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0 and (not slab or _in_slab(
+                            C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f)):
                         w = 1.0
                         if cone:
                             w = 1.0 - np.sqrt(bd[a]) * inv_r
@@ -669,7 +671,7 @@ if AVAILABLE:
                         w = 1.0 if bx[a] < tau else 0.0
                     if not (P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0):
                         w = 0.0
-                    if not _in_slab(C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f):
+                    if slab and not _in_slab(C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f):
                         w = 0.0
                     if cone:
                         w *= 1.0 - np.sqrt(bd[a]) * inv_r
@@ -758,6 +760,8 @@ if AVAILABLE:
             inv_r = 1.0 / (cone_k * max(rad[i], 1e-300))
             n0, n1, n2 = ns[i, 0], ns[i, 1], ns[i, 2]
             m0, m1, m2 = np.float64(ng[i, 0]), np.float64(ng[i, 1]), np.float64(ng[i, 2])
+            # (no slab for a zero normal or two open sides: the test skipped, not only passed)
+            slab = (m0 != 0.0 or m1 != 0.0 or m2 != 0.0) and (plane_b < np.inf or plane_f < np.inf)
             ball4 = D == 4 and not cyl            # the tangent slab's reach (_in_slab): the 4D ball's section
             p0 = 0.0
             p1 = 0.0
@@ -809,8 +813,8 @@ if AVAILABLE:
                     if d2 >= r2:
                         continue
                     cnt += 1
-                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0 and _in_slab(
-                            C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f):
+                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0 and (not slab or _in_slab(
+                            C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f)):
                         w = 1.0
                         if cone:
                             w = 1.0 - np.sqrt(d2) * inv_r
