@@ -225,13 +225,16 @@ def test_geometric_normals_turn_to_the_query_side(monkeypatch):
         m.estimate(p, ns, t, estimator="STANDARD", k=50, ng=ns[:10])
 
 
-def test_render_thin_panel_over_a_floor_reads_no_floor_photons():
-    # Through the renderer (integrator -> PhotonMaps.estimate with each hit's geometric normal): a
+@pytest.mark.parametrize("method", ["PHOTON", "PROGRESSIVE"])
+def test_render_thin_panel_over_a_floor_reads_no_floor_photons(method):
+    # Through the renderer (integrator -> the maps' estimate with each hit's geometric normal): a
     # 1 m panel 0.1 m over a floor, a point light above, a black world.  The panel's top sees no
     # surface (everything else lies below its plane), so its indirect light is exactly 0.  The
     # global photons near it are the floor's (arriving from above: they pass the top's side test)
-    # and the panel underside's (same plane, failing the side test); without the slab the top read
-    # the floor's (mean 0.0195, max 0.043 on main 2026-12-07: 3.6x the floor's own), with it nothing.
+    # and the panel underside's (same plane, failing the side test).  Main 2026-12-07, top / floor
+    # border mean: PHOTON 0.0195 / 0.0054 (3.6x the floor's own), PROGRESSIVE 0.0250 / 0.0052.  With
+    # the slab PHOTON reads exactly 0; PROGRESSIVE 0.00068 (its pilot's regions reach 0.2 m where the
+    # top's own photons are few: a slab of 0.5 rad then reaches the floor; they shrink pass by pass).
     from scenes import make_scene, ortho_camera_down, plane_mesh, point_light
     from stpm_core.render import render
     from stpm_core.scene import Material
@@ -240,10 +243,14 @@ def test_render_thin_panel_over_a_floor_reads_no_floor_photons():
     scene = make_scene([plane_mesh(6.0, z=0.0, material=0, name="floor"),
                         plane_mesh(1.0, z=GAP, material=0, name="panel")], mats, ortho_camera_down(),
                        [point_light((0.3, 0.2, 2.0), 200.0)], resolution=(32, 32))
-    r = render(scene, RenderSettings(samples=4, photons_global=200_000, photons_caustic=0, k_nearest=20, seed=1,
-                                     final_gather_samples=0))
+    extra = {"passes": 4, "photons_global": 100_000} if method == "PROGRESSIVE" else {"photons_global": 200_000}
+    r = render(scene, RenderSettings(method=method, samples=4, photons_caustic=0, k_nearest=20, seed=1,
+                                     final_gather_samples=0, **extra))
     ind = np.asarray(r.passes["Indirect"])[..., :3]
     top = ind[10:22, 10:22]                               # well inside the panel (it spans pixels 8..24)
     floor = np.concatenate([ind[:4].ravel(), ind[-4:].ravel()])
     assert floor.mean() > 0.0                             # (the floor does read indirect light)
-    assert top.max() == 0.0, top.mean()
+    if method == "PHOTON":
+        assert top.max() == 0.0, top.mean()
+    else:
+        assert top.mean() < 0.25 * floor.mean(), (top.mean(), floor.mean())
