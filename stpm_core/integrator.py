@@ -52,6 +52,7 @@ from .world_light import constant_environment
 from .kernels.svm import shade_rows
 from .parallel import ordered_map, worker_count
 from .photons import sharing as _sharing
+from .photons.estimators import plane_weights
 from .raycast.geometry import GUARD_FRACTION, OFFSET_POS, instance_offsets, offset_lengths, segment_of
 from .sampling import rng_for, skip_uniforms
 from .scene import light_visibility
@@ -472,29 +473,32 @@ def _glossy_emission(ctx, gem: np.ndarray, hits, o, t: np.ndarray, C, crow, p_c,
     _K.emission_rows_add(dst, gem, C, crow, W, idx_k, use_idx, beta_k, use_beta, float(clamp))
 
 
-def _estimate(ctx, kind: str, p, ns, t, group, extra: dict, estimator: str | None = None):
+def _estimate(ctx, kind: str, p, ns, t, group, extra: dict, estimator: str | None = None, ng=None):
     """(E (n, 3) irradiance of map ``kind`` at the queries, estimates made): alone, or shared by
-    ``group`` (``photons.sharing``); estimator None: the render's."""
+    ``group`` (``photons.sharing``); estimator None: the render's.  ng (n, 3): the queries' geometric
+    normals (their tangent slabs, ``PhotonMap.estimate``)."""
     if estimator is not None:
         extra = dict(extra, estimator=estimator)
     if group is None:
-        return ctx.maps.estimate(kind, p, ns, t, **extra), p.shape[0]
-    return _sharing.shared_estimate(lambda p, ns, t: ctx.maps.estimate(kind, p, ns, t, support=True, **extra),
-                                    p, ns, t, group)
+        return ctx.maps.estimate(kind, p, ns, t, ng=ng, **extra), p.shape[0]
+    return _sharing.shared_estimate(lambda p, ns, t, ng=None: ctx.maps.estimate(kind, p, ns, t, support=True, ng=ng,
+                                                                                **extra),
+                                    p, ns, t, group, ng=ng)
 
 
-def _estimate_split(ctx, kind: str, p, ns, t, group, extra: dict, static: np.ndarray | None):
+def _estimate_split(ctx, kind: str, p, ns, t, group, extra: dict, static: np.ndarray | None, ng):
     """:func:`_estimate` where the queries of static views (static (n,) bool, or None: none) read the
-    maps with STANDARD, the others with the render's estimator."""
+    maps with STANDARD, the others with the render's estimator (ng (n, 3) the geometric normals)."""
     if static is None or not static.any():
-        return _estimate(ctx, kind, p, ns, t, group, extra)
+        return _estimate(ctx, kind, p, ns, t, group, extra, ng=ng)
     E, estimated = np.empty((p.shape[0], 3)), 0
     for sel, est in ((static, "STANDARD"), (~static, None)):
         if sel.any():
             # (np.take: half the time of fancy indexing for these row gathers)
             i = np.flatnonzero(sel)
             E[i], e = _estimate(ctx, kind, np.take(p, i, axis=0), np.take(ns, i, axis=0), np.take(t, i),
-                                None if group is None else np.take(group, i), extra_sel(extra, i), est)
+                                None if group is None else np.take(group, i), extra_sel(extra, i), est,
+                                np.take(ng, i, axis=0))
             estimated += e
     return E, estimated
 
@@ -598,6 +602,7 @@ def _glossy_caustic(ctx, sh, kc, hits, d, C, crow, t_s, stats, dst, idx_k, use_i
     est = {} if estimator is None else {"estimator": estimator}
     wo = -d[rows]
     ns, ng = hits.ns[rows], hits.ng[rows]
+    ng_q = ng * ctx.plane_w[hits.instance[rows]][:, None]       # the tangent slab's normal (0: none)
     n_f = np.where((np.einsum("ij,ij->i", ns, wo) < 0.0)[:, None], -ns, ns)
     gW = np.ascontiguousarray(np.concatenate([wo, ns, ng], axis=1), np.float64)
     gC = np.ascontiguousarray(C[crow[rows]], np.float64)
@@ -607,14 +612,15 @@ def _glossy_caustic(ctx, sh, kc, hits, d, C, crow, t_s, stats, dst, idx_k, use_i
     if spp > 1 and _sharing.SHARE_RADIUS_FRACTION > 0.0 and getattr(ctx.maps, "shares_lookups", False):
         group = (idx_k[rows] if use_idx else rows) // spp * (ctx.n_instances + 1) + hits.instance[rows]
 
-        def estimate(p, ns_q, t_q, sel):
+        def estimate(p, ns_q, t_q, sel, ng=None):
             # (the sharing's subset sel of the queries: their closure rows and directions go with them)
             return ctx.maps.estimate("caustic", p, ns_q, t_q, support=True,
-                                     glossy=(gC[sel], gW[sel], E_t, E_avg, coat_w), **est)
+                                     glossy=(gC[sel], gW[sel], E_t, E_avg, coat_w), ng=ng, **est)
 
-        Ec, Lg, estimated = _sharing.shared_estimate(estimate, p_q, n_f, t_s[kc], group, wo=wo)
+        Ec, Lg, estimated = _sharing.shared_estimate(estimate, p_q, n_f, t_s[kc], group, wo=wo, ng=ng_q)
     else:
-        Ec, Lg = ctx.maps.estimate("caustic", p_q, n_f, t_s[kc], glossy=(gC, gW, E_t, E_avg, coat_w), **est)
+        Ec, Lg = ctx.maps.estimate("caustic", p_q, n_f, t_s[kc], glossy=(gC, gW, E_t, E_avg, coat_w), ng=ng_q,
+                                   **est)
         estimated = kc.size
     stats.photon_lookups += kc.size
     stats.photon_estimates += estimated
@@ -670,6 +676,10 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
         keep_c = None
     if n_q_rows == 0:
         return
+    # the queries' geometric normals: each look-up counts only photons in its surface's tangent slab
+    # (zero on moving or deforming instances: no slab there, estimators.plane_weights)
+    rows_q = sh[live[:n_q_rows]]
+    ng_q = np.take(hits.ng, rows_q, axis=0) * np.take(ctx.plane_w, np.take(hits.instance, rows_q))[:, None]
     extra = {}
     if getattr(ctx.maps, "per_pixel", False):
         # maps keeping statistics per pixel (compare's SPPM baseline) are told each query's pixel
@@ -699,7 +709,7 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
                 pq, nq, tq = p_q[:n_q_rows][sel], n_q[:n_q_rows][sel], t_q[:n_q_rows][sel]
                 st_sel = None if q_static is None else q_static[sel]
                 E, estimated = _estimate_split(ctx, kind, pq, nq, tq, None if group is None else group[sel],
-                                               extra_sel(extra, sel), st_sel)
+                                               extra_sel(extra, sel), st_sel, ng_q[sel])
                 stats.static_lookups += 0 if st_sel is None else int(np.count_nonzero(st_sel))
                 stats.photon_lookups += sel.size
                 stats.photon_estimates += estimated
@@ -714,7 +724,7 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
             touched.add(name)
             continue
         E, estimated = _estimate_split(ctx, kind, p_q[:n_q_rows], n_q[:n_q_rows], t_q[:n_q_rows], group, extra,
-                                       q_static)
+                                       q_static, ng_q)
         stats.static_lookups += 0 if q_static is None else n_static
         E = np.ascontiguousarray(E, np.float64)
         stats.photon_lookups += n_q_rows
@@ -1185,6 +1195,7 @@ class _Context:
     layout: dict = None                      # columns of a tile's per-sample matrix (_compact_layout)
     features: bool = False                   # RenderSettings.denoise: Denoising Albedo / Normal (kernels.paths.denoising_rows)
     n_instances: int = 0                     # the scene's instances (a photon query's group is pixel x instance)
+    plane_w: np.ndarray = None               # (n_instances,) 1: static, look-ups keep to the tangent slab; 0: moving
     final_gather: int = 0                    # RenderSettings.final_gather_samples (0: the global map read directly)
     term_cut: np.ndarray = None              # (n_instances,) shadow-terminator cutoff, 0: off (terminator_settings)
     term_freq: np.ndarray = None             # (n_instances,) shading offset's frequency multiplier, 1: off
@@ -1496,6 +1507,7 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
                             if maps is None or not ctx.map_kinds.get(kind, False))
     ctx.features = bool(getattr(settings, "denoise", False))
     ctx.n_instances = len(scene.instances)
+    ctx.plane_w = plane_weights(scene)
     ctx.static_view = static_view_setup(scene, maps)
     if ctx.static_view is not None and hasattr(maps, "prepare_standard"):
         maps.prepare_standard()

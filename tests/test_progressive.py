@@ -122,7 +122,7 @@ def test_a_pass_traces_photons_and_camera_samples_in_its_stratum():
         def has(self, kind):
             return kind == "caustic"
 
-        def estimate(self, kind, p, ns, tq):
+        def estimate(self, kind, p, ns, tq, ng=None):
             seen.append(np.asarray(tq).copy())
             return np.zeros((len(p), 3))
     trace_image(scene, st, caster, lights, Spy(), time_override=(0.25, 0.5))

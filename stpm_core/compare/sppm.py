@@ -62,9 +62,10 @@ class SPPMMaps:
     def has(self, kind: str) -> bool:
         return self.maps.has(kind)
 
-    def estimate(self, kind, p, ns, t, *, pixels):
+    def estimate(self, kind, p, ns, t, *, pixels, ng=None):
         """Irradiance E (n, 3) W/m^2 at p (n, 3): photons within the pixel's radius / (pi R^2); then the
-        radius update of every pixel queried."""
+        radius update of every pixel queried.  ng (the geometric normals) is ignored: pbrt's SPPM
+        sums the whole ball, no tangent slab (this is its baseline)."""
         m = self.maps.maps[kind]
         p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
         n = p.shape[0]

@@ -2,8 +2,11 @@
 
 All three return irradiance ``E`` (n, 3) in W/m^2 at query points ``p`` (n, 3)
 and shutter times ``t`` (n,), counting only photons that arrived on the side
-of the shading normal ``ns`` (``dot(ns, wi) > 0``).  The derivations, with the
-units of every name used here, are in docs/photon-mapping.md.
+of the shading normal ``ns`` (``dot(ns, wi) > 0``) and, given the queries'
+geometric normals ``ng``, lying in their tangent slab (``PLANE_FRACTION``,
+``PLANE_FRONT``: other surfaces inside the search ball add nothing).  The
+derivations, with the units of every name used here, are in
+docs/photon-mapping.md.
 
 Photon power is a *per-shutter* quantity: ``Phi`` (W) is the photon's share of
 the flux integrated over the normalised shutter, and photon times are drawn
@@ -61,12 +64,16 @@ from . import kdtree as _kdtree
 from .record import delta_only, oct_decode
 
 __all__ = [
-    "PhotonMap", "ESTIMATOR_NAMES", "CONE_K", "auto_temporal_alpha", "temporal_candidates",
+    "PhotonMap", "ESTIMATOR_NAMES", "CONE_K", "PLANE_FRACTION", "PLANE_FRONT", "plane_weights",
+    "auto_temporal_alpha", "temporal_candidates",
     "temporal_slices", "shutter_mass", "slab_ball_volume",
 ]
 
 ESTIMATOR_NAMES = ("STANDARD", "TEMPORAL", "KD4D")
 CONE_K = 1.1                 # cone kernel: w(d) = 1 - d / (CONE_K * r)
+PLANE_FRACTION = 0.5         # tangent slab: a photon counts only if -PLANE_FRACTION r <= (x_p - x_q) . n_g
+PLANE_FRONT = 0.5            # <= PLANE_FRONT r, n_g toward the query's viewer, r the search radius
+                             # (docs/photon-mapping.md, "Tangent slab"; inf: no bound on that side)
 TEMPORAL_SLICE_C = 0.25      # automatic time slices B = max(1, round(C * (N / k)^(1/3)))
 TEMPORAL_SLICE_ALPHA = 1.5   # candidates per estimate inside a slice, as a multiple of k (the paper's 1.5; fewer
                              # is cheaper but darkens a receiver moving along its normal: docs/photon-mapping.md)
@@ -81,6 +88,31 @@ SEARCH_CAP = True
 SEARCH_CAP_PERCENTILE = 90.0 # of the photons' own kq-th radii: 90 % of the map's photons (of its power) lie denser
 SEARCH_CAP_FACTOR = 2.0      # r_max / that radius: a capped query's density is < 1/4 of the percentile's
 SEARCH_CAP_SAMPLE = 2048     # photons (strided in tree order) whose kq-th radius sets r_max
+
+
+def _slab_normals(ng, ns: np.ndarray) -> np.ndarray:
+    """(n, 3) float32: the geometric normals ng turned to the side of ns (the side the query is seen
+    from: the slab's front); zeros where ng is None (no slab)."""
+    if ng is None:
+        return np.zeros_like(ns, dtype=np.float32)
+    ng = np.asarray(ng, dtype=np.float32).reshape(-1, 3)
+    if ng.shape != ns.shape:
+        raise ValueError(f"geometric normals {ng.shape} do not match the queries' normals {ns.shape}")
+    flip = np.einsum("ij,ij->i", ng, ns) < 0.0
+    return np.where(flip[:, None], -ng, ng)
+
+
+def plane_weights(scene) -> np.ndarray:
+    """(n_instances,) float32: 1 where an instance neither moves nor deforms within the shutter, else 0.
+
+    A query's geometric normal times its instance's weight is the normal :meth:`PhotonMap.estimate`
+    filters by: on a static surface every photon it received lies in its tangent plane, so the
+    slab drops only other surfaces' photons; on a moving or deforming one, photons of other times
+    lie off the query time's plane (a receiver moving along its normal: docs/photon-mapping.md,
+    "Tangent slab"), so the slab is off there (a zero normal).
+    """
+    return np.array([1.0 if inst.transform.is_static and not scene.meshes[inst.mesh].is_deforming else 0.0
+                     for inst in scene.instances], dtype=np.float32)
 
 
 # ---------------------------------------------------------------------------
@@ -358,10 +390,12 @@ class PhotonMap:
             self._caps[key] = cap
         return cap
 
-    def _capped_lookup(self, tree, mode, q, ns, kq, k, kernel, glossy=None):
-        """tree.lookup(...) capped at :meth:`search_cap` (counted in ``stats['capped_count']``)."""
+    def _capped_lookup(self, tree, mode, q, ns, kq, k, kernel, ng, glossy=None):
+        """tree.lookup(...) in the tangent slab of the normals ng (:func:`_slab_normals`), capped at
+        :meth:`search_cap` (counted in ``stats['capped_count']``)."""
         cap = self.search_cap(tree, kq)
-        out = tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers, glossy, cap=cap)
+        out = tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers, glossy, cap=cap, ng=ng,
+                          plane=PLANE_FRACTION, plane_front=PLANE_FRONT)
         if np.isfinite(cap):
             self.stats["capped_count"] += int(np.count_nonzero(out[1] >= cap))
         return out
@@ -402,8 +436,16 @@ class PhotonMap:
     # -- the estimate ---------------------------------------------------------
     def estimate(self, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str = "TEMPORAL",
                  k: int = 50, kernel: str = "BOX", temporal_alpha: float = 0.0, support: bool = False,
-                 glossy=None):
+                 glossy=None, ng: np.ndarray | None = None):
         """Irradiance E (n, 3) W/m^2 at points p (n, 3), normals ns (n, 3), times t (n,).
+
+        ng: (n, 3) unit geometric normals of the queries' surfaces, or None (no slab).  Only
+        photons in the tangent slab |(x_p - x_q) . ng| <= ``PLANE_FRACTION`` r count (r the
+        estimate's radius), so a surface near the query but off its plane (the wall behind a
+        curtain) adds nothing; the measure stays the disc (docs/photon-mapping.md, "Tangent slab").
+        A zero row switches the slab off for that query (h = 0 for every photon): for surfaces that
+        move or deform, whose photons of other times lie off today's plane (:func:`plane_weights`).
+        The geometric normal, not a bent shading one (smooth shading, normal maps).
 
         glossy: None, or (closure rows (n, N_CLOSURE), (wo, ns, ng) (n, 9) of each query's hit, E,
         E_avg, coat_w) (``kdtree.FlatTree.lookup``): then returns (E, L_g), L_g (n, 3) W/(m^2 sr)
@@ -431,6 +473,7 @@ class PhotonMap:
                 return E, np.zeros(n), np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf), np.zeros((n, 3))
             return (E, np.zeros(n), np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf)) if support else E
         ns = np.asarray(ns, dtype=np.float32).reshape(-1, 3)
+        ng = _slab_normals(ng, ns)
         t = np.broadcast_to(np.asarray(t, dtype=np.float64), (n,))
         estimator = estimator.upper()
         if estimator not in ESTIMATOR_NAMES:
@@ -454,17 +497,17 @@ class PhotonMap:
         t0 = _time.perf_counter()
         if B > 1:
             if glossy is not None:
-                E[:], r, tau, lo, hi, Lg = self._search_sliced(B, p, ns, t, k, m, kernel, glossy)
+                E[:], r, tau, lo, hi, Lg = self._search_sliced(B, p, ns, t, k, m, kernel, glossy, ng=ng)
                 self.stats["lookup_s"] += _time.perf_counter() - t0
                 self.stats["lookup_count"] += n
                 return (E, r, tau, lo, hi, Lg) if support else (E, Lg)
-            E[:], r, tau, lo, hi = self._estimate_sliced(B, p, ns, t, k, m, kernel)
+            E[:], r, tau, lo, hi = self._estimate_sliced(B, p, ns, t, k, m, kernel, ng)
             self.stats["lookup_s"] += _time.perf_counter() - t0
             self.stats["lookup_count"] += n
             return (E, r, tau, lo, hi) if support else E
         # -- search: Phi summed over the inner / selected photons, radius, time window ----------
         if glossy is not None:
-            Phi, r, tau, G = self._search_numba(estimator, p, ns, t, k, m, kernel, glossy)
+            Phi, r, tau, G = self._search_numba(estimator, p, ns, t, k, m, kernel, glossy, ng=ng)
             E[:] = self._normalise(estimator, Phi, r, tau, t, kernel)
             Lg = self._normalise(estimator, G, r, tau, t, kernel)
             self.stats["lookup_s"] += _time.perf_counter() - t0
@@ -474,11 +517,11 @@ class PhotonMap:
             return self._support(estimator, E, r, tau) + (Lg,)
         if self.backend == "numba":
             try:
-                Phi, r, tau = self._search_numba(estimator, p, ns, t, k, m, kernel)
+                Phi, r, tau = self._search_numba(estimator, p, ns, t, k, m, kernel, ng=ng)
             except Exception as exc:  # noqa: BLE001 -- fall back to scipy, same answer
                 self._fall_back(exc)
         if self.backend == "scipy":
-            Phi, r, tau = self._search_scipy(estimator, p, ns, t, k, m, kernel)
+            Phi, r, tau = self._search_scipy(estimator, p, ns, t, k, m, kernel, ng)
         # -- normalise: the same numpy code for both searches ------------------------------------
         E[:] = self._normalise(estimator, Phi, r, tau, t, kernel)
         self.stats["lookup_s"] += _time.perf_counter() - t0
@@ -496,7 +539,7 @@ class PhotonMap:
         return E, r, half, np.zeros(n), np.ones(n)
 
     # -- TEMPORAL on time slices ---------------------------------------------------------------------
-    def _estimate_sliced(self, B, p, ns, t, k, m, kernel):
+    def _estimate_sliced(self, B, p, ns, t, k, m, kernel, ng):
         """Consistent TEMPORAL: each query searches the slice holding its time: (E (n, 3) W/m^2,
         r_m (n,), tau (n,), and the slice [lo, hi] (n,) of each query).
 
@@ -505,9 +548,9 @@ class PhotonMap:
         [a, b] (docs/photon-mapping.md shows (k - 1) / (pi r_m^2 W) stays unbiased).
         A failure of the compiled search (build or look-up) redoes the estimate with scipy trees.
         """
-        return self._numba_or_scipy(lambda: self._search_sliced(B, p, ns, t, k, m, kernel))
+        return self._numba_or_scipy(lambda: self._search_sliced(B, p, ns, t, k, m, kernel, ng=ng))
 
-    def _search_sliced(self, B, p, ns, t, k, m, kernel, glossy=None):
+    def _search_sliced(self, B, p, ns, t, k, m, kernel, glossy=None, *, ng):
         """:meth:`_estimate_sliced` with the map's current engine (glossy: :meth:`estimate`'s; then
         the glossy radiance (n, 3) is a sixth result)."""
         sl = self.time_slices(B)
@@ -533,14 +576,15 @@ class PhotonMap:
                 if glossy is not None:
                     gq = (glossy[0][q], glossy[1][q]) + tuple(glossy[2:])
                     Phi[q], r[q], tau[q], G[q] = self._capped_lookup(tree, _kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj,
-                                                                     kernel, gq)
+                                                                     kernel, ng[q], gq)
                     continue
-                Phi[q], r[q], tau[q] = self._capped_lookup(tree, _kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj, kernel)
+                Phi[q], r[q], tau[q] = self._capped_lookup(tree, _kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj, kernel,
+                                                           ng[q])
             else:
                 batch = max(256, _QUERY_BATCH_ELEMS // mj)
                 for a in range(0, len(q), batch):
                     qb = q[a:a + batch]
-                    Phi[qb], r[qb], tau[qb] = self._temporal(p[qb], ns[qb], t[qb], kj, mj, kernel,
+                    Phi[qb], r[qb], tau[qb] = self._temporal(p[qb], ns[qb], t[qb], kj, mj, kernel, ng[qb],
                                                              tree=tree, rows=rows)
         E = self._normalise("TEMPORAL", Phi, r, tau, t, kernel, lo=lo, hi=hi)
         if glossy is not None:
@@ -570,7 +614,7 @@ class PhotonMap:
         return Phi / area[:, None]
 
     # -- compiled search ------------------------------------------------------------------------
-    def _search_numba(self, estimator, p, ns, t, k, m, kernel, glossy=None):
+    def _search_numba(self, estimator, p, ns, t, k, m, kernel, glossy=None, *, ng):
         """(Phi (n, 3) W, r (n,) m, tau (n,)) from the fused numba kernel (see kdtree.py); with glossy
         (:meth:`estimate`) the glossy sums (n, 3) as a fourth."""
         q = np.empty((p.shape[0], 4))
@@ -583,10 +627,10 @@ class PhotonMap:
             tree = self.flat_tree(3)
             mode = _kdtree.MODE_TEMPORAL if estimator == "TEMPORAL" else _kdtree.MODE_STANDARD
         kq = m if estimator == "TEMPORAL" else k
-        return self._capped_lookup(tree, mode, q, ns, kq, k, kernel, glossy)
+        return self._capped_lookup(tree, mode, q, ns, kq, k, kernel, ng, glossy)
 
     # -- scipy search -----------------------------------------------------------------------------
-    def _search_scipy(self, estimator, p, ns, t, k, m, kernel):
+    def _search_scipy(self, estimator, p, ns, t, k, m, kernel, ng):
         """(Phi (n, 3) W, r (n,) m, tau (n,)) with scipy's cKDTree, in memory-bounded batches."""
         n = p.shape[0]
         Phi, r, tau = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
@@ -595,17 +639,26 @@ class PhotonMap:
         for lo in range(0, n, batch):
             sl = slice(lo, min(n, lo + batch))
             if estimator == "STANDARD":
-                Phi[sl], r[sl] = self._standard(p[sl], ns[sl], k, kernel)
+                Phi[sl], r[sl] = self._standard(p[sl], ns[sl], k, kernel, ng[sl])
             elif estimator == "TEMPORAL":
-                Phi[sl], r[sl], tau[sl] = self._temporal(p[sl], ns[sl], t[sl], k, m, kernel)
+                Phi[sl], r[sl], tau[sl] = self._temporal(p[sl], ns[sl], t[sl], k, m, kernel, ng[sl])
             else:
-                Phi[sl], r[sl] = self._kd4d(p[sl], ns[sl], t[sl], k, kernel)
+                Phi[sl], r[sl] = self._kd4d(p[sl], ns[sl], t[sl], k, kernel, ng[sl])
         return Phi, r, tau
 
-    def _weighted_sum(self, idx: np.ndarray, ns: np.ndarray, w: np.ndarray | None) -> np.ndarray:
-        """sum_j [dot(ns, wi_j) > 0] w_j Phi_j over idx (n, j) -> (n, 3) W."""
+    def _weighted_sum(self, idx: np.ndarray, ns: np.ndarray, w: np.ndarray | None, p: np.ndarray,
+                      ng: np.ndarray, rho2: np.ndarray) -> np.ndarray:
+        """sum_j [dot(ns, wi_j) > 0] [x_j in the tangent slab] w_j Phi_j over idx (n, j) -> (n, 3) W.
+
+        The slab (``kdtree._in_slab``): -PLANE_FRACTION rho <= (x_j - p) . ng <= PLANE_FRONT rho, p (n, 3)
+        the queries, ng (n, 3) their geometric normals, rho2 (n, 1) or (n, j) the squared radius of
+        the region's section at each photon (r^2; KD4D's R^2 - (s dt)^2)."""
         G = np.take(self._packed, idx, axis=0)                     # (n, j, 8): one gather per photon
         side = (G[..., 0] * ns[:, None, 0] + G[..., 1] * ns[:, None, 1] + G[..., 2] * ns[:, None, 2]) > 0.0
+        h = np.einsum("njc,nc->nj", self.position[idx] - p[:, None, :], ng.astype(np.float64))
+        c = np.where(h >= 0.0, PLANE_FRONT, PLANE_FRACTION)
+        with np.errstate(invalid="ignore"):        # (inf x 0 where rho = 0 and a bound is off: no bound)
+            side &= np.isinf(c) | (h * h <= c * c * rho2)
         weight = side.astype(np.float32) if w is None else side * w.astype(np.float32)
         return np.einsum("nk,nkc->nc", weight, G[..., 4:7]).astype(np.float64)
 
@@ -614,14 +667,14 @@ class PhotonMap:
         """Cone kernel weights 1 - d / (CONE_K r) (n, j)."""
         return 1.0 - d / (CONE_K * np.maximum(r, 1e-300)[:, None])
 
-    def _standard(self, p, ns, k, kernel):
-        """STANDARD: Phi over the k - 1 inner photons, r_k."""
+    def _standard(self, p, ns, k, kernel, ng):
+        """STANDARD: Phi over the k - 1 inner photons (in the tangent slab), r_k."""
         d, idx = self.tree3().query(p, k, workers=self.workers)
         r = d[:, -1]                                   # radius reaching the k-th photon (m)
         w = self._cone(d[:, :-1], r) if kernel == "CONE" else None
-        return self._weighted_sum(idx[:, :-1], ns, w), r
+        return self._weighted_sum(idx[:, :-1], ns, w, p, ng, (r * r)[:, None]), r
 
-    def _temporal(self, p, ns, t, k, m, kernel, tree=None, rows=None):
+    def _temporal(self, p, ns, t, k, m, kernel, ng, tree=None, rows=None):
         """TEMPORAL: Phi over the k - 1 nearest in time among m - 1 inner candidates, r_m, tau_k.
 
         ``tree`` / ``rows``: search a time slice's cKDTree whose point i is photon ``rows[i]``
@@ -639,9 +692,9 @@ class PhotonMap:
         tau = dt[rows[:, 0], part[:, k - 1]]           # window half-width (shutter units)
         sel = part[:, : k - 1]                         # k - 1 photons strictly inside the window
         w = self._cone(d_c[rows, sel], r) if kernel == "CONE" else None
-        return self._weighted_sum(cand[rows, sel], ns, w), r, tau
+        return self._weighted_sum(cand[rows, sel], ns, w, p, ng, (r * r)[:, None]), r, tau
 
-    def _kd4d(self, p, ns, t, k, kernel):
+    def _kd4d(self, p, ns, t, k, kernel, ng):
         """KD4D: Phi over the k - 1 inner photons in (x, y, z, s t), R_k."""
         q = np.empty((p.shape[0], 4))
         q[:, :3] = p
@@ -649,4 +702,5 @@ class PhotonMap:
         d, idx = self.tree4().query(q, k, workers=self.workers)
         R = d[:, -1]                                   # 4D radius reaching the k-th photon (m)
         w = self._cone(d[:, :-1], R) if kernel == "CONE" else None
-        return self._weighted_sum(idx[:, :-1], ns, w), R
+        dt = self.time_scale * self.time[idx[:, :-1]] - q[:, 3:4]     # s t_j - s t (m)
+        return self._weighted_sum(idx[:, :-1], ns, w, p, ng, np.maximum((R * R)[:, None] - dt * dt, 0.0)), R

@@ -54,7 +54,8 @@ of them from q, so that distance already bounds the search from its first node
 (the bound then rarely tightens during a search, so the order in which leaves
 are visited hardly matters: a best-first search with a heap, until 2026-12-07,
 visited the same leaves at more cost per node).  The window's sum is branch-free
-too (a photon outside the window or on the far side adds w = 0).
+too (a photon outside the window, on the far side or off the query's tangent slab adds w = 0:
+:func:`_in_slab`, docs/photon-mapping.md "Tangent slab").
 
 Bounded searches (``_lookup``'s cap2, ``FlatTree.lookup(..., cap=r_max)``): the search starts from
 min(warm start, r_max^2) and never looks beyond r_max; a query with fewer than kq photons strictly
@@ -522,6 +523,26 @@ if AVAILABLE:
         return kq
 
     @_jit
+    def _in_slab(C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f):
+        """Does photon j of C (4, N) lie in the query's tangent slab, -plane_b rho <= h <= plane_f rho?
+
+        h = (x_j - q) . m (m) its height over the plane through q (q0, q1, q2) of unit normal m
+        (m0, m1, m2; zero: every photon is in); rho the radius of the region's section at the
+        photon: sqrt(r2) for a 3D ball or cylinder, sqrt(r2 - (s t_j - q3)^2) for a 4D ball (its
+        spatial section at the photon's time, so the slab is the same fraction of the disc the
+        photon shares).  plane_b, plane_f: inf, no bound on that side.  Squares compared: no sqrt.
+        """
+        h = ((np.float64(C[0, j]) - q0) * m0 + (np.float64(C[1, j]) - q1) * m1
+             + (np.float64(C[2, j]) - q2) * m2)
+        rho2 = r2
+        if ball4:
+            e3 = s * np.float64(C[3, j]) - q3
+            rho2 = max(r2 - e3 * e3, 0.0)
+        if h >= 0.0:
+            return plane_f == np.inf or h * h <= plane_f * plane_f * rho2
+        return plane_b == np.inf or h * h <= plane_b * plane_b * rho2
+
+    @_jit
     def _glossy_sum(P, bi, wk, n_sel, gC, i, E, E_avg, gW, coat_w):
         """(g0, g1, g2) = sum over the kept photons a < n_sel (weights wk[a] > 0, rows bi[a]) whose
         path was delta-only (P[j, 3] > 0) of wk[a] f_c(wo, wi_j) Phi_j: f_c the rough non-delta
@@ -545,7 +566,8 @@ if AVAILABLE:
         return g0, g1, g2
 
     @_jit
-    def _lookup(P, C, box, n_leaves, q, ns, mode, kq, k, s, cone, cone_k, cap2, out_phi, out_r, out_tau,
+    def _lookup(P, C, box, n_leaves, q, ns, ng, plane_b, plane_f, mode, kq, k, s, cone, cone_k, cap2, out_phi, out_r,
+                out_tau,
                 glossy, gC, gW, E, E_avg, coat_w, out_g):
         """Fused search + reduction for queries q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32.
 
@@ -554,8 +576,17 @@ if AVAILABLE:
 
         mode STANDARD / KD4D: kq = k nearest (3D / 4D); TEMPORAL: kq = m candidates, then the k
         nearest in time among the m - 1 inner ones.  Writes out_phi (n, 3) W (sum of w Phi over
-        the k - 1 inner / selected photons on the ns side), out_r (n,) distance of the kq-th
-        photon (m) and out_tau (n,) TEMPORAL's window half-width (shutter units).
+        the k - 1 inner / selected photons on the ns side and in the query's tangent slab), out_r
+        (n,) distance of the kq-th photon (m) and out_tau (n,) TEMPORAL's window half-width
+        (shutter units).
+
+        Tangent slab: ng (n, 3) float32 the query's unit geometric normal, on the side the query is
+        seen from; a photon counts only if -plane_b rho <= (x_p - x_q) . ng <= plane_f rho (rho the
+        kq-th distance r; for KD4D the radius of the 4D ball's spatial section at the photon's time:
+        :func:`_in_slab`), so a surface within the search ball but off the query's plane (a wall
+        behind a curtain) adds w = 0.  inf: no bound on that side (both inf:
+        every photon of the ball).  The radius still comes from all photons; the estimate's measure
+        stays the disc (docs/photon-mapping.md, "Tangent slab").
 
         cap2: the search's cap r_max^2 (m^2, in the tree's dimensions; inf = unbounded).  A query
         whose kq-th neighbour is not strictly within r_max sums all c < kq photons strictly within
@@ -627,6 +658,11 @@ if AVAILABLE:
                 out_tau[i] = tau
             inv_r = 1.0 / (cone_k * max(r, 1e-300))
             n0, n1, n2 = ns[i, 0], ns[i, 1], ns[i, 2]
+            m0, m1, m2 = np.float64(ng[i, 0]), np.float64(ng[i, 1]), np.float64(ng[i, 2])
+            # (no slab for a zero normal or two open sides: the test skipped, not only passed)
+            slab = (m0 != 0.0 or m1 != 0.0 or m2 != 0.0) and (plane_b < np.inf or plane_f < np.inf)
+            r2 = bd[kq - 1] if full else cap2     # the tangent slab's reach (_in_slab): r^2, KD4D's R^2
+            ball4 = mode == MODE_KD4D
             p0 = 0.0
             p1 = 0.0
             p2 = 0.0
@@ -641,7 +677,8 @@ if AVAILABLE:
                             continue
                         ties -= 1
                     j = bi[a]
-                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0:
+                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0 and (not slab or _in_slab(
+                            C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f)):
                         w = 1.0
                         if cone:
                             w = 1.0 - np.sqrt(bd[a]) * inv_r
@@ -650,14 +687,16 @@ if AVAILABLE:
                         p1 += w * P[j, 5]
                         p2 += w * P[j, 6]
             else:
-                # branch-free: a photon out of the window or on the far side adds w = 0 (exactly
-                # nothing; kept photons add what they did with branches)
+                # branch-free: a photon out of the window, on the far side or off the tangent slab
+                # adds w = 0 (exactly nothing; kept photons add what they did with branches)
                 for a in range(n_sel):
                     j = bi[a]
                     w = 1.0
                     if mode == MODE_TEMPORAL:
                         w = 1.0 if bx[a] < tau else 0.0
                     if not (P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0):
+                        w = 0.0
+                    if slab and not _in_slab(C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f):
                         w = 0.0
                     if cone:
                         w *= 1.0 - np.sqrt(bd[a]) * inv_r
@@ -713,8 +752,8 @@ if AVAILABLE:
                 r_prev = np.inf
 
     @_jit
-    def _range(P, C, box, n_leaves, q, ns, rad, half, D, cyl, s, cone, cone_k, stack, out_phi, out_cnt,
-               glossy, gC, gW, E, E_avg, coat_w, out_g):
+    def _range(P, C, box, n_leaves, q, ns, ng, plane_b, plane_f, rad, half, D, cyl, s, cone, cone_k, stack, out_phi,
+               out_cnt, glossy, gC, gW, E, E_avg, coat_w, out_g):
         """Fixed-size kernels: photons inside each query's own region, summed (the progressive estimate).
 
         P (N, 8) float32 rows (wi, delta_only, Phi, 0) and C (4, N) float32 coordinate rows, both in tree order.
@@ -727,9 +766,12 @@ if AVAILABLE:
         * D = 4, cyl False: the 4D ball |x - x_i|^2 + (s t - s t_i)^2 < rad_i^2;
         * D = 4, cyl True: the cylinder |x - x_i| < rad_i and |s t - s t_i| <= half_i.
 
-        Writes out_phi (n, 3) W: sum of w Phi over the photons inside on the ns side (w = 1, or the
-        cone 1 - d / (cone_k rad) of the spatial distance d for D = 3 / cyl and of the 4D one for the
-        ball), out_cnt (n,) how many photons were inside (either side).  stack: int64 scratch of at
+        Writes out_phi (n, 3) W: sum of w Phi over the photons inside on the ns side and in the
+        tangent slab -plane_b rho <= (x_p - x_i) . ng_i <= plane_f rho (rho = rad_i, or the 4D ball's
+        section at the photon's time; ng (n, 3) float32 unit geometric normals on the query's side;
+        inf: no bound; :func:`_in_slab`, as :func:`_lookup`'s) (w = 1, or the cone 1 - d / (cone_k rad) of the
+        spatial distance d for D = 3 / cyl and of the 4D one for the ball), out_cnt (n,) how many
+        photons were inside (either side, in the slab or not).  stack: int64 scratch of at
         least the tree depth + 2.  Depth-first: a node is entered only if its box reaches the region.
         glossy: also out_g (n, 3) W/sr, the sum of w f_c(wo, wi) Phi over the same photons whose path
         was delta-only (P[j, 3] > 0), f_c query i's rough lobes but DIFFUSE (gC (n, N_CLOSURE) its
@@ -744,6 +786,10 @@ if AVAILABLE:
             h = half[i]
             inv_r = 1.0 / (cone_k * max(rad[i], 1e-300))
             n0, n1, n2 = ns[i, 0], ns[i, 1], ns[i, 2]
+            m0, m1, m2 = np.float64(ng[i, 0]), np.float64(ng[i, 1]), np.float64(ng[i, 2])
+            # (no slab for a zero normal or two open sides: the test skipped, not only passed)
+            slab = (m0 != 0.0 or m1 != 0.0 or m2 != 0.0) and (plane_b < np.inf or plane_f < np.inf)
+            ball4 = D == 4 and not cyl            # the tangent slab's reach (_in_slab): the 4D ball's section
             p0 = 0.0
             p1 = 0.0
             p2 = 0.0
@@ -794,7 +840,8 @@ if AVAILABLE:
                     if d2 >= r2:
                         continue
                     cnt += 1
-                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0:
+                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0 and (not slab or _in_slab(
+                            C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f)):
                         w = 1.0
                         if cone:
                             w = 1.0 - np.sqrt(d2) * inv_r
@@ -839,6 +886,14 @@ _NO_E.setflags(write=False)          # read-only as the GGX tables (kernels.bsdf
 _NO_EA.setflags(write=False)
 
 
+def _plane_c(plane) -> float:
+    """The tangent slab's half-thickness as a fraction of the search radius (float64, > 0; inf: no slab)."""
+    c = float(plane)
+    if not c > 0.0:
+        raise ValueError(f"tangent slab fraction must be > 0 (inf: no slab), got {plane!r}")
+    return c
+
+
 class FlatTree:
     """A compiled kd-tree over one map's photons, in 3D (x, y, z) or 4D (x, y, z, s t).
 
@@ -880,12 +935,17 @@ class FlatTree:
         self.xyzt = np.ascontiguousarray(xyzt.T)
 
     def lookup(self, mode: int, q: np.ndarray, ns: np.ndarray, kq: int, k: int, cone: bool, cone_k: float,
-               workers: int, glossy=None, cap: float = np.inf):
+               workers: int, glossy=None, cap: float = np.inf, *, ng: np.ndarray | None = None,
+               plane: float = np.inf, plane_front: float | None = None):
         """Sums Phi (n, 3) W, radius r (n,) m of the kq-th neighbour and TEMPORAL's tau (n,) for queries q (n, 4).
 
         cap: the search's largest radius r_max (m, in the tree's dimensions; inf: unbounded).  A query
         with fewer than kq photons strictly within r_max gets the sum over all of them, r = r_max
         (exactly: the caller tells capped queries by ``r >= cap``) and tau = inf (:func:`_lookup`).
+
+        ng (n, 3) unit geometric normals on the side the query is seen from (None: ns), plane and
+        plane_front (None: plane): the tangent slab, a photon counts only if -plane r <= (x_p - x_q) . ng
+        <= plane_front r (:func:`_lookup`; inf, the default: no bound).
 
         glossy: None, or (gC (n, N_CLOSURE) float64 closure rows, gW (n, 9) float64 (wo, ns, ng) of
         each query's hit, E, E_avg the GGX tables, coat_w): then a fourth result, the sums (n, 3) of
@@ -910,6 +970,8 @@ class FlatTree:
         scale = 1024.0 / np.maximum(q.max(axis=0) - lo, 1e-30)
         order = np.argsort(_morton(q, lo, scale, D), kind="stable")
         qs, nss = q[order], ns[order]
+        ngs = nss if ng is None else np.ascontiguousarray(np.asarray(ng, np.float32).reshape(-1, 3)[order])
+        plane_b, plane_f = _plane_c(plane), _plane_c(plane if plane_front is None else plane_front)
         phi = np.zeros((n, 3))
         r = np.zeros(n)
         tau = np.zeros(n)
@@ -923,8 +985,9 @@ class FlatTree:
 
         def part(a, b):
             ga, gb = (a, b) if glossy is not None else (0, 0)
-            _lookup(self.pts, self.xyzt, self.box, self.n_leaves, qs[a:b], nss[a:b], mode, kq, k, self.s, cone, cone_k,
-                    cap2, phi[a:b], r[a:b], tau[a:b], glossy is not None, gC[ga:gb], gW[ga:gb], E_t, E_avg, coat_w,
+            _lookup(self.pts, self.xyzt, self.box, self.n_leaves, qs[a:b], nss[a:b], ngs[a:b], plane_b, plane_f, mode,
+                    kq, k, self.s, cone, cone_k, cap2,
+                    phi[a:b], r[a:b], tau[a:b], glossy is not None, gC[ga:gb], gW[ga:gb], E_t, E_avg, coat_w,
                     g[ga:gb])
 
         run_chunks(part, n, workers)
@@ -965,8 +1028,12 @@ class FlatTree:
         return out
 
     def range_sum(self, q: np.ndarray, ns: np.ndarray, rad: np.ndarray, half: np.ndarray | None, cone: bool,
-                  cone_k: float, workers: int, glossy=None):
+                  cone_k: float, workers: int, glossy=None, *, ng: np.ndarray | None = None, plane: float = np.inf,
+                  plane_front: float | None = None):
         """Sums Phi (n, 3) W and counts (n,) of the photons inside fixed regions (:func:`_range`).
+
+        ng (n, 3) unit geometric normals (None: ns), plane and plane_front: the tangent slab
+        -plane rad <= (x_p - x_q) . ng <= plane_front rad (inf, the default: no bound), as :meth:`lookup`'s.
 
         glossy: None, or (gC, gW, E, E_avg, coat_w) as :meth:`lookup`'s: then a third result, the sums
         (n, 3) of w f_c(wo, wi) Phi over the same photons with a delta-only path.
@@ -978,6 +1045,8 @@ class FlatTree:
         n = q.shape[0]
         q = np.ascontiguousarray(q, dtype=np.float64)
         ns = np.ascontiguousarray(ns, dtype=np.float32)
+        ng = ns if ng is None else np.ascontiguousarray(np.asarray(ng, np.float32).reshape(-1, 3))
+        plane_b, plane_f = _plane_c(plane), _plane_c(plane if plane_front is None else plane_front)
         rad = np.ascontiguousarray(rad, dtype=np.float64)
         cyl = half is not None and self.dims == 4
         half = np.zeros(n) if half is None else np.ascontiguousarray(half, dtype=np.float64)
@@ -998,7 +1067,8 @@ class FlatTree:
 
         def part(a, b):
             ga, gb = (a, b) if glossy is not None else (0, 0)
-            _range(self.pts, self.xyzt, self.box, self.n_leaves, q[a:b], ns[a:b], rad[a:b], half[a:b], D, cyl, self.s,
+            _range(self.pts, self.xyzt, self.box, self.n_leaves, q[a:b], ns[a:b], ng[a:b], plane_b, plane_f, rad[a:b],
+                   half[a:b], D, cyl, self.s,
                    cone, cone_k, np.empty(2 * depth, np.int64), phi[a:b], cnt[a:b], glossy is not None, gC[ga:gb],
                    gW[ga:gb], E_t, E_avg, coat_w, g[ga:gb])
 

@@ -50,6 +50,7 @@ import numpy as np
 
 from ..sampling import rng_for
 from . import hashgrid as _hashgrid
+from . import estimators as _estimators
 from .estimators import CONE_K, shutter_mass, slab_ball_volume
 from .kdtree import MODE_TEMPORAL
 from .maps import KINDS, build_photon_maps
@@ -298,11 +299,12 @@ class ProgressiveMaps:
         self._radius = {kind: [] for kind in KINDS}             # a sample of the radii used (for stats)
         self._lookup_s = 0.0
 
-    def _range_sum(self, kind, dims, q, ns, r, half, cone, glossy=None):
-        """(Phi (n, 3), count (n,)) of the pass's photons inside each region (the kd-tree's range query);
-        with glossy (:meth:`estimate`) also the regions' glossy sums (n, 3)."""
+    def _range_sum(self, kind, dims, q, ns, r, half, cone, glossy=None, ng=None):
+        """(Phi (n, 3), count (n,)) of the pass's photons inside each region and its tangent slab (the
+        kd-tree's range query); with glossy (:meth:`estimate`) also the regions' glossy sums (n, 3)."""
         m = self.maps.maps[kind]
-        return m.flat_tree(dims).range_sum(q, ns, r, half, cone, CONE_K, m.workers, glossy)
+        return m.flat_tree(dims).range_sum(q, ns, r, half, cone, CONE_K, m.workers, glossy, ng=ng,
+                                           plane=_estimators.PLANE_FRACTION, plane_front=_estimators.PLANE_FRONT)
 
     @property
     def glossy_lookups(self) -> bool:
@@ -325,8 +327,12 @@ class ProgressiveMaps:
         return self.maps.has(kind) and self.pilot.maps.maps[kind].n > PILOT_K
 
     def estimate(self, kind: str, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *,
-                 estimator: str | None = None, glossy=None):
+                 estimator: str | None = None, glossy=None, ng: np.ndarray | None = None):
         """Irradiance E (n, 3) W/m^2 at p (n, 3) on the ns (n, 3) side at shutter times t (n,).
+
+        ng (n, 3): the queries' unit geometric normals (None: no slab); only photons in the tangent slab
+        -PLANE_FRACTION r <= (x_p - x_q) . ng <= PLANE_FRONT r of the region's radius r count
+        (``estimators``; ``PhotonMap.estimate``; docs/photon-mapping.md, "Tangent slab").
 
         estimator 'STANDARD' with a space-time kernel: the queries are static views
         (``integrator.static_view_rows``), read with the surface disc over the pass's stratum (its
@@ -381,7 +387,8 @@ class ProgressiveMaps:
             r = r * c * w ** (1.0 / 3.0)                         # the 4D ball, unclipped
         # -- photons of this pass inside each region -----------------------------------------------
         q[:, :3] = p - m.origin
-        sums = self._range_sum(kind, 3 if timeless else 4, q, ns, r, half, cone, glossy)
+        ng = np.ascontiguousarray(_estimators._slab_normals(ng, ns))
+        sums = self._range_sum(kind, 3 if timeless else 4, q, ns, r, half, cone, glossy, ng)
         Phi, cnt = sums[0], sums[1]
         # -- normalise by the region's measure in the stratum (area x its share of the stratum's mass) --
         rr = np.maximum(r, 1e-12)

@@ -59,7 +59,7 @@ SHARE_WO_COS = 0.9998         # glossy reads (wo given): view directions at most
 
 def shared_estimate(estimate, p: np.ndarray, ns: np.ndarray, t: np.ndarray, group: np.ndarray, *,
                     f: float = None, f_t: float = None, cos_n: float = None, rounds: int = None,
-                    wo: np.ndarray | None = None):
+                    wo: np.ndarray | None = None, ng: np.ndarray | None = None):
     """Irradiance (n, 3) at the queries, estimated at representatives and shared inside groups.
 
     Parameters
@@ -72,6 +72,8 @@ def shared_estimate(estimate, p: np.ndarray, ns: np.ndarray, t: np.ndarray, grou
     wo : (n, 3) view directions, or None; given, ``estimate`` is called with the queries' indices
         (m,) as a fourth argument and also returns the glossy radiance L_g (m, 3) as a sixth result (``PhotonMaps.estimate(..., glossy=...)``) and it is shared
         as E, where also wo . wo_rep >= ``SHARE_WO_COS``.
+    ng : (n, 3) the queries' geometric normals, or None; given, ``estimate`` is called with
+        ``ng=`` those of the queries it estimates (their tangent slabs, ``PhotonMap.estimate``).
 
     Returns (E (n, 3) float64, estimated: how many queries were estimated, the others shared); with
     wo (E, L_g (n, 3), estimated).
@@ -94,7 +96,8 @@ def shared_estimate(estimate, p: np.ndarray, ns: np.ndarray, t: np.ndarray, grou
     rank = np.arange(n) - start[gi]          # its place in the group
     is_pilot = rank < SHARE_PILOTS
     pilots = order[is_pilot]
-    got = estimate(p[pilots], ns[pilots], t[pilots], *((pilots,) if glossy else ()))
+    got = estimate(p[pilots], ns[pilots], t[pilots], *((pilots,) if glossy else ()),
+                   **({} if ng is None else {"ng": ng[pilots]}))
     Ep, rp, taup = got[:3]
     E[pilots] = Ep
     if glossy:
@@ -119,7 +122,8 @@ def shared_estimate(estimate, p: np.ndarray, ns: np.ndarray, t: np.ndarray, grou
         if not (last or rnd == rounds - 1):
             first[1:] = g[1:] != g[:-1]
         reps = todo[first]
-        got = estimate(p[reps], ns[reps], t[reps], *((reps,) if glossy else ()))
+        got = estimate(p[reps], ns[reps], t[reps], *((reps,) if glossy else ()),
+                       **({} if ng is None else {"ng": ng[reps]}))
         Er, r, _, lo, hi = got[:5]
         E[reps] = Er
         if glossy:
