@@ -23,8 +23,10 @@ if not kdtree.AVAILABLE:
     pytest.skip("numba look-ups unavailable", allow_module_level=True)
 
 
-def oracle_capped(pos, t, packed, q, ns, mode, kq, k, cone, cone_k, s, cap):
-    """(phi (n, 3), r (n,), tau (n,)) of the capped look-up, by sorting every photon per query."""
+def oracle_capped(pos, t, packed, q, ns, mode, kq, k, cone, cone_k, s, cap, ng=None, plane=np.inf):
+    """(phi (n, 3), r (n,), tau (n,)) of the capped look-up, by sorting every photon per query; ng (n, 3)
+    and plane: only photons with |(x_p - x_q) . ng| <= plane rho count (the tangent slab, rho the
+    radius r, KD4D's spatial section sqrt(r^2 - (s dt)^2) at the photon's time)."""
     D = 4 if mode == kdtree.MODE_KD4D else 3
     n = len(q)
     phi, r, tau = np.zeros((n, 3)), np.zeros(n), np.full(n, np.inf)
@@ -42,6 +44,14 @@ def oracle_capped(pos, t, packed, q, ns, mode, kq, k, cone, cone_k, s, cap):
         else:                                                # capped: all photons strictly within r_max
             r[i] = cap
             inner = np.nonzero(d2 < cap * cap)[0]
+        if ng is not None:
+            h = (pos[inner].astype(np.float64) - q[i, :3]) @ ng[i].astype(np.float64)
+            rho2 = np.full(len(inner), r[i] * r[i] if np.isfinite(cap) and r[i] == cap else 0.0)
+            if not (np.isfinite(cap) and r[i] == cap):
+                rho2[:] = d2[order[kq - 1]]
+            if mode == kdtree.MODE_KD4D:
+                rho2 = np.maximum(rho2 - (s * t[inner].astype(np.float64) - q[i, 3]) ** 2, 0.0)
+            inner = inner[h * h <= plane * plane * rho2]
         w = 1.0 - np.sqrt(d2[inner]) / (cone_k * max(r[i], 1e-300)) if cone else np.ones(len(inner))
         phi[i] = side_sum(packed, inner, ns[i], w)
     return phi, r, tau
@@ -70,6 +80,31 @@ def test_capped_lookups_equal_brute_force(seed, dup):
                 assert_sums(phi, phi_o)
                 capped = r >= cap
                 assert 0 < capped.sum() < len(r) or cap != np.percentile(r_unb, 50)
+
+
+def test_capped_lookups_in_the_tangent_slab_equal_brute_force():
+    # the two per-query rules together: a capped query's slab reaches a fraction of r_max, not of a
+    # k-th neighbour it never found (docs/photon-mapping.md, "Bounded searches", "Tangent slab")
+    rng = np.random.default_rng(7)
+    pos, t, packed = photon_arrays(rng, 3000)
+    q, ns = query_arrays(rng, 200, pos)
+    ng = rng.normal(size=(len(q), 3))
+    ng = (ng / np.linalg.norm(ng, axis=1, keepdims=True)).astype(np.float32)
+    trees = {3: kdtree.FlatTree(pos, t, packed, dims=3, s=S), 4: kdtree.FlatTree(pos, t, packed, dims=4, s=S)}
+    for mode, kq, k in ((kdtree.MODE_STANDARD, 50, 50), (kdtree.MODE_TEMPORAL, 75, 50), (kdtree.MODE_KD4D, 50, 50)):
+        qq = q.copy()
+        if mode == kdtree.MODE_KD4D:
+            qq[:, 3] *= S
+        tree = trees[4 if mode == kdtree.MODE_KD4D else 3]
+        cap = float(np.median(tree.lookup(mode, qq, ns, kq, k, False, 1.1, 1)[1]))
+        phi, r, _ = tree.lookup(mode, qq, ns, kq, k, False, 1.1, 1, cap=cap, ng=ng, plane=0.3)
+        phi_o, r_o, _ = oracle_capped(pos, t, packed, qq, ns, mode, kq, k, False, 1.1, S, cap, ng=ng, plane=0.3)
+        assert np.array_equal(r, r_o), mode
+        assert_sums(phi, phi_o)
+        # the slab drops photons in capped and uncapped queries alike
+        phi_all = tree.lookup(mode, qq, ns, kq, k, False, 1.1, 1, cap=cap)[0]
+        for sel in (r >= cap, r < cap):
+            assert phi[sel].sum() < 0.8 * phi_all[sel].sum(), (mode, sel.sum())
 
 
 def test_capped_lookups_split_over_threads_equal_one_thread():
