@@ -33,6 +33,7 @@ f_c(wo, wi_p) (then its paths drop what they reach through delta vertices alone;
 """
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import dataclass, field, replace as _replace
 
@@ -1250,7 +1251,7 @@ def _scratch(name: str, shape: tuple, dtype=np.float64) -> np.ndarray:
 
     Valid until the same thread asks for ``name`` again (the next tile).
     """
-    size = int(np.prod(shape))
+    size = int(math.prod(shape))           # (np.prod, a ufunc reduction: 10 us a call at load 9, math.prod 0.3)
     buf = _SCRATCH.bufs.get(name)
     if buf is None or buf.size < size or buf.dtype != np.dtype(dtype):
         buf = np.empty(size, dtype)

@@ -31,10 +31,17 @@ world's mapping (map-to-world rotation over the shutter), and :attr:`WorldLight.
 the kernels read (:mod:`stpm_core.kernels.environment`):
 
 * Next-event estimation draws wi from the mixture ``p(wi) = c p_cos(wi) + (1 - c) p_img(wi)``
-  (c = ``NEE_COS_FRACTION``; p_cos the cosine density about the normal, or uniform on the
-  sphere without one; p_img the image distribution) and weighs it by ``L(wi) / p(wi)``: the
-  one-sample balance heuristic of the two techniques, so a sun spot is found by the image
-  distribution and a sky of little contrast by the cosine, neither with fireflies.
+  (p_cos the cosine density about the normal, or uniform on the sphere without one; p_img the
+  image distribution) and weighs it by ``L(wi) / p(wi)``: the one-sample balance heuristic of
+  the two techniques, so a sun spot is found by the image distribution and a sky of little
+  contrast by the cosine, neither with fireflies.  c depends on the normal n (turned toward the
+  viewer; ``kernels.environment.nee_cos``): c = lo + (hi - lo) (1 - f(n)), (lo, hi) =
+  ``NEE_COS_RANGE``, f(n) the image distribution's probability above the tangent plane of n,
+  tabulated over an ``NC_ROWS`` x ``NC_COLS`` grid of normals in the image frame
+  (:func:`nee_cos_table`): where most of the image's power lies above the surface (a floor
+  under a sun) the image draws more samples, where it lies below (a wall facing away) the
+  cosine does (docs/blender.md, "the world's cosine fraction"); ``NEE_COS_FRACTION`` without a
+  normal.
 * Photons: the direction omega (where the light comes from) is drawn from
   ``q(omega) = a / (4 pi) + (1 - a) p_img(omega)`` (a = ``PHOTON_UNIFORM_FRACTION``, defensive:
   every direction keeps some density), the photon travels along -omega from the disc of radius
@@ -67,10 +74,11 @@ import numpy as np
 from .motion import MotionTransform
 
 __all__ = ["WorldLight", "environment_arrays", "constant_environment", "camera_environment", "portal_rows",
-           "MAP_RESOLUTION", "NEE_COS_FRACTION", "PHOTON_UNIFORM_FRACTION", "PORTAL_NEE_FRACTION", "PORTAL_PHOTON_FRACTION"]
+           "MAP_RESOLUTION", "NEE_COS_FRACTION", "NEE_COS_RANGE", "nee_cos_table", "PHOTON_UNIFORM_FRACTION", "PORTAL_NEE_FRACTION", "PORTAL_PHOTON_FRACTION"]
 
 MAP_RESOLUTION = 1024            # columns of the distribution grid at most (rows: half), as Cycles' default
-NEE_COS_FRACTION = 0.3           # next-event samples drawn about the normal (the rest from the image)
+NEE_COS_FRACTION = 0.3           # next-event samples drawn uniformly where a point has no normal (the rest from the image)
+NEE_COS_RANGE = (0.1, 0.5)       # ... about the normal: lo where all the image's power is above the surface, hi where none
 PHOTON_UNIFORM_FRACTION = 0.1    # world photons drawn uniformly over the sphere (the rest from the image)
 PORTAL_NEE_FRACTION = 0.5        # next-event samples drawn through the portals facing the point (if any)
 PORTAL_PHOTON_FRACTION = 0.8     # world photons aimed through the portals (the rest over the whole disc)
@@ -118,6 +126,32 @@ def constant_environment(radiance, portals=None) -> tuple:
 def _cell_edges(n: int, m: int) -> np.ndarray:
     """Start indices (m,) of m nearly equal runs of n texels (m <= n)."""
     return (np.arange(m) * n) // m
+
+
+def nee_cos_table(func: np.ndarray) -> np.ndarray:
+    """(NC_ROWS * NC_COLS,) the cosine fraction of next-event estimation per normal direction
+    (``kernels.environment.nee_cos``): the normal of cell (i, j) points to the image-frame (u, v)
+    = ((j + 1/2) / NC_COLS, (i + 1/2) / NC_ROWS); c = lo + (hi - lo) (1 - f), f the share of the
+    cell weights func (Hd, Wd) (the image distribution) whose cell centres lie above its tangent
+    plane (func summed over at most 64 x 128 blocks first, each at its centre)."""
+    from .kernels.environment import NC_COLS, NC_ROWS
+    Hd, Wd = func.shape
+    hb, wb = min(Hd, 64), min(Wd, 128)
+    re, ce = _cell_edges(Hd, hb), _cell_edges(Wd, wb)
+    blocks = np.add.reduceat(np.add.reduceat(func, re, axis=0), ce, axis=1)
+    vc = (re + np.diff(np.append(re, Hd)) / 2.0) / Hd
+    uc = (ce + np.diff(np.append(ce, Wd)) / 2.0) / Wd
+
+    def directions(u, v):
+        theta, phi = np.pi * (1.0 - v), np.pi - 2.0 * np.pi * u
+        return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=-1)
+
+    d = directions(*np.meshgrid(uc, vc)).reshape(-1, 3)
+    w = blocks.reshape(-1) / max(float(blocks.sum()), 1e-300)
+    n = directions(*np.meshgrid((np.arange(NC_COLS) + 0.5) / NC_COLS, (np.arange(NC_ROWS) + 0.5) / NC_ROWS)).reshape(-1, 3)
+    f = ((n @ d.T) > 0.0) @ w
+    lo, hi = NEE_COS_RANGE
+    return lo + (hi - lo) * (1.0 - np.clip(f, 0.0, 1.0))
 
 
 def _max_3x3(a: np.ndarray) -> np.ndarray:
@@ -190,6 +224,8 @@ def environment_arrays(world, portals=None) -> tuple:
     par[E_MEAN] = total / (Hd * Wd)
     par[E_NEE_COS] = NEE_COS_FRACTION if total > 0 else 1.0
     par[E_PHOTON_UNIFORM] = PHOTON_UNIFORM_FRACTION if total > 0 else 1.0
+    if total > 0:
+        par = np.concatenate([par, nee_cos_table(func)])       # kernels.environment.nee_cos
     return (img, func, np.ascontiguousarray(marg), np.ascontiguousarray(cond), par,
             constant_environment(world.radiance, portals)[5])
 

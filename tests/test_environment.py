@@ -271,3 +271,31 @@ def test_an_hdri_sun_makes_the_caustic_of_the_equivalent_sun_lamp():
     print(f"caustic power on the floor: HDRI sun {power[0]:.4g} W, sun lamp {power[1]:.4g} W")
     assert power[1] > 0
     assert power[0] == pytest.approx(power[1], rel=0.03), power
+
+
+def test_the_cosine_fraction_follows_the_image_power_and_stays_unbiased():
+    """Next-event estimation's cosine fraction depends on the normal (``kernels.environment.nee_cos``,
+    ``world_light.nee_cos_table``): small where the image's power (the sun patch) is above the
+    surface, large where it is below; the sampler reports the density ``world_nee_pdf`` gives, and
+    E[L cos / p] is the cosine-weighted integral of the image for any normal (the oracle)."""
+    from stpm_core.kernels.environment import nee_cos
+    from stpm_core.kernels.lights import _sample_env, world_nee_pdf
+    from stpm_core.world_light import NEE_COS_RANGE
+    img = sky_with_sun()
+    img_k, func, marg, cond, par, portals = environment_arrays(World(color=np.ones(3), image=img))
+    M = np.eye(4)
+    lo, hi = NEE_COS_RANGE
+    assert nee_cos(par, M, (0.0, 0.0, 1.0)) < lo + 0.1 * (hi - lo)        # the sun above a floor
+    assert nee_cos(par, M, (0.0, 0.0, -1.0)) > hi - 0.1 * (hi - lo)       # below a ceiling
+    assert nee_cos(par, M, (0.0, 0.0, 0.0)) == par[3]                     # no normal: the fixed fraction
+    rng = np.random.default_rng(5)
+    for n in ((0.0, 0.0, 1.0), (1.0, 0.0, 0.0), (0.0, -0.6, 0.8)):
+        u = rng.random((60_000, 2))
+        est = np.zeros(3)
+        for k in range(u.shape[0]):
+            r = _sample_env(img_k, func, marg, cond, par, M, n, u[k, 0], u[k, 1])
+            wi = (r[0], r[1], r[2])
+            if k < 200:
+                assert r[7] == pytest.approx(world_nee_pdf(func, par, portals, M, (0.0, 0.0, 0.0), n, wi), rel=1e-12)
+            est += np.array(r[4:7]) * max(wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2], 0.0)
+        np.testing.assert_allclose(est / u.shape[0], image_irradiance(img, n), rtol=0.02)

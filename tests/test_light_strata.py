@@ -86,6 +86,25 @@ def test_kernel_matches_the_numpy_oracle(S):
         assert np.array_equal(got, want)
 
 
+@pytest.mark.parametrize("S", [32, 64, 70])
+def test_a_rows_point_does_not_depend_on_the_other_rows(S):
+    """A row's uniforms depend on its pixel's keys, its sample and its jitter only: a few rows of
+    a pixel in any order (later bounces; split paths' strata) get what the full set of rows gives
+    them.  (The kernel computes only the rows' own points where no orthogonal array is used: S =
+    32 and 70 here; 64 takes the array.  docs/rendering.md, "Where a product-shot camera sample's
+    time goes".)"""
+    P = 9
+    rng = np.random.default_rng(S + 1)
+    keys, jit = rng.random((P, S)), rng.random((P * S, 2))
+    full = np.empty((P * S, 2))
+    light_strata(np.arange(P * S), S, keys, jit, full)
+    for frac in (0.02, 0.3):
+        sub = rng.permutation(np.sort(rng.choice(P * S, size=max(1, int(P * S * frac)), replace=False)))
+        part = np.empty((sub.size, 2))
+        light_strata(sub, S, keys, jit[sub], part)
+        assert np.array_equal(part, full[sub]), (S, frac)
+
+
 def test_each_sample_is_uniform_and_the_film_strata_are_not_followed():
     """The j-th sample of a pixel, over many pixels, is uniform on the square (chi-square on 4 x 4
     bins), for a square power of two (net points in the array's cells), another power of two (net

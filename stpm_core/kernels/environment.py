@@ -15,9 +15,11 @@ per-row loop costs two atomic reference-count operations per row, ``sampling.row
   of the channels' mean over the cell's texels, times sin(theta) at the cell centre), row 0 at
   the bottom; marg (Hd + 1,): the running sum of the rows' totals, normalised (0 .. 1);
   cond (Hd, Wd + 1): per row, the running sum of its cells, normalised;
-* par (N_ENV,) float64: ``E_TEXTURED`` (0: a constant world of radiance ``E_L``), ``E_INTERP``
-  (0 Closest, 1 Linear), ``E_MEAN`` (the mean of func over its cells), ``E_NEE_COS`` (the
-  fraction of next-event samples drawn about the normal rather than from the image),
+* par (N_ENV,) float64, for an image with weight (N_ENV + NC_ROWS * NC_COLS,): ``E_TEXTURED`` (0:
+  a constant world of radiance ``E_L``), ``E_INTERP`` (0 Closest, 1 Linear), ``E_MEAN`` (the mean
+  of func over its cells), ``E_NEE_COS`` (the fraction of next-event samples drawn uniformly
+  rather than from the image at a point without a normal; with a normal, the fraction drawn
+  about it is the table after ``N_ENV``, one per normal direction: :func:`nee_cos`),
   ``E_PHOTON_UNIFORM`` (the fraction of photon directions drawn uniformly), ``E_L`` (3),
   ``E_PORTAL_NEE`` (the fraction of next-event samples drawn through the portals, where some
   portal faces the point), ``E_PORTAL_PHOTON`` (the fraction of world photons aimed through them);
@@ -44,7 +46,7 @@ import numpy as np
 from ..numba_probe import njit
 from .sampling import JIT, JIT_INLINE, load_pose, pose_buffer, search_right
 
-__all__ = ["N_ENV", "E_TEXTURED", "E_INTERP", "E_MEAN", "E_NEE_COS", "E_PHOTON_UNIFORM", "E_L", "E_PORTAL_NEE",
+__all__ = ["N_ENV", "NC_ROWS", "NC_COLS", "E_TEXTURED", "E_INTERP", "E_MEAN", "E_NEE_COS", "nee_cos", "E_PHOTON_UNIFORM", "E_L", "E_PORTAL_NEE",
            "E_PORTAL_PHOTON", "PT_S", "PT_E1", "PT_E2", "PT_N", "N_PORTAL", "portal_cross", "portal_cross_batch",
            "env_radiance", "env_pdf", "env_sample", "env_lookup_batch", "env_pdf_batch", "env_sample_batch"]
 
@@ -57,6 +59,7 @@ E_L = 5
 E_PORTAL_NEE = 8
 E_PORTAL_PHOTON = 9
 N_ENV = 10
+NC_ROWS, NC_COLS = 8, 16                    # the per-normal cosine fractions after par[N_ENV:] (nee_cos)
 PT_S, PT_E1, PT_E2, PT_N = 0, 3, 6, 9       # columns of a portal row
 N_PORTAL = 12
 
@@ -82,6 +85,22 @@ def _uv(m):
         u -= 1.0
     z = min(max(m[2] / s, -1.0), 1.0)
     return u, 1.0 - math.acos(z) / np.pi
+
+
+@njit(**JIT_INLINE)
+def nee_cos(par, M, n):
+    """The cosine fraction c of next-event estimation's mixture at a point whose geometric normal
+    (turned toward the viewer) is n, for an environment image of map-to-world rotation M:
+    ``par[N_ENV + i NC_COLS + j]``, the cell (i, j) of the (u, v) of n in the image frame on an
+    NC_ROWS x NC_COLS grid (``world_light.environment_arrays``), where par holds such a table;
+    else (or for a zero n) ``par[E_NEE_COS]``.  A function of (n, M) alone: the sampler and the
+    density read the same c."""
+    if par.shape[0] < N_ENV + NC_ROWS * NC_COLS or (n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0):
+        return par[E_NEE_COS]
+    u, v = _uv(_to_map(M, n))
+    i = min(int(v * NC_ROWS), NC_ROWS - 1)
+    j = min(int(u * NC_COLS), NC_COLS - 1)
+    return par[N_ENV + i * NC_COLS + j]
 
 
 @njit(**JIT_INLINE)

@@ -44,7 +44,7 @@ import numpy as np
 from ..numba_probe import njit
 from .light_params import P_ANGLE, P_COLOR, P_DEAD, P_POWER, P_RADIUS, P_SOFT, P_TYPE, T_AREA, T_MESH, T_POINT, \
     T_SPOT, T_SUN, T_WORLD
-from .environment import (E_NEE_COS, E_PORTAL_NEE, E_TEXTURED, PT_E1, PT_E2, PT_N, PT_S, env_pdf, env_radiance,
+from .environment import (E_PORTAL_NEE, nee_cos, E_TEXTURED, PT_E1, PT_E2, PT_N, PT_S, env_pdf, env_radiance,
                           env_sample, portal_cross)
 from .sampling import (JIT, TWO_PI, area_point, area_shape, axis_or_z, clip, column, concentric_disk,
                        cosine_hemisphere, cross, dot, edot, intensity, light_axis, load_pose, madd, mesh_choice, mesh_point, mesh_triangle, neg, sun_cone,
@@ -276,12 +276,12 @@ def _sample_world(prm, n, u0, u1):
 @njit(**JIT)
 def _sample_env(img, func, marg, cond, par, M, n, u0, u1):
     """WORLD with an environment image (``kernels.environment``'s env arrays, map-to-world rotation
-    M): wi from the mixture p = c p_cos + (1 - c) p_img (c = ``par[E_NEE_COS]``; p_cos cosine
+    M): wi from the mixture p = c p_cos + (1 - c) p_img (c = ``environment.nee_cos`` of n; p_cos cosine
     about n, or uniform on the sphere for a zero n), u0 choosing the technique and reused inside
     it; weight L(wi) / p.  Distance inf.  Returns (wi0, wi1, wi2, inf, w0, w1, w2, p): p is
     :func:`world_nee_pdf`'s value for wi without portals (the same expression), so next-event
     estimation reads the density without a second ``env_pdf``."""
-    c = par[E_NEE_COS]
+    c = nee_cos(par, M, n)
     no_n = n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0
     if u0 < c:
         u0 = u0 / c
@@ -329,7 +329,7 @@ def world_nee_pdf(func, par, portals, M, p, n, wi):
     if par[E_TEXTURED] == 0.0:
         base = p_a
     else:
-        c = par[E_NEE_COS]
+        c = nee_cos(par, M, n)
         base = c * p_a + (1.0 - c) * env_pdf(func, par, M, wi)
     if portals.shape[0] == 0 or par[E_PORTAL_NEE] <= 0.0:
         return base
@@ -385,7 +385,7 @@ def _sample_world_portals(img, func, marg, cond, par, portals, M, p, n, u0, u1):
     else:
         # -- the world's own sampler: cosine (or uniform) and, for an image, its distribution
         u0 = (u0 - g) / (1.0 - g) if g > 0.0 else u0
-        c = par[E_NEE_COS] if par[E_TEXTURED] != 0.0 else 1.0
+        c = nee_cos(par, M, n) if par[E_TEXTURED] != 0.0 else 1.0
         if u0 < c:
             u0 = u0 / c
             wi = uniform_sphere(u0, u1) if no_n else to_world(cosine_hemisphere(u0, u1), n)

@@ -615,7 +615,9 @@ def light_strata(samples, S, keys, jit, U):
     Each U[i] is uniform on [0, 1)^2 whatever the film position (the permutations are uniform, the
     seed is added to each point's reversed bits): every light sampler keeps its density
     (docs/rendering.md, "Stratified light samples").  Only the pixels some row belongs to are
-    worked out.
+    worked out: with the array, all S points of such a pixel (each point's cell fills a slot);
+    without it, the pixel's permutation and scramble seeds, and each row's own point alone (at
+    later bounces a pixel has a few rows: there a row's cost does not grow with S).
     """
     poly = _oa_poly(S)
     s = 1
@@ -629,22 +631,26 @@ def light_strata(samples, S, keys, jit, U):
     slot = np.empty(S, np.int64)                      # the net point in each cell (with the array)
     TX = np.empty(S, np.int64)                        # the pixel's points, 32-bit fractions
     TY = np.empty(S, np.int64)
-    pt = np.full(P * S, -1, np.int64)                 # t_j at p S + j, for the pixels met so far
-    NX = np.empty(P * S, np.int64)                    # the point of each sample
+    met = np.zeros(P, np.uint8)                       # 1 for the pixels worked out so far
+    pt = np.empty(P * S, np.int64)                    # t_j at p S + j (without the array), for those pixels
+    NX = np.empty(P * S, np.int64)                    # the point of each sample (with the array)
     NY = np.empty(P * S, np.int64)
+    seeds = np.empty((P, 2), np.int64)                # each pixel's scramble seeds
     for i in range(samples.shape[0]):
         q = samples[i]
         p = q // S
         b = p * S
-        if pt[b] < 0:
-            # -- the pixel's scrambled points
+        if met[p] == 0:
+            met[p] = 1
+            # -- the pixel's scramble
             seed_x = _hash32(int(keys[p, 0] * 4294967296.0))
             seed_y = _hash32(seed_x ^ 0x9E3779B9)
-            for t in range(S):
-                TX[t] = _owen32(_reverse32(t), seed_x)
-                TY[t] = _owen32(_sobol2(t), seed_y)
+            seeds[p, 0], seeds[p, 1] = seed_x, seed_y
             # -- each sample's point: by the orthogonal array's cell, or a permutation
             if poly != 0:
+                for t in range(S):
+                    TX[t] = _owen32(_reverse32(t), seed_x)
+                    TY[t] = _owen32(_sobol2(t), seed_y)
                 for t in range(S):
                     slot[(TY[t] >> (32 - k_s)) * s + (TX[t] >> (32 - k_s))] = t
                 for h in range(2):
@@ -657,18 +663,22 @@ def light_strata(samples, S, keys, jit, U):
                 for j in range(S):
                     cx, cy = j % s, j // s
                     acy = (cy << 1) ^ poly if (cy << 1) & s else cy << 1      # alpha cy in GF(2^k)
-                    pt[b + j] = slot[sig[s + (cx ^ acy)] * s + sig[cx ^ cy]]
+                    t = slot[sig[s + (cx ^ acy)] * s + sig[cx ^ cy]]
+                    NX[b + j] = TX[t]
+                    NY[b + j] = TY[t]
             else:
                 for j in range(S):
                     pt[b + j] = j
                 for j in range(S - 1, 0, -1):
                     a = min(int(keys[p, j] * (j + 1)), j)
                     pt[b + j], pt[b + a] = pt[b + a], pt[b + j]
-            for j in range(S):
-                NX[b + j] = TX[pt[b + j]]
-                NY[b + j] = TY[pt[b + j]]
-        U[i, 0] = min((NX[q] + jit[i, 0]) / 4294967296.0, _ONE_BELOW)
-        U[i, 1] = min((NY[q] + jit[i, 1]) / 4294967296.0, _ONE_BELOW)
+        if poly != 0:
+            X, Y = NX[q], NY[q]
+        else:
+            t = pt[q]
+            X, Y = _owen32(_reverse32(t), seeds[p, 0]), _owen32(_sobol2(t), seeds[p, 1])
+        U[i, 0] = min((X + jit[i, 0]) / 4294967296.0, _ONE_BELOW)
+        U[i, 1] = min((Y + jit[i, 1]) / 4294967296.0, _ONE_BELOW)
 
 
 @njit(**_JIT)
