@@ -240,3 +240,31 @@ def test_a_bounded_caustic_render_keeps_the_caustic_and_drops_the_far_tail(monke
     assert Bon.shape[1:] == (6, 6) and np.abs(z).max() < 4.0, np.abs(z).max()
     tail_on, tail_off = on[:, beyond].mean(), off[:, beyond].mean()
     assert tail_off > 0 and tail_on < 0.5 * tail_off, (tail_on, tail_off)
+
+
+def test_queries_below_the_cap_density_are_capped_and_brighter_ones_not():
+    # r_max = 1.5 x the 90th percentile of the photons' own k-th radii: a query is capped where the
+    # photon density is below about 1 / 1.5^2 of the level under which the map's dimmest 10 % lie
+    # (docs/photon-mapping.md, "Bounded searches"; the factor was 2, a quarter, before 2026-12-07).
+    # A dense floor (95 % of the photons) and two patches far from it at 1 / 1.8 and 1 / 4.5 of its
+    # density: the first patch's queries read k-nearest estimates, the second's are capped.
+    rng = np.random.default_rng(3)
+    dense = 10_000.0                                          # photons / m^2
+    parts = [(rng.uniform((-2.0, -1.0), (0.0, 1.0), (40_000, 2)))]
+    for x0, ratio in ((0.3, 1.8), (1.2, 4.5)):
+        n = int(dense / ratio * 0.25)
+        parts.append(rng.uniform((x0, -0.25), (x0 + 0.5, 0.25), (n, 2)))
+    xy = np.concatenate(parts)
+    N = len(xy)
+    pos = np.zeros((N, 3))
+    pos[:, :2] = xy
+    m = PhotonMap(make_records(pos, np.tile([0.0, 0.0, 1.0], (N, 1)), np.full((N, 3), 1e-4), rng.random(N)),
+                  Shutter(1.0, 2.0), time_scale=1.0, bounded=True)
+    k = 50
+    for x0, lo, hi in ((0.3, 0.0, 0.1), (1.2, 0.9, 1.0)):
+        q = np.zeros((200, 3))
+        q[:, :2] = rng.uniform((x0 + 0.2, -0.05), (x0 + 0.3, 0.05), (200, 2))
+        before = m.stats["capped_count"]
+        m.estimate(q, np.tile([0.0, 0.0, 1.0], (200, 1)), np.full(200, 0.5), estimator="STANDARD", k=k)
+        frac = (m.stats["capped_count"] - before) / 200
+        assert lo <= frac <= hi, (x0, frac, m.search_cap(m.flat_tree(3), k))

@@ -86,7 +86,7 @@ _QUERY_BATCH_ELEMS = 1 << 21 # neighbours gathered per batch (bounds memory)
 #: bit for bit as before.
 SEARCH_CAP = True
 SEARCH_CAP_PERCENTILE = 90.0 # of the photons' own kq-th radii: 90 % of the map's photons (of its power) lie denser
-SEARCH_CAP_FACTOR = 2.0      # r_max / that radius: a capped query's density is < 1/4 of the percentile's
+SEARCH_CAP_FACTOR = 1.5      # r_max / that radius: a capped query's density is < 1/2.25 of the percentile's
 SEARCH_CAP_SAMPLE = 2048     # photons (strided in tree order) whose kq-th radius sets r_max
 
 
