@@ -344,15 +344,16 @@ def _direct(ctx, p, ng, ns, wo, mat, times, eps, rng, stats: TraceStats, mis=(Fa
     return Ld
 
 
-def _photon_term(ctx, kind: str, p, ns_f, wo, mat, times, stats: TraceStats) -> np.ndarray | None:
-    """rho_d / pi * E_kind(p, ns, t) (n, 3), None when there is no such map."""
+def _photon_term(ctx, kind: str, p, ns_f, wo, mat, times, stats: TraceStats, ng=None) -> np.ndarray | None:
+    """rho_d / pi * E_kind(p, ns, t) (n, 3), None when there is no such map; ng (n, 3): the queries'
+    geometric normals whose tangent slab bounds the photons counted (zero rows: none)."""
     if ctx.maps is None or not ctx.map_kinds.get(kind, False) or p.shape[0] == 0:
         return None
     rho = diffuse_albedo(ctx.table, mat, wo, ns_f)
     live = np.nonzero(np.any(rho > 0.0, axis=1))[0]
     out = np.zeros((p.shape[0], 3))
     if live.size:
-        E = ctx.maps.estimate(kind, p[live], ns_f[live], times[live])
+        E = ctx.maps.estimate(kind, p[live], ns_f[live], times[live], ng=None if ng is None else ng[live])
         stats.photon_lookups += live.size
         out[live] = rho[live] / np.pi * E
     return out
@@ -586,8 +587,10 @@ def shade_paths(ctx, o: np.ndarray, d: np.ndarray, times: np.ndarray, tmax0: np.
                                           mis=mis, samples=rows if idx is None else idx[rows], strata=(n, spp)))
             if ctx.maps is not None:
                 ns_f = _face_forward(ns_s, wo_s)
+                # the tangent slab on instances that hold still (docs/photon-mapping.md, "Tangent slab")
+                ng_q = ng_s * ctx.still[_rows(hit_inst, sh)][:, None]
                 for kind, dst in (("caustic", L_caustic), ("global", L_indirect)):
-                    val = _photon_term(ctx, kind, p_s, ns_f, wo_s, mat_s, t_s, stats)
+                    val = _photon_term(ctx, kind, p_s, ns_f, wo_s, mat_s, t_s, stats, ng=ng_q)
                     if val is not None:
                         add(dst, sh, val)
 
@@ -657,6 +660,9 @@ def trace_image_numpy(scene, settings, caster, lights, maps=None, *, time_overri
                           inst_offset=instance_offsets(scene), world_radiance=np.asarray(scene.world.radiance, float),
                           film_transparent=bool(scene.metadata.get("film_transparent", False)))
     ctx.has_delta = _has_delta_lobe(scene.materials)
+    # 1 where an instance neither moves nor deforms over the shutter (its look-ups keep to the tangent slab)
+    ctx.still = np.array([float(inst.transform.is_static and not scene.meshes[inst.mesh].is_deforming)
+                          for inst in scene.instances])
     ctx.world_light = any(l.type == "WORLD" for l in lights.lights)
     ctx.glossy_bounces, ctx.transmission_bounces = int(settings.glossy_bounces), int(settings.transmission_bounces)
     ctx.any_emission = any(np.any(np.asarray(m.emission) > 0) for m in scene.materials)
