@@ -72,7 +72,9 @@ __all__ = [
 ESTIMATOR_NAMES = ("STANDARD", "TEMPORAL", "KD4D")
 CONE_K = 1.1                 # cone kernel: w(d) = 1 - d / (CONE_K * r)
 PLANE_FRACTION = 0.5         # tangent slab: a photon counts only if -PLANE_FRACTION r <= (x_p - x_q) . n_g
-PLANE_FRONT = 0.5            # <= PLANE_FRONT r, n_g toward the query's viewer, r the search radius
+PLANE_FRONT = np.inf         # <= PLANE_FRONT r, n_g toward the query's viewer, r the search radius; open in
+                             # front: a concave corner's other surface keeps filling the disc (0.5 darkened
+                             # room corners: the textured room's FLIP 0.0413 -> 0.0430; docs "Tangent slab")
                              # (docs/photon-mapping.md, "Tangent slab"; inf: no bound on that side)
 TEMPORAL_SLICE_C = 0.25      # automatic time slices B = max(1, round(C * (N / k)^(1/3)))
 TEMPORAL_SLICE_ALPHA = 1.5   # candidates per estimate inside a slice, as a multiple of k (the paper's 1.5; fewer
