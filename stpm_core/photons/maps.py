@@ -23,8 +23,8 @@ __all__ = ["PhotonMaps", "build_photon_maps", "KINDS"]
 
 KINDS = ("caustic", "global")
 #: the maps whose k-nearest searches are bounded (``PhotonMap(bounded=True)``; ``estimators.SEARCH_CAP``
-#: switches it off): the caustic map, whose look-ups far from every caustic found their neighbours
-#: metres away for a density of almost nothing (docs/photon-mapping.md, "Bounded searches")
+#: switches it off): the caustic map, where most look-ups lie far from every caustic and each one
+#: summed kq photons for a density of almost nothing (docs/photon-mapping.md, "Bounded searches")
 BOUNDED_MAPS = ("caustic",)
 
 
