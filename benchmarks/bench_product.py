@@ -36,7 +36,7 @@ Measured against the reference after the Standard view transform (``bench_room.f
 
 * outside the caustic region: mean LDR-FLIP, mean ratio (linear, all channels), 8 x 8-block
   luminance correlation; the same over the whole image; FLIP outside and farther than ``CUBE_MARGIN``
-  from the frosted cube (``*_flip_ldr_outside_far_cube``: the reference's dark contact under it);
+  from the frosted cube (``*_flip_ldr_outside_far_cube``: the cube's share of the outside);
 * inside it: mean luminance ratio, and the correlation of the 8 x 8-block luminance means of
   the blocks at least half covered by the region (``*_caustic_blocks`` counts them), mean FLIP;
 * per surface (``bench_room.regions`` / ``region_stats``), printed and in ``regions.json``;
@@ -81,9 +81,11 @@ NOCAUSTIC_SPP = 256
 CONVERGED_SPP = 16384
 CAUSTIC_REL, CAUSTIC_ABS = 0.25, 0.02
 #: pixels within this many of the frosted cube (its object-index mask, dilated) are also scored apart
-#: (``*_flip_ldr_outside_far_cube``): the cube rests exactly on the table, and at that contact the
-#: reference renders the table seen through the cube black (Cycles' rays die on the coincident faces;
-#: docs/blender.md), which STPM does not; the issue's figure stays the whole outside
+#: (``*_flip_ldr_outside_far_cube``). Until 2026-12-07 the cube rested exactly on the table and at
+#: that contact the reference rendered the table seen through the cube black (Cycles' rays die on
+#: coincident faces; docs/raycast.md, "Surfaces in contact"); the scene now sinks it 1 um
+#: (``make_hdri_product.CONTACT_SINK``) and the figure is kept to show the cube's share. The
+#: issue's figure stays the whole outside
 CUBE_MARGIN = 6
 #: environment variable: more STPM seeds (comma-separated, e.g. "1,2") rendered after the main one
 #: and scored inside the caustic region only (``stpm_seeds``): the region's figures are one draw of
