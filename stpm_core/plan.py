@@ -13,7 +13,9 @@ The rules (docs/effects.md has them with what each one saves):
   mirror, a smooth coat) exists, a light with power > 0 reaches it (spot cone,
   area-light side, and a small photon probe through the scene: 512 photons
   aimed at each specular object), and a diffuse surface exists to receive the
-  focused light.
+  focused light -- unless the probe's caustic is faint: its brightest irradiance under
+  ``CAUSTIC_CONTRAST_MIN`` of the mean direct irradiance on lit diffuse surfaces and its flux
+  under ``CAUSTIC_POWER_MIN`` of the direct flux (:func:`caustic_contrast`).
 * **indirect** -- diffuse interreflection worth a global map (paths L D+ D):
   light reaches a diffuse surface (a probe of 2048 photons per light over its
   whole emission) and that light can bounce onto a diffuse surface again: at
