@@ -13,7 +13,9 @@ The rules (docs/effects.md has them with what each one saves):
   mirror, a smooth coat) exists, a light with power > 0 reaches it (spot cone,
   area-light side, and a small photon probe through the scene: 512 photons
   aimed at each specular object), and a diffuse surface exists to receive the
-  focused light.
+  focused light -- unless the probe's caustic is faint: its brightest irradiance under
+  ``CAUSTIC_CONTRAST_MIN`` of the mean direct irradiance on lit diffuse surfaces and its flux
+  under ``CAUSTIC_POWER_MIN`` of the direct flux (:func:`caustic_contrast`).
 * **indirect** -- diffuse interreflection worth a global map (paths L D+ D):
   light reaches a diffuse surface (a probe of 2048 photons per light over its
   whole emission) and that light can bounce onto a diffuse surface again: at
@@ -52,7 +54,8 @@ from .raycast.geometry import instance_offsets
 from .sampling import rng_for, stratified_1d
 
 __all__ = ["make_plan", "apply_plan", "format_plan", "plan_summary", "EFFECT_KEYS",
-           "PROBE_PHOTONS_AIMED", "PROBE_PHOTONS_LIGHT"]
+           "PROBE_PHOTONS_AIMED", "PROBE_PHOTONS_LIGHT", "CAUSTIC_CONTRAST_MIN", "CAUSTIC_POWER_MIN",
+           "caustic_contrast"]
 
 EFFECT_KEYS = ("motion_blur", "caustics", "indirect", "time_dependent")
 PROBE_PHOTONS_AIMED = 512    # probe photons per (light, specular object) pair
@@ -60,6 +63,12 @@ PROBE_PHOTONS_AIMED_RETRY = 4096   # second round when the first stored no caust
 PROBE_PHOTONS_LIGHT = 2048   # probe photons per light over its whole emission
 PROBE_RETURN_DEPTH = 4       # bounces the probe follows for light sent back by specular surfaces
 PROBE_RETURN_MIN = 0.005     # returned power (global-map photons' over emitted) that calls for indirect light
+#: the caustic map is left out when the probe's brightest caustic irradiance is below CAUSTIC_CONTRAST_MIN of
+#: the mean direct irradiance on the lit diffuse surfaces AND its flux below CAUSTIC_POWER_MIN of the direct
+#: flux landing on them (docs/effects.md, "A caustic too faint to map"): dim and carrying little light
+CAUSTIC_CONTRAST_MIN = 0.01
+CAUSTIC_POWER_MIN = 0.001
+CAUSTIC_CONTRAST_K = 8       # probe caustic photons per density estimate (the brightest one counts)
 STREAM_PLAN = 0x91A7         # rng stream of the probe (independent of the render's streams)
 _MAX_CONVEXITY_WORK = 4_000_000   # faces x vertices examined by the self-visibility test
 _MESH_FACTS_MAX = 4096             # per-mesh answers remembered across plans (LRU-less: cleared when full)
@@ -234,7 +243,7 @@ def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[i
     table = MaterialTable(scene.materials)
     inst_offset = instance_offsets(scene)
     out = {"reach_specular": {}, "lit_diffuse": set(), "caustic_stored": 0, "aimed": 0, "emitted": 0,
-           "return_power": 0.0, "emitted_power": 0.0}
+           "return_power": 0.0, "emitted_power": 0.0, "caustic_records": [], "direct_diffuse_power": 0.0}
     # -- Aimed photons: does each light reach each specular object, and a diffuse one after it?
     #    A second, larger round only when the first one found no caustic path at all.
     for rnd, n in enumerate((PROBE_PHOTONS_AIMED, PROBE_PHOTONS_AIMED_RETRY)):
@@ -268,6 +277,8 @@ def _probe(scene, settings, caster, lights, spec_targets: dict, emitting: list[i
                                       shading=shading_data(scene, table.closures))
             out["return_power"] += float(np.sum(recs["power"], dtype=np.float64))
             out["emitted_power"] += float(np.sum(Phi[live], dtype=np.float64))
+        lit_now = ~shut & np.isin(inst, np.fromiter(diffuse_inst, int, len(diffuse_inst)))
+        out["direct_diffuse_power"] += float(np.sum(Phi[live][hits.hit][lit_now], dtype=np.float64))
         out["lit_diffuse"].update(int(i) for i in np.unique(inst[~shut]) if int(i) in diffuse_inst)
     return out
 
@@ -291,6 +302,51 @@ def _aimed_round(out, scene, caster, table, lights, spec_targets, emitting, n, s
                                           max_depth=max_depth, inst_offset=inst_offset, target_instance=ii,
                                           shading=shading_data(scene, table.closures))
                 out["caustic_stored"] += int(recs.shape[0])
+                out["caustic_records"].append(recs)
+
+
+def _world_area(scene, i: int) -> float:
+    """Surface area (one side, m^2) of instance i in world space, at mid-shutter."""
+    inst = scene.instances[i]
+    mesh = scene.meshes[inst.mesh]
+    V = np.asarray(mesh.vertices, float)
+    V = V[V.shape[0] // 2] if V.ndim == 3 else V
+    tri = np.asarray(mesh.triangles)
+    if tri.shape[0] == 0 or V.shape[0] == 0:
+        return 0.0
+    M = inst.transform.at(0.5)
+    W = V @ M[:3, :3].T + M[:3, 3]
+    a, b, c = W[tri[:, 0]], W[tri[:, 1]], W[tri[:, 2]]
+    return 0.5 * float(np.sum(np.linalg.norm(np.cross(b - a, c - a), axis=1)))
+
+
+def caustic_contrast(records: list, direct_power: float, lit_area: float, k: int = CAUSTIC_CONTRAST_K) -> float:
+    """How bright the probe's caustic gets against the direct light: the brightest caustic irradiance
+    (mean RGB, W/m^2) of the probe's stored caustic photons, each a k-nearest density estimate over
+    them (its k nearest, itself included: sum of power / (pi r_k^2)), over the mean direct irradiance on
+    the lit diffuse surfaces (the probe's direct power landing on them / their one-sided area).
+
+    The probe photons aimed at each (light, specular object) pair carry that pair's flux (``emit_toward``),
+    so together they sample the caustic flux of every pair; the maximum over noisy k = 8 estimates reads
+    high, which errs toward keeping a caustic.  inf when it cannot tell (fewer than 2 photons stored, no
+    direct light or area, coincident photons)."""
+    recs = [r for r in records if r.shape[0]]
+    if not recs or direct_power <= 0.0 or lit_area <= 0.0:
+        return float("inf")
+    r = np.concatenate(recs)
+    if r.shape[0] < 2:
+        return float("inf")
+    from scipy.spatial import cKDTree
+    pos = np.asarray(r["position"], np.float64)
+    pw = np.asarray(r["power"], np.float64).mean(axis=1)
+    kk = min(int(k), r.shape[0])
+    dist, idx = cKDTree(pos).query(pos, k=kk)
+    rk = dist[:, -1]
+    if np.any(rk <= 0.0):
+        return float("inf")
+    e_caustic = np.sum(pw[idx], axis=1) / (np.pi * rk * rk)
+    e_direct = direct_power / 3.0 / lit_area                # mean RGB, as the caustic's
+    return float(e_caustic.max() / e_direct)
 
 
 # ----------------------------------------------------------------------------
@@ -403,14 +459,26 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
                     ls_index=_lightset_index(lights, len(scene.lights) + len(emissive)))
         reach = {li: s for li, s in pr["reach_specular"].items() if s}
         lit_diffuse = pr["lit_diffuse"]
+        lit_area = sum(_world_area(scene, i) for i in pr["lit_diffuse"])
+        caustic_power = sum(float(np.sum(r["power"], dtype=np.float64)) for r in pr["caustic_records"])
+        contrast = caustic_contrast(pr["caustic_records"], pr["direct_diffuse_power"], lit_area)
         probe_info = {"photons_aimed": pr["aimed"], "photons_emitted": pr["emitted"],
                       "caustic_photons_stored": pr["caustic_stored"],
-                      "returned_power_fraction": pr["return_power"] / max(pr["emitted_power"], 1e-300)}
+                      "returned_power_fraction": pr["return_power"] / max(pr["emitted_power"], 1e-300),
+                      "caustic_power_fraction": caustic_power / max(pr["direct_diffuse_power"], 1e-300),
+                      "caustic_contrast": contrast if np.isfinite(contrast) else None}
 
     # -- Caustics: light -> specular -> diffuse ------------------------------------------
     reached_spec = sorted({i for s in reach.values() for i in s})
     no_path = probe_info is not None and probe_info["caustic_photons_stored"] == 0
-    auto_caustics = bool(reached_spec) and bool(diff_inst) and not no_path
+    # a caustic whose brightest spot is under CAUSTIC_CONTRAST_MIN of the mean direct irradiance and whose
+    # flux is under CAUSTIC_POWER_MIN of the direct light's: not worth a map (the textured room's sky
+    # through the window onto a glass ball: 0.04 % of the image, 9 of 33 single-thread seconds)
+    faint = (not no_path and probe_info is not None
+             and probe_info["caustic_contrast"] is not None
+             and probe_info["caustic_contrast"] < CAUSTIC_CONTRAST_MIN
+             and probe_info["caustic_power_fraction"] < CAUSTIC_POWER_MIN)
+    auto_caustics = bool(reached_spec) and bool(diff_inst) and not no_path and not faint
     if auto_caustics:
         msg = (f"caustics: light reaches specular {_names(inst_names[i] for i in reached_spec)[:4]} "
                f"and diffuse {_names(inst_names[i] for i in diff_inst)[:4]} can receive it")
@@ -423,6 +491,13 @@ def make_plan(scene, settings=None, *, caster=None, lights=None, probe: bool = T
         reasons.append("caustics: off (no light with power > 0)")
     elif not diff_inst:
         reasons.append("caustics: off (no diffuse surface to receive focused light)")
+    elif faint and reached_spec:
+        reasons.append(f"caustics: off (light reaches {_names(inst_names[i] for i in reached_spec)[:4]} but the "
+                       f"caustic is faint: its brightest spot in the probe is "
+                       f"{100 * probe_info['caustic_contrast']:.2g} % of the mean direct irradiance on diffuse "
+                       f"surfaces (under {100 * CAUSTIC_CONTRAST_MIN:g} %), and it carries "
+                       f"{100 * probe_info['caustic_power_fraction']:.2g} % of the direct light's power (under "
+                       f"{100 * CAUSTIC_POWER_MIN:g} %))")
     elif reached_spec:
         reasons.append(f"caustics: off (light reaches {_names(inst_names[i] for i in reached_spec)[:4]} but none of "
                        f"{probe_info['photons_aimed']} probe photons aimed at it went on to a diffuse surface)")

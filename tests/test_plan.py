@@ -298,3 +298,71 @@ def test_a_room_lit_by_an_emissive_panel_only_gets_indirect_light():
                        persp_camera((0, -1.5, 0.5), (0, 0, 0)), [], shutter=OPEN)
     plan = make_plan(scene)
     assert plan["indirect"] and plan["details"]["lit_diffuse_objects"] == ["room"]
+
+
+# ----------------------------------------------------------------------------
+# A caustic too faint to map (plan.CAUSTIC_CONTRAST_MIN, CAUSTIC_POWER_MIN)
+# ----------------------------------------------------------------------------
+def _spot_floor_and_dim_ball(ball_light_w: float, radius: float = 0.5):
+    """The textured room in small: a strong spot lights the floor away from a glass ball, and a second
+    point light of ``ball_light_w`` W (a sphere of ``radius``) is the only one that reaches the ball (the
+    room's sky through the window; its sun misses the ball)."""
+    spot = Light(type="SPOT", color=np.ones(3), power=300.0, spot_size=np.radians(30.0), spot_blend=0.0,
+                 transform=MotionTransform.static(translate(-1.5, 0, 3)), radius=0.0, use_soft_falloff=False)
+    ball = sphere_mesh(0.5, 12, 24, material=GLASS, name="ball")
+    return make_scene([plane_mesh(6.0, name="floor"), (ball, translate(1.5, 0, 1.0))], MATERIALS,
+                      ortho_camera_down(5.0, 5.0), [spot, point_light((1.5, 0, 2.5), ball_light_w, radius=radius)],
+                      shutter=Shutter(1.0, 1.0))
+
+
+def test_caustic_contrast_of_a_uniform_disc():
+    """N photons spread evenly over a disc of area A with total power P (per channel) read an irradiance of
+    about P / A: against D W (summed over RGB) landing on S m^2 of lit surface the contrast is
+    (P / A) / (D / 3 / S), read high (the brightest of 400 noisy k = 8 estimates: 3.7x here), never low."""
+    from stpm_core.photons.record import PHOTON_DTYPE
+    from stpm_core.plan import caustic_contrast
+    rng = np.random.default_rng(0)
+    n, R, P = 400, 0.2, 2.0
+    r, phi = R * np.sqrt(rng.random(n)), 2 * np.pi * rng.random(n)
+    recs = np.zeros(n, PHOTON_DTYPE)
+    recs["position"] = np.stack([r * np.cos(phi), r * np.sin(phi), np.zeros(n)], 1)
+    recs["power"] = P / n
+    expected = (P / (np.pi * R * R)) / (300.0 / 3.0 / 30.0)
+    got = caustic_contrast([recs[:150], recs[150:]], 300.0, 30.0)
+    assert expected <= got <= 5.0 * expected, (got, expected)
+    assert caustic_contrast([recs[:1]], 300.0, 30.0) == float("inf")      # cannot tell: keep the caustic
+    assert caustic_contrast([], 300.0, 30.0) == float("inf")
+
+
+def test_a_faint_caustic_gets_no_map_and_carried_almost_no_light():
+    """The dim soft light's caustic is under both thresholds: the plan drops the caustic map and says
+    why; a render that keeps it (MANUAL) shows the Caustic pass holds < 0.1 % of the image.  The same
+    dim light as a true point focuses to a spot 40 % as bright as the floor's mean direct light while
+    carrying 0.005 % of the power: kept (the power fraction alone would drop it).  With the ball's light
+    as strong as the spot the caustic is kept and holds more than 0.1 % of the image."""
+    from stpm_core.plan import CAUSTIC_CONTRAST_MIN, CAUSTIC_POWER_MIN
+    focused = make_plan(_spot_floor_and_dim_ball(0.01, radius=0.0))
+    pr = focused["details"]["probe"]
+    assert focused["caustics"] and pr["caustic_power_fraction"] < CAUSTIC_POWER_MIN, focused["reasons"]
+    assert pr["caustic_contrast"] > 10 * CAUSTIC_CONTRAST_MIN
+    faint = _spot_floor_and_dim_ball(0.001)
+    plan = make_plan(faint)
+    pr = plan["details"]["probe"]
+    assert plan["details"]["lights_reaching_specular"] == {"light": ["ball"]}     # the dim one reaches it
+    assert pr["caustic_photons_stored"] > 0
+    assert pr["caustic_contrast"] < CAUSTIC_CONTRAST_MIN and pr["caustic_power_fraction"] < CAUSTIC_POWER_MIN
+    assert not plan["caustics"] and any("the caustic is faint" in r for r in plan["reasons"]), plan["reasons"]
+    kept = _tiny(faint, effects="MANUAL", caustics=True, indirect=False, photons_caustic=20000)
+    assert kept.stats["photons_caustic"] > 0
+    share = float(kept.passes["Caustic"][..., :3].sum() / kept.passes["Combined"][..., :3].sum())
+    assert share < 1e-3, share
+    dropped = _tiny(faint, photons_caustic=20000)
+    assert dropped.stats["photon_stats"].get("photons_emitted_caustic", 0) == 0
+
+    bright = _spot_floor_and_dim_ball(300.0)
+    plan = make_plan(bright)
+    assert plan["caustics"], plan["reasons"]
+    assert plan["details"]["probe"]["caustic_contrast"] > 10 * CAUSTIC_CONTRAST_MIN
+    res = _tiny(bright, effects="MANUAL", caustics=True, indirect=False, photons_caustic=20000)
+    share = float(res.passes["Caustic"][..., :3].sum() / res.passes["Combined"][..., :3].sum())
+    assert share > 1e-3, share
