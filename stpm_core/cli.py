@@ -377,10 +377,13 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
             noise = info.get("noise_p95")
             bar.note(f"{label}pass {info['pass']}: {info['elapsed_s']:.1f} s"
                      + (f", noise {noise:.4f}" if noise is not None and noise < 1e30 else ""))
+        # A Render Region: only its pixels are traced (a partial keeps the whole frame; with denoise
+        # the whole frame is traced so the denoiser sees real neighbours at the region's edges)
+        window = None if partial or settings.denoise else scene_region(scene.metadata, scene.resolution)
         try:
             result = render(scene, settings, progress=lambda f, m: bar(f, label + m), cancel=cancel,
                             on_pass=on_pass if settings.method == "PROGRESSIVE" else None,
-                            scheduled_rounds=partial)
+                            scheduled_rounds=partial, window=window)
         finally:
             bar.close()
         if settings.denoise and not partial:     # Blender's Denoise node where bpy runs (docs/blender.md)

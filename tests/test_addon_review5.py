@@ -94,3 +94,65 @@ def test_geometry_nodes_instances_are_named_after_their_mesh():
     out, _warnings = export_now()
     names = sorted(i.name for i in out.instances if "@" in i.name)      # (the source sphere is 'Orange')
     assert names == ["OrangeMesh@FruitBed"] * 4, names
+
+
+def _region_scene():
+    """A floor, a cube and a sphere under a point light, 192 x 128 (3 x 2 tiles of 64 pixels)."""
+    scene = fresh()
+    scene.render.resolution_x, scene.render.resolution_y = 192, 128
+    add_camera()
+    add_light("POINT", energy=400.0, location=(1, -2, 4))
+    add_mesh("plane", "Floor", size=10)
+    add_mesh("cube", "Box", location=(-1, 0, 1))
+    add_mesh("sphere", "Ball", location=(1.2, 0, 0.8))
+    return scene
+
+
+@pytest.mark.parametrize("adaptive", [False, True])
+def test_render_region_traces_its_pixels_only(adaptive):
+    # The review's region covered 68 % of the frame and the whole frame was traced (a region, the
+    # artist's way to look at a detail quickly, saved no time); now only its pixels: without
+    # adaptive sampling they equal the whole frame's bit for bit
+    import numpy as np
+    from stpm_core.render import render
+    from stpm_core.settings import RenderSettings
+    _region_scene()
+    core, _w = export_now()
+    settings = RenderSettings(samples=16, photons_global=3000, photons_caustic=0, seed=5,
+                              use_adaptive_sampling=adaptive, adaptive_threshold=0.05, adaptive_min_samples=8)
+    full = render(core, settings)
+    win = (10, 20, 50, 60)                                  # x0, y0, x1, y1: inside the first tile
+    part = render(core, settings, window=win)
+    a, b = full.passes["Combined"], part.passes["Combined"]
+    inside = np.zeros(a.shape[:2], bool)
+    inside[20:60, 10:50] = True
+    assert np.all(b[inside][:, 3] > 0)
+    untraced = np.ones(a.shape[:2], bool)
+    untraced[:64, :64] = adaptive            # (without adaptive sampling the region's tile is traced whole)
+    untraced[inside] = False
+    assert np.all(b[untraced] == 0) and np.all(b[64:, :] == 0) and np.all(b[:, 64:] == 0)
+    if adaptive:   # other batches, other random numbers: equal in the mean
+        assert abs(b[inside][:, :3].mean() / a[inside][:, :3].mean() - 1) < 0.05
+        assert part.stats["adaptive"]["samples_min"] >= 8
+    else:
+        np.testing.assert_array_equal(a[inside], b[inside])
+    assert part.stats["camera_rays"] < 0.3 * full.stats["camera_rays"], (part.stats["camera_rays"],
+                                                                        full.stats["camera_rays"])
+
+
+def test_f12_render_region_traces_its_pixels_only():
+    # The Render panel's path: Render Region on (Crop off) -> the camera rays of its tiles only
+    from addon.engine import LAST_RENDER
+    scene = _region_scene()
+    scene.render.engine = "STPM"
+    s = scene.stpm
+    s.samples, s.photons_global, s.photons_caustic, s.use_adaptive_sampling = 4, 2000, 0, False
+    rays = {}
+    for border in (False, True):
+        scene.render.use_border, scene.render.use_crop_to_border = border, False
+        scene.render.border_min_x, scene.render.border_max_x = 0.05, 0.3
+        scene.render.border_min_y, scene.render.border_max_y = 0.5, 0.9
+        LAST_RENDER.clear()
+        bpy.ops.render.render()
+        rays[border] = LAST_RENDER["stats"]["camera_rays"]
+    assert rays[True] < 0.3 * rays[False], rays
