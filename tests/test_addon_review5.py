@@ -156,3 +156,17 @@ def test_f12_render_region_traces_its_pixels_only():
         bpy.ops.render.render()
         rays[border] = LAST_RENDER["stats"]["camera_rays"]
     assert rays[True] < 0.3 * rays[False], rays
+
+
+def test_a_frame_range_prints_each_warning_once(tmp_path):
+    # `stpm render --frame 1-3` of the review's kitchen printed the view-layer and compositor lines
+    # once per frame (a 250-frame shot: 500 identical lines)
+    from test_cli_review import stpm
+    path = _save_layered(tmp_path, second_layer=True, glare=True)
+    r = stpm("render", path, "--frame", "1-2", "--samples", "1", "--photons-global", "0", "--photons-caustic", "0",
+             "--resolution", "16x12", "-o", tmp_path / "r_####.exr", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "r_0001.exr").exists() and (tmp_path / "r_0002.exr").exists()
+    lines = r.stderr.splitlines()
+    for start in ("stpm: warning: view layers:", "stpm: warning: compositor:"):
+        assert sum(line.startswith(start) for line in lines) == 1, r.stderr
