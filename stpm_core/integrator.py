@@ -1451,7 +1451,7 @@ def _trace_adaptive(ctx, film, scene, settings, stream, stats, progress, cancel,
         if mask is not None:                  # a Render Region: its pixels only
             need &= mask
     counts = film.combined_sums()[1].astype(np.float64)
-    inside = counts if mask is None else counts[mask.ravel()]
+    inside = counts if mask is None or not mask.any() else counts[mask.ravel()]
     stats.extra["adaptive"] = {
         "threshold": thr, "min_samples": int(n_min), "max_samples": spp, "rounds": len(rounds),
         "samples_mean": float(inside.mean()), "samples_min": int(inside.min()), "samples_max": int(inside.max()),
