@@ -184,10 +184,48 @@ def serve(reply_fd: int) -> None:
 
 
 def _note_source(stpm_scene, path, scene) -> None:
-    """Record where an exported scene came from: ``metadata['source']`` and ``['frame_range']``."""
+    """Record where an exported scene came from: ``metadata['source']`` and ``['frame_range']``,
+    and add :func:`command_line_notes` to its warnings."""
     stpm_scene.metadata["source"] = str(path)
     if int(scene.frame_start) <= int(scene.frame_end):                                  # for the CLI's check
         stpm_scene.metadata["frame_range"] = [int(scene.frame_start), int(scene.frame_end)]
+    notes = command_line_notes(scene)
+    if notes:
+        stpm_scene.metadata["warnings"] = list(stpm_scene.metadata.get("warnings", [])) + notes
+
+
+# Compositor nodes that change nothing in the image (their presence is no reason for a warning)
+_PASSIVE_COMPOSITOR_NODES = {"CompositorNodeRLayers", "NodeGroupOutput", "NodeGroupInput", "CompositorNodeComposite",
+                             "CompositorNodeViewer", "NodeReroute", "NodeFrame", "CompositorNodeOutputFile"}
+
+
+def command_line_notes(scene) -> list[str]:
+    """What ``blender -b FILE -f N`` would render of ``scene`` that a .blend read by ``stpm`` (one
+    exported view layer, no compositor) leaves out: warning lines, [] when nothing.
+
+    * more than one view layer ticked *Use for Rendering* (Blender renders each), or the one
+      exported (the active layer) unticked;
+    * a compositor that changes the image (Output > Post Processing > Compositing on, a node other
+      than Render Layers / the outputs / the STPM Denoise group, which ``stpm render`` runs itself).
+    """
+    from .denoise import GROUP, scene_compositor
+    notes = []
+    exported = bpy.context.view_layer if bpy.context.scene == scene else scene.view_layers[0]
+    rendered = [vl.name for vl in scene.view_layers if vl.use]
+    if len(rendered) > 1 or exported.name not in rendered:
+        notes.append(f"view layers: Blender renders {len(rendered)} of this file ({', '.join(map(repr, rendered))}); "
+                     f"stpm exports the active one, {exported.name!r}, alone (its EXR layer is named ViewLayer). "
+                     f"Render the others with F12 or blender -b -E STPM -f, or make the one you want active "
+                     f"and save")
+    tree = scene_compositor(scene, create=False) if scene.render.use_compositing else None
+    if tree is not None:
+        active = sorted({n.bl_idname.replace("CompositorNode", "") for n in tree.nodes
+                         if n.bl_idname not in _PASSIVE_COMPOSITOR_NODES and not n.mute
+                         and not (n.bl_idname == "CompositorNodeGroup" and n.name == GROUP)})
+        if active:
+            notes.append(f"compositor: its nodes ({', '.join(active)}) are not run by stpm: the EXR and PNG hold "
+                         f"the render itself (F12 and blender -b -E STPM -f apply them)")
+    return notes
 
 
 def _editable(idblock) -> bool:

@@ -84,6 +84,15 @@ def border_region(render, width: int, height: int) -> tuple | None:
     return x0, y0, x1 - x0, y1 - y0
 
 
+def region_window(region, height: int) -> tuple | None:
+    """The core's pixel window (x0, y0, x1, y1), rows from the top, of a :func:`border_region`
+    (x, y from the bottom, w, h), or None: the render traces the region's pixels only."""
+    if region is None:
+        return None
+    x, y, w, h = region
+    return x, height - y - h, x + w, height - y
+
+
 def result_views(render) -> list[str]:
     """Names of the views Blender renders: [''] for mono, e.g. ['left', 'right'] for stereo 3D."""
     if not getattr(render, "use_multiview", False):
@@ -234,7 +243,8 @@ class STPMRenderEngine(bpy.types.RenderEngine):
                                   + (f", noise {noise:.3f}" if noise is not None and noise < 1e30 else ""))
 
             result = render(stpm_scene, settings, progress=self._progress, cancel=self.cancel_requested,
-                            on_pass=show_pass if settings.method == "PROGRESSIVE" else None)
+                            on_pass=show_pass if settings.method == "PROGRESSIVE" else None,
+                            window=region_window(region, height))
         except _core.RenderCancelled:
             self.update_stats("STPM", "Cancelled")
             return

@@ -322,6 +322,12 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
 
     cancel = CancelFlag.active
     probed: set = set()
+    said: set = set()        # warning lines printed: a frame range prints each once, not once per frame
+
+    def warn_once(line: str) -> None:
+        if line not in said:
+            said.add(line)
+            _warn(line)
     for index, frame in enumerate(frames):
         t_frame = time.perf_counter() if many else t_start
         check_cancel(cancel)
@@ -367,7 +373,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
                       "each still is read with STANDARD")
         meta_warnings = scene.metadata.get("warnings", []) if isinstance(scene.metadata, dict) else []
         for w in meta_warnings if isinstance(meta_warnings, list) else []:
-            _warn(str(w))
+            warn_once(str(w))
 
         # -- Render, with a progress bar and Ctrl-C cancelling ---------------------------
         bar = ProgressBar(quiet=args.quiet)
@@ -377,10 +383,13 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
             noise = info.get("noise_p95")
             bar.note(f"{label}pass {info['pass']}: {info['elapsed_s']:.1f} s"
                      + (f", noise {noise:.4f}" if noise is not None and noise < 1e30 else ""))
+        # A Render Region: only its pixels are traced (a partial keeps the whole frame; with denoise
+        # the whole frame is traced so the denoiser sees real neighbours at the region's edges)
+        window = None if partial or settings.denoise else scene_region(scene.metadata, scene.resolution)
         try:
             result = render(scene, settings, progress=lambda f, m: bar(f, label + m), cancel=cancel,
                             on_pass=on_pass if settings.method == "PROGRESSIVE" else None,
-                            scheduled_rounds=partial)
+                            scheduled_rounds=partial, window=window)
         finally:
             bar.close()
         if settings.denoise and not partial:     # Blender's Denoise node where bpy runs (docs/blender.md)
@@ -442,7 +451,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
         if stats_path is None:
             stats.update({"write_s": time.perf_counter() - t_write, "wall_s": time.perf_counter() - t_frame})
         for w in stats["warnings"] + png_warnings:
-            _warn(w)
+            warn_once(w)
         if stats.get("progressive") and not args.quiet:
             from .progressive import summary
             print(f"{label}progressive: {summary(stats['progressive'])}", file=sys.stderr)

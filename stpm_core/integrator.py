@@ -1381,7 +1381,8 @@ def _round_pattern(settings, scene, film, stream, tile, r, B, active):
     return px[rows], py[rows], xi[rows], pix
 
 
-def _trace_adaptive(ctx, film, scene, settings, stream, stats, progress, cancel, progress_span) -> np.ndarray:
+def _trace_adaptive(ctx, film, scene, settings, stream, stats, progress, cancel, progress_span,
+                    mask=None) -> np.ndarray:
     """Adaptive sampling into film (docs/rendering.md, "Adaptive sampling"; :mod:`stpm_core.adaptive`):
     returns each pixel's sample count (H * W,) float64.
 
@@ -1402,7 +1403,7 @@ def _trace_adaptive(ctx, film, scene, settings, stream, stats, progress, cancel,
     side = int(np.clip(np.sqrt(BATCH_SAMPLES / rounds[0][1]), 1, 64))
     tiles = [(x0, y0, min(side, W - x0), min(side, H - y0)) for y0 in range(0, H, side) for x0 in range(0, W, side)]
     half = np.zeros((H * W, 3))               # A: twice the Combined RGB sums of the samples of odd index
-    need = np.ones((H, W), bool)              # the pixels that take the next round
+    need = np.ones((H, W), bool) if mask is None else mask.copy()    # the pixels that take the next round
     f0, f1 = progress_span
     traced = 0
     for r, (first, B) in enumerate(rounds):
@@ -1447,17 +1448,32 @@ def _trace_adaptive(ctx, film, scene, settings, stream, stats, progress, cancel,
         # -- Which pixels go on: the error of each, the unconverged set dilated by one pixel ---------
         I, N = film.combined_sums()
         need = _A.need_samples(_A.pixel_error(I, half, N).reshape(H, W), thr)
+        if mask is not None:                  # a Render Region: its pixels only
+            need &= mask
     counts = film.combined_sums()[1].astype(np.float64)
+    inside = counts if mask is None or not mask.any() else counts[mask.ravel()]
     stats.extra["adaptive"] = {
         "threshold": thr, "min_samples": int(n_min), "max_samples": spp, "rounds": len(rounds),
-        "samples_mean": float(counts.mean()), "samples_min": int(counts.min()), "samples_max": int(counts.max()),
+        "samples_mean": float(inside.mean()), "samples_min": int(inside.min()), "samples_max": int(inside.max()),
         "samples_traced": int(traced),
     }
     return counts
 
 
+def window_mask(window, W: int, H: int) -> np.ndarray | None:
+    """(H, W) bool: the pixels of window (x0, y0, x1, y1), rows from the top, clipped to the image;
+    None for None (every pixel)."""
+    if window is None:
+        return None
+    x0, y0, x1, y1 = (int(v) for v in window)
+    mask = np.zeros((H, W), bool)
+    mask[max(y0, 0):max(min(y1, H), 0), max(x0, 0):max(min(x1, W), 0)] = True
+    return mask
+
+
 def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_override: float | None = None,
-                stream: int = 0, progress=None, cancel=None, progress_span=(0.0, 1.0)) -> tuple[dict, TraceStats]:
+                stream: int = 0, progress=None, cancel=None, progress_span=(0.0, 1.0),
+                window=None) -> tuple[dict, TraceStats]:
     """Trace the whole image; returns (passes name -> (H, W, C) float32, TraceStats).
 
     Parameters
@@ -1470,6 +1486,10 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
         only (a progressive pass's time stratum).
     stream : extra random stream id (the accumulation instant), so stills differ.
     progress(fraction, message), cancel() -> bool: polled once per batch.
+    window : (x0, y0, x1, y1) pixels (rows from the top) or None: trace only those pixels (a Render
+        Region): adaptive sampling samples them alone, else the tiles they touch are traced whole;
+        the other pixels stay 0.  Without adaptive sampling a tile's samples do not depend on which
+        tiles are traced, so the window's pixels equal a whole frame's bit for bit.
     """
     import time as _time
 
@@ -1529,7 +1549,8 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
 
     if adaptive_on(settings, time_override, maps):
         # -- Adaptive sampling: rounds of samples for the pixels not yet converged -----------------
-        counts = _trace_adaptive(ctx, film, scene, settings, stream, stats, progress, cancel, progress_span)
+        counts = _trace_adaptive(ctx, film, scene, settings, stream, stats, progress, cancel, progress_span,
+                                 window_mask(window, W, H))
         stats.seconds = _time.perf_counter() - t_start
         passes = film.resolve()
         passes["Sample Count"] = counts.reshape(H, W, 1).astype(np.float32)
@@ -1540,9 +1561,15 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     # Tiles: square blocks of about BATCH_SAMPLES samples
     side = int(np.clip(np.sqrt(BATCH_SAMPLES / spp), 1, 64))
     tiles = [(x0, y0) for y0 in range(0, H, side) for x0 in range(0, W, side)]
+    # A Render Region: the tiles it touches, each keeping its index (its random stream)
+    mask = window_mask(window, W, H)
+    traced = [ti for ti, (x0, y0) in enumerate(tiles)
+              if mask is None or mask[y0:y0 + side, x0:x0 + side].any()]
 
-    def trace_tile(ti: int):
-        """Tile ti traced and summed per pixel: (film window, TraceStats).  Pure function of (seed, stream, ti)."""
+    def trace_tile(i: int):
+        """Tile traced[i] traced and summed per pixel: (film window, TraceStats).  Pure function of
+        (seed, stream, tile index)."""
+        ti = traced[i]
         x0, y0 = tiles[ti]
         rng = rng_for(settings.seed, STREAM_CAMERA, stream, ti)
         return _trace_tile(ctx, film, cam, (W, H), x0, y0, min(side, W - x0), min(side, H - y0), spp,
@@ -1551,11 +1578,11 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     # Trace tiles on worker threads (embree and most numpy kernels release the GIL);
     # the film takes them in tile order, so the result does not depend on the threads.
     f0, f1 = progress_span
-    for ti, (window, tstats) in enumerate(ordered_map(trace_tile, len(tiles), worker_count(settings), cancel)):
-        film.add_window(window)
+    for i, (tile_sums, tstats) in enumerate(ordered_map(trace_tile, len(traced), worker_count(settings), cancel)):
+        film.add_window(tile_sums)
         stats.merge(tstats)
         if progress is not None:
-            progress(f0 + (f1 - f0) * (ti + 1) / len(tiles), f"tracing tile {ti + 1}/{len(tiles)}")
+            progress(f0 + (f1 - f0) * (i + 1) / len(traced), f"tracing tile {i + 1}/{len(traced)}")
     stats.seconds = _time.perf_counter() - t_start
     passes = film.resolve()
     if ctx.features:

@@ -101,7 +101,8 @@ def _map_stats(maps) -> dict:
 # ----------------------------------------------------------------------------
 # render
 # ----------------------------------------------------------------------------
-def render(scene, settings, *, progress=None, cancel=None, on_pass=None, scheduled_rounds=False) -> RenderResult:
+def render(scene, settings, *, progress=None, cancel=None, on_pass=None, scheduled_rounds=False,
+           window=None) -> RenderResult:
     """Render ``scene`` with ``settings``: :func:`_render`, with numba's own errors (a kernel that could
     not be compiled or loaded on this machine) turned into one :class:`KernelsUnavailable` line.
     The first render of a process says whether the kernels load or compile
@@ -111,13 +112,17 @@ def render(scene, settings, *, progress=None, cancel=None, on_pass=None, schedul
     (name -> (H, W, C) float32) and info (pass, passes, elapsed_s, noise_p95), so a viewer can show it.
     scheduled_rounds: PROGRESSIVE keeps to the schedule of time-strata rounds under a time limit (for a
     partial result, ``stpm render --pass-offset``) rather than taking smaller rounds that fit.
+    window: (x0, y0, x1, y1) pixels, rows from the top, or None: the pixels wanted (a Render Region);
+    methods PHOTON and ACCUMULATION trace the camera samples of those pixels only (of the tiles they
+    touch; ``integrator.trace_image``; the photons are global anyway), PROGRESSIVE ignores it (its
+    noise estimate is over the frame).
     """
     kernels.require()
     compiled_before = kernels.compile_counts()
     try:
         with scene.frozen():          # bounds and instance offsets once per render, not per pass
             result = _render(scene, settings, progress=progress, cancel=cancel, on_pass=on_pass,
-                             scheduled_rounds=scheduled_rounds)
+                             scheduled_rounds=scheduled_rounds, window=window)
     except Exception as exc:
         if kernels.is_numba_error(exc):
             raise kernels.KernelsUnavailable(f"a compiled kernel failed on this machine: {kernels.compile_error(exc)}") from exc
@@ -138,7 +143,8 @@ def _already_said(message: str, said: list) -> bool:
     return m is not None and any(w.startswith(m.group(1)) and m.group(2) in w for w in said)
 
 
-def _render(scene, settings, *, progress=None, cancel=None, on_pass=None, scheduled_rounds=False) -> RenderResult:
+def _render(scene, settings, *, progress=None, cancel=None, on_pass=None, scheduled_rounds=False,
+            window=None) -> RenderResult:
     """Render ``scene`` with ``settings`` (RenderSettings).
 
     progress(fraction in [0, 1], message) is called at least once per tile;
@@ -207,7 +213,7 @@ def _render(scene, settings, *, progress=None, cancel=None, on_pass=None, schedu
         maps = _build_maps(scene, psettings, caster, lights, progress=_span(progress, 0.0, 0.3), cancel=cancel)
         photon_s += _time.perf_counter() - t0
         # -- Distribution ray tracing ---------------------------------------------------
-        passes, ts = trace_image(scene, settings, caster, lights, maps, table=table,
+        passes, ts = trace_image(scene, settings, caster, lights, maps, table=table, window=window,
                                  progress=progress, cancel=cancel,
                                  progress_span=(0.3 if maps is not None else 0.0, 1.0))
         trace_stats.append(ts)
@@ -226,7 +232,8 @@ def _render(scene, settings, *, progress=None, cancel=None, on_pass=None, schedu
                                progress=_span(progress, a, a + 0.3 * (b - a)), cancel=cancel)
             photon_s += _time.perf_counter() - t0
             passes_i, ts = trace_image(scene, still_settings, caster, lights, maps, table=table,
-                                       time_override=t_i, stream=i + 1, progress=progress, cancel=cancel,
+                                       time_override=t_i, stream=i + 1, window=window, progress=progress,
+                                       cancel=cancel,
                                        progress_span=(a + (0.3 * (b - a) if maps is not None else 0.0), b))
             trace_stats.append(ts)
             map_stats.append(_map_stats(maps))

@@ -76,6 +76,22 @@ class _Record:
         self.terminator = terminator or {}     # the object's shadow_terminator_* settings (Instance fields)
 
 
+def _instance_name(obj, inst) -> str:
+    """The name reports and the effects plan use: the object's, 'OBJECT@INSTANCER' for an instance.
+    Geometry that geometry nodes instance (Object Info with As Instance off, a mesh primitive) is
+    listed by Blender as an object named after the instancer itself ('FruitBed@FruitBed' for every
+    orange the review's scatter made); its mesh's name says what it is ('Sphere@FruitBed'). A curve,
+    text or metaball's own evaluated mesh (also listed so, no geometry nodes) keeps 'Circle@Circle'."""
+    if not inst.is_instance:
+        return obj.name
+    parent = inst.parent.original
+    data, parent_data = getattr(obj, "data", None), getattr(parent, "data", None)
+    if (obj.name == parent.name and data is not None and any(m.type == "NODES" for m in parent.modifiers)
+            and (parent_data is None or data.name != parent_data.name)):
+        return f"{data.name}@{parent.name}"
+    return f"{obj.name}@{parent.name}"
+
+
 def _terminator_settings(obj) -> dict:
     """The object's shadow-terminator settings (Blender's Object properties, which Cycles reads;
     Blender's defaults 0.1 and 0.0 where a build has none), as :class:`stpm_core.scene.Instance` fields."""
@@ -247,7 +263,7 @@ def export_scene(depsgraph, frame_set, *, motion_steps: int = 3, bakes="default"
                     cache.keep_mesh(kept_key, None if inst.is_instance else obj.original.name_full, meshes[-1])
         if mesh_cache[data_key] < 0:
             continue
-        records[key] = _Record("MESH", obj.name if not inst.is_instance else f"{obj.name}@{inst.parent.name}",
+        records[key] = _Record("MESH", _instance_name(obj, inst),
                                obj.original.name_full, M, mesh=mesh_cache[data_key], use_motion=use_mb,
                                use_deform=use_deform and not inst.is_instance and obj.type == "MESH",
                                is_instance=inst.is_instance, terminator=_terminator_settings(obj))
