@@ -34,7 +34,7 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .closure import (C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
+from .closure import (C_CC_IOR, C_CC_ROUGH, C_CC_TINT, C_CC_WEIGHT, C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
                       C_TRANSMISSION, C_METAL_CONST, closure_row, finish_closure_at)
 from .sampling import JIT, JIT_INLINE
 
@@ -1272,7 +1272,13 @@ def _closure(op, prog, pc, st, k, C, r, w):
     ior = 1.5
     e0 = e1 = e2 = 0.0
     b0 = b1 = b2 = 0.0
+    C[r, C_CC_WEIGHT] = 0.0                  # Blender's Coat: a Principled BSDF's layer over all lobes
     if _USE_BSDF_PRINCIPLED and op == _BSDF_PRINCIPLED:
+        C[r, C_CC_WEIGHT] = _clamp01(st[int(prog[pc + 11]), k])
+        C[r, C_CC_ROUGH] = _clamp01(st[int(prog[pc + 12]), k])
+        C[r, C_CC_IOR] = min(max(st[int(prog[pc + 13]), k], 1.0), 10.0)
+        t0, t1, t2 = _v3(st, int(prog[pc + 14]), k)
+        C[r, C_CC_TINT], C[r, C_CC_TINT + 1], C[r, C_CC_TINT + 2] = max(t0, 0.0), max(t1, 0.0), max(t2, 0.0)
         b0, b1, b2 = _v3(st, int(prog[pc + 1]), k)
         metallic = st[int(prog[pc + 2]), k]
         rough = st[int(prog[pc + 3]), k]
@@ -1326,6 +1332,7 @@ def _closure(op, prog, pc, st, k, C, r, w):
 def _transparent(C, r, t0, t1, t2):
     """Closure row C[r] := a transparent closure of tint (t0, t1, t2) (a Transparent BSDF, or the
     white one a Principled BSDF's Alpha mixes in): nothing scatters, C_PASS = 1."""
+    C[r, C_CC_WEIGHT] = 0.0
     _primary(C, r, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.5)
     C[r, C_TINT_T] = C[r, C_TINT_T + 1] = C[r, C_TINT_T + 2] = 0.0
     C[r, C_TINT_R] = C[r, C_TINT_R + 1] = C[r, C_TINT_R + 2] = 0.0
