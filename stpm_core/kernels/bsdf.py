@@ -692,8 +692,7 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
     # attenuated by att = (1 - F_cc) mix(1, coat_tint^(1 / cos_t), cw) per channel, F_cc = cw times
     # the layer's albedo at wo (:func:`coat_albedo`; smooth: F_diel(cos_c)), cos_t the cosine of wo
     # refracted into the layer (Beer's law through a layer of unit thickness).  Its normal ncs is
-    # the smooth shading normal (Cycles' Coat Normal defaults to N, which a Principled BSDF's
-    # Normal input does not change), raised as nss is.
+    # nss: Cycles' Coat Normal defaults to the Principled BSDF's N (its Normal input, if linked).
     cw = C[cr, C_CC_WEIGHT]
     ncs = nss
     cos_c = cos_o
@@ -732,13 +731,10 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
 
 @njit(**_JIT)
 def _coat_normal(C, cr, wo, nsf, ngf, nss):
-    """The CLEARCOAT lobe's normal: nss, or where a Normal input replaced the shading normal
-    (``C_BUMPED``) the smooth one it replaced (C_NS, turned to the facing side) raised as nss is."""
-    if not C[cr, C_BUMPED] > 0:
-        return nss
-    s0, s1, s2 = C[cr, C_NS], C[cr, C_NS + 1], C[cr, C_NS + 2]
-    t = 1.0 if s0 * ngf[0] + s1 * ngf[1] + s2 * ngf[2] >= 0.0 else -1.0
-    return _valid_specular(ngf, wo, (t * s0, t * s1, t * s2))
+    """The CLEARCOAT lobe's normal: nss, the specular lobes' normal, as Cycles (svm/closure.h: the
+    coat normal defaults to the Principled BSDF's N, its Normal input where one is linked; a
+    linked Coat Normal is not evaluated, ``nodes.compile`` warns)."""
+    return nss
 
 
 @njit(**_JIT)
@@ -852,7 +848,9 @@ def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
     if C[cr, C_CC_ROUGH] > 0.0 and cos_c > 0.0 and C[cr, C_CC_WEIGHT] > 0.0:
         # -- Rough CLEARCOAT, about its own normal ncs with its own alpha
         cos_ic = dot(wi, ncs)
-        if cos_ic > 0.0 and dot(wi, ng) > 0.0:
+        Nc = (C[cr, C_NS], C[cr, C_NS + 1], C[cr, C_NS + 2]) if C[cr, C_BUMPED] > 0 else ns
+        bump_ok_c = not (dot(Nc, wi) * dot(Nc, ncs) * cos_ic < 0.0)   # (the bump shadowing, as below)
+        if cos_ic > 0.0 and dot(wi, ng) > 0.0 and bump_ok_c:
             hc = _normalized((wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]), 1e-300)
             Dc = _ggx_D(dot(hc, ncs), alpha_c)
             lam_oc = _ggx_lambda(cos_c, alpha_c)

@@ -1272,13 +1272,17 @@ def _closure(op, prog, pc, st, k, C, r, w):
     ior = 1.5
     e0 = e1 = e2 = 0.0
     b0 = b1 = b2 = 0.0
-    C[r, C_CC_WEIGHT] = 0.0                  # Blender's Coat: a Principled BSDF's layer over all lobes
+    # Blender's Coat: a Principled BSDF's layer over all lobes; without one (Coat Weight 0, other
+    # closures) the columns of pack_materials' rows (every column of a program's row is written)
+    _no_coat(C, r)
     if _USE_BSDF_PRINCIPLED and op == _BSDF_PRINCIPLED:
-        C[r, C_CC_WEIGHT] = _clamp01(st[int(prog[pc + 11]), k])
-        C[r, C_CC_ROUGH] = _clamp01(st[int(prog[pc + 12]), k])
-        C[r, C_CC_IOR] = min(max(st[int(prog[pc + 13]), k], 1.0), 10.0)
-        t0, t1, t2 = _v3(st, int(prog[pc + 14]), k)
-        C[r, C_CC_TINT], C[r, C_CC_TINT + 1], C[r, C_CC_TINT + 2] = max(t0, 0.0), max(t1, 0.0), max(t2, 0.0)
+        cw = _clamp01(st[int(prog[pc + 11]), k])
+        if cw > 0.0:
+            C[r, C_CC_WEIGHT] = cw
+            C[r, C_CC_ROUGH] = _clamp01(st[int(prog[pc + 12]), k])
+            C[r, C_CC_IOR] = min(max(st[int(prog[pc + 13]), k], 1.0), 10.0)
+            t0, t1, t2 = _v3(st, int(prog[pc + 14]), k)
+            C[r, C_CC_TINT], C[r, C_CC_TINT + 1], C[r, C_CC_TINT + 2] = max(t0, 0.0), max(t1, 0.0), max(t2, 0.0)
         b0, b1, b2 = _v3(st, int(prog[pc + 1]), k)
         metallic = st[int(prog[pc + 2]), k]
         rough = st[int(prog[pc + 3]), k]
@@ -1332,7 +1336,7 @@ def _closure(op, prog, pc, st, k, C, r, w):
 def _transparent(C, r, t0, t1, t2):
     """Closure row C[r] := a transparent closure of tint (t0, t1, t2) (a Transparent BSDF, or the
     white one a Principled BSDF's Alpha mixes in): nothing scatters, C_PASS = 1."""
-    C[r, C_CC_WEIGHT] = 0.0
+    _no_coat(C, r)
     _primary(C, r, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.5)
     C[r, C_TINT_T] = C[r, C_TINT_T + 1] = C[r, C_TINT_T + 2] = 0.0
     C[r, C_TINT_R] = C[r, C_TINT_R + 1] = C[r, C_TINT_R + 2] = 0.0
@@ -1341,6 +1345,15 @@ def _transparent(C, r, t0, t1, t2):
     C[r, C_TRANSPARENT + 2] = max(t2, 0.0)
     C[r, C_PASS] = 1.0
     C[r, C_METAL_CONST] = 0.0
+
+
+@njit(**JIT_INLINE)            # (inlined with _closure, _transparent)
+def _no_coat(C, r):
+    """Closure row C[r]'s coat-layer columns as ``closure.pack_materials`` writes them: no coat."""
+    C[r, C_CC_WEIGHT] = 0.0
+    C[r, C_CC_ROUGH] = 0.0
+    C[r, C_CC_IOR] = 1.5
+    C[r, C_CC_TINT] = C[r, C_CC_TINT + 1] = C[r, C_CC_TINT + 2] = 1.0
 
 
 @njit(**JIT_INLINE)            # (inlined with _closure, _transparent)
