@@ -177,3 +177,31 @@ def test_node_inputs_fill_the_coat_columns():
     scene = make_scene([surface({"d": N("ShaderNodeBsdfDiffuse", {"Color": (0.5, 0.5, 0.5)})}, "d")])
     C, _ = run_kernel(scene, hits, np.zeros(4, np.int32))
     assert (C[:, kc.C_CC_WEIGHT] == 0.0).all()
+
+
+def test_linked_coat_normal_tilts_the_coat_alone():
+    """A linked Coat Normal (a Combine XYZ here) becomes the coat layer's normal (C_CC_N, C_CC_HAS_N)
+    without touching the shading normal; the smooth coat's mirror reflects about it."""
+    from test_kernel_svm import L, N, make_hits, make_scene, run_kernel, surface
+    nodes = {"n": N("ShaderNodeCombineXYZ", {"X": 0.3, "Y": 0.0, "Z": 1.0}),
+             "p": N("ShaderNodeBsdfPrincipled", {"Base Color": (0.5, 0.5, 0.5), "Coat Weight": 1.0,
+                                                 "Coat Roughness": 0.0, "Coat Normal": L("n", "Vector")})}
+    scene = make_scene([surface(nodes, "p")])
+    hits = make_hits(3, np.random.default_rng(1))
+    ns_before = hits["NS"].copy()
+    C, sd = run_kernel(scene, hits, np.zeros(3, np.int32))
+    assert not any("Coat Normal" in m for m in sd.unsupported), sd.unsupported
+    want = np.array([0.3, 0.0, 1.0]) / math.hypot(0.3, 1.0)
+    assert np.allclose(C[:, kc.C_CC_N:kc.C_CC_N + 3], want) and (C[:, kc.C_CC_HAS_N] == 1.0).all()
+    assert (C[:, kc.C_BUMPED] == 0.0).all() and np.array_equal(hits["NS"], ns_before)
+    # the delta coat's mirror about the tilted normal, the base's lobes about the surface's
+    R = coated_rows((0.5, 0.5, 0.5), rough=0.0)
+    R[0, kc.C_CC_N:kc.C_CC_N + 3] = want
+    R[0, kc.C_CC_HAS_N] = 1.0
+    E, E_avg = kb.ggx_albedo_tables()
+    wo = (0.0, 0.0, 1.0)
+    n = (0.0, 0.0, 1.0)
+    wi0, wi1, wi2, *_, lobe = kb.bsdf_sample_lobe(R, 0, E, E_avg, wo, n, n, 0.9999, 0.5, 0.5)
+    assert lobe == kb.CLEARCOAT
+    mirror = 2.0 * want[2] * want - np.array(wo)
+    assert np.allclose((wi0, wi1, wi2), mirror / np.linalg.norm(mirror), atol=1e-9)

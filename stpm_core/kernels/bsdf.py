@@ -98,7 +98,7 @@ import numpy as np
 from ..numba_probe import njit
 from .sampling import JIT_INLINE, basis, cosine_hemisphere, dot
 from .closure import (C_ALPHA, C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_COAT, C_IOR, C_NS, C_ROUGH_LOBE, C_ROUGHNESS, C_SPECULAR,
-                      C_CC_ALPHA, C_CC_IOR, C_CC_ROUGH, C_CC_TINT, C_CC_WEIGHT,
+                      C_CC_ALPHA, C_CC_HAS_N, C_CC_IOR, C_CC_N, C_CC_ROUGH, C_CC_TINT, C_CC_WEIGHT,
                       C_W_BASE, C_W_GLASS, C_W_METAL, C_METAL_CONST, closure_row)
 
 __all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "CLEARCOAT", "N_LOBES", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
@@ -731,10 +731,13 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
 
 @njit(**_JIT)
 def _coat_normal(C, cr, wo, nsf, ngf, nss):
-    """The CLEARCOAT lobe's normal: nss, the specular lobes' normal, as Cycles (svm/closure.h: the
-    coat normal defaults to the Principled BSDF's N, its Normal input where one is linked; a
-    linked Coat Normal is not evaluated, ``nodes.compile`` warns)."""
-    return nss
+    """The CLEARCOAT lobe's normal, as Cycles (svm/closure.h): a linked Coat Normal (``C_CC_HAS_N``:
+    C_CC_N, the node's world normal, raised as nss is by ``_valid_specular``), else nss, the
+    specular lobes' normal (Cycles' coat normal defaults to the Principled BSDF's N, its Normal
+    input where one is linked)."""
+    if not C[cr, C_CC_HAS_N] > 0:
+        return nss
+    return _valid_specular(ngf, wo, (C[cr, C_CC_N], C[cr, C_CC_N + 1], C[cr, C_CC_N + 2]))
 
 
 @njit(**_JIT)

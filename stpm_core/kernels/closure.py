@@ -45,6 +45,8 @@ metallic, transmission, roughness, specular, ior.  Derived columns
                    lobe, ``kernels.bsdf``); 0 = no coat layer.  Primary, with ``C_CC_ROUGH`` (Coat
                    Roughness), ``C_CC_IOR`` (Coat IOR, >= 1) and ``C_CC_TINT`` (3 columns, Coat Tint)
 ``C_CC_ALPHA``     the coat's GGX alpha = Coat Roughness^2 (derived)
+``C_CC_N``         3 columns: a linked Coat Normal (world, unit, as the node outputs it), when
+                   ``C_CC_HAS_N`` is 1; else the coat follows the BSDF's own normal
 =================  =============================================================
 
 The last row (index M, where hit material -1 lands) is an inert black closure.
@@ -59,7 +61,7 @@ __all__ = ["N_CLOSURE", "pack_materials", "finish_closure", "finish_closure_at",
     "C_BASE", "C_EMIT", "C_METALLIC", "C_TRANSMISSION", "C_ROUGHNESS", "C_SPECULAR", "C_IOR", "C_ALPHA",
     "C_W_BASE", "C_W_METAL", "C_W_GLASS", "C_ROUGH_LOBE", "C_NONDELTA", "C_COAT", "C_HAS_DELTA",
     "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED", "C_TRANSPARENT", "C_PASS", "C_TINT_T", "C_TINT_R",
-    "C_METAL_CONST", "C_CC_WEIGHT", "C_CC_ROUGH", "C_CC_IOR", "C_CC_TINT", "C_CC_ALPHA"]
+    "C_METAL_CONST", "C_CC_WEIGHT", "C_CC_ROUGH", "C_CC_IOR", "C_CC_TINT", "C_CC_ALPHA", "C_CC_N", "C_CC_HAS_N"]
 
 C_BASE = 0            # 3 columns: base colour RGB
 C_EMIT = 3            # 3 columns: emitted radiance RGB
@@ -90,7 +92,9 @@ C_CC_ROUGH = 37       # Coat Roughness in [0, 1] (0: a delta mirror)
 C_CC_IOR = 38         # Coat IOR in [1, 10]
 C_CC_TINT = 39        # 3 columns: Coat Tint, the colour of the layer at normal incidence
 C_CC_ALPHA = 42       # derived: Coat Roughness^2
-N_CLOSURE = 43
+C_CC_N = 43           # 3 columns: a linked Coat Normal (world, unit), used where C_CC_HAS_N is 1
+C_CC_HAS_N = 46       # 1: the coat layer's normal is C_CC_N (a linked Coat Normal); 0: the BSDF's own
+N_CLOSURE = 47
 
 
 @njit(cache=True, nogil=True)
