@@ -99,3 +99,21 @@ def test_tinted_coat_like_cycles(tmp_path):
     r = compare(tmp_path, "tinted coat", "coat_tint.png")
     assert r.z_abs_max < Z_MAX, (r.summary(), np.round(r.z, 1))
     assert abs(r.mean_ratio - 1.0) < MEAN_TOL, r.summary()
+
+
+def test_a_coated_principled_exports_its_graph_without_a_coat_warning():
+    """The exporter keeps the node graph of a material with a Coat Weight (``nodes.graph_needed``: only
+    the interpreter fills the coat's columns) and says nothing about the coat (it said "Coat Weight
+    is not rendered" before); emission under a coat is still named (not dimmed by it)."""
+    from addon.export import export_scene
+    coated_sphere_scene(lambda: coated("Car paint", (0.3, 0.02, 0.02), 0.05))
+    core, warnings = export_scene(bpy.context.evaluated_depsgraph_get(),
+                                  lambda f, sub: bpy.context.scene.frame_set(f, subframe=sub))[:2]
+    assert core.materials[0].graph is not None
+    assert not any("Coat" in str(w) for w in warnings), warnings
+    p = bpy.data.materials["Car paint"].node_tree.nodes["Principled BSDF"]
+    p.inputs["Emission Strength"].default_value = 1.0
+    p.inputs["Emission Color"].default_value = (1.0, 0.5, 0.2, 1.0)
+    _, warnings = export_scene(bpy.context.evaluated_depsgraph_get(),
+                               lambda f, sub: bpy.context.scene.frame_set(f, subframe=sub))[:2]
+    assert any("Emission under a Coat" in str(w) for w in warnings), warnings
