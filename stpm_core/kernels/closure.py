@@ -18,11 +18,13 @@ metallic, transmission, roughness, specular, ior.  Derived columns
 ``C_W_BASE``       (1 - metallic)(1 - transmission): diffuse + coat weight
 ``C_W_METAL``      metallic
 ``C_W_GLASS``      (1 - metallic) transmission
-``C_ROUGH_LOBE``   1 if some GGX lobe (roughness > 0 and a metal, glass or coat lobe)
+``C_ROUGH_LOBE``   1 if some GGX lobe (roughness > 0 and a metal, glass or coat lobe; or a coat layer,
+                   C_CC_WEIGHT > 0, of Coat Roughness > 0)
 ``C_NONDELTA``     1 if some lobe is not a delta (shade / store photons here)
 ``C_COAT``         1 if the diffuse base has a coat (w_base > 0 and specular > 0)
-``C_HAS_DELTA``    1 if some lobe is a delta (roughness 0 and a glass, metal or coat lobe:
-                   paths / photons continue specularly); rough glass is a GGX lobe, not a delta
+``C_HAS_DELTA``    1 if some lobe is a delta (roughness 0 and a glass, metal or coat lobe, or a coat
+                   layer of Coat Roughness 0: paths / photons continue specularly); rough glass is a
+                   GGX lobe, not a delta
 ``C_EMISSIVE``     1 if some emission channel is > 0
 ``C_PROGRAM``      first instruction of the material's node program; -1 = constant
 ``C_NS``           the hit's smooth shading normal (3 columns) when ``C_BUMPED``: a Normal
