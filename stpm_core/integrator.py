@@ -47,7 +47,8 @@ from .kernels import gather as _G
 from .kernels import paths as _K
 from .kernels import static_views as _SV
 from .kernels.bsdf import ggx_albedo_tables
-from .kernels.closure import C_PASS, C_ROUGH_LOBE, C_ROUGHNESS, C_W_GLASS, N_CLOSURE, pack_materials
+from .kernels.closure import (C_CC_ROUGH, C_CC_WEIGHT, C_PASS, C_ROUGH_LOBE, C_ROUGHNESS, C_W_GLASS, N_CLOSURE,
+                              pack_materials)
 from .kernels.light_params import light_params, light_poses, mesh_arrays
 from .world_light import constant_environment
 from .kernels.svm import shade_rows
@@ -584,11 +585,13 @@ def static_view_rows(setup: tuple, o: np.ndarray, position: np.ndarray, instance
 def glossy_caustic_rows(ctx, C, crow) -> np.ndarray:
     """(m,) bool: the hits (closure rows C[crow]) whose rough lobes read the caustic map (docs/rendering.md,
     "Path partition"): with ``ctx.glossy_caustic``, a rough reflection lobe (coat, metal; no glass
-    lobe, not transparent) of roughness >= ``ctx.glossy_floor``."""
+    lobe, not transparent) of roughness >= ``ctx.glossy_floor``, and no coat layer sharper than that (a
+    Principled Coat, ``C_CC_*``, whose lobe would read the map too)."""
     if not ctx.glossy_caustic:
         return np.zeros(crow.shape[0], bool)
     return ((C[crow, C_ROUGH_LOBE] > 0.0) & (C[crow, C_W_GLASS] <= 0.0) & (C[crow, C_PASS] <= 0.0)
-            & (C[crow, C_ROUGHNESS] >= ctx.glossy_floor))
+            & (C[crow, C_ROUGHNESS] >= ctx.glossy_floor)
+            & ((C[crow, C_CC_WEIGHT] <= 0.0) | (C[crow, C_CC_ROUGH] >= ctx.glossy_floor)))
 
 
 def _glossy_caustic(ctx, sh, kc, hits, d, C, crow, t_s, stats, dst, idx_k, use_idx, beta_k, use_beta, rho,

@@ -6,7 +6,9 @@ Walks from the active Material Output's Surface link.  Understood nodes:
 Principled BSDF    Base Color, Metallic, Roughness, Transmission Weight, IOR,
                    Specular IOR Level (0.5 = Blender's default -> specular 1),
                    Emission Color * Emission Strength; refraction tinted by
-                   sqrt(Base Color) as Cycles (``Material.transmission_tint``)
+                   sqrt(Base Color) as Cycles (``Material.transmission_tint``); a Coat
+                   (Weight, Roughness, IOR, Tint) makes the material carry its node graph
+                   (``nodes.graph_needed``), whose interpreter renders the coat layer
 Diffuse BSDF       Color (Lambertian, no coat)
 Glossy BSDF        Color, Roughness (metallic 1; ``constant_fresnel``: Cycles 5.0 gives it no
                    Fresnel, it reflects its colour at every angle)
@@ -595,6 +597,8 @@ class MaterialExporter:
             return _params()
         if kind == "ShaderNodeBsdfPrincipled":
             for name in ("Coat Weight", "Sheen Weight", "Subsurface Weight"):
+                # (a Coat Weight keeps the node graph, which renders the coat: this line is dropped
+                # then; it stays for a graph that could not be exported)
                 if self._value(node, name, 0.0) > 0:
                     self._warn(f"Principled {name} is ignored", graph_carries=True)
             for name in ("Diffuse Roughness", "Thin Film Thickness"):   # (Blender 4.2 / 4.3 on)

@@ -411,7 +411,8 @@ def graph_needed(graph: ShaderGraph, builder: GraphBuilder) -> bool:
     True when a value node the interpreter evaluates, other than Value / RGB, feeds the surface
     (a texture, a Math node, a Normal Map, ...), or the surface's nodes or values pass through
     a node group or a muted node, or the tree has a Transparent BSDF, an Add Shader or a
-    Principled BSDF with Alpha < 1 (chosen per hit), or a Mix Shader that is not exactly a
+    Principled BSDF with Alpha < 1 (chosen per hit) or a Coat Weight (the coat layer: only the
+    interpreter fills its closure columns), or a Mix Shader that is not exactly a
     blend of its inputs' colours (:func:`mix_is_exact_blend`: Cycles evaluates it as two weighted
     closures, whatever its Fac; blending e.g. a Diffuse and a mirror's roughness and metallic
     would turn a sharp glint into a broad highlight).  Plain shader trees (Principled, Diffuse,
@@ -435,6 +436,9 @@ def graph_needed(graph: ShaderGraph, builder: GraphBuilder) -> bool:
         alpha = node.inputs.get("Alpha", 1.0) if node.type == "ShaderNodeBsdfPrincipled" else 1.0
         if isinstance(alpha, Link) or (isinstance(alpha, (int, float)) and alpha < 1.0):
             return True            # transparency: the closure is chosen per hit
+        coat = node.inputs.get("Coat Weight", 0.0) if node.type == "ShaderNodeBsdfPrincipled" else 0.0
+        if isinstance(coat, Link) or (isinstance(coat, (int, float)) and coat > 0.0):
+            return True            # the coat layer: rendered by the interpreter (kernels.svm, C_CC_*)
         if not _is_shader_node(node) and node.type not in CONSTANT_NODES:
             return True
         if any((name, ident) in builder.special for ident in node.inputs):

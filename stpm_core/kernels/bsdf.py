@@ -7,7 +7,7 @@ materials and, later, closures filled per hit by the shader-node interpreter.
 Vectors are 3-tuples of float64; ``wo`` and ``wi`` point away from the surface.
 docs/lights-and-materials.md ("Materials") has the formulas with these names.
 
-Six lobes, weights w_base = (1 - metallic)(1 - transmission),
+Seven lobes (N_LOBES), weights w_base = (1 - metallic)(1 - transmission),
 w_metal = metallic, w_glass = (1 - metallic) transmission:
 
 =========  =======================================================================
@@ -26,6 +26,10 @@ GLASS_T    w_glass (1 - F_diel(eta)) tint_t: delta refraction, or (roughness > 0
            Principled BSDF, the colour for a Glass BSDF
 METAL_MS   no longer a lobe (probability 0): a rough METAL lobe is scaled by Cycles' energy
            compensation k_metal = 1 + F_ms (1 - E(mu_o)) / E(mu_o) per channel instead
+CLEARCOAT  Blender's Principled Coat, a layer over all the lobes above: cw F_diel(ior_c) about its
+           own normal ncs (the smooth shading normal), delta mirror (Coat Roughness 0) or GGX of
+           alpha_c = Coat Roughness^2 times k_cc (as COAT's); the lobes above are times
+           att = (1 - F_cc(wo)) mix(1, coat_tint^(1 / cos_t), cw) per channel (closure C_CC_*)
 =========  =======================================================================
 
 GGX lobes: D G2 / (4 cos_o cos_i) times their Fresnel at wo.h (alpha =
@@ -94,15 +98,17 @@ import numpy as np
 from ..numba_probe import njit
 from .sampling import JIT_INLINE, basis, cosine_hemisphere, dot
 from .closure import (C_ALPHA, C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_COAT, C_IOR, C_NS, C_ROUGH_LOBE, C_ROUGHNESS, C_SPECULAR,
+                      C_CC_ALPHA, C_CC_HAS_N, C_CC_IOR, C_CC_N, C_CC_ROUGH, C_CC_TINT, C_CC_WEIGHT,
                       C_W_BASE, C_W_GLASS, C_W_METAL, C_METAL_CONST, closure_row)
 
-__all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
+__all__ = ["DIFFUSE", "COAT", "METAL", "GLASS_R", "GLASS_T", "METAL_MS", "CLEARCOAT", "N_LOBES", "PATH_STOP", "PATH_DELTA", "PATH_GLOSSY",
            "bsdf_eval_pdf", "bsdf_eval", "bsdf_eval_lobes", "bsdf_eval_smooth", "bsdf_eval_plain", "bsdf_eval_plain_w", "needs_bsdf_call", "bsdf_sample", "bsdf_sample_lobe", "bsdf_sample_path", "bsdf_sample_cont", "bsdf_eval_cont", "bsdf_eval_split", "diffuse_albedo", "fresnel_dielectric",
            "fresnel_dielectric_fss", "coat_albedo", "glass_albedo", "glass_albedo_avg", "build_glass_table",
            "ggx_albedo", "ggx_albedo_avg", "ggx_albedo_tables", "eval_batch", "sample_batch", "albedo_batch",
            "denoising_features", "DENOISE_ALPHA"]
 
-DIFFUSE, COAT, METAL, GLASS_R, GLASS_T, METAL_MS = range(6)
+DIFFUSE, COAT, METAL, GLASS_R, GLASS_T, METAL_MS, CLEARCOAT = range(7)
+N_LOBES = 7
 
 _JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 _EPS = 1e-9
@@ -680,27 +686,95 @@ def _hit(C, cr, E, E_avg, wo, ns, ng):
         k_glass = (_coat_compensation(g_eo, g_avg, C[cr, C_TINT_T]),
                    _coat_compensation(g_eo, g_avg, C[cr, C_TINT_T + 1]),
                    _coat_compensation(g_eo, g_avg, C[cr, C_TINT_T + 2]))
-    # Lobe selection probabilities proportional to an albedo estimate
+    # Blender's Coat (CLEARCOAT): a GGX dielectric layer of weight cw over every other lobe, as
+    # Cycles' Principled BSDF (svm/closure.h): its lobe cw F_diel(wo.h, coat ior) (rough: times the
+    # energy compensation k_cc, F_ss = Fss_diel(coat ior), as the COAT lobe's), and what lies below
+    # attenuated by att = (1 - F_cc) mix(1, coat_tint^(1 / cos_t), cw) per channel, F_cc = cw times
+    # the layer's albedo at wo (:func:`coat_albedo`; smooth: F_diel(cos_c)), cos_t the cosine of wo
+    # refracted into the layer (Beer's law through a layer of unit thickness).  Its normal ncs is
+    # nss: Cycles' Coat Normal defaults to the Principled BSDF's N (its Normal input, if linked).
+    cw = C[cr, C_CC_WEIGHT]
+    ncs = nss
+    cos_c = cos_o
+    alpha_c = max(C[cr, C_CC_ALPHA], 1e-4)
+    F_cc = 0.0
+    k_cc = 1.0
+    att = (1.0, 1.0, 1.0)
+    if cw > 0.0:
+        ncs, cos_c, F_cc, k_cc, att = _coat_layer(C, cr, E, E_avg, wo, nsf, ngf, nss, alpha_c)
+    # Lobe selection probabilities proportional to an albedo estimate (the lower lobes' times the
+    # coat layer's mean attenuation)
+    m_att = (att[0] + att[1] + att[2]) / 3.0
     mean_base = (C[cr, C_BASE] + C[cr, C_BASE + 1] + C[cr, C_BASE + 2]) / 3.0
-    e0 = w_base * (1.0 - F_coat) * mean_base                          # DIFFUSE
-    e1 = w_base * F_coat                                              # COAT (F_coat: its albedo)
-    e2 = w_metal * ((F_metal[0] * ms_scale[0] + F_metal[1] * ms_scale[1] + F_metal[2] * ms_scale[2]) / 3.0)  # METAL
+    e0 = w_base * (1.0 - F_coat) * mean_base * m_att                  # DIFFUSE
+    e1 = w_base * F_coat * m_att                                      # COAT (F_coat: its albedo)
+    e2 = w_metal * ((F_metal[0] * ms_scale[0] + F_metal[1] * ms_scale[1] + F_metal[2] * ms_scale[2]) / 3.0) * m_att
     mean_tint_r = (C[cr, C_TINT_R] + C[cr, C_TINT_R + 1] + C[cr, C_TINT_R + 2]) / 3.0
-    e3 = w_glass * F_glass * mean_tint_r                              # GLASS_R
+    e3 = w_glass * F_glass * mean_tint_r * m_att                      # GLASS_R
     mean_tint = (C[cr, C_TINT_T] + C[cr, C_TINT_T + 1] + C[cr, C_TINT_T + 2]) / 3.0
-    e4 = w_glass * (1.0 - F_glass) * mean_tint                        # GLASS_T
+    e4 = w_glass * (1.0 - F_glass) * mean_tint * m_att                # GLASS_T
     e5 = 0.0                                                          # METAL_MS (no longer a lobe)
+    e6 = F_cc if cos_c > 0.0 else 0.0                                 # CLEARCOAT (F_cc: its albedo)
     if not cos_o > 0.0:
         # wo below the specular normal: Cycles' microfacet closures give nothing (bsdf_microfacet_
         # sample / eval return at cos_NI <= 0); only the diffuse lobe is left
         e1 = e2 = e3 = e4 = 0.0
-    total = e0 + e1 + e2 + e3 + e4 + e5
+    total = e0 + e1 + e2 + e3 + e4 + e5 + e6
     if total > 0:
         t = max(total, 1e-300)
-        p_lobe = (e0 / t, e1 / t, e2 / t, e3 / t, e4 / t, e5 / t)
+        p_lobe = (e0 / t, e1 / t, e2 / t, e3 / t, e4 / t, e5 / t, e6 / t)
     else:
-        p_lobe = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    return nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe
+        p_lobe = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    return (nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe,
+            ncs, cos_c, alpha_c, F_cc, k_cc, att)
+
+
+@njit(**_JIT)
+def _coat_normal(C, cr, wo, nsf, ngf, nss):
+    """The CLEARCOAT lobe's normal, as Cycles (svm/closure.h): a linked Coat Normal (``C_CC_HAS_N``:
+    C_CC_N, the node's world normal, raised as nss is by ``_valid_specular``), else nss, the
+    specular lobes' normal (Cycles' coat normal defaults to the Principled BSDF's N, its Normal
+    input where one is linked)."""
+    if not C[cr, C_CC_HAS_N] > 0:
+        return nss
+    return _valid_specular(ngf, wo, (C[cr, C_CC_N], C[cr, C_CC_N + 1], C[cr, C_CC_N + 2]))
+
+
+@njit(**_JIT)
+def _coat_attenuation(C, cr, cos_cc, F_cc):
+    """(a0, a1, a2): what the coat layer leaves of the lobes below it at wo, (1 - F_cc) times
+    mix(1, coat_tint^(1 / cos_t), cw) per channel; cos_cc = wo . ncs clamped to [0, 1], cos_t its
+    refraction into the layer of ior C_CC_IOR (Cycles: the optical depth 1 / cos_t)."""
+    cw = C[cr, C_CC_WEIGHT]
+    layer = max(1.0 - F_cc, 0.0)
+    t0, t1, t2 = C[cr, C_CC_TINT], C[cr, C_CC_TINT + 1], C[cr, C_CC_TINT + 2]
+    if t0 == 1.0 and t1 == 1.0 and t2 == 1.0:
+        return layer, layer, layer
+    inv = 1.0 / C[cr, C_CC_IOR]
+    cos_t = math.sqrt(max(1.0 - inv * inv * (1.0 - cos_cc * cos_cc), 0.0))
+    depth = 1.0 / max(cos_t, 1e-6)
+    return (layer * (1.0 + cw * (math.pow(t0, depth) - 1.0)), layer * (1.0 + cw * (math.pow(t1, depth) - 1.0)),
+            layer * (1.0 + cw * (math.pow(t2, depth) - 1.0)))
+
+
+@njit(**_JIT)
+def _coat_layer(C, cr, E, E_avg, wo, nsf, ngf, nss, alpha_c):
+    """(ncs, cos_c, F_cc, k_cc, att) of the CLEARCOAT layer (Coat Weight cw > 0) at wo: its normal,
+    wo . ncs (not clamped), its albedo at wo times cw, its energy compensation (1 when smooth) and
+    the attenuation of the lobes below (:func:`_coat_attenuation`)."""
+    cw = C[cr, C_CC_WEIGHT]
+    ior_c = C[cr, C_CC_IOR]
+    ncs = _coat_normal(C, cr, wo, nsf, ngf, nss)
+    cos_c = dot(wo, ncs)
+    cos_cc = min(max(cos_c, 0.0), 1.0)
+    k_cc = 1.0
+    if C[cr, C_CC_ROUGH] > 0.0:
+        F_cc = cw * coat_albedo(E, cos_cc, alpha_c, ior_c)
+        k_cc = _coat_compensation(ggx_albedo(E, cos_cc, alpha_c), ggx_albedo_avg(E_avg, alpha_c),
+                                  fresnel_dielectric_fss(ior_c))
+    else:
+        F_cc = cw * fresnel_dielectric(cos_cc, ior_c)
+    return ncs, cos_c, F_cc, k_cc, _coat_attenuation(C, cr, cos_cc, F_cc)
 
 
 # ----------------------------------------------------------------------------
@@ -737,16 +811,16 @@ def _diffuse_part(C, cr, hit, wi):
     """(f0, f1, f2, pdf) of the DIFFUSE lobe at wi for the hit of :func:`_hit`: base / pi under the
     coat's Fresnel at wo, wherever wi is above the shading normal (not the face:
     :func:`diffuse_side`), and its share of the mixture density."""
-    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
+    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe, ncs, cos_c, alpha_c, F_cc, k_cc, att = hit
     w_base = C[cr, C_W_BASE]
     b0, b1, b2 = C[cr, C_BASE], C[cr, C_BASE + 1], C[cr, C_BASE + 2]
     cos_i = dot(wi, ns)
     f0 = f1 = f2 = pdf = 0.0
     if cos_i > 0:
         d = w_base * (1.0 - F_coat) * bump_shadowing(C, cr, wi, ns, ng)
-        f0 = d * b0 / _PI
-        f1 = d * b1 / _PI
-        f2 = d * b2 / _PI
+        f0 = d * b0 / _PI * att[0]                  # (att: what the coat layer above leaves)
+        f1 = d * b1 / _PI * att[1]
+        f2 = d * b2 / _PI * att[2]
         pdf = p_lobe[DIFFUSE] * cos_i / _PI
     return f0, f1, f2, pdf
 
@@ -761,19 +835,36 @@ def _eval_pdf_hit(C, cr, E, hit, wo, wi):
 @njit(**_JIT)
 def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
     """(f0, f1, f2, pdf) plus f and the mixture pdf of the non-delta lobes other than DIFFUSE (rough
-    COAT times coat_w (1 or 0), METAL, GLASS_R and GLASS_T) at wi, for the hit of :func:`_hit`.
+    COAT times coat_w (1 or 0), METAL, GLASS_R, GLASS_T and CLEARCOAT) at wi, for the hit of :func:`_hit`.
 
-    Reflection (wi above ng and nss): the GGX lobes about nss.  Refraction (wi below ng and nss):
+    CLEARCOAT (Coat Roughness > 0): cw F_diel(wo.h, coat ior) k_cc D G2 / (4 cos_c cos_i) about its
+    normal ncs with alpha = Coat Roughness^2 (wi above ng and ncs); the lobes below it are times
+    the layer's attenuation att (:func:`_hit`).  Reflection (wi above ng and nss): the GGX lobes about nss.  Refraction (wi below ng and nss):
     rough GLASS_T, Walter et al.'s BTDF as Cycles evaluates it (no 1 / eta^2 radiance scaling),
     h = -(wo + eta wi) turned toward nss.  The glass lobes pick reflection or refraction per
     microfacet h as Cycles: refraction with probability (1 - F) t / (F r + (1 - F) t), F =
     F_diel(wo.h, eta), r = mean(tint_r), t = mean(tint_t), inside their joint probability
     p_lobe[GLASS_R] + p_lobe[GLASS_T]."""
-    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
+    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe, ncs, cos_c, alpha_c, F_cc, k_cc, att = hit
     if not C[cr, C_ROUGH_LOBE] > 0:
         return f0, f1, f2, pdf
-    if not cos_o > 0:
-        return f0, f1, f2, pdf
+    if C[cr, C_CC_ROUGH] > 0.0 and cos_c > 0.0 and C[cr, C_CC_WEIGHT] > 0.0:
+        # -- Rough CLEARCOAT, about its own normal ncs with its own alpha
+        cos_ic = dot(wi, ncs)
+        Nc = (C[cr, C_NS], C[cr, C_NS + 1], C[cr, C_NS + 2]) if C[cr, C_BUMPED] > 0 else ns
+        bump_ok_c = not (dot(Nc, wi) * dot(Nc, ncs) * cos_ic < 0.0)   # (the bump shadowing, as below)
+        if cos_ic > 0.0 and dot(wi, ng) > 0.0 and bump_ok_c:
+            hc = _normalized((wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]), 1e-300)
+            Dc = _ggx_D(dot(hc, ncs), alpha_c)
+            lam_oc = _ggx_lambda(cos_c, alpha_c)
+            G2c = 1.0 / (1.0 + lam_oc + _ggx_lambda(cos_ic, alpha_c))
+            cos_ce = max(cos_c, _EPS)
+            Fc = fresnel_dielectric(min(max(dot(wo, hc), 0.0), 1.0), C[cr, C_CC_IOR])
+            sc = C[cr, C_CC_WEIGHT] * Fc * k_cc * Dc * G2c / max(4.0 * cos_ce * max(abs(dot(wi, ns)), _EPS), 1e-300)
+            f0, f1, f2 = f0 + sc, f1 + sc, f2 + sc
+            pdf = pdf + p_lobe[CLEARCOAT] * Dc / ((1.0 + lam_oc) * 4.0 * cos_ce)
+    if not (cos_o > 0 and C[cr, C_ROUGHNESS] > 0.0):
+        return f0, f1, f2, pdf                       # (the main lobes are deltas or see wo from below)
     w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
     cos_i = dot(wi, ns)
     side = dot(wi, ng)
@@ -812,9 +903,9 @@ def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
         s = w_base * F_c * k_coat * coat_w * spec
         sg = w_glass * F_g * spec
         sm = w_metal * spec
-        f0 = f0 + (s + sg * C[cr, C_TINT_R] * k_glass[0] + sm * F_m[0] * ms_scale[0])
-        f1 = f1 + (s + sg * C[cr, C_TINT_R + 1] * k_glass[1] + sm * F_m[1] * ms_scale[1])
-        f2 = f2 + (s + sg * C[cr, C_TINT_R + 2] * k_glass[2] + sm * F_m[2] * ms_scale[2])
+        f0 = f0 + att[0] * (s + sg * C[cr, C_TINT_R] * k_glass[0] + sm * F_m[0] * ms_scale[0])
+        f1 = f1 + att[1] * (s + sg * C[cr, C_TINT_R + 1] * k_glass[1] + sm * F_m[1] * ms_scale[1])
+        f2 = f2 + att[2] * (s + sg * C[cr, C_TINT_R + 2] * k_glass[2] + sm * F_m[2] * ms_scale[2])
         rt = F_g * r_mean + (1.0 - F_g) * t_mean
         split_r = F_g * r_mean / rt if rt > 0 else 0.0
         pdf = pdf + p_ggx * (p_lobe[COAT] * coat_w + p_lobe[METAL] + p_glass * split_r)
@@ -836,9 +927,9 @@ def _glossy_add(C, cr, E, hit, wo, wi, f0, f1, f2, pdf, coat_w):
         jac = eta * eta * (-wi_h) / max(den * den, 1e-300)      # d omega_h / d omega_i
         common = D * wo_h * jac / cos_oe                       # VNDF pdf of wi / G1(wo)
         st = w_glass * (1.0 - F_g) * G2 * common / max(abs(cos_i), _EPS)
-        f0 = f0 + st * C[cr, C_TINT_T] * k_glass[0]
-        f1 = f1 + st * C[cr, C_TINT_T + 1] * k_glass[1]
-        f2 = f2 + st * C[cr, C_TINT_T + 2] * k_glass[2]
+        f0 = f0 + st * C[cr, C_TINT_T] * k_glass[0] * att[0]
+        f1 = f1 + st * C[cr, C_TINT_T + 1] * k_glass[1] * att[1]
+        f2 = f2 + st * C[cr, C_TINT_T + 2] * k_glass[2] * att[2]
         rt = F_g * r_mean + (1.0 - F_g) * t_mean
         split_t = (1.0 - F_g) * t_mean / rt if rt > 0 else 0.0
         pdf = pdf + p_glass * split_t * G1o * common
@@ -856,10 +947,10 @@ def bsdf_eval_pdf(C, cr, E, E_avg, wo, wi, ns, ng):
 def _glass_reflection(C, cr, hit, wo, wi):
     """(f0, f1, f2): the rough GLASS_R term of :func:`_glossy_add` alone at wi (0 unless wi is on the
     reflection side), for the hit of :func:`_hit`."""
-    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
+    ns, ng, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe, ncs, cos_c, alpha_c, F_cc, k_cc, att = hit
     w_glass = C[cr, C_W_GLASS]
     cos_is = dot(wi, nss)
-    if not (C[cr, C_ROUGH_LOBE] > 0 and cos_o > 0 and w_glass > 0 and cos_is > 0 and dot(wi, ng) > 0):
+    if not (C[cr, C_ROUGHNESS] > 0 and cos_o > 0 and w_glass > 0 and cos_is > 0 and dot(wi, ng) > 0):
         return 0.0, 0.0, 0.0
     Ns = (C[cr, C_NS], C[cr, C_NS + 1], C[cr, C_NS + 2]) if C[cr, C_BUMPED] > 0 else ns
     if dot(Ns, wi) * dot(Ns, nss) * cos_is < 0.0:
@@ -871,7 +962,8 @@ def _glass_reflection(C, cr, hit, wo, wi):
     G2 = 1.0 / (1.0 + _ggx_lambda(cos_o, alpha) + _ggx_lambda(cos_is, alpha))
     sg = w_glass * fresnel_dielectric(wo_h, eta_glass) * D * G2 / max(4.0 * cos_oe * max(abs(dot(wi, ns)), _EPS),
                                                                        1e-300)
-    return sg * C[cr, C_TINT_R] * k_glass[0], sg * C[cr, C_TINT_R + 1] * k_glass[1], sg * C[cr, C_TINT_R + 2] * k_glass[2]
+    return (sg * C[cr, C_TINT_R] * k_glass[0] * att[0], sg * C[cr, C_TINT_R + 1] * k_glass[1] * att[1],
+            sg * C[cr, C_TINT_R + 2] * k_glass[2] * att[2])
 
 
 @njit(**_JIT)
@@ -888,7 +980,8 @@ def bsdf_eval_lobes(C, cr, E, E_avg, wo, wi, ns, ng, vis):
     d0 = d1 = d2 = 0.0
     if dot(wi, hit[0]) > 0:
         d = C[cr, C_W_BASE] * (1.0 - hit[6]) * bump_shadowing(C, cr, wi, hit[0], hit[1]) / _PI
-        d0, d1, d2 = d * C[cr, C_BASE], d * C[cr, C_BASE + 1], d * C[cr, C_BASE + 2]
+        at = hit[19]                                 # (what the coat layer leaves)
+        d0, d1, d2 = d * C[cr, C_BASE] * at[0], d * C[cr, C_BASE + 1] * at[1], d * C[cr, C_BASE + 2] * at[2]
     if dot(wi, hit[1]) > 0:                      # reflection: coat + metal + glass reflection
         g0, g1, g2 = _glass_reflection(C, cr, hit, wo, wi)
     else:                                        # refraction: the glass lobe alone
@@ -913,8 +1006,8 @@ def bsdf_eval(C, cr, E, E_avg, wo, wi, ns, ng):
 @njit(**_JIT)
 def needs_bsdf_call(C, cr):
     """Does evaluating closure row C[cr] need more than :func:`bsdf_eval_plain` (a rough lobe, a
-    coat or a replaced normal)?"""
-    return C[cr, C_ROUGH_LOBE] > 0 or C[cr, C_COAT] > 0 or C[cr, C_BUMPED] > 0
+    coat, a coat layer (CLEARCOAT) or a replaced normal)?"""
+    return C[cr, C_ROUGH_LOBE] > 0 or C[cr, C_COAT] > 0 or C[cr, C_BUMPED] > 0 or C[cr, C_CC_WEIGHT] > 0
 
 
 @njit(**_JIT)
@@ -943,20 +1036,28 @@ def bsdf_eval_smooth(C, cr, wo, wi, ns, ng):
     """(f0, f1, f2) of a closure without a rough lobe (``C[cr, C_ROUGH_LOBE] == 0``): the diffuse
     lobe w_base (1 - F_coat(wo)) base_color / pi directly (no hit set-up, no call to the compiled
     rough-lobe code).  The coat's Fresnel is taken at its own normal, as :func:`_hit` does (ns
-    raised where it differs from ng); without coat or replaced normal it is :func:`bsdf_eval_plain`."""
-    if not (C[cr, C_COAT] > 0 or C[cr, C_BUMPED] > 0):
+    raised where it differs from ng); without coat or replaced normal it is :func:`bsdf_eval_plain`.
+    A (smooth) coat layer (CLEARCOAT) above attenuates it by ``_coat_attenuation``."""
+    if not (C[cr, C_COAT] > 0 or C[cr, C_BUMPED] > 0 or C[cr, C_CC_WEIGHT] > 0):
         return bsdf_eval_plain(C, cr, wo, wi, ns, ng)
     nsf, ngf, _ = _oriented(wo, ns, ng)
     scale = 0.0
+    a0 = a1 = a2 = 1.0
     if dot(wi, nsf) > 0:             # (not ngf: the shadow ray decides, :func:`diffuse_side`)
         scale = C[cr, C_W_BASE] * bump_shadowing(C, cr, wi, nsf, ngf)
+        nc = nsf
+        if C[cr, C_BUMPED] > 0 or nsf[0] != ngf[0] or nsf[1] != ngf[1] or nsf[2] != ngf[2]:
+            nc = _valid_specular(ngf, wo, nsf)
         if C[cr, C_COAT] > 0:
-            nc = nsf
-            if C[cr, C_BUMPED] > 0 or nsf[0] != ngf[0] or nsf[1] != ngf[1] or nsf[2] != ngf[2]:
-                nc = _valid_specular(ngf, wo, nsf)
             cos_o = min(max(dot(wo, nc), 0.0), 1.0)
             scale *= 1.0 - C[cr, C_SPECULAR] * fresnel_dielectric(cos_o, C[cr, C_IOR])
-    return (scale * C[cr, C_BASE] * _INV_PI, scale * C[cr, C_BASE + 1] * _INV_PI, scale * C[cr, C_BASE + 2] * _INV_PI)
+        if C[cr, C_CC_WEIGHT] > 0:
+            ncs = _coat_normal(C, cr, wo, nsf, ngf, nc)
+            cos_cc = min(max(dot(wo, ncs), 0.0), 1.0)
+            a0, a1, a2 = _coat_attenuation(C, cr, cos_cc,
+                                           C[cr, C_CC_WEIGHT] * fresnel_dielectric(cos_cc, C[cr, C_CC_IOR]))
+    return (scale * C[cr, C_BASE] * _INV_PI * a0, scale * C[cr, C_BASE + 1] * _INV_PI * a1,
+            scale * C[cr, C_BASE + 2] * _INV_PI * a2)
 
 
 # ----------------------------------------------------------------------------
@@ -970,16 +1071,16 @@ def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
     refract choice), rescaled to [0, 1): a uniform independent of the choice and of wi (Cycles
     rescales its closure-pick uniform the same way), which :func:`bsdf_sample_cont` spends on
     Russian roulette."""
-    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
+    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe, ncs, cos_c, alpha_c, F_cc, k_cc, att = hit
     rough = C[cr, C_ROUGHNESS] > 0.0
     # -- Choose a lobe by the CDF of p_lobe
     lobe = 0                                            # number of CDF entries <= u0
     cdf = 0.0
-    for k in range(6):
+    for k in range(N_LOBES):
         cdf += p_lobe[k]
         if u0 >= cdf:
             lobe += 1
-    lobe = min(lobe, METAL_MS)
+    lobe = min(lobe, CLEARCOAT)
     p_chosen = p_lobe[lobe]
     if not p_chosen > 0:
         return lobe, 0.0, False, (0.0, 0.0, 0.0), 0.0
@@ -991,6 +1092,14 @@ def _sample_lobe(C, cr, hit, wo, u0, u1, u2):
     grough = rough and abs(C[cr, C_IOR] - 1.0) >= _ETA1   # rough refraction (ior 1: a delta, as Cycles)
     is_delta = (lobe == GLASS_T and not grough) or (is_refl and not rough)
     # -- Direction
+    if lobe == CLEARCOAT:
+        # the coat layer: a GGX visible normal about its own normal ncs (its own alpha), or its mirror
+        if C[cr, C_CC_ROUGH] > 0.0:
+            t, b = basis(ncs)
+            lx, ly, lz = _normalized((dot(wo, t), dot(wo, b), max(cos_c, 1e-6)), 0.0)
+            hw = _to_frame(_ggx_sample_vndf(lx, ly, lz, alpha_c, u1, u2), t, b, ncs)
+            return lobe, p_chosen, False, _normalized(_reflect(wo, hw), 1e-300), u_res
+        return lobe, p_chosen, True, _normalized(_reflect(wo, ncs), 1e-300), u_res
     if (lobe == GLASS_R or lobe == GLASS_T) and grough:
         # Rough glass: a GGX visible normal about nss, then reflect or refract through it, the
         # choice per microfacet as Cycles (F mean(tint_r), F = F_diel(wo.h, eta), against
@@ -1053,10 +1162,12 @@ def _on_lobe_side(lobe, side):
 def _delta_weight(C, cr, hit, lobe, p_chosen, wi):
     """Throughput / p_chosen (3-tuple) of delta lobe ``lobe`` toward wi; 0 if a reflection lands
     below ng or a refraction above it (a leak through the shading normal)."""
-    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
+    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe, ncs, cos_c, alpha_c, F_cc, k_cc, att = hit
     side = dot(wi, ngf)
     if not (side < 0 if lobe == GLASS_T else side > 0):
         return 0.0, 0.0, 0.0
+    if lobe == CLEARCOAT:
+        return F_cc / p_chosen, F_cc / p_chosen, F_cc / p_chosen          # cw F_diel(cos_c, coat ior)
     if lobe == COAT:
         thr = C[cr, C_W_BASE] * F_coat
         t0 = t1 = t2 = thr
@@ -1069,7 +1180,7 @@ def _delta_weight(C, cr, hit, lobe, p_chosen, wi):
     else:
         thr = C[cr, C_W_GLASS] * (1.0 - F_glass)
         t0, t1, t2 = thr * C[cr, C_TINT_T], thr * C[cr, C_TINT_T + 1], thr * C[cr, C_TINT_T + 2]
-    return t0 / p_chosen, t1 / p_chosen, t2 / p_chosen
+    return t0 * att[0] / p_chosen, t1 * att[1] / p_chosen, t2 * att[2] / p_chosen     # (under the coat layer)
 
 
 @njit(**_JIT)
@@ -1106,10 +1217,18 @@ def bsdf_sample(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2):
     chosen lobe has probability 0.
     """
     wi0, wi1, wi2, w0, w1, w2, lobe = bsdf_sample_lobe(C, cr, E, E_avg, wo, ns, ng, u0, u1, u2)
+    return wi0, wi1, wi2, w0, w1, w2, lobe_is_delta(C, cr, lobe)
+
+
+@njit(**_JIT)
+def lobe_is_delta(C, cr, lobe):
+    """Is ``lobe`` of closure row C[cr] a delta (smooth reflection / refraction; ior-1 glass refracts
+    as a delta even when rough; CLEARCOAT by its own Coat Roughness)?"""
+    if lobe == CLEARCOAT:
+        return not C[cr, C_CC_ROUGH] > 0.0
     rough = C[cr, C_ROUGHNESS] > 0.0
     grough = rough and abs(C[cr, C_IOR] - 1.0) >= _ETA1
-    is_delta = (lobe == GLASS_T and not grough) or ((lobe == COAT or lobe == METAL or lobe == GLASS_R) and not rough)
-    return wi0, wi1, wi2, w0, w1, w2, is_delta
+    return (lobe == GLASS_T and not grough) or ((lobe == COAT or lobe == METAL or lobe == GLASS_R) and not rough)
 
 
 #: what :func:`bsdf_sample_path` chose: nothing / the DIFFUSE lobe (the path stops), a delta lobe,
@@ -1248,7 +1367,8 @@ def bsdf_eval_split(C, cr, E, E_avg, wo, wi, ns, ng, stop_coat):
 def diffuse_albedo(C, cr, E, wo, ns):
     """(r, g, b) = w_base (1 - F_coat(|wo . ns|)) base_color: the diffuse reflectance after the coat
     (photon radiance = diffuse_albedo / pi * irradiance), F_coat = specular F_diel(mu, ior) for a
-    smooth coat, specular ``coat_albedo``(E, mu, alpha, ior) for a rough one; ns may face either way."""
+    smooth coat, specular ``coat_albedo``(E, mu, alpha, ior) for a rough one; ns may face either way.
+    Under a coat layer (CLEARCOAT) times its attenuation at mu (``_coat_attenuation``)."""
     mu = min(abs(dot(wo, ns)), 1.0)
     spec = C[cr, C_SPECULAR]
     if C[cr, C_ROUGHNESS] > 0.0:
@@ -1256,6 +1376,14 @@ def diffuse_albedo(C, cr, E, wo, ns):
     else:
         F = spec * fresnel_dielectric(mu, C[cr, C_IOR])
     k = C[cr, C_W_BASE] * (1.0 - F)
+    cw = C[cr, C_CC_WEIGHT]
+    if cw > 0.0:
+        if C[cr, C_CC_ROUGH] > 0.0:
+            F_cc = cw * coat_albedo(E, mu, max(C[cr, C_CC_ALPHA], 1e-4), C[cr, C_CC_IOR])
+        else:
+            F_cc = cw * fresnel_dielectric(mu, C[cr, C_CC_IOR])
+        a0, a1, a2 = _coat_attenuation(C, cr, mu, F_cc)
+        return k * C[cr, C_BASE] * a0, k * C[cr, C_BASE + 1] * a1, k * C[cr, C_BASE + 2] * a2
     return k * C[cr, C_BASE], k * C[cr, C_BASE + 1], k * C[cr, C_BASE + 2]
 
 
@@ -1280,7 +1408,7 @@ def denoising_features(C, cr, E, E_avg, wo, ns, ng):
     the camera path carries them on, its feature throughput times the specular-like albedo.
     """
     hit = _hit(C, cr, E, E_avg, wo, ns, ng)
-    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe = hit
+    nsf, ngf, nss, cos_o, eta_glass, alpha, F_coat, F_glass, F_metal, ms_scale, ms_Eo, k_coat, k_glass, p_lobe, ncs, cos_c, alpha_c, F_cc, k_cc, att = hit
     w_base, w_metal, w_glass = C[cr, C_W_BASE], C[cr, C_W_METAL], C[cr, C_W_GLASS]
     rough_like = C[cr, C_ALPHA] > DENOISE_ALPHA
     d0 = d1 = d2 = 0.0                               # diffuse-like albedo
@@ -1288,9 +1416,19 @@ def denoising_features(C, cr, E, E_avg, wo, ns, ng):
     n0 = n1 = n2 = 0.0                               # weighted normal
     w_sum = 0.0
     w_diffuse = 0.0
+    # -- CLEARCOAT: the coat layer over everything (grey)
+    if F_cc > 0.0 and cos_c > 0.0:
+        nc_w = F_cc
+        n0, n1, n2 = nc_w * ncs[0], nc_w * ncs[1], nc_w * ncs[2]
+        w_sum += nc_w
+        if C[cr, C_CC_ALPHA] > DENOISE_ALPHA:
+            d0 = d1 = d2 = F_cc
+            w_diffuse += nc_w
+        else:
+            s0 = s1 = s2 = F_cc
     # -- DIFFUSE: the base under the coat
     k = w_base * (1.0 - F_coat)
-    a0, a1, a2 = k * C[cr, C_BASE], k * C[cr, C_BASE + 1], k * C[cr, C_BASE + 2]
+    a0, a1, a2 = k * C[cr, C_BASE] * att[0], k * C[cr, C_BASE + 1] * att[1], k * C[cr, C_BASE + 2] * att[2]
     w = (a0 + a1 + a2) / 3.0
     if w > 0.0:
         d0, d1, d2 = d0 + a0, d1 + a1, d2 + a2
@@ -1307,6 +1445,7 @@ def denoising_features(C, cr, E, E_avg, wo, ns, ng):
                 a0 = w_glass * (F_glass * C[cr, C_TINT_R] + (1.0 - F_glass) * C[cr, C_TINT_T])
                 a1 = w_glass * (F_glass * C[cr, C_TINT_R + 1] + (1.0 - F_glass) * C[cr, C_TINT_T + 1])
                 a2 = w_glass * (F_glass * C[cr, C_TINT_R + 2] + (1.0 - F_glass) * C[cr, C_TINT_T + 2])
+            a0, a1, a2 = a0 * att[0], a1 * att[1], a2 * att[2]      # (under the coat layer)
             w = (a0 + a1 + a2) / 3.0
             if not w > 0.0:
                 continue

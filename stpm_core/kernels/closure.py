@@ -18,11 +18,13 @@ metallic, transmission, roughness, specular, ior.  Derived columns
 ``C_W_BASE``       (1 - metallic)(1 - transmission): diffuse + coat weight
 ``C_W_METAL``      metallic
 ``C_W_GLASS``      (1 - metallic) transmission
-``C_ROUGH_LOBE``   1 if some GGX lobe (roughness > 0 and a metal, glass or coat lobe)
+``C_ROUGH_LOBE``   1 if some GGX lobe (roughness > 0 and a metal, glass or coat lobe; or a coat layer,
+                   C_CC_WEIGHT > 0, of Coat Roughness > 0)
 ``C_NONDELTA``     1 if some lobe is not a delta (shade / store photons here)
 ``C_COAT``         1 if the diffuse base has a coat (w_base > 0 and specular > 0)
-``C_HAS_DELTA``    1 if some lobe is a delta (roughness 0 and a glass, metal or coat lobe:
-                   paths / photons continue specularly); rough glass is a GGX lobe, not a delta
+``C_HAS_DELTA``    1 if some lobe is a delta (roughness 0 and a glass, metal or coat lobe, or a coat
+                   layer of Coat Roughness 0: paths / photons continue specularly); rough glass is a
+                   GGX lobe, not a delta
 ``C_EMISSIVE``     1 if some emission channel is > 0
 ``C_PROGRAM``      first instruction of the material's node program; -1 = constant
 ``C_NS``           the hit's smooth shading normal (3 columns) when ``C_BUMPED``: a Normal
@@ -41,6 +43,12 @@ metallic, transmission, roughness, specular, ior.  Derived columns
 ``C_METAL_CONST``  1 where the METAL lobe's Fresnel is its colour at every angle (a Glossy BSDF:
                    Cycles 5.0 gives it no Fresnel; ``Material.constant_fresnel``), 0 for Schlick's
                    F0 + (1 - F0)(1 - cos)^5 with F0 = base colour (a Principled BSDF's metal)
+``C_CC_WEIGHT``    a Principled BSDF's Coat Weight in [0, 1] (the CLEARCOAT lobe over every other
+                   lobe, ``kernels.bsdf``); 0 = no coat layer.  Primary, with ``C_CC_ROUGH`` (Coat
+                   Roughness), ``C_CC_IOR`` (Coat IOR, >= 1) and ``C_CC_TINT`` (3 columns, Coat Tint)
+``C_CC_ALPHA``     the coat's GGX alpha = Coat Roughness^2 (derived)
+``C_CC_N``         3 columns: a linked Coat Normal (world, unit, as the node outputs it), when
+                   ``C_CC_HAS_N`` is 1; else the coat follows the BSDF's own normal
 =================  =============================================================
 
 The last row (index M, where hit material -1 lands) is an inert black closure.
@@ -55,7 +63,7 @@ __all__ = ["N_CLOSURE", "pack_materials", "finish_closure", "finish_closure_at",
     "C_BASE", "C_EMIT", "C_METALLIC", "C_TRANSMISSION", "C_ROUGHNESS", "C_SPECULAR", "C_IOR", "C_ALPHA",
     "C_W_BASE", "C_W_METAL", "C_W_GLASS", "C_ROUGH_LOBE", "C_NONDELTA", "C_COAT", "C_HAS_DELTA",
     "C_EMISSIVE", "C_PROGRAM", "C_NS", "C_BUMPED", "C_TRANSPARENT", "C_PASS", "C_TINT_T", "C_TINT_R",
-    "C_METAL_CONST"]
+    "C_METAL_CONST", "C_CC_WEIGHT", "C_CC_ROUGH", "C_CC_IOR", "C_CC_TINT", "C_CC_ALPHA", "C_CC_N", "C_CC_HAS_N"]
 
 C_BASE = 0            # 3 columns: base colour RGB
 C_EMIT = 3            # 3 columns: emitted radiance RGB
@@ -81,7 +89,14 @@ C_PASS = 28           # 1 where the hit's closure is transparent: the ray passes
 C_TINT_T = 29         # 3 columns: the GLASS_T transmission tint (Principled: sqrt(base); Glass BSDF: its colour)
 C_TINT_R = 32         # 3 columns: the GLASS_R reflection tint (Principled: white; Glass BSDF: its colour)
 C_METAL_CONST = 35    # 1: the METAL lobe reflects its colour at every angle (Glossy BSDF); 0: Schlick (Principled)
-N_CLOSURE = 36
+C_CC_WEIGHT = 36      # Coat Weight in [0, 1]: Blender's coat layer (the CLEARCOAT lobe) over all the others
+C_CC_ROUGH = 37       # Coat Roughness in [0, 1] (0: a delta mirror)
+C_CC_IOR = 38         # Coat IOR in [1, 10]
+C_CC_TINT = 39        # 3 columns: Coat Tint, the colour of the layer at normal incidence
+C_CC_ALPHA = 42       # derived: Coat Roughness^2
+C_CC_N = 43           # 3 columns: a linked Coat Normal (world, unit), used where C_CC_HAS_N is 1
+C_CC_HAS_N = 46       # 1: the coat layer's normal is C_CC_N (a linked Coat Normal); 0: the BSDF's own
+N_CLOSURE = 47
 
 
 @njit(cache=True, nogil=True)
@@ -104,7 +119,10 @@ def finish_closure_at(C, r):
     w_base = (1.0 - metallic) * (1.0 - transmission)
     C[r, C_W_BASE] = w_base
     coat = w_base > 0.0 and C[r, C_SPECULAR] > 0.0
-    rough_lobe = rough > 0.0 and (metallic > 0.0 or w_glass > 0.0 or coat)
+    cc = C[r, C_CC_WEIGHT] > 0.0                      # Blender's Coat: a dielectric layer over all lobes
+    cc_rough = C[r, C_CC_ROUGH]
+    C[r, C_CC_ALPHA] = cc_rough * cc_rough
+    rough_lobe = (rough > 0.0 and (metallic > 0.0 or w_glass > 0.0 or coat)) or (cc and cc_rough > 0.0)
     base_max = max(C[r, C_BASE], max(C[r, C_BASE + 1], C[r, C_BASE + 2]))
     C[r, C_ROUGH_LOBE] = 1.0 if rough_lobe else 0.0
     C[r, C_NONDELTA] = 1.0 if ((w_base > 0.0 and base_max > 0.0) or rough_lobe) else 0.0
@@ -112,7 +130,7 @@ def finish_closure_at(C, r):
     smooth = rough == 0.0
     index_matched = abs(C[r, C_IOR] - 1.0) < 1e-4         # rough glass of ior 1 refracts as a delta (Cycles)
     C[r, C_HAS_DELTA] = 1.0 if ((smooth and (w_glass > 0.0 or metallic > 0.0 or coat))
-                                or (w_glass > 0.0 and index_matched)) else 0.0
+                                or (w_glass > 0.0 and index_matched) or (cc and cc_rough == 0.0)) else 0.0
     C[r, C_EMISSIVE] = 1.0 if (C[r, C_EMIT] > 0.0 or C[r, C_EMIT + 1] > 0.0 or C[r, C_EMIT + 2] > 0.0) else 0.0
 
 
@@ -145,7 +163,13 @@ def pack_materials(materials) -> np.ndarray:
         rows[i, C_IOR] = m.ior
         rows[i, C_PROGRAM] = -1.0
         rows[i, C_METAL_CONST] = 1.0 if getattr(m, "constant_fresnel", False) else 0.0
+        # no coat layer (C_CC_WEIGHT 0): a Principled BSDF's Coat is rendered through its node graph
+        # (the exporter keeps the graph of a material with a Coat Weight: kernels.svm fills C_CC_*)
+        rows[i, C_CC_IOR] = 1.5
+        rows[i, C_CC_TINT:C_CC_TINT + 3] = 1.0
     rows[M, C_IOR] = 1.0
+    rows[M, C_CC_IOR] = 1.5
+    rows[M, C_CC_TINT:C_CC_TINT + 3] = 1.0
     rows[M, C_PROGRAM] = -1.0
     _finish_all(rows)
     return rows

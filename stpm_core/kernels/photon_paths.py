@@ -49,9 +49,9 @@ docs/photon-mapping.md ("Tracing") has the equations:
 from __future__ import annotations
 
 from ..numba_probe import njit
-from .bsdf import (COAT, DIFFUSE, GLASS_R, GLASS_T, METAL, PATH_GLOSSY, PATH_STOP, bsdf_eval_pdf,
+from .bsdf import (CLEARCOAT, COAT, DIFFUSE, GLASS_R, GLASS_T, METAL, PATH_GLOSSY, PATH_STOP, bsdf_eval_pdf,
                    bsdf_sample_lobe, bsdf_sample_path, needs_bsdf_call)
-from .closure import C_IOR, C_NONDELTA, C_ROUGHNESS, C_W_GLASS
+from .closure import C_CC_ROUGH, C_IOR, C_NONDELTA, C_ROUGHNESS, C_W_GLASS
 from .sampling import offset_origin
 
 __all__ = ["photon_bounce", "adjoint_weight"]
@@ -75,6 +75,8 @@ def adjoint_weight(C, cr, E, E_avg, wo, wi, ns, ng, lobe, w0, w1, w2):
     rough = C[cr, C_ROUGHNESS] > 0.0
     if (lobe == COAT or lobe == METAL or lobe == GLASS_R) and not rough:
         return w0, w1, w2                                # a delta reflection
+    if lobe == CLEARCOAT and not C[cr, C_CC_ROUGH] > 0.0:
+        return w0, w1, w2                                # the smooth coat layer's mirror
     if lobe == GLASS_T:
         return w0, w1, w2                                # a refraction (delta or rough)
     go = wo[0] * ng[0] + wo[1] * ng[1] + wo[2] * ng[2]

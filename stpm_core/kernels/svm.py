@@ -34,7 +34,7 @@ import math
 import numpy as np
 
 from ..numba_probe import njit
-from .closure import (C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
+from .closure import (C_CC_HAS_N, C_CC_N, C_CC_IOR, C_CC_ROUGH, C_CC_TINT, C_CC_WEIGHT, C_BASE, C_TINT_R, C_TINT_T, C_BUMPED, C_EMIT, C_PASS, C_TRANSPARENT, C_IOR, C_METALLIC, C_NS, C_PROGRAM, C_ROUGHNESS, C_SPECULAR,
                       C_TRANSMISSION, C_METAL_CONST, closure_row, finish_closure_at)
 from .sampling import JIT, JIT_INLINE
 
@@ -1272,7 +1272,23 @@ def _closure(op, prog, pc, st, k, C, r, w):
     ior = 1.5
     e0 = e1 = e2 = 0.0
     b0 = b1 = b2 = 0.0
+    # Blender's Coat: a Principled BSDF's layer over all lobes; without one (Coat Weight 0, other
+    # closures) the columns of pack_materials' rows (every column of a program's row is written)
+    _no_coat(C, r)
     if _USE_BSDF_PRINCIPLED and op == _BSDF_PRINCIPLED:
+        cw = _clamp01(st[int(prog[pc + 11]), k])
+        if cw > 0.0:
+            C[r, C_CC_WEIGHT] = cw
+            C[r, C_CC_ROUGH] = _clamp01(st[int(prog[pc + 12]), k])
+            C[r, C_CC_IOR] = min(max(st[int(prog[pc + 13]), k], 1.0), 10.0)
+            t0, t1, t2 = _v3(st, int(prog[pc + 14]), k)
+            C[r, C_CC_TINT], C[r, C_CC_TINT + 1], C[r, C_CC_TINT + 2] = max(t0, 0.0), max(t1, 0.0), max(t2, 0.0)
+            cn = int(prog[pc + 15])
+            if cn >= 0:                # a linked Coat Normal (world, as the node outputs it)
+                x, y, z = _unit(st[cn, k], st[cn + 1, k], st[cn + 2, k])
+                if x != 0.0 or y != 0.0 or z != 0.0:
+                    C[r, C_CC_N], C[r, C_CC_N + 1], C[r, C_CC_N + 2] = x, y, z
+                    C[r, C_CC_HAS_N] = 1.0
         b0, b1, b2 = _v3(st, int(prog[pc + 1]), k)
         metallic = st[int(prog[pc + 2]), k]
         rough = st[int(prog[pc + 3]), k]
@@ -1326,6 +1342,7 @@ def _closure(op, prog, pc, st, k, C, r, w):
 def _transparent(C, r, t0, t1, t2):
     """Closure row C[r] := a transparent closure of tint (t0, t1, t2) (a Transparent BSDF, or the
     white one a Principled BSDF's Alpha mixes in): nothing scatters, C_PASS = 1."""
+    _no_coat(C, r)
     _primary(C, r, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.5)
     C[r, C_TINT_T] = C[r, C_TINT_T + 1] = C[r, C_TINT_T + 2] = 0.0
     C[r, C_TINT_R] = C[r, C_TINT_R + 1] = C[r, C_TINT_R + 2] = 0.0
@@ -1334,6 +1351,17 @@ def _transparent(C, r, t0, t1, t2):
     C[r, C_TRANSPARENT + 2] = max(t2, 0.0)
     C[r, C_PASS] = 1.0
     C[r, C_METAL_CONST] = 0.0
+
+
+@njit(**JIT_INLINE)            # (inlined with _closure, _transparent)
+def _no_coat(C, r):
+    """Closure row C[r]'s coat-layer columns as ``closure.pack_materials`` writes them: no coat."""
+    C[r, C_CC_WEIGHT] = 0.0
+    C[r, C_CC_ROUGH] = 0.0
+    C[r, C_CC_IOR] = 1.5
+    C[r, C_CC_TINT] = C[r, C_CC_TINT + 1] = C[r, C_CC_TINT + 2] = 1.0
+    C[r, C_CC_N] = C[r, C_CC_N + 1] = C[r, C_CC_N + 2] = 0.0
+    C[r, C_CC_HAS_N] = 0.0
 
 
 @njit(**JIT_INLINE)            # (inlined with _closure, _transparent)

@@ -268,11 +268,16 @@ class _Compiler:
             if isinstance(a, Link) or (isinstance(a, (int, float)) and a < 1.0):
                 self.may_pass = True
                 self.uses_mix = True      # Alpha picks the BSDF or transparency per hit
-            for ident in ("Coat Weight", "Sheen Weight", "Subsurface Weight", "Diffuse Roughness",
-                          "Thin Film Thickness"):
+            for ident in ("Sheen Weight", "Subsurface Weight", "Diffuse Roughness", "Thin Film Thickness"):
                 v = node.inputs.get(ident, 0.0)
                 if isinstance(v, Link) or (isinstance(v, (int, float)) and v > 0):
                     self.warn(n, node, f"{ident} is not rendered")
+            cw = node.inputs.get("Coat Weight", 0.0)
+            if isinstance(cw, Link) or (isinstance(cw, (int, float)) and cw > 0):
+                es = node.inputs.get("Emission Strength", 0.0)
+                if isinstance(es, Link) or (isinstance(es, (int, float)) and es != 0):
+                    self.warn(n, node, "Emission under a Coat is not attenuated by it (Cycles dims it by the "
+                                       "coat's reflectance and tint)")
             tint = node.inputs.get("Specular Tint", (1.0, 1.0, 1.0))
             if isinstance(tint, Link) or (isinstance(tint, (tuple, list)) and any(float(c) != 1.0 for c in tint[:3])):
                 self.warn(n, node, "Specular Tint is not rendered (untinted, as white)")
@@ -283,7 +288,10 @@ class _Compiler:
                       self.input(n, node, "IOR", FLT, 1.5), self.input(n, node, "Alpha", FLT, 1.0),
                       self.input(n, node, "Transmission Weight", FLT, 0.0),
                       self.input(n, node, "Specular IOR Level", FLT, 0.5),
-                      *self.emission(n, node, "Emission Color", "Emission Strength", 0.0), normal)
+                      *self.emission(n, node, "Emission Color", "Emission Strength", 0.0), normal,
+                      self.input(n, node, "Coat Weight", FLT, 0.0), self.input(n, node, "Coat Roughness", FLT, 0.03),
+                      self.input(n, node, "Coat IOR", FLT, 1.5), self.input(n, node, "Coat Tint", VEC, (1.0, 1.0, 1.0)),
+                      self.normal_input(n, node, "Coat Normal", rewrites=False))
         elif t == "ShaderNodeBsdfDiffuse":
             self.emit("BSDF_DIFFUSE", self.input(n, node, "Color", VEC, (0.8, 0.8, 0.8)), normal)
         elif t in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
@@ -300,6 +308,8 @@ class _Compiler:
             self.emit("BSDF_DIFFUSE", self.const((0.8, 0.8, 0.8)), -1.0)
         for ident, v in node.inputs.items():
             if ident.endswith("Normal") and ident != "Normal" and isinstance(v, Link):
+                if t == "ShaderNodeBsdfPrincipled" and ident == "Coat Normal" and self.value(v) is not None:
+                    continue                   # (the coat layer's normal: BSDF_PRINCIPLED's coat_normal)
                 self.warn(n, node, f"{ident} input is not evaluated (the surface normal is used)")
 
     def emission(self, name: str, node, color: str, strength: str, strength_default: float) -> tuple:
@@ -313,15 +323,18 @@ class _Compiler:
             self.may_emit = True
         return c, s
 
-    def normal_input(self, name: str, node):
-        """Slot of a shader's linked Normal input (a world-space unit normal), or -1: the surface's."""
-        v = node.inputs.get("Normal")
+    def normal_input(self, name: str, node, ident: str = "Normal", rewrites: bool = True):
+        """Slot of a shader's linked Normal input (a world-space unit normal), or -1: the surface's.
+        rewrites: the input replaces the hit's shading normal (``uses_normals``; a Coat Normal does
+        not: it is the coat layer's own)."""
+        v = node.inputs.get(ident)
         if not isinstance(v, Link):
             return -1.0
         got = self.value(v)
         if got is None or got[1] != VEC:
             return -1.0
-        self.uses_normals = True
+        if rewrites:
+            self.uses_normals = True
         return got[0]
 
     def finish(self) -> np.ndarray:

@@ -109,7 +109,8 @@ def shader_lobes(graph: "ShaderGraph") -> tuple[bool, bool]:
     ``photons.trace.has_delta`` counts on a material's constants: any Glass BSDF or Glossy /
     Anisotropic BSDF (a delta at roughness 0, a glossy caustic above), a Principled BSDF whose
     Metallic or Transmission Weight may be non-zero, or whose dielectric coat may be smooth
-    (Roughness may be 0 with Specular IOR Level non-zero).  Diffuse lobes: a Diffuse BSDF, a
+    (Roughness may be 0 with Specular IOR Level non-zero) or whose coat layer may be smooth (Coat
+    Weight non-zero, Coat Roughness may be 0).  Diffuse lobes: a Diffuse BSDF, a
     Principled base (Metallic and Transmission Weight may be below 1), any shader the interpreter
     renders as grey diffuse.  A BSDF whose colour is a constant black adds nothing.  Linked inputs
     count as "may be anything", so the answer can only err towards a lobe that never shows.
@@ -148,6 +149,9 @@ def shader_lobes(graph: "ShaderGraph") -> tuple[bool, bool]:
             coat = _may_be_nonzero(ins.get("Specular IOR Level", 0.5))
             base = _may_be_nonzero(ins.get("Base Color", (0.8, 0.8, 0.8)))
             caustic |= (_may_be_nonzero(metallic) and base) or _may_be_nonzero(trans) or (smooth and coat)
+            # the coat layer (Coat Weight): a delta mirror at Coat Roughness 0 (kernels.bsdf CLEARCOAT)
+            caustic |= (_may_be_nonzero(ins.get("Coat Weight", 0.0))
+                        and _may_be(ins.get("Coat Roughness", 0.03), lambda r: r <= 0.0))
             diffuse |= (base and _may_be(metallic, lambda m: m < 1.0) and _may_be(trans, lambda w: w < 1.0))
         else:
             diffuse = True          # an unsupported shader renders as grey diffuse (nodes.compile)

@@ -67,7 +67,9 @@ LAYOUT = {
     "NORMAL_MAP": ("#space", "#layer", "*color", "strength", "*out"),    # space: NORMAL_MAP_SPACES
     "BUMP": ("#invert", "strength", "distance", "hc", "hx", "hy", "*normal", "*out"),   # normal -1: the surface's
     "BSDF_PRINCIPLED": ("*base", "metallic", "roughness", "ior", "alpha", "transmission", "specular",
-                        "*emission", "strength", "*normal"),                 # normal: -1 = the surface's
+                        "*emission", "strength", "*normal",                  # normal: -1 = the surface's
+                        "coat_weight", "coat_roughness", "coat_ior", "*coat_tint",    # the coat layer
+                        "*coat_normal"),                                     # -1: the BSDF's normal
     "BSDF_DIFFUSE": ("*color", "*normal"),
     "BSDF_GLOSSY": ("*color", "roughness", "*normal"),
     "BSDF_GLASS": ("*color", "roughness", "ior", "*normal"),
