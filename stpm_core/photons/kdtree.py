@@ -566,10 +566,11 @@ if AVAILABLE:
         return g0, g1, g2
 
     @_jit
-    def _lookup(P, C, box, n_leaves, q, ns, ng, plane_b, plane_f, mode, kq, k, s, cone, cone_k, cap2, out_phi, out_r,
-                out_tau,
-                glossy, gC, gW, E, E_avg, coat_w, out_g):
-        """Fused search + reduction for queries q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32.
+    def _lookup(P, C, box, n_leaves, q, ns, ng, order, plane_b, plane_f, mode, kq, k, s, cone, cone_k, cap2, out_phi,
+                out_r, out_tau, glossy, gC, gW, E, E_avg, coat_w, out_g):
+        """Fused search + reduction for the queries ``order`` (m,) int64 (rows of q, in the order searched) of
+        q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32; query i's results go to row i of the outputs
+        (rows not in order are left as they are).
 
         P (N, 8) float32 rows (wi, delta_only, Phi, 0) and C (4, N) float32 coordinate rows, both in
         tree order.
@@ -614,9 +615,9 @@ if AVAILABLE:
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
-        n = q.shape[0]
         full = False                           # bi[:kq] holds the previous query's kq nearest
-        for i in range(n):
+        for ii in range(order.shape[0]):
+            i = order[ii]
             q0, q1, q2, q3 = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
             # -- the kq nearest by a tree search, warm-started: the previous query's kq nearest
             # (still in bi[:kq]) are kq photons within the farthest of them from q; never beyond the cap
@@ -640,12 +641,14 @@ if AVAILABLE:
             n_sel = kq - 1 if full else c
             tau = np.inf
             ties = 0
-            if mode == MODE_TEMPORAL and not full:
+            if mode != MODE_TEMPORAL:
+                out_tau[i] = 0.0
+            elif not full:
                 # capped: no time selection, every candidate (finite time distances < tau = inf)
                 for a in range(c):
                     bx[a] = abs(np.float64(C[3, bi[a]]) - q3)
                 out_tau[i] = tau
-            elif mode == MODE_TEMPORAL:
+            else:
                 # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau.
                 # (their time distances, computed for the kept photons only)
                 for a in range(kq - 1):
@@ -864,19 +867,37 @@ if AVAILABLE:
                 out_g[i, 2] = g2
 
     @_jit
-    def _morton(q, lo, scale, D):
-        """Morton codes (n,) int64 of the first D columns of q quantised to 2^10 cells per axis."""
-        n = q.shape[0]
-        code = np.zeros(n, np.int64)
-        for i in range(n):
+    def _morton_order(q, rows, D):
+        """Rows (m,) int64 of q (n, 4) float64 listed in ``rows`` (m,) int64, sorted by the Morton code of
+        their first D columns, each quantised to 2^10 cells over the rows' bounding box (stable among
+        equal codes).  One compiled pass: numpy's reductions over an (m, 4) array cost more than the
+        sort at a look-up batch's few hundred rows."""
+        m = rows.shape[0]
+        lo = np.full(4, np.inf)
+        hi = np.full(4, -np.inf)
+        for ii in range(m):
+            i = rows[ii]
+            for a in range(D):
+                lo[a] = min(lo[a], q[i, a])
+                hi[a] = max(hi[a], q[i, a])
+        scale = np.empty(4)
+        for a in range(D):
+            scale[a] = 1024.0 / max(hi[a] - lo[a], 1e-30)
+        code = np.zeros(m, np.int64)
+        for ii in range(m):
+            i = rows[ii]
             c = 0
             for a in range(D):
                 v = int((q[i, a] - lo[a]) * scale[a])
                 v = min(max(v, 0), 1023)
                 for b in range(10):
                     c |= ((v >> b) & 1) << (D * b + a)
-            code[i] = c
-        return code
+            code[ii] = c
+        perm = np.argsort(code, kind="mergesort")
+        out = np.empty(m, np.int64)
+        for ii in range(m):
+            out[ii] = rows[perm[ii]]
+        return out
 
 
 _NO_C = np.zeros((0, 1))          # no glossy sums: empty closure rows / hit rows, GGX tables
@@ -884,6 +905,14 @@ _NO_E = np.zeros((1, 1, 1))
 _NO_EA = np.zeros(1)
 _NO_E.setflags(write=False)          # read-only as the GGX tables (kernels.bsdf): one compiled signature
 _NO_EA.setflags(write=False)
+
+
+def morton_order(q: np.ndarray, D: int, rows: np.ndarray | None = None) -> np.ndarray:
+    """Rows (m,) int64 of q (n, 4) float64 -- all of them, or those in ``rows`` -- sorted by the Morton
+    code of their first D columns (2^10 cells per axis over their bounding box; stable among equal
+    codes): :func:`_morton_order`."""
+    rows = np.arange(q.shape[0], dtype=np.int64) if rows is None else np.ascontiguousarray(rows, dtype=np.int64)
+    return _morton_order(q, rows, D)
 
 
 def _plane_c(plane) -> float:
@@ -936,7 +965,8 @@ class FlatTree:
 
     def lookup(self, mode: int, q: np.ndarray, ns: np.ndarray, kq: int, k: int, cone: bool, cone_k: float,
                workers: int, glossy=None, cap: float = np.inf, *, ng: np.ndarray | None = None,
-               plane: float = np.inf, plane_front: float | None = None):
+               plane: float = np.inf, plane_front: float | None = None, rows: np.ndarray | None = None,
+               out: tuple | None = None):
         """Sums Phi (n, 3) W, radius r (n,) m of the kq-th neighbour and TEMPORAL's tau (n,) for queries q (n, 4).
 
         cap: the search's largest radius r_max (m, in the tree's dimensions; inf: unbounded).  A query
@@ -951,9 +981,15 @@ class FlatTree:
         each query's hit, E, E_avg the GGX tables, coat_w): then a fourth result, the sums (n, 3) of
         w f_c(wo, wi) Phi over the same photons with a delta-only path (:func:`_lookup`).
 
-        Queries are processed in Morton order (of x, y, z, plus s t for KD4D; results come back in the
-        input order), so consecutive queries are neighbours: the tree nodes they read stay in
-        cache and each search starts from the previous one's radius.
+        rows (m,) int64: answer only these rows of q (and of ns, ng, glossy's), e.g. one time slice's
+        queries, without gathering them into new arrays; out: (phi, r, tau[, g]) float64 arrays of n
+        rows to write the answers into (their other rows are left as they are), returned as the
+        results.  Default: every row, into new arrays.
+
+        Queries are processed in Morton order (of x, y, z, plus s t for KD4D: :func:`morton_order`),
+        so consecutive queries are neighbours: the tree nodes they read stay in cache and each
+        search starts from the previous one's radius.  The kernel reads and writes the rows in
+        place through that order (no sorted copies of the queries, no permuted copies of the results).
         Requires 1 <= kq <= N (and for TEMPORAL 2 <= k < kq): the search reads kq photons.
         """
         N = self.pts.shape[0]
@@ -965,39 +1001,30 @@ class FlatTree:
         n = q.shape[0]
         q = np.ascontiguousarray(q, dtype=np.float64)
         ns = np.ascontiguousarray(ns, dtype=np.float32)
+        ng = ns if ng is None else np.ascontiguousarray(np.asarray(ng, np.float32).reshape(-1, 3))
         D = 4 if mode == MODE_KD4D else 3
-        lo = q.min(axis=0)
-        scale = 1024.0 / np.maximum(q.max(axis=0) - lo, 1e-30)
-        order = np.argsort(_morton(q, lo, scale, D), kind="stable")
-        qs, nss = q[order], ns[order]
-        ngs = nss if ng is None else np.ascontiguousarray(np.asarray(ng, np.float32).reshape(-1, 3)[order])
+        order = morton_order(q, D, rows)
         plane_b, plane_f = _plane_c(plane), _plane_c(plane if plane_front is None else plane_front)
-        phi = np.zeros((n, 3))
-        r = np.zeros(n)
-        tau = np.zeros(n)
-        g = np.zeros((n if glossy is not None else 0, 3))
+        if out is None:
+            phi, r, tau = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
+            g = np.zeros((n if glossy is not None else 0, 3))
+        else:
+            phi, r, tau = out[:3]
+            g = out[3] if glossy is not None else np.zeros((0, 3))
         if glossy is not None:
-            gC = np.ascontiguousarray(glossy[0][order], np.float64)
-            gW = np.ascontiguousarray(glossy[1][order], np.float64)
+            gC = np.ascontiguousarray(glossy[0], np.float64)
+            gW = np.ascontiguousarray(glossy[1], np.float64)
             E_t, E_avg, coat_w = glossy[2], glossy[3], float(glossy[4])
         else:
             gC, gW, E_t, E_avg, coat_w = _NO_C, _NO_C, _NO_E, _NO_EA, 0.0
 
         def part(a, b):
-            ga, gb = (a, b) if glossy is not None else (0, 0)
-            _lookup(self.pts, self.xyzt, self.box, self.n_leaves, qs[a:b], nss[a:b], ngs[a:b], plane_b, plane_f, mode,
-                    kq, k, self.s, cone, cone_k, cap2,
-                    phi[a:b], r[a:b], tau[a:b], glossy is not None, gC[ga:gb], gW[ga:gb], E_t, E_avg, coat_w,
-                    g[ga:gb])
+            _lookup(self.pts, self.xyzt, self.box, self.n_leaves, q, ns, ng, order[a:b], plane_b, plane_f, mode,
+                    kq, k, self.s, cone, cone_k, cap2, phi, r, tau, glossy is not None, gC, gW, E_t, E_avg, coat_w,
+                    g)
 
-        run_chunks(part, n, workers)
-        out_phi, out_r, out_tau = np.empty_like(phi), np.empty_like(r), np.empty_like(tau)
-        out_phi[order], out_r[order], out_tau[order] = phi, r, tau
-        if glossy is None:
-            return out_phi, out_r, out_tau
-        out_g = np.empty_like(g)
-        out_g[order] = g
-        return out_phi, out_r, out_tau, out_g
+        run_chunks(part, order.shape[0], workers)
+        return (phi, r, tau) if glossy is None else (phi, r, tau, g)
 
     def knn_radius(self, q: np.ndarray, kq: int, cap: float, workers: int) -> np.ndarray:
         """Distance (n,) m to the kq-th nearest photon of each query q (n, 4) (x, y, z, s t), capped at ``cap``.
@@ -1013,9 +1040,7 @@ class FlatTree:
         out = np.empty(n)
         if n == 0:
             return out
-        lo = q.min(axis=0)
-        scale = 1024.0 / np.maximum(q.max(axis=0) - lo, 1e-30)
-        order = np.argsort(_morton(q, lo, scale, D), kind="stable")
+        order = morton_order(q, D)
         qs = q[order]
         r = np.empty(n)
         cap2 = float(cap) ** 2 if np.isfinite(cap) else np.inf
