@@ -615,10 +615,24 @@ if AVAILABLE:
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
-        full = False                           # bi[:kq] holds the previous query's kq nearest
-        for ii in range(order.shape[0]):
+        # the queries' rows gathered in search order first, the results scattered back last: one
+        # streaming pass each, where reading and writing rows scattered over the caller's arrays
+        # inside the search loop stalls it (a time slice's queries are a subset of a large batch)
+        m = order.shape[0]
+        qs = np.empty((m, 4))
+        nn = np.empty((m, 6), np.float32)      # ns, ng
+        res = np.empty((m, 5))                 # phi, r, tau
+        for ii in range(m):
             i = order[ii]
-            q0, q1, q2, q3 = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+            for a in range(4):
+                qs[ii, a] = q[i, a]
+            for a in range(3):
+                nn[ii, a] = ns[i, a]
+                nn[ii, 3 + a] = ng[i, a]
+        full = False                           # bi[:kq] holds the previous query's kq nearest
+        for ii in range(m):
+            i = order[ii]
+            q0, q1, q2, q3 = qs[ii, 0], qs[ii, 1], qs[ii, 2], qs[ii, 3]
             # -- the kq nearest by a tree search, warm-started: the previous query's kq nearest
             # (still in bi[:kq]) are kq photons within the farthest of them from q; never beyond the cap
             qq[0], qq[1], qq[2], qq[3] = q0, q1, q2, q3
@@ -637,17 +651,17 @@ if AVAILABLE:
             # slot kq - 1 = the kq-th neighbour (fixes the radius); slots 0 .. kq - 2 are inner.
             # Capped (c < kq within r_max): the c photons bd[:c] inside the r_max ball, r = r_max
             r = np.sqrt(bd[kq - 1]) if full else np.sqrt(cap2)
-            out_r[i] = r
+            res[ii, 3] = r
             n_sel = kq - 1 if full else c
             tau = np.inf
             ties = 0
             if mode != MODE_TEMPORAL:
-                out_tau[i] = 0.0
+                res[ii, 4] = 0.0
             elif not full:
                 # capped: no time selection, every candidate (finite time distances < tau = inf)
                 for a in range(c):
                     bx[a] = abs(np.float64(C[3, bi[a]]) - q3)
-                out_tau[i] = tau
+                res[ii, 4] = tau
             else:
                 # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau.
                 # (their time distances, computed for the kept photons only)
@@ -658,10 +672,10 @@ if AVAILABLE:
                 # at exactly tau as make k - 1.
                 tau, n_less = _kth_smallest_count(bx, kq - 1, k - 1, hist, bucket, sub)
                 ties = k - 1 - n_less
-                out_tau[i] = tau
+                res[ii, 4] = tau
             inv_r = 1.0 / (cone_k * max(r, 1e-300))
-            n0, n1, n2 = ns[i, 0], ns[i, 1], ns[i, 2]
-            m0, m1, m2 = np.float64(ng[i, 0]), np.float64(ng[i, 1]), np.float64(ng[i, 2])
+            n0, n1, n2 = nn[ii, 0], nn[ii, 1], nn[ii, 2]
+            m0, m1, m2 = np.float64(nn[ii, 3]), np.float64(nn[ii, 4]), np.float64(nn[ii, 5])
             # (no slab for a zero normal or two open sides: the test skipped, not only passed)
             slab = (m0 != 0.0 or m1 != 0.0 or m2 != 0.0) and (plane_b < np.inf or plane_f < np.inf)
             r2 = bd[kq - 1] if full else cap2     # the tangent slab's reach (_in_slab): r^2, KD4D's R^2
@@ -707,11 +721,18 @@ if AVAILABLE:
                     p0 += w * P[j, 4]
                     p1 += w * P[j, 5]
                     p2 += w * P[j, 6]
-            out_phi[i, 0] = p0
-            out_phi[i, 1] = p1
-            out_phi[i, 2] = p2
+            res[ii, 0] = p0
+            res[ii, 1] = p1
+            res[ii, 2] = p2
             if glossy:
                 out_g[i, 0], out_g[i, 1], out_g[i, 2] = _glossy_sum(P, bi, wk, n_sel, gC, i, E, E_avg, gW, coat_w)
+        for ii in range(m):
+            i = order[ii]
+            out_phi[i, 0] = res[ii, 0]
+            out_phi[i, 1] = res[ii, 1]
+            out_phi[i, 2] = res[ii, 2]
+            out_r[i] = res[ii, 3]
+            out_tau[i] = res[ii, 4]
 
     @_jit
     def _knn_radius(C, box, n_leaves, q, D, s, kq, cap2, out_r):
