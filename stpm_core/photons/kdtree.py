@@ -888,11 +888,10 @@ if AVAILABLE:
                 out_g[i, 2] = g2
 
     @_jit
-    def _morton_order(q, rows, D):
-        """Rows (m,) int64 of q (n, 4) float64 listed in ``rows`` (m,) int64, sorted by the Morton code of
-        their first D columns, each quantised to 2^10 cells over the rows' bounding box (stable among
-        equal codes).  One compiled pass: numpy's reductions over an (m, 4) array cost more than the
-        sort at a look-up batch's few hundred rows."""
+    def _morton_codes(q, rows, D):
+        """Morton codes (m,) int64 of the rows ``rows`` (m,) int64 of q (n, 4) float64: their first D columns
+        each quantised to 2^10 cells over the rows' bounding box.  One compiled pass: numpy's reductions
+        over an (m, 4) array cost more than the codes at a look-up batch's few hundred rows."""
         m = rows.shape[0]
         lo = np.full(4, np.inf)
         hi = np.full(4, -np.inf)
@@ -914,11 +913,7 @@ if AVAILABLE:
                 for b in range(10):
                     c |= ((v >> b) & 1) << (D * b + a)
             code[ii] = c
-        perm = np.argsort(code, kind="mergesort")
-        out = np.empty(m, np.int64)
-        for ii in range(m):
-            out[ii] = rows[perm[ii]]
-        return out
+        return code
 
 
 _NO_C = np.zeros((0, 1))          # no glossy sums: empty closure rows / hit rows, GGX tables
@@ -931,9 +926,9 @@ _NO_EA.setflags(write=False)
 def morton_order(q: np.ndarray, D: int, rows: np.ndarray | None = None) -> np.ndarray:
     """Rows (m,) int64 of q (n, 4) float64 -- all of them, or those in ``rows`` -- sorted by the Morton
     code of their first D columns (2^10 cells per axis over their bounding box; stable among equal
-    codes): :func:`_morton_order`."""
+    codes; :func:`_morton_codes`, then numpy's stable sort, faster than numba's above a few hundred rows)."""
     rows = np.arange(q.shape[0], dtype=np.int64) if rows is None else np.ascontiguousarray(rows, dtype=np.int64)
-    return _morton_order(q, rows, D)
+    return rows[np.argsort(_morton_codes(q, rows, D), kind="stable")]
 
 
 def _plane_c(plane) -> float:
