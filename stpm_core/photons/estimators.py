@@ -371,7 +371,8 @@ class PhotonMap:
         r_max = SEARCH_CAP_FACTOR x the SEARCH_CAP_PERCENTILE-th percentile over up to SEARCH_CAP_SAMPLE
         of the tree's photons (strided in tree order: spread over the map as its photons are) of the
         distance to their own kq-th neighbour, the photon itself not counted.  Computed once per
-        (tree, kq).
+        (tree, kq): by :meth:`build` for the searches its estimator makes (map building), else at the
+        first look-up that needs it.
         """
         if not (SEARCH_CAP and self.bounded):
             return np.inf

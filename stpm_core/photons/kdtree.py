@@ -61,10 +61,15 @@ Bounded searches (``_lookup``'s cap2, ``FlatTree.lookup(..., cap=r_max)``): the 
 min(warm start, r_max^2) and never looks beyond r_max; a query with fewer than kq photons strictly
 within r_max sums all of them over the r_max region (TEMPORAL: no time selection, tau = inf) and
 leaves no warm start for the next query.  Which maps are bounded and how r_max is chosen:
-:mod:`.estimators` (``SEARCH_CAP``), docs/photon-mapping.md ("Bounded searches").
+:mod:`.estimators` (``SEARCH_CAP``, found when the map is built), docs/photon-mapping.md ("Bounded searches").
 
 Queries are processed in Morton order, so consecutive queries are neighbours
-(warm start, tree nodes in cache).  An exact candidate cache (photons within
+(warm start, tree nodes in cache).  The order is a list of row indices
+(:func:`morton_order`: compiled codes, a radix sort for large batches); the
+kernel gathers those rows of the caller's arrays into contiguous scratch, searches,
+and scatters the results back, so a batch (or one time slice's part of it:
+``FlatTree.lookup(rows=, out=)``) is never copied or permuted in numpy
+(docs/photon-mapping.md, "Look-up overheads").  An exact candidate cache (photons within
 r_c + 2 beta r_c of the last full search, reused by the queries within beta
 r_c of it) was measured slower than a warm-started search in every render
 tried (2026-11-25: STANDARD 0.49 -> 0.31 s, TEMPORAL 0.59 -> 0.46 s, KD4D
