@@ -97,6 +97,37 @@ def test_glossy_sums_match_the_oracle(mode, mat):
     assert g.sum() > 0.0
 
 
+def test_glossy_sums_of_some_rows_in_place_equal_a_look_up_of_those_rows():
+    # FlatTree.lookup(rows=, out=) with glossy sums (PhotonMap._search_sliced: one time slice's
+    # queries): each row reads its own closure and hit rows (gC, gW of the whole batch) and writes
+    # its sums in place, bit for bit a look-up of the gathered rows; other rows untouched
+    rng = np.random.default_rng(9)
+    rec, _ = _map(rng)
+    tree = kdtree.FlatTree(rec["position"], rec["time"], _packed(rec), dims=3, s=1.0)
+    n = 60
+    q = np.zeros((n, 4))
+    q[:, :2] = rng.uniform(-0.8, 0.8, (n, 2))
+    q[:, 3] = rng.uniform(0.1, 0.9, n)
+    ns = np.tile([0.0, 0.0, 1.0], (n, 1)).astype(np.float32)
+    wo = rng.normal(size=(n, 3))
+    wo[:, 2] = np.abs(wo[:, 2]) + 0.2
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    C = pack_materials([Material(base_color=np.full(3, 0.4), roughness=0.6, specular=1.0),
+                        Material(base_color=np.array([0.9, 0.6, 0.4]), metallic=1.0, roughness=0.5)])
+    E, E_avg = ggx_albedo_tables()
+    gC = np.ascontiguousarray(C[rng.integers(0, 2, n)])          # two materials, mixed over the rows
+    gW = np.concatenate([wo, ns, ns], axis=1)
+    rows = rng.choice(n, 25, replace=False)
+    out = tuple(np.full(shape, 5.0) for shape in ((n, 3), n, n, (n, 3)))
+    got = tree.lookup(kdtree.MODE_TEMPORAL, q, ns, 90, 30, False, 1.1, 1, (gC, gW, E, E_avg, 1.0), rows=rows, out=out)
+    want = tree.lookup(kdtree.MODE_TEMPORAL, q[rows], ns[rows], 90, 30, False, 1.1, 1,
+                       (gC[rows], gW[rows], E, E_avg, 1.0))
+    others = np.setdiff1d(np.arange(n), rows)
+    for a, b, c in zip(got, want, out):
+        assert a is c and np.array_equal(a[rows], b) and np.all(a[others] == 5.0)
+    assert want[3].sum() > 0.0
+
+
 @pytest.mark.parametrize("cone", [False, True])
 @pytest.mark.parametrize("cyl", [False, True])
 def test_range_glossy_sums_match_the_oracle(cone, cyl):

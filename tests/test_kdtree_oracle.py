@@ -151,6 +151,55 @@ def test_knn_lookups_split_over_threads_equal_one_thread():
     assert_sums(one[0], two[0])
 
 
+def test_knn_lookups_of_some_rows_into_given_arrays_equal_a_look_up_of_those_rows():
+    # FlatTree.lookup(rows=, out=) (PhotonMap._search_sliced: one time slice's queries of a batch): the
+    # rows' answers written in place, bit for bit those of a look-up of the gathered rows (what the
+    # slices did until 2026-12-07); every other row of out untouched
+    rng = np.random.default_rng(6)
+    pos, t, packed = photon_arrays(rng, 20_000)
+    n = 3000
+    q, ns = query_arrays(rng, n, pos)
+    ng = ns[rng.permutation(n)]
+    tree = kdtree.FlatTree(pos, t, packed, dims=3, s=S)
+    rows = rng.choice(n, 1100, replace=False)                # (any order: the look-up sorts them)
+    others = np.setdiff1d(np.arange(n), rows)
+    for mode, kq, k in ((kdtree.MODE_STANDARD, 40, 40), (kdtree.MODE_TEMPORAL, 75, 50)):
+        cap = float(np.median(tree.lookup(mode, q, ns, kq, k, False, 1.1, 1)[1]))   # about half capped
+        for cone in (False, True):
+            out = (np.full((n, 3), 7.0), np.full(n, 7.0), np.full(n, 7.0))
+            got = tree.lookup(mode, q, ns, kq, k, cone, 1.1, 1, cap=cap, ng=ng, plane=0.5, rows=rows, out=out)
+            assert all(a is b for a, b in zip(got, out))
+            ref = tree.lookup(mode, q[rows], ns[rows], kq, k, cone, 1.1, 1, cap=cap, ng=ng[rows], plane=0.5)
+            for a, b in zip(got, ref):
+                assert np.array_equal(a[rows], b), (mode, cone)
+                assert np.all(a[others] == 7.0)
+            assert 0.2 < np.mean(ref[1] >= cap) < 0.8
+
+
+def test_morton_order_is_the_stable_sort_of_z_curve_codes():
+    # kdtree.morton_order (compiled) against numpy: codes of the rows' first D columns quantised to
+    # 2^10 cells over the rows' own bounding box, sorted stably (ties: many queries in one cell)
+    rng = np.random.default_rng(8)
+
+    def reference(sub, D):
+        lo = sub.min(axis=0)
+        v = np.clip(((sub - lo) * (1024.0 / np.maximum(sub.max(axis=0) - lo, 1e-30))).astype(np.int64), 0, 1023)
+        code = np.zeros(len(sub), np.int64)
+        for b in range(10):
+            for a in range(D):
+                code |= ((v[:, a] >> b) & 1) << (D * b + a)
+        return np.argsort(code, kind="stable")
+
+    for n in (1, 2, 85, 5000):
+        q = rng.random((n, 4)) * [3.0, 1.0, 1e-3, 1.0]
+        q[: n // 2, :3] = np.round(q[: n // 2, :3], 2)          # repeated cells
+        for D in (3, 4):
+            assert np.array_equal(kdtree.morton_order(q, D), reference(q, D))
+            rows = rng.permutation(n)[: max(1, n // 3)]
+            assert np.array_equal(kdtree.morton_order(q, D, rows), rows[reference(q[rows], D)])
+    assert kdtree.morton_order(np.zeros((0, 4)), 3).shape == (0,)
+
+
 @pytest.mark.parametrize("name,N,dup,one_point,seed", CASES, ids=[c[0] for c in CASES])
 def test_knn_radius_equals_brute_force(name, N, dup, one_point, seed):
     rng = np.random.default_rng(10 + seed)

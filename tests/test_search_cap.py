@@ -168,6 +168,34 @@ def test_bounded_estimate_is_the_sum_within_min_rk_rmax_over_its_area():
 
 
 @pytest.mark.parametrize("estimator", ["STANDARD", "TEMPORAL", "KD4D"])
+def test_caps_are_found_at_map_build_not_in_the_first_look_up(monkeypatch, estimator):
+    # PhotonMap.build finds every search cap its look-ups will use (each TEMPORAL time slice's too):
+    # map building, not look-up time.  Then no look-up searches for one, and the estimates are
+    # those of a map whose caps were found lazily, bit for bit
+    rng = np.random.default_rng(12)
+    built = _plane_map(np.random.default_rng(4), 30_000, bounded=True)
+    lazy = PhotonMap(built.records, Shutter(1.0, 2.0), time_scale=1.0, bounded=True)
+    built.build(estimator, k=50)
+    caps = dict(built._caps)
+    n_trees = estimators.temporal_slices(built.n, 50) if estimator == "TEMPORAL" else 1
+    assert len(caps) == n_trees and (n_trees >= 2 or estimator != "TEMPORAL")
+    p = np.zeros((300, 3))
+    p[:, :2] = rng.uniform(-2, 2, (300, 2))
+    up = np.tile([0.0, 0.0, 1.0], (300, 1))
+    t = rng.random(300)
+    searched = []
+    knn_radius = kdtree.FlatTree.knn_radius
+    monkeypatch.setattr(kdtree.FlatTree, "knn_radius", lambda *a, **kw: searched.append(1) or knn_radius(*a, **kw))
+    E = built.estimate(p, up, t, estimator=estimator, k=50)
+    assert not searched and built._caps == caps
+    E_lazy = lazy.estimate(p, up, t, estimator=estimator, k=50)
+    assert len(searched) == n_trees                          # (the lazy map searched for its caps)
+    assert sorted(lazy._caps.values()) == sorted(caps.values())
+    assert np.array_equal(E, E_lazy)
+    assert built.stats["capped_count"] == lazy.stats["capped_count"] > 0
+
+
+@pytest.mark.parametrize("estimator", ["STANDARD", "TEMPORAL", "KD4D"])
 def test_cap_off_is_the_unbounded_search_bit_for_bit(monkeypatch, estimator):
     rng = np.random.default_rng(11)
     rec_rng = np.random.default_rng(3)

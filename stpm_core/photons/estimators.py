@@ -371,7 +371,8 @@ class PhotonMap:
         r_max = SEARCH_CAP_FACTOR x the SEARCH_CAP_PERCENTILE-th percentile over up to SEARCH_CAP_SAMPLE
         of the tree's photons (strided in tree order: spread over the map as its photons are) of the
         distance to their own kq-th neighbour, the photon itself not counted.  Computed once per
-        (tree, kq).
+        (tree, kq): by :meth:`build` for the searches its estimator makes (map building), else at the
+        first look-up that needs it.
         """
         if not (SEARCH_CAP and self.bounded):
             return np.inf
@@ -392,32 +393,70 @@ class PhotonMap:
             self._caps[key] = cap
         return cap
 
-    def _capped_lookup(self, tree, mode, q, ns, kq, k, kernel, ng, glossy=None):
+    def _capped_lookup(self, tree, mode, q, ns, kq, k, kernel, ng, glossy=None, rows=None, out=None):
         """tree.lookup(...) in the tangent slab of the normals ng (:func:`_slab_normals`), capped at
-        :meth:`search_cap` (counted in ``stats['capped_count']``)."""
+        :meth:`search_cap` (counted in ``stats['capped_count']``); rows, out: ``FlatTree.lookup``'s
+        (answer only those rows of the queries, into those arrays)."""
         cap = self.search_cap(tree, kq)
-        out = tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers, glossy, cap=cap, ng=ng,
-                          plane=PLANE_FRACTION, plane_front=PLANE_FRONT)
+        res = tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers, glossy, cap=cap, ng=ng,
+                          plane=PLANE_FRACTION, plane_front=PLANE_FRONT, rows=rows, out=out)
         if np.isfinite(cap):
-            self.stats["capped_count"] += int(np.count_nonzero(out[1] >= cap))
-        return out
+            r = res[1] if rows is None else res[1][rows]
+            self.stats["capped_count"] += int(np.count_nonzero(r >= cap))
+        return res
 
     def build(self, estimator: str, *, k: int = 50, temporal_alpha: float = 0.0) -> None:
-        """Build the tree(s) ``estimator`` needs now (so build time is not charged to look-ups)."""
+        """Build now the tree(s) ``estimator``'s look-ups read and their search caps (:meth:`search_cap`), so
+        that neither is charged to look-ups: both are map building (``stats['tree_build_s']``).
+
+        (Until 2026-12-07 the caps were found inside the first look-up of each tree: 2048 k-nearest
+        searches per tree, B of them for TEMPORAL's B time slices against one for STANDARD's tree;
+        docs/photon-mapping.md, "Bounded searches".)
+        """
         if self.n == 0:
             return
-        dims = 4 if estimator == "KD4D" and not self.timeless else 3
-        B = temporal_slices(self.n, k, temporal_alpha) if estimator == "TEMPORAL" and not self.timeless else 1
+        estimator, k, m, B = self._plan(estimator.upper(), k, temporal_alpha)
+        self._numba_or_scipy(lambda: self._build_searches(estimator, k, m, B))
+
+    def _build_searches(self, estimator: str, k: int, m: int, B: int) -> None:
+        """:meth:`build` with the map's current engine, for :meth:`_plan`'s (estimator, k, m, B)."""
         if B > 1:
-            self._numba_or_scipy(lambda: self.time_slices(B))
+            sl = self.time_slices(B)
+            # each slice's search as _search_sliced makes it: kq = m_j = min(m, its photons), if k_j >= 2
+            searches = [(tree, min(m, len(rows))) for rows, tree in zip(sl["rows"], sl["trees"])
+                        if tree is not None and min(k, min(m, len(rows)) - 1) >= 2]
+        elif self.backend == "numba":
+            searches = [(self.flat_tree(4 if estimator == "KD4D" else 3), m if estimator == "TEMPORAL" else k)]
+        else:
+            self.tree4() if estimator == "KD4D" else self.tree3()
             return
-        if self.backend == "numba":
-            try:
-                self.flat_tree(dims)
-                return
-            except Exception as exc:  # noqa: BLE001 -- a compile failure falls back to scipy
-                self._fall_back(exc)
-        self.tree4() if dims == 4 else self.tree3()
+        if self.backend != "numba":
+            return
+        t0 = _time.perf_counter()
+        for tree, kq in searches:
+            self.search_cap(tree, kq)
+        self.stats["tree_build_s"] += _time.perf_counter() - t0
+
+    def _plan(self, estimator: str, k: int, temporal_alpha: float) -> tuple[str, int, int, int]:
+        """(estimator, k, m, B) of :meth:`estimate`'s searches on this map (n >= 2 photons) for an upper-case
+        estimator name: the estimator actually run (STANDARD on a timeless map, or for TEMPORAL with
+        fewer than 2 photons to select), k >= 2 clipped to the map, TEMPORAL's candidates m (else m = k)
+        and its time slices B (else 1)."""
+        if self.timeless:
+            estimator = "STANDARD"  # time adds nothing: every photon has the same time
+        # k >= 2 so there is at least one inner photon; never more than the map holds
+        k = int(min(max(k, 2), self.n))
+        m = k
+        B = 1
+        if estimator == "TEMPORAL":
+            B = temporal_slices(self.n, k, temporal_alpha)
+            m = min(temporal_candidates(self.n, k, temporal_alpha), self.n)
+            k = min(k, m - 1)
+            if k < 2:
+                estimator = "STANDARD"
+                k = m = int(min(self.n, 2))
+                B = 1
+        return estimator, k, m, B
 
     def _numba_or_scipy(self, fn):
         """fn() with the current engine; if the compiled one fails, switch this map to scipy and call fn() again."""
@@ -480,20 +519,9 @@ class PhotonMap:
         estimator = estimator.upper()
         if estimator not in ESTIMATOR_NAMES:
             raise ValueError(f"unknown estimator {estimator!r}")
-        if self.timeless:
-            estimator = "STANDARD"  # time adds nothing: every photon has the same time
-        # k >= 2 so there is at least one inner photon; never more than the map holds
-        k = int(min(max(k, 2), self.n))
-        m = k
-        B = 1
-        if estimator == "TEMPORAL":
-            B = temporal_slices(self.n, k, temporal_alpha)
-            m = min(temporal_candidates(self.n, k, temporal_alpha), self.n)
-            k = min(k, m - 1)
-            if k < 2:
-                estimator = "STANDARD"
-                k = m = int(min(self.n, 2))
-                B = 1
+        asked = estimator
+        estimator, k, m, B = self._plan(estimator, k, temporal_alpha)
+        if asked == "TEMPORAL" and not self.timeless:
             self.stats["temporal_candidates"] = m
             self.stats["temporal_slices"] = B
         t0 = _time.perf_counter()
@@ -562,6 +590,12 @@ class PhotonMap:
         Phi, r, tau = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
         G = np.zeros((n, 3)) if glossy is not None else None
         lo, hi = edges[which], edges[which + 1]
+        if sl["backend"] == "numba":
+            # every slice's queries read and answered in place (FlatTree.lookup's rows and out)
+            qq = np.empty((n, 4))
+            qq[:, :3] = p
+            qq[:, 3] = t
+            res = (Phi, r, tau) if glossy is None else (Phi, r, tau, G)
         for j in range(B):
             q = order[starts[j]:starts[j + 1]]
             rows, tree = sl["rows"][j], sl["trees"][j]
@@ -572,16 +606,7 @@ class PhotonMap:
             if kj < 2:                                  # a nearly empty slice: nothing to estimate with
                 continue
             if sl["backend"] == "numba":
-                qq = np.empty((len(q), 4))
-                qq[:, :3] = p[q]
-                qq[:, 3] = t[q]
-                if glossy is not None:
-                    gq = (glossy[0][q], glossy[1][q]) + tuple(glossy[2:])
-                    Phi[q], r[q], tau[q], G[q] = self._capped_lookup(tree, _kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj,
-                                                                     kernel, ng[q], gq)
-                    continue
-                Phi[q], r[q], tau[q] = self._capped_lookup(tree, _kdtree.MODE_TEMPORAL, qq, ns[q], mj, kj, kernel,
-                                                           ng[q])
+                self._capped_lookup(tree, _kdtree.MODE_TEMPORAL, qq, ns, mj, kj, kernel, ng, glossy, rows=q, out=res)
             else:
                 batch = max(256, _QUERY_BATCH_ELEMS // mj)
                 for a in range(0, len(q), batch):

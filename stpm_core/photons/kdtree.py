@@ -61,10 +61,15 @@ Bounded searches (``_lookup``'s cap2, ``FlatTree.lookup(..., cap=r_max)``): the 
 min(warm start, r_max^2) and never looks beyond r_max; a query with fewer than kq photons strictly
 within r_max sums all of them over the r_max region (TEMPORAL: no time selection, tau = inf) and
 leaves no warm start for the next query.  Which maps are bounded and how r_max is chosen:
-:mod:`.estimators` (``SEARCH_CAP``), docs/photon-mapping.md ("Bounded searches").
+:mod:`.estimators` (``SEARCH_CAP``, found when the map is built), docs/photon-mapping.md ("Bounded searches").
 
 Queries are processed in Morton order, so consecutive queries are neighbours
-(warm start, tree nodes in cache).  An exact candidate cache (photons within
+(warm start, tree nodes in cache).  The order is a list of row indices
+(:func:`morton_order`: compiled codes, a radix sort for large batches); the
+kernel gathers those rows of the caller's arrays into contiguous scratch, searches,
+and scatters the results back, so a batch (or one time slice's part of it:
+``FlatTree.lookup(rows=, out=)``) is never copied or permuted in numpy
+(docs/photon-mapping.md, "Look-up overheads").  An exact candidate cache (photons within
 r_c + 2 beta r_c of the last full search, reused by the queries within beta
 r_c of it) was measured slower than a warm-started search in every render
 tried (2026-11-25: STANDARD 0.49 -> 0.31 s, TEMPORAL 0.59 -> 0.46 s, KD4D
@@ -95,6 +100,14 @@ __all__ = ["AVAILABLE", "LEAF_SIZE", "MODE_STANDARD", "MODE_TEMPORAL", "MODE_KD4
 LEAF_SIZE = 32           # at most this many photons per leaf (2^L leaves of 16..32; docs/photon-mapping.md, section 5b)
 MODE_STANDARD, MODE_TEMPORAL, MODE_KD4D = 0, 1, 2
 _CHUNK_MIN = 2048        # fewer queries than this per thread are not split
+_RADIX_MIN = 4096        # queries Morton-sorted by radix from this many (numpy's argsort below: as fast there)
+
+# Morton codes: row D - 3 maps a 10-bit cell index v to v's bit b moved to bit D b (D = 3, 4)
+_SPREAD = np.zeros((2, 1024), np.int64)
+for _D in (3, 4):
+    for _b in range(10):
+        _SPREAD[_D - 3] |= ((np.arange(1024) >> _b) & 1) << (_D * _b)
+del _D, _b
 
 AVAILABLE, _IMPORT_ERROR = probe()
 if AVAILABLE:
@@ -566,10 +579,11 @@ if AVAILABLE:
         return g0, g1, g2
 
     @_jit
-    def _lookup(P, C, box, n_leaves, q, ns, ng, plane_b, plane_f, mode, kq, k, s, cone, cone_k, cap2, out_phi, out_r,
-                out_tau,
-                glossy, gC, gW, E, E_avg, coat_w, out_g):
-        """Fused search + reduction for queries q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32.
+    def _lookup(P, C, box, n_leaves, q, ns, ng, order, plane_b, plane_f, mode, kq, k, s, cone, cone_k, cap2, out_phi,
+                out_r, out_tau, glossy, gC, gW, E, E_avg, coat_w, out_g):
+        """Fused search + reduction for the queries ``order`` (m,) int64 (rows of q, in the order searched) of
+        q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32; query i's results go to row i of the outputs
+        (rows not in order are left as they are).
 
         P (N, 8) float32 rows (wi, delta_only, Phi, 0) and C (4, N) float32 coordinate rows, both in
         tree order.
@@ -614,10 +628,24 @@ if AVAILABLE:
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
-        n = q.shape[0]
+        # the queries' rows gathered in search order first, the results scattered back last: one
+        # streaming pass each, where reading and writing rows scattered over the caller's arrays
+        # inside the search loop stalls it (a time slice's queries are a subset of a large batch)
+        m = order.shape[0]
+        qs = np.empty((m, 4))
+        nn = np.empty((m, 6), np.float32)      # ns, ng
+        res = np.empty((m, 5))                 # phi, r, tau
+        for ii in range(m):
+            i = order[ii]
+            for a in range(4):
+                qs[ii, a] = q[i, a]
+            for a in range(3):
+                nn[ii, a] = ns[i, a]
+                nn[ii, 3 + a] = ng[i, a]
         full = False                           # bi[:kq] holds the previous query's kq nearest
-        for i in range(n):
-            q0, q1, q2, q3 = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+        for ii in range(m):
+            i = order[ii]
+            q0, q1, q2, q3 = qs[ii, 0], qs[ii, 1], qs[ii, 2], qs[ii, 3]
             # -- the kq nearest by a tree search, warm-started: the previous query's kq nearest
             # (still in bi[:kq]) are kq photons within the farthest of them from q; never beyond the cap
             qq[0], qq[1], qq[2], qq[3] = q0, q1, q2, q3
@@ -636,16 +664,18 @@ if AVAILABLE:
             # slot kq - 1 = the kq-th neighbour (fixes the radius); slots 0 .. kq - 2 are inner.
             # Capped (c < kq within r_max): the c photons bd[:c] inside the r_max ball, r = r_max
             r = np.sqrt(bd[kq - 1]) if full else np.sqrt(cap2)
-            out_r[i] = r
+            res[ii, 3] = r
             n_sel = kq - 1 if full else c
             tau = np.inf
             ties = 0
-            if mode == MODE_TEMPORAL and not full:
+            if mode != MODE_TEMPORAL:
+                res[ii, 4] = 0.0
+            elif not full:
                 # capped: no time selection, every candidate (finite time distances < tau = inf)
                 for a in range(c):
                     bx[a] = abs(np.float64(C[3, bi[a]]) - q3)
-                out_tau[i] = tau
-            elif mode == MODE_TEMPORAL:
+                res[ii, 4] = tau
+            else:
                 # the k nearest in time among the kq - 1 inner candidates: the k-th fixes tau.
                 # (their time distances, computed for the kept photons only)
                 for a in range(kq - 1):
@@ -655,10 +685,10 @@ if AVAILABLE:
                 # at exactly tau as make k - 1.
                 tau, n_less = _kth_smallest_count(bx, kq - 1, k - 1, hist, bucket, sub)
                 ties = k - 1 - n_less
-                out_tau[i] = tau
+                res[ii, 4] = tau
             inv_r = 1.0 / (cone_k * max(r, 1e-300))
-            n0, n1, n2 = ns[i, 0], ns[i, 1], ns[i, 2]
-            m0, m1, m2 = np.float64(ng[i, 0]), np.float64(ng[i, 1]), np.float64(ng[i, 2])
+            n0, n1, n2 = nn[ii, 0], nn[ii, 1], nn[ii, 2]
+            m0, m1, m2 = np.float64(nn[ii, 3]), np.float64(nn[ii, 4]), np.float64(nn[ii, 5])
             # (no slab for a zero normal or two open sides: the test skipped, not only passed)
             slab = (m0 != 0.0 or m1 != 0.0 or m2 != 0.0) and (plane_b < np.inf or plane_f < np.inf)
             r2 = bd[kq - 1] if full else cap2     # the tangent slab's reach (_in_slab): r^2, KD4D's R^2
@@ -704,11 +734,18 @@ if AVAILABLE:
                     p0 += w * P[j, 4]
                     p1 += w * P[j, 5]
                     p2 += w * P[j, 6]
-            out_phi[i, 0] = p0
-            out_phi[i, 1] = p1
-            out_phi[i, 2] = p2
+            res[ii, 0] = p0
+            res[ii, 1] = p1
+            res[ii, 2] = p2
             if glossy:
                 out_g[i, 0], out_g[i, 1], out_g[i, 2] = _glossy_sum(P, bi, wk, n_sel, gC, i, E, E_avg, gW, coat_w)
+        for ii in range(m):
+            i = order[ii]
+            out_phi[i, 0] = res[ii, 0]
+            out_phi[i, 1] = res[ii, 1]
+            out_phi[i, 2] = res[ii, 2]
+            out_r[i] = res[ii, 3]
+            out_tau[i] = res[ii, 4]
 
     @_jit
     def _knn_radius(C, box, n_leaves, q, D, s, kq, cap2, out_r):
@@ -864,18 +901,52 @@ if AVAILABLE:
                 out_g[i, 2] = g2
 
     @_jit
-    def _morton(q, lo, scale, D):
-        """Morton codes (n,) int64 of the first D columns of q quantised to 2^10 cells per axis."""
-        n = q.shape[0]
-        code = np.zeros(n, np.int64)
-        for i in range(n):
+    def _radix_order(code, bits):
+        """The stable sort order (m,) int64 of code (m,) int64 (values below 2^bits): a least-significant-digit
+        radix sort, 10 bits a pass (numpy's stable argsort is a merge sort: 4x slower at 20k codes)."""
+        m = code.shape[0]
+        idx = np.arange(m)
+        tmp = np.empty(m, np.int64)
+        cnt = np.empty(1025, np.int64)
+        for shift in range(0, bits, 10):
+            cnt[:] = 0
+            for ii in range(m):
+                cnt[((code[idx[ii]] >> shift) & 1023) + 1] += 1
+            for b in range(1024):
+                cnt[b + 1] += cnt[b]
+            for ii in range(m):
+                i = idx[ii]
+                d = (code[i] >> shift) & 1023
+                tmp[cnt[d]] = i
+                cnt[d] += 1
+            idx, tmp = tmp, idx
+        return idx
+
+    @_jit
+    def _morton_codes(q, rows, D):
+        """Morton codes (m,) int64 of the rows ``rows`` (m,) int64 of q (n, 4) float64: their first D columns
+        each quantised to 2^10 cells over the rows' bounding box.  One compiled pass: numpy's reductions
+        over an (m, 4) array cost more than the codes at a look-up batch's few hundred rows."""
+        m = rows.shape[0]
+        lo = np.full(4, np.inf)
+        hi = np.full(4, -np.inf)
+        for ii in range(m):
+            i = rows[ii]
+            for a in range(D):
+                lo[a] = min(lo[a], q[i, a])
+                hi[a] = max(hi[a], q[i, a])
+        scale = np.empty(4)
+        for a in range(D):
+            scale[a] = 1024.0 / max(hi[a] - lo[a], 1e-30)
+        code = np.zeros(m, np.int64)
+        for ii in range(m):
+            i = rows[ii]
             c = 0
             for a in range(D):
                 v = int((q[i, a] - lo[a]) * scale[a])
                 v = min(max(v, 0), 1023)
-                for b in range(10):
-                    c |= ((v >> b) & 1) << (D * b + a)
-            code[i] = c
+                c |= _SPREAD[D - 3, v] << a        # bit b of axis a to bit D b + a
+            code[ii] = c
         return code
 
 
@@ -884,6 +955,15 @@ _NO_E = np.zeros((1, 1, 1))
 _NO_EA = np.zeros(1)
 _NO_E.setflags(write=False)          # read-only as the GGX tables (kernels.bsdf): one compiled signature
 _NO_EA.setflags(write=False)
+
+
+def morton_order(q: np.ndarray, D: int, rows: np.ndarray | None = None) -> np.ndarray:
+    """Rows (m,) int64 of q (n, 4) float64 -- all of them, or those in ``rows`` -- sorted by the Morton
+    code of their first D columns (2^10 cells per axis over their bounding box; stable among equal
+    codes; :func:`_morton_codes`, then numpy's stable sort, or above ``_RADIX_MIN`` rows :func:`_radix_order`)."""
+    rows = np.arange(q.shape[0], dtype=np.int64) if rows is None else np.ascontiguousarray(rows, dtype=np.int64)
+    code = _morton_codes(q, rows, D)
+    return rows[_radix_order(code, 10 * D) if code.shape[0] >= _RADIX_MIN else np.argsort(code, kind="stable")]
 
 
 def _plane_c(plane) -> float:
@@ -936,7 +1016,8 @@ class FlatTree:
 
     def lookup(self, mode: int, q: np.ndarray, ns: np.ndarray, kq: int, k: int, cone: bool, cone_k: float,
                workers: int, glossy=None, cap: float = np.inf, *, ng: np.ndarray | None = None,
-               plane: float = np.inf, plane_front: float | None = None):
+               plane: float = np.inf, plane_front: float | None = None, rows: np.ndarray | None = None,
+               out: tuple | None = None):
         """Sums Phi (n, 3) W, radius r (n,) m of the kq-th neighbour and TEMPORAL's tau (n,) for queries q (n, 4).
 
         cap: the search's largest radius r_max (m, in the tree's dimensions; inf: unbounded).  A query
@@ -951,9 +1032,15 @@ class FlatTree:
         each query's hit, E, E_avg the GGX tables, coat_w): then a fourth result, the sums (n, 3) of
         w f_c(wo, wi) Phi over the same photons with a delta-only path (:func:`_lookup`).
 
-        Queries are processed in Morton order (of x, y, z, plus s t for KD4D; results come back in the
-        input order), so consecutive queries are neighbours: the tree nodes they read stay in
-        cache and each search starts from the previous one's radius.
+        rows (m,) int64: answer only these rows of q (and of ns, ng, glossy's), e.g. one time slice's
+        queries, without gathering them into new arrays; out: (phi, r, tau[, g]) float64 arrays of n
+        rows to write the answers into (their other rows are left as they are), returned as the
+        results.  Default: every row, into new arrays.
+
+        Queries are processed in Morton order (of x, y, z, plus s t for KD4D: :func:`morton_order`),
+        so consecutive queries are neighbours: the tree nodes they read stay in cache and each
+        search starts from the previous one's radius.  The kernel reads and writes the rows in
+        place through that order (no sorted copies of the queries, no permuted copies of the results).
         Requires 1 <= kq <= N (and for TEMPORAL 2 <= k < kq): the search reads kq photons.
         """
         N = self.pts.shape[0]
@@ -965,39 +1052,30 @@ class FlatTree:
         n = q.shape[0]
         q = np.ascontiguousarray(q, dtype=np.float64)
         ns = np.ascontiguousarray(ns, dtype=np.float32)
+        ng = ns if ng is None else np.ascontiguousarray(np.asarray(ng, np.float32).reshape(-1, 3))
         D = 4 if mode == MODE_KD4D else 3
-        lo = q.min(axis=0)
-        scale = 1024.0 / np.maximum(q.max(axis=0) - lo, 1e-30)
-        order = np.argsort(_morton(q, lo, scale, D), kind="stable")
-        qs, nss = q[order], ns[order]
-        ngs = nss if ng is None else np.ascontiguousarray(np.asarray(ng, np.float32).reshape(-1, 3)[order])
+        order = morton_order(q, D, rows)
         plane_b, plane_f = _plane_c(plane), _plane_c(plane if plane_front is None else plane_front)
-        phi = np.zeros((n, 3))
-        r = np.zeros(n)
-        tau = np.zeros(n)
-        g = np.zeros((n if glossy is not None else 0, 3))
+        if out is None:
+            phi, r, tau = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
+            g = np.zeros((n if glossy is not None else 0, 3))
+        else:
+            phi, r, tau = out[:3]
+            g = out[3] if glossy is not None else np.zeros((0, 3))
         if glossy is not None:
-            gC = np.ascontiguousarray(glossy[0][order], np.float64)
-            gW = np.ascontiguousarray(glossy[1][order], np.float64)
+            gC = np.ascontiguousarray(glossy[0], np.float64)
+            gW = np.ascontiguousarray(glossy[1], np.float64)
             E_t, E_avg, coat_w = glossy[2], glossy[3], float(glossy[4])
         else:
             gC, gW, E_t, E_avg, coat_w = _NO_C, _NO_C, _NO_E, _NO_EA, 0.0
 
         def part(a, b):
-            ga, gb = (a, b) if glossy is not None else (0, 0)
-            _lookup(self.pts, self.xyzt, self.box, self.n_leaves, qs[a:b], nss[a:b], ngs[a:b], plane_b, plane_f, mode,
-                    kq, k, self.s, cone, cone_k, cap2,
-                    phi[a:b], r[a:b], tau[a:b], glossy is not None, gC[ga:gb], gW[ga:gb], E_t, E_avg, coat_w,
-                    g[ga:gb])
+            _lookup(self.pts, self.xyzt, self.box, self.n_leaves, q, ns, ng, order[a:b], plane_b, plane_f, mode,
+                    kq, k, self.s, cone, cone_k, cap2, phi, r, tau, glossy is not None, gC, gW, E_t, E_avg, coat_w,
+                    g)
 
-        run_chunks(part, n, workers)
-        out_phi, out_r, out_tau = np.empty_like(phi), np.empty_like(r), np.empty_like(tau)
-        out_phi[order], out_r[order], out_tau[order] = phi, r, tau
-        if glossy is None:
-            return out_phi, out_r, out_tau
-        out_g = np.empty_like(g)
-        out_g[order] = g
-        return out_phi, out_r, out_tau, out_g
+        run_chunks(part, order.shape[0], workers)
+        return (phi, r, tau) if glossy is None else (phi, r, tau, g)
 
     def knn_radius(self, q: np.ndarray, kq: int, cap: float, workers: int) -> np.ndarray:
         """Distance (n,) m to the kq-th nearest photon of each query q (n, 4) (x, y, z, s t), capped at ``cap``.
@@ -1013,9 +1091,7 @@ class FlatTree:
         out = np.empty(n)
         if n == 0:
             return out
-        lo = q.min(axis=0)
-        scale = 1024.0 / np.maximum(q.max(axis=0) - lo, 1e-30)
-        order = np.argsort(_morton(q, lo, scale, D), kind="stable")
+        order = morton_order(q, D)
         qs = q[order]
         r = np.empty(n)
         cap2 = float(cap) ** 2 if np.isfinite(cap) else np.inf
