@@ -7,7 +7,7 @@ MODE batch: what `blender -b kitchen5.blend -E STPM -f 2` does: the file as save
             one frame (2) rendered as an animation of one frame, written to the file's output path
             (render.filepath + frame number, the file's format).
 MODE cycles: Cycles at matched settings (CPU, no denoising, no adaptive sampling, clamps off, Filter Glossy 0:
-            the file's 1.0 made Cycles 5.7 % dark with the counter's light alone, docs/blender.md).
+            the file's 1.0 made Cycles 5.3 % dark with the counter's light alone, docs/blender.md).
 --exr writes a multilayer float EXR instead of the file's format (for comparisons).
 Outputs go to review/out/kitchen5_<mode>_<tag>.* (batch: the file's render.filepath).
 """
