@@ -6,7 +6,8 @@ MODE f12:   the Render panel path: preset (bpy.ops.stpm.apply_preset), then bpy.
 MODE batch: what `blender -b kitchen5.blend -E STPM -f 2` does: the file as saved, engine set to STPM,
             one frame (2) rendered as an animation of one frame, written to the file's output path
             (render.filepath + frame number, the file's format).
-MODE cycles: Cycles at matched settings (CPU, no denoising, no adaptive sampling, clamps off).
+MODE cycles: Cycles at matched settings (CPU, no denoising, no adaptive sampling, clamps off, Filter Glossy 0:
+            the file's 1.0 made Cycles 5.3 % dark with the counter's light alone, docs/blender.md).
 --exr writes a multilayer float EXR instead of the file's format (for comparisons).
 Outputs go to review/out/kitchen5_<mode>_<tag>.* (batch: the file's render.filepath).
 """
@@ -40,6 +41,7 @@ if mode == "cycles":
     r.engine = "CYCLES"; cy = s.cycles
     cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", opt("--samples", int, 256), False, False
     cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0
+    cy.blur_glossy = 0.0
     cy.seed = opt("--seed", int, 0)
     if "--time-limit" in args:
         cy.time_limit = opt("--time-limit", float)
