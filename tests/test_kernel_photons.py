@@ -31,6 +31,8 @@ def _same_records(a: np.ndarray, b: np.ndarray) -> None:
         x, y = a[f].astype(np.float64), b[f].astype(np.float64)
         assert np.allclose(x, y, rtol=1e-6, atol=1e-6 * max(float(np.abs(y).max()), 1e-30)), f
     assert np.abs(a["wi_oct"].astype(int) - b["wi_oct"].astype(int)).max() <= 1
+    assert np.abs(a["ng_oct"].astype(int) - b["ng_oct"].astype(int)).max() <= 1     # (stored normals: both)
+    assert (a["ng_oct"] != -32768).all()
 
 
 @pytest.mark.parametrize("mode,budget", [("caustic", None), ("global", None), ("global", 2), ("caustic", 0)])

@@ -21,7 +21,7 @@ from scenes import box_mesh, make_scene, moving, ortho_camera_down, plane_mesh, 
 from stpm_core.bsdf import MaterialTable
 from stpm_core.lights import LightSet
 from stpm_core.photons import BYTES_PER_PHOTON, build_photon_maps
-from stpm_core.photons.record import make_records, oct_decode, oct_encode
+from stpm_core.photons.record import NO_NORMAL, decode_normal_codes, make_records, normal_codes, oct_decode, oct_encode
 from stpm_core.photons.trace import trace_photon_paths
 from stpm_core.raycast import make_caster
 from stpm_core.scene import Material
@@ -63,7 +63,7 @@ UP = np.array([0.0, 0.0, 1.0])
 # ----------------------------------------------------------------------------
 # Record
 # ----------------------------------------------------------------------------
-def test_record_is_32_bytes_and_round_trips():
+def test_record_is_36_bytes_and_round_trips():
     rng = np.random.default_rng(0)
     w = rng.normal(size=(10000, 3))
     w /= np.linalg.norm(w, axis=1, keepdims=True)
@@ -72,10 +72,30 @@ def test_record_is_32_bytes_and_round_trips():
     assert np.allclose(np.linalg.norm(back, axis=1), 1.0, atol=1e-6)
     back /= np.linalg.norm(back, axis=1, keepdims=True)
     angle = np.arcsin(np.minimum(np.linalg.norm(np.cross(back, w), axis=1), 1.0))
-    assert BYTES_PER_PHOTON == 32
+    assert BYTES_PER_PHOTON == 36
     assert angle.max() < 1e-4 and np.all(np.sum(back * w, axis=1) > 0)
     rec = make_records(rng.random((5, 3)), w[:5], rng.random((5, 3)), rng.random(5))
-    assert rec.itemsize == 32 and rec.nbytes == 160
+    assert rec.itemsize == 36 and rec.nbytes == 180
+    assert (rec["ng_oct"] == NO_NORMAL).all() and (normal_codes(rec) == 0.0).all()      # no normal stored
+
+
+def test_stored_normals_round_trip_on_the_side_of_wi():
+    # record.ng_oct (turned to wi's side) -> normal_codes (12 bits an axis, one float32) -> decoded
+    rng = np.random.default_rng(1)
+    n = rng.normal(size=(10000, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n[:6] = np.vstack([np.eye(3), -np.eye(3)])
+    wi = rng.normal(size=n.shape)
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    rec = make_records(np.zeros_like(n), wi, np.ones_like(n), np.zeros(len(n)), ng=n)
+    code = normal_codes(rec)
+    assert code.dtype == np.float32 and (code >= 1.0).all() and (code < 2.0 ** 24).all()
+    back = decode_normal_codes(code)
+    side = np.where(np.sum(n * wi, axis=1) < 0.0, -1.0, 1.0)[:, None]
+    assert np.sum(back * wi, axis=1).min() >= -1e-3                           # on the side of wi
+    assert np.degrees(np.arccos(np.minimum(np.sum(back * side * n, axis=1), 1.0))).max() < 0.1
+    assert np.array_equal(decode_normal_codes(normal_codes(make_records(
+        np.zeros((1, 3)), [[0.0, 0.0, 1.0]], np.ones((1, 3)), [0.0], ng=[[0.0, 0.0, -1.0]]))), [[0.0, 0.0, 1.0]])
 
 
 # ----------------------------------------------------------------------------
@@ -227,7 +247,7 @@ def test_empty_maps_and_dark_lights_give_zero():
     p = np.zeros((5, 3))
     for est in ("STANDARD", "TEMPORAL", "KD4D"):
         assert np.all(maps.estimate("global", p, np.tile(UP, (5, 1)), np.zeros(5), estimator=est) == 0)
-    assert maps.stats["photons_caustic"] == 0 and maps.stats["bytes_per_photon"] == 32
+    assert maps.stats["photons_caustic"] == 0 and maps.stats["bytes_per_photon"] == 36
 
 
 def test_time_override_stills_reduce_to_standard():

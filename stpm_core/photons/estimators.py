@@ -61,10 +61,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import kdtree as _kdtree
-from .record import delta_only, oct_decode
+from .record import decode_normal_codes, delta_only, normal_codes, oct_decode
 
 __all__ = [
-    "PhotonMap", "ESTIMATOR_NAMES", "CONE_K", "PLANE_FRACTION", "PLANE_FRONT", "plane_weights",
+    "PhotonMap", "ESTIMATOR_NAMES", "CONE_K", "PLANE_FRACTION", "PLANE_FRONT", "NORMAL_COS", "plane_weights",
     "auto_temporal_alpha", "temporal_candidates",
     "temporal_slices", "shutter_mass", "slab_ball_volume",
 ]
@@ -76,6 +76,12 @@ PLANE_FRONT = np.inf         # <= PLANE_FRONT r, n_g toward the query's viewer, 
                              # front: a concave corner's other surface keeps filling the disc (0.5 darkened
                              # room corners: the textured room's FLIP 0.0413 -> 0.0430; docs "Tangent slab")
                              # (docs/photon-mapping.md, "Tangent slab"; inf: no bound on that side)
+#: Photon normals (with the slab on): a photon behind the query's tangent plane counts only if
+#: dot(n_p, n_g) >= NORMAL_COS (in front: any normal, a concave corner's other face), n_p its
+#: surface's stored geometric normal (record.py ``ng_oct``, on the side of its wi), n_g the query's slab
+#: normal: an open outer corner's face behind a wall (perpendicular to it) adds nothing.  Compiled into
+#: the look-ups (``kdtree.NORMAL_COS``; edit it there); docs/photon-mapping.md, "Tangent slab".
+NORMAL_COS = _kdtree.NORMAL_COS
 TEMPORAL_SLICE_C = 0.25      # automatic time slices B = max(1, round(C * (N / k)^(1/3)))
 TEMPORAL_SLICE_ALPHA = 1.5   # candidates per estimate inside a slice, as a multiple of k (the paper's 1.5; fewer
                              # is cheaper but darkens a receiver moving along its normal: docs/photon-mapping.md)
@@ -278,14 +284,16 @@ class PhotonMap:
         self.records = records
         self.position = np.ascontiguousarray(records["position"], dtype=np.float64)
         self.time = np.ascontiguousarray(records["time"], dtype=np.float64)
-        # One 32-byte row per photon for the look-ups: (wi_x, wi_y, wi_z, delta_only, Phi_r, Phi_g, Phi_b, 0)
-        # (delta_only 1: the photon came through delta lobes alone, record.delta_only; read by the
-        # glossy sums of caustic-map look-ups only)
+        # One 32-byte row per photon for the look-ups: (wi_x, wi_y, wi_z, delta_only, Phi_r, Phi_g, Phi_b,
+        # n_code) (delta_only 1: the photon came through delta lobes alone, record.delta_only; read by the
+        # glossy sums of caustic-map look-ups only; n_code its surface's geometric normal,
+        # record.normal_codes, 0 = none: read by the slab's normal test, kdtree._facing)
         self._packed = np.zeros((self.n, 8), dtype=np.float32)
         if self.n:
             self._packed[:, :3] = oct_decode(records["wi_oct"])
             self._packed[:, 3] = delta_only(records)
             self._packed[:, 4:7] = records["power"]
+            self._packed[:, 7] = normal_codes(records)
         self.wi = self._packed[:, :3]
         self.power = self._packed[:, 4:7]
         self.timeless = bool(shutter.is_instant or self.n == 0 or np.ptp(self.time) == 0.0)
@@ -484,6 +492,8 @@ class PhotonMap:
         photons in the tangent slab |(x_p - x_q) . ng| <= ``PLANE_FRACTION`` r count (r the
         estimate's radius), so a surface near the query but off its plane (the wall behind a
         curtain) adds nothing; the measure stays the disc (docs/photon-mapping.md, "Tangent slab").
+        With the slab, a photon behind the plane also needs its stored surface normal within
+        acos(``NORMAL_COS``) of ng (an open outer corner's face, at right angles, adds nothing).
         A zero row switches the slab off for that query (h = 0 for every photon): for surfaces that
         move or deform, whose photons of other times lie off today's plane (:func:`plane_weights`).
         The geometric normal, not a bent shading one (smooth shading, normal maps).
@@ -679,13 +689,21 @@ class PhotonMap:
 
         The slab (``kdtree._in_slab``): -PLANE_FRACTION rho <= (x_j - p) . ng <= PLANE_FRONT rho, p (n, 3)
         the queries, ng (n, 3) their geometric normals, rho2 (n, 1) or (n, j) the squared radius of
-        the region's section at each photon (r^2; KD4D's R^2 - (s dt)^2)."""
+        the region's section at each photon (r^2; KD4D's R^2 - (s dt)^2); and, where the slab is on
+        (ng not zero), the normal test dot(n_j, ng) >= NORMAL_COS of photons with a stored normal
+        behind the plane (h < 0; ``kdtree._facing``)."""
         G = np.take(self._packed, idx, axis=0)                     # (n, j, 8): one gather per photon
         side = (G[..., 0] * ns[:, None, 0] + G[..., 1] * ns[:, None, 1] + G[..., 2] * ns[:, None, 2]) > 0.0
         h = np.einsum("njc,nc->nj", self.position[idx] - p[:, None, :], ng.astype(np.float64))
         c = np.where(h >= 0.0, PLANE_FRONT, PLANE_FRACTION)
         with np.errstate(invalid="ignore"):        # (inf x 0 where rho = 0 and a bound is off: no bound)
             side &= np.isinf(c) | (h * h <= c * c * rho2)
+        code = G[..., 7]
+        if np.any(code > 0.0):
+            n_p = decode_normal_codes(code.ravel()).reshape(code.shape + (3,))
+            on = np.any(ng != 0.0, axis=1)[:, None]
+            side &= (~on | (code <= 0.0) | (h >= 0.0)
+                     | (np.einsum("njc,nc->nj", n_p, ng.astype(np.float64)) >= NORMAL_COS))
         weight = side.astype(np.float32) if w is None else side * w.astype(np.float32)
         return np.einsum("nk,nkc->nc", weight, G[..., 4:7]).astype(np.float64)
 

@@ -32,7 +32,7 @@ axis of each node (measured on up to 512 strided rows), 2^L leaves of at most ``
 photons; leaf l is the photons [l N / L, (l + 1) N / L) in tree order.  Two
 arrays in tree order: the coordinates as rows ``xyzt`` (4, N) float32 (x, y, z,
 t: a leaf's are four contiguous runs, 16 bytes per photon tested), and one
-32-byte row per photon ``pts`` (N, 8) float32 ``(wi, 0, Phi, 0)``, two to a
+32-byte row per photon ``pts`` (N, 8) float32 ``(wi, delta_only, Phi, n_code)``, two to a
 cache line, which only the sums of the kept photons read.
 (Until 2026-12-07 one 48-byte row held both; the search then dragged power
 and direction of every photon tested through the cache.)  Node boxes are
@@ -94,12 +94,20 @@ import numpy as np
 
 from ..numba_probe import probe
 
-__all__ = ["AVAILABLE", "LEAF_SIZE", "MODE_STANDARD", "MODE_TEMPORAL", "MODE_KD4D", "FlatTree", "run_chunks",
-           "disable"]
+__all__ = ["AVAILABLE", "LEAF_SIZE", "MODE_STANDARD", "MODE_TEMPORAL", "MODE_KD4D", "NORMAL_COS", "FlatTree",
+           "run_chunks", "disable"]
 
 LEAF_SIZE = 32           # at most this many photons per leaf (2^L leaves of 16..32; docs/photon-mapping.md, section 5b)
 MODE_STANDARD, MODE_TEMPORAL, MODE_KD4D = 0, 1, 2
 _CHUNK_MIN = 2048        # fewer queries than this per thread are not split
+# the slab's normal test (_facing): a photon behind the query's tangent plane counts only if dot(n_p, n_g)
+# >= NORMAL_COS, n_p its stored geometric normal: cos 80 deg, so faces at right angles to the query's (an
+# open outer corner's, 90 deg) drop out and bumps keep most of theirs (63 deg slopes: 0.88-0.91 of no
+# slab, the slab alone 0.93-0.94, cos 60 deg 0.79-0.84; docs/photon-mapping.md "Tangent slab").  > 0 (compared
+# squared); compiled in (estimators.NORMAL_COS re-exports it)
+NORMAL_COS = float(np.cos(np.radians(80.0)))
+_NORMAL_COS2 = NORMAL_COS * NORMAL_COS
+assert NORMAL_COS > 0.0
 _RADIX_MIN = 4096        # queries Morton-sorted by radix from this many (numpy's argsort below: as fast there)
 
 # Morton codes: row D - 3 maps a 10-bit cell index v to v's bit b moved to bit D b (D = 3, 4)
@@ -556,6 +564,38 @@ if AVAILABLE:
         return plane_b == np.inf or h * h <= plane_b * plane_b * rho2
 
     @_jit
+    def _facing(P, C, j, q0, q1, q2, m0, m1, m2):
+        """Behind the query's tangent plane, does photon j's surface face the query's way: dot(n_p, m)
+        >= NORMAL_COS?  (True in front of the plane, h = (x_j - q) . m >= 0, and without a stored normal.)
+
+        n_p decoded from P[j, 7] (``record.normal_codes``: 1 + iu 4096 + iv, iu, iv the 12-bit
+        octahedral coordinates in [0, 4094]; 0 = none; ``record.decode_normal_codes`` is the numpy
+        copy), m (m0, m1, m2) the query's unit slab normal (both on their wi / viewer side).  Unnormalised
+        n_p: d = n_p . m >= 0 and d^2 >= NORMAL_COS^2 |n_p|^2, no sqrt.  Rejects the face of an open
+        outer corner behind a wall (docs/photon-mapping.md, "Tangent slab", "Photon normals").  In
+        front of the plane every normal counts: there lies a concave corner's other face (the floor at
+        a wall's foot), which fills the part of the disc beyond the query's surface, as PLANE_FRONT = inf.
+        """
+        c = P[j, 7]
+        if not c > 0.0:
+            return True
+        h = ((np.float64(C[0, j]) - q0) * m0 + (np.float64(C[1, j]) - q1) * m1
+             + (np.float64(C[2, j]) - q2) * m2)
+        if h >= 0.0:
+            return True
+        k = np.int64(c) - 1
+        u = np.float64((k >> 12) - 2047) * (1.0 / 2047.0)
+        v = np.float64((k & 4095) - 2047) * (1.0 / 2047.0)
+        z = 1.0 - abs(u) - abs(v)
+        x = u
+        y = v
+        if z < 0.0:
+            x = (1.0 - abs(v)) * (1.0 if u >= 0.0 else -1.0)
+            y = (1.0 - abs(u)) * (1.0 if v >= 0.0 else -1.0)
+        d = x * m0 + y * m1 + z * m2
+        return d >= 0.0 and d * d >= _NORMAL_COS2 * (x * x + y * y + z * z)
+
+    @_jit
     def _glossy_sum(P, bi, wk, n_sel, gC, i, E, E_avg, gW, coat_w):
         """(g0, g1, g2) = sum over the kept photons a < n_sel (weights wk[a] > 0, rows bi[a]) whose
         path was delta-only (P[j, 3] > 0) of wk[a] f_c(wo, wi_j) Phi_j: f_c the rough non-delta
@@ -585,7 +625,7 @@ if AVAILABLE:
         q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32; query i's results go to row i of the outputs
         (rows not in order are left as they are).
 
-        P (N, 8) float32 rows (wi, delta_only, Phi, 0) and C (4, N) float32 coordinate rows, both in
+        P (N, 8) float32 rows (wi, delta_only, Phi, n_code: _facing) and C (4, N) float32 coordinate rows, both in
         tree order.
 
         mode STANDARD / KD4D: kq = k nearest (3D / 4D); TEMPORAL: kq = m candidates, then the k
@@ -707,8 +747,9 @@ if AVAILABLE:
                             continue
                         ties -= 1
                     j = bi[a]
-                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0 and (not slab or _in_slab(
-                            C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f)):
+                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0 and (not slab or (_in_slab(
+                            C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f)
+                            and _facing(P, C, j, q0, q1, q2, m0, m1, m2))):
                         w = 1.0
                         if cone:
                             w = 1.0 - np.sqrt(bd[a]) * inv_r
@@ -726,7 +767,8 @@ if AVAILABLE:
                         w = 1.0 if bx[a] < tau else 0.0
                     if not (P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0):
                         w = 0.0
-                    if slab and not _in_slab(C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f):
+                    if slab and not (_in_slab(C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f)
+                                     and _facing(P, C, j, q0, q1, q2, m0, m1, m2)):
                         w = 0.0
                     if cone:
                         w *= 1.0 - np.sqrt(bd[a]) * inv_r
@@ -793,7 +835,7 @@ if AVAILABLE:
                out_cnt, glossy, gC, gW, E, E_avg, coat_w, out_g):
         """Fixed-size kernels: photons inside each query's own region, summed (the progressive estimate).
 
-        P (N, 8) float32 rows (wi, delta_only, Phi, 0) and C (4, N) float32 coordinate rows, both in tree order.
+        P (N, 8) float32 rows (wi, delta_only, Phi, n_code: _facing) and C (4, N) float32 coordinate rows, both in tree order.
 
         q (n, 4): x, y, z and s t (D = 4; ignored for D = 3); ns (n, 3) float32 normals; rad (n,)
         radius (m); half (n,) the cylinder's half-height in s t units (cyl only).  The region of
@@ -877,8 +919,9 @@ if AVAILABLE:
                     if d2 >= r2:
                         continue
                     cnt += 1
-                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0 and (not slab or _in_slab(
-                            C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f)):
+                    if P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0 and (not slab or (_in_slab(
+                            C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f)
+                            and _facing(P, C, j, q0, q1, q2, m0, m1, m2))):
                         w = 1.0
                         if cone:
                             w = 1.0 - np.sqrt(d2) * inv_r
@@ -980,9 +1023,9 @@ class FlatTree:
     Parameters
     ----------
     position : (N, 3) float32 positions (m); time : (N,) float32 shutter times;
-    packed : (N, 8) float32 rows (wi, 0, Phi, 0); dims : 3 or 4; s : KD4D's time scale (m per shutter).
+    packed : (N, 8) float32 rows (wi, delta_only, Phi, n_code); dims : 3 or 4; s : KD4D's time scale (m per shutter).
 
-    Attributes (tree order): xyzt (4, N) float32 coordinate rows; pts (N, 8) float32 rows (wi, 0, Phi, 0),
+    Attributes (tree order): xyzt (4, N) float32 coordinate rows; pts (N, 8) float32 rows (wi, delta_only, Phi, n_code),
     64-byte aligned; perm (N,) int64 tree row -> input row; box (2 L, 8) float32 node boxes.
     """
 
@@ -1004,7 +1047,7 @@ class FlatTree:
         self.box = raw[off:off + box.size * 4].view(np.float32).reshape(box.shape)
         self.box[:] = box
         self.perm = perm
-        # per photon one 32-byte row (wi, 0, Phi, 0) in tree order, 64-byte aligned (two rows a line):
+        # per photon one 32-byte row (wi, delta_only, Phi, n_code) in tree order, 64-byte aligned (two rows a line):
         # what the sums read of the photons the search keeps
         raw = np.empty(N * 32 + 64, np.uint8)
         off = (-raw.ctypes.data) % 64

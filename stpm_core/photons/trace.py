@@ -249,7 +249,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
                 for part, out in ((extra[~coat], stored), (extra[coat], coat_paths)):
                     if part.size:
                         out.append(make_records(hits.position[idx[part]], -d[part], Phi[part], t[part], origin,
-                                                _delta_flag(caustic, out is coat_paths, n_lobe[part])))
+                                                _delta_flag(caustic, out is coat_paths, n_lobe[part]),
+                                                ng=hits.ng[idx[part]]))
                         if ids is not None and out is stored:
                             stored_ids.append(ids[part])
         if sd.transparent:
@@ -277,7 +278,8 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
             for part, out in ((s[s >= 0], stored), (-1 - s[s < 0], coat_paths)):
                 if part.size:
                     out.append(make_records(hits.position[idx[part]], -d[part], Phi[part], t[part], origin,
-                                            _delta_flag(caustic, out is coat_paths, n_lobe[part])))
+                                            _delta_flag(caustic, out is coat_paths, n_lobe[part]),
+                                            ng=hits.ng[idx[part]]))
                     if ids is not None and out is stored:
                         stored_ids.append(ids[part])
         if last:

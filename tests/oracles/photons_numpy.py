@@ -79,7 +79,7 @@ def trace_photon_paths(caster, table, o, d, Phi, t, rng, *, mode: str, max_depth
             store = nondelta & (n_nondelta >= min_nondelta)
         store &= n_diffuse + 1 <= budget
         if np.any(store):
-            stored.append(make_records(p[store], wo[store], Phi[store], t[store], origin))
+            stored.append(make_records(p[store], wo[store], Phi[store], t[store], origin, ng=ng[store]))
         if depth == max_depth:
             break
         # -- Sample the next direction from the BSDF --------------------------------------
