@@ -383,9 +383,9 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
             noise = info.get("noise_p95")
             bar.note(f"{label}pass {info['pass']}: {info['elapsed_s']:.1f} s"
                      + (f", noise {noise:.4f}" if noise is not None and noise < 1e30 else ""))
-        # A Render Region: only its pixels are traced (a partial keeps the whole frame; with denoise
-        # the whole frame is traced so the denoiser sees real neighbours at the region's edges)
-        window = None if partial or settings.denoise else scene_region(scene.metadata, scene.resolution)
+        # A Render Region: only its pixels are traced, a partial's too (with denoise the whole frame is
+        # traced so the denoiser sees real neighbours at the region's edges; a partial is not denoised)
+        window = None if settings.denoise and not partial else scene_region(scene.metadata, scene.resolution)
         try:
             result = render(scene, settings, progress=lambda f, m: bar(f, label + m), cancel=cancel,
                             on_pass=on_pass if settings.method == "PROGRESSIVE" else None,
@@ -416,7 +416,7 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
             if partial:
                 from .partial import scene_fingerprint, scene_hash, settings_hash, write_partial
                 write_partial(tmp, result.sums, seed=settings.seed, scene_digest=scene_hash(scene),
-                              scene_print=scene_fingerprint(scene),
+                              scene_print=scene_fingerprint(scene), crop=region_crop(scene.metadata),
                               settings_digest=settings_hash(settings), metadata={**meta, "stpm:stats": stats},
                               atomic=False, working=working)
             else:
@@ -436,9 +436,10 @@ def _render_frames(args, frames, many, exr_for, overrides, scene_path, t_start, 
             region = apply_render_region(result.passes, scene.metadata, stats)
             if region is not None and not args.quiet:
                 print(f"{label}render region: {region}", file=sys.stderr)
-        elif scene_region(scene.metadata, scene.resolution) is not None:
-            _warn("the file's Render Region is not applied to a partial result (--pass-offset): "
-                  "the merged EXR holds the whole frame")
+        elif window is not None and not args.quiet:
+            # (the partial's sums hold the whole frame, 0 outside the region; stpm merge crops)
+            text = region_passes(None, window, False, (scene.resolution[1], scene.resolution[0]))
+            print(f"{label}render region: {text} traced (stpm merge applies it)", file=sys.stderr)
         png_warnings: list = []
         outputs = [(out_exr, exr), (out_png, lambda tmp: write_view_png(tmp, result.passes["Combined"][:, :, :3],
                                                                           scene.metadata, working, png_warnings))]
@@ -510,8 +511,26 @@ def apply_render_region(passes: dict, metadata, stats: dict) -> str | None:
     if px is None:
         return None
     x0, r0, x1, r1 = px
-    crop = bool(metadata.get("render_region_crop", False))
-    for name in list(passes):
+    crop = region_crop(metadata)
+    stats["render_region"] = {"x0": x0, "x1": x1, "row0": r0, "row1": r1, "crop": crop}
+    return region_passes(passes, px, crop)
+
+
+def region_crop(metadata) -> bool:
+    """The scene's *Crop to Render Region* (``metadata.render_region_crop``)."""
+    return isinstance(metadata, dict) and bool(metadata.get("render_region_crop", False))
+
+
+def region_passes(passes: dict | None, px, crop: bool, shape=None) -> str:
+    """Blender's output of a Render Region px = (x0, y0, x1, y1) (rows from the top): with ``crop``
+    the region alone, else the whole frame blank outside it (0, alpha 0; Depth Blender's background
+    1e10); in place (``passes`` None: only the description).  Returns the description for the log;
+    ``shape`` (H, W) when there are no passes."""
+    import numpy as np
+    from .film import DEPTH_BACKGROUND
+    H, W = shape if passes is None else next(iter(passes.values())).shape[:2]
+    x0, r0, x1, r1 = px
+    for name in list(passes or ()):
         a = np.asarray(passes[name])
         if crop:
             passes[name] = np.ascontiguousarray(a[r0:r1, x0:x1])
@@ -519,10 +538,8 @@ def apply_render_region(passes: dict, metadata, stats: dict) -> str | None:
             out = np.full_like(a, DEPTH_BACKGROUND if name == "Depth" else 0.0)
             out[r0:r1, x0:x1] = a[r0:r1, x0:x1]
             passes[name] = out
-    text = (f"columns {x0}..{x1 - 1}, rows {r0}..{r1 - 1} of {W}x{H}"
-            + (", cropped" if crop else ", the rest blank"))
-    stats["render_region"] = {"x0": x0, "x1": x1, "row0": r0, "row1": r1, "crop": crop}
-    return text
+    return (f"columns {x0}..{x1 - 1}, rows {r0}..{r1 - 1} of {W}x{H}"
+            + ("" if passes is None else ", cropped" if crop else ", the rest blank"))
 
 
 def blender_ocio_config() -> Path | None:
@@ -643,6 +660,12 @@ def _cmd_merge(args) -> int:
             "noise_flip_visible": flip_visible_fraction(sums), "parts": [str(p) for p in args.parts],
             "seed": head["seed"], "scene_hash": head["scene_hash"], "settings_hash": head["settings_hash"]}
     passes = sums.image()
+    if head.get("region") is not None:
+        # the partials traced a Render Region: the merged image as stpm render writes it (cropped or blank)
+        region = region_passes(passes, head["region"], head["region_crop"])
+        info["render_region"] = region
+        if not args.quiet:
+            print(f"render region: {region}", file=sys.stderr)
     working = head["working_space"]
     meta = {**head.get("provenance", {}), "stpm:progressive": info}
     outputs = [(out_exr, lambda tmp: write_exr(tmp, passes, meta, atomic=False, working=working)),

@@ -689,8 +689,8 @@ def _photon_terms(ctx, sh, hits, d, C, crow, t_s, stats: TraceStats, dsts, idx_k
         # maps keeping statistics per pixel (compare's SPPM baseline) are told each query's pixel
         rows = sh[live[:n_q_rows]]
         samples = idx_k[rows] if use_idx else rows
-        x0, y0, tw, S, W = _SCRATCH.tile
-        p = samples // S
+        x0, y0, tw, S, W, kept = _SCRATCH.tile
+        p = samples // S if kept is None else kept[samples // S]
         extra["pixels"] = (y0 + p // tw) * W + x0 + p % tw
     # Sharing: a pixel's queries on one instance reuse a representative's estimate (photons.sharing)
     group = None
@@ -1262,7 +1262,8 @@ def _scratch(name: str, shape: tuple, dtype=np.float64) -> np.ndarray:
     return buf[:size].reshape(shape)
 
 
-def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, time_override, tstats):
+def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, time_override, tstats,
+                inside=None):
     """One tile: (film window, TraceStats).
 
     Draws the camera uniforms (positions (P, S, 2), then the time permutation
@@ -1271,6 +1272,12 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
     inverse CDF, time strata permuted per pixel), makes rays with
     ``camera_rays``, shades with :func:`shade_paths` and sums per pixel with
     ``Film.tile_sums_matrix``.
+
+    inside : (th, tw) bool or None: the tile's pixels to trace (a Render Region's edge tile); the
+    camera uniforms (and a thin lens's) are drawn for the whole tile, so a pixel's camera rays are a
+    whole frame's; the samples of the other pixels are dropped before any ray is cast, and they stay
+    empty in the window.  The shading's random numbers then follow from the pixels kept: the
+    pixels equal a whole frame's in distribution, not bit for bit.
     """
     P, S = tw * th, int(spp)
     n = P * S
@@ -1293,22 +1300,36 @@ def _trace_tile(ctx, film, cam, resolution, x0, y0, tw, th, spp, shutter, rng, t
         times = np.full(n, float(time_override))
     else:
         times = shutter.sample(xi if with_time else np.zeros(n))
-    _SCRATCH.tile = (x0, y0, tw, S, int(resolution[0]))     # a sample's pixel, for per-pixel maps
-    V, chan, keep = _shade_samples(ctx, cam, resolution, px, py, times, S, rng, tstats)
-    return film.tile_sums_matrix(x0, y0, tw, th, V, combined_is_sum=True,
-                                  alpha_one=not ctx.film_transparent, channels=np.asarray(chan),
-                                  columns=np.flatnonzero(keep)), tstats
+    kept = None
+    if inside is not None:
+        # -- A Render Region's edge tile: the samples of its pixels alone ------------------------------
+        kept = np.flatnonzero(inside.ravel())
+        rows = (kept[:, None] * S + np.arange(S)).ravel()
+        px, py, xi, times = px[rows], py[rows], xi[rows], np.asarray(times)[rows]
+    _SCRATCH.tile = (x0, y0, tw, S, int(resolution[0]), kept)     # a sample's pixel, for per-pixel maps
+    V, chan, keep = _shade_samples(ctx, cam, resolution, px, py, times, S, rng, tstats,
+                                   lens_rows=None if kept is None else (n, rows))
+    if kept is None:
+        return film.tile_sums_matrix(x0, y0, tw, th, V, combined_is_sum=True,
+                                      alpha_one=not ctx.film_transparent, channels=np.asarray(chan),
+                                      columns=np.flatnonzero(keep)), tstats
+    w_kept = film.pixel_sums_matrix(S, V, np.asarray(chan), np.flatnonzero(keep), alpha_one=not ctx.film_transparent)
+    w = np.zeros((th, tw, w_kept.shape[1]), np.float32)
+    w.reshape(th * tw, -1)[kept] = w_kept
+    return ((y0, y0 + th, x0, x0 + tw), [(0, film.n_channels)], w), tstats
 
 
 _NO_LENS = np.zeros((0, 2))            # camera_rays' lens uniforms for a pinhole
 
 
-def _shade_samples(ctx, cam, resolution, px, py, times, S, rng, tstats):
+def _shade_samples(ctx, cam, resolution, px, py, times, S, rng, tstats, lens_rows=None):
     """Camera rays through film positions px, py (n,) at times (n,), shaded: (V, chan, keep).
 
     The samples are laid out as pixels of S consecutive samples.  A camera with a thin lens
     (``aperture_radius > 0``) first draws its lens uniforms from rng, keys (n / S, S) then jitters
-    (n / S, S, 2), placed per pixel by ``kernels.paths.lens_tile``.  V (n, m) float64 (a reused
+    (n / S, S, 2), placed per pixel by ``kernels.paths.lens_tile``; with ``lens_rows`` = (m, rows)
+    (a Render Region's edge tile: the samples are rows of a tile of m) they are drawn for all m
+    and the rows kept, so every sample's camera ray is the whole tile's.  V (n, m) float64 (a reused
     buffer: valid until this thread's next call) holds the layout's columns (``ctx.layout``),
     chan (m,) each column's image channel, keep (m,) bool the columns some sample reached.
     """
@@ -1320,10 +1341,13 @@ def _shade_samples(ctx, cam, resolution, px, py, times, S, rng, tstats):
     # The thin lens: per-pixel stratified lens uniforms, drawn only for a camera with an aperture
     aperture, focus, blades, rotation, ratio = lens_args(cam)
     if aperture > 0.0:
-        keys = rng.random(out=_scratch("lens_keys", (n // S, S)))
-        jit = rng.random(out=_scratch("lens_jit", (n // S, S, 2)))
-        lens_uv = _scratch("lens_uv", (n, 2))
+        m = n if lens_rows is None else int(lens_rows[0])
+        keys = rng.random(out=_scratch("lens_keys", (m // S, S)))
+        jit = rng.random(out=_scratch("lens_jit", (m // S, S, 2)))
+        lens_uv = _scratch("lens_uv", (m, 2))
         _K.lens_tile(S, keys, jit, lens_uv)
+        if lens_rows is not None:
+            lens_uv = np.ascontiguousarray(lens_uv[lens_rows[1]])
     else:
         lens_uv = _NO_LENS
     o, d, tmax0 = _scratch("o", (n, 3)), _scratch("d", (n, 3)), _scratch("tmax0", (n,))
@@ -1490,9 +1514,11 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     stream : extra random stream id (the accumulation instant), so stills differ.
     progress(fraction, message), cancel() -> bool: polled once per batch.
     window : (x0, y0, x1, y1) pixels (rows from the top) or None: trace only those pixels (a Render
-        Region): adaptive sampling samples them alone, else the tiles they touch are traced whole;
-        the other pixels stay 0.  Without adaptive sampling a tile's samples do not depend on which
-        tiles are traced, so the window's pixels equal a whole frame's bit for bit.
+        Region); the other pixels stay 0 (Depth: the background).  Without adaptive sampling the
+        tiles wholly inside the window are traced as in a whole frame (a tile's samples do not depend
+        on which tiles are traced: its pixels equal a whole frame's bit for bit), and the tiles the
+        window's edges cross trace the window's pixels alone (:func:`_trace_tile`'s ``inside``: equal
+        to a whole frame's in distribution).  Adaptive sampling samples the window's pixels alone.
     """
     import time as _time
 
@@ -1564,19 +1590,22 @@ def trace_image(scene, settings, caster, lights, maps=None, *, table=None, time_
     # Tiles: square blocks of about BATCH_SAMPLES samples
     side = int(np.clip(np.sqrt(BATCH_SAMPLES / spp), 1, 64))
     tiles = [(x0, y0) for y0 in range(0, H, side) for x0 in range(0, W, side)]
-    # A Render Region: the tiles it touches, each keeping its index (its random stream)
+    # A Render Region: the tiles it touches, each keeping its index (its random stream), and of a
+    # tile its edges cross, the pixels inside it
     mask = window_mask(window, W, H)
     traced = [ti for ti, (x0, y0) in enumerate(tiles)
               if mask is None or mask[y0:y0 + side, x0:x0 + side].any()]
 
     def trace_tile(i: int):
         """Tile traced[i] traced and summed per pixel: (film window, TraceStats).  Pure function of
-        (seed, stream, tile index)."""
+        (seed, stream, tile index, the window's pixels in the tile)."""
         ti = traced[i]
         x0, y0 = tiles[ti]
+        tw, th = min(side, W - x0), min(side, H - y0)
+        inside = None if mask is None else mask[y0:y0 + th, x0:x0 + tw]
         rng = rng_for(settings.seed, STREAM_CAMERA, stream, ti)
-        return _trace_tile(ctx, film, cam, (W, H), x0, y0, min(side, W - x0), min(side, H - y0), spp,
-                           scene.shutter, rng, time_override, TraceStats())
+        return _trace_tile(ctx, film, cam, (W, H), x0, y0, tw, th, spp, scene.shutter, rng, time_override,
+                           TraceStats(), inside=None if inside is None or inside.all() else inside)
 
     # Trace tiles on worker threads (embree and most numpy kernels release the GIL);
     # the film takes them in tile order, so the result does not depend on the threads.

@@ -16,7 +16,11 @@ beside it, and a JSON header attribute ``stpm:partial``:
   per array of the scene file a digest and float sums, so that :func:`merge` can tell float
   rounding from an edit), ``settings_hash``
   (:func:`settings_hash`: every setting that changes a pass's pixels), ``resolution``,
-  ``working_space`` (the colour space the passes are in: ``stpm_core.colorspaces``).
+  ``working_space`` (the colour space the passes are in: ``stpm_core.colorspaces``);
+* ``region``: the Render Region whose pixels alone the passes traced, ``[x0, y0, x1, y1]`` pixels
+  with rows from the top (:attr:`PassSums.window`; the sums are 0 outside it), or null for the
+  whole frame (absent in partials written before regions were traced alone: they hold the whole
+  frame); ``region_crop``: the scene's *Crop to Render Region*, which ``stpm merge`` applies.
 
 Float64 in EXR: each float64 value x is stored as three float32 channels
 hi = f32(x), mid = f32(x - hi), lo = f32(x - hi - mid); each difference is exact in
@@ -28,7 +32,7 @@ the half sums of Combined RGB.
 Reading checks everything (a partial is untrusted input like any file): the
 header's types and ranges, every layer present with the right shape, every
 value finite; :func:`merge` refuses gaps, overlaps and partials of another
-scene, seed or settings.  Sums of disjoint pass ranges add in float64 (another
+scene, seed, settings or Render Region.  Sums of disjoint pass ranges add in float64 (another
 association than one process's running sum: equal to about 1e-16 relative, so
 the float32 image is bit-equal but for a rare last-bit tie).
 """
@@ -197,8 +201,9 @@ def settings_hash(settings) -> str:
 
 def write_partial(path, sums: PassSums, *, seed: int, scene_digest: str, settings_digest: str,
                   metadata: dict | None = None, atomic: bool = True, working: str = "REC709",
-                  scene_print: dict | None = None) -> Path:
-    """Write ``sums`` (its mean as the visible passes, the exact sums beside) to the EXR ``path``."""
+                  scene_print: dict | None = None, crop: bool = False) -> Path:
+    """Write ``sums`` (its mean as the visible passes, the exact sums beside) to the EXR ``path``;
+    ``sums.window`` (a Render Region) and ``crop`` (Crop to Render Region) go into the header."""
     from .imageio import write_exr
     if sums.count == 0:
         raise StpmError("no pass to write")
@@ -212,7 +217,8 @@ def write_partial(path, sums: PassSums, *, seed: int, scene_digest: str, setting
     head = {"format": PARTIAL_FORMAT, "version": PARTIAL_VERSION, "pass_first": sums.first, "pass_end": sums.end,
             "n_even": sums.n_even, "n_odd": sums.n_odd, "seed": int(seed), "scene_hash": scene_digest,
             "settings_hash": settings_digest, "resolution": [int(W), int(H)],
-            "passes": sorted(sums.sums), "working_space": working}
+            "passes": sorted(sums.sums), "working_space": working,
+            "region": None if sums.window is None else [int(v) for v in sums.window], "region_crop": bool(crop)}
     if scene_print is not None:
         head["scene_fingerprint"] = scene_print
     meta = dict(metadata or {})
@@ -280,11 +286,20 @@ def read_partial(path) -> tuple[PassSums, dict]:
     head["working_space"] = working
     if "scene_fingerprint" in head:      # absent in partials written before it was added
         _check_fingerprint(head["scene_fingerprint"], path)
+    W, H = res
+    region = head.get("region")          # absent in partials written before regions: the whole frame
+    if region is not None and not (isinstance(region, list) and len(region) == 4
+                                   and all(isinstance(v, int) and not isinstance(v, bool) for v in region)
+                                   and 0 <= region[0] < region[2] <= W and 0 <= region[1] < region[3] <= H):
+        raise StpmError(f"{path}: partial result header field 'region' is invalid ({region!r:.60})")
+    head["region"] = region
+    head["region_crop"] = head.get("region_crop", False)
+    if not isinstance(head["region_crop"], bool):
+        raise StpmError(f"{path}: partial result header field 'region_crop' is invalid")
     # where it came from (the render's settings, plan, scene and frame), carried into a merged EXR
     head["provenance"] = {k: v for k, v in data["_metadata"].items()
                           if k in ("stpm:settings", "stpm:plan", "stpm:scene", "stpm:frame") and isinstance(v, str)}
-    W, H = res
-    sums = PassSums(first)
+    sums = PassSums(first, window=region)
     sums.end = sums.next = end
     sums.n_even, sums.n_odd = n_even, n_odd
 
@@ -312,11 +327,20 @@ def read_partial(path) -> tuple[PassSums, dict]:
     return sums, head
 
 
+def region_text(region) -> str:
+    """A partial's ``region`` in words: 'columns 8..39, rows 4..19' or 'the whole frame'."""
+    if region is None:
+        return "the whole frame"
+    x0, y0, x1, y1 = region
+    return f"columns {x0}..{x1 - 1}, rows {y0}..{y1 - 1}"
+
+
 def merge(paths) -> tuple[PassSums, dict]:
     """The passes of several partial results as one (PassSums over their joint range, the first header).
 
-    Refuses (StpmError, one line) partials of different scenes, seeds, settings or sizes, and pass
-    ranges that overlap or leave a gap.  The sums are added in pass order.  Partials whose
+    Refuses (StpmError, one line) partials of different scenes, seeds, settings, sizes or Render
+    Regions (``region``: a region's sums hold its pixels alone), and pass ranges that overlap or
+    leave a gap.  The sums are added in pass order.  Partials whose
     ``scene_hash`` differs but whose ``scene_fingerprint`` says the scenes differ only by float
     rounding (Blender's exports are not bit-reproducible: :func:`fingerprint_difference`) are
     merged; the header returned then holds ``scene_rounding`` (the files that differed).
@@ -327,7 +351,7 @@ def merge(paths) -> tuple[PassSums, dict]:
     parts.sort(key=lambda x: x[0][1]["pass_first"])
     (total, head0), p0 = parts[0]
     rounding = []
-    for key in ("resolution", "seed", "settings_hash", "scene_hash", "passes", "working_space"):
+    for key in ("resolution", "region", "seed", "settings_hash", "scene_hash", "passes", "working_space"):
         for (_, head), p in parts[1:]:
             if key == "scene_hash" and head[key] != head0[key]:
                 diff = fingerprint_difference(head.get("scene_fingerprint"), head0.get("scene_fingerprint"))
@@ -339,6 +363,8 @@ def merge(paths) -> tuple[PassSums, dict]:
             if head[key] != head0[key]:
                 if key == "resolution":
                     what = f"resolutions ({'x'.join(map(str, head[key]))} and {'x'.join(map(str, head0[key]))})"
+                elif key == "region":
+                    what = f"Render Regions ({region_text(head[key])} and {region_text(head0[key])})"
                 elif key == "seed":
                     what = f"seeds ({head[key]} and {head0[key]})"
                 else:

@@ -38,7 +38,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .errors import RenderCancelled
+from .errors import RenderCancelled, StpmError
 from .integrator import static_view_setup, trace_image
 from .parallel import worker_count
 from .photons import build_photon_maps
@@ -80,10 +80,13 @@ class PassSums:
     n_even, n_odd : how many passes each holds; first, end : the range the image holds.
     next : the next pass to add (passes [end, next) are pending).
     stratified : False for passes that all render the whole shutter (every count is a round end).
+    window : (x0, y0, x1, y1) pixels, rows from the top, or None: the pixels the passes traced (a
+        Render Region; the others are 0 in every sum), over which the noise is estimated.
     """
 
-    def __init__(self, first: int, *, stratified: bool = True):
+    def __init__(self, first: int, *, stratified: bool = True, window=None):
         self.first = int(first)
+        self.window = None if window is None else tuple(int(v) for v in window)
         self.end = int(first)
         self.next = int(first)
         self.stratified = bool(stratified)
@@ -144,7 +147,9 @@ class PassSums:
         """The sums over both ranges (``other`` must start where this one ends; pending passes are left out)."""
         if other.first != self.end:
             raise ValueError(f"passes {other.first}..{other.end - 1} do not follow {self.first}..{self.end - 1}")
-        out = PassSums(self.first, stratified=self.stratified)
+        if other.window != self.window:
+            raise ValueError(f"passes of the Render Region {other.window} do not add to passes of {self.window}")
+        out = PassSums(self.first, stratified=self.stratified, window=self.window)
         out.end = out.next = other.end
         out.sums = {k: self.sums[k] + other.sums[k] for k in self.sums}
         out.even = _add(self.even, other.even)
@@ -173,12 +178,16 @@ class PassSums:
                 for k, v in p["sums"].items()}
 
     def halves(self):
-        """(mean of the even passes, mean of the odd passes) of Combined RGB in the image, or None
-        before both exist.  Pass pairs (2q - 1, 2q) render the same stratum, so the halves of whole
-        rounds are identically distributed."""
+        """(mean of the even passes, mean of the odd passes) of Combined RGB in the image (of the
+        window's pixels alone with a window), or None before both exist.  Pass pairs (2q - 1, 2q)
+        render the same stratum, so the halves of whole rounds are identically distributed."""
         if not self.n_even or not self.n_odd:
             return None
-        return self.even / self.n_even, self.odd / self.n_odd
+        A, B = self.even / self.n_even, self.odd / self.n_odd
+        if self.window is not None:
+            x0, y0, x1, y1 = self.window
+            A, B = A[y0:y1, x0:x1], B[y0:y1, x0:x1]
+        return A, B
 
 
 def _add(a, b):
@@ -239,13 +248,16 @@ def flip_visible_fraction(sums: PassSums) -> float | None:
 
 
 def render_passes(scene, settings, psettings, caster, lights, table, *, progress=None, cancel=None,
-                  on_pass=None, scheduled_rounds: bool = False):
+                  on_pass=None, scheduled_rounds: bool = False, window=None):
     """The pass loop of method PROGRESSIVE.
 
     settings : the user's RenderSettings; psettings : after the effects plan (photon counts,
     estimator).  on_pass(sums, info) is called after each pass (info: pass, passes, elapsed_s,
     noise_p95).  ``scheduled_rounds``: keep to the schedule of rounds even when a time limit cuts one
     short (a partial result must hold scheduled rounds), instead of taking smaller rounds that fit.
+    ``window``: (x0, y0, x1, y1) pixels, rows from the top, or None: a Render Region; each pass traces
+    the camera samples of those pixels alone (``integrator.trace_image``; the photons light the whole
+    scene anyway) and the noise is estimated over them.
     Returns (sums, info dict for the stats, TraceStats list, photon stats list).
     """
     t0 = _time.perf_counter()
@@ -264,7 +276,14 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
     if with_photons:
         say(0.0, "tracing pilot photons")
         pilot = build_pilot(scene, psettings, caster, lights, time_scale=s, cancel=cancel)
-    sums = PassSums(first)
+    if window is not None:
+        W, H = int(scene.resolution[0]), int(scene.resolution[1])
+        x0, y0, x1, y1 = (int(v) for v in window)
+        window = (max(x0, 0), max(y0, 0), min(x1, W), min(y1, H))
+        if window[2] <= window[0] or window[3] <= window[1]:
+            raise StpmError(f"the window {tuple(int(v) for v in (x0, y0, x1, y1))} holds no pixel of {W}x{H}")
+        window = None if window == (0, 0, W, H) else window
+    sums = PassSums(first, window=window)
     rounds = Rounds()
     # the passes' settings but for the seed (a copy with the pass's seed per pass: a replace would
     # validate every field again, 0.5 ms a pass; pass_seed is a valid seed, 0 <= seed < 2^62)
@@ -356,7 +375,7 @@ def render_passes(scene, settings, psettings, caster, lights, table, *, progress
                     if pipeline and not rounds.is_end(i) and (last is None or i < last):
                         ahead = (i + 1, ahead_pool().submit(pass_maps, i + 1, rounds.stratum(i + 1), None))
                 img, ts = trace_image(scene, pset, caster, lights, maps, table=table, stream=i, time_override=stratum,
-                                      progress=lambda f, m: span(f, m), cancel=cancel,
+                                      window=window, progress=lambda f, m: span(f, m), cancel=cancel,
                                       progress_span=(0.3 if maps is not None else 0.0, 1.0))
             except RenderCancelled:
                 if sums.next == sums.first:

@@ -113,9 +113,9 @@ def render(scene, settings, *, progress=None, cancel=None, on_pass=None, schedul
     scheduled_rounds: PROGRESSIVE keeps to the schedule of time-strata rounds under a time limit (for a
     partial result, ``stpm render --pass-offset``) rather than taking smaller rounds that fit.
     window: (x0, y0, x1, y1) pixels, rows from the top, or None: the pixels wanted (a Render Region);
-    methods PHOTON and ACCUMULATION trace the camera samples of those pixels only (of the tiles they
-    touch; ``integrator.trace_image``; the photons are global anyway), PROGRESSIVE ignores it (its
-    noise estimate is over the frame).
+    every method traces the camera samples of those pixels only (``integrator.trace_image``; the
+    photons light the whole scene anyway); the other pixels stay 0 (Depth: the background).
+    PROGRESSIVE estimates its noise over the window's pixels (``progressive.PassSums.window``).
     """
     kernels.require()
     compiled_before = kernels.compile_counts()
@@ -203,7 +203,7 @@ def _render(scene, settings, *, progress=None, cancel=None, on_pass=None, schedu
         sums, progressive, trace_stats, map_stats = render_passes(
             scene, settings, psettings, caster, lights, table, progress=progress, cancel=cancel,
             on_pass=None if on_pass is None else (lambda sm, info: on_pass(sm.preview(), info)),
-            scheduled_rounds=scheduled_rounds)
+            scheduled_rounds=scheduled_rounds, window=window)
         passes = sums.image()
         photon_s = sum(float(m.get("photon_trace_s", 0.0)) for m in map_stats)
         warnings.extend(progressive_warnings(progressive))
