@@ -140,6 +140,27 @@ def test_render_region_traces_its_pixels_only(adaptive):
 
 
 @pytest.mark.parametrize("method", ["PHOTON", "PROGRESSIVE"])
+def test_region_pixels_have_the_whole_frames_camera_rays_with_depth_of_field(method):
+    # Emission seen through a thin lens: the camera's film, time and lens uniforms are the only
+    # randomness, so a region's pixels equal the whole frame's bit for bit, also where the region's
+    # edges cross a tile (its uniforms, the lens's too, are drawn for the whole tile)
+    import numpy as np
+    import dof_scenes
+    from stpm_core.render import render
+    from stpm_core.settings import RenderSettings
+    dof_scenes.build("f1.4_round")
+    core, _w = export_now()
+    st = RenderSettings(method=method, passes=2, samples=4, photons_global=0, photons_caustic=0, seed=2,
+                        use_adaptive_sampling=False)
+    full = render(core, st)
+    part = render(core, st, window=(10, 5, 40, 30))          # 30 x 25 pixels of the 64 x 48 frame's one tile
+    a, b = full.passes["Combined"][5:30, 10:40], part.passes["Combined"][5:30, 10:40]
+    assert a[..., :3].std() > 0.1                              # (a picture: blurred checker edges)
+    np.testing.assert_array_equal(a, b)
+    assert part.stats["camera_rays"] == 30 * 25 * 4 * (2 if method == "PROGRESSIVE" else 1)
+
+
+@pytest.mark.parametrize("method", ["PHOTON", "PROGRESSIVE"])
 def test_f12_render_region_traces_its_pixels_only(method):
     # The Render panel's path: Render Region on (Crop off) -> the camera rays of its pixels only
     # (PROGRESSIVE traced the whole frame in every pass before)
