@@ -137,3 +137,22 @@ def test_merge_refuses_partials_of_another_region(region_parts, other, message):
     out = _cli("merge", "a1.exr", other, "-o", "bad.exr", cwd=region_parts)
     assert out.returncode == 1 and message in out.stderr and out.stderr.count("\n") == 1, out.stderr
     assert not (region_parts / "bad.exr").exists()
+
+
+def test_the_noise_of_a_region_is_estimated_over_its_pixels():
+    # The Final Progressive preset stops at a noise threshold: over a whole frame that is 0 outside
+    # the region, the noiseless blocks outside would pull the 95th percentile down (an early stop)
+    from stpm_core.progressive import PassSums, noise_estimate
+    rng = np.random.default_rng(4)
+    win = (8, 0, 24, 16)
+    region, crop, frame = PassSums(1, window=win), PassSums(1), PassSums(1)
+    for i in range(1, 5):
+        img = np.zeros((32, 48, 4), np.float32)
+        img[0:16, 8:24, :3] = rng.gamma(4.0, 0.25, (16, 16, 1))
+        region.add(i, {"Combined": img})
+        frame.add(i, {"Combined": img})
+        crop.add(i, {"Combined": img[0:16, 8:24]})
+    got, want = noise_estimate(region), noise_estimate(crop)
+    assert got["blocks"].shape == (2, 2)
+    assert got["noise_p95"] == want["noise_p95"] and got["noise_mean"] == want["noise_mean"]
+    assert noise_estimate(frame)["noise_mean"] < 0.2 * got["noise_mean"]      # (what the frame's blocks say)
