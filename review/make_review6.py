@@ -239,10 +239,12 @@ ct = bpy.data.node_groups.new("Compositing", "CompositorNodeTree"); scene.compos
 ct.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
 rl = ct.nodes.new("CompositorNodeRLayers")
 ao = ct.nodes.new("CompositorNodeAlphaOver")
-ao.inputs[1].default_value = (0.5, 0.45, 0.4, 1.0)       # the background colour
+ao.inputs["Background"].default_value = (0.5, 0.45, 0.4, 1.0)       # the background colour
 out = ct.nodes.new("NodeGroupOutput")
-ct.links.new(rl.outputs["Image"], ao.inputs[2]); ct.links.new(ao.outputs["Image"], out.inputs[0])
+ct.links.new(rl.outputs["Image"], ao.inputs["Foreground"]); ct.links.new(ao.outputs["Image"], out.inputs[0])
 rs.use_compositing = True
+# a new compositor has no STPM Denoise group: Denoise off and on again puts it before the Alpha Over
+scene.stpm.denoise = False; scene.stpm.denoise = True
 rs.filepath = str(OUT / "watch6_alpha_frame_")
 bpy.ops.wm.save_as_mainfile(filepath=str(OUT / "watch6_alpha.blend"))
 print("saved", OUT / "watch6_alpha.blend")

@@ -2,7 +2,7 @@
 the mean of a crop printed.
 
 python review/probe6.py stpm|cycles OUT.exr [--samples S] [--size WxH] [--hide A,B] [--set key=val,...]
-                        [--crop x0,y0,x1,y1] [--file watch6] [--scale-xy Name=f,...]
+                        [--crop x0,y0,x1,y1] [--file watch6] [--scale-xy Name=f,...] [--aniso0]
 --set sets scene.stpm fields (stpm) or scene.cycles fields (cycles); --crop is in pixels, rows from the top.
 """
 import sys
@@ -34,6 +34,11 @@ for name in filter(None, opt("--hide", "").split(",")):
 for kv in filter(None, opt("--scale-xy", "").split(",")):         # Name=f: scale an object in x and y
     k, v = kv.split("=")
     bpy.data.objects[k].scale.x = bpy.data.objects[k].scale.y = float(v)
+if "--aniso0" in args:                                              # every Principled Anisotropic to 0
+    for m in bpy.data.materials:
+        for n in (m.node_tree.nodes if m.node_tree else []):
+            if n.bl_idname == "ShaderNodeBsdfPrincipled":
+                n.inputs["Anisotropic"].default_value = 0.0
 s.stpm.denoise = False
 if engine == "cycles":
     r.engine = "CYCLES"; cy = s.cycles

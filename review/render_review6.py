@@ -1,7 +1,7 @@
 """The artist's renders of review/out/watch6*.blend (review/make_review6.py), through bpy.
 
 python review/render_review6.py FILE MODE [PRESET] [--samples S] [--tag T] [--exr] [--seed S] [--size WxH]
-                                [--no-denoise]
+                                [--no-denoise] [--passes-out]
 FILE:  watch6, watch6_sky or watch6_alpha (review/out/FILE.blend)
 MODE f12:    the Render panel path: preset (bpy.ops.stpm.apply_preset), then bpy.ops.render.render
              (write_still) on frame 2; prints the render report's warnings and stats.
@@ -52,6 +52,17 @@ else:
         s.stpm.seed = opt("--seed", int)
     if "--no-denoise" in args:
         s.stpm.denoise = False
+if "--passes-out" in args:
+    # the compositor's File Output node writes STPM's passes beside the image (as an artist's comp does)
+    from addon.denoise import scene_compositor
+    tree = scene_compositor(s)
+    rl = next(n for n in tree.nodes if n.bl_idname == "CompositorNodeRLayers")
+    fo = tree.nodes.new("CompositorNodeOutputFile")
+    fo.directory = str(HERE / "out" / f"{name}_passes"); fo.file_name = "pass_"
+    fo.file_output_items.clear()
+    for p in ("Direct", "Indirect", "Caustic", "Emit", "Depth"):
+        fo.file_output_items.new("FLOAT" if p == "Depth" else "RGBA", p)
+        tree.links.new(rl.outputs[p], fo.inputs[p])
 if "--exr" in args:
     r.image_settings.media_type = "MULTI_LAYER_IMAGE"; r.image_settings.color_depth = "32"
 from addon.engine import LAST_RENDER  # noqa: E402
