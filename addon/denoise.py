@@ -114,7 +114,24 @@ def _group_node(tree):
 
 def add_denoise_node(scene):
     """Put the STPM Denoise group between the Render Layers' Image and what it fed (or the
-    compositor's output), fed by the guide passes; returns the group node."""
+    compositor's output), fed by the guide passes; returns the group node.
+
+    The guide passes are STPM's: the Render Layers node has their sockets only while STPM is the
+    render engine.  A script that ticks ``denoise`` before it sets the engine (the sixth artist
+    review's did) got the group without its guides, and every F12 warned that the image was not
+    denoised; so the engine is STPM for the time of the linking, then restored (the links stay,
+    unavailable, until STPM is the engine again)."""
+    engine = scene.render.engine
+    if engine != "STPM":
+        scene.render.engine = "STPM"
+    try:
+        return _add_denoise_node(scene)
+    finally:
+        if scene.render.engine != engine:
+            scene.render.engine = engine
+
+
+def _add_denoise_node(scene):
     tree = scene_compositor(scene)
     rl = _render_layers(tree, scene)
     node = _group_node(tree)

@@ -94,6 +94,26 @@ def _plain(v):
     return v
 
 
+# A global map read directly needs many more photons than one look-up's k: with fewer than this many
+# k's, each estimate averages a good part of the whole map (the sixth artist review's lawn: 530 of 1 M)
+SPARSE_GLOBAL_KS = 10
+
+
+def _sparse_global_map(map_stats: dict, psettings) -> str | None:
+    """The warning for a global map too sparse to read directly (an open scene: light that bounces off
+    the ground mostly leaves to the sky and is not stored), or None: with final gathering the map is
+    read one bounce further, where its blur matters little."""
+    stored = int(map_stats.get("photons_stored_global", map_stats.get("photons_global", 0)) or 0)
+    emitted = int(map_stats.get("photons_emitted_global", 0) or 0)
+    k = int(psettings.k_nearest)
+    if emitted == 0 or psettings.final_gather_samples > 0 or stored >= SPARSE_GLOBAL_KS * k:
+        return None
+    return (f"the global photon map holds {stored} of {emitted} photons, fewer than {SPARSE_GLOBAL_KS} x k "
+            f"({SPARSE_GLOBAL_KS * k}): each indirect-light estimate averages much of the scene, so light "
+            f"bounced between nearby objects comes out too dark or blotchy (an open scene stores few photons); "
+            f"set Final Gather Samples (16) or emit more global photons")
+
+
 def _map_stats(maps) -> dict:
     return _plain(dict(getattr(maps, "stats", {}) or {})) if maps is not None else {}
 
@@ -243,6 +263,9 @@ def _render(scene, settings, *, progress=None, cancel=None, on_pass=None, schedu
                 for k in acc:
                     acc[k] += passes_i[k]
         passes = {k: (v / N).astype(np.float32) for k, v in acc.items()}
+
+    if settings.method != "PROGRESSIVE" and plan["indirect"]:
+        warnings.extend(filter(None, [_sparse_global_map(map_stats[0] if map_stats else {}, psettings)]))
 
     # -- Statistics -------------------------------------------------------------------
     def total(key):

@@ -160,7 +160,8 @@ def test_moving_mapped_render_is_the_same_image_whatever_the_threads():
     scene = _mapped_scene()
     st = dict(samples=8, photons_global=3000, photons_caustic=0, max_depth=4, seed=5)
     a = render(scene, RenderSettings(threads=1, **st))
-    assert not a.warnings, a.warnings
+    # (3000 photons over an open floor: the global map's sparseness is named, render._sparse_global_map)
+    assert not [w for w in a.warnings if not w.startswith("the global photon map holds")], a.warnings
     b = render(scene, RenderSettings(threads=2, **st))
     img = a.passes["Combined"][..., :3]
     assert np.array_equal(img, b.passes["Combined"][..., :3])
