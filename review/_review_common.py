@@ -220,6 +220,27 @@ def bend_rig(obj, name, loc, height, keys):
     return rig
 
 
+def unbiased_cycles(scene, spp):
+    """Render scene with Cycles as the review's references do: CPU, spp samples, no denoising, no
+    adaptive sampling, no clamping (Cycles' unbiased answer; bounces left as the file has them).
+    Returns scene.cycles for further settings."""
+    scene.render.engine = "CYCLES"; cy = scene.cycles
+    cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", spp, False, False
+    cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0
+    return cy
+
+
+def read_exr_layers(path):
+    """Every channel of an EXR, all its subimages (a multilayer EXR's layers): {channel name: (h, w)
+    float32}, e.g. "ViewLayer.Combined.R", "ViewLayer.Object Index.X"."""
+    inp = oiio.ImageInput.open(str(path)); sub = 0; ch = {}
+    while inp.seek_subimage(sub, 0):
+        sp = inp.spec(); px = inp.read_image(sub, 0, 0, sp.nchannels, "float").reshape(sp.height, sp.width, -1)
+        ch.update({n: px[..., i] for i, n in enumerate(sp.channelnames)}); sub += 1
+    inp.close()
+    return ch
+
+
 def car_paint(name="CarPaint", coat_weight=1.0):
     """The outdoor review's car paint: Principled base (0.55, 0.02, 0.02), Metallic 0.7, a Noise
     texture at scale 600 through a ramp (0.15 to 0.45) into Roughness and a Bump (0.15) into Normal,

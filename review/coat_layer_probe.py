@@ -15,9 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import bpy
-import OpenImageIO as oiio
 
-from _review_common import car_body, car_paint, start_scene
+from _review_common import car_body, car_paint, read_exr_layers, start_scene, unbiased_cycles
 
 out = Path(sys.argv[1]); out.mkdir(parents=True, exist_ok=True)
 stpm_spp = int(sys.argv[2]) if len(sys.argv) > 2 else 64
@@ -42,25 +41,14 @@ cam.location = (0.3, -4.2, 1.3); cam.rotation_euler = (math.radians(77), 0.0, ma
 s.collection.objects.link(cam); s.camera = cam
 
 
-def read_layers(path):
-    inp = oiio.ImageInput.open(str(path)); sub = 0; ch = {}
-    while inp.seek_subimage(sub, 0):
-        sp = inp.spec(); px = inp.read_image(sub, 0, 0, sp.nchannels, "float").reshape(sp.height, sp.width, -1)
-        ch.update({n: px[..., i] for i, n in enumerate(sp.channelnames)}); sub += 1
-    inp.close()
-    return ch
-
-
 ref_path, mask_path = out / f"cycles_{cyc_spp}_{coat:g}.npy", out / "mask.npy"
 if not ref_path.exists():
-    s.render.engine = "CYCLES"; cy = s.cycles
-    cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", cyc_spp, False, False
-    cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0
+    unbiased_cycles(s, cyc_spp)
     car.pass_index = 1; s.view_layers[0].use_pass_object_index = True
     s.render.image_settings.media_type = "MULTI_LAYER_IMAGE"
     s.render.filepath = str(out / "cycles.exr"); s.render.use_file_extension = False
     bpy.ops.render.render(write_still=True)
-    ch = read_layers(out / "cycles.exr")
+    ch = read_exr_layers(out / "cycles.exr")
     np.save(ref_path, np.stack([ch[f"ViewLayer.Combined.{c}"] for c in "RGB"], -1).astype(np.float64))
     np.save(mask_path, np.rint(ch["ViewLayer.Object Index.X"]) == 1)
 ref, mask = np.load(ref_path), np.load(mask_path)
