@@ -10,6 +10,7 @@ Import it from a script in review/ (run as ``python review/make_x.py``, so revie
 ``from _review_common import start_scene, principled, ...``. (Not named _common: blend_scenes/_common.py, the generators' helpers, is on sys.path too when
 tests/test_addon_scenes.py is imported, as review/motion_probe.py does.)
 """
+import json
 import math
 import sys
 from pathlib import Path
@@ -218,6 +219,39 @@ def bend_rig(obj, name, loc, height, keys):
     for f, a in keys:
         pb.rotation_euler.x = math.radians(a); pb.keyframe_insert("rotation_euler", index=0, frame=f)
     return rig
+
+
+def open_for_f12(blend, preset, samples=None):
+    """Open blend as the artist's F12 scripts do: the STPM add-on registered (this checkout's), STPM
+    the engine, the preset applied (bpy.ops.stpm.apply_preset) and samples, when given, overriding
+    the preset's. Returns the scene."""
+    sys.path.insert(0, str(ROOT))
+    import addon
+    addon.register()
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    s = bpy.context.scene
+    s.render.engine = "STPM"
+    bpy.ops.stpm.apply_preset(preset=preset)
+    if samples:
+        s.stpm.samples = samples
+    return s
+
+
+def print_f12_report(wall, *, errors=False):
+    """Print what the add-on reported of its last render: the wall time (s), its warnings (and its
+    errors and report keys when errors), the passes written and the stats' phases as JSON."""
+    from addon.engine import LAST_RENDER
+    st = LAST_RENDER.get("stats", {})
+    print(f"F12 wall {wall:.1f} s")
+    for w in LAST_RENDER.get("warnings", []):
+        print("WARNING:", w)
+    if errors:
+        for e in LAST_RENDER.get("errors", []) if isinstance(LAST_RENDER.get("errors"), list) else []:
+            print("ERROR:", e)
+        print("LAST_RENDER keys:", sorted(LAST_RENDER))
+    print("passes:", LAST_RENDER.get("passes"))
+    print(json.dumps({k: st.get(k) for k in ("export_s", "photon_trace_s", "photon_map_build_s", "render_s",
+                                             "render_wall_s", "photons_global", "photons_caustic", "samples")}))
 
 
 def unbiased_cycles(scene, spp):
