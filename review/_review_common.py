@@ -13,6 +13,7 @@ tests/test_addon_scenes.py is imported, as review/motion_probe.py does.)
 import json
 import math
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -262,6 +263,23 @@ def unbiased_cycles(scene, spp):
     cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", spp, False, False
     cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0
     return cy
+
+
+def cycles_reference(blend, frame, out_stem, args):
+    """The review's Cycles reference of blend at frame: args = SPP [TAG] [--seed N] [--time-limit S]
+    (TAG defaults to SPP, seed to 0), unbiased_cycles' settings, a 32-bit EXR written to
+    review/out/<out_stem>_<TAG>.exr; prints the wall time."""
+    spp = int(args[0]); tag = args[1] if len(args) > 1 and not args[1].startswith("--") else str(spp)
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    s = bpy.context.scene; s.frame_set(frame)
+    cy = unbiased_cycles(s, spp)
+    cy.seed = int(args[args.index("--seed") + 1]) if "--seed" in args else 0
+    if "--time-limit" in args:
+        cy.time_limit = float(args[args.index("--time-limit") + 1])
+    s.render.image_settings.media_type = "IMAGE"; s.render.image_settings.file_format = "OPEN_EXR"
+    s.render.image_settings.color_depth = "32"
+    s.render.filepath = str(OUT / f"{out_stem}_{tag}.exr"); s.render.use_file_extension = False
+    t = time.time(); bpy.ops.render.render(write_still=True); print(f"cycles {spp} spp wall {time.time() - t:.1f} s")
 
 
 def read_exr_layers(path):
