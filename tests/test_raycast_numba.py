@@ -12,7 +12,7 @@ from stpm_core.motion import MotionTransform
 from stpm_core.raycast import make_caster
 from stpm_core.raycast.build import BACKEND_ENV, numba_available
 from stpm_core.scene import Instance, Material, Mesh, Scene
-from test_raycast import heightfield, random_rays, random_scene, soup, trs
+from test_raycast import heightfield, many_moving_instances, random_rays, random_scene, soup, trs, waving_heightfield_rays
 
 pytestmark = pytest.mark.skipif(not numba_available(), reason="numba not installed")
 
@@ -66,16 +66,7 @@ def test_numba_matches_numpy_on_random_scenes():
 def test_deforming_mesh_exact_at_each_ray_time():
     """A waving heightfield: every hit lies on the surface at the ray's own time (analytic
     z = h(x, y, t) interpolated on the triangle), and matches the oracle."""
-    times = np.linspace(0, 1, 4)
-    height = lambda x, y, t: 0.3 * np.sin(3 * x + 4 * t) * np.cos(2 * y - 3 * t)
-    mesh = heightfield(24, times, height)
-    scene = Scene(meshes=[mesh], instances=[Instance(0)], materials=[Material()])
-    rng = np.random.default_rng(3)
-    n = 2000
-    xy = rng.uniform(-0.9, 0.9, (n, 2))
-    o = np.column_stack([xy + rng.uniform(-0.1, 0.1, (n, 2)), np.full(n, 2.0)])
-    d = np.column_stack([xy - o[:, :2], np.full(n, -3.0)])
-    t = rng.uniform(0, 1, n)
+    mesh, scene, o, d, t = waving_heightfield_rays(0.1)
     hb = make_caster(scene, "numba").intersect(o, d, t)
     assert hb.hit.all()
     # Barycentric point of the triangle at the ray time == the hit position
@@ -89,14 +80,7 @@ def test_deforming_mesh_exact_at_each_ray_time():
 def test_many_moving_instances_agree():
     """40 moving instances of one mesh (shared BVH, culled through the caster's part BVH)."""
     rng = np.random.default_rng(17)
-    mesh = soup(rng, 6, spread=0.2, size=0.15)
-    inst = []
-    for k in range(40):
-        p0, p1 = rng.uniform(-2, 2, 3), rng.uniform(-2, 2, 3)
-        a0 = rng.uniform(0, 6)
-        a1 = a0 if k % 2 else rng.uniform(0, 6)
-        inst.append(Instance(0, MotionTransform(np.array([0.0, 1.0]), np.stack([trs(p0, a0), trs(p1, a1)]))))
-    scene = Scene(meshes=[mesh], instances=inst, materials=[Material(), Material()])
+    scene = many_moving_instances(rng)
     o, d, t = random_rays(rng, 2000)
     nb = make_caster(scene, "numba")
     assert len({id(p.tris) for p in nb.parts}) == 1                  # one object-space BVH for the mesh
