@@ -11,8 +11,9 @@ from stpm_core.errors import StpmError
 from stpm_core.motion import MotionTransform
 from stpm_core.raycast import make_caster
 from stpm_core.raycast.build import BACKEND_ENV, numba_available
-from stpm_core.scene import Instance, Material, Mesh, Scene
-from test_raycast import heightfield, many_moving_instances, random_rays, random_scene, soup, trs, waving_heightfield_rays
+from stpm_core.scene import Instance, Material, Scene
+from test_raycast import (assert_degenerate_triangles_are_passed_over, degenerate_triangles_scene, heightfield,
+                          many_moving_instances, random_rays, random_scene, soup, trs, waving_heightfield_rays)
 
 pytestmark = pytest.mark.skipif(not numba_available(), reason="numba not installed")
 
@@ -141,23 +142,9 @@ def test_translated_1e5_scene_gives_the_same_hits():
 
 
 def test_degenerate_triangles_do_not_crash_or_nan():
-    V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0],            # collinear
-                  [0, 1, 0], [0, 1, 0],                        # repeated vertex
-                  [-1, -1, 0.5], [1, -1, 0.5], [0, 1, 0.5]], np.float32)
-    F = np.array([[0, 1, 2], [3, 4, 0], [3, 3, 3], [5, 6, 7]], np.int32)
-    mesh = Mesh(vertices=V, triangles=F, material_ids=np.zeros(4, np.int32), normals=np.zeros((4, 3, 3), np.float32))
-    scene = Scene(meshes=[mesh], instances=[Instance(0)], materials=[Material()])
+    scene = degenerate_triangles_scene()
     caster = make_caster(scene, "numba")
-    rng = np.random.default_rng(0)
-    o = np.column_stack([rng.uniform(-1, 2, 500), rng.uniform(-1, 1, 500), np.full(500, 2.0)])
-    o[:50, :2] = V[[0, 1, 2, 3, 4]][np.arange(50) % 5, :2]     # aimed exactly at degenerate vertices
-    d = np.tile([0, 0, -1.0], (500, 1))
-    h = caster.intersect(o, d, np.full(500, 0.5))
-    for f in (h.t[h.hit], h.position[h.hit], h.ng[h.hit], h.ns[h.hit], h.u, h.v):
-        assert np.all(np.isfinite(f))
-    assert h.hit.sum() > 100 and np.all(h.prim[h.hit] == 3)     # only the real triangle is hit
-    np.testing.assert_allclose(h.t[h.hit], 1.5)
-    np.testing.assert_allclose(h.ns[h.hit], h.ng[h.hit])        # zero shading normal -> ng
+    rng = assert_degenerate_triangles_are_passed_over(caster, scene)
     # Axis-parallel rays (zero direction components) along and beside the degenerate ones
     d2 = np.tile([1.0, 0, 0], (500, 1))
     o2 = np.column_stack([np.full(500, -3.0), rng.uniform(-1, 1, 500), rng.choice([0.0, 0.5, 0.25], 500)])
