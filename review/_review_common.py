@@ -1,10 +1,12 @@
-"""What the review scene builders (review/make_*.py, review/coat_layer_probe.py) share (bpy 5.0.1).
+"""What the artist-review scripts in review/ share (bpy 5.0.1).
 
-Each builder makes its scene the way an artist would, with bpy operators; the steps two or more of
-them take the same way live here once: an empty scene with the STPM add-on, PNG/EXR textures written
-with OpenImageIO, Smart UV Project, Principled / Emission / Glass / image-textured materials, boxes,
-lathed (Screw modifier) profiles, a Geometry Nodes scatter, a two-bone armature bending a mesh, and
-the outdoor review's car paint.
+The scene builders (make_*.py, coat_layer_probe.py) make their scenes the way an artist would, with
+bpy operators; the steps two or more of them take the same way live here once: an empty scene with
+the STPM add-on, PNG/EXR textures written with OpenImageIO, Smart UV Project, Principled / Emission /
+Glass / image-textured materials, boxes, lathed (Screw modifier) profiles, a Geometry Nodes scatter,
+a two-bone armature bending a mesh, the outdoor review's car paint. The render scripts share the F12
+set-up and report (render_*_bpy.py), Cycles' unbiased reference settings (render_*_cycles.py and the
+probes) and a multilayer-EXR reader.
 
 Import it from a script in review/ (run as ``python review/make_x.py``, so review/ is on sys.path):
 ``from _review_common import start_scene, principled, ...``. (Not named _common: blend_scenes/_common.py, the generators' helpers, is on sys.path too when
@@ -98,8 +100,8 @@ def _replace_principled(name, idname):
 
 
 def emission(name, color, strength):
-    """A material of an Emission shader alone: color (r, g, b[, a]), strength in W/m^2-ish units as
-    Blender's Strength. Returns the material."""
+    """A material of an Emission shader alone: color (r, g, b[, a]), strength Blender's Emission
+    Strength. Returns the material."""
     m, e = _replace_principled(name, "ShaderNodeEmission")
     e.inputs["Color"].default_value = (*color, 1.0) if len(color) == 3 else color
     e.inputs["Strength"].default_value = strength
