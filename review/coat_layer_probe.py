@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import bpy
-import OpenImageIO as oiio
+
+from _review_common import car_body, car_paint, read_exr_layers, start_scene, unbiased_cycles
 
 out = Path(sys.argv[1]); out.mkdir(parents=True, exist_ok=True)
 stpm_spp = int(sys.argv[2]) if len(sys.argv) > 2 else 64
@@ -23,10 +24,7 @@ cyc_spp = int(sys.argv[3]) if len(sys.argv) > 3 else 512
 coat = float(sys.argv[4]) if len(sys.argv) > 4 else 1.0
 W, H = 160, 96
 
-import addon  # noqa: E402
-bpy.ops.wm.read_factory_settings(use_empty=True)
-addon.register()
-s = bpy.context.scene
+s = start_scene(addon_from_path=True)
 s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = W, H, 100
 world = bpy.data.worlds.new("Sky"); s.world = world
 bg = world.node_tree.nodes["Background"]; bg.inputs["Color"].default_value = (0.35, 0.5, 0.8, 1.0)
@@ -34,21 +32,7 @@ bg.inputs["Strength"].default_value = 0.6
 ground = bpy.data.materials.new("Ground"); gp = ground.node_tree.nodes["Principled BSDF"]
 gp.inputs["Base Color"].default_value = (0.3, 0.3, 0.3, 1.0); gp.inputs["Roughness"].default_value = 0.9
 bpy.ops.mesh.primitive_plane_add(size=30.0); bpy.context.object.data.materials.append(ground)
-bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(0.0, 0.0, 0.3), segments=48, ring_count=24)
-car = bpy.context.object; car.name = "CarBody"; car.scale = (1.6, 0.8, 0.55)
-bpy.ops.object.shade_smooth()
-paint = bpy.data.materials.new("CarPaint"); nt = paint.node_tree; pb = nt.nodes["Principled BSDF"]
-for k, v in {"Base Color": (0.55, 0.02, 0.02, 1.0), "Metallic": 0.7, "Roughness": 0.3, "Coat Weight": coat,
-             "Coat Roughness": 0.03}.items():
-    pb.inputs[k].default_value = v
-flakes = nt.nodes.new("ShaderNodeTexNoise"); flakes.inputs["Scale"].default_value = 600.0
-ramp = nt.nodes.new("ShaderNodeValToRGB")
-ramp.color_ramp.elements[0].position = 0.45; ramp.color_ramp.elements[0].color = (0.15, 0.15, 0.15, 1)
-ramp.color_ramp.elements[1].position = 0.55; ramp.color_ramp.elements[1].color = (0.45, 0.45, 0.45, 1)
-nt.links.new(flakes.outputs["Fac"], ramp.inputs["Fac"]); nt.links.new(ramp.outputs["Color"], pb.inputs["Roughness"])
-bump = nt.nodes.new("ShaderNodeBump"); bump.inputs["Strength"].default_value = 0.15
-nt.links.new(flakes.outputs["Fac"], bump.inputs["Height"]); nt.links.new(bump.outputs["Normal"], pb.inputs["Normal"])
-car.data.materials.append(paint)
+car = car_body((0.0, 0.0, 0.3), car_paint(coat_weight=coat))
 sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN")); sun.data.energy = 3.0
 sun.data.angle = math.radians(1.0)
 sun.rotation_euler = (math.radians(60), 0.0, math.radians(-40)); s.collection.objects.link(sun)
@@ -57,25 +41,14 @@ cam.location = (0.3, -4.2, 1.3); cam.rotation_euler = (math.radians(77), 0.0, ma
 s.collection.objects.link(cam); s.camera = cam
 
 
-def read_layers(path):
-    inp = oiio.ImageInput.open(str(path)); sub = 0; ch = {}
-    while inp.seek_subimage(sub, 0):
-        sp = inp.spec(); px = inp.read_image(sub, 0, 0, sp.nchannels, "float").reshape(sp.height, sp.width, -1)
-        ch.update({n: px[..., i] for i, n in enumerate(sp.channelnames)}); sub += 1
-    inp.close()
-    return ch
-
-
 ref_path, mask_path = out / f"cycles_{cyc_spp}_{coat:g}.npy", out / "mask.npy"
 if not ref_path.exists():
-    s.render.engine = "CYCLES"; cy = s.cycles
-    cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", cyc_spp, False, False
-    cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0
+    unbiased_cycles(s, cyc_spp)
     car.pass_index = 1; s.view_layers[0].use_pass_object_index = True
     s.render.image_settings.media_type = "MULTI_LAYER_IMAGE"
     s.render.filepath = str(out / "cycles.exr"); s.render.use_file_extension = False
     bpy.ops.render.render(write_still=True)
-    ch = read_layers(out / "cycles.exr")
+    ch = read_exr_layers(out / "cycles.exr")
     np.save(ref_path, np.stack([ch[f"ViewLayer.Combined.{c}"] for c in "RGB"], -1).astype(np.float64))
     np.save(mask_path, np.rint(ch["ViewLayer.Object Index.X"]) == 1)
 ref, mask = np.load(ref_path), np.load(mask_path)

@@ -2,16 +2,13 @@
 warned): Cycles at SPP with the CarKey light linked to the car only (as saved) and unlinked, mean
 ratio unlinked / linked over a 3 x 3 grid.  python review/light_linking_probe.py [SPP]"""
 import sys
-from pathlib import Path
 import numpy as np
 import bpy
 import OpenImageIO as oiio
-HERE = Path(__file__).resolve().parent
+from _review_common import HERE, unbiased_cycles
 spp = int(sys.argv[1]) if len(sys.argv) > 1 else 32
 bpy.ops.wm.open_mainfile(filepath=str(HERE / "out" / "outdoor.blend"))
-s = bpy.context.scene; s.frame_set(10); s.render.engine = "CYCLES"; cy = s.cycles
-cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", spp, False, False
-cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0
+s = bpy.context.scene; s.frame_set(10); unbiased_cycles(s, spp)
 s.render.image_settings.media_type = "IMAGE"; s.render.image_settings.file_format = "OPEN_EXR"
 imgs = []
 for tag in ("linked", "unlinked"):

@@ -11,30 +11,15 @@ Writes review/out/bottle.blend and variants:
   bottle_film.blend   transparent film, Standard view, a render region (border, no crop)
 python review/make_bottle.py   (PYTHONPATH = the checkout; bpy 5.0.1)
 """
-import math, sys
-from pathlib import Path
+import math
 import numpy as np
 import bpy
-import OpenImageIO as oiio
 
-HERE = Path(__file__).resolve().parent
-OUT = HERE / "out"; OUT.mkdir(exist_ok=True)
+from _review_common import (OUT, emission, glass, image_material, principled, scatter_tree, select_only, smart_uv,
+                     start_scene, write_image)
+
+scene = start_scene()
 TEX = OUT / "bottle_textures"; TEX.mkdir(exist_ok=True)
-sys.path.insert(0, str(HERE.parent))
-import addon
-
-bpy.ops.wm.read_factory_settings(use_empty=True)
-addon.register()
-bpy.context.preferences.edit.keyframe_new_interpolation_type = "LINEAR"
-scene = bpy.context.scene
-
-
-def write(path, arr, fmt):
-    h, w, c = arr.shape
-    buf = oiio.ImageBuf(oiio.ImageSpec(w, h, c, fmt))
-    buf.set_pixels(oiio.ROI(), arr if fmt == "float" else (np.clip(arr, 0, 1) * 255 + 0.5).astype(np.uint8))
-    assert buf.write(str(path)), buf.geterror()
-
 
 # --- textures: marble (veins from sines of a warped coordinate), its normal map, an HDRI
 rng = np.random.default_rng(3)
@@ -44,42 +29,23 @@ warp = sum(a * np.sin(2 * np.pi * (f1 * xx + f2 * yy) + p)
            for a, f1, f2, p in zip(rng.uniform(0.05, 0.2, 6), rng.integers(1, 5, 6), rng.integers(1, 5, 6), rng.uniform(0, 6, 6)))
 vein = np.abs(np.sin(2 * np.pi * (3 * xx + 2 * yy + warp))) ** 0.25
 marble = np.stack([0.85 * vein + 0.1, 0.83 * vein + 0.1, 0.8 * vein + 0.12], -1)
-write(TEX / "marble.png", marble, "uint8")
+write_image(TEX / "marble.png", marble)
 gy, gx = np.gradient(vein)
 nrm = np.stack([0.5 - 2.0 * gx, 0.5 - 2.0 * gy, np.ones_like(gx)], -1)
-write(TEX / "marble_normal.png", nrm, "uint8")
+write_image(TEX / "marble_normal.png", nrm)
 H, W = 64, 128
 v = (np.arange(H) + 0.5) / H
 env = np.zeros((H, W, 3), np.float32)
 env[:] = (0.3 + 0.6 * (1 - v))[:, None, None] * np.array([0.55, 0.7, 1.0], np.float32)
 env[H // 2:] = np.array([0.12, 0.1, 0.09], np.float32)
 env[14:17, 80:83] = 300.0
-write(TEX / "studio.exr", env, "float")
+write_image(TEX / "studio.exr", env, "float")
 # an IES file: type C, a downlight whose candela falls off with the vertical angle
 angles = list(range(0, 181, 10))
 cd = [max(0.0, math.cos(math.radians(a))) ** 2 * 1000 + 20 for a in angles]
 (TEX / "downlight.ies").write_text(
     "IESNA:LM-63-2002\n[TEST] review\nTILT=NONE\n1 -1 1 %d 1 1 2 0 0 0\n1 1 100\n%s\n0\n%s\n"
     % (len(angles), " ".join(map(str, angles)), " ".join(f"{c:.1f}" for c in cd)))
-
-
-def select_only(obj):
-    bpy.context.view_layer.objects.active = obj
-    for o in bpy.context.view_layer.objects: o.select_set(o is obj)
-
-
-def unwrap(obj):
-    select_only(obj)
-    bpy.ops.object.mode_set(mode="EDIT"); bpy.ops.mesh.select_all(action="SELECT")
-    bpy.ops.uv.smart_project(); bpy.ops.object.mode_set(mode="OBJECT")
-
-
-def principled(name, **inputs):
-    m = bpy.data.materials.new(name)
-    if bpy.app.version < (5, 0, 0): m.use_nodes = True
-    b = m.node_tree.nodes["Principled BSDF"]
-    for k, val in inputs.items(): b.inputs[k].default_value = val
-    return m, b
 
 
 # --- backdrop: floor + wall as one plane bent upward, subdivided for the curve
@@ -95,16 +61,9 @@ bm, _ = principled("Backdrop", **{"Base Color": (0.3, 0.28, 0.27, 1), "Roughness
 
 # --- marble plinth: UV unwrapped, image texture + normal map
 bpy.ops.mesh.primitive_cylinder_add(radius=0.9, depth=0.3, vertices=48, location=(0, 0.2, 0.15)); plinth = bpy.context.object
-plinth.name = "Plinth"; unwrap(plinth); bpy.ops.object.shade_smooth()
-m, b = principled("Marble", Roughness=0.25)
-nt = m.node_tree
-tex = nt.nodes.new("ShaderNodeTexImage"); tex.image = bpy.data.images.load(str(TEX / "marble.png"))
-ntex = nt.nodes.new("ShaderNodeTexImage"); ntex.image = bpy.data.images.load(str(TEX / "marble_normal.png"))
-ntex.image.colorspace_settings.name = "Non-Color"
-nmap = nt.nodes.new("ShaderNodeNormalMap"); nmap.inputs["Strength"].default_value = 0.8
-nt.links.new(tex.outputs["Color"], b.inputs["Base Color"])
-nt.links.new(ntex.outputs["Color"], nmap.inputs["Color"]); nt.links.new(nmap.outputs["Normal"], b.inputs["Normal"])
-plinth.data.materials.append(m)
+plinth.name = "Plinth"; smart_uv(plinth); bpy.ops.object.shade_smooth()
+plinth.data.materials.append(image_material("Marble", TEX / "marble.png", TEX / "marble_normal.png", roughness=0.25,
+                                            normal_strength=0.8))
 
 # --- the bottle: a cube rounded by Subdivision, hollowed by Solidify, glass
 me = bpy.data.meshes.new("Bottle")
@@ -115,12 +74,7 @@ bottle.location = (0, 0.2, 0.3 + 0.25 - 0.035)                      # its base o
 sub = bottle.modifiers.new("Subd", "SUBSURF"); sub.levels, sub.render_levels = 2, 3
 sol = bottle.modifiers.new("Solidify", "SOLIDIFY"); sol.thickness = 0.03
 select_only(bottle); bpy.ops.object.shade_smooth()
-glass = bpy.data.materials.new("Glass")
-if bpy.app.version < (5, 0, 0): glass.use_nodes = True
-gnt = glass.node_tree; gnt.nodes.remove(gnt.nodes["Principled BSDF"])
-g = gnt.nodes.new("ShaderNodeBsdfGlass"); g.inputs["Color"].default_value = (0.95, 0.85, 0.7, 1); g.inputs["Roughness"].default_value = 0.0
-gnt.links.new(g.outputs[0], gnt.nodes["Material Output"].inputs["Surface"])
-bottle.data.materials.append(glass)
+bottle.data.materials.append(glass("Glass", color=(0.95, 0.85, 0.7, 1)))
 
 # --- gold cap
 bpy.ops.mesh.primitive_cylinder_add(radius=0.09, depth=0.18, vertices=32, location=(0, 0.2, 0.82)); cap = bpy.context.object
@@ -146,27 +100,13 @@ col.objects.link(pearl)
 bpy.context.view_layer.layer_collection.children["Pearls"].exclude = True
 bpy.ops.mesh.primitive_plane_add(size=0.9, location=(-0.9, -0.5, 0.001)); pad = bpy.context.object; pad.name = "PearlPad"
 pad.data.materials.append(bm)
-ng = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
-ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-n = ng.nodes; gi = n.new("NodeGroupInput"); go = n.new("NodeGroupOutput")
-dist = n.new("GeometryNodeDistributePointsOnFaces"); dist.inputs["Density"].default_value = 60
-ci = n.new("GeometryNodeCollectionInfo"); ci.inputs["Collection"].default_value = col
-inst = n.new("GeometryNodeInstanceOnPoints"); join = n.new("GeometryNodeJoinGeometry")
-ng.links.new(gi.outputs[0], dist.inputs["Mesh"]); ng.links.new(dist.outputs["Points"], inst.inputs["Points"])
-ng.links.new(ci.outputs[0], inst.inputs["Instance"])
-ng.links.new(inst.outputs[0], join.inputs[0]); ng.links.new(gi.outputs[0], join.inputs[0]); ng.links.new(join.outputs[0], go.inputs[0])
+ng, dist = scatter_tree("Scatter", col, keep_surface=True); dist.inputs["Density"].default_value = 60
 pad.modifiers.new("Scatter", "NODES").node_group = ng
 
 # --- emissive neon strip behind the bottle
 bpy.ops.mesh.primitive_cylinder_add(radius=0.02, depth=1.6, location=(0, 1.2, 0.75), rotation=(0, math.radians(90), 0))
 neon = bpy.context.object; neon.name = "Neon"
-em = bpy.data.materials.new("Neon")
-if bpy.app.version < (5, 0, 0): em.use_nodes = True
-ent = em.node_tree; ent.nodes.remove(ent.nodes["Principled BSDF"])
-e = ent.nodes.new("ShaderNodeEmission"); e.inputs["Color"].default_value = (1.0, 0.25, 0.6, 1); e.inputs["Strength"].default_value = 8
-ent.links.new(e.outputs[0], ent.nodes["Material Output"].inputs["Surface"])
-neon.data.materials.append(em)
+neon.data.materials.append(emission("Neon", (1.0, 0.25, 0.6, 1), 8))
 
 # --- lights: an area light coloured by a Blackbody node, a spot with an IES profile
 ar = bpy.data.lights.new("Softbox", "AREA"); ar.size = 1.2; ar.energy = 120

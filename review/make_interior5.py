@@ -16,32 +16,15 @@ frame range 1-3. Writes review/out/kitchen5.blend.
 Run: PYTHONPATH=. .venv/bin/python review/make_interior5.py
 """
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import bpy
-import OpenImageIO as oiio
+from mathutils import Matrix, Vector
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-OUT = HERE / "out"; OUT.mkdir(exist_ok=True)
-sys.path.insert(0, str(ROOT))
-import addon  # noqa: E402
+from _review_common import (OUT, bend_rig, box, emission, glass, image_material, lathe, principled, scatter_tree,
+                     select_only, smart_uv, start_scene, subdivide, write_image)
 
-bpy.ops.wm.read_factory_settings(use_empty=True)
-addon.register()
-scene = bpy.context.scene
-bpy.context.preferences.edit.keyframe_new_interpolation_type = "LINEAR"
-scene.frame_start, scene.frame_end = 1, 3
-
-
-def write_png(path, arr):
-    h, w, c = arr.shape
-    buf = oiio.ImageBuf(oiio.ImageSpec(w, h, c, "uint8"))
-    buf.set_pixels(oiio.ROI(), (np.clip(arr, 0, 1) * 255 + 0.5).astype(np.uint8))
-    assert buf.write(str(path)), oiio.geterror()
-
+scene = start_scene(frame_range=(1, 3))
 
 # --- textures an artist would paint: wood planks, white tiles with grout (+ normal map), linen
 rng = np.random.default_rng(3)
@@ -49,78 +32,23 @@ yy, xx = np.mgrid[0:256, 0:256].astype(np.float32)
 grain = 0.5 + 0.5 * np.sin(xx * 0.35 + 3.0 * np.sin(yy * 0.05) + rng.normal(0, 0.2, (256, 256)))
 plank = (yy // 32) % 2
 wood = np.stack([0.42 + 0.12 * grain - 0.05 * plank, 0.25 + 0.07 * grain - 0.03 * plank, 0.12 + 0.03 * grain], -1)
-write_png(OUT / "k5_wood.png", wood)
+write_image(OUT / "k5_wood.png", wood)
 grout = ((xx % 64) < 4) | ((yy % 64) < 4)
 tiles = np.where(grout[..., None], np.array([0.35, 0.34, 0.32]), np.array([0.85, 0.86, 0.84]))
-write_png(OUT / "k5_tiles.png", tiles)
+write_image(OUT / "k5_tiles.png", tiles)
 # normal map: grout lines are grooves (tangent-space normals tilt at their edges)
 gx = np.where((xx % 64) < 2, -0.6, np.where(((xx % 64) >= 2) & ((xx % 64) < 4), 0.6, 0.0))
 gy = np.where((yy % 64) < 2, -0.6, np.where(((yy % 64) >= 2) & ((yy % 64) < 4), 0.6, 0.0))
 n = np.stack([gx, gy, np.ones_like(xx)], -1); n /= np.linalg.norm(n, axis=-1, keepdims=True)
-write_png(OUT / "k5_tiles_normal.png", 0.5 + 0.5 * n)
+write_image(OUT / "k5_tiles_normal.png", 0.5 + 0.5 * n)
 weave = 0.5 + 0.5 * np.sign(np.sin(xx * math.pi / 3) * np.sin(yy * math.pi / 3))
-write_png(OUT / "k5_linen.png", np.stack([0.55 + 0.15 * weave, 0.12 + 0.05 * weave, 0.10 + 0.04 * weave], -1))
+write_image(OUT / "k5_linen.png", np.stack([0.55 + 0.15 * weave, 0.12 + 0.05 * weave, 0.10 + 0.04 * weave], -1))
 
 
-def active(obj):
-    bpy.context.view_layer.objects.active = obj
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o is obj)
-
-
-def smart_uv(obj):
-    active(obj)
-    bpy.ops.object.mode_set(mode="EDIT"); bpy.ops.mesh.select_all(action="SELECT")
-    bpy.ops.uv.smart_project(); bpy.ops.object.mode_set(mode="OBJECT")
-
-
-def principled(name, **inputs):
-    m = bpy.data.materials.new(name)
-    b = m.node_tree.nodes["Principled BSDF"]
-    for k, v in inputs.items():
-        b.inputs[k.replace("_", " ")].default_value = (*v, 1.0) if isinstance(v, tuple) and len(v) == 3 else v
-    return m, b
-
-
-def image_material(name, png, normal_png=None, scale=1.0, roughness=0.5):
-    m, b = principled(name, Roughness=roughness)
-    nt = m.node_tree
-    tc = nt.nodes.new("ShaderNodeTexCoord"); mp = nt.nodes.new("ShaderNodeMapping")
-    mp.inputs["Scale"].default_value = (scale, scale, scale)
-    nt.links.new(tc.outputs["UV"], mp.inputs["Vector"])
-    t = nt.nodes.new("ShaderNodeTexImage"); t.image = bpy.data.images.load(str(OUT / png), check_existing=True)
-    nt.links.new(mp.outputs[0], t.inputs["Vector"]); nt.links.new(t.outputs["Color"], b.inputs["Base Color"])
-    if normal_png:
-        tn = nt.nodes.new("ShaderNodeTexImage"); tn.image = bpy.data.images.load(str(OUT / normal_png), check_existing=True)
-        tn.image.colorspace_settings.name = "Non-Color"
-        nm = nt.nodes.new("ShaderNodeNormalMap"); nm.inputs["Strength"].default_value = 1.0
-        nt.links.new(mp.outputs[0], tn.inputs["Vector"]); nt.links.new(tn.outputs["Color"], nm.inputs["Color"])
-        nt.links.new(nm.outputs["Normal"], b.inputs["Normal"])
-    return m
-
-
-def box(name, size, loc, mat=None, coll=None):
-    bpy.ops.mesh.primitive_cube_add(size=1, location=loc); o = bpy.context.object; o.name = name
-    o.scale = size; bpy.ops.object.transform_apply(scale=True)
-    if mat:
-        o.data.materials.append(mat)
-    if coll:
-        for c in o.users_collection:
-            c.objects.unlink(o)
-        coll.objects.link(o)
-    return o
-
-
-def emission(name, color, strength):
-    m = bpy.data.materials.new(name); nt = m.node_tree; nt.nodes.remove(nt.nodes["Principled BSDF"])
-    e = nt.nodes.new("ShaderNodeEmission"); e.inputs["Color"].default_value = (*color, 1); e.inputs["Strength"].default_value = strength
-    nt.links.new(e.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
-    return m
-
-
-wood_m = image_material("Wood", "k5_wood.png", scale=2.0, roughness=0.35)
-tile_m = image_material("Tiles", "k5_tiles.png", "k5_tiles_normal.png", scale=3.0, roughness=0.15)
-linen_m = image_material("Linen", "k5_linen.png", scale=4.0, roughness=0.9)
+wood_m = image_material("Wood", OUT / "k5_wood.png", scale=2.0, roughness=0.35)
+tile_m = image_material("Tiles", OUT / "k5_tiles.png", OUT / "k5_tiles_normal.png", scale=3.0, roughness=0.15,
+                        normal_strength=1.0)
+linen_m = image_material("Linen", OUT / "k5_linen.png", scale=4.0, roughness=0.9)
 plaster_m, _ = principled("Plaster", Base_Color=(0.8, 0.78, 0.74), Roughness=0.9)
 
 # --- the corner: floor, two tiled walls, a ceiling; a window in the back wall (Boolean)
@@ -137,7 +65,7 @@ for o in (back, left):
 sun_d = bpy.data.lights.new("Sun", "SUN"); sun_d.energy = 10.0; sun_d.angle = math.radians(1.0); sun_d.color = (1.0, 0.9, 0.78)
 sun = bpy.data.objects.new("Sun", sun_d); scene.collection.objects.link(sun)
 # shines in through the window onto the glass of water on the table (its caustic)
-sun.rotation_euler = (__import__("mathutils").Vector((0.0, 0.5, 0.82)) - __import__("mathutils").Vector((0.6, 2.0, 1.6))).to_track_quat("-Z", "Y").to_euler()
+sun.rotation_euler = (Vector((0.0, 0.5, 0.82)) - Vector((0.6, 2.0, 1.6))).to_track_quat("-Z", "Y").to_euler()
 pl = bpy.data.lights.new("WindowPortal", "AREA"); pl.shape = "RECTANGLE"; pl.size, pl.size_y = 1.2, 0.9
 pl.cycles.is_portal = True
 plo = bpy.data.objects.new("WindowPortal", pl); scene.collection.objects.link(plo)
@@ -152,7 +80,7 @@ bev = top.modifiers.new("Bevel", "BEVEL"); bev.width = 0.012; bev.segments = 3
 smart_uv(top)
 leg = box("TableLeg", (0.06, 0.06, 0.72), (0.2 + 0.62, 0.6 + 0.32, 0.36), wood_m)
 # legs mirrored about the table's centre: put the leg's origin at the table centre
-leg.data.transform(__import__("mathutils").Matrix.Translation((0.62, 0.32, 0))); leg.location = (0.2, 0.6, 0.36)
+leg.data.transform(Matrix.Translation((0.62, 0.32, 0))); leg.location = (0.2, 0.6, 0.36)
 mir = leg.modifiers.new("Mirror", "MIRROR"); mir.use_axis = (True, True, False)
 smart_uv(leg)
 # runner cloth: a thin plane thickened by Solidify
@@ -162,20 +90,9 @@ runner.modifiers.new("Solidify", "SOLIDIFY").thickness = 0.004
 runner.data.materials.append(linen_m); smart_uv(runner)
 
 # --- glass of water (caustic on the table): Screw profile + Solidify, water body inside
-def lathe(name, profile, loc, steps=48):
-    me = bpy.data.meshes.new(name)
-    me.from_pydata([(r, 0, z) for r, z in profile], [(i, i + 1) for i in range(len(profile) - 1)], [])
-    o = bpy.data.objects.new(name, me); scene.collection.objects.link(o); o.location = loc
-    sc = o.modifiers.new("Screw", "SCREW"); sc.steps = sc.render_steps = steps; sc.use_merge_vertices = True
-    sc.use_smooth_shade = True
-    return o
-
-
-glass = lathe("Glass", [(0.0, 0.0), (0.032, 0.0), (0.034, 0.004), (0.036, 0.11)], (0.0, 0.5, 0.78))
-gs = glass.modifiers.new("Solidify", "SOLIDIFY"); gs.thickness = 0.0025; gs.offset = -1
-glass_m = bpy.data.materials.new("GlassMat"); gnt = glass_m.node_tree; gnt.nodes.remove(gnt.nodes["Principled BSDF"])
-gg = gnt.nodes.new("ShaderNodeBsdfGlass"); gg.inputs["IOR"].default_value = 1.5; gg.inputs["Roughness"].default_value = 0.0
-gnt.links.new(gg.outputs[0], gnt.nodes["Material Output"].inputs["Surface"]); glass.data.materials.append(glass_m)
+water_glass = lathe("Glass", [(0.0, 0.0), (0.032, 0.0), (0.034, 0.004), (0.036, 0.11)], (0.0, 0.5, 0.78))
+gs = water_glass.modifiers.new("Solidify", "SOLIDIFY"); gs.thickness = 0.0025; gs.offset = -1
+water_glass.data.materials.append(glass("GlassMat", ior=1.5))
 water = lathe("Water", [(0.0, 0.006), (0.031, 0.006), (0.0325, 0.075), (0.0, 0.075)], (0.0, 0.5, 0.78))
 water_m, _ = principled("WaterMat", Base_Color=(0.95, 0.98, 1.0), Roughness=0.0, Transmission_Weight=1.0, IOR=1.333)
 water.data.materials.append(water_m)
@@ -194,17 +111,10 @@ bed = bpy.context.object; bed.name = "FruitBed"
 for c in bed.users_collection:
     c.objects.unlink(bed)
 fruit_coll.objects.link(bed)
-gn = bed.modifiers.new("Scatter", "NODES")
-tree = bpy.data.node_groups.new("FruitScatter", "GeometryNodeTree"); gn.node_group = tree
-tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-gi = tree.nodes.new("NodeGroupInput"); go = tree.nodes.new("NodeGroupOutput")
-dist = tree.nodes.new("GeometryNodeDistributePointsOnFaces"); dist.distribute_method = "POISSON"
+tree, dist = scatter_tree("FruitScatter", fruit)
+dist.distribute_method = "POISSON"
 dist.inputs["Density Max"].default_value = 400.0; dist.inputs["Distance Min"].default_value = 0.06
-inst = tree.nodes.new("GeometryNodeInstanceOnPoints")
-oinfo = tree.nodes.new("GeometryNodeObjectInfo"); oinfo.inputs["Object"].default_value = fruit
-tree.links.new(gi.outputs[0], dist.inputs["Mesh"]); tree.links.new(dist.outputs["Points"], inst.inputs["Points"])
-tree.links.new(oinfo.outputs["Geometry"], inst.inputs["Instance"]); tree.links.new(inst.outputs["Instances"], go.inputs[0])
+bed.modifiers.new("Scatter", "NODES").node_group = tree
 
 # --- shelf with jars (Array modifier) on the left wall; a Subdivision Surface pot on the counter
 box("Shelf", (0.25, 1.2, 0.03), (-1.87, 0.5, 1.55), wood_m)
@@ -217,7 +127,7 @@ counter = box("Counter", (0.6, 1.6, 0.9), (-1.7, -0.6, 0.45), plaster_m)
 bpy.ops.mesh.primitive_cube_add(size=0.25, location=(-1.7, -0.4, 1.03)); pot = bpy.context.object; pot.name = "Pot"
 pot.modifiers.new("Subdivision", "SUBSURF").render_levels = 3
 pot.data.materials.append(principled("Copper", Base_Color=(0.95, 0.6, 0.45), Metallic=1.0, Roughness=0.3)[0])
-active(pot); bpy.ops.object.shade_smooth()
+select_only(pot); bpy.ops.object.shade_smooth()
 
 # --- napkin with a shape key that lifts its corner across the frames (deformation blur)
 bpy.ops.mesh.primitive_grid_add(x_subdivisions=12, y_subdivisions=12, size=0.3, location=(-0.25, 0.75, 0.781))
@@ -233,22 +143,9 @@ napkin.data.materials.append(linen_m); smart_uv(napkin)
 # --- a kettle with its spout bent by a keyframed armature on the counter
 bpy.ops.mesh.primitive_cylinder_add(radius=0.03, depth=0.3, vertices=12, location=(-1.6, -1.0, 1.05))
 spout = bpy.context.object; spout.name = "Whisk"
-active(spout); bpy.ops.object.mode_set(mode="EDIT"); bpy.ops.mesh.select_all(action="SELECT")
-bpy.ops.mesh.subdivide(number_cuts=8); bpy.ops.object.mode_set(mode="OBJECT")
+subdivide(spout, 8)
 spout.data.materials.append(principled("Steel", Base_Color=(0.8, 0.8, 0.8), Metallic=1.0, Roughness=0.25)[0])
-arm_d = bpy.data.armatures.new("WhiskRig"); rig = bpy.data.objects.new("WhiskRig", arm_d)
-scene.collection.objects.link(rig); rig.location = (-1.6, -1.0, 0.9)
-active(rig); bpy.ops.object.mode_set(mode="EDIT")
-b1 = arm_d.edit_bones.new("Low"); b1.head = (0, 0, 0); b1.tail = (0, 0, 0.15)
-b2 = arm_d.edit_bones.new("High"); b2.head = (0, 0, 0.15); b2.tail = (0, 0, 0.3); b2.parent = b1
-bpy.ops.object.mode_set(mode="OBJECT")
-for o in (spout, rig):
-    o.select_set(True)
-bpy.context.view_layer.objects.active = rig
-bpy.ops.object.parent_set(type="ARMATURE_AUTO")
-pb = rig.pose.bones["High"]; pb.rotation_mode = "XYZ"
-for f, a in ((1, -40.0), (2, 0.0), (3, 40.0), (4, 0.0)):
-    pb.rotation_euler.x = math.radians(a); pb.keyframe_insert("rotation_euler", index=0, frame=f)
+bend_rig(spout, "WhiskRig", (-1.6, -1.0, 0.9), 0.3, ((1, -40.0), (2, 0.0), (3, 40.0), (4, 0.0)))
 
 # --- pendant lamp with an emissive shade; an area light over the counter; a spot on the table
 shade_m = emission("ShadeGlow", (1.0, 0.75, 0.45), 12.0)
@@ -263,7 +160,7 @@ sd = bpy.data.lights.new("TableSpot", "SPOT"); sd.energy = 120.0; sd.spot_size =
 sd.spot_blend = 0.6; sd.shadow_soft_size = 0.08
 so = bpy.data.objects.new("TableSpot", sd); scene.collection.objects.link(so)
 so.location = (1.4, -0.6, 2.3)
-dvec = __import__("mathutils").Vector((0.2, 0.6, 0.78)) - so.location
+dvec = Vector((0.2, 0.6, 0.78)) - so.location
 so.rotation_euler = dvec.to_track_quat("-Z", "Y").to_euler()
 
 # --- camera: depth of field on the glass (via an Empty), slight dolly, motion blur
@@ -272,7 +169,7 @@ cd = bpy.data.cameras.new("Camera"); cam = bpy.data.objects.new("Camera", cd); s
 scene.camera = cam; cd.lens = 32
 cam.location = (1.45, -1.75, 1.45); cam.keyframe_insert("location", frame=1)
 cam.location = (1.5, -1.7, 1.45); cam.keyframe_insert("location", frame=4)
-tv = __import__("mathutils").Vector((-0.2, 0.7, 0.9)) - __import__("mathutils").Vector((1.45, -1.75, 1.45))
+tv = Vector((-0.2, 0.7, 0.9)) - Vector((1.45, -1.75, 1.45))
 cam.rotation_euler = tv.to_track_quat("-Z", "Y").to_euler()
 cd.dof.use_dof = True; cd.dof.focus_object = focus; cd.dof.aperture_fstop = 2.0
 scene.render.use_motion_blur = True; scene.render.motion_blur_shutter = 0.5

@@ -5,20 +5,14 @@ texture written to disk and loaded, a normal map, a glass with liquid (volume ab
 a rough metal pot, an HDRI world (float EXR with a sun spot), a spinning fan with motion blur.
 Writes review/out/kitchen.blend.
 """
-import math, os, sys
-from pathlib import Path
+import math
 import numpy as np
 import bpy
 import OpenImageIO as oiio
 
-HERE = Path(__file__).resolve().parent
-OUT = HERE / "out"; OUT.mkdir(exist_ok=True)
-sys.path.insert(0, str(HERE.parent))
-import addon
+from _review_common import OUT, image_material, principled, smart_uv, start_scene
 
-bpy.ops.wm.read_factory_settings(use_empty=True)
-addon.register()
-scene = bpy.context.scene
+scene = start_scene()
 
 # --- textures on disk
 h, w = 64, 64
@@ -40,32 +34,12 @@ env[16:19, 40:43] = 2000.0
 buf = oiio.ImageBuf(oiio.ImageSpec(W, H, 3, "float")); buf.set_pixels(oiio.ROI(), env)
 buf.write(str(OUT / "sky.exr"))
 
-def smart_uv(obj):
-    bpy.context.view_layer.objects.active = obj
-    for o in bpy.context.view_layer.objects: o.select_set(o is obj)
-    bpy.ops.object.mode_set(mode="EDIT"); bpy.ops.mesh.select_all(action="SELECT")
-    bpy.ops.uv.smart_project(); bpy.ops.object.mode_set(mode="OBJECT")
-
-def principled(name, **inputs):
-    m = bpy.data.materials.new(name); m.use_nodes = True
-    b = m.node_tree.nodes["Principled BSDF"]
-    for k, v in inputs.items(): b.inputs[k].default_value = v
-    return m, b
-
 # --- table: a cube with bevel, wood texture + normal map
 bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, -0.05)); table = bpy.context.object
 table.scale = (3, 2, 0.1); bpy.ops.object.transform_apply(scale=True)
 table.modifiers.new("Bevel", "BEVEL").width = 0.03
 smart_uv(table)
-m, b = principled("Wood", Roughness=0.5)
-nt = m.node_tree
-tex = nt.nodes.new("ShaderNodeTexImage"); tex.image = bpy.data.images.load(str(OUT / "wood.png"))
-ntex = nt.nodes.new("ShaderNodeTexImage"); ntex.image = bpy.data.images.load(str(OUT / "wood_normal.png"))
-ntex.image.colorspace_settings.name = "Non-Color"
-nmap = nt.nodes.new("ShaderNodeNormalMap")
-nt.links.new(tex.outputs["Color"], b.inputs["Base Color"])
-nt.links.new(ntex.outputs["Color"], nmap.inputs["Color"]); nt.links.new(nmap.outputs["Normal"], b.inputs["Normal"])
-table.data.materials.append(m)
+table.data.materials.append(image_material("Wood", OUT / "wood.png", OUT / "wood_normal.png", roughness=0.5))
 
 # --- glass with liquid
 bpy.ops.mesh.primitive_cylinder_add(radius=0.25, depth=0.6, location=(-0.6, 0.2, 0.3)); glass = bpy.context.object
@@ -106,7 +80,6 @@ for i in range(3):
     bl.rotation_euler.z = i * 2.094; bl.parent = hub; bl.data.materials.append(fm)
 hub.rotation_euler = (math.radians(80), 0, 0)
 scene.frame_start, scene.frame_end = 1, 3
-bpy.context.preferences.edit.keyframe_new_interpolation_type = "LINEAR"
 hub.keyframe_insert("rotation_euler", frame=1)
 hub.rotation_euler.z = math.radians(180); hub.keyframe_insert("rotation_euler", frame=3)
 scene.frame_set(2)

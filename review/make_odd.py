@@ -5,19 +5,10 @@ instanced cones on a plane, a collection instance, a Mix Shader driven by Layer 
 a Principled with Sheen and Coat, a Principled with Subsurface, a spot light with a size and blend,
 an area light DISK, a camera with depth of field.
 """
-import math, sys
-from pathlib import Path
+import math
 import bpy
-HERE = Path(__file__).resolve().parent; OUT = HERE / "out"; OUT.mkdir(exist_ok=True)
-sys.path.insert(0, str(HERE.parent)); import addon
-bpy.ops.wm.read_factory_settings(use_empty=True); addon.register()
-scene = bpy.context.scene
-
-def principled(name, **inputs):
-    m = bpy.data.materials.new(name); m.use_nodes = True
-    b = m.node_tree.nodes["Principled BSDF"]
-    for k, v in inputs.items(): b.inputs[k].default_value = v
-    return m, b
+from _review_common import OUT, principled, scatter_tree, start_scene
+scene = start_scene()
 
 # floor
 bpy.ops.mesh.primitive_plane_add(size=6); floor = bpy.context.object
@@ -28,18 +19,8 @@ pad.data.materials.append(fm)
 bpy.ops.mesh.primitive_cone_add(radius1=0.05, depth=0.15, location=(0, 0, -10)); cone = bpy.context.object
 cm, _ = principled("Cone", **{"Base Color": (0.1, 0.7, 0.2, 1)}); cone.data.materials.append(cm)
 cone.hide_render = True
-mod = pad.modifiers.new("Scatter", "NODES")
-ng = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
-ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-n = ng.nodes; gi = n.new("NodeGroupInput"); go = n.new("NodeGroupOutput")
-dist = n.new("GeometryNodeDistributePointsOnFaces"); dist.inputs["Density"].default_value = 20
-oi = n.new("GeometryNodeObjectInfo"); oi.inputs["Object"].default_value = cone
-inst = n.new("GeometryNodeInstanceOnPoints"); join = n.new("GeometryNodeJoinGeometry")
-ng.links.new(gi.outputs[0], dist.inputs["Mesh"]); ng.links.new(dist.outputs["Points"], inst.inputs["Points"])
-ng.links.new(oi.outputs["Geometry"], inst.inputs["Instance"])
-ng.links.new(inst.outputs[0], join.inputs[0]); ng.links.new(gi.outputs[0], join.inputs[0]); ng.links.new(join.outputs[0], go.inputs[0])
-mod.node_group = ng
+ng, dist = scatter_tree("Scatter", cone, keep_surface=True); dist.inputs["Density"].default_value = 20
+pad.modifiers.new("Scatter", "NODES").node_group = ng
 # text with bevel, Mix(Layer Weight) material
 bpy.ops.object.text_add(location=(-1.6, 0.3, 0.0)); txt = bpy.context.object
 txt.data.body = "STPM"; txt.data.extrude = 0.08; txt.data.bevel_depth = 0.02; txt.data.size = 0.7

@@ -17,49 +17,14 @@ Writes review/out/outdoor.blend (or outdoor_bad.blend), frame 10 of 1-24.
 """
 import math
 import sys
-from pathlib import Path
 
 import bpy
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-OUT = HERE / "out"; OUT.mkdir(exist_ok=True)
-TEX = ROOT / "blend_scenes" / "textures"
-sys.path.insert(0, str(ROOT))
-import addon  # noqa: E402
+from _review_common import (OUT, TEX, bend_rig, car_body, car_paint, glass, image_material, principled, scatter_tree,
+                     select_only, start_scene, subdivide)
 
 BAD = "--bad" in sys.argv
-bpy.ops.wm.read_factory_settings(use_empty=True)
-addon.register()
-scene = bpy.context.scene
-bpy.context.preferences.edit.keyframe_new_interpolation_type = "LINEAR"
-scene.frame_start, scene.frame_end = 1, 24
-
-
-def active(obj):
-    bpy.context.view_layer.objects.active = obj
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o is obj)
-
-
-def principled(name, **inputs):
-    m = bpy.data.materials.new(name)
-    b = m.node_tree.nodes["Principled BSDF"]
-    for k, v in inputs.items():
-        b.inputs[k.replace("_", " ")].default_value = (*v, 1.0) if isinstance(v, tuple) and len(v) == 3 else v
-    return m, b
-
-
-def image_material(name, path, scale=1.0):
-    m, b = principled(name, Roughness=0.8)
-    nt = m.node_tree
-    t = nt.nodes.new("ShaderNodeTexImage"); t.image = bpy.data.images.load(str(path), check_existing=True)
-    if scale != 1.0:
-        tc = nt.nodes.new("ShaderNodeTexCoord"); mp = nt.nodes.new("ShaderNodeMapping")
-        mp.inputs["Scale"].default_value = (scale, scale, scale)
-        nt.links.new(tc.outputs["UV"], mp.inputs["Vector"]); nt.links.new(mp.outputs[0], t.inputs["Vector"])
-    nt.links.new(t.outputs["Color"], b.inputs["Base Color"])
-    return m
+scene = start_scene(frame_range=(1, 24))
 
 
 # --- world: Blender 5's default Sky Texture, sun disc off, a Sun lamp in its direction
@@ -89,7 +54,7 @@ dtex = bpy.data.textures.new("GroundDisp", "IMAGE")
 dtex.image = bpy.data.images.load(str(TEX / "pool_tiles.png"), check_existing=True)
 disp = ground.modifiers.new("Displace", "DISPLACE"); disp.texture = dtex; disp.strength = 0.06
 disp.texture_coords = "UV"
-ground.data.materials.append(image_material("GroundMat", TEX / "planks.png", scale=4.0))
+ground.data.materials.append(image_material("GroundMat", TEX / "planks.png", scale=4.0, roughness=0.8))
 
 # --- the car-paint blob on a turntable
 bpy.ops.mesh.primitive_cylinder_add(radius=1.1, depth=0.08, location=(0.6, 0.4, 0.04))
@@ -97,21 +62,8 @@ turn = bpy.context.object; turn.name = "Turntable"
 turn.data.materials.append(principled("TableMetal", Base_Color=(0.2, 0.2, 0.22), Metallic=1.0, Roughness=0.35)[0])
 turn.rotation_euler.z = 0.0; turn.keyframe_insert("rotation_euler", index=2, frame=1)
 turn.rotation_euler.z = math.pi; turn.keyframe_insert("rotation_euler", index=2, frame=25)
-bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(0.6, 0.4, 0.45), segments=48, ring_count=24)
-car = bpy.context.object; car.name = "CarBody"; car.scale = (1.6, 0.8, 0.55)
-bpy.ops.object.shade_smooth()
+car = car_body((0.6, 0.4, 0.45), car_paint())
 car.parent = turn; car.matrix_parent_inverse = turn.matrix_world.inverted()
-paint, pb = principled("CarPaint", Base_Color=(0.55, 0.02, 0.02), Metallic=0.7, Roughness=0.3,
-                       Coat_Weight=1.0, Coat_Roughness=0.03)
-nt = paint.node_tree
-flakes = nt.nodes.new("ShaderNodeTexNoise"); flakes.inputs["Scale"].default_value = 600.0
-ramp = nt.nodes.new("ShaderNodeValToRGB")
-ramp.color_ramp.elements[0].position = 0.45; ramp.color_ramp.elements[0].color = (0.15, 0.15, 0.15, 1)
-ramp.color_ramp.elements[1].position = 0.55; ramp.color_ramp.elements[1].color = (0.45, 0.45, 0.45, 1)
-nt.links.new(flakes.outputs["Fac"], ramp.inputs["Fac"]); nt.links.new(ramp.outputs["Color"], pb.inputs["Roughness"])
-bump = nt.nodes.new("ShaderNodeBump"); bump.inputs["Strength"].default_value = 0.15
-nt.links.new(flakes.outputs["Fac"], bump.inputs["Height"]); nt.links.new(bump.outputs["Normal"], pb.inputs["Normal"])
-car.data.materials.append(paint)
 
 # --- puddle (water with a Wave bump) and a glass bottle on the ground
 bpy.ops.mesh.primitive_circle_add(vertices=48, radius=1.0, fill_type="NGON", location=(-1.3, -0.6, 0.09))
@@ -135,54 +87,26 @@ pobj = bpy.data.objects.new("Bottle", prof); scene.collection.objects.link(pobj)
 pobj.location = (-0.2, -1.3, 0.06)
 scr = pobj.modifiers.new("Screw", "SCREW"); scr.steps = 48; scr.render_steps = 48; scr.use_smooth_shade = True
 sol = pobj.modifiers.new("Solidify", "SOLIDIFY"); sol.thickness = 0.01
-active(pobj); bpy.ops.object.convert(target="MESH"); bottle = bpy.context.object
-glass = bpy.data.materials.new("BottleGlass"); gnt = glass.node_tree
-gnt.nodes.remove(gnt.nodes["Principled BSDF"])
-gb = gnt.nodes.new("ShaderNodeBsdfGlass"); gb.inputs["Color"].default_value = (0.75, 0.95, 0.8, 1)
-gb.inputs["IOR"].default_value = 1.5; gb.inputs["Roughness"].default_value = 0.0
-gnt.links.new(gb.outputs[0], gnt.nodes["Material Output"].inputs["Surface"])
-bottle.data.materials.append(glass)
+select_only(pobj); bpy.ops.object.convert(target="MESH"); bottle = bpy.context.object
+bottle.data.materials.append(glass("BottleGlass", ior=1.5, color=(0.75, 0.95, 0.8, 1)))
 
 # --- a flag pole bent by a keyframed armature (deformation motion blur)
 bpy.ops.mesh.primitive_cylinder_add(radius=0.06, depth=2.0, vertices=16, location=(2.6, -0.6, 1.0))
 pole = bpy.context.object; pole.name = "Pole"
-active(pole); bpy.ops.object.mode_set(mode="EDIT"); bpy.ops.mesh.select_all(action="SELECT")
-bpy.ops.mesh.subdivide(number_cuts=12); bpy.ops.object.mode_set(mode="OBJECT")
+subdivide(pole, 12)
 pole.data.materials.append(principled("PoleYellow", Base_Color=(0.8, 0.6, 0.05), Roughness=0.4)[0])
-arm_d = bpy.data.armatures.new("PoleRig"); rig = bpy.data.objects.new("PoleRig", arm_d)
-scene.collection.objects.link(rig); rig.location = (2.6, -0.6, 0.0)
-active(rig); bpy.ops.object.mode_set(mode="EDIT")
-b1 = arm_d.edit_bones.new("Low"); b1.head = (0, 0, 0); b1.tail = (0, 0, 1.0)
-b2 = arm_d.edit_bones.new("High"); b2.head = (0, 0, 1.0); b2.tail = (0, 0, 2.0); b2.parent = b1
-bpy.ops.object.mode_set(mode="OBJECT")
-for o in (pole, rig):
-    o.select_set(True)
-bpy.context.view_layer.objects.active = rig
-bpy.ops.object.parent_set(type="ARMATURE_AUTO")
-pb2 = rig.pose.bones["High"]; pb2.rotation_mode = "XYZ"
-for f, a in ((1, -35.0), (10, 35.0), (19, -35.0), (25, 0.0)):
-    pb2.rotation_euler.x = math.radians(a); pb2.keyframe_insert("rotation_euler", index=0, frame=f)
+bend_rig(pole, "PoleRig", (2.6, -0.6, 0.0), 2.0, ((1, -35.0), (10, 35.0), (19, -35.0), (25, 0.0)))
 
 # --- rocks: Geometry Nodes Distribute Points on Faces -> Instance on Points of a UV-textured ico-sphere
 bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=0.12, location=(0, 0, -20))
 rock = bpy.context.object; rock.name = "Rock"
-rock.data.materials.append(image_material("RockMat", TEX / "tiles16.png"))
+rock.data.materials.append(image_material("RockMat", TEX / "tiles16.png", roughness=0.8))
 rock.hide_render = True  # the source is hidden; its instances render
 bpy.ops.mesh.primitive_plane_add(size=5, location=(0.3, 2.2, 0.07))
 patch = bpy.context.object; patch.name = "RockPatch"
-gn = patch.modifiers.new("Scatter", "NODES")
-tree = bpy.data.node_groups.new("Scatter", "GeometryNodeTree"); gn.node_group = tree
-tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-gi = tree.nodes.new("NodeGroupInput"); go = tree.nodes.new("NodeGroupOutput")
-dist = tree.nodes.new("GeometryNodeDistributePointsOnFaces"); dist.inputs["Density"].default_value = 6.0
-inst = tree.nodes.new("GeometryNodeInstanceOnPoints")
-oinfo = tree.nodes.new("GeometryNodeObjectInfo"); oinfo.inputs["Object"].default_value = rock
-rnd = tree.nodes.new("FunctionNodeRandomValue"); rnd.data_type = "FLOAT_VECTOR"
-rnd.inputs["Min"].default_value = (0.5, 0.5, 0.4); rnd.inputs["Max"].default_value = (1.4, 1.2, 0.9)
-tree.links.new(gi.outputs[0], dist.inputs["Mesh"]); tree.links.new(dist.outputs["Points"], inst.inputs["Points"])
-tree.links.new(oinfo.outputs["Geometry"], inst.inputs["Instance"]); tree.links.new(rnd.outputs["Value"], inst.inputs["Scale"])
-tree.links.new(inst.outputs["Instances"], go.inputs[0])
+tree, dist = scatter_tree("Scatter", rock, random_scale=((0.5, 0.5, 0.4), (1.4, 1.2, 0.9)))
+dist.inputs["Density"].default_value = 6.0
+patch.modifiers.new("Scatter", "NODES").node_group = tree
 
 # --- holdout, shadow catcher, fog volume, a light linked to the car only
 bpy.ops.mesh.primitive_cube_add(size=0.4, location=(-2.6, 1.6, 0.3)); ho = bpy.context.object; ho.name = "HoldoutBox"

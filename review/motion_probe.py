@@ -7,17 +7,11 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 import numpy as np, bpy
 from test_addon_scenes import fresh, add_camera, add_light, add_mesh, set_world, export_now
+from _review_common import scatter_tree
+
 
 def scatter_group(obj_to_instance):
-    ng = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
-    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    n = ng.nodes; gi = n.new("NodeGroupInput"); go = n.new("NodeGroupOutput")
-    d = n.new("GeometryNodeDistributePointsOnFaces"); d.inputs["Density"].default_value = 5
-    oi = n.new("GeometryNodeObjectInfo"); oi.inputs["Object"].default_value = obj_to_instance
-    ins = n.new("GeometryNodeInstanceOnPoints")
-    ng.links.new(gi.outputs[0], d.inputs["Mesh"]); ng.links.new(d.outputs["Points"], ins.inputs["Points"])
-    ng.links.new(oi.outputs["Geometry"], ins.inputs["Instance"]); ng.links.new(ins.outputs[0], go.inputs[0])
+    ng, d = scatter_tree("Scatter", obj_to_instance); d.inputs["Density"].default_value = 5
     return ng
 
 s = fresh(); add_camera(); add_light(); set_world((0.1, 0.1, 0.1)); s.render.use_motion_blur = True

@@ -2,21 +2,7 @@
 CPU, no denoising, no adaptive sampling, clamps off (Cycles' unbiased answer; the tests' settings). Max bounces
 left at the file's (Cycles' defaults: 12 total, diffuse 4, glossy 4, transmission 12). Writes
 review/out/outdoor_cycles_<TAG>.exr (--file NAME: review/out/NAME.blend) and prints the wall time."""
-import sys, time
-from pathlib import Path
-import bpy
-HERE = Path(__file__).resolve().parent
-args = sys.argv[1:]; spp = int(args[0]); tag = args[1] if len(args) > 1 and not args[1].startswith("--") else str(spp)
+import sys
+from _review_common import OUT, cycles_reference
 name = sys.argv[sys.argv.index("--file") + 1] if "--file" in sys.argv else "outdoor"
-bpy.ops.wm.open_mainfile(filepath=str(HERE / "out" / f"{name}.blend"))
-s = bpy.context.scene; s.frame_set(10)
-s.render.engine = "CYCLES"; cy = s.cycles
-cy.device, cy.samples, cy.use_denoising, cy.use_adaptive_sampling = "CPU", spp, False, False
-cy.sample_clamp_direct = cy.sample_clamp_indirect = 0.0
-cy.seed = int(args[args.index("--seed") + 1]) if "--seed" in args else 0
-if "--time-limit" in args:
-    cy.time_limit = float(args[args.index("--time-limit") + 1])
-s.render.image_settings.media_type = "IMAGE"; s.render.image_settings.file_format = "OPEN_EXR"
-s.render.image_settings.color_depth = "32"
-s.render.filepath = str(HERE / "out" / f"outdoor_cycles_{tag}.exr"); s.render.use_file_extension = False
-t = time.time(); bpy.ops.render.render(write_still=True); print(f"cycles {spp} spp wall {time.time() - t:.1f} s")
+cycles_reference(OUT / f"{name}.blend", 10, "outdoor_cycles", sys.argv[1:])

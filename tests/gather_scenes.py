@@ -11,20 +11,7 @@ import math
 
 import bpy
 
-from test_addon_scenes import add_camera, add_light, add_mesh, fresh, set_world
-
-
-def _diffuse(name: str, rgb):
-    mat = bpy.data.materials.new(name)
-    tree = mat.node_tree
-    for n in list(tree.nodes):
-        if n.bl_idname != "ShaderNodeOutputMaterial":
-            tree.nodes.remove(n)
-    out = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
-    d = tree.nodes.new("ShaderNodeBsdfDiffuse")
-    d.inputs["Color"].default_value = (*rgb, 1.0)
-    tree.links.new(d.outputs[0], out.inputs["Surface"])
-    return mat
+from test_addon_scenes import add_camera, add_light, add_mesh, diffuse, fresh, set_world
 
 
 def _coated(name: str, rgb, roughness: float):
@@ -47,8 +34,8 @@ def cornell(width: int = 48, height: int = 36, light_z: float = 1.5, light_radiu
     vertex before them, and what bounces on from there."""
     scene = fresh()
     scene.render.resolution_x, scene.render.resolution_y = width, height
-    white, red, green = _diffuse("White", (0.7, 0.7, 0.7)), _diffuse("Red", (0.7, 0.1, 0.1)), \
-        _diffuse("Green", (0.1, 0.7, 0.1))
+    white, red, green = diffuse("White", (0.7, 0.7, 0.7)), diffuse("Red", (0.7, 0.1, 0.1)), \
+        diffuse("Green", (0.1, 0.7, 0.1))
     floor = _coated("Coated", (0.0, 0.0, 0.0), 0.3) if coated_floor else white
     add_mesh("plane", "Floor", (0, 0, 0), floor, size=2)
     add_mesh("plane", "Ceiling", (0, 0, 2), white, size=2, rotation=(math.pi, 0, 0))

@@ -93,6 +93,11 @@ def set_world(color=(0.0, 0.0, 0.0), strength=1.0):
     return world
 
 
+def diffuse(name: str, rgb):
+    """A material of one Diffuse BSDF of colour rgb (the tests' Lambertian surface)."""
+    return node_material(name, "ShaderNodeBsdfDiffuse", Color=(*rgb, 1.0))[0]
+
+
 def export_now(scene=None, motion_steps: int = 3):
     """Export the current scene through the batch path (scene.frame_set, view-layer depsgraph)."""
     scene = scene or bpy.context.scene

@@ -28,7 +28,8 @@ import pytest
 bpy = pytest.importorskip("bpy")
 pytest.importorskip("OpenImageIO")
 
-from test_addon_scenes import add_camera, add_light, add_mesh, fresh, set_world  # noqa: E402
+from test_addon_scenes import add_camera, add_light, add_mesh, diffuse, fresh, set_world  # noqa: E402
+from test_cycles_textures import _empty_material  # noqa: E402
 from cycles_ref import render_cycles, render_cycles_paths, render_stpm  # noqa: E402
 
 SPP = 16                 # STPM camera samples (photon look-ups are per sample)
@@ -52,24 +53,6 @@ def _srgb_decode(c) -> np.ndarray:
     """Linear values of 8-bit sRGB texels (what Cycles reads from the PNG)."""
     c = np.round(np.asarray(c, np.float64) * 255.0) / 255.0
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def _empty_material(name: str):
-    """A new material with only its Material Output: (material, node tree, output node)."""
-    mat = bpy.data.materials.new(name)
-    tree = mat.node_tree
-    for n in list(tree.nodes):
-        if n.bl_idname != "ShaderNodeOutputMaterial":
-            tree.nodes.remove(n)
-    return mat, tree, next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
-
-
-def _diffuse(name: str, rgb):
-    mat, t, out = _empty_material(name)
-    d = t.nodes.new("ShaderNodeBsdfDiffuse")
-    d.inputs["Color"].default_value = (*rgb, 1.0)
-    t.links.new(d.outputs[0], out.inputs["Surface"])
-    return mat
 
 
 def _image_node(tree, png):
@@ -122,7 +105,7 @@ def _bleed_scene(png=None, rgb=None):
     scene.render.resolution_x = scene.render.resolution_y = BLEED_PX
     add_camera(location=(0, 0, 5), rotation=(0, 0, 0), type="ORTHO", ortho_scale=2.0)
     set_world((0, 0, 0), 0.0)
-    add_mesh("plane", "Floor", material=_diffuse("Floor", (0.8, 0.8, 0.8)), size=2.0)
+    add_mesh("plane", "Floor", material=diffuse("Floor", (0.8, 0.8, 0.8)), size=2.0)
     mat, t, out = _empty_material("Wall")
     p = t.nodes.new("ShaderNodeBsdfPrincipled")
     p.inputs["Specular IOR Level"].default_value = 0.0
@@ -245,7 +228,7 @@ def _caustic_scene(png=None, rgb=None):
     scene.render.resolution_x = scene.render.resolution_y = CAUSTIC_PX
     add_camera(location=(0, 0, 0.03), rotation=(0, 0, 0), type="ORTHO", ortho_scale=0.6, clip_start=0.001)
     set_world((0, 0, 0), 0.0)
-    add_mesh("plane", "Floor", material=_diffuse("Floor", (0.8, 0.8, 0.8)), size=4.0)
+    add_mesh("plane", "Floor", material=diffuse("Floor", (0.8, 0.8, 0.8)), size=4.0)
     mat, t, out = _empty_material("Glass")
     g = t.nodes.new("ShaderNodeBsdfGlass")
     g.inputs["Roughness"].default_value = 0.0
@@ -341,7 +324,7 @@ def _slab_scene(mean_colour: bool = False):
     scene.render.resolution_x = scene.render.resolution_y = SLAB_PX
     add_camera(location=(0, 0, 0.2), rotation=(0, 0, 0), type="ORTHO", ortho_scale=1.0, clip_start=0.001)
     set_world((0, 0, 0), 0.0)
-    add_mesh("plane", "Floor", material=_diffuse("Floor", (0.8, 0.8, 0.8)), size=4.0)
+    add_mesh("plane", "Floor", material=diffuse("Floor", (0.8, 0.8, 0.8)), size=4.0)
     mat, t, out = _empty_material("TintedGlass")
     g = t.nodes.new("ShaderNodeBsdfGlass")
     g.inputs["Roughness"].default_value = 0.0

@@ -30,7 +30,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 pytest.importorskip("OpenImageIO")
 
-from test_addon_scenes import add_camera, add_light, add_mesh, fresh, set_world  # noqa: E402
+from test_addon_scenes import add_camera, add_light, add_mesh, diffuse, fresh, set_world  # noqa: E402
 from cycles_ref import block_ztest, render_cycles_paths, render_stpm  # noqa: E402
 
 SEEDS = (0, 1, 2, 3)
@@ -51,25 +51,12 @@ def _principled(name, rgb, roughness, specular=0.5):
     return mat
 
 
-def _diffuse(name, rgb):
-    mat = bpy.data.materials.new(name)
-    tree = mat.node_tree
-    for n in list(tree.nodes):
-        if n.bl_idname != "ShaderNodeOutputMaterial":
-            tree.nodes.remove(n)
-    out = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
-    d = tree.nodes.new("ShaderNodeBsdfDiffuse")
-    d.inputs["Color"].default_value = (*rgb, 1.0)
-    tree.links.new(d.outputs[0], out.inputs["Surface"])
-    return mat
-
-
 def tiled_corner():
     """The corner (4 m walls, 2.6 m high) and its camera; returns the bpy scene."""
     scene = fresh()
     scene.render.resolution_x, scene.render.resolution_y = W, H
     tiles = _principled("Tiles", (0.4, 0.4, 0.4), 0.15)
-    add_mesh("plane", "Floor", (0, 0, 0), _diffuse("Wood", (0.4, 0.3, 0.2)), size=4)
+    add_mesh("plane", "Floor", (0, 0, 0), diffuse("Wood", (0.4, 0.3, 0.2)), size=4)
     add_mesh("plane", "Ceiling", (0, 0, 2.6), _principled("Plaster", (0.8, 0.78, 0.74), 0.9), size=4,
              rotation=(math.pi, 0, 0))
     add_mesh("plane", "Back", (0, 2, 1.3), tiles, size=4, rotation=(math.pi / 2, 0, 0))

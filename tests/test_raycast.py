@@ -72,6 +72,33 @@ def random_scene(rng, offset=np.zeros(3), deform_amp=0.01) -> Scene:
                  materials=[Material(), Material.mirror()])
 
 
+def waving_heightfield_rays(jitter: float, n: int = 2000):
+    """A 24 x 24 heightfield over [-1, 1]^2 waving through 4 time steps, z = 0.3 sin(3x + 4t) cos(2y - 3t),
+    and n rays from z = 2 down onto it, each starting up to `jitter` off in x and y from the point
+    it aims at (seeded): (mesh, scene, o, d, t)."""
+    times = np.linspace(0, 1, 4)
+    mesh = heightfield(24, times, lambda x, y, t: 0.3 * np.sin(3 * x + 4 * t) * np.cos(2 * y - 3 * t))
+    scene = Scene(meshes=[mesh], instances=[Instance(0)], materials=[Material()])
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(-0.9, 0.9, (n, 2))
+    o = np.column_stack([xy + rng.uniform(-jitter, jitter, (n, 2)), np.full(n, 2.0)])
+    d = np.column_stack([xy - o[:, :2], np.full(n, -3.0)])
+    return mesh, scene, o, d, rng.uniform(0, 1, n)
+
+
+def many_moving_instances(rng, n: int = 40) -> Scene:
+    """n moving instances of one small soup (spread over [-2, 2]^3, rotating about z): every other
+    one translates only, the rest also turn (a case for the casters' part BVH)."""
+    mesh = soup(rng, 6, spread=0.2, size=0.15)
+    inst = []
+    for k in range(n):
+        p0, p1 = rng.uniform(-2, 2, 3), rng.uniform(-2, 2, 3)
+        a0 = rng.uniform(0, 6)
+        a1 = a0 if k % 2 else rng.uniform(0, 6)            # every other one: translation only
+        inst.append(Instance(0, MotionTransform(np.array([0.0, 1.0]), np.stack([trs(p0, a0), trs(p1, a1)]))))
+    return Scene(meshes=[mesh], instances=inst, materials=[Material(), Material()])
+
+
 def random_rays(rng, n: int, offset=np.zeros(3)):
     o = rng.uniform(-3, 3, (n, 3)) + offset
     target = rng.uniform(-1.5, 1.5, (n, 3)) + offset
@@ -139,14 +166,7 @@ def test_embree_matches_numpy_on_random_scene():
 def test_many_moving_instances_agree():
     """40 moving instances (culled through the part BVH) against the oracle."""
     rng = np.random.default_rng(17)
-    mesh = soup(rng, 6, spread=0.2, size=0.15)
-    inst = []
-    for k in range(40):
-        p0, p1 = rng.uniform(-2, 2, 3), rng.uniform(-2, 2, 3)
-        a0 = rng.uniform(0, 6)
-        a1 = a0 if k % 2 else rng.uniform(0, 6)            # every other one: translation only
-        inst.append(Instance(0, MotionTransform(np.array([0.0, 1.0]), np.stack([trs(p0, a0), trs(p1, a1)]))))
-    scene = Scene(meshes=[mesh], instances=inst, materials=[Material(), Material()])
+    scene = many_moving_instances(rng)
     o, d, t = random_rays(rng, 3000)
     he = make_caster(scene, "embree").intersect(o, d, t)
     hn = make_caster(scene, "numpy").intersect(o, d, t)
@@ -222,15 +242,7 @@ def test_numpy_bvh_matches_brute_force(monkeypatch):
 @needs_embree
 def test_deforming_heightfield_is_exact_away_from_the_border():
     """A connected, waving surface: the bucket + 1-ring refinement gives the exact hit."""
-    times = np.linspace(0, 1, 4)
-    mesh = heightfield(24, times, lambda x, y, t: 0.3 * np.sin(3 * x + 4 * t) * np.cos(2 * y - 3 * t))
-    scene = Scene(meshes=[mesh], instances=[Instance(0)], materials=[Material()])
-    rng = np.random.default_rng(3)
-    n = 2000
-    xy = rng.uniform(-0.9, 0.9, (n, 2))
-    o = np.column_stack([xy + rng.uniform(-0.05, 0.05, (n, 2)), np.full(n, 2.0)])
-    d = np.column_stack([xy - o[:, :2], np.full(n, -3.0)])
-    t = rng.uniform(0, 1, n)
+    mesh, scene, o, d, t = waving_heightfield_rays(0.05)
     he = make_caster(scene, "embree").intersect(o, d, t)
     hn = make_caster(scene, "numpy").intersect(o, d, t)
     assert he.hit.all() and hn.hit.all()
@@ -410,18 +422,23 @@ def test_self_intersection_guard(backend):
     assert not same_tri.any()
 
 
-@pytest.mark.parametrize("backend", ["embree", "numpy"])
-def test_degenerate_triangles_do_not_crash_or_nan(backend):
-    if backend == "embree" and not embree_available():
-        pytest.skip("embreex not installed")
+def degenerate_triangles_scene() -> Scene:
+    """Three degenerate triangles (collinear, a repeated vertex, all three vertices the same) at
+    z = 0 under one real triangle at z = 0.5, all with zero shading normals."""
     V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0],           # collinear
                   [0, 1, 0], [0, 1, 0],                       # repeated vertex
                   [-1, -1, 0.5], [1, -1, 0.5], [0, 1, 0.5]], np.float32)
     F = np.array([[0, 1, 2], [3, 4, 0], [3, 3, 3], [5, 6, 7]], np.int32)
     normals = np.zeros((4, 3, 3), np.float32)                 # zero shading normals too
     mesh = Mesh(vertices=V, triangles=F, material_ids=np.zeros(4, np.int32), normals=normals)
-    scene = Scene(meshes=[mesh], instances=[Instance(0)], materials=[Material()])
-    caster = make_caster(scene, backend)
+    return Scene(meshes=[mesh], instances=[Instance(0)], materials=[Material()])
+
+
+def assert_degenerate_triangles_are_passed_over(caster, scene):
+    """500 rays straight down (50 aimed exactly at the degenerate vertices) hit only the real
+    triangle, with finite hit records and the geometric normal for the zero shading normal.
+    Returns the generator, to go on drawing from."""
+    V = np.asarray(scene.meshes[0].vertices)
     rng = np.random.default_rng(0)
     o = np.column_stack([rng.uniform(-1, 2, 500), rng.uniform(-1, 1, 500), np.full(500, 2.0)])
     o[:50, :2] = V[[0, 1, 2, 3, 4]][np.arange(50) % 5, :2]    # aimed exactly at degenerate vertices
@@ -429,9 +446,18 @@ def test_degenerate_triangles_do_not_crash_or_nan(backend):
     h = caster.intersect(o, d, np.full(500, 0.5))
     for f in (h.t[h.hit], h.position[h.hit], h.ng[h.hit], h.ns[h.hit], h.u, h.v):
         assert np.all(np.isfinite(f))
-    assert np.all(h.prim[h.hit] == 3)                          # only the real triangle is hit
+    assert h.hit.sum() > 100 and np.all(h.prim[h.hit] == 3)   # only the real triangle is hit
     np.testing.assert_allclose(h.t[h.hit], 1.5)
     np.testing.assert_allclose(h.ns[h.hit], h.ng[h.hit])       # zero shading normal -> ng
+    return rng
+
+
+@pytest.mark.parametrize("backend", ["embree", "numpy"])
+def test_degenerate_triangles_do_not_crash_or_nan(backend):
+    if backend == "embree" and not embree_available():
+        pytest.skip("embreex not installed")
+    scene = degenerate_triangles_scene()
+    assert_degenerate_triangles_are_passed_over(make_caster(scene, backend), scene)
 
 
 # ---------------------------------------------------------------- API edges

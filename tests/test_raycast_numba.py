@@ -11,8 +11,9 @@ from stpm_core.errors import StpmError
 from stpm_core.motion import MotionTransform
 from stpm_core.raycast import make_caster
 from stpm_core.raycast.build import BACKEND_ENV, numba_available
-from stpm_core.scene import Instance, Material, Mesh, Scene
-from test_raycast import heightfield, random_rays, random_scene, soup, trs
+from stpm_core.scene import Instance, Material, Scene
+from test_raycast import (assert_degenerate_triangles_are_passed_over, degenerate_triangles_scene, heightfield,
+                          many_moving_instances, random_rays, random_scene, soup, trs, waving_heightfield_rays)
 
 pytestmark = pytest.mark.skipif(not numba_available(), reason="numba not installed")
 
@@ -66,16 +67,7 @@ def test_numba_matches_numpy_on_random_scenes():
 def test_deforming_mesh_exact_at_each_ray_time():
     """A waving heightfield: every hit lies on the surface at the ray's own time (analytic
     z = h(x, y, t) interpolated on the triangle), and matches the oracle."""
-    times = np.linspace(0, 1, 4)
-    height = lambda x, y, t: 0.3 * np.sin(3 * x + 4 * t) * np.cos(2 * y - 3 * t)
-    mesh = heightfield(24, times, height)
-    scene = Scene(meshes=[mesh], instances=[Instance(0)], materials=[Material()])
-    rng = np.random.default_rng(3)
-    n = 2000
-    xy = rng.uniform(-0.9, 0.9, (n, 2))
-    o = np.column_stack([xy + rng.uniform(-0.1, 0.1, (n, 2)), np.full(n, 2.0)])
-    d = np.column_stack([xy - o[:, :2], np.full(n, -3.0)])
-    t = rng.uniform(0, 1, n)
+    mesh, scene, o, d, t = waving_heightfield_rays(0.1)
     hb = make_caster(scene, "numba").intersect(o, d, t)
     assert hb.hit.all()
     # Barycentric point of the triangle at the ray time == the hit position
@@ -89,14 +81,7 @@ def test_deforming_mesh_exact_at_each_ray_time():
 def test_many_moving_instances_agree():
     """40 moving instances of one mesh (shared BVH, culled through the caster's part BVH)."""
     rng = np.random.default_rng(17)
-    mesh = soup(rng, 6, spread=0.2, size=0.15)
-    inst = []
-    for k in range(40):
-        p0, p1 = rng.uniform(-2, 2, 3), rng.uniform(-2, 2, 3)
-        a0 = rng.uniform(0, 6)
-        a1 = a0 if k % 2 else rng.uniform(0, 6)
-        inst.append(Instance(0, MotionTransform(np.array([0.0, 1.0]), np.stack([trs(p0, a0), trs(p1, a1)]))))
-    scene = Scene(meshes=[mesh], instances=inst, materials=[Material(), Material()])
+    scene = many_moving_instances(rng)
     o, d, t = random_rays(rng, 2000)
     nb = make_caster(scene, "numba")
     assert len({id(p.tris) for p in nb.parts}) == 1                  # one object-space BVH for the mesh
@@ -157,23 +142,9 @@ def test_translated_1e5_scene_gives_the_same_hits():
 
 
 def test_degenerate_triangles_do_not_crash_or_nan():
-    V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0],            # collinear
-                  [0, 1, 0], [0, 1, 0],                        # repeated vertex
-                  [-1, -1, 0.5], [1, -1, 0.5], [0, 1, 0.5]], np.float32)
-    F = np.array([[0, 1, 2], [3, 4, 0], [3, 3, 3], [5, 6, 7]], np.int32)
-    mesh = Mesh(vertices=V, triangles=F, material_ids=np.zeros(4, np.int32), normals=np.zeros((4, 3, 3), np.float32))
-    scene = Scene(meshes=[mesh], instances=[Instance(0)], materials=[Material()])
+    scene = degenerate_triangles_scene()
     caster = make_caster(scene, "numba")
-    rng = np.random.default_rng(0)
-    o = np.column_stack([rng.uniform(-1, 2, 500), rng.uniform(-1, 1, 500), np.full(500, 2.0)])
-    o[:50, :2] = V[[0, 1, 2, 3, 4]][np.arange(50) % 5, :2]     # aimed exactly at degenerate vertices
-    d = np.tile([0, 0, -1.0], (500, 1))
-    h = caster.intersect(o, d, np.full(500, 0.5))
-    for f in (h.t[h.hit], h.position[h.hit], h.ng[h.hit], h.ns[h.hit], h.u, h.v):
-        assert np.all(np.isfinite(f))
-    assert h.hit.sum() > 100 and np.all(h.prim[h.hit] == 3)     # only the real triangle is hit
-    np.testing.assert_allclose(h.t[h.hit], 1.5)
-    np.testing.assert_allclose(h.ns[h.hit], h.ng[h.hit])        # zero shading normal -> ng
+    rng = assert_degenerate_triangles_are_passed_over(caster, scene)
     # Axis-parallel rays (zero direction components) along and beside the degenerate ones
     d2 = np.tile([1.0, 0, 0], (500, 1))
     o2 = np.column_stack([np.full(500, -3.0), rng.uniform(-1, 1, 500), rng.choice([0.0, 0.5, 0.25], 500)])

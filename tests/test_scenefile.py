@@ -24,6 +24,8 @@ from stpm_core.settings import RenderSettings
 from stpm_core.shutter import Shutter
 from stpm_core.textures import Texture
 
+from loader_fuzz import _json_paths  # every path tuple to a value inside a JSON object
+
 
 # ----------------------------------------------------------------------------
 # A scene using every feature of the format
@@ -709,17 +711,6 @@ def test_fuzz_bytes(tmp_path, valid_bytes, data):
     path = tmp_path / "fuzz.stpm"
     path.write_bytes(bytes(raw))
     _load_or_scene_error(path)
-
-
-def _json_paths(obj, prefix=()):
-    """Every (path tuple) to a value inside a JSON object."""
-    yield prefix
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            yield from _json_paths(v, prefix + (k,))
-    elif isinstance(obj, list):
-        for i, v in enumerate(obj):
-            yield from _json_paths(v, prefix + (i,))
 
 
 JSON_VALUES = st.recursive(
