@@ -734,6 +734,8 @@ def _read_container(path: Path) -> dict[str, np.ndarray]:
             plan = []
             total = 0
             for info in zf.infolist():
+                if not info.filename:            # a corrupt directory entry (ZipInfo.is_dir would IndexError)
+                    raise SceneError("the archive has a member without a name (corrupt)")
                 if info.is_dir():
                     continue
                 key = info.filename[:-4] if info.filename.endswith(".npy") else info.filename

@@ -665,6 +665,18 @@ def test_header_edge_cases(tmp_path):
     assert "settings" in _load_error(tmp_path / "s.stpm")
 
 
+def test_zip_member_without_a_name(tmp_path):
+    """A corrupted central directory can leave a member's name empty (found by test_fuzz_bytes):
+    zipfile's ``ZipInfo.is_dir`` then raised a bare IndexError through the loader."""
+    import zipfile
+    path = tmp_path / "noname.stpm"
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr(zipfile.ZipInfo(""), b"y")
+        zf.writestr(zipfile.ZipInfo("header.npy"), b"x")
+    msg = _load_error(path)
+    assert "without a name" in msg
+
+
 def test_header_not_json(tmp_path):
     path = tmp_path / "h.stpm"
     with open(path, "wb") as f:
