@@ -401,13 +401,14 @@ class PhotonMap:
             self._caps[key] = cap
         return cap
 
-    def _capped_lookup(self, tree, mode, q, ns, kq, k, kernel, ng, glossy=None, rows=None, out=None):
+    def _capped_lookup(self, tree, mode, q, ns, kq, k, kernel, ng, glossy=None, rows=None, out=None, back=None):
         """tree.lookup(...) in the tangent slab of the normals ng (:func:`_slab_normals`), capped at
         :meth:`search_cap` (counted in ``stats['capped_count']``); rows, out: ``FlatTree.lookup``'s
-        (answer only those rows of the queries, into those arrays)."""
+        (answer only those rows of the queries, into those arrays); back: the slab's back fraction
+        (None: ``PLANE_FRACTION``; :meth:`estimate`)."""
         cap = self.search_cap(tree, kq)
         res = tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers, glossy, cap=cap, ng=ng,
-                          plane=PLANE_FRACTION, plane_front=PLANE_FRONT, rows=rows, out=out)
+                          plane=PLANE_FRACTION if back is None else back, plane_front=PLANE_FRONT, rows=rows, out=out)
         if np.isfinite(cap):
             r = res[1] if rows is None else res[1][rows]
             self.stats["capped_count"] += int(np.count_nonzero(r >= cap))
@@ -485,7 +486,7 @@ class PhotonMap:
     # -- the estimate ---------------------------------------------------------
     def estimate(self, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str = "TEMPORAL",
                  k: int = 50, kernel: str = "BOX", temporal_alpha: float = 0.0, support: bool = False,
-                 glossy=None, ng: np.ndarray | None = None):
+                 glossy=None, ng: np.ndarray | None = None, back: float | None = None):
         """Irradiance E (n, 3) W/m^2 at points p (n, 3), normals ns (n, 3), times t (n,).
 
         ng: (n, 3) unit geometric normals of the queries' surfaces, or None (no slab).  Only
@@ -497,6 +498,10 @@ class PhotonMap:
         A zero row switches the slab off for that query (h = 0 for every photon): for surfaces that
         move or deform, whose photons of other times lie off today's plane (:func:`plane_weights`).
         The geometric normal, not a bent shading one (smooth shading, normal maps).
+        back: the slab's back fraction for these queries (None: ``PLANE_FRACTION``); any value >= 1
+        bounds no photon of the search region (each lies within the region's radius of the query,
+        so |h| <= rho) and leaves the photon-normal test alone (final gathering's cache:
+        ``photons.gather.GATHER_PLANE_BACK``).
 
         glossy: None, or (closure rows (n, N_CLOSURE), (wo, ns, ng) (n, 9) of each query's hit, E,
         E_avg, coat_w) (``kdtree.FlatTree.lookup``): then returns (E, L_g), L_g (n, 3) W/(m^2 sr)
@@ -512,6 +517,8 @@ class PhotonMap:
         STANDARD (-inf, inf)).  r = 0 where nothing was estimated (an empty map or slice).  What
         ``photons.sharing`` needs to decide which other queries may reuse an estimate.
         """
+        if back is not None and not float(back) > 0.0:
+            raise ValueError(f"tangent slab back fraction must be > 0 (>= 1: no bound), got {back!r}")
         p = np.asarray(p, dtype=np.float64).reshape(-1, 3) - self.origin  # into the records' frame
         n = p.shape[0]
         E = np.zeros((n, 3), dtype=np.float64)
@@ -537,17 +544,17 @@ class PhotonMap:
         t0 = _time.perf_counter()
         if B > 1:
             if glossy is not None:
-                E[:], r, tau, lo, hi, Lg = self._search_sliced(B, p, ns, t, k, m, kernel, glossy, ng=ng)
+                E[:], r, tau, lo, hi, Lg = self._search_sliced(B, p, ns, t, k, m, kernel, glossy, ng=ng, back=back)
                 self.stats["lookup_s"] += _time.perf_counter() - t0
                 self.stats["lookup_count"] += n
                 return (E, r, tau, lo, hi, Lg) if support else (E, Lg)
-            E[:], r, tau, lo, hi = self._estimate_sliced(B, p, ns, t, k, m, kernel, ng)
+            E[:], r, tau, lo, hi = self._estimate_sliced(B, p, ns, t, k, m, kernel, ng, back)
             self.stats["lookup_s"] += _time.perf_counter() - t0
             self.stats["lookup_count"] += n
             return (E, r, tau, lo, hi) if support else E
         # -- search: Phi summed over the inner / selected photons, radius, time window ----------
         if glossy is not None:
-            Phi, r, tau, G = self._search_numba(estimator, p, ns, t, k, m, kernel, glossy, ng=ng)
+            Phi, r, tau, G = self._search_numba(estimator, p, ns, t, k, m, kernel, glossy, ng=ng, back=back)
             E[:] = self._normalise(estimator, Phi, r, tau, t, kernel)
             Lg = self._normalise(estimator, G, r, tau, t, kernel)
             self.stats["lookup_s"] += _time.perf_counter() - t0
@@ -557,11 +564,11 @@ class PhotonMap:
             return self._support(estimator, E, r, tau) + (Lg,)
         if self.backend == "numba":
             try:
-                Phi, r, tau = self._search_numba(estimator, p, ns, t, k, m, kernel, ng=ng)
+                Phi, r, tau = self._search_numba(estimator, p, ns, t, k, m, kernel, ng=ng, back=back)
             except Exception as exc:  # noqa: BLE001 -- fall back to scipy, same answer
                 self._fall_back(exc)
         if self.backend == "scipy":
-            Phi, r, tau = self._search_scipy(estimator, p, ns, t, k, m, kernel, ng)
+            Phi, r, tau = self._search_scipy(estimator, p, ns, t, k, m, kernel, ng, back)
         # -- normalise: the same numpy code for both searches ------------------------------------
         E[:] = self._normalise(estimator, Phi, r, tau, t, kernel)
         self.stats["lookup_s"] += _time.perf_counter() - t0
@@ -579,7 +586,7 @@ class PhotonMap:
         return E, r, half, np.zeros(n), np.ones(n)
 
     # -- TEMPORAL on time slices ---------------------------------------------------------------------
-    def _estimate_sliced(self, B, p, ns, t, k, m, kernel, ng):
+    def _estimate_sliced(self, B, p, ns, t, k, m, kernel, ng, back=None):
         """Consistent TEMPORAL: each query searches the slice holding its time: (E (n, 3) W/m^2,
         r_m (n,), tau (n,), and the slice [lo, hi] (n,) of each query).
 
@@ -588,9 +595,9 @@ class PhotonMap:
         [a, b] (docs/photon-mapping.md shows (k - 1) / (pi r_m^2 W) stays unbiased).
         A failure of the compiled search (build or look-up) redoes the estimate with scipy trees.
         """
-        return self._numba_or_scipy(lambda: self._search_sliced(B, p, ns, t, k, m, kernel, ng=ng))
+        return self._numba_or_scipy(lambda: self._search_sliced(B, p, ns, t, k, m, kernel, ng=ng, back=back))
 
-    def _search_sliced(self, B, p, ns, t, k, m, kernel, glossy=None, *, ng):
+    def _search_sliced(self, B, p, ns, t, k, m, kernel, glossy=None, *, ng, back=None):
         """:meth:`_estimate_sliced` with the map's current engine (glossy: :meth:`estimate`'s; then
         the glossy radiance (n, 3) is a sixth result)."""
         sl = self.time_slices(B)
@@ -616,13 +623,14 @@ class PhotonMap:
             if kj < 2:                                  # a nearly empty slice: nothing to estimate with
                 continue
             if sl["backend"] == "numba":
-                self._capped_lookup(tree, _kdtree.MODE_TEMPORAL, qq, ns, mj, kj, kernel, ng, glossy, rows=q, out=res)
+                self._capped_lookup(tree, _kdtree.MODE_TEMPORAL, qq, ns, mj, kj, kernel, ng, glossy, rows=q, out=res,
+                                    back=back)
             else:
                 batch = max(256, _QUERY_BATCH_ELEMS // mj)
                 for a in range(0, len(q), batch):
                     qb = q[a:a + batch]
                     Phi[qb], r[qb], tau[qb] = self._temporal(p[qb], ns[qb], t[qb], kj, mj, kernel, ng[qb],
-                                                             tree=tree, rows=rows)
+                                                             tree=tree, rows=rows, back=back)
         E = self._normalise("TEMPORAL", Phi, r, tau, t, kernel, lo=lo, hi=hi)
         if glossy is not None:
             return E, r, tau, lo, hi, self._normalise("TEMPORAL", G, r, tau, t, kernel, lo=lo, hi=hi)
@@ -651,7 +659,7 @@ class PhotonMap:
         return Phi / area[:, None]
 
     # -- compiled search ------------------------------------------------------------------------
-    def _search_numba(self, estimator, p, ns, t, k, m, kernel, glossy=None, *, ng):
+    def _search_numba(self, estimator, p, ns, t, k, m, kernel, glossy=None, *, ng, back=None):
         """(Phi (n, 3) W, r (n,) m, tau (n,)) from the fused numba kernel (see kdtree.py); with glossy
         (:meth:`estimate`) the glossy sums (n, 3) as a fourth."""
         q = np.empty((p.shape[0], 4))
@@ -664,10 +672,10 @@ class PhotonMap:
             tree = self.flat_tree(3)
             mode = _kdtree.MODE_TEMPORAL if estimator == "TEMPORAL" else _kdtree.MODE_STANDARD
         kq = m if estimator == "TEMPORAL" else k
-        return self._capped_lookup(tree, mode, q, ns, kq, k, kernel, ng, glossy)
+        return self._capped_lookup(tree, mode, q, ns, kq, k, kernel, ng, glossy, back=back)
 
     # -- scipy search -----------------------------------------------------------------------------
-    def _search_scipy(self, estimator, p, ns, t, k, m, kernel, ng):
+    def _search_scipy(self, estimator, p, ns, t, k, m, kernel, ng, back=None):
         """(Phi (n, 3) W, r (n,) m, tau (n,)) with scipy's cKDTree, in memory-bounded batches."""
         n = p.shape[0]
         Phi, r, tau = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
@@ -676,26 +684,26 @@ class PhotonMap:
         for lo in range(0, n, batch):
             sl = slice(lo, min(n, lo + batch))
             if estimator == "STANDARD":
-                Phi[sl], r[sl] = self._standard(p[sl], ns[sl], k, kernel, ng[sl])
+                Phi[sl], r[sl] = self._standard(p[sl], ns[sl], k, kernel, ng[sl], back)
             elif estimator == "TEMPORAL":
-                Phi[sl], r[sl], tau[sl] = self._temporal(p[sl], ns[sl], t[sl], k, m, kernel, ng[sl])
+                Phi[sl], r[sl], tau[sl] = self._temporal(p[sl], ns[sl], t[sl], k, m, kernel, ng[sl], back=back)
             else:
-                Phi[sl], r[sl] = self._kd4d(p[sl], ns[sl], t[sl], k, kernel, ng[sl])
+                Phi[sl], r[sl] = self._kd4d(p[sl], ns[sl], t[sl], k, kernel, ng[sl], back)
         return Phi, r, tau
 
     def _weighted_sum(self, idx: np.ndarray, ns: np.ndarray, w: np.ndarray | None, p: np.ndarray,
-                      ng: np.ndarray, rho2: np.ndarray) -> np.ndarray:
+                      ng: np.ndarray, rho2: np.ndarray, back: float | None = None) -> np.ndarray:
         """sum_j [dot(ns, wi_j) > 0] [x_j in the tangent slab] w_j Phi_j over idx (n, j) -> (n, 3) W.
 
         The slab (``kdtree._in_slab``): -PLANE_FRACTION rho <= (x_j - p) . ng <= PLANE_FRONT rho, p (n, 3)
         the queries, ng (n, 3) their geometric normals, rho2 (n, 1) or (n, j) the squared radius of
         the region's section at each photon (r^2; KD4D's R^2 - (s dt)^2); and, where the slab is on
         (ng not zero), the normal test dot(n_j, ng) >= NORMAL_COS of photons with a stored normal
-        behind the plane (h < 0; ``kdtree._facing``)."""
+        behind the plane (h < 0; ``kdtree._facing``).  back: PLANE_FRACTION's stand-in (None: it)."""
         G = np.take(self._packed, idx, axis=0)                     # (n, j, 8): one gather per photon
         side = (G[..., 0] * ns[:, None, 0] + G[..., 1] * ns[:, None, 1] + G[..., 2] * ns[:, None, 2]) > 0.0
         h = np.einsum("njc,nc->nj", self.position[idx] - p[:, None, :], ng.astype(np.float64))
-        c = np.where(h >= 0.0, PLANE_FRONT, PLANE_FRACTION)
+        c = np.where(h >= 0.0, PLANE_FRONT, PLANE_FRACTION if back is None else back)
         with np.errstate(invalid="ignore"):        # (inf x 0 where rho = 0 and a bound is off: no bound)
             side &= np.isinf(c) | (h * h <= c * c * rho2)
         code = G[..., 7]
@@ -712,14 +720,14 @@ class PhotonMap:
         """Cone kernel weights 1 - d / (CONE_K r) (n, j)."""
         return 1.0 - d / (CONE_K * np.maximum(r, 1e-300)[:, None])
 
-    def _standard(self, p, ns, k, kernel, ng):
+    def _standard(self, p, ns, k, kernel, ng, back=None):
         """STANDARD: Phi over the k - 1 inner photons (in the tangent slab), r_k."""
         d, idx = self.tree3().query(p, k, workers=self.workers)
         r = d[:, -1]                                   # radius reaching the k-th photon (m)
         w = self._cone(d[:, :-1], r) if kernel == "CONE" else None
-        return self._weighted_sum(idx[:, :-1], ns, w, p, ng, (r * r)[:, None]), r
+        return self._weighted_sum(idx[:, :-1], ns, w, p, ng, (r * r)[:, None], back), r
 
-    def _temporal(self, p, ns, t, k, m, kernel, ng, tree=None, rows=None):
+    def _temporal(self, p, ns, t, k, m, kernel, ng, tree=None, rows=None, back=None):
         """TEMPORAL: Phi over the k - 1 nearest in time among m - 1 inner candidates, r_m, tau_k.
 
         ``tree`` / ``rows``: search a time slice's cKDTree whose point i is photon ``rows[i]``
@@ -737,9 +745,9 @@ class PhotonMap:
         tau = dt[rows[:, 0], part[:, k - 1]]           # window half-width (shutter units)
         sel = part[:, : k - 1]                         # k - 1 photons strictly inside the window
         w = self._cone(d_c[rows, sel], r) if kernel == "CONE" else None
-        return self._weighted_sum(cand[rows, sel], ns, w, p, ng, (r * r)[:, None]), r, tau
+        return self._weighted_sum(cand[rows, sel], ns, w, p, ng, (r * r)[:, None], back), r, tau
 
-    def _kd4d(self, p, ns, t, k, kernel, ng):
+    def _kd4d(self, p, ns, t, k, kernel, ng, back=None):
         """KD4D: Phi over the k - 1 inner photons in (x, y, z, s t), R_k."""
         q = np.empty((p.shape[0], 4))
         q[:, :3] = p
@@ -748,4 +756,4 @@ class PhotonMap:
         R = d[:, -1]                                   # 4D radius reaching the k-th photon (m)
         w = self._cone(d[:, :-1], R) if kernel == "CONE" else None
         dt = self.time_scale * self.time[idx[:, :-1]] - q[:, 3:4]     # s t_j - s t (m)
-        return self._weighted_sum(idx[:, :-1], ns, w, p, ng, np.maximum((R * R)[:, None] - dt * dt, 0.0)), R
+        return self._weighted_sum(idx[:, :-1], ns, w, p, ng, np.maximum((R * R)[:, None] - dt * dt, 0.0), back), R

@@ -11,9 +11,12 @@ the photon's incoming direction at t_i), and the irradiance
     E_i = E_direct(x_i, t_i) + E_caustic(x_i, n_i, t_i) + E_global(x_i, n_i, t_i)        W / m^2
 
 the last two read with the render's own space-time estimator (STANDARD / TEMPORAL / KD4D, k) from
-the caustic and global maps, the first by next-event estimation at (x_i, t_i) toward every light
-(``integrator._cache_direct``, with a white Lambertian closure), so E_i is the whole irradiance at
-x_i.  (Direct light from first-hit photons instead -- Jensen's global map -- leaked through
+the caustic and global maps with the photon-normal test and no tangent slab (``GATHER_PLANE_BACK``:
+a photon behind the point's plane counts only if its stored normal is within acos(``NORMAL_COS``)
+of n_i, so the sunlit notch faces of an open outer corner, at right angles behind a wall, add
+nothing; the wall behind a curtain still does), the first by next-event estimation at (x_i, t_i)
+toward every light (``integrator._cache_direct``, with a white Lambertian closure), so E_i is the
+whole irradiance at x_i.  (Direct light from first-hit photons instead -- Jensen's global map -- leaked through
 zero-thickness walls: a point inside a room near an edge read the sunlit roof's photons across it,
 since a photon record has no normal to tell them apart.)  A gather hit then reads ONE cache point (``kernels.gather.cache_lookup``):
 the nearest in space-time on its instance with a normal within acos(``GATHER_NORMAL_COS``), within ``reach``.
@@ -27,12 +30,18 @@ import numpy as np
 from ..kernels import gather as _G
 from .record import oct_decode
 
-__all__ = ["IrradianceCache", "GATHER_STRIDE", "GATHER_NORMAL_COS", "GATHER_REACH"]
+__all__ = ["IrradianceCache", "GATHER_STRIDE", "GATHER_NORMAL_COS", "GATHER_REACH", "GATHER_PLANE_BACK"]
 
 GATHER_STRIDE = 4              # every 4th global photon is a cache point (Christensen's choice)
 GATHER_NORMAL_COS = 0.9        # a cache point serves a hit whose normal is within acos(0.9) = 26 deg of its own
 GATHER_REACH = 4.0             # a hit reads no cache point farther than 4 x the 95th percentile of the
                                # estimates' radii r_k (then E = 0, counted in gather_misses)
+GATHER_PLANE_BACK = 2.0        # the cache's estimates: the tangent slab's back fraction (estimators.PLANE_FRACTION's
+                               # stand-in).  Every photon of a search region lies within its radius rho of the
+                               # point, so |h| <= rho and any fraction >= 1 bounds nothing (2: clear of rounding):
+                               # the photon-normal test (kdtree._facing) alone, which the slab switches on.  The
+                               # slab proper darkened curtains under final gathering (docs/photon-mapping.md,
+                               # "Tangent slab"); without the normal test an open outer corner leaked (section 9)
 
 
 class IrradianceCache:
@@ -113,10 +122,11 @@ class IrradianceCache:
         # -- Irradiance at each point: the render's own space-time estimator ---------------------
         reach = np.inf
         if p.shape[0]:
-            E, r = maps.estimate("global", p, ns, t, support=True)[:2]
+            # (ng: the photon-normal test against the point's geometric normal, no height bound)
+            E, r = maps.estimate("global", p, ns, t, support=True, ng=ng, back=GATHER_PLANE_BACK)[:2]
             E = np.array(E, np.float64)
             if caustics and maps.has("caustic"):
-                E += maps.estimate("caustic", p, ns, t)
+                E += maps.estimate("caustic", p, ns, t, ng=ng, back=GATHER_PLANE_BACK)
             r = np.asarray(r, np.float64)
             r = r[np.isfinite(r) & (r > 0)]
             if r.size:

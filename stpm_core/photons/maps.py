@@ -71,11 +71,12 @@ class PhotonMaps:
 
     def estimate(self, kind: str, p: np.ndarray, ns: np.ndarray, t: np.ndarray, *, estimator: str | None = None,
                  k: int | None = None, kernel: str | None = None, temporal_alpha: float | None = None,
-                 support: bool = False, glossy=None, ng: np.ndarray | None = None):
+                 support: bool = False, glossy=None, ng: np.ndarray | None = None, back: float | None = None):
         """Irradiance E (n, 3) W/m^2 at p (n, 3) on the ns (n, 3) side at shutter times t (n,).
 
         ng (n, 3): the queries' unit geometric normals (None: no slab), whose tangent slab bounds
-        the photons counted (``PhotonMap.estimate``; zero rows: no slab for those queries).
+        the photons counted (``PhotonMap.estimate``; zero rows: no slab for those queries); back:
+        the slab's back fraction (None: ``estimators.PLANE_FRACTION``; >= 1: the photon-normal test alone).
 
         Zeros where the map is empty.  Keyword overrides default to the settings.  support: return
         ``(E, r, tau, lo, hi)``, the region each estimate read (``PhotonMap.estimate``).  glossy:
@@ -90,7 +91,7 @@ class PhotonMaps:
             k=self.k if k is None else int(k),
             kernel=(kernel or self.kernel).upper(),
             temporal_alpha=self.temporal_alpha if temporal_alpha is None else float(temporal_alpha),
-            support=support, glossy=glossy, ng=ng)
+            support=support, glossy=glossy, ng=ng, back=back)
 
     @property
     def stats(self) -> dict:
