@@ -404,6 +404,7 @@ def test_the_plan_is_the_same_whichever_compiled_interpreter_shades_its_probe(mo
 
     def plan_with(cover):
         monkeypatch.setattr(svm_variants, "_LOADED", {})
+        monkeypatch.setattr(svm_variants, "_VARIANTS_LOADED", set())
         monkeypatch.setattr(svm_variants, "covering", cover)
         return make_plan(scene)
 

@@ -295,7 +295,7 @@ def test_a_compiled_superset_variant_is_reused_and_only_a_superset(tmp_path, mon
     folder, cache = tmp_path / "svm_variants", tmp_path / "svm_variants" / "__pycache__"
     cache.mkdir(parents=True)
     ops = frozenset(BENCH_OPS)
-    monkeypatch.setattr(svm_variants, "_LOADED", {})               # (none loaded in this process)
+    monkeypatch.setattr(svm_variants, "_VARIANTS_LOADED", set())   # (none loaded in this process)
 
     def put(feats, compiled=True, digest_ok=True):
         name = svm_variants.variant_name(feats)
@@ -323,5 +323,13 @@ def test_a_compiled_superset_variant_is_reused_and_only_a_superset(tmp_path, mon
     put(ops)                                                        # its own compiled: its own
     assert cover(ops) == ops
     # in this process: a loaded superset serves without looking at the folder
-    svm_variants._LOADED[big] = object()
+    svm_variants._VARIANTS_LOADED.add(big)
     assert svm_variants.covering(ops | {"BSDF_GLASS"}, folder=tmp_path / "none") == big
+    # interpreter(): a set served by a superset's variant is not itself a loaded variant (a subset of
+    # it must not be sent to a variant that was never compiled)
+    monkeypatch.setattr(svm_variants, "_LOADED", {})
+    monkeypatch.setattr(svm_variants, "_load", lambda f: ("entry", f))
+    monkeypatch.setattr(svm_variants.numba_probe, "variant_dir", lambda: tmp_path / "none")
+    assert svm_variants.interpreter(ops) == ("entry", big)
+    assert svm_variants._VARIANTS_LOADED == {big}
+    assert svm_variants.covering(ops - {"RAMP"}, folder=tmp_path / "none") == big

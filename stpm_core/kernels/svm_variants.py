@@ -16,7 +16,7 @@ cached once for every variant.
 A variant of more features shades a scene's programs bit for bit as the scene's own: when one is
 already compiled (:func:`covering`: in this process, or numba's index of its ``_shade`` in the cache
 folder), the scene runs it instead of compiling its own (the fifth review's kitchen after
-``hdri_product``: 3-5 s for its first plan against 15-34 s).
+``hdri_product``: 1.5-1.7 s for its first plan against 6.6-7.9 s at load 2.5).
 
 The generated file goes to the kernel cache folder (:func:`stpm_core.numba_probe.variant_dir`), so
 numba's on-disk cache works for it as for any kernel file.  Its name is a hash of the kernel
@@ -185,6 +185,7 @@ def _check_names(homes) -> None:
 
 _LOCK = threading.Lock()
 _LOADED: dict = {}          # frozenset of feature names -> the compiled entry (a numba dispatcher)
+_VARIANTS_LOADED: set = set()   # the feature sets of the variant modules loaded (and run) in this process
 
 
 def interpreter(ops, reuse: bool = True):
@@ -206,7 +207,10 @@ def interpreter(ops, reuse: bool = True):
         if entry is None:
             # a variant of more features already compiled (in this process, or in the cache folder)
             # shades these programs bit for bit as this set's own would: no compile
-            entry = _LOADED[ops] = _load(covering(ops))
+            cover = covering(ops)
+            entry = _LOADED[ops] = _load(cover)
+            if entry is not svm._shade:
+                _VARIANTS_LOADED.add(cover)
         return entry
 
 
@@ -228,17 +232,18 @@ def _features_of(path: Path, digest: str):
 def covering(ops, folder=None, cache_dirs=None) -> frozenset:
     """The feature set whose variant :func:`interpreter` loads for ``ops``: ``ops`` itself when its
     variant is compiled (in this process or in the cache folder) or when no compiled variant holds
-    every feature of ``ops``; else the smallest such compiled variant's (ties: by file name).
+    every feature of ``ops``; else the smallest such compiled variant's (ties: the first in sorted
+    feature names).
 
     A variant of a superset shades ``ops``' programs bit for bit as ``ops``' own variant (the
     opcodes it keeps besides are never dispatched to: :mod:`.svm`'s full interpreter is the
     largest superset, ``tests/test_svm_variants.py``), so the choice changes no pixel and no plan,
     and a scene whose node kinds a scene rendered earlier already covers (the fifth review's kitchen
     after ``hdri_product``, ``sunlit_pool`` after ``textured_room``) compiles nothing: a new
-    variant costs 15-30 s at load 7-8 (docs/effects.md, "What the plan costs").  "Compiled in the
+    variant costs 5-12 s at load 4, 12-37 s at load 7-10 (docs/effects.md, "What the plan costs").  "Compiled in the
     cache folder": numba's index of the variant's ``_shade`` is there (:func:`_cache_dirs`)."""
     ops = frozenset(ops) - {"END"}
-    loaded = [f for f, e in _LOADED.items() if e is not svm._shade and ops <= f]
+    loaded = [f for f in _VARIANTS_LOADED if ops <= f]
     if ops in loaded:
         return ops
     folder = numba_probe.variant_dir() if folder is None else folder
