@@ -366,3 +366,52 @@ def test_a_faint_caustic_gets_no_map_and_carried_almost_no_light():
     res = _tiny(bright, effects="MANUAL", caustics=True, indirect=False, photons_caustic=20000)
     share = float(res.passes["Caustic"][..., :3].sum() / res.passes["Combined"][..., :3].sum())
     assert share > 1e-3, share
+
+
+# ----------------------------------------------------------------------------
+# What the plan costs: the probe's shading may come from a compiled superset's interpreter
+# ----------------------------------------------------------------------------
+def _node_glass_over_floor():
+    """A ball whose Mix Shader picks Glass or Diffuse by a Checker, over a Checker-coloured floor:
+    the probe's caustic photons exist only through the node interpreter's Glass branch."""
+    from stpm_core.nodes.graph import Link, ShaderGraph
+    from test_kernel_svm import N
+    floor = ShaderGraph(nodes={
+        "Checker": N("ShaderNodeTexChecker", {"Scale": 4.0, "Color1": (0.9, 0.9, 0.9), "Color2": (0.3, 0.5, 0.2)}),
+        "Diffuse": N("ShaderNodeBsdfDiffuse", {"Color": Link("Checker", "Color")})}, surface=Link("Diffuse", "BSDF"))
+    ball = ShaderGraph(nodes={
+        "Checker": N("ShaderNodeTexChecker", {"Scale": 3.0}),
+        "Glass": N("ShaderNodeBsdfGlass", {"Color": (0.9, 0.8, 0.6), "Roughness": 0.0, "IOR": 1.5}),
+        "Diffuse": N("ShaderNodeBsdfDiffuse", {"Color": (0.5, 0.5, 0.5)}),
+        "Mix": N("ShaderNodeMixShader", {"Fac": Link("Checker", "Fac"), "Shader": Link("Diffuse", "BSDF"),
+                                         "Shader_001": Link("Glass", "BSDF")})}, surface=Link("Mix", "Shader"))
+    mats = [Material(graph=floor, name="checker floor"), Material(graph=ball, name="mixed glass")]
+    return make_scene([plane_mesh(6.0, name="floor", material=0),
+                       (sphere_mesh(0.5, 12, 24, material=1, name="ball"), translate(0, 0, 1))],
+                      mats, persp_camera((0, -6, 3), (0, 0, 0.5)), [point_light((0, 0, 3), 300.0)], shutter=OPEN)
+
+
+def test_the_plan_is_the_same_whichever_compiled_interpreter_shades_its_probe(monkeypatch):
+    """The probe shades its photons with the node interpreter compiled for the scene's node kinds or,
+    to compile nothing (``svm_variants.covering``), a compiled one of more kinds -- the full
+    interpreter is the largest: the same plan, probe numbers included.  One missing a kind the scene
+    uses (the Glass branch folded away) would change it: the test can tell."""
+    from stpm_core.kernels import svm_variants
+    from stpm_core.shading import shading_data
+    scene = _node_glass_over_floor()
+    ops = shading_data(scene).ops
+    assert {"BSDF_GLASS", "MIX_SHADER", "TEX_CHECKER"} <= ops
+
+    def plan_with(cover):
+        monkeypatch.setattr(svm_variants, "_LOADED", {})
+        monkeypatch.setattr(svm_variants, "_VARIANTS_LOADED", set())
+        monkeypatch.setattr(svm_variants, "covering", cover)
+        return make_plan(scene)
+
+    own = plan_with(lambda o, *a, **k: frozenset(o))
+    assert own["caustics"] and own["details"]["probe"]["caustic_photons_stored"] > 0
+    monkeypatch.setenv("STPM_SVM_VARIANTS", "0")                      # the full interpreter
+    assert plan_with(lambda o, *a, **k: frozenset(o)) == own
+    monkeypatch.delenv("STPM_SVM_VARIANTS")
+    wrong = plan_with(lambda o, *a, **k: frozenset(o) - {"BSDF_GLASS"})
+    assert wrong != own and wrong["details"]["probe"]["caustic_photons_stored"] == 0

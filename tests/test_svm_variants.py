@@ -85,13 +85,16 @@ def _shade(scene, ops, rows: bool):
     h = Hits(t=np.ones(600), instance=np.zeros(600, np.int32), prim=np.zeros(600, np.int32), u=hits["bu"],
              v=hits["bv"], position=hits["P"], ng=hits["NG"], ns=hits["NS"], material=mat)
     G = hit_geometry(h, hits["D"])
+    # (the entry svm.shade_closures / shade_closure_rows call: ops' own variant, not a compiled
+    # superset's that svm_variants.covering may pick)
+    entry = svm._shade if ops is None else svm_variants.interpreter(ops, reuse=False)
     if rows:
         C = np.full((600 + sd.closures.shape[0], N_CLOSURE), np.nan)
         crow = np.zeros(600, np.int64)
-        svm.shade_closure_rows(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, 5, C, crow, ops=ops)
+        entry(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, 5, svm._NO_U, C, crow, True)
         return C[crow], G[2].copy()
     C = np.full((600, N_CLOSURE), np.nan)
-    svm.shade_closures(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, 5, C, ops=ops)
+    entry(mat, sd.closures, sd.prog, sd.n_slots, G, sd.A, sd.X, 5, svm._NO_U, C, svm._NO_ROWS, False)
     return C, G[2].copy()
 
 
@@ -110,7 +113,7 @@ def test_program_ops_walks_every_instruction():
 def test_a_variant_shades_bit_identically_to_the_full_interpreter():
     scene = _scene()
     sd = shading_data(scene)
-    entry = svm_variants.interpreter(sd.ops)
+    entry = svm_variants.interpreter(sd.ops, reuse=False)     # (this set's own, not a compiled superset's)
     assert entry is not svm._shade, "no variant was made (no writable kernel cache folder?)"
     for rows in (False, True):
         full, ns_full = _shade(scene, None, rows)
@@ -159,7 +162,7 @@ def test_the_parts_a_variant_leaves_out_shade_bit_identically():
     sd = shading_data(scene)
     assert {"TEXCOORD_GENERATED", "BSDF_GLASS", "IMAGE_CLOSEST"} <= sd.ops
     assert not sd.ops & {"TEXCOORD_OBJECT", "BSDF_GLOSSY", "IMAGE_LINEAR8", "IMAGE_LINEAR", "SET_NORMAL"}
-    entry = svm_variants.interpreter(sd.ops)
+    entry = svm_variants.interpreter(sd.ops, reuse=False)
     assert entry is not svm._shade
     for rows in (False, True):
         full, ns_full = _shade(scene, None, rows)
@@ -282,3 +285,51 @@ def test_stale_variants_are_removed_conservatively(tmp_path):
     assert svm_variants.remove_stale(folder, cache_dirs=[cache, mirror], now=now) == []
     # the default cache folders: numba's __pycache__ next to the modules
     assert svm_variants._cache_dirs(folder)[0] == cache
+
+
+def test_a_compiled_superset_variant_is_reused_and_only_a_superset(tmp_path, monkeypatch):
+    """``covering``: a variant already compiled (numba's index of its ``_shade`` in the cache folder)
+    whose features hold every one of a scene's serves it (no new compile; the smallest such one);
+    a set's own compiled variant wins; a variant missing a feature, one never compiled, or one of
+    other kernel sources is never picked (it would shade the scene's programs wrongly or compile)."""
+    folder, cache = tmp_path / "svm_variants", tmp_path / "svm_variants" / "__pycache__"
+    cache.mkdir(parents=True)
+    ops = frozenset(BENCH_OPS)
+    monkeypatch.setattr(svm_variants, "_VARIANTS_LOADED", set())   # (none loaded in this process)
+
+    def put(feats, compiled=True, digest_ok=True):
+        name = svm_variants.variant_name(feats)
+        text = svm_variants.variant_source(feats)
+        if not digest_ok:
+            text = text.replace(svm_variants._DIGEST_TAG, svm_variants._DIGEST_TAG + "0")
+        (folder / f"{name}.py").write_text(text)
+        if compiled:
+            (cache / f"{name}._shade-702.py311.nbi").write_text("")
+        return frozenset(feats)
+
+    def cover(o):
+        return svm_variants.covering(o, folder=folder, cache_dirs=[cache])
+
+    assert cover(ops) == ops                                        # nothing compiled: its own
+    put(ops - {"RAMP"} | {"TEX_NOISE"})                             # lacks RAMP: never
+    put(ops | {"TEX_WAVE"}, compiled=False)                         # not compiled: never
+    put(ops | {"TEX_GRADIENT"}, digest_ok=False)                    # other kernel sources: never
+    assert cover(ops) == ops
+    big = put(ops | {"TEX_NOISE", "BUMP", "TEX_WAVE", "BSDF_GLASS"})
+    small = put(ops | {"TEX_NOISE", "BUMP"})
+    assert cover(ops) == small                                      # the smallest compiled superset
+    assert cover(ops | {"BSDF_GLASS"}) == big
+    assert cover(ops | {"TEX_MAGIC"}) == ops | {"TEX_MAGIC"}        # no superset: its own
+    put(ops)                                                        # its own compiled: its own
+    assert cover(ops) == ops
+    # in this process: a loaded superset serves without looking at the folder
+    svm_variants._VARIANTS_LOADED.add(big)
+    assert svm_variants.covering(ops | {"BSDF_GLASS"}, folder=tmp_path / "none") == big
+    # interpreter(): a set served by a superset's variant is not itself a loaded variant (a subset of
+    # it must not be sent to a variant that was never compiled)
+    monkeypatch.setattr(svm_variants, "_LOADED", {})
+    monkeypatch.setattr(svm_variants, "_load", lambda f: ("entry", f))
+    monkeypatch.setattr(svm_variants.numba_probe, "variant_dir", lambda: tmp_path / "none")
+    assert svm_variants.interpreter(ops) == ("entry", big)
+    assert svm_variants._VARIANTS_LOADED == {big}
+    assert svm_variants.covering(ops - {"RAMP"}, folder=tmp_path / "none") == big

@@ -13,6 +13,11 @@ function only a dropped branch calls is never compiled.  The leaf functions (``_
 ``mix_color``, ``texture.tex_image_rows`` ...) are :mod:`.svm`'s own dispatchers, compiled and
 cached once for every variant.
 
+A variant of more features shades a scene's programs bit for bit as the scene's own: when one is
+already compiled (:func:`covering`: in this process, or numba's index of its ``_shade`` in the cache
+folder), the scene runs it instead of compiling its own (the fifth review's kitchen after
+``hdri_product``: 1.5-1.7 s for its first plan against 6.6-7.9 s at load 2.5).
+
 The generated file goes to the kernel cache folder (:func:`stpm_core.numba_probe.variant_dir`), so
 numba's on-disk cache works for it as for any kernel file.  Its name is a hash of the kernel
 sources (``numba_probe.sources_digest``: a callee's edit must not reuse a stale compile) and of
@@ -46,7 +51,7 @@ from .. import numba_probe
 from ..nodes.ops import BLEND_MODES, LAYOUT, OP
 from . import svm, texture
 
-__all__ = ["DISPATCHERS", "FEATURES", "program_ops", "variant_source", "variant_name", "interpreter",
+__all__ = ["DISPATCHERS", "FEATURES", "program_ops", "variant_source", "variant_name", "interpreter", "covering",
            "remove_stale", "STALE_AGE_S"]
 
 # The functions that test _USE_<feature> flags, and every function calling one of them up to the
@@ -180,22 +185,92 @@ def _check_names(homes) -> None:
 
 _LOCK = threading.Lock()
 _LOADED: dict = {}          # frozenset of feature names -> the compiled entry (a numba dispatcher)
+_VARIANTS_LOADED: set = set()   # the feature sets of the variant modules loaded (and run) in this process
 
 
-def interpreter(ops):
+def interpreter(ops, reuse: bool = True):
     """The compiled ``_shade`` for programs using only the :data:`FEATURES` named in ``ops``
     (``ShadingData.ops``; None: any): :mod:`.svm`'s own when ops holds every feature or no variant
-    file can be written, else the variant module's (generated and imported once per process)."""
+    file can be written, else the variant module's (generated and imported once per process): the
+    variant of ``ops`` itself, or (``reuse``) of the smallest superset already compiled
+    (:func:`covering`)."""
     if ops is None or os.environ.get(VARIANTS_ENV, "") == "0":
         return svm._shade
     ops = frozenset(ops) - {"END"}
     if FEATURES <= ops:
         return svm._shade
+    if not reuse:
+        with _LOCK:
+            return _load(ops)
     with _LOCK:
         entry = _LOADED.get(ops)
         if entry is None:
-            entry = _LOADED[ops] = _load(ops)
+            # a variant of more features already compiled (in this process, or in the cache folder)
+            # shades these programs bit for bit as this set's own would: no compile
+            cover = covering(ops)
+            entry = _LOADED[ops] = _load(cover)
+            if entry is not svm._shade:
+                _VARIANTS_LOADED.add(cover)
         return entry
+
+
+def _features_of(path: Path, digest: str):
+    """The feature set a variant module file was generated for (its ``_USE_<feature> = True``
+    lines), or None when it is not one of this install's kernel sources (``digest``) or its name is
+    not its text's (:func:`variant_name`'s hash: a hand-edited, truncated or foreign file)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    if f"\n{_DIGEST_TAG}{digest}\n" not in text:
+        return None
+    if "svm_" + hashlib.sha256((digest + "\0" + text).encode()).hexdigest()[:20] != path.stem:
+        return None
+    return frozenset(m.group(1) for m in re.finditer(r"^_USE_(\w+) = True$", text, re.M)) & FEATURES
+
+
+def covering(ops, folder=None, cache_dirs=None) -> frozenset:
+    """The feature set whose variant :func:`interpreter` loads for ``ops``: ``ops`` itself when its
+    variant is compiled (in this process or in the cache folder) or when no compiled variant holds
+    every feature of ``ops``; else the smallest such compiled variant's (ties: the first in sorted
+    feature names).
+
+    A variant of a superset shades ``ops``' programs bit for bit as ``ops``' own variant (the
+    opcodes it keeps besides are never dispatched to: :mod:`.svm`'s full interpreter is the
+    largest superset, ``tests/test_svm_variants.py``), so the choice changes no pixel and no plan,
+    and a scene whose node kinds a scene rendered earlier already covers (the fifth review's kitchen
+    after ``hdri_product``, ``sunlit_pool`` after ``textured_room``) compiles nothing: a new
+    variant costs 5-12 s at load 4, 12-37 s at load 7-10 (docs/effects.md, "What the plan costs").  "Compiled in the
+    cache folder": numba's index of the variant's ``_shade`` is there (:func:`_cache_dirs`)."""
+    ops = frozenset(ops) - {"END"}
+    loaded = [f for f in _VARIANTS_LOADED if ops <= f]
+    if ops in loaded:
+        return ops
+    folder = numba_probe.variant_dir() if folder is None else folder
+    if folder is None or not Path(folder).is_dir():
+        return min(loaded, key=lambda f: (len(f), sorted(f))) if loaded else ops
+    folder = Path(folder)
+    compiled = set()
+    for d in (_cache_dirs(folder) if cache_dirs is None else cache_dirs):
+        d = Path(d)
+        if d.is_dir():
+            compiled.update(p.name.split(".", 1)[0] for p in d.glob("svm_*._shade-*.nbi"))
+    try:
+        if variant_name(ops) in compiled:
+            return ops
+    except (OSError, ValueError):
+        return ops
+    digest = numba_probe.sources_digest()
+    found = list(loaded)
+    for stem in sorted(compiled):
+        path = folder / f"{stem}.py"
+        if _NAME.fullmatch(path.name) and path.is_file():
+            feats = _features_of(path, digest)
+            if feats is not None and ops <= feats:
+                found.append(feats)
+    if not found:
+        return ops
+    return min(found, key=lambda f: (len(f), sorted(f)))
 
 
 def variant_name(ops) -> str:
