@@ -115,7 +115,7 @@ assert NORMAL_COS > 0.0
 # missing part would have held EDGE_MISS photons or more, and where the strip EDGE_STRIP r wide inside the edge
 # holds EDGE_ACCEPT of the photons a uniform density puts there (a density step keeps few); at least EDGE_MIN
 # photons, none more than EDGE_FRONT r in front of the plane (a concave corner's other face fills the disc)
-EDGE_Z = 1.0
+EDGE_Z = 1.5
 EDGE_DIRS = 11
 EDGE_SPAN = 0.5
 EDGE_GAP = 1.5
