@@ -64,8 +64,8 @@ from . import kdtree as _kdtree
 from .record import decode_normal_codes, delta_only, normal_codes, oct_decode
 
 __all__ = [
-    "PhotonMap", "ESTIMATOR_NAMES", "CONE_K", "PLANE_FRACTION", "PLANE_FRONT", "NORMAL_COS", "plane_weights",
-    "auto_temporal_alpha", "temporal_candidates",
+    "PhotonMap", "ESTIMATOR_NAMES", "CONE_K", "EDGE_CORRECTION", "PLANE_FRACTION", "PLANE_FRONT", "NORMAL_COS",
+    "plane_weights", "auto_temporal_alpha", "temporal_candidates",
     "temporal_slices", "shutter_mass", "slab_ball_volume",
 ]
 
@@ -82,6 +82,12 @@ PLANE_FRONT = np.inf         # <= PLANE_FRONT r, n_g toward the query's viewer, 
 #: normal: an open outer corner's face behind a wall (perpendicular to it) adds nothing.  Compiled into
 #: the look-ups (``kdtree.NORMAL_COS``; edit it there); docs/photon-mapping.md, "Tangent slab".
 NORMAL_COS = _kdtree.NORMAL_COS
+#: Boundary correction (docs/photon-mapping.md, "Boundary correction at a convex edge"): a map built with ``edge=True``
+#: (the global map of a render: ``maps.EDGE_MAPS``) divides a compiled STANDARD / TEMPORAL estimate with
+#: the slab on by the fraction of its disc the query's surface covers where its photons end at a
+#: straight edge (a wall beside a window opening: kdtree._edge_scale).  Not the caustic map: a caustic
+#: ends where its photons end, which the photons cannot tell from a surface's edge.  False: as before.
+EDGE_CORRECTION = True
 TEMPORAL_SLICE_C = 0.25      # automatic time slices B = max(1, round(C * (N / k)^(1/3)))
 TEMPORAL_SLICE_ALPHA = 1.5   # candidates per estimate inside a slice, as a multiple of k (the paper's 1.5; fewer
                              # is cheaper but darkens a receiver moving along its normal: docs/photon-mapping.md)
@@ -261,8 +267,13 @@ class PhotonMap:
     """
 
     def __init__(self, records: np.ndarray, shutter, *, time_scale: float, workers: int = -1,
-                 backend: str = "auto", origin: np.ndarray | None = None, bounded: bool = False):
+                 backend: str = "auto", origin: np.ndarray | None = None, bounded: bool = False,
+                 edge: bool = False):
         self.shutter = shutter
+        # compiled STANDARD / TEMPORAL look-ups with the slab divide by the part of the disc their
+        # surface covers, where the photons show an edge (kdtree._edge_scale; EDGE_CORRECTION switches
+        # it off everywhere)
+        self.edge = bool(edge)
         # compiled searches capped at r_max (search_cap; SEARCH_CAP switches it off everywhere)
         self.bounded = bool(bounded)
         self._caps = {}                      # (id(tree), kq) -> r_max of that search (m)
@@ -408,7 +419,8 @@ class PhotonMap:
         (None: ``PLANE_FRACTION``; :meth:`estimate`)."""
         cap = self.search_cap(tree, kq)
         res = tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers, glossy, cap=cap, ng=ng,
-                          plane=PLANE_FRACTION if back is None else back, plane_front=PLANE_FRONT, rows=rows, out=out)
+                          plane=PLANE_FRACTION if back is None else back, plane_front=PLANE_FRONT, rows=rows, out=out,
+                          edge=self.edge and EDGE_CORRECTION)
         if np.isfinite(cap):
             r = res[1] if rows is None else res[1][rows]
             self.stats["capped_count"] += int(np.count_nonzero(r >= cap))

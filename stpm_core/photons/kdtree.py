@@ -108,6 +108,25 @@ _CHUNK_MIN = 2048        # fewer queries than this per thread are not split
 NORMAL_COS = float(np.cos(np.radians(80.0)))
 _NORMAL_COS2 = NORMAL_COS * NORMAL_COS
 assert NORMAL_COS > 0.0
+# boundary correction at a surface's edge (_edge_scale; docs/photon-mapping.md "Boundary correction"): read only
+# where the k photons' centroid in the tangent plane lies EDGE_Z standard errors of a uniform disc (r / (2 sqrt
+# N)) off the query; the edge's normal searched over EDGE_DIRS directions within EDGE_SPAN rad of the centroid's;
+# the support's gap before a chord counted EDGE_GAP x its single-direction expectation; applied only where the
+# missing part would have held EDGE_MISS photons or more, and where the strip EDGE_STRIP r wide inside the edge
+# holds EDGE_ACCEPT of the photons a uniform density puts there (a density step keeps few); at least EDGE_MIN
+# photons, none more than EDGE_FRONT r in front of the plane (a concave corner's other face fills the disc)
+EDGE_Z = 1.5
+EDGE_DIRS = 11
+EDGE_SPAN = 0.5
+EDGE_GAP = 1.5
+EDGE_MISS = 4.0
+EDGE_STRIP = 0.3
+EDGE_ACCEPT = 0.6
+EDGE_MIN = 16
+EDGE_FRONT = 0.05
+_EDGE_COS = np.cos(EDGE_SPAN * np.linspace(-1.0, 1.0, EDGE_DIRS))
+_EDGE_SIN = np.sin(EDGE_SPAN * np.linspace(-1.0, 1.0, EDGE_DIRS))
+_EDGE_QUAD = 128         # midpoint nodes of the cut segment's (cone-)weighted area
 _RADIX_MIN = 4096        # queries Morton-sorted by radix from this many (numpy's argsort below: as fast there)
 
 # Morton codes: row D - 3 maps a 10-bit cell index v to v's bit b moved to bit D b (D = 3, 4)
@@ -596,6 +615,133 @@ if AVAILABLE:
         return d >= 0.0 and d * d >= _NORMAL_COS2 * (x * x + y * y + z * z)
 
     @_jit
+    def _cut_fraction(d, inv_k):
+        """Weighted fraction of a unit disc left by cutting off the segment x > d (0 <= d <= 1): the
+        weight 1 - rho inv_k (inv_k = 1 / CONE_K for the cone kernel, 0 for the box).  The segment's
+        weight by the midpoint rule over its angle (_EDGE_QUAD nodes; the box's closed form
+        1 - (acos d - d sqrt(1 - d^2)) / pi within 8e-4), the disc's pi (1 - 2 inv_k / 3)."""
+        a = np.arccos(d)
+        h = 2.0 * a / _EDGE_QUAD
+        seg = 0.0
+        for i in range(_EDGE_QUAD):
+            th = -a + (i + 0.5) * h
+            b = d / np.cos(th)           # where the ray at angle th leaves the covered part
+            if b < 1.0:
+                seg += (1.0 - b * b) * 0.5 - (1.0 - b * b * b) * inv_k / 3.0
+        return 1.0 - seg * h / (np.pi * (1.0 - 2.0 * inv_k / 3.0))
+
+    @_jit
+    def _disc_seg(x):
+        """Area of the unit disc's segment beyond the chord at x (-1 <= x <= 1): acos x - x sqrt(1 - x^2)."""
+        x = min(max(x, -1.0), 1.0)
+        return np.arccos(x) - x * np.sqrt(1.0 - x * x)
+
+    @_jit
+    def _edge_collect(P, C, bi, n_sel, q0, q1, q2, q3, m0, m1, m2, r2, s, plane_b, plane_f, ex, ey, ez):
+        """(N, front): the in-plane offsets (x_p - q) - h m (h = (x_p - q) . m) of the n_sel inner candidates
+        bi[:n_sel] that pass the slab and normal tests into ex, ey, ez[:N]; front: does any lie more than
+        EDGE_FRONT r in front of the plane (r = sqrt(r2))?  What _lookup's sum loop collects on its way
+        (this separate pass serves its branch for ties in time)."""
+        lim = EDGE_FRONT * np.sqrt(r2)
+        n = 0
+        front = False
+        for a in range(n_sel):
+            j = bi[a]
+            if not (_in_slab(C, j, q0, q1, q2, q3, m0, m1, m2, r2, False, s, plane_b, plane_f)
+                    and _facing(P, C, j, q0, q1, q2, m0, m1, m2)):
+                continue
+            v0 = np.float64(C[0, j]) - q0
+            v1 = np.float64(C[1, j]) - q1
+            v2 = np.float64(C[2, j]) - q2
+            h = v0 * m0 + v1 * m1 + v2 * m2
+            front = front or h > lim
+            ex[n] = v0 - h * m0
+            ey[n] = v1 - h * m1
+            ez[n] = v2 - h * m2
+            n += 1
+        return n, front
+
+    @_jit
+    def _edge_scale(ex, ey, ez, n, front, m0, m1, m2, r2, inv_k):
+        """1 / (the fraction of the query's disc its surface covers), as its photons show it; 1 where
+        they show no edge (docs/photon-mapping.md, "Boundary correction at a convex edge").
+
+        ex, ey, ez[:n]: the in-plane offsets from the query of the search's inner candidates that pass
+        the slab and normal tests (position only: no side or time test, so TEMPORAL reads all its
+        candidates; :func:`_edge_collect`), m the plane's unit normal, r = sqrt(r2) the disc's radius;
+        overwritten.  Uniform over the disc, their centroid c lies within a standard error r / (2
+        sqrt n) of q; where a straight edge cuts the disc it moves away from the edge.  Where |c| >
+        EDGE_Z r / (2 sqrt n): the support h = min over EDGE_DIRS directions u within EDGE_SPAN of -c /
+        |c| of max_p (x_p - q) . u (the nearest line with no photon beyond; its u the edge's normal),
+        d = h / r clamped to [0, 1] (the query lies on its surface: at most 2x) plus EDGE_GAP x the
+        expected gap of n uniform points before a chord, f_box(d) / (n chord(d)), f_box(d) = 1 -
+        (acos d - d sqrt(1 - d^2)) / pi.  Applied only if the missing part would have held EDGE_MISS
+        photons or more, n (1 - f_box) >= EDGE_MISS f_box (a direction's scan stops as soon as a photon
+        lies beyond the d where that fails), and if the strip EDGE_STRIP r wide inside the line holds at
+        least EDGE_ACCEPT of what the density n / (pi r^2 f_box) puts there: a surface's edge is sharp,
+        while beyond a density step (a dimmer region of the same surface) photons go on to the disc's
+        rim, and where they thin out the strip is short of photons.  Returns 1 / _cut_fraction(d,
+        inv_k) (the kernel's weight).  No correction with fewer than EDGE_MIN photons or with front
+        (one lies more than EDGE_FRONT r in front of the plane: a concave corner's other face fills
+        that part of the disc, PLANE_FRONT = inf)."""
+        if front or n < EDGE_MIN:
+            return 1.0
+        c0 = 0.0
+        c1 = 0.0
+        c2 = 0.0
+        for a in range(n):
+            c0 += ex[a]
+            c1 += ey[a]
+            c2 += ez[a]
+        cc = c0 * c0 + c1 * c1 + c2 * c2               # (n |c|)^2
+        if not cc * 4.0 > EDGE_Z * EDGE_Z * r2 * n:    # |c| <= EDGE_Z r / (2 sqrt n)
+            return 1.0
+        r = np.sqrt(r2)
+        cn = np.sqrt(cc)
+        u0, u1, u2 = -c0 / cn, -c1 / cn, -c2 / cn       # toward the missing part, in the plane
+        w0, w1, w2 = m1 * u2 - m2 * u1, m2 * u0 - m0 * u2, m0 * u1 - m1 * u0   # m x u
+        u0, u1, u2 = u0 / r, u1 / r, u2 / r             # (in units of r)
+        w0, w1, w2 = w0 / r, w1 / r, w2 / r
+        for a in range(n):
+            x = ex[a] * u0 + ey[a] * u1 + ez[a] * u2
+            y = ex[a] * w0 + ey[a] * w1 + ez[a] * w2
+            ex[a] = x
+            ey[a] = y
+        # beyond dmax the miss test fails: seg(d) < pi EDGE_MISS / (n + EDGE_MISS); seg(d) <= (4 sqrt 2 / 3)
+        # (1 - d)^(3/2), so the d where that bound equals it lies at or beyond the exact one (the early stop
+        # below never stops a direction that could pass; the exact test follows)
+        need = np.pi * EDGE_MISS / (n + EDGE_MISS)
+        dmax = 1.0 - (need * 3.0 / (4.0 * np.sqrt(2.0))) ** (2.0 / 3.0)
+        hmin = np.inf
+        cb = 1.0
+        sb = 0.0
+        for i in range(EDGE_DIRS):
+            ct = _EDGE_COS[i]
+            st = _EDGE_SIN[i]
+            hm = -np.inf
+            for a in range(n):
+                hm = max(hm, ex[a] * ct + ey[a] * st)
+                if hm > dmax:
+                    break                              # this direction cannot pass the miss test
+            if hm < hmin:
+                hmin, cb, sb = hm, ct, st
+        if not hmin <= dmax:
+            return 1.0
+        d = max(hmin, 0.0)
+        fb = 1.0 - _disc_seg(d) / np.pi
+        d = min(d + EDGE_GAP * np.pi * fb / (n * 2.0 * np.sqrt(1.0 - d * d)), 1.0)
+        fb = 1.0 - _disc_seg(d) / np.pi
+        if n * (1.0 - fb) < EDGE_MISS * fb:
+            return 1.0
+        cnt = 0
+        for a in range(n):
+            if ex[a] * cb + ey[a] * sb >= hmin - EDGE_STRIP:
+                cnt += 1
+        if cnt < EDGE_ACCEPT * n / (np.pi * fb) * (_disc_seg(hmin - EDGE_STRIP) - _disc_seg(hmin)):
+            return 1.0
+        return 1.0 / _cut_fraction(d, inv_k)
+
+    @_jit
     def _glossy_sum(P, bi, wk, n_sel, gC, i, E, E_avg, gW, coat_w):
         """(g0, g1, g2) = sum over the kept photons a < n_sel (weights wk[a] > 0, rows bi[a]) whose
         path was delta-only (P[j, 3] > 0) of wk[a] f_c(wo, wi_j) Phi_j: f_c the rough non-delta
@@ -620,7 +766,7 @@ if AVAILABLE:
 
     @_jit
     def _lookup(P, C, box, n_leaves, q, ns, ng, order, plane_b, plane_f, mode, kq, k, s, cone, cone_k, cap2, out_phi,
-                out_r, out_tau, glossy, gC, gW, E, E_avg, coat_w, out_g):
+                out_r, out_tau, glossy, gC, gW, E, E_avg, coat_w, out_g, edge):
         """Fused search + reduction for the queries ``order`` (m,) int64 (rows of q, in the order searched) of
         q (n, 4) (x, y, z, s t or t), normals ns (n, 3) float32; query i's results go to row i of the outputs
         (rows not in order are left as they are).
@@ -648,6 +794,10 @@ if AVAILABLE:
         = inf (the whole time slice); the search never looks beyond r_max (docs/photon-mapping.md,
         "Bounded searches").  With cap2 = inf every value is the unbounded search's, bit for bit.
 
+        edge: with the slab on and not KD4D, out_phi (and out_g) times :func:`_edge_scale` of the inner
+        candidates that pass the slab and normal tests (their in-plane offsets collected by the sum
+        loop): 1 / the covered fraction of the disc where the query's surface ends inside it.
+
         glossy: also out_g (n, 3) W/sr, the same photons' sum of w f_c(wo, wi) Phi over those whose
         path was delta-only, f_c query i's rough lobes (:func:`_glossy_sum`; gC (n, N_CLOSURE) its
         closure row, gW (n, 9) its wo, ns, ng; E, E_avg the GGX tables; coat_w 1, or 0 without the
@@ -665,6 +815,9 @@ if AVAILABLE:
         hist = np.empty(kq, np.int64)
         leaf_d2 = np.empty(LEAF_SIZE + 1)
         wk = np.empty(nbuf)                    # the weight of each kept photon (glossy)
+        ex = np.empty(nbuf)                    # in-plane offsets of the slab's photons (_edge_scale)
+        ey = np.empty(nbuf)
+        ez = np.empty(nbuf)
         qq = np.empty(4)
         qnode = np.empty(box.shape[0], np.int64)
         qdist = np.empty(box.shape[0])
@@ -736,6 +889,11 @@ if AVAILABLE:
             p0 = 0.0
             p1 = 0.0
             p2 = 0.0
+            # the boundary correction's photons (_edge_scale): collected by the sum loop below
+            eslab = edge and slab and not ball4
+            elim = EDGE_FRONT * np.sqrt(r2)
+            n_e = 0
+            front = False
             if ties > 0:
                 # some of the k - 1 at exactly tau: the first ``ties`` of them in buffer order
                 for a in range(n_sel):
@@ -767,20 +925,38 @@ if AVAILABLE:
                         w = 1.0 if bx[a] < tau else 0.0
                     if not (P[j, 0] * n0 + P[j, 1] * n1 + P[j, 2] * n2 > 0.0):
                         w = 0.0
-                    if slab and not (_in_slab(C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f)
-                                     and _facing(P, C, j, q0, q1, q2, m0, m1, m2)):
-                        w = 0.0
+                    if slab:
+                        if not (_in_slab(C, j, q0, q1, q2, q3, m0, m1, m2, r2, ball4, s, plane_b, plane_f)
+                                and _facing(P, C, j, q0, q1, q2, m0, m1, m2)):
+                            w = 0.0
+                        elif eslab:
+                            v0 = np.float64(C[0, j]) - q0
+                            v1 = np.float64(C[1, j]) - q1
+                            v2 = np.float64(C[2, j]) - q2
+                            h = v0 * m0 + v1 * m1 + v2 * m2
+                            front = front or h > elim
+                            ex[n_e] = v0 - h * m0
+                            ey[n_e] = v1 - h * m1
+                            ez[n_e] = v2 - h * m2
+                            n_e += 1
                     if cone:
                         w *= 1.0 - np.sqrt(bd[a]) * inv_r
                     wk[a] = w
                     p0 += w * P[j, 4]
                     p1 += w * P[j, 5]
                     p2 += w * P[j, 6]
-            res[ii, 0] = p0
-            res[ii, 1] = p1
-            res[ii, 2] = p2
+            f = 1.0
+            if eslab:
+                if ties > 0:
+                    n_e, front = _edge_collect(P, C, bi, n_sel, q0, q1, q2, q3, m0, m1, m2, r2, s, plane_b,
+                                               plane_f, ex, ey, ez)
+                f = _edge_scale(ex, ey, ez, n_e, front, m0, m1, m2, r2, 1.0 / cone_k if cone else 0.0)
+            res[ii, 0] = p0 * f
+            res[ii, 1] = p1 * f
+            res[ii, 2] = p2 * f
             if glossy:
-                out_g[i, 0], out_g[i, 1], out_g[i, 2] = _glossy_sum(P, bi, wk, n_sel, gC, i, E, E_avg, gW, coat_w)
+                g0, g1, g2 = _glossy_sum(P, bi, wk, n_sel, gC, i, E, E_avg, gW, coat_w)
+                out_g[i, 0], out_g[i, 1], out_g[i, 2] = g0 * f, g1 * f, g2 * f
         for ii in range(m):
             i = order[ii]
             out_phi[i, 0] = res[ii, 0]
@@ -1060,7 +1236,7 @@ class FlatTree:
     def lookup(self, mode: int, q: np.ndarray, ns: np.ndarray, kq: int, k: int, cone: bool, cone_k: float,
                workers: int, glossy=None, cap: float = np.inf, *, ng: np.ndarray | None = None,
                plane: float = np.inf, plane_front: float | None = None, rows: np.ndarray | None = None,
-               out: tuple | None = None):
+               out: tuple | None = None, edge: bool = False):
         """Sums Phi (n, 3) W, radius r (n,) m of the kq-th neighbour and TEMPORAL's tau (n,) for queries q (n, 4).
 
         cap: the search's largest radius r_max (m, in the tree's dimensions; inf: unbounded).  A query
@@ -1074,6 +1250,10 @@ class FlatTree:
         glossy: None, or (gC (n, N_CLOSURE) float64 closure rows, gW (n, 9) float64 (wo, ns, ng) of
         each query's hit, E, E_avg the GGX tables, coat_w): then a fourth result, the sums (n, 3) of
         w f_c(wo, wi) Phi over the same photons with a delta-only path (:func:`_lookup`).
+
+        edge: divide each estimate with the slab on (not KD4D) by the fraction of its disc its surface
+        covers where its photons show a straight edge (:func:`_edge_scale`; docs/photon-mapping.md,
+        "Boundary correction at a convex edge"); False: every estimate as without it, bit for bit.
 
         rows (m,) int64: answer only these rows of q (and of ns, ng, glossy's), e.g. one time slice's
         queries, without gathering them into new arrays; out: (phi, r, tau[, g]) float64 arrays of n
@@ -1115,7 +1295,7 @@ class FlatTree:
         def part(a, b):
             _lookup(self.pts, self.xyzt, self.box, self.n_leaves, q, ns, ng, order[a:b], plane_b, plane_f, mode,
                     kq, k, self.s, cone, cone_k, cap2, phi, r, tau, glossy is not None, gC, gW, E_t, E_avg, coat_w,
-                    g)
+                    g, bool(edge))
 
         run_chunks(part, order.shape[0], workers)
         return (phi, r, tau) if glossy is None else (phi, r, tau, g)

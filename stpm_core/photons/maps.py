@@ -26,6 +26,10 @@ KINDS = ("caustic", "global")
 #: switches it off): the caustic map, where most look-ups lie far from every caustic and each one
 #: summed kq photons for a density of almost nothing (docs/photon-mapping.md, "Bounded searches")
 BOUNDED_MAPS = ("caustic",)
+#: the maps whose look-ups correct the disc's boundary bias at a surface's edge (``PhotonMap(edge=True)``;
+#: ``estimators.EDGE_CORRECTION`` switches it off): the global map, whose photons end where a surface ends;
+#: the caustic map's also end where a caustic does (docs/photon-mapping.md, "Edges and corners")
+EDGE_MAPS = ("global",)
 
 
 class PhotonMaps:
@@ -181,7 +185,7 @@ def build_photon_maps(scene, settings, caster, lights, *, time_override=None, pr
     # -- Build the search structure the chosen estimator needs ----------------------------
     origin = photon_origin(scene)  # the records' positions are relative to it (record.py)
     maps = {kind: PhotonMap(rec, scene.shutter, time_scale=s, workers=workers, origin=origin,
-                            bounded=kind in BOUNDED_MAPS)
+                            bounded=kind in BOUNDED_MAPS, edge=kind in EDGE_MAPS)
             for kind, rec in (("caustic", rec_c), ("global", rec_g))}
     for m in maps.values() if build_trees else ():
         m.build(settings.estimator, k=settings.k_nearest, temporal_alpha=settings.temporal_alpha)
