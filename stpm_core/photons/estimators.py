@@ -416,11 +416,13 @@ class PhotonMap:
         """tree.lookup(...) in the tangent slab of the normals ng (:func:`_slab_normals`), capped at
         :meth:`search_cap` (counted in ``stats['capped_count']``); rows, out: ``FlatTree.lookup``'s
         (answer only those rows of the queries, into those arrays); back: the slab's back fraction
-        (None: ``PLANE_FRACTION``; :meth:`estimate`)."""
+        (None: ``PLANE_FRACTION``; :meth:`estimate`).  The boundary correction (``edge``) is made at
+        the default slab only: a given back fraction is final gathering's cache
+        (``gather.IrradianceCache.build``), which stays uncorrected (its oracle in tests/test_final_gather.py)."""
         cap = self.search_cap(tree, kq)
         res = tree.lookup(mode, q, ns, kq, k, kernel == "CONE", CONE_K, self.workers, glossy, cap=cap, ng=ng,
                           plane=PLANE_FRACTION if back is None else back, plane_front=PLANE_FRONT, rows=rows, out=out,
-                          edge=self.edge and EDGE_CORRECTION)
+                          edge=self.edge and EDGE_CORRECTION and back is None)
         if np.isfinite(cap):
             r = res[1] if rows is None else res[1][rows]
             self.stats["capped_count"] += int(np.count_nonzero(r >= cap))
