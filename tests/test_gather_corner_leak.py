@@ -31,7 +31,7 @@ class _CornerCaster:
         n = o.shape[0]
         on_a = np.abs(o[:, 1]) < 1e-3
         ng = np.where(on_a[:, None], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
-        inst = np.where(~on_a & (o[:, 1] > 0.0), 1, 0).astype(np.int64)
+        inst = np.where(~on_a & (o[:, 1] > 0.0), 1, 0).astype(np.int32)
         return SimpleNamespace(hit=np.ones(n, bool), ng=ng, ns=ng.copy(), instance=inst, position=o)
 
 
@@ -46,7 +46,7 @@ def test_gather_hits_near_an_open_outer_corner_read_no_notch_photons(estimator, 
     # gather hits on A near the corner, arriving from the room (+y)
     n = 400
     y = np.column_stack([rng.uniform(0.02, 0.1, n), np.zeros(n), rng.uniform(0.5, 1.5, n)])
-    hits = SimpleNamespace(position=y, ng=np.tile([0.0, 1.0, 0.0], (n, 1)), instance=np.zeros(n, np.int64))
+    hits = SimpleNamespace(position=y, ng=np.tile([0.0, 1.0, 0.0], (n, 1)), instance=np.zeros(n, np.int32))
     d = np.tile([0.0, -1.0, 0.0], (n, 1))
     E = cache.lookup(np.arange(n), np.arange(n), hits, d, rng.random(n))[:, 0]
     assert cache.stats["gather_misses"] == 0
