@@ -24,27 +24,19 @@ from pathlib import Path
 import numpy as np
 import bpy
 import mathutils
-import OpenImageIO as oiio
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 OUT = HERE / "out"; OUT.mkdir(exist_ok=True)
 sys.path.insert(0, str(ROOT))
 import addon  # noqa: E402
+from _review_common import lathe, principled, smart_uv, write_image  # noqa: E402
 
 bpy.ops.wm.read_factory_settings(use_empty=True)
 addon.register()
 scene = bpy.context.scene
 bpy.context.preferences.edit.keyframe_new_interpolation_type = "LINEAR"
 scene.frame_start, scene.frame_end = 1, 3
-
-
-def write_image(path, arr, fmt="uint8"):
-    h, w, c = arr.shape
-    buf = oiio.ImageBuf(oiio.ImageSpec(w, h, c, fmt))
-    data = arr.astype(np.float32) if fmt != "uint8" else (np.clip(arr, 0, 1) * 255 + 0.5).astype(np.uint8)
-    buf.set_pixels(oiio.ROI(), data)
-    assert buf.write(str(path)), oiio.geterror()
 
 
 # --- images an artist would make: an HDRI with a sun, a dial label, a stone texture and its normal map
@@ -80,26 +72,6 @@ hgt = np.sin(xx * 0.05 + 4 * np.sin(yy * 0.03))
 gy, gx = np.gradient(hgt)
 n = np.stack([-gx * 3, -gy * 3, np.ones_like(xx)], -1); n /= np.linalg.norm(n, axis=-1, keepdims=True)
 write_image(OUT / "r6_stone_normal.png", 0.5 + 0.5 * n)
-
-
-def active(obj):
-    bpy.context.view_layer.objects.active = obj
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o is obj)
-
-
-def smart_uv(obj):
-    active(obj)
-    bpy.ops.object.mode_set(mode="EDIT"); bpy.ops.mesh.select_all(action="SELECT")
-    bpy.ops.uv.smart_project(); bpy.ops.object.mode_set(mode="OBJECT")
-
-
-def principled(name, **inputs):
-    m = bpy.data.materials.new(name)
-    b = m.node_tree.nodes["Principled BSDF"]
-    for k, val in inputs.items():
-        b.inputs[k.replace("_", " ")].default_value = (*val, 1.0) if isinstance(val, tuple) and len(val) == 3 else val
-    return m, b
 
 
 def shader_material(name):
@@ -174,19 +146,10 @@ band.scale = (0.07, 0.5, 0.01); bpy.ops.object.transform_apply(scale=True); band
 band.modifiers.new("Bevel", "BEVEL").width = 0.004
 
 
-def lathe(name, profile, loc, steps=64):
-    me = bpy.data.meshes.new(name)
-    me.from_pydata([(rr, 0, z) for rr, z in profile], [(i, i + 1) for i in range(len(profile) - 1)], [])
-    o = bpy.data.objects.new(name, me); scene.collection.objects.link(o); o.location = loc
-    sc = o.modifiers.new("Screw", "SCREW"); sc.steps = sc.render_steps = steps; sc.use_merge_vertices = True
-    sc.use_smooth_shade = True
-    return o
-
-
-tumbler = lathe("Tumbler", [(0.0, 0.0), (0.045, 0.0), (0.047, 0.004), (0.05, 0.12)], (0.15, -0.05, 0.83))
+tumbler = lathe("Tumbler", [(0.0, 0.0), (0.045, 0.0), (0.047, 0.004), (0.05, 0.12)], (0.15, -0.05, 0.83), steps=64)
 sol = tumbler.modifiers.new("Solidify", "SOLIDIFY"); sol.thickness = 0.004; sol.offset = -1
 tumbler.data.materials.append(glass_m)
-drink = lathe("Whisky", [(0.0, 0.012), (0.0445, 0.012), (0.046, 0.06), (0.0, 0.06)], (0.15, -0.05, 0.83))
+drink = lathe("Whisky", [(0.0, 0.012), (0.0445, 0.012), (0.046, 0.06), (0.0, 0.06)], (0.15, -0.05, 0.83), steps=64)
 drink.data.materials.append(whisky)
 for o in (case, face, band, tumbler, drink):
     o.parent = disc; o.matrix_parent_inverse = disc.matrix_world.inverted()
